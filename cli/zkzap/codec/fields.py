@@ -1,0 +1,371 @@
+"""Declarative bit fields: one declaration per field drives encoding, decoding and the CLI.
+
+A :class:`Field` names the bits it occupies in NOTES.md notation (``"b4[1:0] b3[7:5]"``: the
+parts are concatenated most significant first), its scale/offset to physical units, its range,
+its unit, the protocol version it appeared in and, for enumerations, the names of its values.
+A :class:`Layout` is an ordered set of fields over a fixed-size frame; it generates a decoder
+function from the declarations (like ``collections.namedtuple`` does) so decoding is one call
+with no per-field interpretation.
+"""
+
+from __future__ import annotations
+
+import re
+
+_PART = re.compile(r"^b(\d+)(?:\[(\d+)(?::(\d+))?\])?$")
+
+
+class FieldValueError(ValueError):
+    """A value outside a field's range or grid, or an unknown name. The message names the field."""
+
+
+def parse_bits(spec: str) -> tuple:
+    """``"b4[1:0] b3[7:5]"`` -> ``((4, 1, 0), (3, 7, 5))``; ``"b2"`` is ``b2[7:0]``."""
+    parts = []
+    for token in spec.split():
+        m = _PART.match(token)
+        if not m:
+            raise ValueError(f"bad bit spec {spec!r}")
+        byte = int(m.group(1))
+        hi = int(m.group(2)) if m.group(2) is not None else 7
+        lo = int(m.group(3)) if m.group(3) is not None else (hi if m.group(2) is not None else 0)
+        if not 0 <= lo <= hi <= 7:
+            raise ValueError(f"bad bit range in {spec!r}")
+        parts.append((byte, hi, lo))
+    return tuple(parts)
+
+
+def _decimals(step: float) -> int:
+    text = repr(float(step))
+    if "e" in text:
+        return 6
+    frac = text.split(".")[1].rstrip("0")
+    return len(frac)
+
+
+class VersionScale:
+    """A scale that depends on the protocol version: ``VersionScale(((3, 0.1),), 0.2)`` means
+    0.1 for versions <= 3 and 0.2 above."""
+
+    __slots__ = ("steps", "default", "decimals")
+
+    def __init__(self, steps, default):
+        self.steps = tuple(steps)
+        self.default = default
+        self.decimals = max(_decimals(s) for s in [default] + [s for _, s in self.steps])
+
+    def __call__(self, ctx):
+        v = ctx.get("version")
+        for upto, s in self.steps:
+            if v is not None and v <= upto:
+                return s
+        return self.default
+
+    def describe(self) -> str:
+        rules = [f"{s} for protocol version <= {upto}" for upto, s in self.steps]
+        rules.append(f"{self.default} above")
+        return ", ".join(rules)
+
+
+class ContextScale:
+    """A scale that is a factor times a context parameter (``target rpm = value x 10 x RPM_X``)."""
+
+    __slots__ = ("param", "factor", "decimals")
+
+    def __init__(self, param, factor):
+        self.param = param
+        self.factor = factor
+        self.decimals = 0
+
+    def __call__(self, ctx):
+        p = ctx.get(self.param)
+        return None if p is None or p == 0 else self.factor * p
+
+    def describe(self) -> str:
+        return f"{self.factor} x {self.param}"
+
+
+class Field:
+    """One field of a frame. ``key`` is its JSON key / CSV column; ``cli`` how the CLI takes it
+    (``"--state"`` for an option, ``"VOLTS"`` for an argument, None when not offered)."""
+
+    __slots__ = (
+        "key", "bits", "width", "scale", "offset", "unit", "lo", "hi", "since", "names",
+        "name_key", "values", "raw_key", "cli", "help", "note", "since_by_value", "decimals",
+        "_label",
+    )
+
+    def __init__(self, key, bits, *, scale=1, offset=0, unit="", lo=0, hi=None, since=1,
+                 names=None, name_key=None, values=None, raw_key=None, cli=None, help="",
+                 note="", since_by_value=None, label=None):
+        self.key = key
+        self._label = label
+        self.bits = parse_bits(bits)
+        self.width = sum(hi_ - lo_ + 1 for _, hi_, lo_ in self.bits)
+        self.scale = scale
+        self.offset = offset
+        self.unit = unit
+        self.lo = lo
+        self.hi = (1 << self.width) - 1 if hi is None else hi
+        if self.hi >= 1 << self.width:
+            raise ValueError(f"{key}: range exceeds {self.width} bits")
+        self.since = since
+        self.names = names
+        self.name_key = name_key
+        self.values = values
+        self.raw_key = raw_key
+        self.cli = cli
+        self.help = help
+        self.note = note
+        self.since_by_value = since_by_value or {}
+        if isinstance(scale, (VersionScale, ContextScale)):
+            self.decimals = scale.decimals
+        else:
+            self.decimals = _decimals(scale) if isinstance(scale, float) else 0
+
+    # --- description -------------------------------------------------------------------
+    @property
+    def label(self) -> str:
+        """Name used in messages: the CLI spelling where there is one."""
+        if self._label:
+            return self._label
+        if self.cli and self.cli.startswith("--"):
+            return self.cli[2:]
+        if self.cli:
+            return self.cli.lower()
+        return self.key
+
+    @property
+    def is_enum(self) -> bool:
+        return self.names is not None
+
+    def scale_for(self, ctx):
+        s = self.scale
+        return s(ctx) if callable(s) else s
+
+    def physical_range(self, ctx=None):
+        """(low, high) in physical units, or None when the scale depends on missing context."""
+        if self.names is not None or self.values is not None:
+            return self.lo, self.hi
+        s = self.scale_for(ctx or {})
+        if s is None:
+            return None
+        return self._phys(self.lo, s), self._phys(self.hi, s)
+
+    def describe_range(self, ctx=None) -> str:
+        if self.names is not None:
+            return ", ".join(f"{n} ({v})" for v, n in self.names.items() if self.lo <= v <= self.hi)
+        if self.values is not None:
+            return ", ".join(f"{p}" for p in self.values.values())
+        r = self.physical_range(ctx)
+        unit = f" {self.unit}" if self.unit else ""
+        if r is None:
+            return f"{self.lo}..{self.hi} (raw)"
+        return f"{_fmt(r[0])}..{_fmt(r[1])}{unit}"
+
+    def step(self, ctx=None):
+        s = self.scale_for(ctx or {})
+        return s
+
+    def _phys(self, raw, s):
+        v = raw * s + self.offset
+        if isinstance(v, float):
+            v = round(v, self.decimals)
+            if self.decimals == 0:
+                v = int(v)
+        return v
+
+    # --- conversion ---------------------------------------------------------------------
+    def to_physical(self, raw, ctx=None):
+        if self.values is not None:
+            return self.values.get(raw)
+        if self.names is not None:
+            return raw
+        s = self.scale_for(ctx or {})
+        if s is None:
+            return None
+        return self._phys(raw, s)
+
+    def _range_error(self, value, ctx, extra=""):
+        note = f" ({self.note})" if self.note else ""
+        return FieldValueError(
+            f"{self.label}: {value} is out of range; allowed {self.describe_range(ctx)}{note}{extra}")
+
+    def check_raw(self, raw) -> int:
+        if not isinstance(raw, int) or isinstance(raw, bool):
+            raise FieldValueError(f"{self.label}: {raw!r} is not an integer")
+        if not self.lo <= raw <= self.hi:
+            raise FieldValueError(f"{self.label}: raw value {raw} is out of range {self.lo}..{self.hi}"
+                                  f" ({self.width}-bit field)")
+        return raw
+
+    def to_raw(self, value, ctx=None):
+        """Physical value (or, for enumerations, a name or number) -> (raw, note or None).
+
+        Off-grid values are rounded to the nearest step; the note says so. Out-of-range values
+        raise :class:`FieldValueError` naming the field and its allowed range.
+        """
+        ctx = ctx or {}
+        if self.names is not None:
+            if isinstance(value, str):
+                lowered = value.strip().lower()
+                for raw, name in self.names.items():
+                    if name == lowered and self.lo <= raw <= self.hi:
+                        return raw, None
+                try:
+                    value = int(lowered, 0)
+                except ValueError:
+                    raise FieldValueError(
+                        f"{self.label}: unknown name {value!r}; allowed {self.describe_range(ctx)}") from None
+            if not isinstance(value, int) or not self.lo <= value <= self.hi:
+                raise self._range_error(value, ctx)
+            return value, None
+        if self.values is not None:
+            for raw, phys in self.values.items():
+                if phys == value or str(phys) == str(value):
+                    return raw, None
+            raise self._range_error(value, ctx)
+        if isinstance(value, str):
+            try:
+                value = float(value) if any(c in value for c in ".eE") else int(value, 0)
+            except ValueError:
+                raise FieldValueError(f"{self.label}: {value!r} is not a number") from None
+        s = self.scale_for(ctx)
+        if s is None:
+            raise FieldValueError(f"{self.label}: needs {self.scale.param.replace('_', '-')} to convert")
+        exact = (value - self.offset) / s
+        raw = int(round(exact))
+        lo_p, hi_p = self._phys(self.lo, s), self._phys(self.hi, s)
+        eps = abs(s) * 1e-6
+        if value < min(lo_p, hi_p) - eps or value > max(lo_p, hi_p) + eps:
+            raise self._range_error(_fmt(value), ctx)
+        raw = min(max(raw, self.lo), self.hi)
+        note = None
+        if abs(exact - raw) > 1e-6:
+            unit = f" {self.unit}" if self.unit else ""
+            note = (f"{self.label}: {_fmt(value)}{unit} is not a multiple of {_fmt(s)}{unit}; "
+                    f"rounded to {_fmt(self._phys(raw, s))}{unit}")
+        return raw, note
+
+    # --- code generation ----------------------------------------------------------------
+    def raw_expr(self, buf="b") -> str:
+        expr = None
+        for byte, hi, lo in self.bits:
+            w = hi - lo + 1
+            piece = f"{buf}[{byte}]"
+            if lo:
+                piece = f"({piece} >> {lo})"
+            if w < 8:
+                piece = f"({piece} & {(1 << w) - 1:#x})"
+            expr = piece if expr is None else f"(({expr}) << {w} | {piece})"
+        return expr
+
+    def insert(self, frame: bytearray, raw: int) -> None:
+        shift = self.width
+        for byte, hi, lo in self.bits:
+            w = hi - lo + 1
+            shift -= w
+            part = (raw >> shift) & ((1 << w) - 1)
+            mask = ((1 << w) - 1) << lo
+            frame[byte] = (frame[byte] & ~mask & 0xFF) | (part << lo)
+
+    def mask_of(self, byte: int) -> int:
+        m = 0
+        for b, hi, lo in self.bits:
+            if b == byte:
+                m |= ((1 << (hi - lo + 1)) - 1) << lo
+        return m
+
+
+def _fmt(x) -> str:
+    if isinstance(x, float):
+        text = f"{x:.6f}".rstrip("0").rstrip(".")
+        return text if text not in ("-0", "") else "0"
+    return str(x)
+
+
+class Layout:
+    """Fields over a fixed-size frame, with a generated decoder.
+
+    ``decode(frame, ctx, known)`` returns a dict of keys in declaration order. ``ctx`` carries
+    context parameters (``version`` for version-dependent scales, ``rpm_factor``...). A field
+    whose ``since`` is newer than the *known* version (``known``; None when unknown) decodes
+    to None. ``raw=True`` adds ``<key>_raw`` entries with the undecoded integers.
+    """
+
+    def __init__(self, fields, size, covered=None):
+        self.fields = tuple(fields)
+        self.size = size
+        self.by_key = {f.key: f for f in self.fields}
+        self._decode = self._compile(raw=False)
+        self._decode_raw = self._compile(raw=True)
+        self.reserved = self._reserved_masks(covered or {})
+
+    def _reserved_masks(self, covered):
+        masks = {}
+        for byte in range(self.size):
+            used = covered.get(byte, 0)
+            for f in self.fields:
+                used |= f.mask_of(byte)
+            masks[byte] = ~used & 0xFF
+        return masks
+
+    def _compile(self, raw: bool):
+        ns = {}
+        lines = ["def decode(b, ctx, known):", "    d = {}"]
+        for i, f in enumerate(self.fields):
+            r = f"r{i}"
+            lines.append(f"    {r} = {f.raw_expr()}")
+            gate = f.since > 1
+            ind = "    "
+            if gate:
+                lines.append(f"    if known is not None and known < {f.since}:")
+                lines.append(f"        d[{f.key!r}] = None")
+                if f.name_key:
+                    lines.append(f"        d[{f.name_key!r}] = None")
+                lines.append("    else:")
+                ind = "        "
+            if f.raw_key:
+                lines.append(f"{ind}d[{f.raw_key!r}] = {r}")
+            if f.values is not None:
+                ns[f"v{i}"] = f.values
+                lines.append(f"{ind}d[{f.key!r}] = v{i}.get({r})")
+            elif f.names is not None:
+                ns[f"n{i}"] = f.names
+                lines.append(f"{ind}d[{f.key!r}] = {r}")
+                lines.append(f"{ind}d[{f.name_key!r}] = n{i}.get({r}) or 'undocumented-%d' % {r}")
+            elif callable(f.scale):
+                ns[f"s{i}"] = f.scale
+                ns[f"f{i}"] = f
+                lines.append(f"{ind}sc = s{i}(ctx)")
+                lines.append(f"{ind}d[{f.key!r}] = None if sc is None else f{i}._phys({r}, sc)")
+            elif f.scale == 1 and f.offset == 0:
+                lines.append(f"{ind}d[{f.key!r}] = {r}")
+            elif isinstance(f.scale, float):
+                lines.append(f"{ind}d[{f.key!r}] = round({r} * {f.scale!r} + {f.offset!r}, {f.decimals})")
+            else:
+                lines.append(f"{ind}d[{f.key!r}] = {r} * {f.scale!r} + {f.offset!r}")
+            if raw:
+                lines.append(f"    d[{(f.key + '_raw')!r}] = {r}")
+        lines.append("    return d")
+        exec("\n".join(lines), ns)  # noqa: S102 - generated from the static tables above
+        return ns["decode"]
+
+    def decode(self, frame, ctx=None, known=None, raw=False):
+        return (self._decode_raw if raw else self._decode)(frame, ctx or {}, known)
+
+    def keys(self):
+        out = []
+        for f in self.fields:
+            if f.raw_key:
+                out.append(f.raw_key)
+            out.append(f.key)
+            if f.name_key:
+                out.append(f.name_key)
+        return out
+
+    def reserved_bits(self, frame):
+        """Non-zero reserved bits as ``"b1=0x0c b2=0x80"`` (None when all are zero)."""
+        found = [f"b{byte}={frame[byte] & mask:#04x}" for byte, mask in self.reserved.items()
+                 if frame[byte] & mask]
+        return " ".join(found) or None

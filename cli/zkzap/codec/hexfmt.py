@@ -1,0 +1,87 @@
+"""Hex text in and out.
+
+Accepted input notations: ``FF 14 64``, ``ff1464``, ``0xFF,0x14,0x64``, ``FF:14:64``,
+``FF-14-64``, ``\\xff\\x14``, ``#`` comments, and dump lines from ``xxd`` (``00000010: ff14 ...``
+and its ASCII column), ``hexdump -C`` (offset, ``|ascii|`` gutter) and ``od -A x -t x1``
+(an odd-length offset). An offset is dropped only where it cannot be data: it ends in a
+colon, is followed by a ``|...|`` gutter, or has an odd number of digits.
+Output is uppercase hex bytes separated by single spaces.
+"""
+
+from __future__ import annotations
+
+import re
+
+_HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
+_COLON_OFFSET = re.compile(r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)")
+_GUTTER = re.compile(r"\s\s\|.*\|\s*$")
+_HEXDUMP_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{4,16}\s")
+_ODD_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{5}(?:[0-9A-Fa-f]{2})*\s")
+_SPLIT = re.compile(r"[\s,:;\-]+")
+
+
+class HexError(ValueError):
+    """Malformed hex text."""
+
+
+def format_hex(data) -> str:
+    """``b"\\xff\\x1d"`` -> ``"FF 1D"``."""
+    return bytes(data).hex(" ").upper()
+
+
+def _strip_dump(line: str) -> str:
+    m = _COLON_OFFSET.match(line)
+    if m:
+        rest = line[m.end():].strip()
+        # xxd: hex groups, then two or more spaces, then the ASCII column
+        return re.split(r"\s{2,}", rest, maxsplit=1)[0]
+    g = _GUTTER.search(line)
+    if g:
+        line = line[:g.start()]
+        m = _HEXDUMP_OFFSET.match(line)
+        return line[m.end():] if m else line
+    m = _ODD_OFFSET.match(line)
+    if m:
+        return line[m.end():]
+    return line
+
+
+def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0) -> bytes:
+    """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`."""
+    line = line.split("#", 1)[0]
+    if not line.strip():
+        return b""
+    line = _strip_dump(line).replace("\\x", " ").replace("\\X", " ")
+    out = bytearray()
+    where = f" (line {lineno})" if lineno else ""
+    for token in _SPLIT.split(line):
+        if not token:
+            continue
+        prefixed = token[:2] in ("0x", "0X")
+        if prefixed:
+            token = token[2:]
+        if not token or not _HEX_DIGITS.issuperset(token):
+            raise HexError(f"{what}: {token!r} is not hex{where}; expected bytes such as 'FF 14 64' or '0xFF,0x14'")
+        if len(token) % 2:
+            if prefixed and len(token) == 1:
+                token = "0" + token
+            else:
+                raise HexError(f"{what}: {token!r} has an odd number of hex digits{where}; every byte needs two")
+        out += bytes.fromhex(token)
+    return bytes(out)
+
+
+def parse_hex(text: str, *, what: str = "hex input") -> bytes:
+    """Parse hex text of one or more lines. Raises :class:`HexError`."""
+    lines = text.splitlines()
+    if len(lines) <= 1:
+        return parse_hex_line(text, what=what)
+    return b"".join(parse_hex_line(line, what=what, lineno=i) for i, line in enumerate(lines, 1))
+
+
+def iter_hex_stream(stream, *, what: str = "stdin"):
+    """Yield the bytes of each line of a text stream, one line at a time (constant memory)."""
+    for i, line in enumerate(stream, 1):
+        data = parse_hex_line(line, what=what, lineno=i)
+        if data:
+            yield data

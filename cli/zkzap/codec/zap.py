@@ -1,0 +1,463 @@
+"""mightyZAP IR protocol: instructions, the 12Lf register map and the payload codec.
+
+Packets: ``FF FF FF ID SIZE CMD P1..Pn CHK`` (command) and ``FF FF FF ID SIZE ERR P1..Pn CHK``
+(feedback); SIZE = n + 2; CHK = 0xFF - ((ID + SIZE + CMD/ERR + P1..Pn) & 0xFF). ID 0..253,
+254 is broadcast (never answered). Framing (header, SIZE, checksum) lives in
+:mod:`zkzap.codec.framing`; this module knows what the bytes between SIZE and CHK mean.
+The register map is :data:`REGISTERS`, declared once; names, CLI choices, ranges, help and
+the ``zap registers`` table come from it.
+"""
+
+from __future__ import annotations
+
+from .crc import zap_checksum
+from .fields import FieldValueError
+
+HEADER = b"\xff\xff\xff"
+BROADCAST = 0xFE
+MAX_ID = 253
+MAX_SIZE = 255
+
+ERROR_BITS = {5: "overload", 0: "input-voltage"}
+ERROR_TEXT = {
+    "overload": "overload: the load could not be held at the maximum force; force is cut until "
+                "restart or power cycle",
+    "input-voltage": "input voltage out of the operating range",
+}
+
+
+class Instruction:
+    """One instruction. ``reply`` says when a non-broadcast command is answered:
+    ``"always"`` (Echo), ``"load"`` (Load Data: return modes 1 and 2), ``"all"`` (mode 2 only)."""
+
+    def __init__(self, code, name, cli, help, reply, params_help=""):
+        self.code, self.name, self.cli, self.help, self.reply = code, name, cli, help, reply
+        self.params_help = params_help
+
+    def answered(self, return_mode: int, target_id: int) -> bool:
+        """Whether an actuator in ``return_mode`` replies to this instruction sent to ``target_id``."""
+        if target_id == BROADCAST:
+            return False
+        if self.reply == "always":
+            return True
+        if self.reply == "load":
+            return return_mode >= 1
+        return return_mode >= 2
+
+
+INSTRUCTIONS = (
+    Instruction(0xF1, "Echo", "echo", "Ask for a feedback packet (connection check).", "always"),
+    Instruction(0xF2, "Load Data", "load", "Read LENGTH bytes from ADDRESS.", "load", "address, length"),
+    Instruction(0xF3, "Store Data", "store", "Write data at ADDRESS.", "all", "address, data..."),
+    Instruction(0xF4, "Send Data", "send", "Stage data at ADDRESS, applied by Execution.", "all",
+                "address, data..."),
+    Instruction(0xF5, "Execution", "execute", "Apply the data staged by Send Data.", "all"),
+    Instruction(0xF6, "Factory Reset", "factory-reset", "Restore factory settings.", "all",
+                "option (bit0 ID, bit1 baud rate)"),
+    Instruction(0xF8, "Restart", "restart", "Restart the actuator.", "all"),
+    Instruction(0x73, "Symmetric Store", "sync-move", "Write the same address of several actuators.",
+                "all", "address, length, {id, data x length}..."),
+)
+INSTRUCTION_BY_CODE = {i.code: i for i in INSTRUCTIONS}
+INSTRUCTION_BY_NAME = {i.cli: i for i in INSTRUCTIONS}
+INSTRUCTION_BY_NAME.update({i.name.lower().replace(" ", "-"): i for i in INSTRUCTIONS})
+INSTRUCTION_BY_NAME["symmetric-store"] = INSTRUCTION_BY_NAME["sync-move"]
+INSTRUCTION_BY_NAME["send-data"] = INSTRUCTION_BY_NAME["send"]
+INSTRUCTION_BY_NAME["execution"] = INSTRUCTION_BY_NAME["execute"]
+
+BAUD_CODES = {16: 115200, 32: 57600, 48: 38400, 64: 19200, 128: 9600}
+BAUD_TO_CODE = {v: k for k, v in BAUD_CODES.items()}
+
+
+class Register:
+    """One register of the data map. ``scale`` converts raw to ``unit`` (0.1 V registers)."""
+
+    __slots__ = ("address", "name", "size", "access", "stored", "default", "lo", "hi", "unit",
+                 "scale", "choices", "help")
+
+    def __init__(self, address, name, size, access, default=None, lo=None, hi=None, unit="",
+                 scale=1, choices=None, help=""):
+        self.address = address
+        self.name = name
+        self.size = size
+        self.access = access.split()[0]           # "R" or "RW"
+        self.stored = "NV" in access.split()[1:] if " " in access else None
+        self.default = default
+        self.lo = 0 if lo is None else lo
+        self.hi = (1 << (8 * size)) - 1 if hi is None else hi
+        self.unit = unit
+        self.scale = scale
+        self.choices = choices                    # allowed raw values -> meaning
+        self.help = help
+
+    @property
+    def writable(self) -> bool:
+        return self.access == "RW"
+
+    @property
+    def memory(self) -> str:
+        """``"NV"`` (stored), ``"V"`` (volatile) or ``""`` for read-only registers."""
+        if self.stored is None:
+            return ""
+        return "NV" if self.stored else "V"
+
+    def describe_range(self) -> str:
+        if self.choices:
+            return ", ".join(f"{k} ({v})" for k, v in self.choices.items())
+        unit = f" {self.unit}" if self.unit and self.scale == 1 else ""
+        return f"{self.lo}..{self.hi}{unit}"
+
+    def check(self, value: int) -> int:
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise FieldValueError(f"{self.name}: {value!r} is not an integer")
+        if self.choices is not None and value not in self.choices:
+            raise FieldValueError(f"{self.name}: {value} is not allowed; allowed {self.describe_range()}")
+        if not self.lo <= value <= self.hi:
+            raise FieldValueError(f"{self.name}: {value} is out of range; allowed {self.describe_range()}")
+        return value
+
+    def to_bytes(self, value: int) -> bytes:
+        return value.to_bytes(self.size, "little")
+
+    def physical(self, raw):
+        if self.scale == 1:
+            return raw
+        return round(raw * self.scale, 3)
+
+
+R = Register
+#: The 12Lf data map (firmware >= 2.0). NV = stored, survives power off; V = volatile.
+REGISTERS = (
+    R(0x00, "model-number", 2, "R", help="model number"),
+    R(0x02, "firmware-version", 1, "R", help="firmware version"),
+    R(0x03, "id", 1, "RW NV", 0, 0, 253, help="actuator ID"),
+    R(0x04, "baud-rate", 1, "RW NV", 32, choices={k: f"{v} bps" for k, v in BAUD_CODES.items()},
+      help="baud rate code, applied after restart"),
+    R(0x06, "short-stroke-limit", 2, "RW NV", 0, 0, 4095, help="short stroke limit (position)"),
+    R(0x08, "long-stroke-limit", 2, "RW NV", 3686, 0, 4095, help="long stroke limit (position)"),
+    R(0x0A, "protocol-type", 1, "RW NV", 1, choices={0: "Modbus RTU", 1: "IR"},
+      help="0 = Modbus RTU (leaves this protocol!), 1 = IR"),
+    R(0x0C, "lowest-limit-voltage", 1, "R", unit="V", scale=0.1, help="lowest input voltage"),
+    R(0x0D, "highest-limit-voltage", 1, "R", unit="V", scale=0.1, help="highest input voltage"),
+    R(0x0E, "motor-operating-rate-limit", 2, "RW NV", 1023, 0, 1023, help="motor operating rate limit"),
+    R(0x10, "feedback-return-mode", 1, "RW NV", 1,
+      choices={0: "Echo only", 1: "Load Data and Echo", 2: "every command"},
+      help="which commands are answered"),
+    R(0x11, "alarm-led", 1, "RW NV", 0x21, 0, 0x21, help="alarms shown on the LED (bit5 overload, bit0 voltage)"),
+    R(0x12, "alarm-shutdown", 1, "RW NV", 0x21, 0, 0x21, help="alarms that cut the force (same bits)"),
+    R(0x13, "start-compliance-margin", 1, "RW NV", None, 0, 255, help="start compliance margin"),
+    R(0x14, "end-compliance-margin", 1, "RW NV", None, 0, 255, help="end compliance margin"),
+    R(0x15, "speed-limit", 2, "RW NV", 1023, 0, 1023, help="speed limit"),
+    R(0x18, "calibration-short-stroke", 2, "R", help="calibrated short stroke"),
+    R(0x1A, "calibration-long-stroke", 2, "R", help="calibrated long stroke"),
+    R(0x21, "acceleration", 1, "RW NV", None, 0, 255, help="acceleration"),
+    R(0x22, "deceleration", 1, "RW NV", None, 0, 255, help="deceleration"),
+    R(0x23, "current-i-gain", 1, "RW NV", None, 0, 255, help="current loop I gain"),
+    R(0x24, "current-p-gain", 1, "RW NV", None, 0, 255, help="current loop P gain"),
+    R(0x25, "speed-d-gain", 1, "RW NV", None, 0, 255, help="speed D gain (position D on D7/D12/L12)"),
+    R(0x26, "speed-i-gain", 1, "RW NV", None, 0, 255, help="speed I gain (position I on D7/D12/L12)"),
+    R(0x27, "speed-p-gain", 1, "RW NV", None, 0, 255, help="speed P gain (position P on D7/D12/L12)"),
+    R(0x2E, "min-position-calibration", 1, "RW NV", None, 0, 255, help="minimum position calibration"),
+    R(0x2F, "max-position-calibration", 1, "RW NV", None, 0, 255, help="maximum position calibration"),
+    R(0x34, "current-limit", 2, "RW NV", 800, 0, 1600, unit="mA", help="stored current limit"),
+    R(0x80, "force-on-off", 1, "RW V", 1, 0, 1, help="motor force (a goal position turns it back on)"),
+    R(0x81, "led", 1, "RW V", 0, 0, 7, help="LED: bit0 all off, bit1 red, bit2 green"),
+    R(0x86, "goal-position", 2, "RW V", None, 0, 4095, help="goal position (clamped to the stroke limits)"),
+    R(0x88, "goal-speed", 2, "RW V", 1023, 0, 1023, help="goal speed (defaults to the speed limit)"),
+    R(0x8A, "goal-current", 2, "RW V", 800, 0, 1600, unit="mA", help="goal current (defaults to the current limit)"),
+    R(0x8C, "present-position", 2, "R", None, 0, 4095, help="present position"),
+    R(0x8E, "present-current", 2, "R", unit="mA", help="present current"),
+    R(0x90, "present-motor-operating-rate", 2, "R", None, 0, 2047,
+      help="0 stopped, 1..1023 retracting, 1024..2047 extending"),
+    R(0x92, "present-voltage", 1, "R", unit="V", scale=0.1, help="present input voltage"),
+    R(0x96, "moving", 1, "R", 0, 0, 1, help="1 while moving"),
+)
+del R
+REGISTER_BY_NAME = {r.name: r for r in REGISTERS}
+REGISTER_BY_ADDRESS = {r.address: r for r in REGISTERS}
+
+
+def register(spec) -> Register:
+    """A register by kebab-case name, or by address (``0x86``, ``134``). An address outside the
+    map gives an anonymous one-byte read/write register so raw access stays possible."""
+    if isinstance(spec, Register):
+        return spec
+    if isinstance(spec, str):
+        key = spec.strip().lower().replace("_", "-")
+        if key in REGISTER_BY_NAME:
+            return REGISTER_BY_NAME[key]
+        try:
+            addr = int(key, 0)
+        except ValueError:
+            close = [n for n in REGISTER_BY_NAME if key in n]
+            hint = f"; did you mean {', '.join(close[:4])}?" if close else "; see 'zap registers'"
+            raise FieldValueError(f"register: unknown name {spec!r}{hint}") from None
+    else:
+        addr = spec
+    if not 0 <= addr <= 0xFF:
+        raise FieldValueError(f"register: address {addr} is out of range; allowed 0x00..0xFF")
+    reg = REGISTER_BY_ADDRESS.get(addr)
+    if reg is None:
+        reg = Register(addr, f"0x{addr:02x}", 1, "RW", help="not in the 12Lf map")
+    return reg
+
+
+def check_id(value, *, allow_broadcast=True) -> int:
+    if isinstance(value, str):
+        v = value.strip().lower()
+        if v in ("broadcast", "all", "bc"):
+            if allow_broadcast:
+                return BROADCAST
+            raise FieldValueError("id: broadcast is not allowed here; allowed 0..253")
+        try:
+            value = int(v, 0)
+        except ValueError:
+            raise FieldValueError(f"id: {value!r} is not a number; allowed 0..253"
+                                  f"{', 254 or broadcast' if allow_broadcast else ''}") from None
+    top = BROADCAST if allow_broadcast else MAX_ID
+    if not isinstance(value, int) or not 0 <= value <= top:
+        raise FieldValueError(f"id: {value} is out of range; allowed 0..253"
+                              f"{', 254 or broadcast' if allow_broadcast else ''}")
+    return value
+
+
+# --- packets -----------------------------------------------------------------------------------
+
+def packet(ident: int, code: int, params=b"") -> bytes:
+    """``FF FF FF ID SIZE CODE params CHK`` for a command (CODE = instruction) or feedback (error)."""
+    params = bytes(params)
+    size = len(params) + 2
+    if size > MAX_SIZE:
+        raise FieldValueError(f"params: {len(params)} bytes do not fit one packet; at most {MAX_SIZE - 2}")
+    body = bytes((ident, size, code)) + params
+    return HEADER + body + bytes((zap_checksum(body),))
+
+
+def _id(ident):
+    return check_id(ident)
+
+
+def echo(ident=0) -> bytes:
+    return packet(_id(ident), 0xF1)
+
+
+def load(ident, reg, length=None) -> bytes:
+    reg = register(reg)
+    length = reg.size if length is None else length
+    if not isinstance(length, int) or not 1 <= length <= 0xFF:
+        raise FieldValueError(f"length: {length} is out of range; allowed 1..255")
+    return packet(_id(ident), 0xF2, bytes((reg.address, length)))
+
+
+def _write(code, ident, reg, value, *, force=False):
+    reg = register(reg)
+    if not reg.writable and not force:
+        raise FieldValueError(f"{reg.name}: read-only register (0x{reg.address:02X}); it cannot be written")
+    reg.check(value)
+    return packet(_id(ident), code, bytes((reg.address,)) + reg.to_bytes(value))
+
+
+def store(ident, reg, value, *, force=False) -> bytes:
+    """Store Data: write ``value`` (raw, in the register's units) little-endian in its size."""
+    return _write(0xF3, ident, reg, value, force=force)
+
+
+def send_data(ident, reg, value, *, force=False) -> bytes:
+    """Send Data: stage a write, applied by :func:`execute`."""
+    return _write(0xF4, ident, reg, value, force=force)
+
+
+def execute(ident=BROADCAST) -> bytes:
+    return packet(_id(ident), 0xF5)
+
+
+def factory_reset(ident, reset_id=False, reset_baud=False) -> bytes:
+    return packet(_id(ident), 0xF6, bytes(((1 if reset_id else 0) | (2 if reset_baud else 0),)))
+
+
+def restart(ident) -> bytes:
+    return packet(_id(ident), 0xF8)
+
+
+def symmetric_store(reg, targets) -> list:
+    """Symmetric Store to broadcast: ``targets`` maps ID -> value (or is a list of pairs).
+
+    SIZE is one byte, so one packet carries at most ``(255 - 4) // (1 + length)`` actuators;
+    more targets are split over as many packets as needed, in the given order.
+    """
+    reg = register(reg)
+    if not reg.writable:
+        raise FieldValueError(f"{reg.name}: read-only register (0x{reg.address:02X}); it cannot be written")
+    items = list(targets.items() if isinstance(targets, dict) else targets)
+    if not items:
+        raise FieldValueError("targets: none given; expected ID:VALUE pairs")
+    seen = set()
+    for ident, value in items:
+        check_id(ident, allow_broadcast=False)
+        if ident in seen:
+            raise FieldValueError(f"id: {ident} is given twice")
+        seen.add(ident)
+        reg.check(value)
+    per = (MAX_SIZE - 4) // (1 + reg.size)
+    out = []
+    for start in range(0, len(items), per):
+        chunk = items[start:start + per]
+        params = bytearray((reg.address, reg.size))
+        for ident, value in chunk:
+            params.append(ident)
+            params += reg.to_bytes(value)
+        out.append(packet(BROADCAST, 0x73, params))
+    return out
+
+
+def max_per_packet(length: int) -> int:
+    return (MAX_SIZE - 4) // (1 + length)
+
+
+# --- decoding ----------------------------------------------------------------------------------
+
+class PacketError(ValueError):
+    """A malformed packet."""
+
+
+class ChecksumError(PacketError):
+    def __init__(self, message, expected, found):
+        super().__init__(message)
+        self.expected = expected
+        self.found = found
+
+
+def check_packet(pkt) -> None:
+    """Raise :class:`PacketError`/:class:`ChecksumError` unless ``pkt`` is one whole packet."""
+    n = len(pkt)
+    if n < 7 or pkt[:3] != HEADER:
+        raise PacketError(f"mightyZAP packet: {n} bytes starting {bytes(pkt[:3]).hex(' ').upper() or '(none)'}; "
+                          "a packet starts FF FF FF and has at least 7 bytes")
+    size = pkt[4]
+    if pkt[3] == 0xFF:
+        raise PacketError("mightyZAP packet: ID FF is not allowed; allowed 0..254")
+    if size < 2 or n != size + 5:
+        raise PacketError(f"mightyZAP packet: SIZE {size} says {size + 5} bytes, got {n}")
+    expected = zap_checksum(pkt[3:-1])
+    if expected != pkt[-1]:
+        raise ChecksumError(f"mightyZAP packet: checksum mismatch: expected {expected:02X}, "
+                            f"found {pkt[-1]:02X}", expected, pkt[-1])
+
+
+def is_command(code: int) -> bool:
+    """The byte after SIZE tells command from feedback: instruction codes vs. error bits."""
+    return code in INSTRUCTION_BY_CODE
+
+
+def error_names(err: int) -> list:
+    names = [name for bit, name in ERROR_BITS.items() if err & (1 << bit)]
+    other = err & ~0x21
+    if other:
+        names.append(f"undocumented-0x{other:02x}")
+    return names
+
+
+def _register_values(address: int, data: bytes) -> list:
+    """Split ``data`` read from/written to ``address`` into named register values."""
+    out = []
+    i = 0
+    while i < len(data):
+        addr = address + i
+        reg = REGISTER_BY_ADDRESS.get(addr)
+        if reg is not None and i + reg.size <= len(data):
+            raw = int.from_bytes(data[i:i + reg.size], "little")
+            out.append((reg, raw))
+            i += reg.size
+        else:
+            out.append((register(addr) if reg is None else Register(addr, reg.name + "(partial)", 1, "R"),
+                        data[i]))
+            i += 1
+    return out
+
+
+def _with_register(rec, address, data):
+    values = _register_values(address, data)
+    rec["address"] = address
+    if len(values) == 1:
+        reg, raw = values[0]
+        rec["register"] = reg.name
+        rec["value"] = raw
+        if reg.scale != 1:
+            rec["physical"] = reg.physical(raw)
+            rec["unit"] = reg.unit
+    else:
+        rec["register"] = ",".join(r.name for r, _ in values)
+        rec["values"] = {r.name: v for r, v in values}
+
+
+def decode_packet(pkt, request=None) -> dict:
+    """Decode a checked packet into a record.
+
+    ``request`` is the Load Data command this feedback answers (when known, e.g. paired in a
+    capture), so its data can be named by register.
+    """
+    ident, code = pkt[3], pkt[5]
+    params = bytes(pkt[6:-1])
+    rec = {"kind": "command" if is_command(code) else "feedback", "id": ident}
+    if rec["kind"] == "command":
+        ins = INSTRUCTION_BY_CODE[code]
+        rec["instruction"] = ins.cli
+        rec["code"] = code
+        rec["params"] = params.hex(" ").upper()
+        if code == 0xF2 and len(params) == 2:
+            reg = REGISTER_BY_ADDRESS.get(params[0])
+            rec["address"] = params[0]
+            rec["register"] = reg.name if reg else f"0x{params[0]:02x}"
+            rec["length"] = params[1]
+        elif code in (0xF3, 0xF4) and len(params) >= 2:
+            _with_register(rec, params[0], params[1:])
+        elif code == 0xF6 and len(params) == 1:
+            rec["reset_id"] = bool(params[0] & 1)
+            rec["reset_baud"] = bool(params[0] & 2)
+        elif code == 0x73 and len(params) >= 2:
+            addr, length = params[0], params[1]
+            reg = REGISTER_BY_ADDRESS.get(addr)
+            rec["address"] = addr
+            rec["register"] = reg.name if reg else f"0x{addr:02x}"
+            rec["length"] = length
+            targets = {}
+            body = params[2:]
+            step = 1 + length
+            if length and len(body) % step == 0:
+                for j in range(0, len(body), step):
+                    targets[str(body[j])] = int.from_bytes(body[j + 1:j + step], "little")
+                rec["targets"] = targets
+            else:
+                rec["malformed"] = f"{len(body)} data bytes are not a multiple of {step}"
+    else:
+        rec["error"] = code
+        rec["errors"] = error_names(code)
+        rec["params"] = params.hex(" ").upper()
+        if request is not None and params and request[5] == 0xF2 and len(request) == 9:
+            _with_register(rec, request[6], params)
+        elif len(params) in (1, 2) and request is None:
+            rec["value"] = int.from_bytes(params, "little")
+    return rec
+
+
+class ZapDecoder:
+    """Stateful record decoder: pairs each feedback with the last Load Data sent to its ID, so
+    feedback data from a capture of both directions is named by register."""
+
+    def __init__(self):
+        self.pending = {}
+
+    def decode(self, pkt) -> dict:
+        ident, code = pkt[3], pkt[5]
+        if is_command(code):
+            if code == 0xF2:
+                self.pending[ident] = bytes(pkt)
+            else:
+                self.pending.pop(ident, None)
+            return decode_packet(pkt)
+        req = self.pending.pop(ident, None)
+        return decode_packet(pkt, req)
+
+
+ZAP_KEYS = ("kind", "id", "instruction", "code", "error", "errors", "register", "address", "length",
+            "value", "physical", "unit", "values", "targets", "reset_id", "reset_baud", "params")

@@ -1,0 +1,464 @@
+"""ZK turbine ECU protocol V1.2 (with the V1.4 additions): the field tables and payload codec.
+
+Everything about a field is declared once, in :data:`CONTROL` and :data:`STATUS`; encoders,
+decoders, the CLI's sub-commands and options, JSON keys, CSV columns and help text are derived
+from these tables. Frame boundaries and CRCs live in :mod:`zkzap.codec.framing`.
+
+Control frame (host -> ECU), 4 bytes: ``FF b1 b2 CRC``; b1[7:4] is the command ID; the CRC
+covers bytes 1..2. Status frame (ECU -> host), 7 bytes: ``F0|ID b1..b5 CRC``; the CRC covers
+bytes 0..5. ``bN`` below is byte N of the frame.
+"""
+
+from __future__ import annotations
+
+from .crc import crc8_maxim
+from .fields import ContextScale, Field, FieldValueError, Layout, VersionScale
+
+CONTROL_HEAD = 0xFF
+STATUS_HEAD = 0xF0
+CONTROL_LEN = 4
+STATUS_LEN = 7
+
+#: Protocol version assumed for version-dependent units until a status ID 6 frame reveals it.
+#: Version 4 is the version of the document's own worked example, and every version >= 4
+#: shares its 0.2 V voltage unit.
+DEFAULT_PROTOCOL_VERSION = 4
+
+# --- names from the appendix ---------------------------------------------------------------
+ENGINE_STATES = {
+    0: "stop", 1: "standby", 2: "ignition-min-throttle", 3: "ignition", 4: "preheat",
+    5: "fuel-ramp", 6: "learn-max-throttle", 7: "learn-min-throttle", 8: "learn-idle",
+    9: "running-min-throttle", 10: "running-pump-limit", 11: "running", 12: "cooling",
+    13: "restart", 14: "test-glowplug", 15: "test-main-valve", 16: "test-ignition-valve",
+    17: "test-pump", 18: "test-starter", 19: "fuel-exhaust-air",
+}
+ENGINE_STATE_TEXT = {
+    0: "Stop", 1: "Standby/auto cooling", 2: "Ignition (requires minimum throttle)",
+    3: "Ignition", 4: "Preheat", 5: "Fuel ramp", 6: "Running (learning mode, requires maximum throttle)",
+    7: "Running (learning mode, requires minimum throttle)", 8: "Running (learning idle)",
+    9: "Running (minimum throttle)", 10: "Running (warning, fuel pump at limit)", 11: "Running",
+    12: "Cooling", 13: "Restart", 14: "Test glowplug", 15: "Test main valve",
+    16: "Test ignition valve", 17: "Test pump", 18: "Test starter", 19: "Fuel exhaust air",
+}
+ERRORS = {
+    0: "none", 1: "timeout", 2: "voltage-low", 3: "glowplug-failure", 4: "pump-failure",
+    5: "starter-failure", 6: "rpm-low", 7: "rpm-instability", 8: "egt-high", 9: "egt-low",
+    10: "egt-sensor-failure", 11: "ignition-valve-failure", 12: "main-valve-failure",
+    13: "loss-of-control-signal", 14: "starter-controller-overheat",
+    15: "pump-controller-overheat", 16: "clutch-failure", 17: "current-overload",
+    18: "engine-offline",
+}
+ERROR_TEXT = {
+    0: "No error", 1: "Time out", 2: "Voltage low", 3: "Glowplug failure", 4: "Pump failure",
+    5: "Starter failure", 6: "RPM low", 7: "RPM instability", 8: "Exhaust temperature is high",
+    9: "Exhaust temperature is low", 10: "Exhaust gas temperature sensor failure",
+    11: "Ignition valve failure", 12: "Main valve failure", 13: "Loss of control signal",
+    14: "Starter controller temperature is too high", 15: "Pump controller temperature is too high",
+    16: "Clutch failure", 17: "Current overload", 18: "Engine offline",
+}
+#: Control ID 1 SW: who controls the engine and in which state.
+CONTROL_SW = {0: "pwm", 1: "stop", 2: "standby", 3: "run"}
+#: Control ID 6 SW: 0 leaves ID 1's SW in force.
+MODE_SW = {0: "none", 1: "stop", 2: "standby", 3: "run"}
+#: Status ID 1 SwSt.
+SW_STATE = {0: "stop", 1: "standby", 2: "run"}
+#: Control ID 2 params, 1..13 in document order.
+ACTIONS = {
+    1: "drain-oil", 2: "test-glowplug", 3: "test-main-valve", 4: "test-ignition-valve",
+    5: "test-pump", 6: "test-starter", 7: "rate-20hz", 8: "rate-50hz", 9: "rate-100hz",
+    10: "reset-fuel", 11: "zero-thrust", 12: "pump-on", 13: "pump-off",
+}
+ACTION_TEXT = {
+    1: "Drain oil", 2: "Test the glowplug", 3: "Test the main valve", 4: "Test the ignition valve",
+    5: "Test the fuel pump", 6: "Test the starter", 7: "Set the status update rate to 20 Hz",
+    8: "Set the status update rate to 50 Hz", 9: "Set the status update rate to 100 Hz",
+    10: "Reset fuel consumption statistics", 11: "Calibrate the thrust sensor to 0",
+    12: "Open the fuel pump for a long time", 13: "Close the pump",
+}
+ACTION_SINCE = {10: 2, 11: 2, 12: 5, 13: 5}
+STATUS_RATES = {0: 20, 1: 50, 2: 100}
+
+#: Voltage unit of status IDs 2 and 6: 0.1 V up to protocol version 3, 0.2 V from 4.
+VOLTAGE = VersionScale(((3, 0.1),), 0.2)
+
+
+class ControlCommand:
+    """One control command (host -> ECU)."""
+
+    def __init__(self, id, name, help, fields=(), since=1, params=(), hazard=None, needs_unlock=False):
+        self.id = id
+        self.name = name
+        self.help = help
+        self.since = since
+        self.params = tuple(params)   # context parameters the CLI asks for (not in the frame)
+        self.hazard = hazard          # what it can do to an engine; None when harmless
+        self.needs_unlock = needs_unlock
+        self.layout = Layout(fields, CONTROL_LEN, covered={0: 0xFF, 1: 0xF0, 3: 0xFF})
+
+    @property
+    def fields(self):
+        return self.layout.fields
+
+
+class Param:
+    """A context parameter a command needs to convert physical values (not sent in the frame)."""
+
+    def __init__(self, key, lo, hi, cli, help):
+        self.key, self.lo, self.hi, self.cli, self.help = key, lo, hi, cli, help
+
+    @property
+    def label(self):
+        return self.cli.lstrip("-")
+
+    def check(self, value):
+        if not isinstance(value, int) or not self.lo <= value <= self.hi:
+            raise FieldValueError(f"{self.label}: {value} is out of range; allowed {self.lo}..{self.hi}")
+        return value
+
+
+RPM_FACTOR = Param("rpm_factor", 1, 6, "--rpm-factor",
+                   "RPM factor RPM_X set with 'mode' (1..6): target rpm = value x 10 x RPM_X")
+
+CONTROL = (
+    ControlCommand(0, "keepalive", "Keep-alive (ID 0): no control, the ECU keeps reporting status."),
+    ControlCommand(1, "control", "Engine state and throttle (ID 1).", fields=(
+        Field("sw", "b1[3:2]", names=CONTROL_SW, name_key="state", cli="--state",
+              help="pwm hands control back to the PWM input; stop, standby (cools when hot) or run"),
+        Field("throttle_pct", "b1[1:0] b2", scale=0.1, unit="%", hi=1000, cli="--throttle",
+              help="throttle, 0..100 % in 0.1 % steps"),
+    ), hazard="can start the engine"),
+    ControlCommand(2, "action", "ECU action or setting (ID 2).", fields=(
+        Field("param", "b2", names=ACTIONS, name_key="action", lo=1, hi=13, cli="NAME", label="action",
+              since_by_value=ACTION_SINCE, help="the action to run"),
+    ), hazard="can run the starter or pump, fire the igniter or drain fuel"),
+    ControlCommand(3, "unlock", "Unlock settings (ID 3): ignition-voltage and accel-curve need it first."),
+    ControlCommand(4, "ignition-voltage", "Ignition pump voltage (ID 4); needs unlock first.", fields=(
+        Field("ignition_voltage_v", "b2", scale=0.02, unit="V", cli="VOLTS", label="ignition-voltage",
+              help="ignition pump voltage, 0..5.10 V in 0.02 V steps"),
+    ), needs_unlock=True),
+    ControlCommand(5, "accel-curve", "Acceleration curve (ID 5); needs unlock first.", fields=(
+        Field("accel_curve", "b2", lo=10, hi=70, cli="N", label="accel-curve",
+              help="acceleration curve 10..70; larger accelerates faster"),
+    ), needs_unlock=True),
+    ControlCommand(6, "mode", "Engine state and RPM factor (ID 6); a non-zero RPM factor selects RPM mode.", fields=(
+        Field("rpm_factor", "b2[4:2]", hi=6, cli="--rpm-factor",
+              help="RPM factor RPM_X 0..6 (0 = throttle mode); max target 40950 x RPM_X rpm"),
+        Field("sw", "b2[1:0]", names=MODE_SW, name_key="state", cli="--state",
+              help="none leaves ID 1's state in force; stop, standby or run override it"),
+    ), since=4, hazard="can start the engine"),
+    ControlCommand(7, "rpm", "Target engine speed in RPM mode (ID 7).", fields=(
+        Field("target_rpm", "b1[3:0] b2", scale=ContextScale("rpm_factor", 10), hi=4095,
+              raw_key="rpm_value", unit="rpm", cli="RPM", label="rpm",
+              help="target engine speed; sent as RPM / (10 x RPM_X), 0..4095"),
+    ), since=4, params=(RPM_FACTOR,)),
+    ControlCommand(8, "pressure", "Atmospheric static pressure (ID 8).", fields=(
+        Field("pressure_hpa", "b1[1:0] b2", unit="hPa", hi=1023, cli="HPA", label="pressure",
+              note="10-bit field; the document's 1024 does not fit",
+              help="air pressure, 0..1023 hPa"),
+    )),
+)
+CONTROL_BY_ID = {c.id: c for c in CONTROL}
+CONTROL_BY_NAME = {c.name: c for c in CONTROL}
+
+RPM = Field("rpm", "b2 b1", scale=10, unit="rpm", help="engine speed")
+
+
+class StatusFrame:
+    """One status frame kind (ECU -> host)."""
+
+    def __init__(self, id, name, fields, since=1, help=""):
+        self.id = id
+        self.name = name
+        self.since = since
+        self.help = help
+        self.layout = Layout((RPM,) + tuple(fields), STATUS_LEN, covered={0: 0xFF, 6: 0xFF})
+
+    @property
+    def fields(self):
+        return self.layout.fields
+
+
+STATUS = (
+    StatusFrame(1, "engine", (
+        Field("engine_state", "b3[4:0]", names=ENGINE_STATES, name_key="engine_state_name",
+              help="engine state (appendix table 0..19)"),
+        Field("error_code", "b4[1:0] b3[7:5]", names=ERRORS, name_key="error_name",
+              help="error code (appendix table 0..18)"),
+        Field("egt_c", "b4[4:2] b5", offset=-50, unit="°C", help="exhaust gas temperature"),
+        Field("sw_state", "b4[6:5]", names=SW_STATE, name_key="sw_state_name",
+              help="host control state: stop, standby, run"),
+    )),
+    StatusFrame(2, "voltages", (
+        Field("radio_voltage_v", "b3", scale=VOLTAGE, unit="V", help="receiver (radio) voltage"),
+        Field("power_voltage_v", "b4", scale=VOLTAGE, unit="V", help="power (battery) voltage"),
+        Field("pump_voltage_v", "b5", scale=VOLTAGE, unit="V", help="fuel pump voltage"),
+    )),
+    StatusFrame(3, "throttle", (
+        Field("throttle_pct", "b3", unit="%", help="throttle"),
+        Field("pressure_pa", "b5 b4", scale=2, unit="Pa", help="air pressure"),
+    )),
+    StatusFrame(4, "load", (
+        Field("current_a", "b4[0] b3", scale=0.1, unit="A", help="current"),
+        Field("thrust_kg", "b4[7:1] b5", scale=0.1, unit="kg", since=2,
+              help="thrust (0 without a thrust sensor)"),
+    )),
+    StatusFrame(5, "ignition", (
+        Field("ignition_pump_voltage_v", "b3", scale=0.02, unit="V", help="ignition pump voltage"),
+        Field("curve_inc", "b4", help="acceleration curve INC (raw, unit not documented)"),
+        Field("curve_dec", "b5", help="acceleration curve DEC (raw, unit not documented)"),
+    )),
+    StatusFrame(6, "config", (
+        Field("max_rpm", "b3", scale=1000, unit="rpm", help="maximum engine speed"),
+        Field("max_pump_voltage_v", "b4", scale=VOLTAGE, unit="V", help="maximum pump voltage"),
+        Field("protocol_version", "b5[7:2]", help="ECU protocol version"),
+        Field("status_rate_hz", "b5[1:0]", values=STATUS_RATES, raw_key=None, unit="Hz",
+              help="status update rate (20, 50 or 100 Hz)"),
+    )),
+    StatusFrame(7, "fuel", (
+        Field("fuel_flow_l_min", "b4[1:0] b3", scale=0.01, unit="L/min", help="fuel flow rate"),
+        Field("fuel_used_l", "b5 b4[7:2]", scale=0.1, unit="L", since=2, help="fuel used"),
+    )),
+    StatusFrame(8, "setup", (
+        Field("idle_rpm", "b3", scale=1000, unit="rpm", help="idle speed"),
+        Field("esr", "b4[5]", help="1: the ECU asks the host to send air pressure (control ID 8)"),
+        Field("scl", "b4[4]", help="1: speed closed loop, 0: open loop"),
+        Field("startup_time_s", "b4[3:0] b5", scale=0.1, unit="s", help="startup time"),
+    )),
+    StatusFrame(9, "ecu", (
+        Field("ecu_temp_c", "b3", offset=-50, unit="°C", since=5, help="ECU temperature"),
+        Field("prop_rpm", "b5 b4", unit="rpm", since=6, help="propeller/shaft speed (V1.4)"),
+    )),
+    StatusFrame(10, "pump", (
+        Field("fuel_pump_rpm", "b5 b4", unit="rpm", help="fuel pump speed (V1.4)"),
+    ), since=1, help="added by the V1.4 edition"),
+)
+STATUS_BY_ID = {s.id: s for s in STATUS}
+
+#: Every status key in table order (CSV columns, snapshot rows).
+STATUS_KEYS = []
+for _s in STATUS:
+    for _k in _s.layout.keys():
+        if _k not in STATUS_KEYS:
+            STATUS_KEYS.append(_k)
+CONTROL_KEYS = []
+for _c in CONTROL:
+    for _k in _c.layout.keys():
+        if _k not in CONTROL_KEYS:
+            CONTROL_KEYS.append(_k)
+del _s, _c, _k
+
+
+class FrameError(ValueError):
+    """A frame of the wrong length, head or ID."""
+
+
+class CrcError(FrameError):
+    """A frame whose CRC does not match."""
+
+    def __init__(self, message, expected, found):
+        super().__init__(message)
+        self.expected = expected
+        self.found = found
+
+
+# --- control frames ----------------------------------------------------------------------------
+
+def control_frame(cmd_id: int, b1_low: int, b2: int) -> bytes:
+    """Assemble ``FF b1 b2 CRC`` from the command ID, b1[3:0] and b2."""
+    b1 = (cmd_id << 4) | (b1_low & 0x0F)
+    return bytes((CONTROL_HEAD, b1, b2, crc8_maxim((b1, b2))))
+
+
+def control_command(name_or_id):
+    cmd = CONTROL_BY_NAME.get(name_or_id) if isinstance(name_or_id, str) else CONTROL_BY_ID.get(name_or_id)
+    if cmd is None:
+        names = ", ".join(c.name for c in CONTROL)
+        raise FieldValueError(f"command: unknown {name_or_id!r}; allowed {names} (or IDs 0..8)")
+    return cmd
+
+
+def encode_control(name_or_id, **values):
+    """Encode a control command from physical values. Returns ``(frame, notes)``.
+
+    Enumerated fields take names or numbers (``sw="run"``); context parameters go in the
+    same keyword arguments (``rpm_factor=3``). Missing fields are 0. Raises
+    :class:`FieldValueError` naming the field and its range.
+    """
+    cmd = control_command(name_or_id)
+    ctx = {}
+    for p in cmd.params:
+        if p.key not in values:
+            raise FieldValueError(f"{p.label}: required; allowed {p.lo}..{p.hi}")
+        ctx[p.key] = p.check(values.pop(p.key))
+    frame = bytearray((CONTROL_HEAD, cmd.id << 4, 0, 0))
+    notes = []
+    known = {f.key for f in cmd.fields} | {f.name_key for f in cmd.fields if f.name_key}
+    for key in values:
+        if key not in known:
+            raise FieldValueError(f"{key}: not a field of {cmd.name}; fields: {', '.join(sorted(known)) or 'none'}")
+    for f in cmd.fields:
+        v = values.get(f.key, values.get(f.name_key, 0) if f.name_key else 0)
+        raw, note = f.to_raw(v, ctx)
+        if note:
+            notes.append(note)
+        f.insert(frame, raw)
+    frame[3] = crc8_maxim(frame[1:3])
+    return bytes(frame), notes
+
+
+def encode_control_raw(cmd_id: int, **raws) -> bytes:
+    """Encode a control frame from raw field values (``throttle_pct=500``). Reserved bits may be
+    set with ``b1_low`` / ``b2`` masks for one-off crafting; unknown keys are an error."""
+    cmd = control_command(cmd_id)
+    frame = bytearray((CONTROL_HEAD, cmd.id << 4, 0, 0))
+    fields = {f.key: f for f in cmd.fields}
+    fields.update({f.raw_key: f for f in cmd.fields if f.raw_key})
+    fields.update({f.name_key: f for f in cmd.fields if f.name_key})
+    for key, raw in raws.items():
+        key = key.replace("-", "_")
+        if key == "reserved_b1":
+            frame[1] |= _check_byte(key, raw, 0x0F)
+            continue
+        if key == "reserved_b2":
+            frame[2] |= _check_byte(key, raw, 0xFF)
+            continue
+        f = fields.get(key)
+        if f is None:
+            allowed = ", ".join(sorted(fields)) or "none"
+            raise FieldValueError(f"{key}: not a field of command {cmd.id} ({cmd.name}); fields: {allowed}"
+                                  f"; reserved bits: reserved_b1, reserved_b2")
+        if f.names is not None and isinstance(raw, str):
+            raw, _ = f.to_raw(raw)
+        f.insert(frame, f.check_raw(raw))
+    frame[3] = crc8_maxim(frame[1:3])
+    return bytes(frame)
+
+
+def _check_byte(key, value, mask):
+    if not isinstance(value, int) or value & ~mask:
+        raise FieldValueError(f"{key}: {value!r} is out of range; allowed bits {mask:#04x}")
+    return value
+
+
+def check_control(frame) -> None:
+    """Raise :class:`FrameError`/:class:`CrcError` unless ``frame`` is a well-formed control frame."""
+    if len(frame) != CONTROL_LEN:
+        raise FrameError(f"control frame: {len(frame)} bytes; a control frame has {CONTROL_LEN}")
+    if frame[0] != CONTROL_HEAD:
+        raise FrameError(f"control frame: head {frame[0]:02X}; expected FF")
+    crc = crc8_maxim(frame[1:3])
+    if crc != frame[3]:
+        raise CrcError(f"control frame: CRC mismatch: expected {crc:02X}, found {frame[3]:02X}", crc, frame[3])
+
+
+def decode_control(frame, ctx=None, raw=False) -> dict:
+    """Decode a checked control frame into a record."""
+    cmd_id = frame[1] >> 4
+    cmd = CONTROL_BY_ID.get(cmd_id)
+    rec = {"kind": "control", "id": cmd_id}
+    if cmd is None:
+        rec["command"] = None
+        rec["payload"] = f"{frame[1] & 0x0F:X}{frame[2]:02X}"
+        return rec
+    rec["command"] = cmd.name
+    rec.update(cmd.layout.decode(frame, ctx or {}, None, raw))
+    reserved = cmd.layout.reserved_bits(frame)
+    if reserved:
+        rec["reserved"] = reserved
+    return rec
+
+
+# --- status frames -----------------------------------------------------------------------------
+
+def status_frame(status_id: int, payload) -> bytes:
+    """Assemble ``F0|ID b1..b5 CRC`` from five payload bytes."""
+    body = bytes((STATUS_HEAD | status_id,)) + bytes(payload)
+    return body + bytes((crc8_maxim(body),))
+
+
+def encode_status(status_id: int, version=DEFAULT_PROTOCOL_VERSION, **values) -> bytes:
+    """Encode a status frame from physical values (used by the simulator and the tests)."""
+    st = STATUS_BY_ID.get(status_id)
+    if st is None:
+        raise FieldValueError(f"status id: {status_id} is unknown; allowed 1..{max(STATUS_BY_ID)}")
+    ctx = {"version": version}
+    frame = bytearray(STATUS_LEN)
+    frame[0] = STATUS_HEAD | status_id
+    keys = {f.key: f for f in st.fields}
+    for key in values:
+        if key not in keys:
+            raise FieldValueError(f"{key}: not a field of status {status_id}; fields: {', '.join(keys)}")
+    for f in st.fields:
+        v = values.get(f.key)
+        if v is None:
+            continue
+        raw, _ = f.to_raw(v, ctx)
+        f.insert(frame, raw)
+    frame[6] = crc8_maxim(frame[:6])
+    return bytes(frame)
+
+
+def check_status(frame) -> None:
+    if len(frame) != STATUS_LEN:
+        raise FrameError(f"status frame: {len(frame)} bytes; a status frame has {STATUS_LEN}")
+    if frame[0] & 0xF0 != STATUS_HEAD:
+        raise FrameError(f"status frame: head {frame[0]:02X}; expected F1..F{max(STATUS_BY_ID):X}")
+    crc = crc8_maxim(frame[:6])
+    if crc != frame[6]:
+        raise CrcError(f"status frame: CRC mismatch: expected {crc:02X}, found {frame[6]:02X}", crc, frame[6])
+
+
+def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False) -> dict:
+    """Decode a checked status frame. ``version`` sets version-dependent units; ``known`` is the
+    version actually known (seen or given) and gates fields newer than it (None: ungated)."""
+    sid = frame[0] & 0x0F
+    st = STATUS_BY_ID.get(sid)
+    rec = {"kind": "status", "id": sid}
+    if st is None:
+        rec["rpm"] = (frame[2] << 8 | frame[1]) * 10
+        rec["payload"] = bytes(frame[3:6]).hex(" ").upper()
+        return rec
+    if sid == 6:
+        version = known = frame[5] >> 2
+    rec.update(st.layout.decode(frame, {"version": version}, known, raw))
+    return rec
+
+
+def check_frame(frame):
+    """Check a whole ZK frame of either kind by its length. Returns ``"control"`` or ``"status"``."""
+    if len(frame) == CONTROL_LEN:
+        check_control(frame)
+        return "control"
+    if len(frame) == STATUS_LEN:
+        check_status(frame)
+        return "status"
+    raise FrameError(f"ZK frame: {len(frame)} bytes; a control frame has 4, a status frame 7")
+
+
+class ZkDecoder:
+    """Stateful record decoder for a ZK byte stream's frames.
+
+    Tracks the protocol version (from status ID 6, else the one given, else the default) and
+    the RPM factor of the last control ID 6, so ID 2/6 voltages and ID 7 targets decode right.
+    ``version_source`` is ``"frame"``, ``"given"`` or ``"default"``.
+    """
+
+    def __init__(self, protocol_version=None, raw=False):
+        self.given = protocol_version
+        self.version = protocol_version if protocol_version is not None else DEFAULT_PROTOCOL_VERSION
+        self.known = protocol_version
+        self.version_source = "given" if protocol_version is not None else "default"
+        self.rpm_factor = None
+        self.raw = raw
+
+    def decode(self, frame) -> dict:
+        if len(frame) == STATUS_LEN:
+            if frame[0] == 0xF6:
+                v = frame[5] >> 2
+                self.version = self.known = v
+                self.version_source = "frame"
+            return decode_status(frame, self.version, self.known, self.raw)
+        rec = decode_control(frame, {"rpm_factor": self.rpm_factor}, self.raw)
+        if rec["id"] == 6:
+            self.rpm_factor = rec["rpm_factor"]
+        return rec
