@@ -462,3 +462,23 @@ class ZkDecoder:
         if rec["id"] == 6:
             self.rpm_factor = rec["rpm_factor"]
         return rec
+
+
+#: Control ID 2 actions that run hardware: each needs consent on a real port.
+HAZARDOUS_ACTIONS = frozenset({1, 2, 3, 4, 5, 6, 12})
+
+
+def control_hazard(frame) -> str | None:
+    """What a control frame can do to an engine, or None when it is harmless.
+
+    Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
+    fuel, fire the igniter, open valves, run the pump or the starter.
+    """
+    cmd_id = frame[1] >> 4
+    if cmd_id == 1 and (frame[1] >> 2) & 3 == 3:
+        return "state run can start the engine"
+    if cmd_id == 6 and frame[2] & 3 == 3:
+        return "state run can start the engine"
+    if cmd_id == 2 and frame[2] in HAZARDOUS_ACTIONS:
+        return f"action {ACTIONS[frame[2]]} runs ECU hardware ({ACTION_TEXT[frame[2]].lower()})"
+    return None

@@ -1,0 +1,213 @@
+"""The command-line application: a root group whose sub-commands are imported only when used.
+
+``zkzap`` is the root (``zkzap zk ...``, ``zkzap zap ...``, ``zkzap crc ...``, ``zkzap sim ...``);
+``zk`` and ``zap`` are direct entry points to those two groups. Every command module is thin:
+it parses options (``options.py``) and calls the codec, link, simulator and io layers.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from .. import __version__
+from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError
+
+EXIT_EPILOG = "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "."
+
+
+class LazyGroup(click.Group):
+    """A group whose sub-commands live in modules imported on first use.
+
+    ``lazy`` maps a command name to ``("module", "attribute", "short help")``; the short help
+    is kept here so that ``--help`` lists every command without importing any of them.
+    """
+
+    def __init__(self, *args, lazy=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lazy = dict(lazy or {})
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(self.lazy))
+
+    def get_command(self, ctx, name):
+        if name in self.commands:
+            return self.commands[name]
+        spec = self.lazy.get(name)
+        if spec is None:
+            return None
+        import importlib
+
+        cmd = getattr(importlib.import_module(spec[0], __package__), spec[1])
+        self.commands[name] = cmd
+        return cmd
+
+    def format_commands(self, ctx, formatter):
+        rows = []
+        width = formatter.width or 80
+        for name in self.list_commands(ctx):
+            if name in self.commands:
+                cmd = self.commands[name]
+                if cmd.hidden:
+                    continue
+                text = cmd.get_short_help_str(limit=width - 6 - len(name))
+            else:
+                text = self.lazy[name][2]
+            rows.append((name, text))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+def _debug_callback(ctx, param, value):
+    if value:
+        os.environ["ZKZAP_DEBUG"] = "1"
+    return value
+
+
+debug_option = click.option(
+    "--debug", is_flag=True, expose_value=False, is_eager=True, callback=_debug_callback,
+    help="Show Python tracebacks on errors (also ZKZAP_DEBUG=1).")
+
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+ZK_COMMANDS = {
+    "send": (".zk.send", "send", "Compose a control command and send it (or print it with -n)."),
+    "decode": (".zk.decode", "decode", "Decode ZK frames from hex or a binary capture."),
+    "monitor": (".zk.monitor", "monitor", "Show or log the ECU's status frames as they arrive."),
+    "profile": (".zk.profile", "profile", "Run a throttle schedule on the engine and log telemetry."),
+    "states": (".zk.tables", "states", "List the engine states (appendix table)."),
+    "errors": (".zk.tables", "errors", "List the engine error codes (appendix table)."),
+    "fields": (".zk.tables", "fields", "List every control and status field with bits, unit and range."),
+}
+ZAP_COMMANDS = {
+    "echo": (".zap.compose", "echo", "Echo: check that an actuator answers."),
+    "load": (".zap.compose", "load", "Load Data: read a register."),
+    "store": (".zap.compose", "store", "Store Data: write a register."),
+    "send": (".zap.compose", "send_data", "Send Data: stage a write, applied by execute."),
+    "execute": (".zap.compose", "execute", "Execution: apply staged writes."),
+    "factory-reset": (".zap.compose", "factory_reset", "Factory Reset: restore factory settings."),
+    "restart": (".zap.compose", "restart", "Restart the actuator."),
+    "sync-move": (".zap.compose", "sync_move", "Symmetric Store: move several actuators at once."),
+    "raw": (".zap.compose", "raw", "Send any instruction with hex parameters."),
+    "decode": (".zap.decode", "decode", "Decode mightyZAP packets from hex or a binary capture."),
+    "scan": (".zap.scan", "scan", "Find every actuator on the bus (IDs and baud rates)."),
+    "dump": (".zap.scan", "dump", "Read back the whole register map of one actuator."),
+    "move": (".zap.scan", "move", "Move to a position, optionally waiting until it stops."),
+    "set-id": (".zap.scan", "set_id", "Give an actuator a new ID, verified by read-back."),
+    "set-baud": (".zap.scan", "set_baud", "Change an actuator's baud rate, verified."),
+    "registers": (".zap.tables", "registers", "List the register map (12Lf)."),
+}
+ROOT_COMMANDS = {
+    "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),
+    "zap": (".zap", "zap", "mightyZAP actuators: scan, move, load, store, decode."),
+    "crc": (".crc", "crc", "Compute or check CRCs and checksums of both protocols."),
+    "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
+    "ports": (".ports", "ports", "List serial ports, with adapter hints."),
+    "completion": (".completion", "completion", "Print the shell completion script."),
+}
+
+
+def _available(mapping):
+    """Only the commands whose module exists (later modules arrive with later features)."""
+    import importlib.util
+
+    here = os.path.dirname(__file__)
+    out = {}
+    for name, spec in mapping.items():
+        rel = spec[0].lstrip(".").replace(".", os.sep)
+        if os.path.exists(os.path.join(here, rel + ".py")) or os.path.isdir(os.path.join(here, rel)):
+            out[name] = spec
+    return out
+
+
+@click.group(cls=LazyGroup, lazy=_available(ROOT_COMMANDS), context_settings=CONTEXT, epilog=EXIT_EPILOG)
+@click.version_option(__version__, "-V", "--version", prog_name="zkzap", message="%(prog)s %(version)s")
+@debug_option
+def root():
+    """zkzap: the ZK turbine ECU protocol and mightyZAP actuators from the command line.
+
+    Data goes to stdout, messages to stderr. Ports are device paths or pyserial URLs
+    (socket://, rfc2217://, loop://, spy://, hwgrep://); every command that talks to a device
+    also runs against the built-in simulators (--sim, or 'zkzap sim').
+    """
+
+
+def _error(message: str) -> None:
+    from ..io.term import style
+
+    prog = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else "zkzap"
+    if prog.endswith(".py") or prog in ("__main__", "-c", ""):
+        prog = "zkzap"
+    click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {message}", err=True)
+
+
+def run(cmd, prog_name=None, args=None) -> int:
+    """Run a click command with zkzap's error conventions; returns the exit status."""
+    from ..codec.fields import FieldValueError
+    from ..codec.hexfmt import HexError
+
+    debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
+    try:
+        rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False)
+        return rv if isinstance(rv, int) else 0
+    except click.exceptions.Exit as e:
+        return e.exit_code
+    except click.ClickException as e:
+        e.show()
+        return e.exit_code
+    except click.exceptions.Abort:
+        click.echo("", err=True)
+        return INTERRUPTED
+    except KeyboardInterrupt:
+        return INTERRUPTED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 0
+    except ZkzapError as e:
+        if debug:
+            raise
+        _error(str(e))
+        return e.code
+    except (FieldValueError, HexError) as e:
+        if debug:
+            raise
+        _error(str(e))
+        return USAGE
+
+
+def _quiet_stdout():
+    """After EPIPE: point stdout at /dev/null so the interpreter's final flush is silent."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
+def _exit(code):
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _quiet_stdout()
+    except (ValueError, OSError):
+        pass
+    sys.exit(code)
+
+
+def main():
+    _exit(run(root, "zkzap"))
+
+
+def zk_main():
+    from .zk import zk
+
+    _exit(run(zk, "zk"))
+
+
+def zap_main():
+    from .zap import zap
+
+    _exit(run(zap, "zap"))

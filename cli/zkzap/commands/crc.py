@@ -1,0 +1,109 @@
+"""``zkzap crc``: compute and check the CRCs and checksums of both protocols."""
+
+from __future__ import annotations
+
+import click
+
+from ..codec import crc as crcs
+from ..codec import zap, zk
+from ..codec.hexfmt import format_hex
+from ..errors import CheckFailed, UsageError
+from . import CONTEXT
+from .options import read_hex_input
+
+HEX = click.argument("hex_bytes", nargs=-1, metavar="HEX...")
+APPEND = click.option("-a", "--append", is_flag=True, help="Print the input followed by the checksum.")
+CHECK = click.option("-c", "--check", is_flag=True,
+                     help="Check a whole frame (ZK control, ZK status or mightyZAP): exit 0 when "
+                          "its CRC/checksum is right, 1 when not (expected and found on stderr).")
+
+
+@click.group(context_settings=CONTEXT)
+def crc():
+    """Compute or check CRCs and checksums.
+
+    \b
+    Examples:
+      zkzap crc zk 14 64                  # D3: CRC-8/MAXIM-DOW of exactly these bytes
+      zkzap crc zap 00 02 F1              # 0C: mightyZAP checksum from ID to last parameter
+      zkzap crc zk --append 14 64         # 14 64 D3
+      zkzap crc check FF 14 64 D3         # exit 0; any protocol's whole frame
+    """
+
+
+def check_any(frame: bytes) -> str:
+    """Check a whole frame of either protocol; returns a description, raises on mismatch."""
+    if len(frame) >= 7 and frame[:3] == zap.HEADER:
+        try:
+            zap.check_packet(frame)
+        except zap.ChecksumError as e:
+            raise CheckFailed(str(e)) from None
+        except zap.PacketError as e:
+            raise UsageError(str(e)) from None
+        return f"mightyZAP packet: checksum {frame[-1]:02X} ok"
+    try:
+        kind = zk.check_frame(frame)
+    except zk.CrcError as e:
+        raise CheckFailed(str(e)) from None
+    except zk.FrameError as e:
+        raise UsageError(f"{e}; a mightyZAP packet starts FF FF FF") from None
+    return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
+
+
+def _run(hex_bytes, append, check, compute):
+    data = read_hex_input(hex_bytes)
+    if check:
+        if append:
+            raise UsageError("--append and --check exclude each other")
+        click.echo(check_any(data), err=True)
+        return
+    if not data:
+        raise UsageError("hex input: no bytes given")
+    value = compute(data)
+    click.echo(format_hex(data + bytes((value,))) if append else f"{value:02X}")
+
+
+@crc.command("zk", context_settings=CONTEXT)
+@HEX
+@APPEND
+@CHECK
+def crc_zk(hex_bytes, append, check):
+    """CRC-8/MAXIM-DOW (seed 0) of exactly the given bytes.
+
+    For a control frame give bytes 1..2 (the FF head is not covered); for a status frame
+    bytes 0..5. Reads stdin when no bytes are given or HEX is '-'.
+
+    \b
+    Examples:
+      zkzap crc zk 14 64             # D3
+      zkzap crc zk F1 00 00 00 00 4C # A0
+    """
+    _run(hex_bytes, append, check, crcs.crc8_maxim)
+
+
+@crc.command("zap", context_settings=CONTEXT)
+@HEX
+@APPEND
+@CHECK
+def crc_zap(hex_bytes, append, check):
+    """mightyZAP checksum of the bytes from ID to the last parameter.
+
+    \b
+    Examples:
+      zkzap crc zap 00 02 F1                  # 0C
+      zkzap crc zap --append 01 05 F3 88 00 02 # 01 05 F3 88 00 02 7C
+    """
+    _run(hex_bytes, append, check, crcs.zap_checksum)
+
+
+@crc.command("check", context_settings=CONTEXT)
+@HEX
+def crc_check(hex_bytes):
+    """Check a whole frame of either protocol (same as --check).
+
+    \b
+    Examples:
+      zkzap crc check FF 14 64 D3
+      zkzap crc check FF FF FF 00 02 F1 0C
+    """
+    _run(hex_bytes, False, True, None)

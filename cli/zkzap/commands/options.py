@@ -1,0 +1,140 @@
+"""Options and helpers shared by every command module (one definition each).
+
+Nothing here imports rich or pyserial: both are loaded by the functions that need them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from ..errors import UsageError
+from ..io.writers import FORMATS
+
+#: Environment variables giving defaults, one pair per protocol group.
+ENV = {
+    "zk": {"port": "ZKZAP_ZK_PORT", "baud": "ZKZAP_ZK_BAUD"},
+    "zap": {"port": "ZKZAP_ZAP_PORT", "baud": "ZKZAP_ZAP_BAUD"},
+}
+#: Default baud rates: the mightyZAP factory default is 57600 (code 32); the ZK document lists
+#: 2400..115200 as configurable without a default, and 115200 is the common ECU setting.
+DEFAULT_BAUD = {"zk": 115200, "zap": 57600}
+
+
+def note(message: str) -> None:
+    """A message for the person (stderr), never mixed with data."""
+    click.echo(f"note: {message}", err=True)
+
+
+def warn(message: str) -> None:
+    from ..io.term import style
+
+    click.echo(f"{style('warning:', sys.stderr, fg='yellow', bold=True)} {message}", err=True)
+
+
+def format_option(*, choices=FORMATS, help_extra=""):
+    """``--format``/``-f``: default a table on a terminal, JSON Lines otherwise."""
+    return click.option(
+        "-f", "--format", "fmt", type=click.Choice(choices), default=None,
+        help="Output format (default: table on a terminal, jsonl otherwise)." + help_extra)
+
+
+def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl"):
+    from ..io.term import is_tty
+
+    if fmt:
+        return fmt
+    return tty_default if is_tty(stream if stream is not None else sys.stdout) else pipe_default
+
+
+def output_options(f):
+    f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
+    f = click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
+                     help="Write records to FILE instead of stdout.")(f)
+    return f
+
+
+def open_output(path, append=False):
+    """(stream, had_content): a line-buffered text stream for ``path`` ('-' or None: stdout)."""
+    if not path or path == "-":
+        return sys.stdout, False
+    try:
+        had = append and os.path.exists(path) and os.path.getsize(path) > 0
+        return open(path, "a" if append else "w", encoding="utf-8", newline=""), had
+    except OSError as e:
+        raise UsageError(f"output: cannot open {path}: {e.strerror}") from None
+
+
+dry_run_option = click.option(
+    "-n", "--dry-run", is_flag=True,
+    help="Compose and print the frame as hex; open no port, send nothing.")
+
+yes_option = click.option(
+    "-y", "--yes", is_flag=True,
+    help="Consent to a command that can start the engine, pump fuel or fire the igniter "
+         "(or write stored settings); without it a terminal prompts and a script is refused.")
+
+protocol_version_option = click.option(
+    "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+    help="ECU protocol version assumed until a status ID 6 frame reveals it "
+         "(sets the voltage unit: 0.1 V up to 3, 0.2 V from 4; default 4).")
+
+
+def port_options(group: str):
+    """``-p/--port``, ``-b/--baud``, ``--timeout`` and ``--sim`` for a protocol group."""
+    env = ENV[group]
+
+    def deco(f):
+        f = click.option("--sim", is_flag=True,
+                         help="Talk to the built-in simulator instead of a port.")(f)
+        f = click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
+                         help="Reply timeout (default: derived from the baud rate).")(f)
+        f = click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
+                         default=DEFAULT_BAUD[group], show_default=True,
+                         help=f"Baud rate [env {env['baud']}].")(f)
+        f = click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
+                         shell_complete=_complete_ports,
+                         help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
+                              f"loop://, spy://, hwgrep://) [env {env['port']}].")(f)
+        return f
+
+    return deco
+
+
+def _complete_ports(ctx, param, incomplete):
+    from click.shell_completion import CompletionItem
+
+    try:
+        from serial.tools import list_ports
+    except ImportError:  # pragma: no cover
+        return []
+    items = [CompletionItem(p.device, help=p.description) for p in list_ports.comports()]
+    items += [CompletionItem(u) for u in ("socket://", "rfc2217://", "loop://", "spy://", "hwgrep://")]
+    return [i for i in items if i.value.startswith(incomplete)]
+
+
+def read_hex_input(args, *, what="hex input") -> bytes:
+    """Hex bytes from the arguments (joined), or from stdin when there are none or one is ``-``."""
+    from ..codec.hexfmt import parse_hex
+
+    if not args or list(args) == ["-"]:
+        if sys.stdin is None or (sys.stdin.isatty() and not args):
+            raise UsageError(f"{what}: none given; pass hex bytes as arguments or on stdin")
+        return parse_hex(sys.stdin.read(), what="stdin")
+    return parse_hex(" ".join(a for a in args), what=what)
+
+
+def consent(action: str, yes: bool) -> None:
+    """Ask before something hazardous. ``--yes`` consents; a terminal prompts; anything else
+    (a script, CI, no stdin) is refused with exit status 2 and nothing is sent."""
+    if yes:
+        return
+    from ..io.term import is_tty
+
+    if is_tty(sys.stdin) and is_tty(sys.stderr):
+        if click.confirm(f"{action}. Continue?", default=False, err=True):
+            return
+        raise UsageError("not sent: consent refused")
+    raise UsageError(f"not sent: {action}; pass --yes to confirm")
