@@ -1,0 +1,135 @@
+"""pyserial URL handler for ``sim://KIND?option=value&...``: a simulator running in-process.
+
+``KIND`` is ``zk`` (the ECU) or ``zap`` (the actuator bus); the query carries the simulator's
+options (``speed`` scales its clock). Reads advance the simulation; writes are delivered to it
+immediately with the port's baud rate. pyserial finds this module through
+``serial.protocol_handler_packages`` (see :func:`zkzap.link.port.open_port`).
+"""
+
+from __future__ import annotations
+
+import time
+from urllib.parse import parse_qsl, urlsplit
+
+import serial
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+
+from ..sim import make_device
+from ..sim.base import Clock
+
+
+class Serial(SerialBase):
+    """A serial port whose other end is a simulated device."""
+
+    def open(self):
+        if self._port is None:
+            raise SerialException("port must be configured before it can be used")
+        if self.is_open:
+            raise SerialException("port already open")
+        kind, options = self.from_url(self._port)
+        speed = float(options.pop("speed", "1"))
+        try:
+            self._clock = Clock(speed)
+            self._device = make_device(kind, **options)
+        except (TypeError, ValueError) as e:
+            raise SerialException(f"sim://{kind}: {e}") from None
+        self._rx = bytearray()
+        self.is_open = True
+
+    @staticmethod
+    def from_url(url):
+        parts = urlsplit(url)
+        if parts.scheme != "sim":
+            raise SerialException(f"expected a URL of the form sim://zk or sim://zap?ids=1,2, got {url!r}")
+        return parts.netloc or parts.path.strip("/"), dict(parse_qsl(parts.query))
+
+    def _reconfigure_port(self):
+        pass
+
+    def close(self):
+        if self.is_open:
+            self.is_open = False
+            self._device.close()
+
+    def _pump(self):
+        out = self._device.poll(self._clock.now())
+        if out:
+            self._rx += out
+
+    @property
+    def in_waiting(self):
+        if not self.is_open:
+            raise PortNotOpenError()
+        self._pump()
+        return len(self._rx)
+
+    def read(self, size=1):
+        if not self.is_open:
+            raise PortNotOpenError()
+        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        while True:
+            self._pump()
+            if len(self._rx) >= size:
+                break
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                break
+            wake = self._device.next_wakeup(self._clock.now())
+            delay = 0.02 if wake is None else self._clock.real_delay(wake - self._clock.now())
+            if deadline is not None:
+                delay = min(delay, deadline - now)
+            time.sleep(max(delay, 0.0005))
+        data = bytes(self._rx[:size])
+        del self._rx[:size]
+        return data
+
+    def write(self, data):
+        if not self.is_open:
+            raise PortNotOpenError()
+        data = serial.to_bytes(data)
+        self._device.receive(data, self._clock.now(), self._baudrate)
+        return len(data)
+
+    def reset_input_buffer(self):
+        if not self.is_open:
+            raise PortNotOpenError()
+        self._pump()
+        self._rx.clear()
+
+    def reset_output_buffer(self):
+        if not self.is_open:
+            raise PortNotOpenError()
+
+    def flush(self):
+        pass
+
+    @property
+    def device(self):
+        """The simulated device (for tests and fault injection)."""
+        return self._device
+
+    # modem lines: a simulator has none worth modelling
+    def _update_rts_state(self):
+        pass
+
+    def _update_dtr_state(self):
+        pass
+
+    def _update_break_state(self):
+        pass
+
+    @property
+    def cts(self):
+        return True
+
+    @property
+    def dsr(self):
+        return True
+
+    @property
+    def ri(self):
+        return False
+
+    @property
+    def cd(self):
+        return True

@@ -1,0 +1,46 @@
+"""The interface every simulated device implements, and the simulation clock."""
+
+from __future__ import annotations
+
+import time
+
+
+class Clock:
+    """Model time: real monotonic time scaled by ``speed`` (``speed=10`` runs ten times faster)."""
+
+    def __init__(self, speed: float = 1.0):
+        if speed <= 0:
+            raise ValueError(f"speed: {speed} is out of range; must be > 0")
+        self.speed = speed
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        """Seconds of model time since the clock started."""
+        return (time.monotonic() - self._t0) * self.speed
+
+    def real_delay(self, model_seconds: float) -> float:
+        """Real seconds until ``model_seconds`` of model time have passed."""
+        return max(0.0, model_seconds / self.speed)
+
+
+class Device:
+    """A virtual device on a serial line. All times are model seconds from a :class:`Clock`.
+
+    - :meth:`receive` takes bytes the host wrote (``baud`` is the host's line speed when the
+      transport knows it, else None);
+    - :meth:`poll` returns the bytes the device sends by ``now`` (possibly ``b""``);
+    - :meth:`next_wakeup` says when :meth:`poll` next has something to do (None: only after
+      input).
+    """
+
+    def receive(self, data: bytes, now: float, baud=None) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def poll(self, now: float) -> bytes:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def next_wakeup(self, now: float):  # pragma: no cover - interface
+        return None
+
+    def close(self) -> None:
+        """Called when the simulator stops (save state, ...)."""

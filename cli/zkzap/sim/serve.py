@@ -1,0 +1,145 @@
+"""Serve a simulated device on a pseudo-terminal or a TCP socket until SIGINT/SIGTERM.
+
+The first line on stdout is the port to use (a pty path, or ``socket://HOST:PORT``), flushed
+at once, so a script can read it and start talking. On a pty the host's baud rate is read
+from the terminal settings on every write, so a device can ignore a host at the wrong baud.
+"""
+
+from __future__ import annotations
+
+import os
+import selectors
+import signal
+import socket
+import sys
+import termios
+import tty
+
+from .base import Clock
+
+#: termios speed constants -> baud
+_SPEEDS = {getattr(termios, f"B{b}"): b for b in (
+    50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400, 57600, 115200,
+    230400, 460800, 500000, 576000, 921600, 1000000, 1152000, 1500000, 2000000, 2500000, 3000000,
+    3500000, 4000000) if hasattr(termios, f"B{b}")}
+
+
+class _Stop(Exception):
+    pass
+
+
+def _install_signals():
+    def handler(signum, frame):
+        raise _Stop()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def _announce(text, out):
+    out.write(text + "\n")
+    out.flush()
+
+
+def _timeout(device, clock):
+    wake = device.next_wakeup(clock.now())
+    if wake is None:
+        return 0.5
+    return min(0.5, clock.real_delay(wake - clock.now()))
+
+
+def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
+    """Run ``device`` on a new pseudo-terminal; its path is announced on ``out`` (and, with
+    ``link``, also made available as a symlink at that path)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    if link:
+        try:
+            os.unlink(link)
+        except FileNotFoundError:
+            pass
+        os.symlink(path, link)
+    sel = selectors.DefaultSelector()
+    sel.register(master, selectors.EVENT_READ)
+    _install_signals()
+    _announce(link or path, out)
+    try:
+        while True:
+            for _key, _ in sel.select(_timeout(device, clock)):
+                try:
+                    data = os.read(master, 4096)
+                except OSError:
+                    data = b""
+                if data:
+                    baud = _SPEEDS.get(termios.tcgetattr(slave)[5])
+                    device.receive(data, clock.now(), baud)
+            reply = device.poll(clock.now())
+            if reply:
+                os.write(master, reply)
+    except _Stop:
+        pass
+    finally:
+        device.close()
+        sel.close()
+        os.close(master)
+        os.close(slave)
+        if link:
+            try:
+                os.unlink(link)
+            except OSError:
+                pass
+
+
+def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) -> None:
+    """Run ``device`` behind a TCP socket (one client at a time, like a serial line); the URL
+    ``socket://HOST:PORT`` is announced on ``out``. Port 0 picks a free port."""
+    srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    srv.bind((host, port))
+    srv.listen(1)
+    actual = srv.getsockname()[1]
+    sel = selectors.DefaultSelector()
+    sel.register(srv, selectors.EVENT_READ, "accept")
+    client = None
+    _install_signals()
+    shown = f"[{host}]" if ":" in host else host
+    _announce(f"socket://{shown}:{actual}", out)
+    try:
+        while True:
+            for key, _ in sel.select(_timeout(device, clock)):
+                if key.data == "accept":
+                    conn, _addr = srv.accept()
+                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    if client is not None:
+                        sel.unregister(client)
+                        client.close()
+                    client = conn
+                    sel.register(client, selectors.EVENT_READ, "client")
+                else:
+                    try:
+                        data = client.recv(4096)
+                    except OSError:
+                        data = b""
+                    if data:
+                        device.receive(data, clock.now(), None)
+                    else:
+                        sel.unregister(client)
+                        client.close()
+                        client = None
+            reply = device.poll(clock.now())
+            if reply and client is not None:
+                try:
+                    client.sendall(reply)
+                except OSError:
+                    sel.unregister(client)
+                    client.close()
+                    client = None
+    except _Stop:
+        pass
+    finally:
+        device.close()
+        if client is not None:
+            client.close()
+        sel.close()
+        srv.close()
