@@ -191,11 +191,12 @@ class Field:
         return FieldValueError(
             f"{self.label}: {value} is out of range; allowed {self.describe_range(ctx)}{note}{extra}")
 
-    def check_raw(self, raw) -> int:
+    def check_raw(self, raw, label=None) -> int:
+        label = label or self.label
         if not isinstance(raw, int) or isinstance(raw, bool):
-            raise FieldValueError(f"{self.label}: {raw!r} is not an integer")
+            raise FieldValueError(f"{label}: {raw!r} is not an integer")
         if not self.lo <= raw <= self.hi:
-            raise FieldValueError(f"{self.label}: raw value {raw} is out of range {self.lo}..{self.hi}"
+            raise FieldValueError(f"{label}: raw value {raw} is out of range {self.lo}..{self.hi}"
                                   f" ({self.width}-bit field)")
         return raw
 

@@ -29,29 +29,42 @@ def format_hex(data) -> str:
     return bytes(data).hex(" ").upper()
 
 
-def _strip_dump(line: str) -> str:
+_END_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{7,8}\s*$")
+
+
+def _strip_dump(line: str):
+    """(line without offset and gutter, whether it was a dump line)."""
     m = _COLON_OFFSET.match(line)
     if m:
         rest = line[m.end():].strip()
         # xxd: hex groups, then two or more spaces, then the ASCII column
-        return re.split(r"\s{2,}", rest, maxsplit=1)[0]
+        return re.split(r"\s{2,}", rest, maxsplit=1)[0], True
     g = _GUTTER.search(line)
     if g:
         line = line[:g.start()]
         m = _HEXDUMP_OFFSET.match(line)
-        return line[m.end():] if m else line
+        return (line[m.end():] if m else line), True
     m = _ODD_OFFSET.match(line)
     if m:
-        return line[m.end():]
-    return line
+        return line[m.end():], True
+    return line, False
 
 
-def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0) -> bytes:
-    """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`."""
+def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state=None) -> bytes:
+    """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`.
+
+    ``state`` (a dict kept across the lines of one input) lets the lone final-offset line that
+    ``hexdump`` and ``od`` print after a dump be recognised as such.
+    """
     line = line.split("#", 1)[0]
     if not line.strip():
         return b""
-    line = _strip_dump(line).replace("\\x", " ").replace("\\X", " ")
+    line, dump = _strip_dump(line)
+    if state is not None:
+        if not dump and state.get("dump") and _END_OFFSET.match(line):
+            return b""
+        state["dump"] = dump
+    line = line.replace("\\x", " ").replace("\\X", " ")
     out = bytearray()
     where = f" (line {lineno})" if lineno else ""
     for token in _SPLIT.split(line):
@@ -76,12 +89,14 @@ def parse_hex(text: str, *, what: str = "hex input") -> bytes:
     lines = text.splitlines()
     if len(lines) <= 1:
         return parse_hex_line(text, what=what)
-    return b"".join(parse_hex_line(line, what=what, lineno=i) for i, line in enumerate(lines, 1))
+    state = {}
+    return b"".join(parse_hex_line(line, what=what, lineno=i, state=state) for i, line in enumerate(lines, 1))
 
 
 def iter_hex_stream(stream, *, what: str = "stdin"):
     """Yield the bytes of each line of a text stream, one line at a time (constant memory)."""
+    state = {}
     for i, line in enumerate(stream, 1):
-        data = parse_hex_line(line, what=what, lineno=i)
+        data = parse_hex_line(line, what=what, lineno=i, state=state)
         if data:
             yield data

@@ -329,7 +329,7 @@ def encode_control_raw(cmd_id: int, **raws) -> bytes:
                                   f"; reserved bits: reserved_b1, reserved_b2")
         if f.names is not None and isinstance(raw, str):
             raw, _ = f.to_raw(raw)
-        f.insert(frame, f.check_raw(raw))
+        f.insert(frame, f.check_raw(raw, key))
     frame[3] = crc8_maxim(frame[1:3])
     return bytes(frame)
 

@@ -1,0 +1,65 @@
+"""Shared fixtures: the CLI through CliRunner and as installed subprocesses."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+from click.testing import CliRunner
+
+# Run the source tree's package even when the tests are run without an install.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli"))
+
+from zkzap.commands import root, run  # noqa: E402
+
+
+class Result:
+    def __init__(self, code, out, err):
+        self.exit_code, self.stdout, self.stderr = code, out, err
+
+    def __repr__(self):
+        return f"Result(exit={self.exit_code}, stdout={self.stdout!r}, stderr={self.stderr!r})"
+
+
+@pytest.fixture
+def cli(monkeypatch):
+    """Invoke ``zkzap ARGS...`` in-process with zkzap's error handling; returns exit/stdout/stderr."""
+    monkeypatch.setenv("NO_COLOR", "1")
+    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD"):
+        monkeypatch.delenv(var, raising=False)
+
+    def invoke(*args, input=None):
+        runner = CliRunner()
+        with runner.isolation(input=input) as streams:
+            code = run(root, "zkzap", list(args))
+            out, err = streams[0].getvalue(), streams[1].getvalue()
+        return Result(code, out.decode(), err.decode())
+
+    return invoke
+
+
+def _exe(name):
+    here = os.path.dirname(sys.executable)
+    path = os.path.join(here, name)
+    return path if os.path.exists(path) else shutil.which(name)
+
+
+@pytest.fixture
+def sh():
+    """Run an installed command (zkzap, zk, zap) as a real subprocess."""
+    env = dict(os.environ, NO_COLOR="1")
+    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD"):
+        env.pop(var, None)
+
+    def call(name, *args, input=None, timeout=30):
+        exe = _exe(name)
+        if exe is None:
+            pytest.skip(f"{name} is not installed (pip install -e .)")
+        p = subprocess.run([exe, *args], input=input, capture_output=True, timeout=timeout, env=env,
+                           text=isinstance(input, str) or input is None)
+        return Result(p.returncode, p.stdout, p.stderr)
+
+    return call
