@@ -135,12 +135,9 @@ def root():
     """
 
 
-def _error(message: str) -> None:
+def _error(message: str, prog: str = "zkzap") -> None:
     from ..io.term import style
 
-    prog = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else "zkzap"
-    if prog.endswith(".py") or prog in ("__main__", "-c", ""):
-        prog = "zkzap"
     click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {message}", err=True)
 
 
@@ -169,12 +166,12 @@ def run(cmd, prog_name=None, args=None) -> int:
     except ZkzapError as e:
         if debug:
             raise
-        _error(str(e))
+        _error(str(e), prog_name or "zkzap")
         return e.code
     except (FieldValueError, HexError) as e:
         if debug:
             raise
-        _error(str(e))
+        _error(str(e), prog_name or "zkzap")
         return USAGE
 
 
