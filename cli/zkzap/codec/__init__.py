@@ -8,10 +8,17 @@
 - :mod:`.hexfmt`   hex text in the common notations, in and out
 """
 
-from .crc import crc8_maxim, zap_checksum
-from .fields import FieldValueError
-from .framing import ZapFramer, ZkFramer
-from .hexfmt import HexError, format_hex, parse_hex
-
 __all__ = ["crc8_maxim", "zap_checksum", "FieldValueError", "ZkFramer", "ZapFramer", "HexError",
            "format_hex", "parse_hex"]
+
+_WHERE = {"crc8_maxim": "crc", "zap_checksum": "crc", "FieldValueError": "fields", "ZkFramer": "framing",
+          "ZapFramer": "framing", "HexError": "hexfmt", "format_hex": "hexfmt", "parse_hex": "hexfmt"}
+
+
+def __getattr__(name):
+    # Lazy re-exports: importing one codec module does not import the others.
+    if name in _WHERE:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+    raise AttributeError(name)

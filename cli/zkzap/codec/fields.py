@@ -298,9 +298,22 @@ class Layout:
         self.fields = tuple(fields)
         self.size = size
         self.by_key = {f.key: f for f in self.fields}
-        self._decode = self._compile(raw=False)
-        self._decode_raw = self._compile(raw=True)
-        self.reserved = self._reserved_masks(covered or {})
+        self._decoders = {}
+        self._covered = covered or {}
+        self._reserved = None
+
+    @property
+    def reserved(self):
+        if self._reserved is None:
+            self._reserved = self._reserved_masks(self._covered)
+        return self._reserved
+
+    def decoder(self, raw=False):
+        """The generated decoder function ``(frame, ctx, known) -> dict`` (compiled on first use)."""
+        fn = self._decoders.get(raw)
+        if fn is None:
+            fn = self._decoders[raw] = self._compile(raw)
+        return fn
 
     def _reserved_masks(self, covered):
         masks = {}
@@ -353,7 +366,7 @@ class Layout:
         return ns["decode"]
 
     def decode(self, frame, ctx=None, known=None, raw=False):
-        return (self._decode_raw if raw else self._decode)(frame, ctx or {}, known)
+        return self.decoder(raw)(frame, ctx or {}, known)
 
     def keys(self):
         out = []

@@ -11,7 +11,7 @@ import sys
 import click
 
 from ..errors import UsageError
-from ..io.writers import FORMATS
+from ..io import FORMATS
 
 #: Environment variables giving defaults, one pair per protocol group.
 ENV = {

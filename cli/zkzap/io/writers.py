@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 
-FORMATS = ("table", "json", "jsonl", "csv")
+from . import FORMATS  # noqa: F401 - re-exported
 
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
 
