@@ -369,8 +369,9 @@ def _register_values(address: int, data: bytes) -> list:
             out.append((reg, raw))
             i += reg.size
         else:
-            out.append((register(addr) if reg is None else Register(addr, reg.name + "(partial)", 1, "R"),
-                        data[i]))
+            # outside the map (or past 0xFF), or a register cut short: one raw byte, named by address
+            name = f"0x{addr:02x}" if reg is None else f"{reg.name}(partial)"
+            out.append((Register(addr, name, 1, "RW"), data[i]))
             i += 1
     return out
 
