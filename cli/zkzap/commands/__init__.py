@@ -44,6 +44,15 @@ class LazyGroup(click.Group):
         self.commands[name] = cmd
         return cmd
 
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:
+            # Raised past click (which would exit 1): the reader of stdout went away.
+            if _stdout_closed():
+                raise PipeClosed() from None
+            raise
+
     def format_commands(self, ctx, formatter):
         rows = []
         width = formatter.width or 80
@@ -112,8 +121,6 @@ ROOT_COMMANDS = {
 
 def _available(mapping):
     """Only the commands whose module exists (later modules arrive with later features)."""
-    import importlib.util
-
     here = os.path.dirname(__file__)
     out = {}
     for name, spec in mapping.items():
@@ -135,10 +142,27 @@ def root():
     """
 
 
-def _error(message: str, prog: str = "zkzap") -> None:
-    from ..io.term import style
+class PipeClosed(Exception):
+    """stdout's reader went away (``zkzap ... | head``): end quietly."""
 
-    click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {message}", err=True)
+
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe or socket whose reading end is closed."""
+    try:
+        import select
+
+        p = select.poll()
+        p.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in p.poll(0))
+    except (AttributeError, ValueError, OSError):
+        return True
+
+
+def _error(message: str, prog: str = "zkzap") -> None:
+    from ..io.term import color_enabled, style
+
+    click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {message}", err=True,
+               color=color_enabled(sys.stderr))
 
 
 def run(cmd, prog_name=None, args=None) -> int:
@@ -155,12 +179,14 @@ def run(cmd, prog_name=None, args=None) -> int:
     except click.ClickException as e:
         e.show()
         return e.exit_code
-    except click.exceptions.Abort:
-        click.echo("", err=True)
+    except click.exceptions.Abort as e:
+        if not isinstance(e.__cause__, KeyboardInterrupt):   # click already ended the ^C line
+            click.echo("", err=True)
         return INTERRUPTED
     except KeyboardInterrupt:
+        click.echo("", err=True)
         return INTERRUPTED
-    except BrokenPipeError:
+    except (BrokenPipeError, PipeClosed):
         _quiet_stdout()
         return 0
     except ZkzapError as e:

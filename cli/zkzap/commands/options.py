@@ -29,9 +29,10 @@ def note(message: str) -> None:
 
 
 def warn(message: str) -> None:
-    from ..io.term import style
+    from ..io.term import color_enabled, style
 
-    click.echo(f"{style('warning:', sys.stderr, fg='yellow', bold=True)} {message}", err=True)
+    click.echo(f"{style('warning:', sys.stderr, fg='yellow', bold=True)} {message}", err=True,
+               color=color_enabled(sys.stderr))
 
 
 def format_option(*, choices=FORMATS, help_extra=""):
