@@ -1,0 +1,749 @@
+"""A simulated mightyZAP bus: one or more 12Lf actuators on a half-duplex line.
+
+Each actuator holds the full register map (:data:`zkzap.codec.zap.REGISTERS`) in a 256-byte
+memory, answers exactly as its feedback-return mode says (0: Echo only; 1: Load Data and Echo;
+2: every command; broadcast never), and models what a script can observe:
+
+- goal-position moves present-position at goal-speed over model time (``moving`` = 1 meanwhile,
+  present-motor-operating-rate and present-current meaningful), clamped to the stroke limits;
+  force-on-off 0 stops the rod, a goal position turns the force back on (unless an alarm in
+  alarm-shutdown holds it off);
+- Send Data stages one write per actuator, Execution applies it; Symmetric Store; Factory Reset
+  (option bit0 resets the ID, bit1 the baud rate) and Restart (both restart the actuator: it is
+  deaf for :data:`BOOT_TIME`, volatile registers return to power-on values, a new baud rate
+  takes effect);
+- a host at another baud rate than the actuator's is not heard (pty and ``sim://`` transports
+  pass the host's baud; a TCP client has none and always matches);
+- replies leave :data:`TURNAROUND` after the command (plus :data:`NV_WRITE_TIME` after a write
+  to stored registers), take their real time on the wire, and never overlap; two actuators
+  answering at once collide (wired-AND of their bytes, like an open-drain line);
+- stored (NV) registers and the rod position are kept in a JSON state file (``state=FILE``)
+  across restarts of the simulator.
+
+Faults, per actuator (``faults=`` option, ``zkzap sim zap --fault``, or :meth:`ActuatorBus.inject`),
+written ``[ID:]KIND[=VALUE][/COUNT]`` (ID ``all`` or omitted: every actuator; COUNT: only the next
+COUNT replies):
+
+=============  ===========================================================================
+overload       overload error (bit5): force cut (alarm-shutdown bit5) until restart
+voltage[=V]    supply voltage V (default 6.0): error bit0 while outside the voltage limits
+silent         never answers (aliases: no-reply, mute)
+corrupt        replies with a wrong checksum (alias: checksum)
+truncate[=N]   replies cut short by N bytes (default 2)
+wrong-id[=ID]  replies carry another ID (default ID + 1)
+delay=MS       replies MS model milliseconds late (default 20)
+stuck          the rod is blocked: ``moving`` stays 1 and the position does not change
+echo           the adapter echoes the host's bytes back, like a half-duplex adapter (bus-wide)
+=============  ===========================================================================
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections import deque
+
+from ..codec import zap
+from ..codec.framing import ZapFramer
+
+#: Actuator processing time before a reply starts (model seconds).
+TURNAROUND = 0.002
+#: Pause after a write to stored (NV) registers: replies and commands wait for the memory.
+NV_WRITE_TIME = 0.005
+#: After Restart / Factory Reset the actuator hears nothing for this long.
+BOOT_TIME = 0.02
+#: Rod speed at goal-speed 1023, in position units per model second (full stroke in ~0.4 s).
+FULL_SPEED = 10000.0
+#: The simulator's identity (the e-manual gives no model number; this one is the simulator's).
+MODEL_NUMBER = 0x0C4C
+FIRMWARE_VERSION = 20
+SUPPLY_VOLTAGE = 12.0
+
+#: Values for registers the data map gives no default (simulator choices, plausible for a 12Lf).
+SIM_DEFAULTS = {
+    "model-number": MODEL_NUMBER,
+    "firmware-version": FIRMWARE_VERSION,
+    "lowest-limit-voltage": 70,
+    "highest-limit-voltage": 130,
+    "start-compliance-margin": 7,
+    "end-compliance-margin": 7,
+    "calibration-short-stroke": 0,
+    "calibration-long-stroke": 4095,
+    "acceleration": 20,
+    "deceleration": 20,
+    "current-i-gain": 20,
+    "current-p-gain": 30,
+    "speed-d-gain": 0,
+    "speed-i-gain": 10,
+    "speed-p-gain": 40,
+    "min-position-calibration": 0,
+    "max-position-calibration": 0,
+    "present-position": 0,
+    "present-current": 0,
+    "present-motor-operating-rate": 0,
+    "present-voltage": 120,
+    "goal-position": 0,
+}
+
+R = zap.REGISTER_BY_NAME
+STORED = tuple(r for r in zap.REGISTERS if r.stored)
+OVERLOAD_BIT = 0x20
+VOLTAGE_BIT = 0x01
+STATE_FORMAT = "zkzap-zap-bus/1"
+
+FAULT_KINDS = {
+    "overload": "overload", "voltage": "voltage", "silent": "silent", "no-reply": "silent",
+    "noreply": "silent", "mute": "silent", "corrupt": "corrupt", "checksum": "corrupt",
+    "truncate": "truncate", "truncated": "truncate", "wrong-id": "wrong-id", "delay": "delay",
+    "stuck": "stuck", "echo": "echo",
+}
+FAULT_HELP = ("overload, voltage[=V], silent, corrupt, truncate[=N], wrong-id[=ID], delay=MS, stuck, "
+              "echo")
+#: Faults that change replies (COUNT applies to them).
+REPLY_FAULTS = ("silent", "corrupt", "truncate", "wrong-id", "delay")
+
+
+def baud_of(code: int) -> int:
+    return zap.BAUD_CODES.get(code, 57600)
+
+
+class Fault:
+    __slots__ = ("kind", "value", "count")
+
+    def __init__(self, kind, value=None, count=None):
+        self.kind, self.value, self.count = kind, value, count
+
+    def __repr__(self):
+        return f"Fault({self.kind!r}, {self.value!r}, {self.count!r})"
+
+
+def parse_fault(text: str):
+    """``"[ID:]KIND[=VALUE][/COUNT]"`` -> ``(ident or None for all, kind, value, count)``.
+
+    Raises ValueError with a one-line message naming what is wrong and what is allowed.
+    """
+    spec = text.strip()
+    if not spec:
+        raise ValueError("fault: empty; expected [ID:]KIND[=VALUE][/COUNT]")
+    ident = None
+    if ":" in spec:
+        who, spec = spec.split(":", 1)
+        who = who.strip().lower()
+        if who not in ("all", "*", ""):
+            try:
+                ident = int(who, 0)
+            except ValueError:
+                raise ValueError(f"fault {text!r}: ID {who!r} is not a number; allowed 0..253 or all") from None
+            if not 0 <= ident <= zap.MAX_ID:
+                raise ValueError(f"fault {text!r}: ID {ident} is out of range; allowed 0..253 or all")
+    count = None
+    if "/" in spec:
+        spec, cnt = spec.rsplit("/", 1)
+        try:
+            count = int(cnt)
+        except ValueError:
+            count = -1
+        if count < 1:
+            raise ValueError(f"fault {text!r}: COUNT {cnt!r} must be a positive integer")
+    name, _, raw = spec.partition("=")
+    kind = FAULT_KINDS.get(name.strip().lower())
+    if kind is None:
+        raise ValueError(f"fault {text!r}: unknown kind {name!r}; allowed {FAULT_HELP}")
+    value = None
+    if raw:
+        try:
+            value = float(raw) if kind in ("voltage", "delay") else int(raw, 0)
+        except ValueError:
+            raise ValueError(f"fault {text!r}: value {raw!r} is not a number") from None
+        if kind == "voltage" and not 0 <= value <= 25.5:
+            raise ValueError(f"fault {text!r}: voltage {value} is out of range; allowed 0..25.5 V")
+        if kind == "delay" and not 0 <= value <= 60000:
+            raise ValueError(f"fault {text!r}: delay {value} is out of range; allowed 0..60000 ms")
+        if kind == "truncate" and not 1 <= value <= 255:
+            raise ValueError(f"fault {text!r}: truncate {value} is out of range; allowed 1..255 bytes")
+        if kind == "wrong-id" and not 0 <= value <= 254:
+            raise ValueError(f"fault {text!r}: wrong-id {value} is out of range; allowed 0..254")
+        if kind in ("overload", "silent", "corrupt", "stuck", "echo"):
+            raise ValueError(f"fault {text!r}: {kind} takes no value")
+    return ident, kind, value, count
+
+
+def parse_ids(text: str):
+    """``"1,2,5-8,3@115200"`` -> list of (id, baud or None). Duplicates are allowed (a real bus
+    can hold two actuators with one ID; their replies collide)."""
+    out = []
+    for part in str(text).replace(" ", ",").split(","):
+        part = part.strip()
+        if not part:
+            continue
+        part, _, baud = part.partition("@")
+        b = None
+        if baud:
+            try:
+                b = int(baud)
+            except ValueError:
+                b = -1
+            if b not in zap.BAUD_TO_CODE:
+                raise ValueError(f"ids: baud {baud!r} in {part}@{baud}; allowed "
+                                 f"{', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+        lo, dash, hi = part.partition("-")
+        try:
+            first = int(lo, 0)
+            last = int(hi, 0) if dash else first
+        except ValueError:
+            raise ValueError(f"ids: {part!r} is not an ID or range (like 1,2,5-8)") from None
+        if not (0 <= first <= zap.MAX_ID and 0 <= last <= zap.MAX_ID) or last < first:
+            raise ValueError(f"ids: {part!r} is out of range; allowed 0..253")
+        out.extend((i, b) for i in range(first, last + 1))
+    if not out:
+        raise ValueError("ids: none given; expected a list like 1,2,5-8")
+    return out
+
+
+class Actuator:
+    """One simulated 12Lf. ``slot`` is its place on the bus (stable across ID changes)."""
+
+    def __init__(self, slot: int, ident: int = 0, baud: int = 57600):
+        self.slot = slot
+        self.mem = bytearray(256)
+        for reg in zap.REGISTERS:
+            default = SIM_DEFAULTS.get(reg.name, reg.default)
+            self._poke(reg, default or 0)
+        self._poke(R["id"], ident)
+        self._poke(R["baud-rate"], zap.BAUD_TO_CODE[baud])
+        self.baud = baud                  # the line speed in effect (baud-rate applies at restart)
+        self.pos = 0.0                    # rod position (float, position units)
+        self.t = 0.0                      # model time of the last update
+        self.supply = SUPPLY_VOLTAGE
+        self.overload = False
+        self.stuck = False
+        self.staged = None                # (address, data) from Send Data
+        self.busy_until = 0.0
+        self.deaf_until = 0.0
+        self.faults = {}                  # kind -> Fault (reply faults)
+        self.nv_dirty = False             # stored registers changed since the last save
+        self.power_on(0.0)
+
+    # -- registers ----------------------------------------------------------------------------
+
+    def _poke(self, reg, value):
+        self.mem[reg.address:reg.address + reg.size] = int(value).to_bytes(reg.size, "little")
+
+    def _peek(self, reg) -> int:
+        return int.from_bytes(self.mem[reg.address:reg.address + reg.size], "little")
+
+    def get(self, name) -> int:
+        """A register's raw value (by name, address or Register), as a Load Data would see it now."""
+        return self._peek(zap.register(name))
+
+    def set(self, name, value) -> None:
+        """Set a register directly (test set-up; no side effects, no NV pause)."""
+        reg = zap.register(name)
+        self._poke(reg, value)
+        if reg.name == "baud-rate":
+            self.baud = baud_of(value)
+        if reg.name == "present-position":
+            self.pos = float(value)
+
+    @property
+    def ident(self) -> int:
+        return self.mem[R["id"].address]
+
+    @property
+    def return_mode(self) -> int:
+        return self.mem[R["feedback-return-mode"].address]
+
+    def error_byte(self) -> int:
+        err = OVERLOAD_BIT if self.overload else 0
+        volts = round(self.supply * 10)
+        if not self._peek(R["lowest-limit-voltage"]) <= volts <= self._peek(R["highest-limit-voltage"]):
+            err |= VOLTAGE_BIT
+        return err
+
+    def force_allowed(self) -> bool:
+        return not (self.error_byte() & self._peek(R["alarm-shutdown"]))
+
+    # -- life cycle ---------------------------------------------------------------------------
+
+    def power_on(self, now: float) -> None:
+        """Volatile registers to power-on values; the stored baud rate takes effect."""
+        self.t = now
+        self.overload = False
+        self.staged = None
+        self.baud = baud_of(self._peek(R["baud-rate"]))
+        self._poke(R["force-on-off"], 1 if self.force_allowed() else 0)
+        self._poke(R["led"], 0)
+        self._poke(R["goal-position"], round(self.pos))
+        self._poke(R["goal-speed"], self._peek(R["speed-limit"]))
+        self._poke(R["goal-current"], self._peek(R["current-limit"]))
+        self._refresh(False, 0.0)
+
+    def factory_reset(self, option: int) -> None:
+        keep_id, keep_baud = self._peek(R["id"]), self._peek(R["baud-rate"])
+        for reg in STORED:
+            self._poke(reg, SIM_DEFAULTS.get(reg.name, reg.default) or 0)
+        if not option & 1:
+            self._poke(R["id"], keep_id)
+        if not option & 2:
+            self._poke(R["baud-rate"], keep_baud)
+
+    # -- motion -------------------------------------------------------------------------------
+
+    def speed(self) -> int:
+        """Effective speed 0..1023: goal speed within the speed and operating-rate limits."""
+        return min(self._peek(R["goal-speed"]), self._peek(R["speed-limit"]),
+                   self._peek(R["motor-operating-rate-limit"]))
+
+    def _driving(self) -> bool:
+        return self._peek(R["force-on-off"]) == 1 and round(self.pos) != self._peek(R["goal-position"]) \
+            and self.speed() > 0
+
+    def update(self, now: float) -> None:
+        """Advance the rod to model time ``now`` and refresh the present-* registers."""
+        dt = max(0.0, now - self.t)
+        self.t = max(self.t, now)
+        driving = self._driving()
+        velocity = 0.0
+        if driving and not self.stuck:
+            goal = self._peek(R["goal-position"])
+            velocity = FULL_SPEED * self.speed() / 1023.0
+            gap = goal - self.pos
+            step = velocity * dt
+            if abs(gap) <= step:
+                self.pos = float(goal)
+                driving = False
+            else:
+                self.pos += math.copysign(step, gap)
+        self._refresh(driving, velocity)
+
+    def _refresh(self, driving: bool, velocity: float) -> None:
+        self._poke(R["present-position"], max(0, min(4095, round(self.pos))))
+        self._poke(R["moving"], 1 if driving else 0)
+        duty = self.speed() if driving else 0
+        if duty and self._peek(R["goal-position"]) > self.pos:
+            duty += 1024
+        self._poke(R["present-motor-operating-rate"], min(duty, 2047))
+        limit = self._peek(R["goal-current"])
+        if driving and self.stuck:
+            current = limit
+        elif driving:
+            current = min(limit, 120 + round(300 * velocity / FULL_SPEED))
+        elif self._peek(R["force-on-off"]):
+            current = min(limit, 15)
+        else:
+            current = 0
+        self._poke(R["present-current"], current)
+        self._poke(R["present-voltage"], max(0, min(255, round(self.supply * 10))))
+
+    # -- writes -------------------------------------------------------------------------------
+
+    def write(self, address: int, data: bytes) -> bool:
+        """Write ``data`` at ``address`` as Store Data does; returns True when a stored (NV)
+        register was written. Bytes of read-only or unmapped addresses are ignored, values out
+        of range leave the register unchanged, goal-position is clamped to the stroke limits."""
+        touched = {}
+        for i in range(len(data)):
+            addr = address + i
+            if addr > 0xFF:
+                break
+            reg = _REG_AT.get(addr)
+            if reg is None or not reg.writable:
+                continue
+            if reg.name not in touched:
+                touched[reg.name] = (reg, self._peek(reg))
+            self.mem[addr] = data[i]
+        stored = False
+        for reg, old in touched.values():
+            new = self._peek(reg)
+            if not self._accept(reg, new):
+                self._poke(reg, old)
+                continue
+            stored = stored or bool(reg.stored)
+            self._effect(reg, old, new)
+        return stored
+
+    def _accept(self, reg, value) -> bool:
+        if reg.choices is not None:
+            return value in reg.choices
+        if reg.name == "id":
+            return value <= zap.MAX_ID
+        return reg.lo <= value <= reg.hi
+
+    def _effect(self, reg, old, new):
+        name = reg.name
+        if name == "goal-position":
+            lo, hi = self._peek(R["short-stroke-limit"]), self._peek(R["long-stroke-limit"])
+            lo, hi = min(lo, hi), max(lo, hi)
+            self._poke(reg, max(lo, min(hi, new)))
+            if self.force_allowed():
+                self._poke(R["force-on-off"], 1)
+        elif name == "force-on-off" and new == 1 and not self.force_allowed():
+            self._poke(reg, 0)
+
+    # -- instructions -------------------------------------------------------------------------
+
+    def handle(self, pkt: bytes, now: float):
+        """Process one command packet addressed to this actuator (or broadcast).
+
+        Returns ``(start_time, reply_bytes, baud)`` or None; may flag the actuator for restart.
+        """
+        if now < self.deaf_until:
+            return None
+        start = max(now, self.busy_until)
+        self.update(start)
+        ident, code, params = pkt[3], pkt[5], bytes(pkt[6:-1])
+        ins = zap.INSTRUCTION_BY_CODE.get(code)
+        if ins is None:
+            return None
+        answer = ins.answered(self.return_mode, ident)
+        out = b""
+        nv = False
+        restart = False
+        if code == 0xF1:                                    # Echo
+            if params:
+                return None
+        elif code == 0xF2:                                  # Load Data
+            if len(params) != 2:
+                return None
+            address, length = params
+            length = min(length, 256 - address, zap.MAX_SIZE - 2)
+            out = bytes(self.mem[address:address + length])
+        elif code == 0xF3:                                  # Store Data
+            if len(params) < 2:
+                return None
+            nv = self.write(params[0], params[1:])
+        elif code == 0xF4:                                  # Send Data
+            if len(params) < 2:
+                return None
+            self.staged = (params[0], params[1:])
+        elif code == 0xF5:                                  # Execution
+            if params:
+                return None
+            if self.staged is not None:
+                nv = self.write(*self.staged)
+                self.staged = None
+        elif code == 0xF6:                                  # Factory Reset
+            if len(params) != 1:
+                return None
+            self.factory_reset(params[0])
+            nv = restart = True
+        elif code == 0xF8:                                  # Restart
+            if params:
+                return None
+            restart = True
+        elif code == 0x73:                                  # Symmetric Store
+            if len(params) < 2:
+                return None
+            address, length = params[0], params[1]
+            body = params[2:]
+            step = 1 + length
+            if not length or len(body) % step:
+                return None
+            for j in range(0, len(body), step):
+                if body[j] == self.ident:
+                    nv = self.write(address, body[j + 1:j + step])
+        done = start + (NV_WRITE_TIME if nv else 0.0)
+        self.busy_until = done
+        self.nv_dirty = self.nv_dirty or nv
+        reply = zap.packet(ident, self.error_byte(), out) if answer else None
+        baud = self.baud
+        if restart:
+            self.deaf_until = done + BOOT_TIME
+            self.update(done)
+            self.power_on(done)
+            self.t = done
+        if reply is None:
+            return None
+        return done + TURNAROUND, reply, baud
+
+    def apply_faults(self, t, reply):
+        """Reply faults: returns (t, reply) or None (silent)."""
+        for kind in REPLY_FAULTS:
+            f = self.faults.get(kind)
+            if f is None:
+                continue
+            if f.count is not None:
+                f.count -= 1
+                if f.count <= 0:
+                    del self.faults[kind]
+            if kind == "silent":
+                return None
+            if kind == "delay":
+                t += (20.0 if f.value is None else f.value) / 1000.0
+            elif kind == "wrong-id":
+                other = (reply[3] + 1) % 254 if f.value is None else int(f.value)
+                reply = zap.packet(other, reply[5], reply[6:-1])
+            elif kind == "corrupt":
+                reply = reply[:-1] + bytes(((reply[-1] ^ 0x5A),))
+            elif kind == "truncate":
+                cut = 2 if f.value is None else int(f.value)
+                reply = reply[:max(0, len(reply) - cut)]
+        return t, reply
+
+    # -- persistence --------------------------------------------------------------------------
+
+    def state(self) -> dict:
+        return {"slot": self.slot, "position": round(self.pos),
+                "registers": {r.name: self._peek(r) for r in STORED}}
+
+    def restore(self, st: dict) -> None:
+        regs = st.get("registers", {})
+        if not isinstance(regs, dict):
+            raise ValueError("registers is not an object")
+        for name, value in regs.items():
+            reg = R.get(name)
+            if reg is None or not reg.stored:
+                raise ValueError(f"unknown stored register {name!r}")
+            if not isinstance(value, int) or not self._accept(reg, value):
+                raise ValueError(f"{name}: {value!r} is out of range; allowed {reg.describe_range()}")
+            self._poke(reg, value)
+        pos = st.get("position", 0)
+        if not isinstance(pos, int) or not 0 <= pos <= 4095:
+            raise ValueError(f"position: {pos!r} is out of range; allowed 0..4095")
+        self.pos = float(pos)
+        self.power_on(0.0)
+
+
+_REG_AT = {}
+for _r in zap.REGISTERS:
+    for _a in range(_r.address, _r.address + _r.size):
+        _REG_AT[_a] = _r
+
+
+class ActuatorBus:
+    """The bus: actuators, the line between them and the host, fault injection, persistence.
+
+    For tests (``port.device`` behind ``sim://zap``): :meth:`actuator`, :meth:`inject`,
+    :meth:`clear_faults`, the ``echo`` attribute (adapter echo) and ``received`` (the last
+    packets the actuators heard).
+    """
+
+    def __init__(self, actuators, *, state_path=None, echo=False):
+        self.actuators = list(actuators)
+        self.state_path = state_path
+        self.echo = echo
+        self.restored = False
+        self.received = deque(maxlen=1000)
+        self._framers = {}
+        self._queue = []                  # (ready_time, seq, bytes), kept sorted
+        self._seq = 0
+        self._bus_free = 0.0
+
+    # -- Python API for tests -----------------------------------------------------------------
+
+    def actuator(self, ident: int) -> Actuator:
+        """The first actuator whose ID is ``ident`` (KeyError if none)."""
+        for a in self.actuators:
+            if a.ident == ident:
+                return a
+        raise KeyError(f"no actuator with ID {ident} on the simulated bus")
+
+    def _targets(self, ident):
+        if ident is None or ident == "all":
+            return list(self.actuators)
+        return [a for a in self.actuators if a.ident == ident]
+
+    def inject(self, ident, kind, value=None, count=None) -> None:
+        """Inject a fault on actuator ``ident`` (``None``/``"all"``: every actuator); see the
+        module documentation for kinds. ``count`` limits a reply fault to the next N replies."""
+        kind = FAULT_KINDS.get(kind, kind)
+        if kind not in set(FAULT_KINDS.values()):
+            raise ValueError(f"fault: unknown kind {kind!r}; allowed {FAULT_HELP}")
+        if kind == "echo":
+            self.echo = True
+            return
+        targets = self._targets(ident)
+        if not targets:
+            raise ValueError(f"fault: no actuator with ID {ident} on the simulated bus")
+        for a in targets:
+            if kind == "overload":
+                a.overload = True
+                if not a.force_allowed():
+                    a.update(a.t)
+                    a._poke(R["force-on-off"], 0)
+            elif kind == "voltage":
+                a.supply = 6.0 if value is None else float(value)
+                if not a.force_allowed():
+                    a._poke(R["force-on-off"], 0)
+            elif kind == "stuck":
+                a.stuck = True
+            else:
+                a.faults[kind] = Fault(kind, value, count)
+
+    def inject_text(self, text: str) -> None:
+        ident, kind, value, count = parse_fault(text)
+        self.inject(ident, kind, value, count)
+
+    def clear_faults(self, ident=None) -> None:
+        """Remove every injected fault (overload stays latched until restart, as on the real one)."""
+        for a in self._targets(ident):
+            a.faults.clear()
+            a.stuck = False
+            a.supply = SUPPLY_VOLTAGE
+        if ident is None:
+            self.echo = False
+
+    # -- Device interface ---------------------------------------------------------------------
+
+    def receive(self, data: bytes, now: float, baud=None) -> None:
+        if not data:
+            return
+        if self.echo:
+            self._emit(now, bytes(data))
+        framer = self._framers.get(baud)
+        if framer is None:
+            framer = self._framers[baud] = ZapFramer()
+        for pkt in framer.feed(data):
+            self.received.append(bytes(pkt))
+            self._dispatch(bytes(pkt), now, baud)
+
+    def _dispatch(self, pkt: bytes, now: float, baud) -> None:
+        ident, code = pkt[3], pkt[5]
+        if not zap.is_command(code):
+            return                         # feedback from someone else: not for actuators
+        listeners = [a for a in self.actuators if baud is None or a.baud == baud]
+        if ident == zap.BROADCAST:
+            targets = listeners
+        else:
+            targets = [a for a in listeners if a.ident == ident]
+        replies = []
+        stored = False
+        for a in targets:
+            r = a.handle(pkt, now)
+            if a.nv_dirty:
+                stored = True
+                a.nv_dirty = False
+            if r is not None:
+                faulted = a.apply_faults(r[0], r[1])
+                if faulted is not None and faulted[1]:
+                    replies.append((faulted[0], faulted[1], r[2]))
+        if stored:
+            self.save()
+        if not replies:
+            return
+        replies.sort(key=lambda r: r[0])
+        # replies starting together collide: the line carries the AND of their bits
+        merged = []
+        for t, data, rbaud in replies:
+            if merged and abs(merged[-1][0] - t) < 1e-9:
+                mt, md, mb = merged[-1]
+                n = max(len(md), len(data))
+                md, data = md.ljust(n, b"\xff"), data.ljust(n, b"\xff")
+                merged[-1] = (mt, bytes(x & y for x, y in zip(md, data)), mb)
+            else:
+                merged.append((t, data, rbaud))
+        for t, data, rbaud in merged:
+            start = max(t, self._bus_free)
+            end = start + len(data) * 10.0 / rbaud
+            self._bus_free = end
+            self._emit(end, data)
+
+    def _emit(self, t: float, data: bytes) -> None:
+        self._seq += 1
+        self._queue.append((t, self._seq, data))
+        self._queue.sort()
+
+    def poll(self, now: float) -> bytes:
+        if not self._queue or self._queue[0][0] > now:
+            return b""
+        out = bytearray()
+        while self._queue and self._queue[0][0] <= now:
+            out += self._queue.pop(0)[2]
+        return bytes(out)
+
+    def next_wakeup(self, now: float):
+        return self._queue[0][0] if self._queue else None
+
+    def close(self) -> None:
+        for a in self.actuators:
+            a.update(a.t)
+        self.save()
+
+    # -- persistence --------------------------------------------------------------------------
+
+    def save(self) -> None:
+        """Write the stored registers and rod positions to the state file (atomically)."""
+        if not self.state_path:
+            return
+        doc = {"format": STATE_FORMAT, "actuators": [a.state() for a in self.actuators]}
+        tmp = f"{self.state_path}.tmp{os.getpid()}"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=1)
+            f.write("\n")
+        os.replace(tmp, self.state_path)
+
+    def load_state(self) -> bool:
+        """Restore actuators from the state file; False when the file does not exist."""
+        path = self.state_path
+        try:
+            with open(path, encoding="utf-8") as f:
+                doc = json.load(f)
+        except FileNotFoundError:
+            return False
+        except (OSError, ValueError) as e:
+            raise ValueError(f"state {path}: cannot read: {e}") from None
+        if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
+                not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
+            raise ValueError(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")
+        actuators = []
+        for i, st in enumerate(doc["actuators"]):
+            a = Actuator(i)
+            try:
+                a.restore(st)
+            except (ValueError, TypeError, AttributeError) as e:
+                raise ValueError(f"state {path}: actuator {i}: {e}") from None
+            actuators.append(a)
+        self.actuators = actuators
+        self.restored = True
+        return True
+
+
+def _flag(value, name) -> bool:
+    v = str(value).strip().lower()
+    if v in ("1", "true", "yes", "on"):
+        return True
+    if v in ("0", "false", "no", "off", ""):
+        return False
+    raise ValueError(f"{name}: {value!r}; allowed 0 or 1")
+
+
+def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_mode=None,
+                 voltage=None, **unknown) -> ActuatorBus:
+    """Build a bus from string options (a ``sim://zap?...`` query or ``zkzap sim zap``).
+
+    ``ids``: ``1,2,5-8`` (``ID@BAUD`` for one actuator at another baud rate); ``baud``: the
+    others' baud rate; ``return_mode``: every actuator's feedback-return-mode; ``echo=1``: the
+    adapter echoes; ``faults``: comma-separated ``[ID:]KIND[=VALUE][/COUNT]``; ``voltage``: the
+    supply voltage; ``state``: a JSON file keeping stored registers across runs (when it exists
+    it defines the bus and ``ids``/``baud``/``return_mode`` are not applied).
+    """
+    if unknown:
+        raise ValueError(f"unknown option {', '.join(sorted(unknown))}; allowed ids, state, baud, echo, "
+                         "faults, return_mode, voltage, speed")
+    try:
+        line = int(baud)
+    except ValueError:
+        line = -1
+    if line not in zap.BAUD_TO_CODE:
+        raise ValueError(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+    bus = ActuatorBus([], state_path=state or None, echo=_flag(echo, "echo"))
+    if not (state and bus.load_state()):
+        bus.actuators = [Actuator(i, ident, b or line) for i, (ident, b) in enumerate(parse_ids(ids))]
+        if return_mode not in (None, ""):
+            if str(return_mode) not in ("0", "1", "2"):
+                raise ValueError(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
+            for a in bus.actuators:
+                a.set("feedback-return-mode", int(return_mode))
+        if state:
+            bus.save()
+    if voltage not in (None, ""):
+        try:
+            v = float(voltage)
+        except ValueError:
+            raise ValueError(f"voltage: {voltage!r} is not a number") from None
+        bus.inject(None, "voltage", v)
+    for text in str(faults or "").split(","):
+        if text.strip():
+            bus.inject_text(text)
+    return bus
