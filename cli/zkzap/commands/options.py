@@ -50,6 +50,19 @@ def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl
     return tty_default if is_tty(stream if stream is not None else sys.stdout) else pipe_default
 
 
+def write_rows(rows, columns, fmt=None, *, title=None, table_columns=None, stream=None):
+    """Write dict ``rows`` in ``fmt`` (default: a table on a terminal, JSON Lines otherwise)."""
+    from ..io.writers import make_writer
+
+    stream = stream if stream is not None else sys.stdout
+    writer = make_writer(resolve_format(fmt, stream), stream, columns, title=title, table_columns=table_columns)
+    try:
+        for row in rows:
+            writer.write(row)
+    finally:
+        writer.close()
+
+
 def output_options(f):
     f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
     f = click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
