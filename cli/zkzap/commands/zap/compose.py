@@ -2,10 +2,14 @@
 ``factory-reset``, ``restart``, ``sync-move`` and ``raw``.
 
 With ``-n/--dry-run`` each prints its packet(s) as hex, one per line; otherwise it sends them
-through :func:`deliver`.
+through :func:`deliver` (or, for ``echo`` and ``load``, prints what comes back). The link
+options (:func:`link_options`) are shared with ``zap scan``/``dump``/``move``/``set-id``/
+``set-baud``.
 """
 
 from __future__ import annotations
+
+import sys
 
 import click
 
@@ -13,59 +17,365 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT
-from ..options import dry_run_option, port_options, yes_option
+from ..options import consent, dry_run_option, port_options, yes_option
 from .params import INT, REGISTER, id_option
+
+RETURN_MODES = ("0", "1", "2", "auto")
+
+
+def _check_sim_ids(ctx, param, value):
+    if value is None:
+        return None
+    from ...sim.zap_bus import parse_ids
+
+    try:
+        parse_ids(value)
+    except ValueError as e:
+        raise UsageError(f"--sim-ids: {e}") from None
+    return value
+
+
+def link_options(f=None, *, baud_type=None, baud_help=None):
+    """Port, baud, timeout, --sim, return mode, retries, --sim-ids and -v for every command that
+    talks to actuators. ``baud_type``/``baud_help`` replace -b/--baud's type (``zap scan``
+    takes a list)."""
+    if f is None:
+        return lambda g: link_options(g, baud_type=baud_type, baud_help=baud_help)
+    f = click.option("-v", "--verbose", is_flag=True,
+                     help="Say on stderr what was sent and how the actuator acknowledged it.")(f)
+    f = click.option("--sim-ids", metavar="LIST", default=None, callback=_check_sim_ids,
+                     help="With --sim: the IDs on the in-process simulated bus, like 1,2,5-8 "
+                          "(default: the IDs the command addresses).")(f)
+    f = click.option("--retries", type=click.IntRange(0, 20), default=2, show_default=True,
+                     help="Retries after no reply or a corrupted reply.")(f)
+    f = click.option("--return-mode", type=click.Choice(RETURN_MODES), default="1", show_default=True,
+                     envvar="ZKZAP_ZAP_RETURN_MODE",
+                     help="The actuators' feedback-return-mode: 0 answers Echo only, 1 Load Data and "
+                          "Echo, 2 every command; 'auto' asks the actuator first "
+                          "[env ZKZAP_ZAP_RETURN_MODE].")(f)
+    f = port_options("zap")(f)
+    if baud_type is not None:
+        for param in f.__click_params__:
+            if param.name == "baud":
+                param.type = baud_type
+                param.help = baud_help or param.help
+                param.metavar = baud_type.name.upper()
+    return f
 
 
 def wire_options(f):
     """Options every instruction shares."""
     f = yes_option(f)
-    f = port_options("zap")(f)
+    f = link_options(f)
     f = dry_run_option(f)
     return f
 
 
-def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, **wire):
-    """Print the packets (dry run) or send them."""
+def _say(message: str) -> None:
+    click.echo(message, err=True)
+
+
+def targets_of(packets) -> list:
+    """The actuator IDs packets address (for the default simulated bus)."""
+    ids = []
+    for p in packets:
+        if p[3] != zap.BROADCAST:
+            ids.append(p[3])
+        elif p[5] == 0x73 and len(p) > 9:
+            length = p[7]
+            body = p[8:-1]
+            ids.extend(body[j] for j in range(0, len(body), 1 + length))
+    return sorted(set(ids)) or [0]
+
+
+def require_port(port, sim) -> None:
+    if not port and not sim:
+        raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
+
+
+def ask_consent(packets, *, port, sim, yes) -> None:
+    """On a real port, writing stored (NV) settings needs consent (--yes or a prompt)."""
+    from ...link.zap_bus import is_simulated, stored_writes
+
+    if sim or is_simulated(port):
+        return
+    names = []
+    for p in packets:
+        for n in stored_writes(p):
+            if n not in names:
+                names.append(n)
+    if names:
+        consent(f"this writes stored settings on {port} ({', '.join(names)}); they survive power-off "
+                "and each write wears the actuator's memory", yes)
+
+
+def refuse_protocol_change(packets, force) -> None:
+    from ...link.zap_bus import leaves_protocol
+
+    if not force and any(leaves_protocol(p) for p in packets):
+        raise UsageError("protocol-type: 0 switches the actuator to Modbus RTU and this tool can no "
+                         "longer reach it; pass --force to do it anyway")
+
+
+def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, **_):
+    """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
+    from ...link.zap_bus import open_bus
+
+    require_port(port, sim)
+    mode = 1 if return_mode == "auto" else int(return_mode)
+    default_ids = ",".join(str(i) for i in ids)
+    sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
+    bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
+                   return_mode=mode, retries=retries, sim_options=sim_opts)
+    if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
+        try:
+            bus.detect_return_mode(probe)
+        except BaseException:
+            bus.close()
+            raise
+    return bus
+
+
+def describe(pkt: bytes) -> str:
+    """One human line for a command packet: 'store goal-position=2047 to ID 1'."""
+    to = "every actuator (broadcast)" if pkt[3] == zap.BROADCAST else f"ID {pkt[3]}"
+    if not zap.is_command(pkt[5]):
+        return f"instruction 0x{pkt[5]:02X} ({len(pkt) - 7} parameter bytes) to {to}"
+    rec = zap.decode_packet(pkt)
+    what = rec["instruction"]
+    if "value" in rec:
+        what += f" {rec['register']}={rec['value']}"
+    elif "values" in rec:
+        what += " " + " ".join(f"{k}={v}" for k, v in rec["values"].items())
+    elif "targets" in rec:
+        what += f" {rec['register']} " + " ".join(f"{k}:{v}" for k, v in rec["targets"].items())
+    elif rec.get("instruction") == "load":
+        what += f" {rec['register']} ({rec['length']} bytes)"
+    elif rec.get("instruction") == "factory-reset":
+        what += (" (ID too)" if rec["reset_id"] else "") + (" (baud rate too)" if rec["reset_baud"] else "")
+    return f"{what} to {to}"
+
+
+def acknowledgement(pkt: bytes, reply, bus) -> str:
+    if reply is not None:
+        return f"acknowledged in {reply.rtt * 1000:.1f} ms" + (f", errors: {', '.join(reply.errors)}"
+                                                               if reply.error else "")
+    if pkt[3] == zap.BROADCAST:
+        return "not acknowledged (a broadcast is never answered)"
+    mode = bus.return_mode
+    meaning = zap.REGISTER_BY_NAME["feedback-return-mode"].choices.get(mode, "?")
+    return f"not acknowledged (feedback-return-mode {mode}: {meaning})"
+
+
+def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, sim_ids=None, return_mode="1",
+            retries=2, force=False, show_reply=False, **wire):
+    """Print the packets (dry run) or send them, each waiting for the reply the return mode
+    gives. Error bits in a reply end with exit status 5 after every packet went out."""
     if dry_run:
         for p in packets:
             click.echo(format_hex(p))
         return
-    if not port and not sim:
-        raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
-    raise UsageError("sending needs the link layer, which this build does not include; use -n")
+    require_port(port, sim)
+    refuse_protocol_change(packets, force)
+    ask_consent(packets, port=port, sim=sim, yes=yes)
+    from ...link.zap_bus import device_error
+
+    probe = next((p[3] for p in packets if p[3] != zap.BROADCAST), None)
+    bad = None
+    with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode=return_mode,
+                   retries=retries, ids=targets_of(packets), probe=probe) as bus:
+        for p in packets:
+            reply = bus.command(p, check=False)
+            if show_reply and reply is not None:
+                click.echo(format_hex(reply.packet))
+            if verbose or (reply is not None and reply.error):
+                _say(f"sent {describe(p)}: {acknowledgement(p, reply, bus)}")
+            if reply is not None and reply.error and bad is None:
+                bad = reply
+    if bad is not None:
+        raise device_error(bad)
+
+
+# -- echo ----------------------------------------------------------------------------------------
+
+ECHO_COLUMNS = ["id", "seq", "error", "errors", "rtt_ms"]
+
+
+def _format(default, choices, what):
+    return click.option("-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
+                        help=f"Output format: {what}.")
+
+
+def _link_args(common):
+    return {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries")}
 
 
 @click.command(context_settings=CONTEXT)
 @id_option()
+@click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
+              help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
+@click.option("--interval", type=click.FloatRange(0, 3600), default=0.0, metavar="SECONDS",
+              help="Pause between echoes with --count.")
+@_format("text", ("text", "table", "json", "jsonl", "csv"),
+         "'text' prints one line per reply; the others give records with id, seq, error, errors, rtt_ms")
 @wire_options
-def echo(ident, **common):
-    """Echo (0xF1): the actuator answers with a feedback packet.
+def echo(ident, count, interval, fmt, **common):
+    """Echo (0xF1): the actuator answers with a feedback packet (connection check).
+
+    Every return mode answers Echo; a broadcast never. Prints one line per reply. With
+    --count N it keeps going past lost replies, like ping, and ends with a summary on stderr;
+    the exit status is 0 only if every echo was answered (3 if one was lost, 6 if one was
+    garbled), 5 if a reply carried error bits.
 
     \b
     Examples:
       zap echo -n                 # FF FF FF 00 02 F1 0C
       zap echo --id 3 -p /dev/ttyUSB0
+      zap echo --id 3 --count 100 -p /dev/ttyUSB0 -f jsonl | jq .rtt_ms
     """
-    deliver([zap.echo(ident)], **common)
+    pkt = zap.echo(ident)
+    if common["dry_run"]:
+        return deliver([pkt], **common)
+    if ident == zap.BROADCAST:
+        raise UsageError("id: a broadcast Echo is never answered; give one actuator's ID")
+    import time
+
+    from ...errors import BadReply, NoReply
+    from ...io.writers import make_writer
+    from ...link.zap_bus import device_error
+
+    writer = None if fmt == "text" else make_writer(fmt, sys.stdout, ECHO_COLUMNS)
+    sent = answered = lost = garbled = 0
+    rtts = []
+    failure = flagged = None
+    try:
+        with open_link(ids=[ident], **_link_args(common)) as bus:
+            while count == 0 or sent < count:
+                if sent and interval:
+                    time.sleep(interval)
+                sent += 1
+                try:
+                    r = bus.echo(ident, check=False, retries=None if count == 1 else 0)
+                except (NoReply, BadReply) as e:
+                    if count == 1:
+                        raise
+                    failure = e
+                    if isinstance(e, NoReply):
+                        lost += 1
+                    else:
+                        garbled += 1
+                    _say(f"seq {sent}: {e}")
+                    continue
+                answered += 1
+                rtts.append(r.rtt)
+                if r.error and flagged is None:
+                    flagged = r
+                rec = {"id": r.ident, "seq": sent, "error": r.error, "errors": r.errors,
+                       "rtt_ms": round(r.rtt * 1000, 3)}
+                if writer is None:
+                    state = ", ".join(r.errors) if r.error else "ok"
+                    click.echo(f"reply from ID {r.ident}: seq={sent} {state} {rec['rtt_ms']:.1f} ms")
+                else:
+                    writer.write(rec)
+    except KeyboardInterrupt:
+        if count != 0:
+            raise
+    finally:
+        if writer is not None:
+            writer.close()
+        if count != 1 and sent:
+            summary = f"{sent} sent, {answered} answered, {lost} lost, {garbled} garbled"
+            if rtts:
+                summary += (f"; round trip min/avg/max {min(rtts) * 1000:.2f}/"
+                            f"{sum(rtts) / len(rtts) * 1000:.2f}/{max(rtts) * 1000:.2f} ms")
+            _say(summary)
+    if flagged is not None:
+        raise device_error(flagged)
+    if failure is not None:
+        raise failure.__class__(f"{lost + garbled} of {sent} echoes failed; last: {failure}")
+
+
+# -- load ----------------------------------------------------------------------------------------
+
+LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meaning", "errors"]
+
+
+def register_records(ident, values, errors=()):
+    """Records (id, register, address, value, physical/unit where scaled, meaning where the
+    register has named values) for [(Register, raw), ...]."""
+    out = []
+    for reg, raw in values:
+        rec = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
+        if reg.scale != 1:
+            rec["physical"] = reg.physical(raw)
+            rec["unit"] = reg.unit
+        elif reg.unit:
+            rec["unit"] = reg.unit
+        if reg.choices and raw in reg.choices:
+            rec["meaning"] = reg.choices[raw]
+        rec["errors"] = list(errors)
+        out.append(rec)
+    return out
 
 
 @click.command(context_settings=CONTEXT)
 @click.argument("reg", metavar="REGISTER", type=REGISTER)
-@click.option("-l", "--length", type=click.IntRange(1, 255), default=None,
-              help="Bytes to read (default: the register's size).")
-@id_option()
+@click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
+              help="Bytes to read (default: the register's size); more bytes read the registers that follow.")
+@click.option("--physical", is_flag=True, help="Print scaled registers in their unit (present-voltage 12.0, not 120).")
+@_format("value", ("value", "table", "json", "jsonl", "csv"),
+         "'value' prints the bare value (for pos=$(zap load ...)); the others give records")
+@id_option(allow_broadcast=True)
 @wire_options
-def load(reg, length, ident, **common):
+def load(reg, length, physical, fmt, ident, **common):
     """Load Data (0xF2): read REGISTER.
+
+    Prints the bare value (one register), or one NAME=VALUE line per register when --length
+    spans several; --format json|jsonl|csv|table gives records with id, register, address,
+    value (and physical/unit for scaled registers, meaning for coded ones). Error bits in the
+    reply are reported on stderr and give exit status 5 after the value is printed.
 
     \b
     Examples:
       zap load present-position -n        # FF FF FF 00 04 F2 8C 02 7B
-      zap load present-voltage --id 1 -p /dev/ttyUSB0
-      pos=$(zap load present-position -p /dev/ttyUSB0)
+      zap load present-voltage --id 1 -p /dev/ttyUSB0 --physical
+      pos=$(zap load present-position --id 1 -p /dev/ttyUSB0)
+      zap load model-number --length 17 --id 1 --sim -f json
     """
-    deliver([zap.load(ident, reg, length)], **common)
+    length = reg.size if length is None else length
+    if reg.address + length > 0x100:
+        raise UsageError(f"--length: {length} bytes from 0x{reg.address:02X} run past address 0xFF; "
+                         f"allowed 1..{0x100 - reg.address}")
+    pkt = zap.load(ident, reg, length)
+    if common["dry_run"]:
+        return deliver([pkt], **common)
+    if ident == zap.BROADCAST:
+        raise UsageError("id: a broadcast Load Data is never answered; give one actuator's ID")
+    if common["return_mode"] == "0":
+        raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
+    from ...link.zap_bus import device_error, error_message
+
+    with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
+        if bus.return_mode == 0:
+            raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
+        reply, values = bus.read_registers(ident, reg.address, length, check=False)
+    records = register_records(reply.ident, values, reply.errors)
+    if fmt == "value":
+        for rec in records:
+            v = rec["physical"] if physical and "physical" in rec else rec["value"]
+            click.echo(str(v) if len(records) == 1 else f"{rec['register']}={v}")
+    else:
+        from ...io.writers import make_writer
+
+        writer = make_writer(fmt, sys.stdout, LOAD_COLUMNS)
+        for rec in records:
+            writer.write(rec)
+        writer.close()
+    if common["verbose"]:
+        _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
+    if reply.error:
+        _say(f"warning: {error_message(reply)}")
+        raise device_error(reply)
 
 
 def _write_command(name, builder, doc):
@@ -76,19 +386,24 @@ def _write_command(name, builder, doc):
     @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
     @wire_options
     def command(reg, value, ident, force, **common):
-        if reg.name == "protocol-type" and value == 0 and not force:
-            raise UsageError("protocol-type: 0 switches the actuator to Modbus RTU and this tool can no "
-                             "longer reach it; pass --force to do it anyway")
-        deliver([builder(ident, reg, value)], **common)
+        pkt = builder(ident, reg, value)
+        refuse_protocol_change([pkt], force)
+        deliver([pkt], force=force, **common)
 
     return command
 
+
+_WIRE_NOTE = """
+Sent to a port, the write is acknowledged only in feedback-return-mode 2 (-v says how it went);
+error bits in an acknowledgement give exit status 5. On a real port, writing a stored (NV)
+register asks for consent (--yes); the simulator (--sim, sim://) and loop:// never ask.
+"""
 
 store = _write_command("store", zap.store, """Store Data (0xF3): write VALUE to REGISTER.
 
 VALUE is an integer in the register's units ('zap registers' lists ranges), written
 little-endian in the register's size. Read-only registers and values out of range are refused.
-
+""" + _WIRE_NOTE + """
 \b
 Examples:
   zap store goal-position 2047 --id 1 -n     # FF FF FF 01 05 F3 86 FF 07 7A
@@ -97,7 +412,7 @@ Examples:
 """)
 
 send_data = _write_command("send", zap.send_data, """Send Data (0xF4): stage VALUE for REGISTER; 'zap execute' applies it.
-
+""" + _WIRE_NOTE + """
 \b
 Examples:
   zap send goal-position 2047 --id 1 -n      # FF FF FF 01 05 F4 86 FF 07 79
@@ -125,11 +440,14 @@ def execute(ident, **common):
 @id_option()
 @wire_options
 def factory_reset(reset_id, reset_baud, ident, **common):
-    """Factory Reset (0xF6): restore the factory settings.
+    """Factory Reset (0xF6): restore the factory settings (the actuator then restarts).
+
+    On a real port it asks for consent (--yes): every stored setting is overwritten.
 
     \b
     Examples:
       zap factory-reset --id 1 --reset-id -n     # FF FF FF 01 03 F6 01 04
+      zap factory-reset --id 1 -p /dev/ttyUSB0 --yes
     """
     deliver([zap.factory_reset(ident, reset_id, reset_baud)], **common)
 
@@ -138,11 +456,12 @@ def factory_reset(reset_id, reset_baud, ident, **common):
 @id_option()
 @wire_options
 def restart(ident, **common):
-    """Restart (0xF8) the actuator.
+    """Restart (0xF8) the actuator (a stored baud-rate change takes effect).
 
     \b
     Examples:
       zap restart -n              # FF FF FF 00 02 F8 05
+      zap restart --id 1 -p /dev/ttyUSB0
     """
     deliver([zap.restart(ident)], **common)
 
@@ -166,40 +485,49 @@ def parse_targets(pairs):
 @click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
+@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
 @wire_options
-def sync_move(targets, reg, **common):
+def sync_move(targets, reg, force, **common):
     """Symmetric Store (0x73) to broadcast: write one register of several actuators at once.
 
     One packet carries at most (255 - 4) / (1 + size) actuators (83 for a 2-byte register);
-    more are split over as many packets as needed.
+    more are split over as many packets as needed. A broadcast is never answered.
 
     \b
     Examples:
       zap sync-move 1:1023 2:2047 -n    # FF FF FF FE 0A 73 86 02 01 FF 03 02 FF 07 F1
       zap sync-move 1:300 2:300 3:300 --register goal-speed -p /dev/ttyUSB0
     """
-    deliver(zap.symmetric_store(reg, parse_targets(targets)), **common)
+    packets = zap.symmetric_store(reg, parse_targets(targets))
+    refuse_protocol_change(packets, force)
+    deliver(packets, force=force, **common)
 
 
 @click.command(context_settings=CONTEXT)
 @click.argument("instruction", metavar="INSTRUCTION")
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()
+@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol).")
 @wire_options
-def raw(instruction, params, ident, **common):
+def raw(instruction, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
     INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move)
-    or a code (0xF2, F2). PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02).
+    or a code (0xF2, F2). PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
+    port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
+    a reply but does not fail without one.
 
     \b
     Examples:
       zap raw load 8C 02 -n          # FF FF FF 00 04 F2 8C 02 7B
       zap raw 0xF3 03 01 -n          # FF FF FF 00 04 F3 03 01 04
+      zap raw load 00 03 --id 1 -p /dev/ttyUSB0 | zap decode
     """
     code = _instruction_code(instruction)
     data = parse_hex(" ".join(params), what="params") if params else b""
-    deliver([zap.packet(ident, code, data)], **common)
+    pkt = zap.packet(ident, code, data)
+    refuse_protocol_change([pkt], force)
+    deliver([pkt], force=force, show_reply=True, **common)
 
 
 def _instruction_code(text: str) -> int:
