@@ -14,16 +14,20 @@ from ...codec import zk
 from ...codec.hexfmt import format_hex
 from ...errors import UsageError
 from .. import CONTEXT
-from ..options import dry_run_option, note, port_options, protocol_version_option, warn, yes_option
+from ..options import consent, dry_run_option, note, port_options, protocol_version_option, warn, yes_option
+from .monitor import EXIT_HELP, errors_text, log_options, resolve_port
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,
                     ("mode", "sw"): "none", ("mode", "rpm_factor"): 0}
 
 EXAMPLES = {
-    "keepalive": ["zk send keepalive -n                      # FF 00 00 00"],
+    "keepalive": ["zk send keepalive -n                      # FF 00 00 00",
+                  "zk send keepalive -p /dev/ttyUSB0 --for 0 -o log.csv   # keep a pre-v5 ECU's link alive"],
     "control": ["zk send control --state run --throttle 50 -n   # FF 1D F4 70",
-                "zk send control --state stop -p /dev/ttyUSB0"],
+                "zk send control --state stop -p /dev/ttyUSB0",
+                "zk send control --state run --throttle 30 --for 60 -p /dev/ttyUSB0 --yes -o run.csv",
+                "zk send control --state run --throttle 30 --for 30 -p 'sim://zk?speed=10'"],
     "action": ["zk send action rate-50hz -n", "zk send action test-pump -p /dev/ttyUSB0 --yes"],
     "unlock": ["zk send unlock -n"],
     "ignition-voltage": ["zk send ignition-voltage 3.2 -n"],
@@ -34,23 +38,109 @@ EXAMPLES = {
 }
 
 
+#: Options that only mean something with --for, by parameter name -> how the user spells it.
+_FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
+             "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log"}
+
+
 def send_options(f):
-    """Options every ``zk send`` sub-command shares."""
-    f = protocol_version_option(f)
-    f = yes_option(f)
-    f = port_options("zk")(f)
-    f = dry_run_option(f)
+    """Options every ``zk send`` sub-command shares (on a click Command or a function)."""
+    opts = [
+        dry_run_option,
+        port_options("zk"),
+        yes_option,
+        protocol_version_option,
+        click.option("--for", "for_s", type=click.FloatRange(0), default=None, metavar="SECONDS",
+                     help="Keep sending at --rate for SECONDS (0: until Ctrl-C), writing the status "
+                          "frames received meanwhile as 'zk monitor' does."),
+        click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
+                     help="With --for: frames per second (default 20)."),
+        click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default=None,
+                     help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
+                          "an ECU error when the command controls the engine (default standby: throttle "
+                          "0, a hot engine cools)."),
+        click.option("--no-wait", is_flag=True,
+                     help="Send once and exit without waiting for a status frame (TX-only wiring)."),
+        log_options,
+    ]
+    # A Command lists options in the order they are added; a function in reverse.
+    for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
+        f = opt(f)
     return f
 
 
-def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, **wire):
-    """Print the frame (dry run) or send it."""
+def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, for_s=None,
+            rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
+            stale_after=3, raw_log=None):
+    """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
+    the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
+    real port a frame that can start the engine or run hardware needs consent."""
+    given = {k: v for k, v in (("rate", rate), ("abort", abort), ("fmt", fmt), ("output", output),
+                               ("append", append or None), ("snapshot", snapshot), ("ids", ids),
+                               ("raw_log", raw_log)) if v is not None}
     if dry_run:
+        if for_s is not None:
+            raise UsageError("for: not with -n/--dry-run (nothing is sent)")
         click.echo(format_hex(frame))
         return
-    if not port and not sim:
-        raise UsageError("no port: give -p PORT (or set ZKZAP_ZK_PORT), --sim, or -n to print the frame")
-    raise UsageError("sending needs the link layer, which this build does not include; use -n")
+    if for_s is None and given:
+        raise UsageError(f"{_FOR_ONLY[next(iter(given))].lstrip('-')}: applies only with --for")
+    if for_s is not None and no_wait:
+        raise UsageError("no-wait: not with --for")
+    url = resolve_port(port, sim)
+    from ...link import zk_link
+
+    if ids is not None:
+        zk_link.parse_ids(ids)
+    hazard = zk.control_hazard(frame)
+    if hazard and not zk_link.is_simulator(url):
+        consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
+    if for_s is None:
+        _send_once(zk_link, url, baud, frame, timeout, no_wait)
+        return
+    from .monitor import run_telemetry
+
+    controls = zk_link.controls_engine(frame)
+    outcome, tel, session = run_telemetry(
+        url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
+        stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
+        duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
+        stop_on_error=controls, title=f"{format_hex(frame)} to {url}")
+    outcome.raise_for_status()
+    if tel.errors and not controls:
+        note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")
+
+
+def _send_once(zk_link, url, baud, frame, timeout, no_wait):
+    """Write one frame; unless ``no_wait``, wait for a status frame to show the ECU is there."""
+    import time
+
+    from ...codec.framing import ZkFramer
+    from ...errors import NoReply
+
+    link = zk_link.ZkLink.open(url, baud)
+    try:
+        link.write(frame)
+        if no_wait:
+            return
+        limit = timeout if timeout is not None else zk_link.DEFAULT_SILENCE_S
+        framer = ZkFramer("status")
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline:
+            if framer.feed(link.read()):
+                return
+        raise NoReply(f"sent {format_hex(frame)}, but no status frame came back from {url} within "
+                      f"{limit:g} s (check the port, baud rate and wiring; --no-wait skips this check)")
+    finally:
+        link.close()
+
+
+SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 3 if none comes within "
+               "--timeout, default 2 s). With --for it is sent at --rate and the status frames are written "
+               "as 'zk monitor' writes them. On a real port a frame that can start the engine or run ECU "
+               "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask. "
+               + EXIT_HELP.replace("with --fail-on-error, an ECU error code was seen",
+                                   "a new ECU error while the command controls the engine (after the abort)"))
 
 
 def _check_version(cmd, raw_param, protocol_version):
@@ -108,7 +198,7 @@ def _make(cmd):
     doc = _doc(cmd, fields)
     command = click.Command(cmd.name, callback=callback, params=params, help=doc,
                             short_help=cmd.help.split(" (")[0].rstrip("."), context_settings=CONTEXT,
-                            no_args_is_help=False)
+                            no_args_is_help=False, epilog=SEND_EPILOG)
     return send_options(command)
 
 
@@ -131,10 +221,15 @@ def send():
     """Compose a control command and send it, or print it as hex with -n/--dry-run.
 
     \b
+    Sent to a port (-p PORT, --sim), the frame goes once, or with --for SECONDS at --rate Hz while
+    the ECU's status frames are written as 'zk monitor' writes them.
+
+    \b
     Examples:
       zk send control --state run --throttle 50 -n    # FF 1D F4 70
       zk send action rate-50hz -n
       zk send raw 1 sw=3 throttle_pct=500 -n          # raw field values
+      zk send control --state run --throttle 30 --for 20 --sim -f jsonl
     """
 
 
@@ -156,7 +251,7 @@ def _parse_assignments(pairs):
     return out
 
 
-@send.command("raw", context_settings=CONTEXT)
+@send.command("raw", context_settings=CONTEXT, epilog=SEND_EPILOG)
 @click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...")
 @send_options

@@ -1,0 +1,280 @@
+"""``zk monitor``: the ECU's status frames as they arrive — a live dashboard on a terminal, JSON
+Lines in a pipe, CSV or JSON on request, to stdout or a file — and the telemetry plumbing that
+``zk send --for`` and ``zk profile`` share (:func:`log_options`, :func:`run_telemetry`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from ...codec import zk
+from ...errors import DeviceError, UsageError
+from ...io.writers import FORMATS
+from .. import CONTEXT
+from ..options import note, open_output, port_options, protocol_version_option
+
+#: Output format by the extension of -o FILE when --format is not given.
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+
+EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
+             "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
+             "--fail-on-error, an ECU error code was seen; 130 Ctrl-C; 143 SIGTERM. Every record already "
+             "written stays whole.")
+
+
+def log_options(f):
+    """Options for where and how status records are written (monitor, send --for, profile)."""
+    opts = [
+        click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
+                     help="Output format: table is the live dashboard on a terminal; default table on a "
+                          "terminal, jsonl in a pipe, or by the extension of -o (.csv, .json, .jsonl)."),
+        click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True, allow_dash=True),
+                     help="Write records to FILE (the dashboard stays on a terminal)."),
+        click.option("--append", is_flag=True,
+                     help="Append to --output and --raw-log (a CSV gets no second header)."),
+        click.option("--snapshot/--frames", "snapshot", default=None,
+                     help="Snapshot rows (every field's latest value on each row) or one record per "
+                          "frame. Default: snapshot for csv, frames for jsonl/json."),
+        click.option("--ids", metavar="LIST", default=None,
+                     help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
+        click.option("--stale-after", type=click.IntRange(1, 1000), default=3, show_default=True,
+                     metavar="N", help="An ID is stale after N of its periods without a frame."),
+        click.option("--raw-log", type=click.Path(dir_okay=False, writable=True), default=None,
+                     metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
+                                          "or 'zk decode --binary')."),
+    ]
+    # A Command lists options in the order they are added; a function in reverse.
+    for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
+        f = opt(f)
+    return f
+
+
+def resolve_port(port, sim, **sim_options) -> str:
+    from ...link.port import sim_url
+
+    if sim and port:
+        raise UsageError("port: give -p PORT or --sim, not both")
+    if sim:
+        return sim_url("zk", **sim_options)
+    if not port:
+        raise UsageError("no port: give -p PORT (or set ZKZAP_ZK_PORT) or --sim")
+    return port
+
+
+def check_log_options(ids, snapshot, fmt):
+    """Validate the log options before anything is opened; returns the parsed ID set."""
+    from ...link.zk_link import parse_ids
+
+    return parse_ids(ids) if ids is not None else None
+
+
+class Output:
+    """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal."""
+
+    def __init__(self, fmt, output, append, snapshot, ids, title, columns_for):
+        from ...io.term import is_tty
+
+        path = output if output and output != "-" else None
+        if fmt is None and path:
+            fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+        self.stream, had = open_output(output, append)
+        if fmt is None:
+            fmt = "table" if is_tty(self.stream) else "jsonl"
+        self.fmt = fmt
+        self.dashboard = None
+        self.writer = None
+        stdout_tty = is_tty(sys.stdout)
+        if fmt == "table" and self.stream is sys.stdout and stdout_tty:
+            self.dashboard = _dashboard(title)
+        elif path and stdout_tty:
+            self.dashboard = _dashboard(title)
+        if snapshot is None:
+            snapshot = fmt == "csv"
+        if fmt == "table" and self.dashboard is not None and self.stream is sys.stdout:
+            snapshot = False
+        self.snapshot = snapshot
+        if self.dashboard is None or self.stream is not sys.stdout:
+            from ...io.writers import make_writer
+
+            if fmt == "table":
+                self.snapshot = False
+                self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
+                self._table = True
+            else:
+                self.writer = make_writer(fmt, self.stream, columns_for(self.snapshot, ids), header=not had)
+                self._table = False
+
+    def write(self, rec):
+        if self.writer is not None:
+            if self._table:
+                from .decode import summary
+
+                rec = dict(rec, _summary=summary(rec))
+            self.writer.write(rec)
+
+    def update(self, snapshot, health):
+        if self.dashboard is not None:
+            self.dashboard.update(snapshot, health)
+
+    def __enter__(self):
+        if self.dashboard is not None:
+            self.dashboard.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            if self.dashboard is not None:
+                self.dashboard.__exit__(*exc)
+        finally:
+            self.close()
+        return False
+
+    def close(self):
+        if self.writer is not None:
+            w, self.writer = self.writer, None
+            try:
+                w.close()
+            except BrokenPipeError:
+                pass
+        if self.stream is not sys.stdout and not self.stream.closed:
+            self.stream.close()
+
+
+_TABLE_COLUMNS = [("t", "t"), ("id", "id"), ("_summary", "fields"), ("stale", "stale")]
+
+
+def _dashboard(title):
+    from ...io.dashboard import Dashboard
+
+    return Dashboard(sys.stdout, title)
+
+
+def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
+                  snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
+                  count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
+                  abort_at_end=False, title=None):
+    """Log status records from a port (or a replay) while optionally sending control frames.
+
+    Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
+    after its own reporting. Files are closed (whole) before this returns.
+    """
+    from ...link import zk_link as L
+
+    id_set = L.parse_ids(ids) if ids is not None else None
+    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
+    raw = None
+    source = None
+    try:
+        if raw_log:
+            try:
+                raw = open(raw_log, "ab" if append else "wb")
+            except OSError as e:
+                raise UsageError(f"raw-log: cannot open {raw_log}: {e.strerror}") from None
+        if replay is not None:
+            source = L.ReplaySource(replay, fast=fast)
+        else:
+            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw))
+        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
+        session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
+                            count=count, duration=duration,
+                            silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
+                            stop_on_error=stop_on_error, abort_at_end=abort_at_end,
+                            on_update=out.update if out.dashboard is not None else None, notify=note)
+        with out:
+            outcome = session.run()
+    finally:
+        if source is not None:
+            source.close()
+        out.close()
+        if raw is not None:
+            raw.close()
+    if tel.version_note:
+        note(tel.version_note)
+    framer = source.framer
+    if framer.bad:
+        note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
+             f"({framer.skipped} bytes)")
+    return outcome, tel, session
+
+
+def errors_text(tel) -> str:
+    return ", ".join(f"{e['code']} {e['name']} at t={e['t']:g} s" for e in tel.summary()["errors"])
+
+
+@click.command(context_settings=CONTEXT, epilog=EXIT_HELP)
+@port_options("zk")
+@click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
+              help="Decode a raw log (--raw-log) instead of a port, paced in real time.")
+@click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
+@log_options
+@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+              help="Stop after N records.")
+@click.option("--duration", type=click.FloatRange(0, min_open=True), default=None, metavar="SECONDS",
+              help="Stop after SECONDS.")
+@click.option("--keepalive", is_flag=True,
+              help="Send keep-alives (ID 0) at --rate: ECUs before protocol version 5 report loss of "
+                   "control signal when the host falls silent.")
+@click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
+              help="Keep-alive rate (default 20 Hz).")
+@protocol_version_option
+@click.option("--fail-on-error", is_flag=True,
+              help="Exit with status 5 if any ECU error code was seen (after writing every record).")
+def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
+            count, duration, keepalive, rate, protocol_version, fail_on_error):
+    """Show or log the ECU's status frames as they arrive.
+
+    On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
+    gives them). CSV (-f csv, or -o FILE.csv) gets snapshot rows: every field's latest value on
+    each row, one row per frame. Every record has 'time' (ISO 8601 UTC), 't' (seconds since the
+    start), 'stale' and 'stale_ids' (IDs not seen for --stale-after periods). Each record is
+    flushed as it is written: Ctrl-C or a vanished port leaves a whole file.
+
+    Voltages are decoded in the ECU's own unit: frames are held back until the first status ID 6
+    (the protocol version; at most 12 frames) unless --protocol-version is given.
+
+    --timeout is the longest silence tolerated (default 2 s). A replay's 't' is rebuilt from the
+    status rate the frames report.
+
+    \b
+    Examples:
+      zk monitor --sim                                  # the dashboard, on the simulator
+      zk monitor -p /dev/ttyUSB0 --count 50 -f jsonl | jq -c 'select(.id==1)'
+      zk monitor -p /dev/ttyUSB0 -o run.csv --raw-log run.bin
+      zk monitor --replay run.bin --fast -f csv
+      zk monitor -p /dev/ttyUSB0 --duration 10 --fail-on-error --ids 1 -f jsonl
+    """
+    if replay is not None:
+        if port or sim:
+            raise UsageError("replay: give --replay FILE or a port (-p/--sim), not both")
+        if keepalive or raw_log:
+            raise UsageError(f"{'keepalive' if keepalive else 'raw-log'}: not with --replay")
+        if not os.path.isfile(replay):
+            raise UsageError(f"replay: cannot read {replay}: no such file")
+        url = None
+    else:
+        if fast:
+            raise UsageError("fast: only with --replay")
+        url = resolve_port(port, sim)
+    if rate is not None and not keepalive:
+        raise UsageError("rate: applies only with --keepalive")
+    check_log_options(ids, snapshot, fmt)
+    control = None
+    if keepalive:
+        frame = zk.encode_control("keepalive")[0]
+
+        def control(t):
+            return frame
+
+    outcome, tel, _ = run_telemetry(
+        url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
+        ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
+        count=count, duration=duration, control=control, rate=rate)
+    if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
+        note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
+             "sending; --keepalive does")
+    outcome.raise_for_status()
+    if fail_on_error and tel.errors:
+        raise DeviceError(f"ECU reported error{'s' if len(tel.errors) > 1 else ''}: {errors_text(tel)}")
