@@ -1,0 +1,1 @@
+"""Package data: the example throttle schedule (``zk profile --example``)."""
