@@ -15,7 +15,7 @@ def feed_chunked(framer, data, cuts):
     for cut in sorted(set(c for c in cuts if 0 < c < len(data))) + [len(data)]:
         out += framer.feed(data[pos:cut])
         pos = cut
-    framer.flush()
+    out += framer.flush()
     return out
 
 

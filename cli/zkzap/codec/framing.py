@@ -3,12 +3,27 @@
 A framer knows only sync, length and checksum (like pymodbus's framers); what the bytes mean
 is the business of :mod:`zkzap.codec.zk` and :mod:`zkzap.codec.zap`. Feed it chunks with
 :meth:`feed`, which returns the frames completed so far; call :meth:`flush` at the end of the
-stream. After garbage or a CRC failure it slides forward one byte and looks for the next
-head, so a valid frame that follows is never lost. It keeps at most one frame's worth of
-bytes between calls: memory is constant whatever the stream length.
+stream and use the frames it returns. It keeps at most a few frames' worth of bytes between
+calls: memory is constant whatever the stream length.
 
-Counters: ``frames`` (good frames), ``bad`` (candidate frames whose CRC/checksum failed, each
-damaged region counted once), ``skipped`` (bytes that were not part of a good frame).
+Resynchronisation. After garbage or a CRC failure the framer slides forward one byte and
+looks for the next head, so a valid frame that follows is never lost to the damage itself.
+An 8-bit CRC (or checksum) also accepts 1 in 256 random candidates, so garbage that ends in a
+head byte (a truncated frame, line noise) can form a *false* frame overlapping the real one
+after it. Therefore a candidate that validates right after skipped bytes is checked against
+every rival candidate starting inside it. A rival that also validates wins unless the
+candidate is *confirmed* (a valid frame starts right after it) and the rival is not, and
+provided the rival would itself win against its own rivals (so the choice never drops both).
+Deciding may need the bytes after the candidate: until they arrive it is held back
+(``pending``), and :meth:`flush` decides with what there is, so use the frames flush()
+returns. A frame that follows a good frame directly (or starts the stream) is returned at
+once, with no look-ahead: a live stream is never delayed. The residual rate at which a false
+frame still wins (both readings valid and unconfirmed, or garbage right after a good frame)
+is measured by ``benchmarks/fuzz.py``.
+
+Counters: ``frames`` (good frames), ``bad`` (candidate frames whose CRC/checksum failed or
+that lost to a rival, each damaged region counted once), ``skipped`` (bytes that were not
+part of a good frame).
 """
 
 from __future__ import annotations
@@ -16,6 +31,13 @@ from __future__ import annotations
 from .crc import CRC8_TABLE
 
 _T = CRC8_TABLE
+_HDR = b"\xff\xff\xff"
+
+#: Recently validated ZK frames are remembered (up to this many) so that a repeated frame,
+#: the common case in a capture, is recognised without recomputing its CRC.
+VALID_CACHE = 8192
+#: How deep a chain of overlapping valid candidates is followed when deciding between them.
+MAX_DEPTH = 3
 
 
 class ZkFramer:
@@ -39,61 +61,147 @@ class ZkFramer:
         self._len = lengths
         self._buf = b""
         self._bad_until = 0
+        self._synced = True
+        self._valid = {}
         self.frames = 0
         self.bad = 0
         self.skipped = 0
 
     def feed(self, data) -> list:
+        """Frames completed by ``data`` (a frame right after skipped bytes may be held back
+        until the bytes that confirm it arrive)."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
+        return self._scan(buf, False)
+
+    def flush(self) -> list:
+        """End of stream: decide about held frames with the bytes there are and return them;
+        bytes still held after that are a truncated frame (counted as skipped)."""
+        out = self._scan(self._buf, True) if self._buf else []
+        self._buf = b""
+        self._bad_until = 0
+        self._synced = True
+        return out
+
+    @property
+    def pending(self) -> int:
+        """Bytes held back waiting for the rest of a frame (or for the bytes that confirm it)."""
+        return len(self._buf)
+
+    def _ok(self, buf, i, ln) -> bool:
+        T = _T
+        if ln == 7:
+            return T[T[T[T[T[T[T[buf[i]] ^ buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] ^ buf[i + 4]]
+                     ^ buf[i + 5]] ^ buf[i + 6]] == 0
+        return buf[i + 1] < 0x90 and T[T[T[buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] == 0
+
+    def _valid_at(self, buf, p, final):
+        """Whether a valid frame starts at ``p``: True/False, None when bytes are missing."""
+        n = len(buf)
+        if p >= n:
+            return False if final else None
+        ln = self._len[buf[p]]
+        if not ln:
+            return False
+        if p + ln > n:
+            return False if final else None
+        return self._ok(buf, p, ln)
+
+    def _resync(self, buf, i, ln, final, depth=0):
+        """A valid candidate at ``i`` after skipped bytes: keep it (True), drop it for a rival
+        (False), or None when the bytes needed to decide have not arrived."""
+        lens = self._len
+        n = len(buf)
+        end = i + ln
+        rivals = []
+        for j in range(i + 1, end):
+            lj = lens[buf[j]]
+            if not lj:
+                continue
+            if j + lj > n:
+                if final:
+                    continue
+                return None
+            if self._ok(buf, j, lj):
+                rivals.append((j, lj))
+        if not rivals:
+            return True
+        mine = self._valid_at(buf, end, final)
+        if mine is None:
+            return None
+        for j, lj in rivals:
+            theirs = self._valid_at(buf, j + lj, final)
+            if theirs is None:
+                return None
+            if (theirs or not mine) and depth < MAX_DEPTH:
+                wins = self._resync(buf, j, lj, final, depth + 1)
+                if wins is None:
+                    return None
+                if wins:
+                    return False
+        return True
+
+    def _scan(self, buf, final) -> list:
         out = []
         append = out.append
         lens = self._len
         T = _T
+        valid = self._valid
         n = len(buf)
         i = 0
         skipped = 0
         bad_until = self._bad_until
+        synced = self._synced
         while i < n:
             ln = lens[buf[i]]
             if not ln:
                 skipped += 1
                 i += 1
+                synced = False
                 continue
-            if i + ln > n:
-                break
-            if ln == 7:
-                ok = T[T[T[T[T[T[T[buf[i]] ^ buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] ^ buf[i + 4]]
-                       ^ buf[i + 5]] ^ buf[i + 6]] == 0
+            e = i + ln
+            if e > n:
+                if not final:
+                    break
+                ok = False          # a truncated frame at the end of the stream
+                e = n
             else:
-                ok = buf[i + 1] < 0x90 and T[T[T[buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] == 0
+                f = buf[i:e]
+                if f in valid:
+                    ok = True
+                else:
+                    if ln == 7:
+                        ok = T[T[T[T[T[T[T[buf[i]] ^ buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] ^ buf[i + 4]]
+                               ^ buf[i + 5]] ^ buf[i + 6]] == 0
+                    else:
+                        ok = buf[i + 1] < 0x90 and T[T[T[buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] == 0
+                    if ok:
+                        if len(valid) >= VALID_CACHE:
+                            valid.clear()
+                        valid[f] = None
+                if ok and not synced:
+                    ok = self._resync(buf, i, ln, final)
+                    if ok is None:
+                        break
             if ok:
-                append(buf[i:i + ln])
-                i += ln
+                append(f)
+                i = e
+                synced = True
             else:
                 if i >= bad_until:
                     self.bad += 1
-                    bad_until = i + ln
+                    bad_until = e
                 skipped += 1
                 i += 1
+                synced = False
         self.frames += len(out)
+        if final:
+            skipped += n - i
+            i = n
         self.skipped += skipped
         self._bad_until = bad_until - i
+        self._synced = synced
         self._buf = buf[i:]
         return out
-
-    @property
-    def pending(self) -> int:
-        """Bytes held back waiting for the rest of a frame."""
-        return len(self._buf)
-
-    def flush(self) -> list:
-        """End of stream: bytes still held are a truncated frame (counted as skipped)."""
-        if self._buf:
-            self.skipped += len(self._buf)
-            self.bad += 1 if self._bad_until <= 0 else 0
-            self._buf = b""
-        self._bad_until = 0
-        return []
 
 
 class ZapFramer:
@@ -105,67 +213,162 @@ class ZapFramer:
     def __init__(self):
         self._buf = b""
         self._bad_until = 0
+        self._synced = True
         self.frames = 0
         self.bad = 0
         self.skipped = 0
 
     def feed(self, data) -> list:
+        """Packets completed by ``data`` (a packet right after skipped bytes may be held back
+        until the bytes that confirm it arrive)."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
-        out = []
-        n = len(buf)
-        i = 0
-        skipped = 0
-        bad_until = self._bad_until
-        find = buf.find
-        while True:
-            j = find(b"\xff\xff\xff", i)
-            if j < 0:
-                # keep a trailing run of FFs: it may be the start of a header
-                keep = n
-                while keep > i and keep > n - 2 and buf[keep - 1] == 0xFF:
-                    keep -= 1
-                skipped += keep - i
-                i = keep
-                break
-            while j + 3 < n and buf[j + 3] == 0xFF:
-                j += 1
-            skipped += j - i
-            i = j
-            if i + 5 > n:
-                break
-            size = buf[i + 4]
-            end = i + 5 + size
-            if size < 2:
-                ok = False
-                end = i + 5
-            elif end > n:
-                break
-            else:
-                ok = (0xFF - (sum(buf[i + 3:end - 1]) & 0xFF)) == buf[end - 1]
-            if ok:
-                out.append(buf[i:end])
-                i = end
-            else:
-                if i >= bad_until:
-                    self.bad += 1
-                    bad_until = end
-                skipped += 1
-                i += 1
-        self.frames += len(out)
-        self.skipped += skipped
-        self._bad_until = bad_until - i
-        self._buf = buf[i:]
+        return self._scan(buf, False)
+
+    def flush(self) -> list:
+        """End of stream: decide about held packets and return them; bytes still held after
+        that are a truncated packet (counted as skipped, and as bad when they began with a
+        header)."""
+        out = self._scan(self._buf, True) if self._buf else []
+        self._buf = b""
+        self._bad_until = 0
+        self._synced = True
         return out
 
     @property
     def pending(self) -> int:
         return len(self._buf)
 
-    def flush(self) -> list:
-        if self._buf:
-            self.skipped += len(self._buf)
-            if self._buf.startswith(b"\xff\xff\xff") and self._bad_until <= 0:
-                self.bad += 1
-            self._buf = b""
-        self._bad_until = 0
-        return []
+    @staticmethod
+    def _head(buf, p, n):
+        """The header position of a run of FFs starting at ``p`` (its last three), or -1."""
+        while p + 3 < n and buf[p + 3] == 0xFF:
+            p += 1
+        return p
+
+    def _valid_at(self, buf, p, final):
+        """Whether a valid packet starts at ``p`` (after any extra FFs of its header run)."""
+        n = len(buf)
+        if p + 3 > n:
+            if buf[p:] == _HDR[:n - p]:
+                return False if final else None
+            return False
+        if buf[p:p + 3] != _HDR:
+            return False
+        p = self._head(buf, p, n)
+        if p + 5 > n:
+            return False if final else None
+        size = buf[p + 4]
+        end = p + 5 + size
+        if size < 2:
+            return False
+        if end > n:
+            return False if final else None
+        return (0xFF - (sum(buf[p + 3:end - 1]) & 0xFF)) == buf[end - 1]
+
+    def _resync(self, buf, i, end, final, depth=0):
+        n = len(buf)
+        rivals = []
+        j = buf.find(_HDR, i + 1, end + 2)
+        while 0 <= j < end:
+            j = self._head(buf, j, n)
+            if j >= end:
+                break
+            if j + 5 > n:
+                if not final:
+                    return None
+            else:
+                size = buf[j + 4]
+                e = j + 5 + size
+                if size >= 2:
+                    if e > n:
+                        if not final:
+                            return None
+                    elif (0xFF - (sum(buf[j + 3:e - 1]) & 0xFF)) == buf[e - 1]:
+                        rivals.append((j, e))
+            j = buf.find(_HDR, j + 1, end + 2)
+        if not rivals:
+            return True
+        mine = self._valid_at(buf, end, final)
+        if mine is None:
+            return None
+        for j, e in rivals:
+            theirs = self._valid_at(buf, e, final)
+            if theirs is None:
+                return None
+            if (theirs or not mine) and depth < MAX_DEPTH:
+                wins = self._resync(buf, j, e, final, depth + 1)
+                if wins is None:
+                    return None
+                if wins:
+                    return False
+        return True
+
+    def _scan(self, buf, final) -> list:
+        out = []
+        n = len(buf)
+        i = 0
+        skipped = 0
+        bad_until = self._bad_until
+        synced = self._synced
+        find = buf.find
+        while True:
+            j = find(_HDR, i)
+            if j < 0:
+                # keep a trailing run of FFs: it may be the start of a header
+                keep = n
+                if not final:
+                    while keep > i and keep > n - 2 and buf[keep - 1] == 0xFF:
+                        keep -= 1
+                if keep > i:
+                    synced = False
+                skipped += keep - i
+                i = keep
+                break
+            while j + 3 < n and buf[j + 3] == 0xFF:
+                j += 1
+            if j > i:
+                skipped += j - i
+                synced = False
+            i = j
+            if i + 5 > n:
+                if not final:
+                    break
+                ok = False              # a truncated packet at the end of the stream
+                end = n
+            else:
+                size = buf[i + 4]
+                end = i + 5 + size
+                if size < 2:
+                    ok = False
+                    end = i + 5
+                elif end > n:
+                    if not final:
+                        break
+                    ok = False
+                    end = n
+                else:
+                    ok = (0xFF - (sum(buf[i + 3:end - 1]) & 0xFF)) == buf[end - 1]
+                    if ok and not synced:
+                        ok = self._resync(buf, i, end, final)
+                        if ok is None:
+                            break
+            if ok:
+                out.append(buf[i:end])
+                i = end
+                synced = True
+            else:
+                if i >= bad_until:
+                    self.bad += 1
+                    bad_until = end
+                skipped += 1
+                i += 1
+                synced = False
+        self.frames += len(out)
+        if final:
+            skipped += n - i
+            i = n
+        self.skipped += skipped
+        self._bad_until = bad_until - i
+        self._synced = synced
+        self._buf = buf[i:]
+        return out
