@@ -297,24 +297,17 @@ class ZapBus:
         (kind, detail, received bytes)."""
         framer = ZapFramer()
         received = bytearray()
-        copies = 0
         echo_known = self.adapter_echo
+        state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0)}
         wrong = []
-        want = rx_len + (len(pkt) if echo_known else 0)
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                break
-            chunk = self._read(max(1, want - len(received)), left)
-            if not chunk:
-                break
-            received += chunk
-            for p in framer.feed(chunk):
+
+        def examine(packets):
+            for p in packets:
                 p = bytes(p)
                 if p == pkt:
-                    copies += 1
+                    state["copies"] += 1
                     self.adapter_echo = True
-                    want = max(want, len(received) + rx_len)
+                    state["want"] = max(state["want"], len(received) + rx_len)
                     continue
                 if p in self._recent:
                     continue                      # a late echo of an earlier packet
@@ -322,13 +315,31 @@ class ZapBus:
                     continue                      # another master's command
                 if p[3] not in accept:
                     wrong.append(p)
-                    want = len(received) + rx_len
+                    state["want"] = len(received) + rx_len
                     continue
                 data = p[6:-1]
                 if data_len is not None and len(data) != data_len:
                     return ("length", f"reply carries {len(data)} data bytes, expected {data_len}",
                             bytes(received))
                 return Reply(p[3], p[5], data, p)
+            return None
+
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            chunk = self._read(max(1, state["want"] - len(received)), left)
+            if not chunk:
+                break
+            received += chunk
+            got = examine(framer.feed(chunk))
+            if got is not None:
+                return got
+        pending, bad_before = framer.pending, framer.bad
+        got = examine(framer.flush())               # a packet held back to rule out a rival
+        if got is not None:
+            return got
+        copies = state["copies"]
         # The documented Restart feedback is a copy of the command itself: accept a copy that
         # is more than the adapter's known echo.
         if restart and not wrong and copies >= (2 if echo_known else 1):
@@ -336,11 +347,11 @@ class ZapBus:
         if wrong:
             ids = ", ".join(str(p[3]) for p in wrong)
             return ("wrong-id", f"reply from ID {ids}, expected ID {min(accept)}", bytes(received))
+        if pending and not bad_before and bytes(received).find(zap.HEADER) >= 0:
+            return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet)",
+                    bytes(received))
         if framer.bad:
             return ("checksum", "corrupted reply (checksum mismatch)", bytes(received))
-        if framer.pending:
-            return ("truncated", f"truncated reply ({framer.pending} bytes of an incomplete packet)",
-                    bytes(received))
         if len(received) > copies * len(pkt):
             return ("garbage", "unreadable bytes instead of a reply (wrong baud rate?)", bytes(received))
         return ("none", "echo only" if copies else "", bytes(received))

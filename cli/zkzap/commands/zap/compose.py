@@ -353,7 +353,7 @@ def load(reg, length, physical, fmt, ident, **common):
         raise UsageError("id: a broadcast Load Data is never answered; give one actuator's ID")
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    from ...link.zap_bus import device_error, error_message
+    from ...link.zap_bus import device_error
 
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
         if bus.return_mode == 0:
@@ -374,7 +374,6 @@ def load(reg, length, physical, fmt, ident, **common):
     if common["verbose"]:
         _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
     if reply.error:
-        _say(f"warning: {error_message(reply)}")
         raise device_error(reply)
 
 
