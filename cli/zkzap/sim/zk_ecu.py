@@ -161,7 +161,7 @@ class ZkEcu(Device):
         self._last_rx = None          # model time of the last valid control frame
         self._last_frame = None
         self._t = 0.0
-        self._next_tick = 0.0
+        self._schedule(0.0)
         self._cycle = 0
         self.frames_sent = 0
         self.silent = silent_after is not None and silent_after <= 0
@@ -325,7 +325,9 @@ class ZkEcu(Device):
             self.rx_ignored += 1
             return
         if param in RATE_BY_ACTION:
-            self.rate = RATE_BY_ACTION[param]
+            if self.rate != RATE_BY_ACTION[param]:
+                self.rate = RATE_BY_ACTION[param]
+                self._schedule(min(self._next_tick, self._t + 1.0 / self.rate))
         elif param == 10:
             self.fuel_used = 0.0
         elif param == 11:
@@ -351,15 +353,22 @@ class ZkEcu(Device):
             self.state = STATE["cooling"] if self.egt > COOL_DONE_C else STATE["stop"]
 
     # --- time --------------------------------------------------------------------------------------
+    def _schedule(self, first):
+        """Status ticks at ``first + n / rate`` (computed, not accumulated: no drift)."""
+        self._tick_base = first
+        self._tick_n = 0
+        self._next_tick = first
+
     def _advance_to(self, now):
         period = 1.0 / self.rate
         if now - self._next_tick > MAX_BURST * period:
             self._integrate(now - MAX_BURST * period)
-            self._next_tick = now - (MAX_BURST - 1) * period
-        while self._next_tick <= now:
+            self._schedule(now - (MAX_BURST - 1) * period)
+        while self._next_tick <= now + 1e-9:
             self._integrate(self._next_tick)
             self._tick()
-            self._next_tick += 1.0 / self.rate
+            self._tick_n += 1
+            self._next_tick = self._tick_base + self._tick_n / self.rate
         self._integrate(now)
 
     def _tick(self):
@@ -491,7 +500,7 @@ class ZkEcu(Device):
             if self.pump_on and s in (0, 1):
                 flow, pump = 0.08, 3.0
         self.rpm += (rpm_t - self.rpm) * (1.0 - math.exp(-dt / rpm_tau))
-        if rpm_t == 0.0 and self.rpm < 50.0:
+        if rpm_t == 0.0 and self.rpm < 1000.0:     # bearing friction stops a slow rotor
             self.rpm = 0.0
         self.egt += (egt_t - self.egt) * (1.0 - math.exp(-dt / egt_tau))
         load = max(0.0, (self.rpm - self.idle_rpm) / span) if s == RUNNING else 0.0
