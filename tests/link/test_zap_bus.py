@@ -1,0 +1,231 @@
+"""mightyZAP transactions through the in-process simulator (sim://zap) with real pyserial."""
+
+import time
+
+import pytest
+
+from zkzap.codec import zap
+from zkzap.errors import BadReply, DeviceError, NoReply, PortError, UsageError
+from zkzap.link.port import open_port, sim_url
+from zkzap.link.zap_bus import (MARGIN, NETWORK_MARGIN, TURNAROUND, ZapBus, host_margin, is_simulated,
+                                leaves_protocol, open_bus, stored_writes, wire_time)
+
+
+def make(ids="1,2", return_mode=1, **opts):
+    port = open_port(sim_url("zap", ids=ids, **opts), 57600, timeout=0.1)
+    return ZapBus(port, return_mode=return_mode)
+
+
+@pytest.fixture
+def bus():
+    b = make()
+    yield b
+    b.close()
+
+
+def test_timeout_is_derived_from_the_baud_rate():
+    b = make()
+    assert wire_time(10, 57600) == pytest.approx(10 * 10 / 57600)
+    assert b.margin == MARGIN
+    t57 = b.reply_timeout(7, 7)
+    assert t57 == pytest.approx(14 * 10 / 57600 + TURNAROUND + MARGIN)
+    b.set_baud(115200)
+    assert b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + TURNAROUND + MARGIN)
+    assert b.reply_timeout(7, 7) < t57
+    b.timeout = 0.5
+    assert b.reply_timeout(7, 7) == 0.5
+
+
+def test_margin_by_port_kind():
+    assert host_margin("socket://127.0.0.1:5000") == MARGIN
+    assert host_margin("socket://10.1.2.3:5000") == MARGIN + NETWORK_MARGIN
+    assert host_margin("/dev/does-not-exist") == MARGIN
+    assert is_simulated("sim://zap") and is_simulated("loop://")
+    assert not is_simulated("socket://localhost:1") and not is_simulated("/dev/ttyUSB0")
+
+
+def test_echo_load_and_blocks(bus):
+    r = bus.echo(1)
+    assert (r.ident, r.error, r.data) == (1, 0, b"")
+    assert 0 < r.rtt < 0.05
+    assert bus.read(2, "present-voltage") == 120
+    reply, values = bus.read_registers(1, 0x00, 5)
+    assert [(reg.name, v) for reg, v in values][:4] == [("model-number", 0x0C4C), ("firmware-version", 20),
+                                                       ("id", 1), ("baud-rate", 32)]
+
+
+def test_writes_wait_only_for_replies_the_mode_gives(bus):
+    t = time.monotonic()
+    assert bus.store(1, "goal-position", 2000) is None          # mode 1: not answered
+    assert time.monotonic() - t < 0.005
+    # the simulator answers in the mode the command arrived in (1: no reply); the link waits
+    # because mode 2 would answer, takes the silence, and follows the new mode from now on
+    assert bus.store(1, "feedback-return-mode", 2) is None
+    assert bus.return_mode == 2
+    r = bus.store(1, "led", 2)                                   # mode 2: acknowledged
+    assert r.ident == 1 and r.error == 0
+    assert bus.execute() is None                                 # broadcast
+    assert bus.read(1, "goal-position") == 2000
+
+
+def test_return_mode_0_answers_echo_only():
+    b = make(ids="1", return_mode=0)
+    b.port.device.actuator(1).set("feedback-return-mode", 0)
+    with pytest.raises(UsageError, match="feedback-return-mode 0"):
+        b.load(1, 0x8C, 2)
+    assert b.echo(1).ident == 1
+    assert b.detect_return_mode(1) == 0
+    b.port.device.actuator(1).set("feedback-return-mode", 2)
+    assert b.detect_return_mode(1) == 2 and b.return_mode == 2
+
+
+def test_error_bits_raise_device_error_with_the_reply(bus):
+    bus.port.device.inject(2, "overload")
+    with pytest.raises(DeviceError) as e:
+        bus.read(2, "present-position")
+    assert e.value.code == 5
+    assert "ID 2 reports error 0x20: overload" in str(e.value)
+    assert e.value.reply.value == 0
+    r = bus.load(2, 0x8C, 2, check=False)
+    assert r.errors == ["overload"]
+    bus.port.device.inject(1, "voltage", 5.0)
+    with pytest.raises(DeviceError, match="input voltage out of the operating range"):
+        bus.echo(1)
+
+
+@pytest.mark.parametrize("kind,code,needle", [
+    ("corrupt", 6, "corrupted reply (checksum mismatch) after 3 tries"),
+    ("truncate", 6, "truncated reply"),
+    ("wrong-id", 6, "reply from ID 3, expected ID 2"),
+    ("silent", 3, "no reply from ID 2 at 57600 baud"),
+])
+def test_failures_after_retries(bus, kind, code, needle):
+    bus.port.device.inject(2, kind)
+    sent = bus.sent
+    with pytest.raises((BadReply, NoReply)) as e:
+        bus.read(2, "present-position")
+    assert e.value.code == code
+    assert needle in str(e.value)
+    assert bus.sent - sent == 3                                  # 1 + 2 retries
+    assert bus.read(1, "present-position") == 0                  # the bus is usable afterwards
+
+
+def test_a_single_bad_reply_is_retried(bus):
+    bus.port.device.inject(1, "corrupt", count=1)
+    assert bus.read(1, "present-voltage") == 120
+    assert bus.retried == 1
+
+
+def test_no_reply_takes_tries_times_timeout(bus):
+    limit = bus.reply_timeout(9, 9)
+    t = time.monotonic()
+    with pytest.raises(NoReply):
+        bus.read(7, "present-position")
+    took = time.monotonic() - t
+    assert 3 * limit <= took < 3 * limit + 0.05
+
+
+def test_half_duplex_echo_is_skipped(bus):
+    bus.port.device.echo = True
+    assert bus.read(1, "present-voltage") == 120
+    assert bus.adapter_echo
+    with pytest.raises(NoReply, match="only our own bytes came back"):
+        bus.echo(9, retries=0)
+
+
+def test_late_reply_from_a_slow_actuator_still_counts(bus):
+    bus.port.device.inject(1, "delay", 5, count=1)
+    assert bus.echo(1, retries=2).ident == 1
+
+
+def test_id_change_acknowledged_by_either_id():
+    b = make(ids="1", return_mode=2)
+    b.port.device.actuator(1).set("feedback-return-mode", 2)
+    r = b.store(1, "id", 5)
+    assert r.ident in (1, 5)
+    assert b.echo(5).ident == 5
+
+
+def test_restart_and_wait_ready():
+    b = make(ids="1", return_mode=2)
+    b.port.device.actuator(1).set("feedback-return-mode", 2)
+    b.store(1, "baud-rate", zap.BAUD_TO_CODE[115200])
+    assert b.restart(1).ident == 1
+    b.set_baud(115200)
+    assert b.wait_ready(1, within=1.0).ident == 1
+    assert b.read(1, "baud-rate") == 16
+
+
+def test_documented_restart_copy_reply_is_accepted():
+    """The document's Restart feedback repeats the command; a loop:// line gives exactly that."""
+    b = ZapBus(open_port("loop://", 57600, timeout=0.1), return_mode=2, url="loop://")
+    r = b.restart(3)
+    assert r.ident == 3 and r.packet == zap.restart(3)
+
+
+def test_symmetric_store_moves_several(bus):
+    bus.symmetric_store("goal-position", [(1, 300), (2, 600)])
+    assert bus.read(1, "goal-position") == 300
+    assert bus.read(2, "goal-position") == 600
+
+
+def test_unknown_instruction_reply_is_optional(bus):
+    assert bus.command(zap.packet(1, 0x99, b"\x01")) is None
+
+
+def test_ping_for_scans(bus):
+    assert bus.ping(1).ident == 1
+    assert bus.ping(9) is None
+    bus.port.device.inject(2, "corrupt")
+    with pytest.raises(BadReply):
+        bus.ping(2, retries=1)
+
+
+class Vanishing:
+    """A port that fails like an unplugged USB adapter."""
+
+    baudrate = 57600
+    port = "/dev/ttyUSB9"
+
+    def reset_input_buffer(self):
+        pass
+
+    def write(self, data):
+        return len(data)
+
+    def read(self, n):
+        import serial
+
+        raise serial.SerialException("device reports readiness to read but returned no data")
+
+    timeout = 0.1
+
+    def close(self):
+        pass
+
+
+def test_a_vanished_port_is_a_port_error():
+    b = ZapBus(Vanishing())
+    with pytest.raises(PortError) as e:
+        b.echo(1)
+    assert e.value.code == 4 and "/dev/ttyUSB9" in str(e.value)
+
+
+def test_stored_writes_and_protocol_change():
+    assert stored_writes(zap.store(1, "long-stroke-limit", 3000)) == ["long-stroke-limit"]
+    assert stored_writes(zap.store(1, "goal-position", 3000)) == []
+    assert stored_writes(zap.factory_reset(1)) != []
+    (sync,) = zap.symmetric_store("speed-limit", [(1, 5)])
+    assert stored_writes(sync) == ["speed-limit"]
+    assert stored_writes(zap.packet(1, 0xF3, bytes([0x03, 0x01, 0x20]))) == ["id", "baud-rate"]
+    assert leaves_protocol(zap.store(1, "protocol-type", 0))
+    assert not leaves_protocol(zap.store(1, "protocol-type", 1))
+    (sync,) = zap.symmetric_store("protocol-type", [(1, 1), (2, 0)])
+    assert leaves_protocol(sync)
+
+
+def test_open_bus_needs_a_port():
+    with pytest.raises(UsageError, match="no port"):
+        open_bus(None)
+    with open_bus(sim=True, sim_ids="4", baud=115200) as b:
+        assert b.echo(4).ident == 4 and b.baud == 115200
