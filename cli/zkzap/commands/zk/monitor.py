@@ -12,7 +12,7 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
-from ...io.writers import FORMATS
+from ...io import FORMATS
 from .. import CONTEXT
 from ..options import note, open_output, port_options, protocol_version_option
 
