@@ -251,7 +251,7 @@ class ZapBus:
         ``data_len``: data bytes the reply must carry (None: any); ``extra``: seconds added to
         the derived timeout; ``accept_ids``: IDs a reply may carry (default: the packet's);
         ``check``: raise DeviceError for error bits; ``optional``: no reply is not an error
-        (returns None).
+        (returns None at once, without a retry: the command may have been carried out).
         """
         pkt = bytes(pkt)
         ident = pkt[3]
@@ -290,6 +290,8 @@ class ZapBus:
                     raise device_error(got)
                 return got
             problems.append(got)
+            if optional and got[0] == "none":
+                return None                # silence is a legitimate answer: do not repeat the command
         return self._fail(pkt, problems, limit, tries, optional)
 
     def _await(self, pkt, accept, data_len, rx_len, deadline, restart):
