@@ -44,6 +44,12 @@ class LazyGroup(click.Group):
         self.commands[name] = cmd
         return cmd
 
+    def make_context(self, info_name, args, parent=None, **extra):
+        if parent is None and "terminal_width" not in extra:
+            # what click would compute, without importing shutil (and bz2, lzma) at every --help
+            extra["terminal_width"] = _help_width(self.context_settings.get("max_content_width") or 80)
+        return super().make_context(info_name, args, parent=parent, **extra)
+
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
@@ -142,6 +148,23 @@ def root():
     """
 
 
+def _help_width(max_width):
+    from click import formatting
+
+    if formatting.FORCED_WIDTH is not None:     # click's test runner fixes the width
+        return None
+    try:
+        columns = int(os.environ.get("COLUMNS", ""))
+    except ValueError:
+        columns = 0
+    if columns <= 0:
+        try:
+            columns = os.get_terminal_size(sys.__stdout__.fileno()).columns
+        except (AttributeError, ValueError, OSError):
+            columns = 80
+    return max(min(columns, max_width) - 2, 50)
+
+
 class PipeClosed(Exception):
     """stdout's reader went away (``zkzap ... | head``): end quietly."""
 
@@ -167,9 +190,6 @@ def _error(message: str, prog: str = "zkzap") -> None:
 
 def run(cmd, prog_name=None, args=None) -> int:
     """Run a click command with zkzap's error conventions; returns the exit status."""
-    from ..codec.fields import FieldValueError
-    from ..codec.hexfmt import HexError
-
     debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
     try:
         rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False)
@@ -194,11 +214,19 @@ def run(cmd, prog_name=None, args=None) -> int:
             raise
         _error(str(e), prog_name or "zkzap")
         return e.code
-    except (FieldValueError, HexError) as e:
-        if debug:
+    except Exception as e:
+        if debug or not _bad_input(e):
             raise
         _error(str(e), prog_name or "zkzap")
         return USAGE
+
+
+def _bad_input(e) -> bool:
+    """A codec error about a value or hex text (imported only when one is raised)."""
+    from ..codec.fields import FieldValueError
+    from ..codec.hexfmt import HexError
+
+    return isinstance(e, (FieldValueError, HexError))
 
 
 def _quiet_stdout():
