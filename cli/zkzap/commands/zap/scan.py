@@ -405,9 +405,11 @@ BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
               help="The actuator's present ID 0..253 (factory default 0).")
 @click.option("--force", is_flag=True, help="Go ahead even if another actuator already answers to NEW.")
+@click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
+              help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options
-def set_id(new, ident, force, yes, **common):
+def set_id(new, ident, force, ready_timeout, yes, **common):
     """Give the actuator at --id the ID NEW, verified by reading it back from NEW.
 
     Checks first that --id answers and that NEW is free (two actuators with one ID garble
@@ -430,7 +432,7 @@ def set_id(new, ident, force, yes, **common):
                               "('zap scan') or pass --force")
         bus.store(ident, ID_REG, new)
         try:
-            bus.wait_ready(new, within=1.0)
+            bus.wait_ready(new, within=ready_timeout)
             value = bus.read(new, ID_REG)
         except NoReply:
             raise CheckFailed(f"set-id: ID {new} does not answer after the change; "
@@ -446,9 +448,11 @@ def set_id(new, ident, force, yes, **common):
               help="Actuator ID 0..253.")
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")
+@click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
+              help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options
-def set_baud(new_baud, ident, no_restart, yes, **common):
+def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
     """Change the actuator's baud rate to BAUD (9600, 19200, 38400, 57600, 115200), verified.
 
     Stores baud-rate, restarts the actuator (the rate takes effect at restart), switches this
@@ -476,7 +480,7 @@ def set_baud(new_baud, ident, no_restart, yes, **common):
         bus.restart(ident)
         bus.set_baud(baud)
         try:
-            bus.wait_ready(ident, within=2.0)
+            bus.wait_ready(ident, within=ready_timeout)
             value = bus.read(ident, BAUD_REG)
         except NoReply:
             raise CheckFailed(f"set-baud: ID {ident} does not answer at {baud} baud after the restart; "
