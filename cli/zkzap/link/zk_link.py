@@ -101,8 +101,7 @@ def describe_abort(kind: str) -> str:
 
 def iso_utc(ts: float) -> str:
     """``2024-05-01T12:00:00.123Z`` for a POSIX time."""
-    sec = int(ts)
-    ms = int((ts - sec) * 1000)
+    sec, ms = divmod(int(round(ts * 1000)), 1000)
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z"
 
 
@@ -135,7 +134,7 @@ class ZkLink:
         try:
             data = self.ser.read(READ_SIZE)
         except Exception as e:   # SerialException, OSError, and whatever a URL handler raises
-            raise PortError(f"port {self.url}: failed while reading: {_reason(e)}") from None
+            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
         if data:
             self.bytes_in += len(data)
             if self.raw_log is not None:
@@ -148,7 +147,7 @@ class ZkLink:
             self.ser.write(frame)
             self.ser.flush()
         except Exception as e:
-            raise PortError(f"port {self.url}: failed while writing: {_reason(e)}") from None
+            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
         self.frames_out += 1
 
     def close(self):
@@ -159,8 +158,9 @@ class ZkLink:
 
 
 def _reason(e) -> str:
-    text = str(e) or type(e).__name__
-    return text.split("] ", 1)[-1] if text.startswith("[Errno") else text
+    import re
+
+    return re.sub(r"\[Errno \d+\] ", "", str(e)) or type(e).__name__
 
 
 # --- frame sources -----------------------------------------------------------------------------

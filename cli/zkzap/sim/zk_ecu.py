@@ -167,6 +167,9 @@ class ZkEcu(Device):
         self.silent = silent_after is not None and silent_after <= 0
         self._out = bytearray()
         self._ranges = {}
+        if self._error_at is not None and self._error_at[0] <= 0:
+            self._fault(self._error_at[1])      # present from power-up
+            self._error_at = None
 
     # --- Device interface ------------------------------------------------------------------------
     def receive(self, data, now, baud=None):
