@@ -196,8 +196,16 @@ def run(cmd, prog_name=None, args=None) -> int:
         return rv if isinstance(rv, int) else 0
     except click.exceptions.Exit as e:
         return e.exit_code
+    except click.exceptions.NoArgsIsHelpError as e:
+        e.show()                                   # a bare group: its help
+        return e.exit_code
     except click.ClickException as e:
-        e.show()
+        # one line like every other error: "zk: error: <what> (see 'zk send control --help')"
+        message = " ".join(e.format_message().split())
+        ctx = getattr(e, "ctx", None)
+        if isinstance(e, click.UsageError) and ctx is not None:
+            message = message.rstrip(".") + f" (see '{ctx.command_path} --help')"
+        _error(message, prog_name or "zkzap")
         return e.exit_code
     except click.exceptions.Abort as e:
         if not isinstance(e.__cause__, KeyboardInterrupt):   # click already ended the ^C line
