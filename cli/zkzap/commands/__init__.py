@@ -196,7 +196,7 @@ def run(cmd, prog_name=None, args=None) -> int:
         return rv if isinstance(rv, int) else 0
     except click.exceptions.Exit as e:
         return e.exit_code
-    except click.exceptions.NoArgsIsHelpError as e:
+    except _NO_ARGS_IS_HELP as e:
         e.show()                                   # a bare group: its help
         return e.exit_code
     except click.ClickException as e:
@@ -227,6 +227,10 @@ def run(cmd, prog_name=None, args=None) -> int:
             raise
         _error(str(e), prog_name or "zkzap")
         return USAGE
+
+
+#: click >= 8.2 raises this for a bare group (it shows the group's help); 8.1 exits 0 instead.
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
 def _bad_input(e) -> bool:
