@@ -82,6 +82,38 @@ def usb_latency(device: str):
         return None
 
 
+def no_delay(port) -> None:
+    """Send small packets at once on a socket:// port (pyserial leaves Nagle's algorithm on: a
+    command that gets no reply would hold the next one back until a delayed ACK, ~40 ms)."""
+    sock = getattr(port, "_socket", None)
+    if sock is None:
+        return
+    try:
+        import socket
+
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except (OSError, AttributeError):
+        pass
+
+
+def close_socket(port) -> bool:
+    """Close a socket:// port without pyserial's 0.3 s pause "for quick reconnects" (a
+    simulator or ser2net-style server takes the next client at once); False for other ports."""
+    sock = getattr(port, "_socket", None)
+    if sock is None or not getattr(port, "is_open", False):
+        return False
+    import socket
+
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass
+    sock.close()
+    port._socket = None
+    port.is_open = False
+    return True
+
+
 class Reply:
     """A checked feedback packet: ``ident``, ``error`` (bits), ``data`` (parameter bytes),
     ``packet`` (the whole packet) and ``rtt`` (seconds from the end of our write)."""
@@ -170,6 +202,7 @@ class ZapBus:
         self.sent = 0
         self.replies = 0
         self.retried = 0
+        no_delay(port)
 
     # -- line -----------------------------------------------------------------------------------
 
@@ -178,6 +211,12 @@ class ZapBus:
         return self.port.baudrate
 
     def set_baud(self, baud: int) -> None:
+        """Switch the port's line speed, once what was sent has left at the old speed."""
+        try:
+            self.port.flush()
+        except Exception:  # noqa: BLE001 - a port without tcdrain; the pause below covers it
+            pass
+        self._settle()
         try:
             self.port.baudrate = baud
         except (ValueError, OSError) as e:
@@ -187,7 +226,8 @@ class ZapBus:
 
     def close(self) -> None:
         try:
-            self.port.close()
+            if not close_socket(self.port):
+                self.port.close()
         except Exception:  # noqa: BLE001 - closing a vanished port must not mask the real error
             pass
 
