@@ -176,7 +176,8 @@ def test_return_mode_auto_and_mode_0(cli):
     r = cli("zap", "store", "led", "2", "--id", "1", "--return-mode", "auto", "-v",
             "-p", url(ids="1", return_mode="2"))
     assert "acknowledged in" in r.stderr
-    r = cli("zap", "load", "present-position", "--id", "1", "--return-mode", "auto", "-p", url(ids="1", return_mode="0"))
+    r = cli("zap", "load", "present-position", "--id", "1", "--return-mode", "auto",
+            "-p", url(ids="1", return_mode="0"))
     assert r.exit_code == 2 and "feedback-return-mode 0" in r.stderr
     r = cli("zap", "load", "present-position", "--return-mode", "0", "--sim")
     assert r.exit_code == 2

@@ -344,8 +344,9 @@ def test_fault_text_and_options():
     assert parse_fault("all:delay=30/2") == (None, "delay", 30.0, 2)
     assert parse_fault("corrupt") == (None, "corrupt", None, None)
     assert parse_fault("3:no-reply") == (3, "silent", None, None)
-    for bad, needle in [("2:explode", "unknown kind"), ("x:silent", "not a number"), ("300:silent", "out of range"),
-                        ("1:corrupt/0", "COUNT"), ("1:overload=3", "takes no value"), ("1:voltage=abc", "not a number")]:
+    for bad, needle in [("2:explode", "unknown kind"), ("x:silent", "not a number"),
+                        ("300:silent", "out of range"), ("1:corrupt/0", "COUNT"),
+                        ("1:overload=3", "takes no value"), ("1:voltage=abc", "not a number")]:
         with pytest.raises(ValueError, match=needle):
             parse_fault(bad)
     bus = from_options(ids="1,2", faults="2:silent,1:corrupt/1", echo="1", voltage="6")

@@ -410,7 +410,8 @@ Examples:
   zap store short-stroke-limit 100 --id 1 -p /dev/ttyUSB0 --yes
 """)
 
-send_data = _write_command("send", zap.send_data, """Send Data (0xF4): stage VALUE for REGISTER; 'zap execute' applies it.
+send_data = _write_command("send", zap.send_data, """Send Data (0xF4): stage VALUE for REGISTER; 'zap execute'
+applies it.
 """ + _WIRE_NOTE + """
 \b
 Examples:

@@ -16,7 +16,7 @@ from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT
 from ..options import consent, note, resolve_format, yes_option
-from .compose import _format, _link_args, link_options, open_link, register_records
+from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
 SCAN_COLUMNS = ["id", "baud", "model", "firmware", "return_mode", "status", "errors"]
