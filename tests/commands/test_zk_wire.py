@@ -88,11 +88,11 @@ def test_monitor_raw_log_and_replay(cli, tmp_path):
 
 
 def test_monitor_fail_on_error(cli):
-    r = cli("zk", "monitor", "-p", SIM + "&error=pump-failure&error_after=0.5", "--count", "40",
+    r = cli("zk", "monitor", "-p", SIM + "&error=pump-failure&error_after=0.5", "--count", "15",
             "--fail-on-error", "--ids", "1")
     assert r.exit_code == 5
     recs = jsonl(r.stdout)
-    assert len(recs) == 40 and recs[-1]["error_name"] == "pump-failure"
+    assert len(recs) == 15 and recs[-1]["error_name"] == "pump-failure"
     assert "ECU reported error: 4 pump-failure" in r.stderr
     r = cli("zk", "monitor", "-p", SIM, "--count", "12", "--fail-on-error")
     assert r.exit_code == 0
@@ -268,3 +268,72 @@ def test_profile_bad_row_and_consent(cli, tmp_path, pty_port):
     r = cli("zk", "profile", str(sched), "-p", path)
     assert r.exit_code == 2 and "state run can start the engine" in r.stderr
     assert written() == b""
+
+
+# --- port from the environment, terminal view ----------------------------------------------------
+
+def test_sim_and_replay_beat_the_environment_port(cli, monkeypatch, tmp_path):
+    monkeypatch.setenv("ZKZAP_ZK_PORT", "/dev/does-not-exist-zk")
+    r = cli("zk", "monitor", "--sim", "--count", "2", "--ids", "1")
+    assert r.exit_code == 0 and len(jsonl(r.stdout)) == 2
+    raw = tmp_path / "r.bin"
+    from zkzap.sim.zk_ecu import ZkEcu
+
+    raw.write_bytes(ZkEcu().poll(0.99))
+    r = cli("zk", "monitor", "--replay", str(raw), "--fast")
+    assert r.exit_code == 0 and len(jsonl(r.stdout)) == 20
+    r = cli("zk", "monitor", "--count", "1")
+    assert r.exit_code == 4 and "/dev/does-not-exist-zk" in r.stderr
+
+
+class FakeDashboard:
+    made = []
+
+    def __init__(self, stream, title):
+        self.title, self.updates, self.entered = title, [], False
+        FakeDashboard.made.append(self)
+
+    def __enter__(self):
+        self.entered = True
+        return self
+
+    def __exit__(self, *exc):
+        self.entered = False
+        return False
+
+    def update(self, snapshot, health):
+        self.updates.append((snapshot, health))
+
+
+@pytest.mark.parametrize("extra,file_records", [([], False), (["-o", "log.csv"], True)])
+def test_terminal_gets_the_dashboard(cli, monkeypatch, tmp_path, extra, file_records):
+    from zkzap.commands.zk import monitor as mon
+    from zkzap.io import term
+
+    FakeDashboard.made = []
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(mon, "_dashboard", lambda title: FakeDashboard(None, title))
+    real = term.is_tty
+    monkeypatch.setattr(term, "is_tty", lambda stream: stream is mon.sys.stdout or real(stream))
+    r = cli("zk", "monitor", "-p", SIM, "--duration", "0.5", *extra)
+    assert r.exit_code == 0, r
+    assert r.stdout == ""                                            # the view replaces stdout records
+    (dash,) = FakeDashboard.made
+    assert dash.title == f"ZK ECU on {SIM}" and not dash.entered and len(dash.updates) >= 3
+    snapshot, health = dash.updates[-1]
+    assert set(zk.STATUS_KEYS) | {"time_s"} == set(snapshot)
+    assert set(health) == {"frames", "frames_per_s", "crc_errors", "skipped", "stale", "protocol_version",
+                           "version_source"}
+    assert health["frames"] > 50 and health["protocol_version"] == 6 and health["version_source"] == "frame"
+    assert snapshot["max_rpm"] == 160000
+    if file_records:
+        rows = list(csv.DictReader(open(tmp_path / "log.csv")))
+        assert len(rows) == health["frames"]
+
+
+def test_send_for_output_file_format_by_extension(cli, tmp_path):
+    out = tmp_path / "drive.jsonl"
+    r = cli("zk", "send", "mode", "--state", "run", "--rpm-factor", "2", "-p", SIM, "--for", "0.3", "-o", str(out))
+    assert r.exit_code == 0 and r.stdout == ""
+    recs = jsonl(out.read_text())
+    assert recs and all("frame" in x for x in recs)

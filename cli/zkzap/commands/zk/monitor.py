@@ -52,9 +52,32 @@ def log_options(f):
     return f
 
 
+TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
+                "longer means exit 3.")
+
+
+def zk_timeout_help(cmd):
+    """Give a command's --timeout (from port_options) its meaning for a ZK status stream."""
+    for p in cmd.params:
+        if p.name == "timeout":
+            p.help = TIMEOUT_HELP
+    return cmd
+
+
+def port_from_env() -> bool:
+    """Whether -p/--port came from ZKZAP_ZK_PORT rather than the command line."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return ctx.get_parameter_source("port") == click.core.ParameterSource.ENVIRONMENT
+
+
 def resolve_port(port, sim, **sim_options) -> str:
+    """The URL to open: --sim's in-process simulator, else -p PORT (or ZKZAP_ZK_PORT)."""
     from ...link.port import sim_url
 
+    if sim and port and port_from_env():
+        port = None                      # an explicit --sim beats the environment's default port
     if sim and port:
         raise UsageError("port: give -p PORT or --sim, not both")
     if sim:
@@ -235,8 +258,8 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
     Voltages are decoded in the ECU's own unit: frames are held back until the first status ID 6
     (the protocol version; at most 12 frames) unless --protocol-version is given.
 
-    --timeout is the longest silence tolerated (default 2 s). A replay's 't' is rebuilt from the
-    status rate the frames report.
+    A replay's 't' is rebuilt from the status rate the frames report (a raw log holds bytes, not
+    times).
 
     \b
     Examples:
@@ -247,6 +270,8 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
       zk monitor -p /dev/ttyUSB0 --duration 10 --fail-on-error --ids 1 -f jsonl
     """
     if replay is not None:
+        if port and port_from_env():
+            port = None
         if port or sim:
             raise UsageError("replay: give --replay FILE or a port (-p/--sim), not both")
         if keepalive or raw_log:
@@ -278,3 +303,6 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
     outcome.raise_for_status()
     if fail_on_error and tel.errors:
         raise DeviceError(f"ECU reported error{'s' if len(tel.errors) > 1 else ''}: {errors_text(tel)}")
+
+
+zk_timeout_help(monitor)

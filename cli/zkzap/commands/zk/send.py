@@ -15,7 +15,7 @@ from ...codec.hexfmt import format_hex
 from ...errors import UsageError
 from .. import CONTEXT
 from ..options import consent, dry_run_option, note, port_options, protocol_version_option, warn, yes_option
-from .monitor import EXIT_HELP, errors_text, log_options, resolve_port
+from .monitor import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,
@@ -66,6 +66,12 @@ def send_options(f):
     # A Command lists options in the order they are added; a function in reverse.
     for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
         f = opt(f)
+    if isinstance(f, click.Command):
+        zk_timeout_help(f)
+    else:
+        for p in getattr(f, "__click_params__", ()):
+            if p.name == "timeout":
+                p.help = TIMEOUT_HELP
     return f
 
 
