@@ -368,6 +368,64 @@ class Layout:
     def decode(self, frame, ctx=None, known=None, raw=False):
         return self.decoder(raw)(frame, ctx or {}, known)
 
+    # --- text encoders ------------------------------------------------------------------
+    def items(self, ctx, known, raw=False):
+        """The record this layout decodes to, as ``(code, items)`` for one fixed context.
+
+        ``code`` is the lines that extract the raw values ``r0, r1...`` from a frame ``b``;
+        ``items`` lists ``(key, kind, what)`` in the decoder's key order, where kind is
+        ``"const"`` (what: the value), ``"int"``/``"float"`` (what: an expression) or
+        ``"table"`` (what: ``(expression, values)``, the value for every raw value). With the
+        context fixed, version gates and version-dependent scales are constants, so the
+        values are exactly those :meth:`decoder` gives for that context.
+        """
+        code = []
+        items = []
+        for i, f in enumerate(self.fields):
+            r = f"r{i}"
+            code.append(f"{r} = {f.raw_expr()}")
+            if f.since > 1 and known is not None and known < f.since:
+                items.append((f.key, "const", None))
+                if f.name_key:
+                    items.append((f.name_key, "const", None))
+            else:
+                if f.raw_key:
+                    items.append((f.raw_key, "int", r))
+                every = range(1 << f.width)
+                if f.values is not None:
+                    items.append((f.key, "table", (r, [f.values.get(v) for v in every])))
+                elif f.names is not None:
+                    items.append((f.key, "int", r))
+                    items.append((f.name_key, "table", (r, [f.names.get(v) or "undocumented-%d" % v for v in every])))
+                elif callable(f.scale):
+                    sc = f.scale(ctx)
+                    if sc is None:
+                        items.append((f.key, "const", None))
+                    else:
+                        items.append((f.key,) + _phys_item(r, sc, f.offset, f.decimals))
+                elif f.scale == 1 and f.offset == 0:
+                    items.append((f.key, "int", r))
+                elif isinstance(f.scale, float):
+                    items.append((f.key, "float", f"round({r} * {f.scale!r} + {f.offset!r}, {f.decimals})"))
+                else:
+                    kind = "float" if isinstance(f.offset, float) else "int"
+                    items.append((f.key, kind, f"{r} * {f.scale!r} + {f.offset!r}"))
+            if raw:
+                items.append((f.key + "_raw", "int", r))
+        return code, items
+
+    def text_encoder(self, dialect, ctx, known, raw=False, head=(), tail=()):
+        """A generated function ``frame -> text`` rendering the record of one frame straight to
+        ``dialect``'s text (JSON object, CSV row) for one fixed context.
+
+        ``head`` and ``tail`` are items around the layout's own (``("kind", "const",
+        "status")``, ``("frame", "str", "b.hex(' ').upper()")``). Built from the same
+        declarations as :meth:`decoder`, value for value.
+        """
+        code, items = self.items(ctx, known, raw)
+        return compile_text(code, list(head) + items + list(tail), dialect)
+
+
     def keys(self):
         out = []
         for f in self.fields:
@@ -383,3 +441,55 @@ class Layout:
         found = [f"b{byte}={frame[byte] & mask:#04x}" for byte, mask in self.reserved.items()
                  if frame[byte] & mask]
         return " ".join(found) or None
+
+
+def _phys_item(r, sc, offset, decimals):
+    """Field._phys with a constant scale, as an (kind, expression) item."""
+    if isinstance(sc, float) or isinstance(offset, float):
+        if decimals == 0:
+            return "int", f"int(round({r} * {sc!r} + {offset!r}, 0))"
+        return "float", f"round({r} * {sc!r} + {offset!r}, {decimals})"
+    return "int", f"{r} * {sc!r} + {offset!r}"
+
+
+def compile_text(code, items, dialect):
+    """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
+    giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
+
+    The dialect renders values (``dialect.value(v)``), gives the template piece of a dynamic
+    string (``dialect.str_piece``) and arranges the ``(key, piece, arg)`` cells into one
+    %-template (``dialect.template(cells) -> (template, args)``).
+    """
+    ns = {}
+    cells = []
+    for n, (key, kind, what) in enumerate(items):
+        if kind == "const":
+            cells.append((key, dialect.value(what).replace("%", "%%"), None))
+        elif kind == "int":
+            cells.append((key, "%d", what))
+        elif kind == "float":
+            # rendered once per raw value (round() and float repr are the slow part)
+            var = re.findall(r"\br\d+\b", what)
+            if len(var) == 1:
+                ns[f"t{n}"] = {}
+                ns["VALUE"] = dialect.value
+                exec(f"def f{n}({var[0]}):\n    v = t{n}[{var[0]}] = VALUE({what})\n    return v", ns)  # noqa: S102
+                cells.append((key, "%s", f"(t{n}.get({var[0]}) or f{n}({var[0]}))"))
+            else:
+                cells.append((key, "%r", what))
+        elif kind == "str":
+            cells.append((key, dialect.str_piece, what))
+        elif kind == "table":
+            expr, values = what
+            ns[f"t{n}"] = tuple(dialect.value(v) for v in values)
+            cells.append((key, "%s", f"t{n}[{expr}]"))
+        else:  # pragma: no cover - the kinds above are all Layout.items produces
+            raise ValueError(f"item kind {kind!r}")
+    template, args = dialect.template(cells)
+    used = set(re.findall(r"\br\d+\b", " ".join(args)))
+    body = [line for line in code if line.split(" = ")[0] in used]
+    ns["TEMPLATE"] = template
+    src = ["def encode(b):"] + [f"    {line}" for line in body]
+    src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
+    exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
+    return ns["encode"]

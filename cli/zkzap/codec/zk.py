@@ -435,12 +435,18 @@ def check_frame(frame):
     raise FrameError(f"ZK frame: {len(frame)} bytes; a control frame has 4, a status frame 7")
 
 
+#: Status IDs with a field whose unit depends on the protocol version (ID 6 carries its own).
+VERSIONED_STATUS = frozenset(st.id for st in STATUS if st.id != 6 and any(
+    isinstance(f.scale, VersionScale) for f in st.fields))
+
+
 class ZkDecoder:
     """Stateful record decoder for a ZK byte stream's frames.
 
     Tracks the protocol version (from status ID 6, else the one given, else the default) and
     the RPM factor of the last control ID 6, so ID 2/6 voltages and ID 7 targets decode right.
-    ``version_source`` is ``"frame"``, ``"given"`` or ``"default"``.
+    ``version_source`` is ``"frame"``, ``"given"`` or ``"default"``; ``assumed`` becomes True
+    when a frame with a version-dependent unit was decoded with the default version.
     """
 
     def __init__(self, protocol_version=None, raw=False):
@@ -450,6 +456,7 @@ class ZkDecoder:
         self.version_source = "given" if protocol_version is not None else "default"
         self.rpm_factor = None
         self.raw = raw
+        self.assumed = False
 
     def decode(self, frame) -> dict:
         if len(frame) == STATUS_LEN:
@@ -457,11 +464,158 @@ class ZkDecoder:
                 v = frame[5] >> 2
                 self.version = self.known = v
                 self.version_source = "frame"
+            elif self.version_source == "default" and frame[0] & 0x0F in VERSIONED_STATUS:
+                self.assumed = True
             return decode_status(frame, self.version, self.known, self.raw)
         rec = decode_control(frame, {"rpm_factor": self.rpm_factor}, self.raw)
         if rec["id"] == 6:
             self.rpm_factor = rec["rpm_factor"]
         return rec
+
+    def lines(self, dialect, cache=None):
+        """A :class:`ZkLines` rendering this decoder's records straight to ``dialect``'s text."""
+        return ZkLines(self, dialect, LINE_CACHE if cache is None else cache)
+
+
+#: Rendered lines remembered per decoding context, in two generations of this many (a capture
+#: repeats frames heavily; the recently used ones survive a rotation).
+LINE_CACHE = 16384
+_MAX_CONTEXTS = 8
+
+
+class ZkLines:
+    """Frames to text lines (no newline) of one dialect: the records :class:`ZkDecoder` gives,
+    with the frame's hex under ``frame``, rendered by encoders generated from the tables.
+
+    Equal to rendering ``decoder.decode(frame) | {"frame": hex}`` with the dialect, line for
+    line, and it updates the decoder's state the same way. A bounded memo maps a frame's bytes
+    to its line for each decoding context (version, known version, RPM factor): a frame that
+    would change the context is never served from it, so state changes are never skipped.
+    """
+
+    def __init__(self, decoder, dialect, cache=LINE_CACHE):
+        self.decoder = decoder
+        self.dialect = dialect
+        self.cache = cache
+        self._encoders = {}
+        self._contexts = {}
+        self._select()
+
+    def _select(self):
+        d = self.decoder
+        key = (d.version, d.known, d.rpm_factor)
+        c = self._contexts.get(key)
+        if c is None:
+            if len(self._contexts) >= _MAX_CONTEXTS:
+                self._contexts.clear()
+            # [young memo, old memo, status encoders by head byte that keep this context]
+            c = self._contexts[key] = [{}, {}, {}]
+        self._key = key
+        self._memo, self._old, self._fast = c
+        self._ctx = c
+
+    def _rotate(self):
+        c = self._ctx
+        c[1] = c[0]
+        c[0] = {}
+        self._memo, self._old = c[0], c[1]
+        return c[0]
+
+    def encode_all(self, frames) -> list:
+        """The lines of ``frames`` (bytes objects, as a framer returns them), in order."""
+        out = []
+        append = out.append
+        memo = self._memo
+        get = memo.get
+        old = self._old.get
+        fast = self._fast.get
+        cap = self.cache
+        for f in frames:
+            line = get(f)
+            if line is None:
+                line = old(f)
+                if line is None:
+                    enc = fast(f[0])
+                    if enc is None:
+                        line = self._miss(f)
+                        memo = self._memo
+                        get = memo.get
+                        old = self._old.get
+                        fast = self._fast.get
+                        append(line)
+                        continue
+                    line = enc(f)
+                if len(memo) >= cap:
+                    memo = self._rotate()
+                    get = memo.get
+                    old = self._old.get
+                memo[f] = line
+            append(line)
+        return out
+
+    def encode(self, frame) -> str:
+        return self.encode_all([bytes(frame)])[0]
+
+    def _miss(self, f):
+        """A frame with no line in the memo and no fast encoder: render it the full way, then
+        remember it (or its encoder) unless it changed the decoding context."""
+        key = self._key
+        line, enc = self._render(f)
+        d = self.decoder
+        if (d.version, d.known, d.rpm_factor) == key:
+            if self.cache:
+                if len(self._memo) >= self.cache:
+                    self._rotate()
+                self._memo[f] = line
+            if enc is not None:
+                self._fast[f[0]] = enc
+        else:
+            self._select()
+        return line
+
+    def _generic(self, f):
+        rec = self.decoder.decode(f)
+        rec["frame"] = f.hex(" ").upper()
+        return self.dialect.record(rec)
+
+    def _render(self, f):
+        """(line, the status encoder when it may serve this head byte from now on, else None)."""
+        d = self.decoder
+        raw = d.raw
+        if len(f) == STATUS_LEN:
+            sid = f[0] & 0x0F
+            st = STATUS_BY_ID.get(sid)
+            if st is None:
+                return self._generic(f), None
+            if sid == 6:
+                d.version = d.known = version = known = f[5] >> 2
+                d.version_source = "frame"
+            else:
+                version, known = d.version, d.known
+                if d.version_source == "default" and sid in VERSIONED_STATUS:
+                    d.assumed = True
+            k = (sid, version, known)
+            enc = self._encoders.get(k)
+            if enc is None:
+                if len(self._encoders) >= 256:
+                    self._encoders.clear()
+                enc = self._encoders[k] = st.layout.text_encoder(
+                    self.dialect, {"version": version}, known, raw,
+                    head=(("kind", "const", "status"), ("id", "const", sid)),
+                    tail=(("frame", "str", "b.hex(' ').upper()"),))
+            return enc(f), (None if sid == 6 else enc)
+        cmd_id = f[1] >> 4
+        cmd = CONTROL_BY_ID.get(cmd_id)
+        if cmd is None or cmd_id == 6 or cmd.layout.reserved_bits(f):
+            return self._generic(f), None
+        k = ("control", cmd_id, d.rpm_factor)
+        enc = self._encoders.get(k)
+        if enc is None:
+            enc = self._encoders[k] = cmd.layout.text_encoder(
+                self.dialect, {"rpm_factor": d.rpm_factor}, None, raw,
+                head=(("kind", "const", "control"), ("id", "const", cmd_id), ("command", "const", cmd.name)),
+                tail=(("frame", "str", "b.hex(' ').upper()"),))
+        return enc(f), None
 
 
 #: Control ID 2 actions that run hardware: each needs consent on a real port.

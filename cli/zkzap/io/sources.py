@@ -26,9 +26,11 @@ def binary_chunks(paths):
             except OSError as e:
                 raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
             close = True
+        # read1: a live pipe (cat /dev/ttyUSB0 | ...) is decoded as its bytes arrive
+        read = getattr(stream, "read1", stream.read)
         try:
             while True:
-                block = stream.read(CHUNK)
+                block = read(CHUNK)
                 if not block:
                     break
                 yield block
@@ -46,21 +48,45 @@ def hex_chunks(args):
     return iter_hex_stream(sys.stdin, what="stdin"), False
 
 
-class DecodeStats:
-    def __init__(self):
-        self.records = 0
-
-
 def run_decode(chunks, framer, decode, writer, *, frame_key="frame"):
     """Feed ``chunks`` through ``framer``; write ``decode(frame)`` records (with the frame's hex
-    under ``frame_key``) to ``writer``. Returns the number of records written."""
+    under ``frame_key``) to ``writer``, one block per chunk. Returns the number of records."""
     count = 0
-    write = writer.write
     for chunk in chunks:
-        for frame in framer.feed(chunk):
-            rec = decode(frame)
-            rec[frame_key] = frame.hex(" ").upper()
-            write(rec)
-            count += 1
-    framer.flush()
+        count += _records(framer.feed(chunk), decode, writer, frame_key)
+    return count + _records(framer.flush(), decode, writer, frame_key)
+
+
+def _records(frames, decode, writer, frame_key):
+    if not frames:
+        return 0
+    recs = []
+    for frame in frames:
+        rec = decode(frame)
+        rec[frame_key] = frame.hex(" ").upper()
+        recs.append(rec)
+    writer.write_many(recs)
+    return len(recs)
+
+
+def run_text_decode(chunks, framer, lines, writer, after=None):
+    """Like :func:`run_decode` for the text formats: ``lines.encode_all(frames)`` renders the
+    records (see :class:`zkzap.codec.zk.ZkLines`) and ``writer.write_lines`` writes each block.
+    ``after()`` runs after each block. Returns the number of records written."""
+    count = 0
+    encode_all = lines.encode_all
+    write_lines = writer.write_lines
+    for chunk in chunks:
+        frames = framer.feed(chunk)
+        if frames:
+            write_lines(encode_all(frames))
+            count += len(frames)
+            if after is not None:
+                after()
+    frames = framer.flush()
+    if frames:
+        write_lines(encode_all(frames))
+        count += len(frames)
+        if after is not None:
+            after()
     return count

@@ -7,11 +7,20 @@ in memory. ``table`` is for people: rich, only on a terminal, imported only when
 
 Value rendering in CSV: None -> empty, booleans -> ``true``/``false``, lists joined with
 ``;``, dicts as ``key=value`` joined with ``;``.
+
+Bulk decoding writes blocks: :meth:`Writer.write_many` (records) and :meth:`Writer.write_lines`
+(text already rendered by a dialect: :func:`json_dialect`, :func:`csv_dialect`) hand the
+stream many whole records at once and flush after each block, so output is fast and a killed
+process still leaves whole lines: on a file or pipe a block goes out in one ``write`` system
+call loop with SIGINT/SIGTERM held off until it is complete.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
+import threading
 
 from . import FORMATS  # noqa: F401 - re-exported
 
@@ -40,20 +49,111 @@ def _csv_quote(s: str) -> str:
     return s
 
 
+class JsonDialect:
+    """Records as compact JSON objects (the ``jsonl``/``json`` formats), for text encoders."""
+
+    str_piece = '"%s"'
+    value = staticmethod(_dumps)
+    record = staticmethod(_dumps)
+
+    @staticmethod
+    def template(cells):
+        return ("{" + ",".join(f"{_dumps(k)}:{piece}" for k, piece, _ in cells) + "}",
+                [arg for _, _, arg in cells if arg is not None])
+
+
+class CsvDialect:
+    """Records as rows of a fixed column set (the ``csv`` format), for text encoders."""
+
+    str_piece = "%s"
+
+    def __init__(self, columns):
+        self.columns = list(columns)
+
+    @staticmethod
+    def value(v):
+        return _csv_quote(csv_cell(v))
+
+    def record(self, rec):
+        get = rec.get
+        return ",".join(_csv_quote(csv_cell(get(c))) for c in self.columns)
+
+    def template(self, cells):
+        by_key = {k: (piece, arg) for k, piece, arg in cells}
+        pieces, args = [], []
+        for c in self.columns:
+            piece, arg = by_key.get(c, ("", None))
+            pieces.append(piece)
+            if arg is not None:
+                args.append(arg)
+        return ",".join(pieces), args
+
+
+def json_dialect():
+    return JsonDialect()
+
+
+def csv_dialect(columns):
+    return CsvDialect(columns)
+
+
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
+def _raw_fd(stream):
+    """The file descriptor under a UTF-8 text stream, or None (then blocks go through it)."""
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+    enc = (getattr(stream, "encoding", None) or "").lower().replace("-", "").replace("_", "")
+    if enc != "utf8" or getattr(stream, "errors", "strict") not in ("strict", "surrogateescape") \
+            or os.linesep != "\n":
+        return None
+    return fd
+
+
 class Writer:
     def __init__(self, stream, flush=True):
         self.stream = stream
         self.flush = flush
         self.count = 0
+        self._fd = False
 
     def write(self, rec: dict) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def write_many(self, recs) -> None:
+        """Several records as one block (flushed once)."""
+        for rec in recs:
+            self.write(rec)
 
     def close(self) -> None:
         try:
             self.stream.flush()
         except (BrokenPipeError, ValueError):
             pass
+
+    def _emit(self, text: str) -> None:
+        """Write a block of whole records and flush it: on a file descriptor in one write loop
+        that SIGINT/SIGTERM cannot cut (they are handled right after it)."""
+        if self._fd is False:
+            self._fd = _raw_fd(self.stream)
+        fd = self._fd
+        if fd is None:
+            self.stream.write(text)
+            self.stream.flush()
+            return
+        self.stream.flush()
+        data = memoryview(text.encode("utf-8"))
+        hold = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else None
+        try:
+            while data:
+                data = data[os.write(fd, data):]
+        finally:
+            if hold:
+                signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class JsonlWriter(Writer):
@@ -62,6 +162,16 @@ class JsonlWriter(Writer):
         if self.flush:
             self.stream.flush()
         self.count += 1
+
+    def write_many(self, recs):
+        self.write_lines([_dumps(rec) for rec in recs])
+
+    def write_lines(self, lines):
+        """Records already rendered by :class:`JsonDialect` (no newlines)."""
+        if lines:
+            lines.append("")
+            self._emit("\n".join(lines))
+            self.count += len(lines) - 1
 
 
 class JsonWriter(Writer):
@@ -72,6 +182,14 @@ class JsonWriter(Writer):
         if self.flush:
             self.stream.flush()
         self.count += 1
+
+    def write_many(self, recs):
+        self.write_lines([_dumps(rec) for rec in recs])
+
+    def write_lines(self, lines):
+        if lines:
+            self._emit(("[\n" if self.count == 0 else ",\n") + ",\n".join(lines))
+            self.count += len(lines)
 
     def close(self):
         self.stream.write("[]\n" if self.count == 0 else "\n]\n")
@@ -96,6 +214,21 @@ class CsvWriter(Writer):
         if self.flush:
             self.stream.flush()
         self.count += 1
+
+    def write_many(self, recs):
+        columns = self.columns
+        lines = []
+        for rec in recs:
+            get = rec.get
+            lines.append(",".join(_csv_quote(csv_cell(get(c))) for c in columns))
+        self.write_lines(lines)
+
+    def write_lines(self, lines):
+        """Rows already rendered by :class:`CsvDialect` for this column set (no newlines)."""
+        if lines:
+            lines.append("")
+            self._emit("\n".join(lines))
+            self.count += len(lines) - 1
 
 
 class TableWriter(Writer):

@@ -85,8 +85,8 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       zk decode --binary capture.bin -f csv -o capture.csv
       xxd capture.bin | zk decode --accept status
     """
-    from ...io.sources import binary_chunks, hex_chunks, run_decode
-    from ...io.writers import make_writer
+    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
+    from ...io.writers import csv_dialect, json_dialect, make_writer
 
     if binary:
         chunks, explicit = binary_chunks(list(inputs)), False
@@ -98,14 +98,16 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
     decoder = zk.ZkDecoder(protocol_version, raw=raw)
     warned = []
 
-    def decode_one(frame):
-        rec = decoder.decode(frame)
-        if not warned and decoder.version_source == "default" and rec["id"] in (2,) and rec["kind"] == "status":
+    def check_assumed():
+        if decoder.assumed and not warned:
             warned.append(1)
             note(f"voltages assume protocol version {zk.DEFAULT_PROTOCOL_VERSION} (0.2 V) until a status "
                  "ID 6 frame is seen; set --protocol-version if the ECU is older")
-        if fmt == "table":
-            rec["_summary"] = summary(rec)
+
+    def decode_one(frame):
+        rec = decoder.decode(frame)
+        check_assumed()
+        rec["_summary"] = summary(rec)
         return rec
 
     if explicit:
@@ -115,9 +117,15 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
         if not frames:
             _explain_single(data)
         framer = ZkFramer(accept)
-    writer = make_writer(fmt, stream, columns(accept, raw), table_columns=TABLE_COLUMNS, header=not had)
+    cols = columns(accept, raw)
+    writer = make_writer(fmt, stream, cols, table_columns=TABLE_COLUMNS, header=not had)
     try:
-        run_decode(chunks, framer, decode_one, writer)
+        if fmt == "table":
+            run_decode(chunks, framer, decode_one, writer)
+        else:
+            # straight to text: encoders generated from the tables, a memo of repeated frames
+            lines = decoder.lines(csv_dialect(cols) if fmt == "csv" else json_dialect())
+            run_text_decode(chunks, framer, lines, writer, check_assumed)
     finally:
         writer.close()
         if stream is not sys.stdout:
