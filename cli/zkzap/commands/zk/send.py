@@ -11,7 +11,6 @@ from __future__ import annotations
 import click
 
 from ...codec import zk
-from ...codec.hexfmt import format_hex
 from ...errors import UsageError
 from .. import CONTEXT
 from ..options import consent, dry_run_option, note, port_options, protocol_version_option, warn, yes_option
@@ -41,6 +40,12 @@ EXAMPLES = {
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log"}
+
+
+def format_hex(frame) -> str:
+    from ...codec.hexfmt import format_hex as fmt    # imported when used: a faster start
+
+    return fmt(frame)
 
 
 def send_options(f):
@@ -222,7 +227,22 @@ def _doc(cmd, fields):
     return "\n".join(lines)
 
 
-@click.group(context_settings=CONTEXT)
+class SendGroup(click.Group):
+    """Builds a control command's sub-command from the codec table when it is first asked for,
+    so that running one builds one (a faster start); help and completion list them all."""
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(zk.CONTROL_BY_NAME))
+
+    def get_command(self, ctx, name):
+        cmd = super().get_command(ctx, name)
+        if cmd is None and name in zk.CONTROL_BY_NAME:
+            cmd = _make(zk.CONTROL_BY_NAME[name])
+            self.add_command(cmd)
+        return cmd
+
+
+@click.group(cls=SendGroup, context_settings=CONTEXT)
 def send():
     """Compose a control command and send it, or print it as hex with -n/--dry-run.
 
@@ -237,10 +257,6 @@ def send():
       zk send raw 1 sw=3 throttle_pct=500 -n          # raw field values
       zk send control --state run --throttle 30 --for 20 --sim -f jsonl
     """
-
-
-for _cmd in zk.CONTROL:
-    send.add_command(_make(_cmd))
 
 
 def _parse_assignments(pairs):
