@@ -63,8 +63,8 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
     sel = selectors.DefaultSelector()
     sel.register(master, selectors.EVENT_READ)
     _install_signals()
-    _announce(link or path, out)
     try:
+        _announce(link or path, out)       # inside the try: a signal right after the line is a stop
         while True:
             for _key, _ in sel.select(_timeout(device, clock)):
                 try:
@@ -104,8 +104,8 @@ def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) ->
     client = None
     _install_signals()
     shown = f"[{host}]" if ":" in host else host
-    _announce(f"socket://{shown}:{actual}", out)
     try:
+        _announce(f"socket://{shown}:{actual}", out)
         while True:
             for key, _ in sel.select(_timeout(device, clock)):
                 if key.data == "accept":
