@@ -337,3 +337,9 @@ def test_send_for_output_file_format_by_extension(cli, tmp_path):
     assert r.exit_code == 0 and r.stdout == ""
     recs = jsonl(out.read_text())
     assert recs and all("frame" in x for x in recs)
+
+
+def test_table_format_in_a_pipe_is_a_rich_table(cli):
+    r = cli("zk", "monitor", "-p", SIM, "--count", "2", "-f", "table")
+    assert r.exit_code == 0
+    assert "fields" in r.stdout and "power_voltage_v=12.0 V" in r.stdout and "time=" not in r.stdout

@@ -135,7 +135,8 @@ class Output:
             if self._table:
                 from .decode import summary
 
-                rec = dict(rec, _summary=summary(rec))
+                fields = {k: v for k, v in rec.items() if k not in _NOT_FIELDS}
+                rec = dict(rec, _summary=summary(fields))
             self.writer.write(rec)
 
     def update(self, snapshot, health):
@@ -167,6 +168,7 @@ class Output:
 
 
 _TABLE_COLUMNS = [("t", "t"), ("id", "id"), ("_summary", "fields"), ("stale", "stale")]
+_NOT_FIELDS = {"time", "t", "stale", "stale_ids"}
 
 
 def _dashboard(title):
