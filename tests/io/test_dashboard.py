@@ -222,7 +222,7 @@ def test_updates_from_another_thread_while_rendering():
     t = threading.Thread(target=feed)
     t.start()
     try:
-        for _ in range(30):
+        for _ in range(8):
             assert "RPM" in text_of(d)
     finally:
         stop.set()
