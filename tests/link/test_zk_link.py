@@ -106,12 +106,16 @@ def test_new_ecu_error_ends_the_session_with_the_abort():
 
 def test_error_present_at_the_start_is_not_new():
     ecu_url = "sim://zk?speed=20&error=voltage-low&error_after=0"
-    s, tel, out, link = session(ecu_url, control=lambda t: zk.encode_control("keepalive")[0],
-                                stop_on_error=True, count=30)
+    notes = []
+    s, tel, out, link = session(ecu_url, control=lambda t: RUN30, stop_on_error=True, count=30,
+                                notify=notes.append)
     outcome = s.run()
     link.close()
-    assert outcome.reason == "count" and tel.errors == {2: pytest.approx(tel.errors[2])}
-    assert tel.new_error is None
+    assert outcome.reason == "count" and list(tel.errors) == [2]
+    assert tel.new_error is None and tel.initial_error == (2, "voltage-low")
+    assert notes == ["the ECU reports error 2 (voltage-low) from before; an ECU starts again only after stop "
+                     "or standby"]
+    assert [r["engine_state_name"] for r in out if r["id"] == 1][-1] == "stop"   # latched: no start
 
 
 def test_no_abort_when_the_session_does_not_control_the_engine():

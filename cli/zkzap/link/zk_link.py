@@ -348,6 +348,7 @@ class Telemetry:
         self.version_note = None
         # ECU errors
         self._baseline = None
+        self.initial_error = None     # (code, name) of an error the ECU reported from the start
         self.new_error = None
         self.errors = {}
         # summary
@@ -441,6 +442,7 @@ class Telemetry:
         code = rec.get("error_code") or 0
         if self._baseline is None:
             self._baseline = code
+            self.initial_error = (code, rec.get("error_name")) if code else None
         if code and code not in self.errors:
             self.errors[code] = t
         if code == 0:
@@ -628,6 +630,7 @@ class Session:
         next_send = 0.0
         next_update = 0.0
         outcome = None
+        told = False
         with SignalGuard() as guard:
             try:
                 while outcome is None:
@@ -655,6 +658,10 @@ class Session:
                         break
                     for t, frame in got:
                         self.last_frame_t = t
+                        if not told and tel.initial_error is not None and self.controlling:
+                            told = True
+                            self.notify(f"the ECU reports error {tel.initial_error[0]} ({tel.initial_error[1]}) "
+                                        f"from before; an ECU starts again only after stop or standby")
                         for rec in tel.feed(t, frame):
                             self.sink(rec)
                             written += 1
