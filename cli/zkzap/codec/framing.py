@@ -33,8 +33,8 @@ from .crc import CRC8_TABLE
 _T = CRC8_TABLE
 _HDR = b"\xff\xff\xff"
 
-#: Recently validated ZK frames are remembered (up to this many) so that a repeated frame,
-#: the common case in a capture, is recognised without recomputing its CRC.
+#: Recently validated frames are remembered (up to this many) so that a repeated frame, the
+#: common case in a capture, is recognised without recomputing its CRC or checksum.
 VALID_CACHE = 8192
 #: How deep a chain of overlapping valid candidates is followed when deciding between them.
 MAX_DEPTH = 3
@@ -214,6 +214,7 @@ class ZapFramer:
         self._buf = b""
         self._bad_until = 0
         self._synced = True
+        self._valid = {}
         self.frames = 0
         self.bad = 0
         self.skipped = 0
@@ -221,8 +222,21 @@ class ZapFramer:
     def feed(self, data) -> list:
         """Packets completed by ``data`` (a packet right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
-        buf = self._buf + bytes(data) if self._buf else bytes(data)
-        return self._scan(buf, False)
+        if self._buf:
+            return self._scan(self._buf + bytes(data), False)
+        data = bytes(data)
+        n = len(data)
+        # the usual read of a reply or a captured packet: exactly one whole packet, in step
+        if (n >= 7 and self._synced and data[4] + 5 == n and data[4] >= 2 and data[3] != 0xFF
+                and data[0] == data[1] == data[2] == 0xFF):
+            valid = self._valid
+            if data in valid or (0xFF - (sum(data[3:-1]) & 0xFF)) == data[-1]:
+                if len(valid) >= VALID_CACHE:
+                    valid.clear()
+                valid[data] = None
+                self.frames += 1
+                return [data]
+        return self._scan(data, False)
 
     def flush(self) -> list:
         """End of stream: decide about held packets and return them; bytes still held after
@@ -305,6 +319,8 @@ class ZapFramer:
 
     def _scan(self, buf, final) -> list:
         out = []
+        append = out.append
+        valid = self._valid
         n = len(buf)
         i = 0
         skipped = 0
@@ -347,13 +363,21 @@ class ZapFramer:
                     ok = False
                     end = n
                 else:
-                    ok = (0xFF - (sum(buf[i + 3:end - 1]) & 0xFF)) == buf[end - 1]
+                    p = buf[i:end]
+                    if p in valid:
+                        ok = True
+                    else:
+                        ok = (0xFF - (sum(buf[i + 3:end - 1]) & 0xFF)) == buf[end - 1]
+                        if ok:
+                            if len(valid) >= VALID_CACHE:
+                                valid.clear()
+                            valid[p] = None
                     if ok and not synced:
                         ok = self._resync(buf, i, end, final)
                         if ok is None:
                             break
             if ok:
-                out.append(buf[i:end])
+                append(p)
                 i = end
                 synced = True
             else:
