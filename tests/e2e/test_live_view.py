@@ -85,8 +85,11 @@ class Terminal:
         text = ""
         while time.monotonic() < deadline:
             text = self.screen()
-            if predicate(text):
-                return text
+            try:
+                if predicate(text):
+                    return text
+            except AssertionError:      # caught mid-redraw: look again
+                pass
             time.sleep(0.1)
         raise AssertionError(f"timed out waiting for {what}; the screen shows:\n{text}")
 
