@@ -15,8 +15,20 @@ CHUNK = 1 << 16
 
 
 def binary_chunks(paths):
-    """Chunks of each file in ``paths`` in turn; ``-`` (or no paths) is stdin."""
-    for path in paths or ["-"]:
+    """Chunks of each file in ``paths`` in turn; ``-`` (or no paths) is stdin. Every file is
+    checked before the first chunk is read, so an unreadable one is an error before any output."""
+    paths = list(paths or ["-"])
+    for path in paths:
+        if path != "-":
+            try:
+                open(path, "rb").close()
+            except OSError as e:
+                raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
+    return _binary_chunks(paths)
+
+
+def _binary_chunks(paths):
+    for path in paths:
         if path == "-":
             stream = sys.stdin.buffer
             close = False
