@@ -9,6 +9,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 
 import pytest
 from click.testing import CliRunner
@@ -199,3 +200,23 @@ def test_offline_examples_run_and_print_what_they_say(pages, monkeypatch):
             with_output += 1
         checked += 1
     assert checked >= 30 and with_output >= 15, (checked, with_output)
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="bash is not installed")
+@pytest.mark.parametrize("prog,words,expected", [
+    ("zk", "zk send act", "action"),
+    ("zap", "zap load present-v", "present-voltage"),
+    ("zkzap", "zkzap zk send control --state st", "stop standby"),     # the codec's order
+])
+def test_committed_bash_script_completes_through_the_program(prog, words, expected):
+    bindir = os.path.dirname(sys.executable)
+    if not os.path.exists(os.path.join(bindir, prog)):
+        pytest.skip(f"{prog} is not installed beside {sys.executable} (pip install -e .)")
+    script = os.path.join(COMPLETIONS, "bash", prog)
+    words_list = words.split(" ")
+    code = (f"source {shlex.quote(script)}; COMP_WORDS=({' '.join(shlex.quote(w) for w in words_list)}); "
+            f"COMP_CWORD={len(words_list) - 1}; _{prog}_completion {prog}; echo \"${{COMPREPLY[*]}}\"")
+    env = dict(os.environ, PATH=bindir + os.pathsep + os.environ.get("PATH", ""))
+    p = subprocess.run(["bash", "--norc", "--noprofile", "-c", code], capture_output=True, text=True, env=env,
+                       timeout=30)
+    assert p.stdout.strip() == expected, p.stderr
