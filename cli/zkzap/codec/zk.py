@@ -481,6 +481,8 @@ class ZkDecoder:
 #: repeats frames heavily; the recently used ones survive a rotation).
 LINE_CACHE = 16384
 _MAX_CONTEXTS = 8
+#: Compiled text encoders, shared by every ZkLines: (dialect key, raw, ID, context) -> function.
+_ENCODERS = {}
 
 
 class ZkLines:
@@ -497,7 +499,6 @@ class ZkLines:
         self.decoder = decoder
         self.dialect = dialect
         self.cache = cache
-        self._encoders = {}
         self._contexts = {}
         self._select()
 
@@ -594,12 +595,12 @@ class ZkLines:
                 version, known = d.version, d.known
                 if d.version_source == "default" and sid in VERSIONED_STATUS:
                     d.assumed = True
-            k = (sid, version, known)
-            enc = self._encoders.get(k)
+            k = (getattr(self.dialect, "key", id(self.dialect)), raw, sid, version, known)
+            enc = _ENCODERS.get(k)
             if enc is None:
-                if len(self._encoders) >= 256:
-                    self._encoders.clear()
-                enc = self._encoders[k] = st.layout.text_encoder(
+                if len(_ENCODERS) >= 512:
+                    _ENCODERS.clear()
+                enc = _ENCODERS[k] = st.layout.text_encoder(
                     self.dialect, {"version": version}, known, raw,
                     head=(("kind", "const", "status"), ("id", "const", sid)),
                     tail=(("frame", "str", "b.hex(' ').upper()"),))
@@ -608,10 +609,12 @@ class ZkLines:
         cmd = CONTROL_BY_ID.get(cmd_id)
         if cmd is None or cmd_id == 6 or cmd.layout.reserved_bits(f):
             return self._generic(f), None
-        k = ("control", cmd_id, d.rpm_factor)
-        enc = self._encoders.get(k)
+        k = (getattr(self.dialect, "key", id(self.dialect)), raw, "control", cmd_id, d.rpm_factor)
+        enc = _ENCODERS.get(k)
         if enc is None:
-            enc = self._encoders[k] = cmd.layout.text_encoder(
+            if len(_ENCODERS) >= 512:
+                _ENCODERS.clear()
+            enc = _ENCODERS[k] = cmd.layout.text_encoder(
                 self.dialect, {"rpm_factor": d.rpm_factor}, None, raw,
                 head=(("kind", "const", "control"), ("id", "const", cmd_id), ("command", "const", cmd.name)),
                 tail=(("frame", "str", "b.hex(' ').upper()"),))

@@ -53,6 +53,7 @@ class JsonDialect:
     """Records as compact JSON objects (the ``jsonl``/``json`` formats), for text encoders."""
 
     str_piece = '"%s"'
+    key = ("json",)
     value = staticmethod(_dumps)
     record = staticmethod(_dumps)
 
@@ -69,6 +70,7 @@ class CsvDialect:
 
     def __init__(self, columns):
         self.columns = list(columns)
+        self.key = ("csv",) + tuple(self.columns)
 
     @staticmethod
     def value(v):
