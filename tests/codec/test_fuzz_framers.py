@@ -145,10 +145,11 @@ def test_zk_truncated_frame_no_longer_hides_the_next_frame():
         real = zk.status_frame(rng.randint(1, 10), rng.randbytes(5))
         cut = bytes((rng.choice(range(0xF1, 0xFF)),)) + rng.randbytes(rng.randint(1, 5))
         false = cut + real[:7 - len(cut)]
-        if zk.crc8_maxim(false[:6]) == false[6]:
+        damaged = (b"\xf1" + cut + real)[:7]             # a damaged frame whose span covers the cut
+        if zk.crc8_maxim(false[:6]) == false[6] and zk.crc8_maxim(damaged[:6]) != damaged[6]:
             after = zk.status_frame(1, b"\x00\x00\x00\x00\x4c")
             f = ZkFramer()
-            data = b"\x00" + cut + real + after
+            data = b"\xf1" + cut + real + after
             assert run(f, data) == [real, after]
             for k in range(len(data) + 1):
                 assert run(ZkFramer(), data, [k]) == [real, after]
@@ -158,11 +159,12 @@ def test_zk_truncated_frame_no_longer_hides_the_next_frame():
 
 def test_held_frame_is_returned_by_flush():
     real = zk.status_frame(2, b"\x10\x20\xf5\x01\x02")   # an F5 inside: a rival head to check
+    assert zk.crc8_maxim(b"\xf1\x00" + real[:4]) != real[4]   # F1 00 ... is a damaged frame
     f = ZkFramer()
-    assert f.feed(b"\x00" + real) == []          # after skipped bytes, waiting for what follows
+    assert f.feed(b"\xf1\x00" + real) == []      # inside a damaged region: waits for what follows
     assert f.pending == 7
     assert f.flush() == [real]
-    assert f.skipped == 1 and f.frames == 1
+    assert f.skipped == 2 and f.frames == 1 and f.bad == 1
 
 
 def test_in_step_frames_are_never_held():

@@ -10,10 +10,13 @@ Resynchronisation. After garbage or a CRC failure the framer slides forward one 
 looks for the next head, so a valid frame that follows is never lost to the damage itself.
 An 8-bit CRC (or checksum) also accepts 1 in 256 random candidates, so garbage that ends in a
 head byte (a truncated frame, line noise) can form a *false* frame overlapping the real one
-after it. Therefore a candidate that validates right after skipped bytes is checked against
-every rival candidate starting inside it. A rival that also validates wins unless the
-candidate is *confirmed* (a valid frame starts right after it) and the rival is not, and
-provided the rival would itself win against its own rivals (so the choice never drops both).
+after it. Therefore a candidate that validates right after skipped bytes, inside a damaged
+region (the span of a candidate that failed its check), is checked against every rival
+candidate starting inside it. A rival that also validates wins unless the candidate is
+*confirmed* (a valid frame starts right after it) and the rival is not, and provided the rival
+would itself win against its own rivals (so the choice never drops both). Outside a damaged
+region the earliest valid candidate wins, as before: garbage with no head byte in it never
+costs a frame.
 Deciding may need the bytes after the candidate: until they arrive it is held back
 (``pending``), and :meth:`flush` decides with what there is, so use the frames flush()
 returns. A frame that follows a good frame directly (or starts the stream) is returned at
@@ -178,7 +181,7 @@ class ZkFramer:
                         if len(valid) >= VALID_CACHE:
                             valid.clear()
                         valid[f] = None
-                if ok and not synced:
+                if ok and not synced and i < bad_until:
                     ok = self._resync(buf, i, ln, final)
                     if ok is None:
                         break
@@ -372,7 +375,7 @@ class ZapFramer:
                             if len(valid) >= VALID_CACHE:
                                 valid.clear()
                             valid[p] = None
-                    if ok and not synced:
+                    if ok and not synced and i < bad_until:
                         ok = self._resync(buf, i, end, final)
                         if ok is None:
                             break
