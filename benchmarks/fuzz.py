@@ -204,11 +204,23 @@ class Encoders:
             self.records = zap.ZapDecoder()
             self.json = self.csv = None
 
-    def run(self, frames):
+    def run(self, frames, case=None):
         recs = [self.records.decode(f) for f in frames]
         if self.json is not None:
-            self.json.encode_all(frames)
+            lines = self.json.encode_all(frames)
             self.csv.encode_all(frames)
+            if case is not None:
+                # the fused path (framing and rendering in one pass) gives the same lines
+                fused = zk.ZkDecoder().lines(self.json.dialect, cache=16)
+                framer = ZkFramer(case.accept)
+                got = []
+                prev = 0
+                for cut in case.cuts + [len(case.data)]:
+                    got += framer.feed_lines(case.data[prev:cut], fused)
+                    prev = cut
+                got += framer.flush_lines(fused)
+                if got != lines:
+                    raise AssertionError(f"fused lines differ: {got} != {lines}")
         return recs
 
 
@@ -228,7 +240,7 @@ def check_case(case, encoders=True):
             prev = cut
         out += framer.flush()
         if encoders:
-            Encoders(case.proto, case.accept).run(out)
+            Encoders(case.proto, case.accept).run(out, case)
     except Exception:  # property 1
         t.errors = 1
         t.examples.append(("exception", case, traceback.format_exc()))

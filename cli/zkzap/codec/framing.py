@@ -79,7 +79,18 @@ class ZkFramer:
     def flush(self) -> list:
         """End of stream: decide about held frames with the bytes there are and return them;
         bytes still held after that are a truncated frame (counted as skipped)."""
-        out = self._scan(self._buf, True) if self._buf else []
+        return self.flush_lines(None)
+
+    def feed_lines(self, data, lines) -> list:
+        """:meth:`feed`, returning ``lines.line(frame)`` for each frame instead of the frame,
+        where ``lines`` is a :class:`~zkzap.codec.zk.ZkLines`. A frame in step whose line is
+        in ``lines.memo`` (where only checked frames go) costs one look-up."""
+        buf = self._buf + bytes(data) if self._buf else bytes(data)
+        return self._scan(buf, False, lines)
+
+    def flush_lines(self, lines) -> list:
+        """:meth:`flush`, returning lines as :meth:`feed_lines` does (frames when None)."""
+        out = self._scan(self._buf, True, lines) if self._buf else []
         self._buf = b""
         self._bad_until = 0
         self._synced = True
@@ -143,12 +154,13 @@ class ZkFramer:
                     return False
         return True
 
-    def _scan(self, buf, final) -> list:
+    def _scan(self, buf, final, sink=None) -> list:
         out = []
         append = out.append
         lens = self._len
         T = _T
         valid = self._valid
+        memo = sink.memo if sink is not None else valid
         n = len(buf)
         i = 0
         skipped = 0
@@ -162,6 +174,13 @@ class ZkFramer:
                 synced = False
                 continue
             e = i + ln
+            if synced and e <= n:
+                # in step: a repeated frame needs no CRC and no look-around
+                f = buf[i:e]
+                if f in memo:
+                    append(f if sink is None else memo[f])
+                    i = e
+                    continue
             if e > n:
                 if not final:
                     break
@@ -186,7 +205,11 @@ class ZkFramer:
                     if ok is None:
                         break
             if ok:
-                append(f)
+                if sink is None:
+                    append(f)
+                else:
+                    append(sink.line(f))
+                    memo = sink.memo
                 i = e
                 synced = True
             else:

@@ -513,6 +513,7 @@ class ZkLines:
             c = self._contexts[key] = [{}, {}, {}]
         self._key = key
         self._memo, self._old, self._fast = c
+        self.memo = self._memo
         self._ctx = c
 
     def _rotate(self):
@@ -520,7 +521,23 @@ class ZkLines:
         c[1] = c[0]
         c[0] = {}
         self._memo, self._old = c[0], c[1]
+        self.memo = self._memo
         return c[0]
+
+    def line(self, f) -> str:
+        """The line of one checked frame (bytes), after a miss in :attr:`memo` (the current
+        context's young memo, which a framer may read directly: see ZkFramer.feed_lines)."""
+        line = self._old.get(f)
+        if line is None:
+            enc = self._fast.get(f[0])
+            if enc is None:
+                return self._miss(f)
+            line = enc(f)
+        memo = self._memo
+        if len(memo) >= self.cache:
+            memo = self._rotate()
+        memo[f] = line
+        return line
 
     def encode_all(self, frames) -> list:
         """The lines of ``frames`` (bytes objects, as a framer returns them), in order."""
@@ -567,7 +584,7 @@ class ZkLines:
             if self.cache:
                 if len(self._memo) >= self.cache:
                     self._rotate()
-                self._memo[f] = line
+                self._memo[bytes(f)] = line
             if enc is not None:
                 self._fast[f[0]] = enc
         else:

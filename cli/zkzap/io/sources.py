@@ -86,19 +86,25 @@ def run_text_decode(chunks, framer, lines, writer, after=None):
     records (see :class:`zkzap.codec.zk.ZkLines`) and ``writer.write_lines`` writes each block.
     ``after()`` runs after each block. Returns the number of records written."""
     count = 0
-    encode_all = lines.encode_all
     write_lines = writer.write_lines
+    if hasattr(framer, "feed_lines"):
+        # framing and rendering in one pass: a repeated frame in step is one memo look-up
+        feed = lambda chunk: framer.feed_lines(chunk, lines)  # noqa: E731
+        flush = lambda: framer.flush_lines(lines)  # noqa: E731
+    else:
+        feed = lambda chunk: lines.encode_all(framer.feed(chunk))  # noqa: E731
+        flush = lambda: lines.encode_all(framer.flush())  # noqa: E731
     for chunk in chunks:
-        frames = framer.feed(chunk)
-        if frames:
-            write_lines(encode_all(frames))
-            count += len(frames)
+        out = feed(chunk)
+        if out:
+            count += len(out)
+            write_lines(out)
             if after is not None:
                 after()
-    frames = framer.flush()
-    if frames:
-        write_lines(encode_all(frames))
-        count += len(frames)
+    out = flush()
+    if out:
+        count += len(out)
+        write_lines(out)
         if after is not None:
             after()
     return count

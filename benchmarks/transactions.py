@@ -1,0 +1,89 @@
+"""mightyZAP transactions against the actuator-bus simulator over a real pty.
+
+    python benchmarks/transactions.py                  # 57600 baud, 2000 round trips
+    python benchmarks/transactions.py --baud 115200 --count 5000
+
+Starts ``zkzap sim zap --ids 1,2,3`` (it prints its pty on the first line), then measures:
+
+1. Load Data round trips per second through the library (``ZapBus.transact`` of a
+   present-position read, the command ``zap load`` runs), next to the wire's own limit at
+   that baud rate (request + reply bytes, 10 bits each);
+2. ``zap load present-position`` as a command, one process per read (what a shell loop gets);
+3. a full 0..253 ``zap scan`` at one baud rate, as a command. Target: <= 2 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
+
+
+def tool(name):
+    exe = os.path.join(os.path.dirname(sys.executable), name)
+    return [exe] if os.path.exists(exe) else [sys.executable, "-m", "zkzap"]
+
+
+def start_sim(ids, baud):
+    env = dict(os.environ, NO_COLOR="1")
+    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    port = p.stdout.readline().strip()
+    if not port:
+        p.kill()
+        raise SystemExit(f"simulator did not start: {p.stderr.read()[-500:]}")
+    return p, port
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--baud", type=int, default=57600)
+    ap.add_argument("--count", type=int, default=2000, help="library round trips")
+    ap.add_argument("--commands", type=int, default=20, help="zap load processes")
+    args = ap.parse_args(argv)
+
+    from zkzap.codec import zap
+    from zkzap.link.port import open_port
+    from zkzap.link.zap_bus import ZapBus
+
+    sim, port = start_sim("1,2,3", args.baud)
+    try:
+        pkt = zap.load(1, "present-position")
+        with ZapBus(open_port(port, args.baud, timeout=0)) as bus:
+            bus.transact(pkt)                                   # warm up
+            t0 = time.perf_counter()
+            for _ in range(args.count):
+                bus.transact(pkt)
+            dt = time.perf_counter() - t0
+        wire = (len(pkt) + 9) * 10 / args.baud
+        print(f"Load Data round trips over a pty at {args.baud} baud: {args.count / dt:,.0f}/s "
+              f"({dt / args.count * 1e3:.2f} ms each; the wire alone needs {wire * 1e3:.2f} ms)")
+
+        env = dict(os.environ, NO_COLOR="1")
+        cmd = tool("zap") + ["load", "present-position", "--id", "1", "-p", port, "-b", str(args.baud)]
+        t0 = time.perf_counter()
+        for _ in range(args.commands):
+            subprocess.run(cmd, check=True, capture_output=True, env=env)
+        dt = time.perf_counter() - t0
+        print(f"zap load as a command: {args.commands / dt:.1f}/s ({dt / args.commands * 1e3:.0f} ms per process)")
+
+        cmd = tool("zap") + ["scan", "-p", port, "-b", str(args.baud), "-f", "jsonl"]
+        t0 = time.perf_counter()
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        dt = time.perf_counter() - t0
+        found = [line for line in r.stdout.splitlines() if line.strip()]
+        print(f"full 0..253 scan at {args.baud} baud: {dt:.2f} s, {len(found)} found (exit {r.returncode})  "
+              f"target <= 2 s {'met' if dt <= 2 else 'NOT met'}")
+    finally:
+        sim.terminate()
+        sim.wait(5)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
