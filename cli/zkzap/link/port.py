@@ -23,8 +23,10 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
     if _HANDLERS not in serial.protocol_handler_packages:
         serial.protocol_handler_packages.append(_HANDLERS)
     try:
-        return serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
+        port = serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
                                      exclusive=True)
+        _no_delay(port)
+        return port
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:
@@ -32,6 +34,42 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
         if "could not open port" in text or "No such file" in text or "Errno" in text:
             raise PortError(f"port {url}: cannot open: {_short(e)}") from None
         raise PortError(f"port {url}: {_short(e)}") from None
+
+
+def _no_delay(port) -> None:
+    """Send small frames at once on a socket:// port (pyserial leaves Nagle's algorithm on: a
+    command that gets no reply would hold the next one back until a delayed ACK, ~40 ms)."""
+    sock = getattr(port, "_socket", None)
+    if sock is None:
+        return
+    try:
+        import socket
+
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except (OSError, AttributeError):
+        pass
+
+
+def close_port(port) -> None:
+    """Close ``port``; a socket:// port without pyserial's 0.3 s pause "for quick reconnects"
+    (a simulator or ser2net-style server takes the next client at once). Never raises: closing
+    a vanished port must not mask the error that ended its use."""
+    sock = getattr(port, "_socket", None)
+    try:
+        if sock is not None and getattr(port, "is_open", False):
+            import socket
+
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            sock.close()
+            port._socket = None
+            port.is_open = False
+        else:
+            port.close()
+    except Exception:  # noqa: BLE001 - serial.SerialException, OSError from a vanished device
+        pass
 
 
 def sim_url(kind: str, **options) -> str:

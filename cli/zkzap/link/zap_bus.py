@@ -29,6 +29,7 @@ from urllib.parse import urlsplit
 from ..codec import zap
 from ..codec.framing import ZapFramer
 from ..errors import BadReply, DeviceError, NoReply, PortError, UsageError
+from .port import close_port
 
 #: Allowance for the actuator's processing before it answers (seconds).
 TURNAROUND = 0.002
@@ -80,38 +81,6 @@ def usb_latency(device: str):
             return int(f.read().strip()) / 1000.0
     except (OSError, ValueError):
         return None
-
-
-def no_delay(port) -> None:
-    """Send small packets at once on a socket:// port (pyserial leaves Nagle's algorithm on: a
-    command that gets no reply would hold the next one back until a delayed ACK, ~40 ms)."""
-    sock = getattr(port, "_socket", None)
-    if sock is None:
-        return
-    try:
-        import socket
-
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    except (OSError, AttributeError):
-        pass
-
-
-def close_socket(port) -> bool:
-    """Close a socket:// port without pyserial's 0.3 s pause "for quick reconnects" (a
-    simulator or ser2net-style server takes the next client at once); False for other ports."""
-    sock = getattr(port, "_socket", None)
-    if sock is None or not getattr(port, "is_open", False):
-        return False
-    import socket
-
-    try:
-        sock.shutdown(socket.SHUT_RDWR)
-    except OSError:
-        pass
-    sock.close()
-    port._socket = None
-    port.is_open = False
-    return True
 
 
 class Reply:
@@ -202,7 +171,6 @@ class ZapBus:
         self.sent = 0
         self.replies = 0
         self.retried = 0
-        no_delay(port)
 
     # -- line -----------------------------------------------------------------------------------
 
@@ -225,11 +193,7 @@ class ZapBus:
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
 
     def close(self) -> None:
-        try:
-            if not close_socket(self.port):
-                self.port.close()
-        except Exception:  # noqa: BLE001 - closing a vanished port must not mask the real error
-            pass
+        close_port(self.port)
 
     def __enter__(self):
         return self

@@ -151,10 +151,9 @@ class ZkLink:
         self.frames_out += 1
 
     def close(self):
-        try:
-            self.ser.close()
-        except Exception:
-            pass
+        from .port import close_port
+
+        close_port(self.ser)
 
 
 def _reason(e) -> str:
