@@ -125,18 +125,7 @@ ROOT_COMMANDS = {
 }
 
 
-def _available(mapping):
-    """Only the commands whose module exists (later modules arrive with later features)."""
-    here = os.path.dirname(__file__)
-    out = {}
-    for name, spec in mapping.items():
-        rel = spec[0].lstrip(".").replace(".", os.sep)
-        if os.path.exists(os.path.join(here, rel + ".py")) or os.path.isdir(os.path.join(here, rel)):
-            out[name] = spec
-    return out
-
-
-@click.group(cls=LazyGroup, lazy=_available(ROOT_COMMANDS), context_settings=CONTEXT, epilog=EXIT_EPILOG)
+@click.group(cls=LazyGroup, lazy=ROOT_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="zkzap", message="%(prog)s %(version)s")
 @debug_option
 def root():

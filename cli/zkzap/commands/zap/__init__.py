@@ -5,10 +5,10 @@ from __future__ import annotations
 import click
 
 from ... import __version__
-from .. import CONTEXT, EXIT_EPILOG, ZAP_COMMANDS, LazyGroup, _available, debug_option
+from .. import CONTEXT, EXIT_EPILOG, ZAP_COMMANDS, LazyGroup, debug_option
 
 
-@click.group(cls=LazyGroup, lazy=_available(ZAP_COMMANDS), context_settings=CONTEXT, epilog=EXIT_EPILOG)
+@click.group(cls=LazyGroup, lazy=ZAP_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="zap", message="%(prog)s (zkzap) %(version)s")
 @debug_option
 def zap():

@@ -5,10 +5,10 @@ from __future__ import annotations
 import click
 
 from ... import __version__
-from .. import CONTEXT, EXIT_EPILOG, ZK_COMMANDS, LazyGroup, _available, debug_option
+from .. import CONTEXT, EXIT_EPILOG, ZK_COMMANDS, LazyGroup, debug_option
 
 
-@click.group(cls=LazyGroup, lazy=_available(ZK_COMMANDS), context_settings=CONTEXT, epilog=EXIT_EPILOG)
+@click.group(cls=LazyGroup, lazy=ZK_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="zk", message="%(prog)s (zkzap) %(version)s")
 @debug_option
 def zk():
