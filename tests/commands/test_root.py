@@ -23,8 +23,8 @@ def test_every_lazy_entry_is_a_command(group, name, spec, cli):
 def test_help_lists_every_command_without_importing_them(cli):
     for group, mapping in MAPS:
         out = cli(*([group] if group else []), "--help").stdout
-        for name, spec in mapping.items():
-            assert f"  {name} " in out and spec[2][:20] in out
+        listed = {line.split()[0] for line in out.split("Commands:")[1].splitlines() if line.startswith("  ")}
+        assert set(mapping) <= listed
 
 
 def test_version(cli):
