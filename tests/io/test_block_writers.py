@@ -33,7 +33,6 @@ def test_blocks_equal_records_on_a_file_descriptor(tmp_path):
         path = tmp_path / f"out.{fmt}"
         with open(path, "w", encoding="utf-8", newline="") as f:
             w = make_writer(fmt, f, COLS)
-            assert w._fd is False
             w.write_many(RECS[:1])
             w.write_many(RECS[1:])
             assert w._fd == f.fileno()         # went straight to the descriptor

@@ -20,8 +20,10 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
 import threading
 
+from ..errors import USAGE, ZkzapError
 from . import FORMATS  # noqa: F401 - re-exported
 
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
@@ -115,12 +117,21 @@ def _raw_fd(stream):
     return fd
 
 
+class OutputError(ZkzapError):
+    """The output could not be written (disk full, file system gone): exit 2, like an output
+    file that cannot be opened. The records before the failure are whole."""
+
+    code = USAGE
+
+
 class Writer:
     def __init__(self, stream, flush=True):
         self.stream = stream
         self.flush = flush
         self.count = 0
         self._fd = False
+        self._good = None
+        self._failed = False
 
     def write(self, rec: dict) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -135,34 +146,94 @@ class Writer:
             self.stream.flush()
         except (BrokenPipeError, ValueError):
             pass
+        except OSError as e:
+            self._fail(e)
+
+    def _put(self, text: str) -> None:
+        """One record: flushed at once (``flush``), else left to the stream's buffering."""
+        if self.flush:
+            self._emit(text)
+        else:
+            try:
+                self.stream.write(text)
+            except BrokenPipeError:
+                raise
+            except OSError as e:
+                self._fail(e)
 
     def _emit(self, text: str) -> None:
         """Write a block of whole records and flush it: on a file descriptor in one write loop
-        that SIGINT/SIGTERM cannot cut (they are handled right after it)."""
-        if self._fd is False:
-            self._fd = _raw_fd(self.stream)
-        fd = self._fd
-        if fd is None:
-            self.stream.write(text)
-            self.stream.flush()
+        that SIGINT/SIGTERM cannot cut (they are handled right after it). When the write
+        fails (disk full), a regular file is cut back to the last whole record."""
+        if self._failed:
             return
-        self.stream.flush()
-        data = memoryview(text.encode("utf-8"))
+        if self._fd is False:
+            self._fd = fd = _raw_fd(self.stream)
+            if fd is not None:
+                try:
+                    if stat.S_ISREG(os.fstat(fd).st_mode):
+                        self._good = os.lseek(fd, 0, os.SEEK_CUR)     # after the last raw write
+                except OSError:
+                    self._good = None
+        fd = self._fd
+        try:
+            if fd is None:
+                self.stream.write(text)
+                self.stream.flush()
+                return
+            self.stream.flush()
+            if self._good is not None:
+                self._good = os.lseek(fd, 0, os.SEEK_CUR)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            self._fail(e)
+        raw = text.encode("utf-8")
+        data = memoryview(raw)
         hold = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
         old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else None
         try:
             while data:
                 data = data[os.write(fd, data):]
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            if self._good is not None:
+                # keep the whole lines of this block that did reach the file
+                done = len(raw) - len(data)
+                self._good += raw.rfind(b"\n", 0, done) + 1
+            self._fail(e)
         finally:
             if hold:
                 signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        if self._good is not None:
+            self._good += len(raw)
+
+    def _fail(self, e):
+        """Leave whole records behind, make later writes and the caller's close() quiet, and
+        raise a clear :class:`OutputError`."""
+        self._failed = True
+        fd = self._fd if self._fd is not False else _raw_fd(self.stream)
+        if fd is not None:
+            if self._good is not None:
+                try:
+                    os.ftruncate(fd, self._good)
+                except OSError:
+                    pass
+            try:
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, fd)
+                os.close(null)
+            except OSError:
+                pass
+        name = getattr(self.stream, "name", None)
+        name = "stdout" if not isinstance(name, str) or name == "<stdout>" else name
+        raise OutputError(f"output: cannot write {name}: {e.strerror or e}") from None
 
 
 class JsonlWriter(Writer):
     def write(self, rec):
-        self.stream.write(_dumps(rec) + "\n")
-        if self.flush:
-            self.stream.flush()
+        self._put(_dumps(rec) + "\n")
         self.count += 1
 
     def write_many(self, recs):
@@ -180,9 +251,7 @@ class JsonWriter(Writer):
     """One JSON array, written incrementally; ``[]`` when there are no records."""
 
     def write(self, rec):
-        self.stream.write(("[\n" if self.count == 0 else ",\n") + _dumps(rec))
-        if self.flush:
-            self.stream.flush()
+        self._put(("[\n" if self.count == 0 else ",\n") + _dumps(rec))
         self.count += 1
 
     def write_many(self, recs):
@@ -194,7 +263,7 @@ class JsonWriter(Writer):
             self.count += len(lines)
 
     def close(self):
-        self.stream.write("[]\n" if self.count == 0 else "\n]\n")
+        self._put("[]\n" if self.count == 0 else "\n]\n")
         super().close()
 
 
@@ -206,15 +275,11 @@ class CsvWriter(Writer):
         super().__init__(stream, flush)
         self.columns = list(columns)
         if header:
-            stream.write(",".join(self.columns) + "\n")
-            if flush:
-                stream.flush()
+            self._put(",".join(self.columns) + "\n")
 
     def write(self, rec):
         get = rec.get
-        self.stream.write(",".join(_csv_quote(csv_cell(get(c))) for c in self.columns) + "\n")
-        if self.flush:
-            self.stream.flush()
+        self._put(",".join(_csv_quote(csv_cell(get(c))) for c in self.columns) + "\n")
         self.count += 1
 
     def write_many(self, recs):
