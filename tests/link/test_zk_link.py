@@ -397,3 +397,28 @@ def test_schedule_errors_name_the_line(text, msg):
 def test_schedule_rounding_note():
     s = L.Schedule.parse("0,33.33\n", name="s.csv")
     assert s.notes == ["s.csv:1: throttle: 33.33 % is not a multiple of 0.1 %; rounded to 33.3 %"]
+
+
+def test_replay_keeps_a_frame_held_for_look_ahead_at_the_end(tmp_path):
+    """After damage, a framer holds a valid frame until what follows confirms it; at the end of
+    a replay that frame comes out of flush() and must not be lost."""
+    from zkzap.codec import zk as zkc
+    from zkzap.codec.framing import ZkFramer
+    from zkzap.link.zk_link import ReplaySource
+
+    good = zkc.status_frame(1, b"\x00\x00\x00\x00\x4c")
+    data = good + bytes.fromhex("4cf2f24c4c") + good    # damage with rival heads before the last frame
+    framer = ZkFramer("status")
+    assert framer.feed(data) == [good]         # the last frame waits for confirmation ...
+    assert framer.flush() == [good]            # ... and comes out at the end
+    expected = [good, good]
+    log = tmp_path / "raw.bin"
+    log.write_bytes(data)
+    src = ReplaySource(str(log), fast=True)
+    got = []
+    while True:
+        due = src.poll()
+        if due is None:
+            break
+        got += [f for _, f in due]
+    assert got == expected

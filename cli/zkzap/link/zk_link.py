@@ -224,11 +224,12 @@ class ReplaySource:
     def _fill(self):
         while not self.queue and not self.eof:
             block = self.file.read(READ_SIZE)
-            if not block:
+            if block:
+                frames = self.framer.feed(block)
+            else:
                 self.eof = True
-                self.framer.flush()
-                break
-            for f in self.framer.feed(block):
+                frames = self.framer.flush()      # frames held for look-ahead come out here
+            for f in frames:
                 self.queue.append((self.next_t, f))
                 if f[0] == 0xF6:
                     rate = zk.decode_status(f).get("status_rate_hz")
