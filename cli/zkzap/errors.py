@@ -15,6 +15,8 @@ PORT_ERROR = 4
 DEVICE_ERROR = 5
 #: The reply was malformed or corrupted (bad checksum, wrong ID) after every retry.
 BAD_REPLY = 6
+#: The output could not be written (disk full, file system gone); records before it are whole.
+OUTPUT_ERROR = 7
 #: Interrupted by Ctrl-C (SIGINT); 143 for SIGTERM.
 INTERRUPTED = 130
 TERMINATED = 143
@@ -27,6 +29,7 @@ EXIT_CODES = (
     (PORT_ERROR, "port cannot be opened, or failed or vanished while in use"),
     (DEVICE_ERROR, "the device reported an error (actuator error bits, ECU error code)"),
     (BAD_REPLY, "corrupted or unexpected reply (bad checksum, wrong ID) after retries"),
+    (OUTPUT_ERROR, "the output could not be written (disk full); the records before are whole"),
     (INTERRUPTED, "interrupted (Ctrl-C); 143 when terminated (SIGTERM)"),
 )
 
@@ -64,3 +67,10 @@ class DeviceError(ZkzapError):
 
 class BadReply(ZkzapError):
     code = BAD_REPLY
+
+
+class OutputError(ZkzapError):
+    """The output could not be written (disk full, file system gone). The records written
+    before the failure are whole."""
+
+    code = OUTPUT_ERROR

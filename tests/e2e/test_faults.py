@@ -66,7 +66,7 @@ def captures(tmp_path_factory):
 def test_disk_full_during_decode(captures, tmp_path, cmd, fmt):
     out = tmp_path / f"out.{fmt or 'json'}"
     r = run(cmd[0], *(a.replace("{cap}", str(captures)) for a in cmd[1:]), "-o", str(out), preexec=small_disk)
-    assert r.returncode == 2, r.stderr
+    assert r.returncode == 7, r.stderr
     assert r.stderr == f"{cmd[0]}: error: output: cannot write {out}: File too large\n"
     assert r.stdout == ""
     assert 0 < out.stat().st_size <= LIMIT
@@ -82,7 +82,7 @@ def test_disk_full_during_monitor(start_sim, tmp_path):
     url, _ = start_sim(["zk", "--speed", SPEED, "--pty"])
     out = tmp_path / "log.csv"
     r = run("zk", "monitor", "-p", url, "--count", "2000", "-f", "csv", "-o", str(out), preexec=small_disk)
-    assert r.returncode == 2, r.stderr
+    assert r.returncode == 7, r.stderr
     assert r.stderr.endswith(f"zk: error: output: cannot write {out}: File too large\n")
     assert "Traceback" not in r.stderr
     assert len(whole_records(out, "csv")) > 10
@@ -91,7 +91,7 @@ def test_disk_full_during_monitor(start_sim, tmp_path):
 def test_stdout_on_a_full_device(captures):
     with open("/dev/full", "w") as full:
         r = run("zk", "decode", "--binary", str(captures / "zk.bin"), stdout=full)
-    assert r.returncode == 2 and r.stderr == "zk: error: output: cannot write stdout: No space left on device\n"
+    assert r.returncode == 7 and r.stderr == "zk: error: output: cannot write stdout: No space left on device\n"
 
 
 # --- signals at random moments ----------------------------------------------------------------

@@ -23,7 +23,7 @@ import signal
 import stat
 import threading
 
-from ..errors import USAGE, ZkzapError
+from ..errors import OutputError
 from . import FORMATS  # noqa: F401 - re-exported
 
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
@@ -115,13 +115,6 @@ def _raw_fd(stream):
             or os.linesep != "\n":
         return None
     return fd
-
-
-class OutputError(ZkzapError):
-    """The output could not be written (disk full, file system gone): exit 2, like an output
-    file that cannot be opened. The records before the failure are whole."""
-
-    code = USAGE
 
 
 class Writer:

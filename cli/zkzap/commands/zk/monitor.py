@@ -21,7 +21,8 @@ FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson"
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
              "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
-             "--fail-on-error, an ECU error code was seen; 130 Ctrl-C; 143 SIGTERM. Every record already "
+             "--fail-on-error, an ECU error code was seen; 7 the output could not be written (disk full); "
+             "130 Ctrl-C; 143 SIGTERM. Every record already "
              "written stays whole.")
 
 

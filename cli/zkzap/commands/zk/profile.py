@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from ...errors import UsageError
+from ...errors import OutputError, UsageError
 from .. import CONTEXT
 from ..options import consent, dry_run_option, note, port_options, protocol_version_option, yes_option
 from .monitor import EXIT_HELP, log_options, resolve_port, zk_timeout_help
@@ -164,7 +164,7 @@ def _write_json(path, summary):
         with open(path, "w", encoding="utf-8") as f:
             f.write(text)
     except OSError as e:
-        raise UsageError(f"summary-json: cannot write {path}: {e.strerror}") from None
+        raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
 
 
 def _print_plan(sched, rate, fmt, output, append):
