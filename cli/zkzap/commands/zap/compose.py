@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT
-from ..options import consent, dry_run_option, port_options, yes_option
+from ..options import SignedCommand, consent, dry_run_option, port_options, yes_option
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -378,7 +378,7 @@ def load(reg, length, physical, fmt, ident, **common):
 
 
 def _write_command(name, builder, doc):
-    @click.command(name, context_settings=CONTEXT, help=doc)
+    @click.command(name, cls=SignedCommand, context_settings=CONTEXT, help=doc)
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
     @click.argument("value", metavar="VALUE", type=INT)
     @id_option()

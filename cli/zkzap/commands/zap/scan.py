@@ -15,7 +15,7 @@ import click
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT
-from ..options import consent, note, resolve_format, yes_option
+from ..options import SignedCommand, consent, note, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
@@ -310,7 +310,7 @@ WATCH_FIRST = zap.REGISTER_BY_NAME["present-position"]
 WATCH_LAST = zap.REGISTER_BY_NAME["moving"]
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=SignedCommand, context_settings=CONTEXT)
 @click.argument("position", type=INT, metavar="POSITION")
 @click.option("-i", "--id", "ident", type=IdType(), default=0, show_default=True,
               help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")

@@ -13,7 +13,8 @@ import click
 from ...codec import zk
 from ...errors import UsageError
 from .. import CONTEXT
-from ..options import consent, dry_run_option, note, port_options, protocol_version_option, warn, yes_option
+from ..options import (SignedCommand, consent, dry_run_option, note, port_options, protocol_version_option, warn,
+                       yes_option)
 from .monitor import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
@@ -207,7 +208,7 @@ def _make(cmd):
         params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,
                                    help=p.help))
     doc = _doc(cmd, fields)
-    command = click.Command(cmd.name, callback=callback, params=params, help=doc,
+    command = SignedCommand(cmd.name, callback=callback, params=params, help=doc,
                             short_help=cmd.help.split(" (")[0].rstrip("."), context_settings=CONTEXT,
                             no_args_is_help=False, epilog=SEND_EPILOG)
     return send_options(command)
