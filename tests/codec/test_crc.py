@@ -4,7 +4,7 @@ import crcmod.predefined
 from hypothesis import given
 from hypothesis import strategies as st
 
-from zkzap.codec.crc import CRC8_TABLE, crc8_maxim, zap_checksum
+from zkzap.codec.crc import CRC8_TABLE, build_table, crc8_maxim, zap_checksum
 
 # The first and last rows of the document's crc_array, typed in from the document.
 DOC_TABLE_HEAD = [0x00, 0x5E, 0xBC, 0xE2, 0x61, 0x3F, 0xDD, 0x83, 0xC2, 0x9C, 0x7E, 0x20, 0xA3, 0xFD, 0x1F, 0x41]
@@ -28,6 +28,10 @@ _crcmod = crcmod.predefined.mkCrcFun("crc-8-maxim")
 
 def test_catalogue_check_value():
     assert crc8_maxim(b"123456789") == 0xA1
+
+
+def test_table_is_the_reflected_polynomial():
+    assert CRC8_TABLE == build_table(0x8C)
 
 
 def test_table_matches_document():

@@ -121,7 +121,7 @@ ZK_DECODE = [
     Bad("zk decode --protocol-version 0 FF", "'--protocol-version'"),
     Bad("zk decode --accept sideways FF", "'--accept': 'sideways' is not one of"),
     Bad("zk decode -o /nonexistent/dir/log.csv -f csv FF 1D F4 70", "output: cannot open /nonexistent/dir/log.csv"),
-    Bad("zk decode -o / FF 1D F4 70", "'-o' / '--output'"),
+    Bad("zk decode -o / FF 1D F4 70", "output: cannot open /: Is a directory"),
 ]
 
 ZAP_COMPOSE = [

@@ -10,9 +10,6 @@ with no per-field interpretation.
 
 from __future__ import annotations
 
-import re
-
-_PART = re.compile(r"^b(\d+)(?:\[(\d+)(?::(\d+))?\])?$")
 
 
 class FieldValueError(ValueError):
@@ -23,12 +20,21 @@ def parse_bits(spec: str) -> tuple:
     """``"b4[1:0] b3[7:5]"`` -> ``((4, 1, 0), (3, 7, 5))``; ``"b2"`` is ``b2[7:0]``."""
     parts = []
     for token in spec.split():
-        m = _PART.match(token)
-        if not m:
-            raise ValueError(f"bad bit spec {spec!r}")
-        byte = int(m.group(1))
-        hi = int(m.group(2)) if m.group(2) is not None else 7
-        lo = int(m.group(3)) if m.group(3) is not None else (hi if m.group(2) is not None else 0)
+        try:
+            if token[0] != "b":
+                raise ValueError
+            name, _, bits = token.partition("[")
+            byte = int(name[1:])
+            if bits:
+                if not bits.endswith("]"):
+                    raise ValueError
+                hi_text, _, lo_text = bits[:-1].partition(":")
+                hi = int(hi_text)
+                lo = int(lo_text) if lo_text else hi
+            else:
+                hi, lo = 7, 0
+        except (ValueError, IndexError):
+            raise ValueError(f"bad bit spec {spec!r}") from None
         if not 0 <= lo <= hi <= 7:
             raise ValueError(f"bad bit range in {spec!r}")
         parts.append((byte, hi, lo))
@@ -460,6 +466,8 @@ def compile_text(code, items, dialect):
     string (``dialect.str_piece``) and arranges the ``(key, piece, arg)`` cells into one
     %-template (``dialect.template(cells) -> (template, args)``).
     """
+    import re
+
     ns = {}
     cells = []
     for n, (key, kind, what) in enumerate(items):

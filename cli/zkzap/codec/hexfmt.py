@@ -13,11 +13,27 @@ from __future__ import annotations
 import re
 
 _HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
-_COLON_OFFSET = re.compile(r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)")
-_GUTTER = re.compile(r"\s\s\|.*\|\s*$")
-_HEXDUMP_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{4,16}\s")
-_ODD_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{5}(?:[0-9A-Fa-f]{2})*\s")
-_SPLIT = re.compile(r"[\s,:;\-]+")
+_PATTERNS = {
+    "colon_offset": r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)",
+    "gutter": r"\s\s\|.*\|\s*$",
+    "hexdump_offset": r"^\s*[0-9A-Fa-f]{4,16}\s",
+    "odd_offset": r"^\s*[0-9A-Fa-f]{5}(?:[0-9A-Fa-f]{2})*\s",
+    "end_offset": r"^\s*[0-9A-Fa-f]{7,8}\s*$",
+    "split": r"[\s,:;\-]+",
+    "wide_gap": r"\s{2,}",
+}
+
+
+class _Patterns:
+    """The patterns above, compiled on first use: composing a frame only formats hex."""
+
+    def __getattr__(self, name):
+        rx = re.compile(_PATTERNS[name])
+        setattr(self, name, rx)
+        return rx
+
+
+_rx = _Patterns()
 
 
 class HexError(ValueError):
@@ -29,22 +45,19 @@ def format_hex(data) -> str:
     return bytes(data).hex(" ").upper()
 
 
-_END_OFFSET = re.compile(r"^\s*[0-9A-Fa-f]{7,8}\s*$")
-
-
 def _strip_dump(line: str):
     """(line without offset and gutter, whether it was a dump line)."""
-    m = _COLON_OFFSET.match(line)
+    m = _rx.colon_offset.match(line)
     if m:
         rest = line[m.end():].strip()
         # xxd: hex groups, then two or more spaces, then the ASCII column
-        return re.split(r"\s{2,}", rest, maxsplit=1)[0], True
-    g = _GUTTER.search(line)
+        return _rx.wide_gap.split(rest, maxsplit=1)[0], True
+    g = _rx.gutter.search(line)
     if g:
         line = line[:g.start()]
-        m = _HEXDUMP_OFFSET.match(line)
+        m = _rx.hexdump_offset.match(line)
         return (line[m.end():] if m else line), True
-    m = _ODD_OFFSET.match(line)
+    m = _rx.odd_offset.match(line)
     if m:
         return line[m.end():], True
     return line, False
@@ -61,13 +74,13 @@ def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state
         return b""
     line, dump = _strip_dump(line)
     if state is not None:
-        if not dump and state.get("dump") and _END_OFFSET.match(line):
+        if not dump and state.get("dump") and _rx.end_offset.match(line):
             return b""
         state["dump"] = dump
     line = line.replace("\\x", " ").replace("\\X", " ")
     out = bytearray()
     where = f" (line {lineno})" if lineno else ""
-    for token in _SPLIT.split(line):
+    for token in _rx.split.split(line):
         if not token:
             continue
         prefixed = token[:2] in ("0x", "0X")

@@ -82,6 +82,20 @@ def _debug_callback(ctx, param, value):
     return value
 
 
+def version_option(prog: str):
+    """``-V/--version``: print ``PROG (zkzap) VERSION`` and exit. (click.version_option would look
+    up its message catalogue at import, on every start.)"""
+    text = f"{prog} {__version__}" if prog == "zkzap" else f"{prog} (zkzap) {__version__}"
+
+    def callback(ctx, param, value):
+        if value and not ctx.resilient_parsing:
+            click.echo(text)
+            ctx.exit()
+
+    return click.option("-V", "--version", is_flag=True, expose_value=False, is_eager=True, callback=callback,
+                        help="Show the version and exit.")
+
+
 debug_option = click.option(
     "--debug", is_flag=True, expose_value=False, is_eager=True, callback=_debug_callback,
     help="Show Python tracebacks on errors (also ZKZAP_DEBUG=1).")
@@ -126,7 +140,7 @@ ROOT_COMMANDS = {
 
 
 @click.group(cls=LazyGroup, lazy=ROOT_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
-@click.version_option(__version__, "-V", "--version", prog_name="zkzap", message="%(prog)s %(version)s")
+@version_option("zkzap")
 @debug_option
 def root():
     """zkzap: the ZK turbine ECU protocol and mightyZAP actuators from the command line.

@@ -24,10 +24,15 @@ DEFAULT_BAUD = {"zk": 115200, "zap": 57600}
 
 
 class SignedCommand(click.Command):
-    """A command whose positional arguments may be negative numbers (``ignition-voltage -0.5``):
-    click would read ``-0.5`` as an unknown option and never name the field. A token that looks
+    """A command whose positional arguments may be negative numbers (``ignition-voltage -0.5``).
+
+    click would read ``-0.5`` as an unknown option and never name the field: a token that looks
     like a negative number, is no option of this command and is not an option's value is moved
-    behind ``--`` (keeping the arguments' order), so the field's own range check reports it."""
+    behind ``--`` (keeping the arguments' order), so the field's own range check reports it.
+    A lone short option (``-n``) is passed to click in its long spelling (``--dry-run``): click
+    tries every single-dash token as a long option first, and the failed try costs the start-up
+    of a command that shell scripts call in loops.
+    """
 
     def parse_args(self, ctx, args):
         if "--" not in args:
@@ -38,12 +43,20 @@ class SignedCommand(click.Command):
                 takes_value = prev in opts and not opts[prev].is_flag and not opts[prev].count
                 if _is_negative_number(a) and a not in opts and not takes_value:
                     tail.append(a)
+                elif not takes_value and len(a) == 2 and a in opts and _long(opts[a]):
+                    head.append(_long(opts[a]))
                 else:
                     head.append(a)
                 prev = a
             if tail:
                 args = head + ["--"] + tail
+            else:
+                args = head
         return super().parse_args(ctx, args)
+
+
+def _long(option):
+    return next((o for o in option.opts if o.startswith("--")), None)
 
 
 def _is_negative_number(token: str) -> bool:
@@ -96,9 +109,25 @@ def write_rows(rows, columns, fmt=None, *, title=None, table_columns=None, strea
         writer.close()
 
 
+class FilePath(click.ParamType):
+    """A file path, completed as a file by the shell. The command opens it and reports a failure
+    naming the option (click.Path's checks would run its message catalogue look-ups at start-up,
+    on every command that merely has such an option)."""
+
+    name = "file"
+
+    def convert(self, value, param, ctx):
+        return value if isinstance(value, str) else str(value)
+
+    def shell_complete(self, ctx, param, incomplete):
+        from click.shell_completion import CompletionItem
+
+        return [CompletionItem(incomplete, type="file")]
+
+
 def output_options(f):
     f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
-    f = click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
+    f = click.option("-o", "--output", type=FilePath(),
                      help="Write records to FILE instead of stdout.")(f)
     return f
 

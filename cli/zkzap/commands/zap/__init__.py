@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import click
 
-from ... import __version__
-from .. import CONTEXT, EXIT_EPILOG, ZAP_COMMANDS, LazyGroup, debug_option
+from .. import CONTEXT, EXIT_EPILOG, ZAP_COMMANDS, LazyGroup, debug_option, version_option
 
 
 @click.group(cls=LazyGroup, lazy=ZAP_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
-@click.version_option(__version__, "-V", "--version", prog_name="zap", message="%(prog)s (zkzap) %(version)s")
+@version_option("zap")
 @debug_option
 def zap():
     """mightyZAP linear actuators, IR protocol: scan the bus, move, read and write registers,

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import click
 
-from ... import __version__
-from .. import CONTEXT, EXIT_EPILOG, ZK_COMMANDS, LazyGroup, debug_option
+from .. import CONTEXT, EXIT_EPILOG, ZK_COMMANDS, LazyGroup, debug_option, version_option
 
 
 @click.group(cls=LazyGroup, lazy=ZK_COMMANDS, context_settings=CONTEXT, epilog=EXIT_EPILOG)
-@click.version_option(__version__, "-V", "--version", prog_name="zk", message="%(prog)s (zkzap) %(version)s")
+@version_option("zk")
 @debug_option
 def zk():
     """ZK turbine ECU protocol V1.2: send control commands, monitor and log status, run throttle

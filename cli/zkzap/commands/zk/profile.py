@@ -10,7 +10,7 @@ import click
 from ...errors import OutputError, UsageError
 from .. import CONTEXT
 from ..options import consent, dry_run_option, note, port_options, protocol_version_option, yes_option
-from .monitor import EXIT_HELP, log_options, resolve_port, zk_timeout_help
+from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
           "a prompt on a terminal; sim:// and --sim never ask. "

@@ -15,7 +15,7 @@ from ...errors import UsageError
 from .. import CONTEXT
 from ..options import (SignedCommand, consent, dry_run_option, note, port_options, protocol_version_option, warn,
                        yes_option)
-from .monitor import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
+from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,

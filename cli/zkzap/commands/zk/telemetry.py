@@ -1,0 +1,97 @@
+"""Options and helpers that ``zk monitor``, ``zk send --for`` and ``zk profile`` share: where
+and how status records are written, the port to open, the exit status text.
+
+Kept apart from the monitor command so that composing a frame (``zk send ... -n``) does not
+build the monitor command; the logging machinery itself (:mod:`.monitor`'s ``run_telemetry``)
+is imported only when a command really logs.
+"""
+
+from __future__ import annotations
+
+import click
+
+from ...errors import UsageError
+from ...io import FORMATS
+from ..options import FilePath
+
+#: Output format by the extension of -o FILE when --format is not given.
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+
+EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
+             "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
+             "--fail-on-error, an ECU error code was seen; 7 the output could not be written (disk full); "
+             "130 Ctrl-C; 143 SIGTERM. Every record already "
+             "written stays whole.")
+
+
+def log_options(f):
+    """Options for where and how status records are written (monitor, send --for, profile)."""
+    opts = [
+        click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
+                     help="Output format: table is the live dashboard on a terminal; default table on a "
+                          "terminal, jsonl in a pipe, or by the extension of -o (.csv, .json, .jsonl)."),
+        click.option("-o", "--output", type=FilePath(),
+                     help="Write records to FILE (the dashboard stays on a terminal)."),
+        click.option("--append", is_flag=True,
+                     help="Append to --output and --raw-log (a CSV gets no second header)."),
+        click.option("--snapshot/--frames", "snapshot", default=None,
+                     help="Snapshot rows (every field's latest value on each row) or one record per "
+                          "frame. Default: snapshot for csv, frames for jsonl/json."),
+        click.option("--ids", metavar="LIST", default=None,
+                     help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
+        click.option("--stale-after", type=click.IntRange(1, 1000), default=3, show_default=True,
+                     metavar="N", help="An ID is stale after N of its periods without a frame."),
+        click.option("--raw-log", type=FilePath(), default=None,
+                     metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
+                                          "or 'zk decode --binary')."),
+    ]
+    # A Command lists options in the order they are added; a function in reverse.
+    for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
+        f = opt(f)
+    return f
+
+
+TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
+                "longer means exit 3.")
+
+
+def zk_timeout_help(cmd):
+    """Give a command's --timeout (from port_options) its meaning for a ZK status stream."""
+    for p in cmd.params:
+        if p.name == "timeout":
+            p.help = TIMEOUT_HELP
+    return cmd
+
+
+def port_from_env() -> bool:
+    """Whether -p/--port came from ZKZAP_ZK_PORT rather than the command line."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return ctx.get_parameter_source("port") == click.core.ParameterSource.ENVIRONMENT
+
+
+def resolve_port(port, sim, **sim_options) -> str:
+    """The URL to open: --sim's in-process simulator, else -p PORT (or ZKZAP_ZK_PORT)."""
+    from ...link.port import sim_url
+
+    if sim and port and port_from_env():
+        port = None                      # an explicit --sim beats the environment's default port
+    if sim and port:
+        raise UsageError("port: give -p PORT or --sim, not both")
+    if sim:
+        return sim_url("zk", **sim_options)
+    if not port:
+        raise UsageError("no port: give -p PORT (or set ZKZAP_ZK_PORT) or --sim")
+    return port
+
+
+def check_log_options(ids, snapshot, fmt):
+    """Validate the log options before anything is opened; returns the parsed ID set."""
+    from ...link.zk_link import parse_ids
+
+    return parse_ids(ids) if ids is not None else None
+
+
+def errors_text(tel) -> str:
+    return ", ".join(f"{e['code']} {e['name']} at t={e['t']:g} s" for e in tel.summary()["errors"])
