@@ -43,7 +43,64 @@ VALID_CACHE = 8192
 MAX_DEPTH = 3
 
 
-class ZkFramer:
+class _Framer:
+    """What both framers share: counters, the bytes held between calls, the end of a scan, and
+    the choice between overlapping valid candidates after damage."""
+
+    def __init__(self):
+        self._buf = b""
+        self._bad_until = 0
+        self._synced = True
+        self._valid = {}
+        self.frames = 0
+        self.bad = 0
+        self.skipped = 0
+
+    @property
+    def pending(self) -> int:
+        """Bytes held back waiting for the rest of a frame (or for the bytes that confirm it)."""
+        return len(self._buf)
+
+    def _reset(self):
+        self._buf = b""
+        self._bad_until = 0
+        self._synced = True
+
+    def _end_scan(self, buf, i, out, skipped, bad_until, synced, final):
+        """Book-keeping at the end of :meth:`_scan`: counters, and the bytes kept for later."""
+        self.frames += len(out)
+        if final:
+            skipped += len(buf) - i
+            i = len(buf)
+        self.skipped += skipped
+        self._bad_until = bad_until - i
+        self._synced = synced
+        self._buf = buf[i:]
+        return out
+
+    def _decide(self, buf, end, rivals, final, depth):
+        """Keep the candidate ending at ``end`` (True) or drop it for one of ``rivals``
+        (``(start, end)`` of valid candidates starting inside it) that a following frame
+        confirms (False); None when the bytes needed to decide have not arrived."""
+        if not rivals:
+            return True
+        mine = self._valid_at(buf, end, final)
+        if mine is None:
+            return None
+        for j, e in rivals:
+            theirs = self._valid_at(buf, e, final)
+            if theirs is None:
+                return None
+            if (theirs or not mine) and depth < MAX_DEPTH:
+                wins = self._resync(buf, j, e, final, depth + 1)
+                if wins is None:
+                    return None
+                if wins:
+                    return False
+        return True
+
+
+class ZkFramer(_Framer):
     """Frames of the ZK protocol: 4-byte control (``FF``) and 7-byte status (``F1``..``FE``).
 
     ``accept`` is ``"both"``, ``"status"`` or ``"control"``. Control frames are accepted only
@@ -62,13 +119,7 @@ class ZkFramer:
         if accept in ("both", "control"):
             lengths[0xFF] = 4
         self._len = lengths
-        self._buf = b""
-        self._bad_until = 0
-        self._synced = True
-        self._valid = {}
-        self.frames = 0
-        self.bad = 0
-        self.skipped = 0
+        super().__init__()
 
     def feed(self, data) -> list:
         """Frames completed by ``data`` (a frame right after skipped bytes may be held back
@@ -91,15 +142,8 @@ class ZkFramer:
     def flush_lines(self, lines) -> list:
         """:meth:`flush`, returning lines as :meth:`feed_lines` does (frames when None)."""
         out = self._scan(self._buf, True, lines) if self._buf else []
-        self._buf = b""
-        self._bad_until = 0
-        self._synced = True
+        self._reset()
         return out
-
-    @property
-    def pending(self) -> int:
-        """Bytes held back waiting for the rest of a frame (or for the bytes that confirm it)."""
-        return len(self._buf)
 
     def _ok(self, buf, i, ln) -> bool:
         T = _T
@@ -120,12 +164,11 @@ class ZkFramer:
             return False if final else None
         return self._ok(buf, p, ln)
 
-    def _resync(self, buf, i, ln, final, depth=0):
-        """A valid candidate at ``i`` after skipped bytes: keep it (True), drop it for a rival
-        (False), or None when the bytes needed to decide have not arrived."""
+    def _resync(self, buf, i, end, final, depth=0):
+        """A valid candidate at ``i..end`` after skipped bytes: keep it (True), drop it for a
+        rival (False), or None when the bytes needed to decide have not arrived."""
         lens = self._len
         n = len(buf)
-        end = i + ln
         rivals = []
         for j in range(i + 1, end):
             lj = lens[buf[j]]
@@ -136,23 +179,8 @@ class ZkFramer:
                     continue
                 return None
             if self._ok(buf, j, lj):
-                rivals.append((j, lj))
-        if not rivals:
-            return True
-        mine = self._valid_at(buf, end, final)
-        if mine is None:
-            return None
-        for j, lj in rivals:
-            theirs = self._valid_at(buf, j + lj, final)
-            if theirs is None:
-                return None
-            if (theirs or not mine) and depth < MAX_DEPTH:
-                wins = self._resync(buf, j, lj, final, depth + 1)
-                if wins is None:
-                    return None
-                if wins:
-                    return False
-        return True
+                rivals.append((j, j + lj))
+        return self._decide(buf, end, rivals, final, depth)
 
     def _scan(self, buf, final, sink=None) -> list:
         out = []
@@ -201,7 +229,7 @@ class ZkFramer:
                             valid.clear()
                         valid[f] = None
                 if ok and not synced and i < bad_until:
-                    ok = self._resync(buf, i, ln, final)
+                    ok = self._resync(buf, i, e, final)
                     if ok is None:
                         break
             if ok:
@@ -219,31 +247,14 @@ class ZkFramer:
                 skipped += 1
                 i += 1
                 synced = False
-        self.frames += len(out)
-        if final:
-            skipped += n - i
-            i = n
-        self.skipped += skipped
-        self._bad_until = bad_until - i
-        self._synced = synced
-        self._buf = buf[i:]
-        return out
+        return self._end_scan(buf, i, out, skipped, bad_until, synced, final)
 
 
-class ZapFramer:
+class ZapFramer(_Framer):
     """Packets of the mightyZAP IR protocol: ``FF FF FF ID SIZE ... CHK``.
 
     The header is the last three of a run of FF bytes (ID is never FF). SIZE must be at least 2.
     """
-
-    def __init__(self):
-        self._buf = b""
-        self._bad_until = 0
-        self._synced = True
-        self._valid = {}
-        self.frames = 0
-        self.bad = 0
-        self.skipped = 0
 
     def feed(self, data) -> list:
         """Packets completed by ``data`` (a packet right after skipped bytes may be held back
@@ -269,14 +280,8 @@ class ZapFramer:
         that are a truncated packet (counted as skipped, and as bad when they began with a
         header)."""
         out = self._scan(self._buf, True) if self._buf else []
-        self._buf = b""
-        self._bad_until = 0
-        self._synced = True
+        self._reset()
         return out
-
-    @property
-    def pending(self) -> int:
-        return len(self._buf)
 
     @staticmethod
     def _head(buf, p, n):
@@ -326,22 +331,7 @@ class ZapFramer:
                     elif (0xFF - (sum(buf[j + 3:e - 1]) & 0xFF)) == buf[e - 1]:
                         rivals.append((j, e))
             j = buf.find(_HDR, j + 1, end + 2)
-        if not rivals:
-            return True
-        mine = self._valid_at(buf, end, final)
-        if mine is None:
-            return None
-        for j, e in rivals:
-            theirs = self._valid_at(buf, e, final)
-            if theirs is None:
-                return None
-            if (theirs or not mine) and depth < MAX_DEPTH:
-                wins = self._resync(buf, j, e, final, depth + 1)
-                if wins is None:
-                    return None
-                if wins:
-                    return False
-        return True
+        return self._decide(buf, end, rivals, final, depth)
 
     def _scan(self, buf, final) -> list:
         out = []
@@ -413,12 +403,4 @@ class ZapFramer:
                 skipped += 1
                 i += 1
                 synced = False
-        self.frames += len(out)
-        if final:
-            skipped += n - i
-            i = n
-        self.skipped += skipped
-        self._bad_until = bad_until - i
-        self._synced = synced
-        self._buf = buf[i:]
-        return out
+        return self._end_scan(buf, i, out, skipped, bad_until, synced, final)
