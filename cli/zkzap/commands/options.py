@@ -143,6 +143,21 @@ def open_output(path, append=False):
         raise UsageError(f"output: cannot open {path}: {e.strerror}") from None
 
 
+def close_output(writer, stream) -> None:
+    """Close ``writer`` and, unless it is stdout, the stream ``open_output`` gave."""
+    try:
+        writer.close()
+    finally:
+        if stream is not sys.stdout:
+            stream.close()
+
+
+def note_skipped(framer, what: str, check: str) -> None:
+    """Say on stderr what a decoding stream skipped, when it skipped anything."""
+    if framer.bad or framer.skipped:
+        note(f"{framer.frames} {what} decoded; {framer.bad} bad ({check}), {framer.skipped} bytes skipped")
+
+
 dry_run_option = click.option(
     "-n", "--dry-run", is_flag=True,
     help="Compose and print the frame as hex; open no port, send nothing.")

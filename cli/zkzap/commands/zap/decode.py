@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 
 import click
 
@@ -10,7 +9,7 @@ from ...codec import zap
 from ...codec.framing import ZapFramer
 from ...errors import CheckFailed, UsageError
 from .. import CONTEXT
-from ..options import format_option, note, open_output, output_options, resolve_format
+from ..options import close_output, format_option, note_skipped, open_output, output_options, resolve_format
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -71,11 +70,8 @@ def decode(inputs, binary, fmt, output, append):
     try:
         run_decode(chunks, framer, decode_one, writer)
     finally:
-        writer.close()
-        if stream is not sys.stdout:
-            stream.close()
-    if framer.bad or framer.skipped:
-        note(f"{framer.frames} packets decoded; {framer.bad} bad (checksum), {framer.skipped} bytes skipped")
+        close_output(writer, stream)
+    note_skipped(framer, "packets", "checksum")
 
 
 def _explain_single(data: bytes):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 
 import click
 
@@ -10,7 +9,8 @@ from ...codec import zk
 from ...codec.framing import ZkFramer
 from ...errors import CheckFailed, UsageError
 from .. import CONTEXT
-from ..options import format_option, note, open_output, output_options, protocol_version_option, resolve_format
+from ..options import (close_output, format_option, note, note_skipped, open_output, output_options,
+                       protocol_version_option, resolve_format)
 
 
 def columns(accept="both", raw=False):
@@ -127,11 +127,8 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
             lines = decoder.lines(csv_dialect(cols) if fmt == "csv" else json_dialect())
             run_text_decode(chunks, framer, lines, writer, check_assumed)
     finally:
-        writer.close()
-        if stream is not sys.stdout:
-            stream.close()
-    if framer.bad or framer.skipped:
-        note(f"{framer.frames} frames decoded; {framer.bad} bad (CRC), {framer.skipped} bytes skipped")
+        close_output(writer, stream)
+    note_skipped(framer, "frames", "CRC")
 
 
 def _explain_single(data: bytes):

@@ -9,7 +9,7 @@ import click
 
 from ...errors import OutputError, UsageError
 from .. import CONTEXT
-from ..options import consent, dry_run_option, note, port_options, protocol_version_option, yes_option
+from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -180,6 +180,4 @@ def _print_plan(sched, rate, fmt, output, append):
         for t, state, thr, frame in sched.plan(rate):
             writer.write({"t": t, "state": state, "throttle_pct": thr, "frame": format_hex(frame)})
     finally:
-        writer.close()
-        if stream is not sys.stdout:
-            stream.close()
+        close_output(writer, stream)
