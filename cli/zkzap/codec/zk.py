@@ -424,6 +424,14 @@ def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False
     return rec
 
 
+def check_defined(frame) -> None:
+    """Raise :class:`FrameError` for a control frame whose command ID is not defined (0..8);
+    its CRC may well be right (``crc check`` accepts it, the decoders skip it)."""
+    if len(frame) == CONTROL_LEN and frame[1] >> 4 not in CONTROL_BY_ID:
+        raise FrameError(f"control frame: command ID {frame[1] >> 4} is not defined; "
+                         f"allowed 0..{max(CONTROL_BY_ID)}")
+
+
 def check_frame(frame):
     """Check a whole ZK frame of either kind by its length. Returns ``"control"`` or ``"status"``."""
     if len(frame) == CONTROL_LEN:
