@@ -46,3 +46,21 @@ def test_error_names_the_line():
 def test_round_trip(data):
     assert parse_hex(format_hex(data)) == data
     assert format_hex(data) == " ".join(f"{b:02X}" for b in data)
+
+
+def test_logic_analyser_csv_exports():
+    # Saleae Logic 1: time, value, error columns, a header row
+    legacy = ("Time [s],Value,Parity Error,Framing Error\n0.000000000,0xFF,,\n0.000086800,0x1D,,\n"
+              "0.000173600,0xF4,,\n0.000260400,0x70,,\n")
+    assert parse_hex(legacy) == bytes.fromhex("FF1DF470")
+    # Saleae Logic 2: quoted analyser name and type, start time, duration, data
+    logic2 = ('name,type,start_time,duration,data\n"Async Serial","data",0.0010,8.68e-05,0xFF\n'
+              '"Async Serial","data",0.0011,8.68e-05,0x14\n')
+    assert parse_hex(logic2) == bytes.fromhex("FF14")
+
+
+def test_a_header_is_skipped_only_as_the_first_line():
+    with pytest.raises(HexError, match="'foo' is not hex"):
+        parse_hex("FF 14\nfoo,bar\n")
+    with pytest.raises(HexError):
+        parse_hex("Time,Value")          # a single line of arguments is never a header

@@ -137,3 +137,10 @@ def test_subprocess_binary_stdin(sh):
     data = bytes.fromhex(STREAM.replace(" ", "")) * 100
     r = sh("zkzap", "zk", "decode", "--binary", "-f", "csv", input=data)
     assert r.exit_code == 0 and r.stdout.count(b"\n") == 301
+
+
+def test_logic_analyser_export_on_stdin(cli):
+    export = "Time [s],Value\n" + "".join(f"0.{i:06d},0x{b:02X}\n" for i, b in enumerate(bytes.fromhex(
+        STREAM.replace(" ", ""))))
+    r = cli("zk", "decode", input=export)
+    assert r.exit_code == 0 and [x["id"] for x in records(r.stdout)] == [1, 1, 6]

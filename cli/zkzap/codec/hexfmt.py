@@ -1,9 +1,9 @@
 """Hex text in and out.
 
 Accepted input notations: ``FF 14 64``, ``ff1464``, ``0xFF,0x14,0x64``, ``FF:14:64``,
-``FF-14-64``, ``\\xff\\x14``, ``#`` comments, and dump lines from ``xxd`` (``00000010: ff14 ...``
-and its ASCII column), ``hexdump -C`` (offset, ``|ascii|`` gutter) and ``od -A x -t x1``
-(an odd-length offset). An offset is dropped only where it cannot be data: it ends in a
+``FF-14-64``, ``\\xff\\x14``, ``#`` comments, logic-analyser CSV exports (their ``0x..``
+byte column), and dump lines from ``xxd`` (``00000010: ff14 ...`` and its ASCII column),
+``hexdump -C`` (offset, ``|ascii|`` gutter) and ``od -A x -t x1`` (an odd-length offset). An offset is dropped only where it cannot be data: it ends in a
 colon, is followed by a ``|...|`` gutter, or has an odd number of digits.
 Output is uppercase hex bytes separated by single spaces.
 """
@@ -21,6 +21,7 @@ _PATTERNS = {
     "end_offset": r"^\s*[0-9A-Fa-f]{7,8}\s*$",
     "split": r"[\s,:;\-]+",
     "wide_gap": r"\s{2,}",
+    "csv_byte": r"(?<![0-9A-Za-z.])0[xX]([0-9A-Fa-f]{1,2})(?![0-9A-Za-z.])",
 }
 
 
@@ -67,11 +68,33 @@ def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state
     """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`.
 
     ``state`` (a dict kept across the lines of one input) lets the lone final-offset line that
-    ``hexdump`` and ``od`` print after a dump be recognised as such.
+    ``hexdump`` and ``od`` print after a dump be recognised as such, and the header line of a
+    logic analyser's CSV export be skipped.
+
+    A logic analyser's CSV export (``0.000086800,0x14,,`` or
+    ``"Async Serial","data",0.0011,8.68e-05,0x14``) gives its ``0x..`` byte fields; the
+    timestamps and names beside them are not data.
     """
     line = line.split("#", 1)[0]
     if not line.strip():
         return b""
+    first = state is not None and not state.get("seen")
+    if state is not None:
+        state["seen"] = True
+    try:
+        return _parse_tokens(line, what, lineno, state)
+    except HexError:
+        if "," not in line:
+            raise
+        found = _rx.csv_byte.findall(line)
+        if found:
+            return bytes(int(b, 16) for b in found)
+        if first:
+            return b""              # the header row of a CSV export: "Time [s],Value,..."
+        raise
+
+
+def _parse_tokens(line, what, lineno, state) -> bytes:
     line, dump = _strip_dump(line)
     if state is not None:
         if not dump and state.get("dump") and _rx.end_offset.match(line):
