@@ -11,9 +11,9 @@ from ..errors import PortError, UsageError
 _HANDLERS = "zkzap.link"
 
 
-def byte_time(baud: int) -> float:
-    """Seconds one byte takes on the wire (start + 8 data + stop bits)."""
-    return 10.0 / baud
+def wire_time(nbytes: int, baud: int) -> float:
+    """Seconds ``nbytes`` take on the line (start + 8 data + stop bits)."""
+    return nbytes * 10.0 / baud
 
 
 def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):

@@ -29,7 +29,7 @@ from urllib.parse import urlsplit
 from ..codec import zap
 from ..codec.framing import ZapFramer
 from ..errors import BadReply, DeviceError, NoReply, PortError, UsageError
-from .port import close_port
+from .port import close_port, wire_time
 
 #: Allowance for the actuator's processing before it answers (seconds).
 TURNAROUND = 0.002
@@ -45,11 +45,6 @@ RESTART_PAUSE = 0.1
 RETRIES = 2
 
 _LOOPBACK = ("localhost", "127.0.0.1", "::1", "")
-
-
-def wire_time(nbytes: int, baud: int) -> float:
-    """Seconds ``nbytes`` take on the line (start + 8 data + stop bits)."""
-    return nbytes * 10.0 / baud
 
 
 def is_simulated(url) -> bool:

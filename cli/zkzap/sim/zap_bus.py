@@ -46,6 +46,7 @@ from collections import deque
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
+from ..link.port import wire_time
 
 #: Actuator processing time before a reply starts (model seconds).
 TURNAROUND = 0.002
@@ -635,7 +636,7 @@ class ActuatorBus:
                 merged.append((t, data, rbaud))
         for t, data, rbaud in merged:
             start = max(t, self._bus_free)
-            end = start + len(data) * 10.0 / rbaud
+            end = start + wire_time(len(data), rbaud)
             self._bus_free = end
             self._emit(end, data)
 
