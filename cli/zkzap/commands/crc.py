@@ -7,9 +7,9 @@ import click
 from ..codec import crc as crcs
 from ..codec import zap, zk
 from ..codec.hexfmt import format_hex
-from ..errors import CheckFailed, UsageError
+from ..errors import UsageError
 from . import CONTEXT
-from .options import read_hex_input
+from .options import checked, read_hex_input
 
 HEX = click.argument("hex_bytes", nargs=-1, metavar="HEX...")
 APPEND = click.option("-a", "--append", is_flag=True, help="Print the input followed by the checksum.")
@@ -34,19 +34,9 @@ def crc():
 def check_any(frame: bytes) -> str:
     """Check a whole frame of either protocol; returns a description, raises on mismatch."""
     if len(frame) >= 7 and frame[:3] == zap.HEADER:
-        try:
-            zap.check_packet(frame)
-        except zap.ChecksumError as e:
-            raise CheckFailed(str(e)) from None
-        except zap.PacketError as e:
-            raise UsageError(str(e)) from None
+        checked(zap.check_packet, frame)
         return f"mightyZAP packet: checksum {frame[-1]:02X} ok"
-    try:
-        kind = zk.check_frame(frame)
-    except zk.CrcError as e:
-        raise CheckFailed(str(e)) from None
-    except zk.FrameError as e:
-        raise UsageError(f"{e}; a mightyZAP packet starts FF FF FF") from None
+    kind = checked(zk.check_frame, frame, "; a mightyZAP packet starts FF FF FF")
     return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
 
 

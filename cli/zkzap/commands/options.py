@@ -143,6 +143,21 @@ def open_output(path, append=False):
         raise UsageError(f"output: cannot open {path}: {e.strerror}") from None
 
 
+def checked(check, frame, hint=""):
+    """Run a codec check on one explicit frame: a CRC/checksum mismatch is a failed check
+    (exit 1), a malformed frame is bad input (exit 2, ``hint`` appended). Returns what
+    ``check`` returns."""
+    from ..codec import zap, zk
+    from ..errors import CheckFailed
+
+    try:
+        return check(frame)
+    except (zk.CrcError, zap.ChecksumError) as e:
+        raise CheckFailed(str(e)) from None
+    except (zk.FrameError, zap.PacketError) as e:
+        raise UsageError(f"{e}{hint}") from None
+
+
 def close_output(writer, stream) -> None:
     """Close ``writer`` and, unless it is stdout, the stream ``open_output`` gave."""
     try:

@@ -7,9 +7,9 @@ import click
 
 from ...codec import zap
 from ...codec.framing import ZapFramer
-from ...errors import CheckFailed, UsageError
+from ...errors import UsageError
 from .. import CONTEXT
-from ..options import close_output, format_option, note_skipped, open_output, output_options, resolve_format
+from ..options import checked, close_output, format_option, note_skipped, open_output, output_options, resolve_format
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -77,9 +77,4 @@ def decode(inputs, binary, fmt, output, append):
 def _explain_single(data: bytes):
     if not data:
         raise UsageError("hex input: no bytes given")
-    try:
-        zap.check_packet(data)
-    except zap.ChecksumError as e:
-        raise CheckFailed(str(e)) from None
-    except zap.PacketError as e:
-        raise UsageError(str(e)) from None
+    checked(zap.check_packet, data)

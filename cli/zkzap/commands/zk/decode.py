@@ -7,9 +7,9 @@ import click
 
 from ...codec import zk
 from ...codec.framing import ZkFramer
-from ...errors import CheckFailed, UsageError
+from ...errors import UsageError
 from .. import CONTEXT
-from ..options import (close_output, format_option, note, note_skipped, open_output, output_options,
+from ..options import (checked, close_output, format_option, note, note_skipped, open_output, output_options,
                        protocol_version_option, resolve_format)
 
 
@@ -135,10 +135,5 @@ def _explain_single(data: bytes):
     """No valid frame in explicit input: say why, as precisely as the input allows."""
     if not data:
         raise UsageError("hex input: no bytes given")
-    try:
-        zk.check_frame(data)
-        zk.check_defined(data)       # CRC right, but not a frame the framer takes
-    except zk.CrcError as e:
-        raise CheckFailed(str(e)) from None
-    except zk.FrameError as e:
-        raise UsageError(str(e)) from None
+    checked(zk.check_frame, data)
+    checked(zk.check_defined, data)      # CRC right, but not a frame the framer takes
