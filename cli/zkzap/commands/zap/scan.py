@@ -400,6 +400,16 @@ ID_REG = zap.REGISTER_BY_NAME["id"]
 BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
 
 
+def _read_back(bus, ident, reg, within, silent):
+    """After a change: wait until ``ident`` answers again, then read ``reg``. ``silent`` is the
+    failure (exit 1) when it does not answer within ``within`` seconds."""
+    try:
+        bus.wait_ready(ident, within=within)
+        return bus.read(ident, reg)
+    except NoReply:
+        raise CheckFailed(silent) from None
+
+
 @click.command("set-id", context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
@@ -431,12 +441,8 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
             raise CheckFailed(f"ID {new} is already taken by another actuator; choose a free ID "
                               "('zap scan') or pass --force")
         bus.store(ident, ID_REG, new)
-        try:
-            bus.wait_ready(new, within=ready_timeout)
-            value = bus.read(new, ID_REG)
-        except NoReply:
-            raise CheckFailed(f"set-id: ID {new} does not answer after the change; "
-                              f"check with 'zap scan'") from None
+        value = _read_back(bus, new, ID_REG, ready_timeout,
+                           f"set-id: ID {new} does not answer after the change; check with 'zap scan'")
     if value != new:
         raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}")
     note(f"ID {ident} is now ID {new} (verified)")
@@ -479,12 +485,9 @@ def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
             return
         bus.restart(ident)
         bus.set_baud(baud)
-        try:
-            bus.wait_ready(ident, within=ready_timeout)
-            value = bus.read(ident, BAUD_REG)
-        except NoReply:
-            raise CheckFailed(f"set-baud: ID {ident} does not answer at {baud} baud after the restart; "
-                              f"try 'zap scan --baud all'") from None
+        value = _read_back(bus, ident, BAUD_REG, ready_timeout,
+                           f"set-baud: ID {ident} does not answer at {baud} baud after the restart; "
+                           f"try 'zap scan --baud all'")
     if value != code:
         raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})")
     note(f"ID {ident} now talks at {baud} baud (verified); use -b {baud} from now on")
