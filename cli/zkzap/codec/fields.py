@@ -314,11 +314,14 @@ class Layout:
             self._reserved = self._reserved_masks(self._covered)
         return self._reserved
 
-    def decoder(self, raw=False):
-        """The generated decoder function ``(frame, ctx, known) -> dict`` (compiled on first use)."""
-        fn = self._decoders.get(raw)
+    def decoder(self, ctx=None, known=None, raw=False):
+        """The generated decoder ``frame -> dict`` for one context (compiled on first use, from
+        the same :meth:`items` as the text encoders)."""
+        ctx = ctx or {}
+        key = (tuple(sorted(ctx.items())), known, raw)
+        fn = self._decoders.get(key)
         if fn is None:
-            fn = self._decoders[raw] = self._compile(raw)
+            fn = self._decoders[key] = compile_dict(*self.items(ctx, known, raw))
         return fn
 
     def _reserved_masks(self, covered):
@@ -330,49 +333,8 @@ class Layout:
             masks[byte] = ~used & 0xFF
         return masks
 
-    def _compile(self, raw: bool):
-        ns = {}
-        lines = ["def decode(b, ctx, known):", "    d = {}"]
-        for i, f in enumerate(self.fields):
-            r = f"r{i}"
-            lines.append(f"    {r} = {f.raw_expr()}")
-            gate = f.since > 1
-            ind = "    "
-            if gate:
-                lines.append(f"    if known is not None and known < {f.since}:")
-                lines.append(f"        d[{f.key!r}] = None")
-                if f.name_key:
-                    lines.append(f"        d[{f.name_key!r}] = None")
-                lines.append("    else:")
-                ind = "        "
-            if f.raw_key:
-                lines.append(f"{ind}d[{f.raw_key!r}] = {r}")
-            if f.values is not None:
-                ns[f"v{i}"] = f.values
-                lines.append(f"{ind}d[{f.key!r}] = v{i}.get({r})")
-            elif f.names is not None:
-                ns[f"n{i}"] = f.names
-                lines.append(f"{ind}d[{f.key!r}] = {r}")
-                lines.append(f"{ind}d[{f.name_key!r}] = n{i}.get({r}) or 'undocumented-%d' % {r}")
-            elif callable(f.scale):
-                ns[f"s{i}"] = f.scale
-                ns[f"f{i}"] = f
-                lines.append(f"{ind}sc = s{i}(ctx)")
-                lines.append(f"{ind}d[{f.key!r}] = None if sc is None else f{i}._phys({r}, sc)")
-            elif f.scale == 1 and f.offset == 0:
-                lines.append(f"{ind}d[{f.key!r}] = {r}")
-            elif isinstance(f.scale, float):
-                lines.append(f"{ind}d[{f.key!r}] = round({r} * {f.scale!r} + {f.offset!r}, {f.decimals})")
-            else:
-                lines.append(f"{ind}d[{f.key!r}] = {r} * {f.scale!r} + {f.offset!r}")
-            if raw:
-                lines.append(f"    d[{(f.key + '_raw')!r}] = {r}")
-        lines.append("    return d")
-        exec("\n".join(lines), ns)  # noqa: S102 - generated from the static tables above
-        return ns["decode"]
-
     def decode(self, frame, ctx=None, known=None, raw=False):
-        return self.decoder(raw)(frame, ctx or {}, known)
+        return self.decoder(ctx, known, raw)(frame)
 
     # --- text encoders ------------------------------------------------------------------
     def items(self, ctx, known, raw=False):
@@ -456,6 +418,25 @@ def _phys_item(r, sc, offset, decimals):
             return "int", f"int(round({r} * {sc!r} + {offset!r}, 0))"
         return "float", f"round({r} * {sc!r} + {offset!r}, {decimals})"
     return "int", f"{r} * {sc!r} + {offset!r}"
+
+
+def compile_dict(code, items):
+    """Compile ``code`` + ``items`` (see :meth:`Layout.items`) into ``frame -> dict``."""
+    ns = {}
+    entries = []
+    for n, (key, kind, what) in enumerate(items):
+        if kind == "const":
+            ns[f"c{n}"] = what
+            entries.append(f"{key!r}: c{n}")
+        elif kind == "table":
+            expr, values = what
+            ns[f"t{n}"] = tuple(values)
+            entries.append(f"{key!r}: t{n}[{expr}]")
+        else:
+            entries.append(f"{key!r}: {what}")
+    src = ["def decode(b):"] + [f"    {line}" for line in code] + ["    return {" + ", ".join(entries) + "}"]
+    exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
+    return ns["decode"]
 
 
 def compile_text(code, items, dialect):
