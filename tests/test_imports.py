@@ -85,6 +85,8 @@ def test_commands_import_only_what_they_use(tmp_path, baseline, case):
     also = ("zkzap.codec.zap",) if argv[0] == "zk" or argv[1:2] == ("zk",) else ("zkzap.codec.zk",)
     if case in ("zkzap --help", "zk --help", "--version"):
         also += ("zkzap.codec",)      # a group's help lists its commands without importing them
+    if argv[-1] == "-n":
+        also += ("locale",)   # no message-catalogue look-up for the help option either
     check(mods, baseline, also_forbidden=also)
 
 

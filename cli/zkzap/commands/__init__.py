@@ -18,7 +18,87 @@ from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError
 EXIT_EPILOG = "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "."
 
 
-class LazyGroup(click.Group):
+HELP_TEXT = "Show this message and exit."
+
+
+def _show_help(ctx, param, value):
+    if value and not ctx.resilient_parsing:
+        click.echo(ctx.get_help(), color=ctx.color)
+        ctx.exit()
+
+
+class QuickHelp:
+    """A ``-h/--help`` option built without a message-catalogue look-up.
+
+    click builds each command's help option with ``gettext``, whose first call imports
+    :mod:`locale` and compiles its regular expressions: about 1 ms on every run of a command
+    that shell scripts call in loops and that every TAB runs. The option is the same otherwise.
+    """
+
+    def get_help_option(self, ctx):
+        names = self.get_help_option_names(ctx)
+        if not names or not self.add_help_option:
+            return None
+        option = self.__dict__.get("_quick_help")
+        if option is None:
+            # created once: click orders eager callbacks by object identity
+            option = self._quick_help = click.Option(
+                [*names, "_zkzap_help"], is_flag=True, expose_value=False, is_eager=True,
+                help=HELP_TEXT, callback=_show_help)
+        return option
+
+
+class Command(QuickHelp, click.Command):
+    """Every zkzap command: click's, with the quick help option, and a lone short option
+    (``-n``) handed to click in its long spelling (``--dry-run``): click tries every single-dash
+    token as a long option first, and the failed try (an exception and a message-catalogue
+    look-up) costs the start-up of a command that shell scripts call in loops.
+
+    With ``negative_numbers`` set, a token that looks like a negative number, is no option of
+    the command and is not an option's value goes behind ``--`` (keeping the arguments' order).
+    """
+
+    negative_numbers = False
+
+    def parse_args(self, ctx, args):
+        if "--" not in args:
+            opts = {o: p for p in self.get_params(ctx) if isinstance(p, click.Option)
+                    for o in p.opts + p.secondary_opts}
+            head, tail, prev = [], [], None
+            for a in args:
+                takes_value = prev in opts and not opts[prev].is_flag and not opts[prev].count
+                if self.negative_numbers and _is_negative_number(a) and a not in opts and not takes_value:
+                    tail.append(a)
+                elif not takes_value and len(a) == 2 and a in opts and _long(opts[a]):
+                    head.append(_long(opts[a]))
+                else:
+                    head.append(a)
+                prev = a
+            args = head + ["--"] + tail if tail else head
+        return super().parse_args(ctx, args)
+
+
+def _long(option):
+    return next((o for o in option.opts if o.startswith("--")), None)
+
+
+def _is_negative_number(token: str) -> bool:
+    if len(token) < 2 or token[0] != "-" or not (token[1].isdigit() or token[1] == "."):
+        return False
+    try:
+        float(token) if not token[1:].lower().startswith("0x") else int(token, 16)
+    except ValueError:
+        return False
+    return True
+
+
+class Group(QuickHelp, click.Group):
+    """Every zkzap group: click's, with the quick help option for itself and its commands."""
+
+    command_class = Command
+
+
+class LazyGroup(Group):
     """A group whose sub-commands live in modules imported on first use.
 
     ``lazy`` maps a command name to ``("module", "attribute", "short help")``; the short help

@@ -6,10 +6,10 @@ import sys
 
 import click
 
-from . import CONTEXT
+from . import CONTEXT, Command
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("shell", type=click.Choice(["bash", "zsh", "fish"]))
 @click.option("--prog", type=click.Choice(["zkzap", "zk", "zap"]), default="zkzap", show_default=True,
               help="The command to complete: zkzap, or the direct entry points zk and zap.")

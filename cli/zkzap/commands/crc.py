@@ -8,7 +8,7 @@ from ..codec import crc as crcs
 from ..codec import zap, zk
 from ..codec.hexfmt import format_hex
 from ..errors import UsageError
-from . import CONTEXT
+from . import CONTEXT, Group
 from .options import checked, read_hex_input
 
 HEX = click.argument("hex_bytes", nargs=-1, metavar="HEX...")
@@ -18,7 +18,7 @@ CHECK = click.option("-c", "--check", is_flag=True,
                           "its CRC/checksum is right, 1 when not (expected and found on stderr).")
 
 
-@click.group(context_settings=CONTEXT)
+@click.group(cls=Group, context_settings=CONTEXT)
 def crc():
     """Compute or check CRCs and checksums.
 

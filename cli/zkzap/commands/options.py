@@ -12,6 +12,7 @@ import click
 
 from ..errors import UsageError
 from ..io import FORMATS
+from . import Command
 
 #: Environment variables giving defaults, one pair per protocol group.
 ENV = {
@@ -23,50 +24,15 @@ ENV = {
 DEFAULT_BAUD = {"zk": 115200, "zap": 57600}
 
 
-class SignedCommand(click.Command):
+class SignedCommand(Command):
     """A command whose positional arguments may be negative numbers (``ignition-voltage -0.5``).
 
     click would read ``-0.5`` as an unknown option and never name the field: a token that looks
     like a negative number, is no option of this command and is not an option's value is moved
     behind ``--`` (keeping the arguments' order), so the field's own range check reports it.
-    A lone short option (``-n``) is passed to click in its long spelling (``--dry-run``): click
-    tries every single-dash token as a long option first, and the failed try costs the start-up
-    of a command that shell scripts call in loops.
     """
 
-    def parse_args(self, ctx, args):
-        if "--" not in args:
-            opts = {o: p for p in self.get_params(ctx) if isinstance(p, click.Option)
-                    for o in p.opts + p.secondary_opts}
-            head, tail, prev = [], [], None
-            for a in args:
-                takes_value = prev in opts and not opts[prev].is_flag and not opts[prev].count
-                if _is_negative_number(a) and a not in opts and not takes_value:
-                    tail.append(a)
-                elif not takes_value and len(a) == 2 and a in opts and _long(opts[a]):
-                    head.append(_long(opts[a]))
-                else:
-                    head.append(a)
-                prev = a
-            if tail:
-                args = head + ["--"] + tail
-            else:
-                args = head
-        return super().parse_args(ctx, args)
-
-
-def _long(option):
-    return next((o for o in option.opts if o.startswith("--")), None)
-
-
-def _is_negative_number(token: str) -> bool:
-    if len(token) < 2 or token[0] != "-" or not (token[1].isdigit() or token[1] == "."):
-        return False
-    try:
-        float(token) if not token[1:].lower().startswith("0x") else int(token, 16)
-    except ValueError:
-        return False
-    return True
+    negative_numbers = True
 
 
 def note(message: str) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from . import CONTEXT
+from . import CONTEXT, Command
 from .options import format_option, note, resolve_format, write_rows
 
 COLUMNS = ["device", "name", "description", "vid_pid", "vid", "pid", "serial_number", "manufacturer", "product",
@@ -13,7 +13,7 @@ TABLE_COLUMNS = [("device", "device"), ("description", "description"), ("vid_pid
                  ("serial_number", "serial number"), ("_hints", "hints")]
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.option("-u", "--usb", "usb_only", is_flag=True, help="Only USB adapters (leave out built-in UARTs).")
 @format_option()
 def ports(usb_only, fmt):

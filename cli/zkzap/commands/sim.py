@@ -13,7 +13,7 @@ import sys
 import click
 
 from ..errors import UsageError
-from . import CONTEXT
+from . import CONTEXT, Group
 
 
 def _listen(ctx, param, value):
@@ -80,7 +80,7 @@ def _make(kind, **options):
         raise UsageError(f"sim {kind}: {e}") from None
 
 
-@click.group(context_settings=CONTEXT)
+@click.group(cls=Group, context_settings=CONTEXT)
 def sim():
     """Run the built-in ECU or actuator-bus simulator on a pty or a TCP socket.
 

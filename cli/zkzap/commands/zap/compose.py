@@ -16,7 +16,7 @@ import click
 from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import SignedCommand, consent, dry_run_option, port_options, yes_option
 from .params import INT, REGISTER, id_option
 
@@ -210,7 +210,7 @@ def _link_args(common):
     return {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries")}
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @id_option()
 @click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
               help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
@@ -318,7 +318,7 @@ def register_records(ident, values, errors=()):
     return out
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("reg", metavar="REGISTER", type=REGISTER)
 @click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
               help="Bytes to read (default: the register's size); more bytes read the registers that follow.")
@@ -420,7 +420,7 @@ Examples:
 """)
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @id_option(default="broadcast")
 @wire_options
 def execute(ident, **common):
@@ -434,7 +434,7 @@ def execute(ident, **common):
     deliver([zap.execute(ident)], **common)
 
 
-@click.command("factory-reset", context_settings=CONTEXT)
+@click.command("factory-reset", cls=Command, context_settings=CONTEXT)
 @click.option("--reset-id", is_flag=True, help="Also reset the ID to 0 (option bit 0).")
 @click.option("--reset-baud", is_flag=True, help="Also reset the baud rate to 57600 (option bit 1).")
 @id_option()
@@ -452,7 +452,7 @@ def factory_reset(reset_id, reset_baud, ident, **common):
     deliver([zap.factory_reset(ident, reset_id, reset_baud)], **common)
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @id_option()
 @wire_options
 def restart(ident, **common):
@@ -481,7 +481,7 @@ def parse_targets(pairs):
     return out
 
 
-@click.command("sync-move", context_settings=CONTEXT)
+@click.command("sync-move", cls=Command, context_settings=CONTEXT)
 @click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
@@ -503,7 +503,7 @@ def sync_move(targets, reg, force, **common):
     deliver(packets, force=force, **common)
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("instruction", metavar="INSTRUCTION")
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()

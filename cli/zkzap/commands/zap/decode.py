@@ -8,7 +8,7 @@ import click
 from ...codec import zap
 from ...codec.framing import ZapFramer
 from ...errors import UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import checked, close_output, format_option, note_skipped, open_output, output_options, resolve_format
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
@@ -31,7 +31,7 @@ def _table_cells(rec):
     return rec
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option()

@@ -14,7 +14,7 @@ import click
 
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import SignedCommand, consent, note, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
@@ -112,7 +112,7 @@ def _consent_real(port, sim, yes, action):
 
 # -- scan ----------------------------------------------------------------------------------------
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="IDs to probe, like 0-253 or 1,2,5-8.")
 @click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
@@ -249,7 +249,7 @@ def map_blocks(gap=8):
     return [tuple(b) for b in blocks]
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
               help="Actuator ID 0..253.")
 @click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
@@ -410,7 +410,7 @@ def _read_back(bus, ident, reg, within, silent):
         raise CheckFailed(silent) from None
 
 
-@click.command("set-id", context_settings=CONTEXT)
+@click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
               help="The actuator's present ID 0..253 (factory default 0).")
@@ -448,7 +448,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
     note(f"ID {ident} is now ID {new} (verified)")
 
 
-@click.command("set-baud", context_settings=CONTEXT)
+@click.command("set-baud", cls=Command, context_settings=CONTEXT)
 @click.argument("new_baud", type=click.Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
               help="Actuator ID 0..253.")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from ...codec import zap
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import format_option, resolve_format, write_rows
 from .params import REGISTER
 
@@ -32,7 +32,7 @@ def _table_row(reg) -> dict:
     return row
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[REGISTER...]", type=REGISTER)
 @click.option("-w", "--writable", is_flag=True, help="Only registers that can be written.")
 @click.option("--memory", type=click.Choice(["NV", "V"], case_sensitive=False), default=None,

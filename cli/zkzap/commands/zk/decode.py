@@ -8,7 +8,7 @@ import click
 from ...codec import zk
 from ...codec.framing import ZkFramer
 from ...errors import UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import (checked, close_output, format_option, note, note_skipped, open_output, output_options,
                        protocol_version_option, resolve_format)
 
@@ -57,7 +57,7 @@ def summary(rec) -> str:
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame", "frame")]
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option()

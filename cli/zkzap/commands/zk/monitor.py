@@ -12,7 +12,7 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import note, open_output, port_options, protocol_version_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         resolve_port, zk_timeout_help)
@@ -151,7 +151,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     return outcome, tel, session
 
 
-@click.command(context_settings=CONTEXT, epilog=EXIT_HELP)
+@click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @port_options("zk")
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) instead of a port, paced in real time.")

@@ -8,7 +8,7 @@ import sys
 import click
 
 from ...errors import OutputError, UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
@@ -36,7 +36,7 @@ def _read(path) -> str:
         raise UsageError(f"schedule: {path} is not UTF-8 text (expected CSV rows time_s,throttle_pct[,state])") from None
 
 
-@click.command(context_settings=CONTEXT, epilog=EPILOG)
+@click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv")
 @click.option("--example", is_flag=True, help="Print the example schedule (a start, steps up to 100 %, "
                                               "cool-down) and exit.")

@@ -12,7 +12,7 @@ import click
 
 from ...codec import zk
 from ...errors import UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Group
 from ..options import (SignedCommand, consent, dry_run_option, note, port_options, protocol_version_option, warn,
                        yes_option)
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
@@ -228,7 +228,7 @@ def _doc(cmd, fields):
     return "\n".join(lines)
 
 
-class SendGroup(click.Group):
+class SendGroup(Group):
     """Builds a control command's sub-command from the codec table when it is first asked for,
     so that running one builds one (a faster start); help and completion list them all."""
 

@@ -9,7 +9,7 @@ import click
 
 from ...codec import zk
 from ...errors import UsageError
-from .. import CONTEXT
+from .. import CONTEXT, Command
 from ..options import format_option, resolve_format, write_rows
 
 
@@ -50,7 +50,7 @@ class _TableName(click.ParamType):
 STATE_COLUMNS = ["code", "name", "description"]
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[CODE|NAME...]", type=_TableName(zk.ENGINE_STATES))
 @format_option(choices=("table", "json", "jsonl", "csv"))
 def states(which, fmt):
@@ -70,7 +70,7 @@ def states(which, fmt):
     write_rows(rows, STATE_COLUMNS, fmt, title="Engine states (status ID 1)")
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[CODE|NAME...]", type=_TableName(zk.ERRORS))
 @format_option(choices=("table", "json", "jsonl", "csv"))
 def errors(which, fmt):
@@ -178,7 +178,7 @@ def _short_range(field, full):
     return f"{min(codes)}..{max(codes)}, names: '{where}'"
 
 
-@click.command(context_settings=CONTEXT)
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.option("-k", "--kind", type=click.Choice(["both", "control", "status"]), default="both", show_default=True,
               help="Control (host -> ECU) or status (ECU -> host) fields.")
 @click.option("-i", "--id", "frame_id", type=click.IntRange(0, 15), default=None, metavar="ID",
