@@ -154,25 +154,31 @@ protocol_version_option = click.option(
          "(sets the voltage unit: 0.1 V up to 3, 0.2 V from 4; default 4).")
 
 
+def apply_options(f, options):
+    """Apply option decorators listed in help order to a function or to a click Command (a
+    Command lists its options in the order they are added; a function's decorators apply in
+    reverse)."""
+    for opt in (options if isinstance(f, click.Command) else reversed(options)):
+        f = opt(f)
+    return f
+
+
 def port_options(group: str):
     """``-p/--port``, ``-b/--baud``, ``--timeout`` and ``--sim`` for a protocol group."""
     env = ENV[group]
-
-    def deco(f):
-        f = click.option("--sim", is_flag=True,
-                         help="Talk to the built-in simulator instead of a port.")(f)
-        f = click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
-                         help="Reply timeout (default: derived from the baud rate).")(f)
-        f = click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
-                         default=DEFAULT_BAUD[group], show_default=True,
-                         help=f"Baud rate [env {env['baud']}].")(f)
-        f = click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
-                         shell_complete=_complete_ports,
-                         help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
-                              f"loop://, spy://, hwgrep://) [env {env['port']}].")(f)
-        return f
-
-    return deco
+    options = [
+        click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
+                     shell_complete=_complete_ports,
+                     help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
+                          f"loop://, spy://, hwgrep://) [env {env['port']}]."),
+        click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
+                     default=DEFAULT_BAUD[group], show_default=True,
+                     help=f"Baud rate [env {env['baud']}]."),
+        click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
+                     help="Reply timeout (default: derived from the baud rate)."),
+        click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
+    ]
+    return lambda f: apply_options(f, options)
 
 
 def _complete_ports(ctx, param, incomplete):

@@ -33,7 +33,8 @@ def _read(path) -> str:
     except OSError as e:
         raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
     except UnicodeDecodeError:
-        raise UsageError(f"schedule: {path} is not UTF-8 text (expected CSV rows time_s,throttle_pct[,state])") from None
+        raise UsageError(f"schedule: {path} is not UTF-8 text "
+                         "(expected CSV rows time_s,throttle_pct[,state])") from None
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)

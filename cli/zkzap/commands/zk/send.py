@@ -12,9 +12,9 @@ import click
 
 from ...codec import zk
 from ...errors import UsageError
-from .. import CONTEXT, Group
-from ..options import (SignedCommand, consent, dry_run_option, note, port_options, protocol_version_option, warn,
-                       yes_option)
+from .. import CONTEXT, Command, Group
+from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
+                       protocol_version_option, warn, yes_option)
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
@@ -69,9 +69,7 @@ def send_options(f):
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
     ]
-    # A Command lists options in the order they are added; a function in reverse.
-    for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
-        f = opt(f)
+    f = apply_options(f, opts)
     if isinstance(f, click.Command):
         zk_timeout_help(f)
     else:
@@ -229,16 +227,16 @@ def _doc(cmd, fields):
 
 
 class SendGroup(Group):
-    """Builds a control command's sub-command from the codec table when it is first asked for,
-    so that running one builds one (a faster start); help and completion list them all."""
+    """Builds a sub-command when it is first asked for: a control command from the codec table,
+    or ``raw``; running one builds one (a faster start), help and completion list them all."""
 
     def list_commands(self, ctx):
-        return sorted(set(super().list_commands(ctx)) | set(zk.CONTROL_BY_NAME))
+        return sorted(set(super().list_commands(ctx)) | set(zk.CONTROL_BY_NAME) | {"raw"})
 
     def get_command(self, ctx, name):
         cmd = super().get_command(ctx, name)
-        if cmd is None and name in zk.CONTROL_BY_NAME:
-            cmd = _make(zk.CONTROL_BY_NAME[name])
+        if cmd is None and (name in zk.CONTROL_BY_NAME or name == "raw"):
+            cmd = _make(zk.CONTROL_BY_NAME[name]) if name != "raw" else _make_raw()
             self.add_command(cmd)
         return cmd
 
@@ -274,11 +272,14 @@ def _parse_assignments(pairs):
     return out
 
 
-@send.command("raw", context_settings=CONTEXT, epilog=SEND_EPILOG)
+def _make_raw():
+    return send_options(raw_command)
+
+
+@click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
 @click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...")
-@send_options
-def raw(cmd_id, assignments, **common):
+def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.
 
     ID is the command ID 0..8. FIELD is a field key of that command ('zk fields' lists them;

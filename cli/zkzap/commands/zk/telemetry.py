@@ -12,7 +12,7 @@ import click
 
 from ...errors import UsageError
 from ...io import FORMATS
-from ..options import FilePath
+from ..options import FilePath, apply_options
 
 #: Output format by the extension of -o FILE when --format is not given.
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
@@ -45,10 +45,7 @@ def log_options(f):
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
                                           "or 'zk decode --binary')."),
     ]
-    # A Command lists options in the order they are added; a function in reverse.
-    for opt in (opts if isinstance(f, click.Command) else reversed(opts)):
-        f = opt(f)
-    return f
+    return apply_options(f, opts)
 
 
 TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
