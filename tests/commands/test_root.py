@@ -33,3 +33,31 @@ def test_version(cli):
     for group in ([], ["zk"], ["zap"]):
         r = cli(*group, "--version")
         assert r.exit_code == 0 and __version__ in r.stdout
+
+
+@pytest.mark.parametrize("entry,prog", [("main", "zkzap"), ("zk_main", "zk"), ("zap_main", "zap")])
+def test_entry_points_freeze_what_is_imported_then_run(monkeypatch, entry, prog):
+    import gc
+
+    calls = []
+    monkeypatch.setattr(gc, "freeze", lambda: calls.append("freeze"))
+    monkeypatch.setattr(commands, "run", lambda cmd, name: calls.append(("run", cmd.name, name)) or 3)
+    with pytest.raises(SystemExit) as e:
+        getattr(commands, entry)()
+    assert e.value.code == 3
+    assert calls == ["freeze", ("run", "root" if prog == "zkzap" else prog, prog)]
+
+
+def test_every_command_builds_its_help_option_without_gettext(monkeypatch, cli):
+    import gettext
+
+    looked_up = []
+    monkeypatch.setattr(gettext, "dgettext", lambda domain, msg: looked_up.append(msg) or msg)
+    for group, mapping in MAPS:
+        for name, spec in mapping.items():
+            cmd = getattr(importlib.import_module(spec[0], "zkzap.commands"), spec[1])
+            ctx = click.Context(cmd, info_name=name)
+            option = cmd.get_help_option(ctx)
+            assert option.opts == ["-h", "--help"] and option.help == "Show this message and exit."
+            assert option is cmd.get_help_option(ctx)
+    assert looked_up == []
