@@ -5,6 +5,19 @@ from __future__ import annotations
 import time
 
 
+def parse_flag(key: str, value) -> bool:
+    """A simulator's on/off option (a URL query or a command-line value): 1/0, true/false,
+    yes/no, on/off; empty is off."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off", ""):
+        return False
+    raise ValueError(f"{key}: {value!r} is not a boolean; allowed 0/1, true/false")
+
+
 class Clock:
     """Model time: real monotonic time scaled by ``speed`` (``speed=10`` runs ten times faster)."""
 

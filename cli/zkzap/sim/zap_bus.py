@@ -47,6 +47,7 @@ from collections import deque
 from ..codec import zap
 from ..codec.framing import ZapFramer
 from ..link.port import wire_time
+from .base import parse_flag
 
 #: Actuator processing time before a reply starts (model seconds).
 TURNAROUND = 0.002
@@ -700,15 +701,6 @@ class ActuatorBus:
         return True
 
 
-def _flag(value, name) -> bool:
-    v = str(value).strip().lower()
-    if v in ("1", "true", "yes", "on"):
-        return True
-    if v in ("0", "false", "no", "off", ""):
-        return False
-    raise ValueError(f"{name}: {value!r}; allowed 0 or 1")
-
-
 def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_mode=None,
                  voltage=None, **unknown) -> ActuatorBus:
     """Build a bus from string options (a ``sim://zap?...`` query or ``zkzap sim zap``).
@@ -728,7 +720,7 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
         line = -1
     if line not in zap.BAUD_TO_CODE:
         raise ValueError(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
-    bus = ActuatorBus([], state_path=state or None, echo=_flag(echo, "echo"))
+    bus = ActuatorBus([], state_path=state or None, echo=parse_flag("echo", echo))
     if not (state and bus.load_state()):
         bus.actuators = [Actuator(i, ident, b or line) for i, (ident, b) in enumerate(parse_ids(ids))]
         if return_mode not in (None, ""):

@@ -56,7 +56,7 @@ from collections import deque
 
 from ..codec import zk
 from ..codec.framing import ZkFramer
-from .base import Device
+from .base import Device, parse_flag
 
 #: Below protocol version 5, a host silent for longer than this (model seconds) loses control:
 #: error 13 and the engine stops.
@@ -531,17 +531,6 @@ def _error_code(value):
     return value
 
 
-def _bool(key, v):
-    if isinstance(v, bool):
-        return v
-    text = str(v).strip().lower()
-    if text in ("1", "true", "yes", "on"):
-        return True
-    if text in ("0", "false", "no", "off", ""):
-        return False
-    raise ValueError(f"{key}: {v!r} is not a boolean; allowed 0/1, true/false")
-
-
 def _num(kind):
     def conv(key, v):
         try:
@@ -554,7 +543,7 @@ def _num(kind):
 _INT, _FLOAT = _num(int), _num(float)
 OPTIONS = {
     "protocol_version": _INT, "rate": _INT, "max_rpm": _INT, "idle_rpm": _INT, "max_thrust": _FLOAT,
-    "ambient": _FLOAT, "battery": _FLOAT, "max_pump_voltage": _FLOAT, "esr": _bool, "baud": _INT,
+    "ambient": _FLOAT, "battery": _FLOAT, "max_pump_voltage": _FLOAT, "esr": parse_flag, "baud": _INT,
     "corrupt_every": _INT, "silent_after": _FLOAT, "error": lambda k, v: v, "error_after": _FLOAT,
 }
 #: Options accepted and handled elsewhere: ``speed`` scales the Clock that drives the device.
