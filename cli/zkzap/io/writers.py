@@ -224,20 +224,25 @@ class Writer:
         raise OutputError(f"output: cannot write {name}: {e.strerror or e}") from None
 
 
-class JsonlWriter(Writer):
+class LineWriter(Writer):
+    """A record per line (JSON Lines, CSV rows)."""
+
+    def write_lines(self, lines):
+        """Records already rendered by the format's dialect (:class:`JsonDialect`,
+        :class:`CsvDialect` for this column set), without newlines, as one block."""
+        if lines:
+            lines.append("")
+            self._emit("\n".join(lines))
+            self.count += len(lines) - 1
+
+
+class JsonlWriter(LineWriter):
     def write(self, rec):
         self._put(_dumps(rec) + "\n")
         self.count += 1
 
     def write_many(self, recs):
         self.write_lines([_dumps(rec) for rec in recs])
-
-    def write_lines(self, lines):
-        """Records already rendered by :class:`JsonDialect` (no newlines)."""
-        if lines:
-            lines.append("")
-            self._emit("\n".join(lines))
-            self.count += len(lines) - 1
 
 
 class JsonWriter(Writer):
@@ -260,7 +265,7 @@ class JsonWriter(Writer):
         super().close()
 
 
-class CsvWriter(Writer):
+class CsvWriter(LineWriter):
     """CSV with one header and a fixed column set. ``header=False`` when appending to a file
     that already has one. Keys not in ``columns`` are dropped; missing ones are empty."""
 
@@ -282,13 +287,6 @@ class CsvWriter(Writer):
             get = rec.get
             lines.append(",".join(_csv_quote(csv_cell(get(c))) for c in columns))
         self.write_lines(lines)
-
-    def write_lines(self, lines):
-        """Rows already rendered by :class:`CsvDialect` for this column set (no newlines)."""
-        if lines:
-            lines.append("")
-            self._emit("\n".join(lines))
-            self.count += len(lines) - 1
 
 
 class TableWriter(Writer):
