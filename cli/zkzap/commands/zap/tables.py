@@ -37,7 +37,7 @@ def _table_row(reg) -> dict:
 @click.option("-w", "--writable", is_flag=True, help="Only registers that can be written.")
 @click.option("--memory", type=click.Choice(["NV", "V"], case_sensitive=False), default=None,
               help="Only stored (NV, survive power off; writes wear memory) or volatile (V) registers.")
-@format_option(choices=("table", "json", "jsonl", "csv"))
+@format_option()
 def registers(which, writable, memory, fmt):
     """List the register map (12Lf, firmware 2.0 or later): name, address, size, access,
     NV (stored) or V (volatile), range, unit, default.

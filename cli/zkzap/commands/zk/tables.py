@@ -47,12 +47,19 @@ class _TableName(click.ParamType):
         return [CompletionItem(n, help=str(c)) for c, n in self.table.items() if n.startswith(incomplete)]
 
 
-STATE_COLUMNS = ["code", "name", "description"]
+CODE_COLUMNS = ["code", "name", "description"]
+
+
+def _write_codes(names, texts, which, what, fmt, title):
+    """The rows of an appendix table (all, or those ``which`` picks) in ``fmt``."""
+    codes = _lookup(names, which, what) if which else list(names)
+    rows = ({"code": c, "name": names[c], "description": texts.get(c, "")} for c in codes)
+    write_rows(rows, CODE_COLUMNS, fmt, title=title)
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[CODE|NAME...]", type=_TableName(zk.ENGINE_STATES))
-@format_option(choices=("table", "json", "jsonl", "csv"))
+@format_option()
 def states(which, fmt):
     """List the engine states of status ID 1 (engine_state, engine_state_name).
 
@@ -65,14 +72,12 @@ def states(which, fmt):
       zk states 11 -f json
       zk decode F1 E0 2E 0B 48 BC 47 | jq -r .engine_state_name    # running
     """
-    codes = _lookup(zk.ENGINE_STATES, which, "state") if which else list(zk.ENGINE_STATES)
-    rows = ({"code": c, "name": zk.ENGINE_STATES[c], "description": zk.ENGINE_STATE_TEXT.get(c, "")} for c in codes)
-    write_rows(rows, STATE_COLUMNS, fmt, title="Engine states (status ID 1)")
+    _write_codes(zk.ENGINE_STATES, zk.ENGINE_STATE_TEXT, which, "state", fmt, "Engine states (status ID 1)")
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[CODE|NAME...]", type=_TableName(zk.ERRORS))
-@format_option(choices=("table", "json", "jsonl", "csv"))
+@format_option()
 def errors(which, fmt):
     """List the ECU error codes of status ID 1 (error_code, error_name).
 
@@ -84,9 +89,7 @@ def errors(which, fmt):
       zk errors 13
       zk errors egt -f jsonl
     """
-    codes = _lookup(zk.ERRORS, which, "error") if which else list(zk.ERRORS)
-    rows = ({"code": c, "name": zk.ERRORS[c], "description": zk.ERROR_TEXT.get(c, "")} for c in codes)
-    write_rows(rows, STATE_COLUMNS, fmt, title="ECU error codes (status ID 1)")
+    _write_codes(zk.ERRORS, zk.ERROR_TEXT, which, "error", fmt, "ECU error codes (status ID 1)")
 
 
 # --- fields ------------------------------------------------------------------------------------
@@ -183,7 +186,7 @@ def _short_range(field, full):
               help="Control (host -> ECU) or status (ECU -> host) fields.")
 @click.option("-i", "--id", "frame_id", type=click.IntRange(0, 15), default=None, metavar="ID",
               help="Only the frame with this ID (control 0..8, status 1..10).")
-@format_option(choices=("table", "json", "jsonl", "csv"))
+@format_option()
 def fields(kind, frame_id, fmt):
     """List every control and status field: frame, JSON key, bits, scale, unit, range and the
     protocol version it appeared in.
