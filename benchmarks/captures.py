@@ -59,7 +59,8 @@ def zk_engine_frames(count, seed=1, rate_hz=50):
                     egt_c=max(-50, min(1997, int(egt + g(0, 2)))), sw_state=2 if running else 1)
         elif sid == 2:
             f = enc(2, rpm=r // 10 * 10, radio_voltage_v=5.0 + round(g(0, 0.1) / 0.2) * 0.2,
-                    power_voltage_v=24.0 - round(abs(g(0, 0.2)) / 0.2) * 0.2, pump_voltage_v=round(flow * 8 / 0.2) * 0.2)
+                    power_voltage_v=24.0 - round(abs(g(0, 0.2)) / 0.2) * 0.2,
+                    pump_voltage_v=round(flow * 8 / 0.2) * 0.2)
         elif sid == 3:
             f = enc(3, rpm=r // 10 * 10, throttle_pct=thr, pressure_pa=101324 + 2 * int(g(0, 2)))
         elif sid == 4:
@@ -124,27 +125,26 @@ def zk_capture(count=1_000_000, kind="engine", seed=1):
     return path
 
 
-def zap_feedback_packets(count, seed=1):
-    """Feedback packets of present-position reads from IDs 1..4 (``FF FF FF ID 04 00 LL HH CHK``)."""
+def _positions(count, seed):
+    """(ID, position) of ``count`` present-position reads from IDs 1..4, each rod wandering."""
     rng = random.Random(seed)
-    out = []
     pos = [2048, 1000, 3000, 500]
     for i in range(count):
         ident = i % 4 + 1
         pos[ident - 1] = max(0, min(4095, pos[ident - 1] + rng.randint(-8, 8)))
-        out.append(zap.packet(ident, 0x00, pos[ident - 1].to_bytes(2, "little")))
-    return out
+        yield ident, pos[ident - 1]
+
+
+def zap_feedback_packets(count, seed=1):
+    """Feedback packets of present-position reads from IDs 1..4 (``FF FF FF ID 04 00 LL HH CHK``)."""
+    return [zap.packet(ident, 0x00, p.to_bytes(2, "little")) for ident, p in _positions(count, seed)]
 
 
 def dxl_feedback_packets(count, seed=1):
     """The equivalent Dynamixel Protocol 1.0 status packets (``FF FF ID 04 ERR LL HH CHK``)."""
-    rng = random.Random(seed)
     out = []
-    pos = [2048, 1000, 3000, 500]
-    for i in range(count):
-        ident = i % 4 + 1
-        pos[ident - 1] = max(0, min(4095, pos[ident - 1] + rng.randint(-8, 8)))
-        body = bytes((ident, 4, 0)) + pos[ident - 1].to_bytes(2, "little")
+    for ident, p in _positions(count, seed):
+        body = bytes((ident, 4, 0)) + p.to_bytes(2, "little")
         out.append(b"\xff\xff" + body + bytes((~sum(body) & 0xFF,)))
     return out
 

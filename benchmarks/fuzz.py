@@ -90,6 +90,29 @@ def _flip(rng, data, expected, damaged):
             damaged.add(k)
 
 
+def _truncated(rng, pool):
+    """A valid frame cut short."""
+    f = rng.choice(pool)
+    return f[:rng.randint(1, len(f) - 1)]
+
+
+def _bit_flipped(rng, pool):
+    """A valid frame with one bit flipped."""
+    f = bytearray(rng.choice(pool))
+    f[rng.randrange(len(f))] ^= 1 << rng.randrange(8)
+    return bytes(f)
+
+
+def _damaged(rng, parts, expected):
+    """The stream of ``parts`` with 0..2 random bit flips, and the embedded frames they left
+    intact."""
+    data = bytearray(b"".join(parts))
+    damaged = set()
+    for _ in range(rng.choice((0, 0, 0, 1, 2)) if data else 0):
+        _flip(rng, data, expected, damaged)
+    return bytes(data), [e for k, e in enumerate(expected) if k not in damaged]
+
+
 def _cuts(rng, n):
     r = rng.random()
     if r < 0.4 or n == 0:
@@ -116,22 +139,15 @@ def make_zk(rng, pool, max_pieces=12):
         elif r < 0.78:
             piece = bytes((rng.choice(ZK_HEADS),)) + rng.randbytes(rng.randint(0, 6))
         elif r < 0.86:
-            f = rng.choice(pool)
-            piece = f[:rng.randint(1, len(f) - 1)]
+            piece = _truncated(rng, pool)
         elif r < 0.94:
-            f = bytearray(rng.choice(pool))
-            f[rng.randrange(len(f))] ^= 1 << rng.randrange(8)
-            piece = bytes(f)
+            piece = _bit_flipped(rng, pool)
         else:
             piece = bytes(rng.choice(ZK_HEADS) for _ in range(rng.randint(1, 8)))
         parts.append(piece)
         pos += len(piece)
-    data = bytearray(b"".join(parts))
-    damaged = set()
-    for _ in range(rng.choice((0, 0, 0, 1, 2)) if data else 0):
-        _flip(rng, data, expected, damaged)
-    expected = [e for k, e in enumerate(expected) if k not in damaged]
-    return Case("zk", bytes(data), expected, accept, _cuts(rng, len(data)))
+    data, expected = _damaged(rng, parts, expected)
+    return Case("zk", data, expected, accept, _cuts(rng, len(data)))
 
 
 def make_zap(rng, pool, max_pieces=10):
@@ -149,24 +165,17 @@ def make_zap(rng, pool, max_pieces=10):
         elif r < 0.77:
             piece = b"\xff" * rng.randint(1, 4) + rng.randbytes(rng.randint(0, 8))
         elif r < 0.85:
-            f = rng.choice(pool)
-            piece = f[:rng.randint(1, len(f) - 1)]
+            piece = _truncated(rng, pool)
         elif r < 0.93:
-            f = bytearray(rng.choice(pool))
-            f[rng.randrange(len(f))] ^= 1 << rng.randrange(8)
-            piece = bytes(f)
+            piece = _bit_flipped(rng, pool)
         else:
             piece = bytes(rng.choice((0xFF, 0xFF, rng.randrange(256))) for _ in range(rng.randint(1, 8)))
         parts.append(piece)
         pos += len(piece)
-    data = bytearray(b"".join(parts))
-    damaged = set()
-    for _ in range(rng.choice((0, 0, 0, 1, 2)) if data else 0):
-        _flip(rng, data, expected, damaged)
     # A packet's ID must not be FF; a packet whose header run is extended by a preceding FF
     # is still the same packet, but one preceded by FF FF? (? != FF) is too.
-    expected = [e for k, e in enumerate(expected) if k not in damaged]
-    return Case("zap", bytes(data), expected, None, _cuts(rng, len(data)))
+    data, expected = _damaged(rng, parts, expected)
+    return Case("zap", data, expected, None, _cuts(rng, len(data)))
 
 
 # --- checking -------------------------------------------------------------------------------
