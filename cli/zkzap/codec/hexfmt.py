@@ -3,8 +3,9 @@
 Accepted input notations: ``FF 14 64``, ``ff1464``, ``0xFF,0x14,0x64``, ``FF:14:64``,
 ``FF-14-64``, ``\\xff\\x14``, ``#`` comments, logic-analyser CSV exports (their ``0x..``
 byte column), and dump lines from ``xxd`` (``00000010: ff14 ...`` and its ASCII column),
-``hexdump -C`` (offset, ``|ascii|`` gutter) and ``od -A x -t x1`` (an odd-length offset). An offset is dropped only where it cannot be data: it ends in a
-colon, is followed by a ``|...|`` gutter, or has an odd number of digits.
+``hexdump -C`` (offset, ``|ascii|`` gutter) and ``od -A x -t x1`` (an odd-length offset).
+An offset is dropped only where it cannot be data: it ends in a colon, is followed by a
+``|...|`` gutter, or has an odd number of digits.
 Output is uppercase hex bytes separated by single spaces.
 """
 
