@@ -15,6 +15,19 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(
 
 from zkzap.commands import root, run  # noqa: E402
 
+#: Variables that change zkzap's behaviour or its output's look: none of the developer's (or
+#: CI's) values may reach a test. A test that wants one sets it itself.
+LEAKY = ("NO_COLOR", "FORCE_COLOR", "COLUMNS", "LINES", "TERM_PROGRAM", "CLICOLOR", "CLICOLOR_FORCE")
+
+
+@pytest.fixture(autouse=True)
+def hermetic(monkeypatch):
+    """Every test runs without the caller's ZKZAP_* and colour/terminal-size variables, so
+    ``ZKZAP_DEBUG=1`` or ``ZKZAP_ZAP_RETURN_MODE=0`` in a developer's shell changes nothing."""
+    for var in list(os.environ):
+        if var.startswith("ZKZAP_") or var in LEAKY:
+            monkeypatch.delenv(var, raising=False)
+
 
 class Result:
     def __init__(self, code, out, err):
@@ -28,8 +41,6 @@ class Result:
 def cli(monkeypatch):
     """Invoke ``zkzap ARGS...`` in-process with zkzap's error handling; returns exit/stdout/stderr."""
     monkeypatch.setenv("NO_COLOR", "1")
-    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD"):
-        monkeypatch.delenv(var, raising=False)
 
     def invoke(*args, input=None):
         runner = CliRunner()
@@ -51,8 +62,6 @@ def _exe(name):
 def sh():
     """Run an installed command (zkzap, zk, zap) as a real subprocess."""
     env = dict(os.environ, NO_COLOR="1")
-    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD"):
-        env.pop(var, None)
 
     def call(name, *args, input=None, timeout=30):
         exe = _exe(name)
