@@ -16,8 +16,14 @@ from . import Command
 
 #: Environment variables giving defaults, one pair per protocol group.
 ENV = {
-    "zk": {"port": "ZKZAP_ZK_PORT", "baud": "ZKZAP_ZK_BAUD"},
-    "zap": {"port": "ZKZAP_ZAP_PORT", "baud": "ZKZAP_ZAP_BAUD"},
+    "zk": {"port": "ZKZAP_ZK_PORT", "baud": "ZKZAP_ZK_BAUD", "stop_bits": "ZKZAP_ZK_STOPBITS"},
+    "zap": {"port": "ZKZAP_ZAP_PORT", "baud": "ZKZAP_ZAP_BAUD", "stop_bits": "ZKZAP_ZAP_STOPBITS"},
+}
+#: What the stop-bit option says per group: the ZK document allows 1 or 2; the mightyZAP side is
+#: 8N1, and the option is there for adapters that need it.
+STOP_BITS_HELP = {
+    "zk": "Stop bits of the ECU's UART (8 data bits, no parity): 1 or 2, as the ECU is configured",
+    "zap": "Stop bits (the actuators use 8N1; for adapters that need 2)",
 }
 #: Default baud rates: the mightyZAP factory default is 57600 (code 32); the ZK document lists
 #: 2400..115200 as configurable without a default, and 115200 is the common ECU setting.
@@ -163,22 +169,69 @@ def apply_options(f, options):
     return f
 
 
-def port_options(group: str):
-    """``-p/--port``, ``-b/--baud``, ``--timeout`` and ``--sim`` for a protocol group."""
+class BaudType(click.ParamType):
+    """A baud rate 300..4000000; with ``auto`` allowed, also the word ``auto`` (detect it)."""
+
+    name = "integer"
+
+    def __init__(self, auto=False):
+        self.auto = auto
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, int) and not isinstance(value, bool):
+            number = value
+        else:
+            text = str(value).strip().lower()
+            if text == "auto" and self.auto:
+                return "auto"
+            try:
+                number = int(text)
+            except ValueError:
+                number = None
+        if number is None or not 300 <= number <= 4_000_000:
+            allowed = "300..4000000" + (" or auto" if self.auto else "")
+            self.fail(f"{value!r} is not allowed; allowed {allowed}"
+                      + ("" if self.auto or str(value).strip().lower() != "auto"
+                         else " (auto: only 'zk monitor' and 'zk detect' find the baud rate)"), param, ctx)
+        return number
+
+    def shell_complete(self, ctx, param, incomplete):
+        from click.shell_completion import CompletionItem
+
+        bauds = ["2400", "4800", "9600", "19200", "38400", "57600", "115200"] + (["auto"] if self.auto else [])
+        return [CompletionItem(b) for b in bauds if b.startswith(incomplete)]
+
+
+def port_options(group: str, *, baud_auto: bool = False):
+    """``-p/--port``, ``-b/--baud``, ``--stop-bits``, ``--timeout`` and ``--sim`` for a protocol
+    group; ``baud_auto``: ``-b auto`` detects the line settings first."""
     env = ENV[group]
     options = [
         click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
                      shell_complete=_complete_ports,
                      help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
                           f"loop://, spy://, hwgrep://) [env {env['port']}]."),
-        click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
+        click.option("-b", "--baud", type=BaudType(baud_auto), envvar=env["baud"],
                      default=DEFAULT_BAUD[group], show_default=True,
-                     help=f"Baud rate [env {env['baud']}]."),
+                     help=(f"Baud rate, or auto to detect it (and the stop bits) first [env {env['baud']}]."
+                           if baud_auto else f"Baud rate [env {env['baud']}].")),
+        click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+                     default="1", show_default=True, callback=lambda ctx, param, v: int(v),
+                     help=f"{STOP_BITS_HELP[group]} [env {env['stop_bits']}]."),
         click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
                      help="Reply timeout (default: derived from the baud rate)."),
         click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
     ]
     return lambda f: apply_options(f, options)
+
+
+def warn_port(url) -> None:
+    """Say on stderr when a port name is wrong for an outgoing connection (macOS /dev/tty.*)."""
+    from ..link.adapters import outgoing_port_hint
+
+    hint = outgoing_port_hint(url)
+    if hint:
+        warn(hint)
 
 
 def _complete_ports(ctx, param, incomplete):

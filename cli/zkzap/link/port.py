@@ -11,20 +11,53 @@ from ..errors import PortError, UsageError
 _HANDLERS = "zkzap.link"
 
 
-def wire_time(nbytes: int, baud: int) -> float:
-    """Seconds ``nbytes`` take on the line (start + 8 data + stop bits)."""
-    return nbytes * 10.0 / baud
+#: Stop bits a line may use (8 data bits, no parity): the ZK document allows 1 or 2.
+STOP_BITS = (1, 2)
 
 
-def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
-    """A pyserial port for ``url`` at ``baud``, opened exclusively where the OS allows."""
+def bits_per_byte(stop_bits: int = 1) -> int:
+    """Bits one byte takes on an 8N1/8N2 line: start + 8 data + stop bits."""
+    return 9 + stop_bits
+
+
+def wire_time(nbytes: int, baud: int, stop_bits: int = 1) -> float:
+    """Seconds ``nbytes`` take on the line (start + 8 data + ``stop_bits`` stop bits)."""
+    return nbytes * (9.0 + stop_bits) / baud
+
+
+def byte_rate(baud: int, stop_bits: int = 1) -> float:
+    """Bytes per second the line carries at most."""
+    return baud / (9.0 + stop_bits)
+
+
+def line_load(rate_hz: float, frame_bytes: int, baud: int, stop_bits: int = 1) -> float:
+    """The fraction of the line that ``rate_hz`` frames of ``frame_bytes`` a second take (above 1:
+    they do not fit)."""
+    return rate_hz * wire_time(frame_bytes, baud, stop_bits)
+
+
+def fit_note(what: str, rate_hz: float, frame_bytes: int, baud: int, stop_bits: int = 1):
+    """A one-line note when ``rate_hz`` frames of ``frame_bytes`` bytes do not fit the line, else None."""
+    if not baud or line_load(rate_hz, frame_bytes, baud, stop_bits) <= 1.0:
+        return None
+    need = rate_hz * frame_bytes * (9 + stop_bits)
+    most = byte_rate(baud, stop_bits) / frame_bytes
+    return (f"{what}: {rate_hz:g} frames/s of {frame_bytes} bytes need {need:,.0f} baud at 8N{stop_bits}; "
+            f"{baud} baud carries at most {most:.1f} a second")
+
+
+def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1):
+    """A pyserial port for ``url`` at ``baud`` (8 data bits, no parity, ``stop_bits`` 1 or 2),
+    opened exclusively where the OS allows."""
     import serial
 
+    if stop_bits not in STOP_BITS:
+        raise UsageError(f"stop-bits: {stop_bits!r}; allowed 1, 2")
     if _HANDLERS not in serial.protocol_handler_packages:
         serial.protocol_handler_packages.append(_HANDLERS)
     try:
         port = serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
-                                     exclusive=True)
+                                     exclusive=True, stopbits=stop_bits)
         _no_delay(port)
         return port
     except ValueError as e:

@@ -173,6 +173,10 @@ class ZapBus:
     def baud(self) -> int:
         return self.port.baudrate
 
+    @property
+    def stop_bits(self) -> int:
+        return int(getattr(self.port, "stopbits", 1) or 1)
+
     def set_baud(self, baud: int) -> None:
         """Switch the port's line speed, once what was sent has left at the old speed."""
         try:
@@ -200,7 +204,7 @@ class ZapBus:
         """The derived timeout: both packets on the wire + turnaround + margin + ``extra``."""
         if self.timeout is not None:
             return self.timeout
-        return wire_time(tx_bytes + rx_bytes, self.baud) + TURNAROUND + self.margin + extra
+        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + TURNAROUND + self.margin + extra
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
@@ -263,7 +267,7 @@ class ZapBus:
         if not reply:
             self._settle()
             self._write(pkt)
-            gap = wire_time(len(pkt), self.baud)
+            gap = wire_time(len(pkt), self.baud, self.stop_bits)
             gap += RESTART_PAUSE if restart else (NV_PAUSE if stored else 0.0)
             self._quiet_until = time.monotonic() + gap
             return None
@@ -500,7 +504,7 @@ class ZapBus:
 
 
 def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, return_mode=1,
-             retries=RETRIES, sim_options=None) -> ZapBus:
+             retries=RETRIES, sim_options=None, stop_bits=1) -> ZapBus:
     """Open ``port`` (any pyserial URL or device, or the in-process simulator with ``sim``;
     ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`."""
     from .port import open_port, sim_url
@@ -515,5 +519,5 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         if not port:
             raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
         url = port
-    p = open_port(url, baud, timeout=0.1)
+    p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
     return ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)

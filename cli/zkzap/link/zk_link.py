@@ -119,10 +119,10 @@ class ZkLink:
         self.frames_out = 0
 
     @classmethod
-    def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S):
+    def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S, stop_bits=1):
         from .port import open_port
 
-        ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0)
+        ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
         return cls(ser, url, raw_log)
 
     @property
@@ -505,6 +505,12 @@ class Telemetry:
 
 # --- signals ---------------------------------------------------------------------------------
 
+#: The signals that end a session: SIGINT (Ctrl-C), SIGTERM, and on Windows SIGBREAK (Ctrl-Break),
+#: which ends it like Ctrl-C.
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n))
+INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
+
+
 class SignalGuard:
     """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
     records (files stay whole) and can send the abort command. A second signal while the first
@@ -521,7 +527,7 @@ class SignalGuard:
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            for s in (signal.SIGINT, signal.SIGTERM):
+            for s in STOP_SIGNALS:
                 try:
                     self._old[s] = signal.signal(s, self._handler)
                 except (ValueError, OSError):   # pragma: no cover - embedded interpreters
@@ -635,7 +641,7 @@ class Session:
             try:
                 while outcome is None:
                     if guard.signum is not None:
-                        outcome = Outcome("interrupted" if guard.signum == signal.SIGINT else "terminated")
+                        outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
                         break
                     now = src.now()
                     if self.duration is not None and now >= self.duration:

@@ -91,6 +91,10 @@ def targets_of(packets) -> list:
 def require_port(port, sim) -> None:
     if not port and not sim:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
+    if port and not sim:
+        from ..options import warn_port
+
+        warn_port(port)
 
 
 def ask_consent(packets, *, port, sim, yes) -> None:
@@ -117,7 +121,8 @@ def refuse_protocol_change(packets, force) -> None:
                          "longer reach it; pass --force to do it anyway")
 
 
-def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, **_):
+def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
+              **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
     from ...link.zap_bus import open_bus
 
@@ -126,7 +131,7 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
-                   return_mode=mode, retries=retries, sim_options=sim_opts)
+                   return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits)
     if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
         try:
             bus.detect_return_mode(probe)
@@ -183,7 +188,8 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
     probe = next((p[3] for p in packets if p[3] != zap.BROADCAST), None)
     bad = None
     with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode=return_mode,
-                   retries=retries, ids=targets_of(packets), probe=probe) as bus:
+                   retries=retries, ids=targets_of(packets), probe=probe,
+                   stop_bits=wire.get("stop_bits", 1)) as bus:
         for p in packets:
             reply = bus.command(p, check=False)
             if show_reply and reply is not None:
@@ -207,7 +213,8 @@ def _format(default, choices, what):
 
 
 def _link_args(common):
-    return {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries")}
+    return {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
+                                   "stop_bits")}
 
 
 @click.command(cls=Command, context_settings=CONTEXT)

@@ -56,7 +56,7 @@ def _read(path) -> str:
 @yes_option
 @protocol_version_option
 @log_options
-def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, port, baud, timeout, sim, yes,
+def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, port, baud, stop_bits, timeout, sim, yes,
             protocol_version, fmt, output, append, snapshot, ids, stale_after, raw_log):
     """Run a throttle schedule on the engine while its telemetry is logged.
 
@@ -114,7 +114,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
+        stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
         abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}")
     summary = _summary(name, url, sched, outcome, tel, session)
     _print_summary(summary)

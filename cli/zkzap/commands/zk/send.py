@@ -79,7 +79,7 @@ def send_options(f):
     return f
 
 
-def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, for_s=None,
+def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, stop_bits=1, for_s=None,
             rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
             stale_after=3, raw_log=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
@@ -106,7 +106,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if hazard and not zk_link.is_simulator(url):
         consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
     if for_s is None:
-        _send_once(zk_link, url, baud, frame, timeout, no_wait)
+        _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits)
         return
     from .monitor import run_telemetry
 
@@ -114,21 +114,21 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
+        stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
         stop_on_error=controls, title=f"{format_hex(frame)} to {url}")
     outcome.raise_for_status()
     if tel.errors and not controls:
         note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")
 
 
-def _send_once(zk_link, url, baud, frame, timeout, no_wait):
+def _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits=1):
     """Write one frame; unless ``no_wait``, wait for a status frame to show the ECU is there."""
     import time
 
     from ...codec.framing import ZkFramer
     from ...errors import NoReply
 
-    link = zk_link.ZkLink.open(url, baud)
+    link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
     try:
         link.write(frame)
         if no_wait:
@@ -167,7 +167,8 @@ def _make(cmd):
     fields = [f for f in cmd.fields if f.cli]
 
     def callback(**kw):
-        common = {k: kw.pop(k) for k in ("dry_run", "port", "baud", "timeout", "sim", "yes", "protocol_version")}
+        common = {k: kw.pop(k) for k in ("dry_run", "port", "baud", "timeout", "sim", "yes", "protocol_version",
+                                         "stop_bits")}
         values = {}
         for f in fields:
             v = kw.pop(f.key)
