@@ -53,7 +53,7 @@ def serve_options(f):
 
 def _serve(device, speed, use_pty, listen, link):
     from ..sim.base import Clock
-    from ..sim.serve import serve_pty, serve_tcp
+    from ..sim.serve import PtyUnsupported, serve_pty, serve_tcp
 
     if use_pty and listen:
         raise UsageError("--pty and --listen: choose one")
@@ -68,7 +68,11 @@ def _serve(device, speed, use_pty, listen, link):
             device.close()
             raise UsageError(f"--listen: cannot listen on {host}:{port}: {e.strerror or e}") from None
     else:
-        serve_pty(device, clock, link=link)
+        try:
+            serve_pty(device, clock, link=link)
+        except PtyUnsupported as e:
+            device.close()
+            raise UsageError(f"--pty: {e}") from None
 
 
 def _make(kind, **options):
@@ -109,10 +113,17 @@ def _parse_set(ctx, param, values):
               help="The protocol version the ECU reports (status ID 6).")
 @click.option("--rate", type=click.Choice(["20", "50", "100"]), default=None,
               help="Status rate in Hz at power-up (the rate actions change it).")
+@click.option("-b", "--baud", type=click.Choice(["2400", "4800", "9600", "19200", "38400", "57600", "115200"]),
+              default=None,
+              help="The ECU's UART speed (the document's list): a pty host at another speed reads "
+                   "misframed garbage. Default: whatever the host uses.")
+@click.option("--stop-bits", type=click.Choice(["1", "2"]), default=None,
+              help="The ECU's stop bits (8 data bits, no parity; default 1): a pty host at another "
+                   "setting reads garbage (the host's receiver is modelled strictly).")
 @click.option("--set", "extra", multiple=True, callback=_parse_set, metavar="KEY=VALUE",
               help="Any other ECU simulator option (max_rpm, idle_rpm, battery, faults, ...); repeatable.")
 @serve_options
-def zk(protocol_version, rate, extra, speed, use_pty, listen, link):
+def zk(protocol_version, rate, baud, stop_bits, extra, speed, use_pty, listen, link):
     """The ZK turbine ECU simulator: status frames at the configured rate, an engine model
     that starts, runs, follows the throttle and cools down.
 
@@ -121,9 +132,13 @@ def zk(protocol_version, rate, extra, speed, use_pty, listen, link):
       zkzap sim zk                               # prints /dev/pts/N
       zkzap sim zk --listen 127.0.0.1:0 --speed 10
       zkzap sim zk --protocol-version 4 --set max_rpm=120000
+      zkzap sim zk --baud 9600 --stop-bits 2          # for 'zk detect'
     """
+    for key, value in (("baud", baud), ("stop_bits", stop_bits)):
+        if value is not None and key in extra:
+            raise UsageError(f"--{key.replace('_', '-')} and --set {key}=...: give one")
     device = _make("zk", protocol_version=None if protocol_version is None else str(protocol_version),
-                   rate=rate, **extra)
+                   rate=rate, baud=baud, stop_bits=stop_bits, **extra)
     _serve(device, speed, use_pty, listen, link)
 
 

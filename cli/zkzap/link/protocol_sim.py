@@ -2,7 +2,8 @@
 
 ``KIND`` is ``zk`` (the ECU) or ``zap`` (the actuator bus); the query carries the simulator's
 options (``speed`` scales its clock). Reads advance the simulation; writes are delivered to it
-immediately with the port's baud rate. pyserial finds this module through
+immediately with the port's baud rate (and stop bits, for a device with line settings of its
+own: what either side sends at other settings arrives misframed, see :mod:`zkzap.sim.uart`). pyserial finds this module through
 ``serial.protocol_handler_packages`` (see :func:`zkzap.link.port.open_port`).
 """
 
@@ -54,6 +55,9 @@ class Serial(SerialBase):
     def _pump(self):
         out = self._device.poll(self._clock.now())
         if out:
+            line = getattr(self._device, "line", None)
+            if line is not None:       # the device's UART settings against this port's
+                out = line.to_host(out, self._baudrate, int(self._stopbits))
             self._rx += out
 
     @property
@@ -87,7 +91,10 @@ class Serial(SerialBase):
         if not self.is_open:
             raise PortNotOpenError()
         data = serial.to_bytes(data)
-        self._device.receive(data, self._clock.now(), self._baudrate)
+        if getattr(self._device, "line", None) is not None:
+            self._device.receive(data, self._clock.now(), self._baudrate, int(self._stopbits))
+        else:
+            self._device.receive(data, self._clock.now(), self._baudrate)
         return len(data)
 
     def reset_input_buffer(self):

@@ -1,8 +1,10 @@
 """Serve a simulated device on a pseudo-terminal or a TCP socket until SIGINT/SIGTERM.
 
 The first line on stdout is the port to use (a pty path, or ``socket://HOST:PORT``), flushed
-at once, so a script can read it and start talking. On a pty the host's baud rate is read
-from the terminal settings on every write, so a device can ignore a host at the wrong baud.
+at once, so a script can read it and start talking. On a pty the host's line settings (baud
+rate, stop bits) are read from the terminal settings on every transfer, so a device with line
+settings of its own (``device.line``, see :mod:`zkzap.sim.uart`) misframes what a host at other
+settings sends and reads. A pty needs a POSIX system (termios); TCP works everywhere.
 """
 
 from __future__ import annotations
@@ -12,28 +14,65 @@ import selectors
 import signal
 import socket
 import sys
-import termios
-import tty
 
 from .base import Clock
 
-#: termios speed constants -> baud
-_SPEEDS = {getattr(termios, f"B{b}"): b for b in (
-    50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400, 57600, 115200,
-    230400, 460800, 500000, 576000, 921600, 1000000, 1152000, 1500000, 2000000, 2500000, 3000000,
-    3500000, 4000000) if hasattr(termios, f"B{b}")}
+_BAUDS = (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400, 57600, 115200,
+          230400, 460800, 500000, 576000, 921600, 1000000, 1152000, 1500000, 2000000, 2500000, 3000000,
+          3500000, 4000000)
+
+
+class PtyUnsupported(RuntimeError):
+    """Pseudo-terminals need a POSIX system (termios)."""
+
+
+def _termios():
+    try:
+        import termios
+        import tty
+    except ImportError:
+        raise PtyUnsupported("a pseudo-terminal needs a POSIX system (Linux, macOS, BSD); "
+                             "serve on TCP instead (--listen 127.0.0.1:0)") from None
+    return termios, tty
+
+
+def host_settings(termios, fd, speeds):
+    """(baud, stop bits) of the terminal ``fd`` (the host's side of the pty)."""
+    attrs = termios.tcgetattr(fd)
+    return speeds.get(attrs[5]), 2 if attrs[2] & termios.CSTOPB else 1
 
 
 class _Stop(Exception):
     pass
 
 
+def stop_signals():
+    """The signals that stop a simulator: SIGINT, SIGTERM, and on Windows SIGBREAK (Ctrl-Break)."""
+    return [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n)]
+
+
 def _install_signals():
     def handler(signum, frame):
         raise _Stop()
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    for s in stop_signals():
+        try:
+            signal.signal(s, handler)
+        except (ValueError, OSError):   # pragma: no cover - not deliverable on this platform
+            pass
+
+
+def _deliver(device, data, now, settings):
+    line = getattr(device, "line", None)
+    if line is not None:
+        device.receive(data, now, settings[0], settings[1])
+    else:
+        device.receive(data, now, settings[0])
+
+
+def _outgoing(device, data, settings):
+    line = getattr(device, "line", None)
+    return data if line is None else line.to_host(data, *settings)
 
 
 def _announce(text, out):
@@ -51,6 +90,8 @@ def _timeout(device, clock):
 def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
     """Run ``device`` on a new pseudo-terminal; its path is announced on ``out`` (and, with
     ``link``, also made available as a symlink at that path)."""
+    termios, tty = _termios()
+    speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
     master, slave = os.openpty()
     tty.setraw(slave)
     path = os.ttyname(slave)
@@ -72,11 +113,10 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
                 except OSError:
                     data = b""
                 if data:
-                    baud = _SPEEDS.get(termios.tcgetattr(slave)[5])
-                    device.receive(data, clock.now(), baud)
+                    _deliver(device, data, clock.now(), host_settings(termios, slave, speeds))
             reply = device.poll(clock.now())
             if reply:
-                os.write(master, reply)
+                os.write(master, _outgoing(device, reply, host_settings(termios, slave, speeds)))
     except _Stop:
         pass
     finally:
@@ -122,7 +162,7 @@ def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) ->
                     except OSError:
                         data = b""
                     if data:
-                        device.receive(data, clock.now(), None)
+                        _deliver(device, data, clock.now(), (None, None))
                     else:
                         sel.unregister(client)
                         client.close()

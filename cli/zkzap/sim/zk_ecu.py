@@ -39,9 +39,15 @@ Engine model (all times in model seconds; ``--speed`` runs the model faster)
       a silence longer than :data:`LOSS_OF_SIGNAL_S` raises error 13 and stops the engine. From
       version 5 the ECU keeps its state when the host falls silent.
 
-Control frames with a bad CRC (or garbage) are ignored, as a real ECU would; with the ``baud``
-option set, bytes written at another baud rate (on a pty, where the host's speed is known) are
-ignored too.
+Control frames with a bad CRC (or garbage) are ignored, as a real ECU would.
+
+Line settings: with ``baud`` (and ``stop_bits``, 1 or 2, default 1) set, the ECU's UART runs at
+that setting, like a real one configured so: a host at another baud rate or stop-bit setting
+(on a pty or behind ``sim://``, where the host's settings are known; a TCP client has none)
+reads misframed garbage (:mod:`zkzap.sim.uart`) and what it sends reaches the ECU as garbage
+too. The status stream never outruns the line: at a rate whose frames do not fit the baud rate
+(100 Hz of 7-byte frames needs 7 700 baud at 8N1), frames are sent back to back and the
+effective rate is what the line carries. Without ``baud`` the ECU follows the host's setting.
 
 Fault injection, for tests: ``corrupt_every=N`` damages every Nth status frame (bad CRC),
 ``silent_after=S`` stops transmitting after S seconds, ``error=CODE`` (a number or a name such
@@ -56,7 +62,9 @@ from collections import deque
 
 from ..codec import zk
 from ..codec.framing import ZkFramer
+from ..link.port import STOP_BITS, wire_time
 from .base import Device, parse_flag
+from .uart import Line
 
 #: Below protocol version 5, a host silent for longer than this (model seconds) loses control:
 #: error 13 and the engine stops.
@@ -86,7 +94,7 @@ SW_CODE = {"stop": 0, "standby": 1, "run": 2}   # status ID 1 SwSt
 DEFAULTS = {
     "protocol_version": 6, "rate": 20, "max_rpm": 160000, "idle_rpm": 40000, "max_thrust": 14.0,
     "ambient": 20.0, "battery": 12.0, "max_pump_voltage": 10.0, "esr": False, "baud": None,
-    "corrupt_every": 0, "silent_after": None, "error": None, "error_after": 0.0,
+    "stop_bits": 1, "corrupt_every": 0, "silent_after": None, "error": None, "error_after": 0.0,
 }
 
 
@@ -99,7 +107,7 @@ class ZkEcu(Device):
 
     def __init__(self, protocol_version=6, rate=20, max_rpm=160000, idle_rpm=40000, max_thrust=14.0,
                  ambient=20.0, battery=12.0, max_pump_voltage=10.0, esr=False, baud=None,
-                 corrupt_every=0, silent_after=None, error=None, error_after=0.0):
+                 stop_bits=1, corrupt_every=0, silent_after=None, error=None, error_after=0.0):
         if not 1 <= protocol_version <= 63:
             raise ValueError(f"protocol_version: {protocol_version} is out of range; allowed 1..63")
         if rate not in RATE_BY_ACTION.values():
@@ -108,6 +116,11 @@ class ZkEcu(Device):
             raise ValueError(f"max_rpm: {max_rpm}; allowed multiples of 1000 in 1000..255000")
         if idle_rpm % 1000 or not 1000 <= idle_rpm < max_rpm:
             raise ValueError(f"idle_rpm: {idle_rpm}; allowed multiples of 1000 below max_rpm")
+        if baud is not None and not 300 <= baud <= 4_000_000:
+            raise ValueError(f"baud: {baud} is out of range; allowed 300..4000000 (the document lists "
+                             f"2400, 4800, 9600, 19200, 38400, 57600, 115200)")
+        if stop_bits not in STOP_BITS:
+            raise ValueError(f"stop_bits: {stop_bits}; allowed 1, 2")
         if corrupt_every < 0:
             raise ValueError(f"corrupt_every: {corrupt_every} is out of range; allowed 0 (off) or more")
         self.version = protocol_version
@@ -119,6 +132,11 @@ class ZkEcu(Device):
         self.battery = battery
         self.max_pump_v = max_pump_voltage
         self.baud = baud
+        self.stop_bits = stop_bits
+        #: the ECU's UART settings (the transports reframe through it)
+        self.line = Line(baud, stop_bits)
+        self._line_free = 0.0         # model time the line is free again (paced stream)
+        self.frames_skipped = 0       # status ticks the line had no room for
         self.corrupt_every = corrupt_every
         self.silent_after = silent_after
         self._error_at = (error_after, _error_code(error)) if error is not None else None
@@ -172,11 +190,11 @@ class ZkEcu(Device):
             self._error_at = None
 
     # --- Device interface ------------------------------------------------------------------------
-    def receive(self, data, now, baud=None):
+    def receive(self, data, now, baud=None, stop_bits=None):
         self._advance_to(now)
-        if self.baud is not None and baud is not None and baud != self.baud:
+        if self.baud is not None and baud is not None and (baud != self.baud or (stop_bits or 1) < self.stop_bits):
             self.rx_wrong_baud += len(data)
-            return
+            data = self.line.from_host(data, baud, stop_bits)   # what the ECU's UART makes of it
         for frame in self._framer.feed(data):
             self._command(frame, now)
 
@@ -381,6 +399,11 @@ class ZkEcu(Device):
             self.silent = True
         if self.silent:
             return
+        if self.baud is not None:
+            if self._t < self._line_free - 1e-9:
+                self.frames_skipped += 1      # the line is still busy with the frame before
+                return
+            self._line_free = self._t + wire_time(zk.STATUS_LEN, self.baud, self.stop_bits)
         frame = self.status_frame(sid)
         self.frames_sent += 1
         if self.corrupt_every and self.frames_sent % self.corrupt_every == 0:
@@ -544,6 +567,7 @@ _INT, _FLOAT = _num(int), _num(float)
 OPTIONS = {
     "protocol_version": _INT, "rate": _INT, "max_rpm": _INT, "idle_rpm": _INT, "max_thrust": _FLOAT,
     "ambient": _FLOAT, "battery": _FLOAT, "max_pump_voltage": _FLOAT, "esr": parse_flag, "baud": _INT,
+    "stop_bits": _INT,
     "corrupt_every": _INT, "silent_after": _FLOAT, "error": lambda k, v: v, "error_after": _FLOAT,
 }
 #: Options accepted and handled elsewhere: ``speed`` scales the Clock that drives the device.
@@ -556,9 +580,9 @@ def from_options(**options) -> ZkEcu:
 
     ``protocol_version`` (default 6), ``rate`` (20/50/100 Hz, default 20), ``max_rpm`` (160000),
     ``idle_rpm`` (40000), ``max_thrust`` (kg at max rpm, 14), ``ambient`` (degC, 20), ``battery``
-    (V, 12), ``max_pump_voltage`` (V, 10), ``esr`` (0/1: ask for air pressure), ``baud`` (ignore
-    writes at other bauds), and the faults ``corrupt_every``, ``silent_after``, ``error``,
-    ``error_after``. ``speed`` is accepted (it belongs to the clock).
+    (V, 12), ``max_pump_voltage`` (V, 10), ``esr`` (0/1: ask for air pressure), ``baud`` (the
+    ECU's UART speed; unset: the host's), ``stop_bits`` (1 or 2), and the faults
+    ``corrupt_every``, ``silent_after``, ``error``, ``error_after``. ``speed`` is accepted (it belongs to the clock).
     """
     options = {k.replace("-", "_"): v for k, v in options.items() if v is not None}
     unknown = sorted(set(options) - set(OPTIONS) - PASSED_THROUGH)
