@@ -190,6 +190,7 @@ ZK_COMMANDS = {
     "states": (".zk.tables", "states", "List the engine states (appendix table)."),
     "errors": (".zk.tables", "errors", "List the engine error codes (appendix table)."),
     "fields": (".zk.tables", "fields", "List every control and status field with bits, unit and range."),
+    "detect": (".zk.detect", "detect", "Find the ECU's baud rate and stop bits by listening."),
 }
 ZAP_COMMANDS = {
     "echo": (".zap.compose", "echo", "Echo: check that an actuator answers."),

@@ -103,7 +103,7 @@ def _dashboard(title):
 
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
-                  count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
+                  stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
                   abort_at_end=False, title=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
@@ -111,8 +111,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     after its own reporting. Files are closed (whole) before this returns.
     """
     from ...link import zk_link as L
+    from ...link.port import fit_note
 
     id_set = L.parse_ids(ids) if ids is not None else None
+    if control is not None and url is not None:
+        told = fit_note("control rate", rate or L.DEFAULT_RATE, 4, baud, stop_bits)
+        if told:
+            note(told)
     out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
     raw = None
     source = None
@@ -127,7 +132,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
-            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s))
+            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
         session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
@@ -144,6 +149,10 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             raw.close()
     if tel.version_note:
         note(tel.version_note)
+    if url is not None and tel.frames:
+        told = fit_note(f"the ECU's status rate ({tel.rate} Hz)", tel.rate, 7, baud, stop_bits)
+        if told:
+            note(told + "; expect fewer status frames")
     framer = source.framer
     if framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
@@ -152,7 +161,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
-@port_options("zk")
+@port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) instead of a port, paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
@@ -169,7 +178,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @protocol_version_option
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
-def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
+def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
             count, duration, keepalive, rate, protocol_version, fail_on_error):
     """Show or log the ECU's status frames as they arrive.
 
@@ -202,6 +211,9 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
             raise UsageError(f"{'keepalive' if keepalive else 'raw-log'}: not with --replay")
         if not os.path.isfile(replay):
             raise UsageError(f"replay: cannot read {replay}: no such file")
+        if baud == "auto":
+            raise UsageError("baud: auto makes no sense with --replay (a recording has no line settings); "
+                             "allowed with a port only")
         url = None
     else:
         if fast:
@@ -217,10 +229,12 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
         def control(t):
             return frame
 
+    if baud == "auto":
+        baud, stop_bits = _detect_line(url)
     outcome, tel, _ = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        count=count, duration=duration, control=control, rate=rate)
+        stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
         note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
              "sending; --keepalive does")
@@ -230,3 +244,20 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
 
 
 zk_timeout_help(monitor)
+
+
+def _detect_line(url):
+    """``--baud auto``: the ECU's baud rate and stop bits, found by listening first."""
+    from ...api.detect import no_answer
+    from .detect import run_detection
+    from ...api.detect import BAUDS
+
+    result = run_detection(url, list(BAUDS), (1, 2), None, None, False)
+    if not result.found:
+        raise no_answer(result)
+    extra = ""
+    if result.protocol_version is not None:
+        extra = f", protocol version {result.protocol_version}, {result.status_rate_hz} Hz"
+    note(f"detected {result.baud} baud, {result.stop_bits} stop bit{'s' if result.stop_bits == 2 else ''}"
+         f"{extra} on {url} in {result.elapsed:.1f} s")
+    return result.baud, result.stop_bits
