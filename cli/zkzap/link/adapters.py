@@ -10,6 +10,7 @@ device the user may not open. The sysfs and /dev roots are parameters so tests c
 from __future__ import annotations
 
 import os
+import sys
 
 SYSFS_USB_SERIAL = "/sys/bus/usb-serial/devices"
 DEV_BY_ID = "/dev/serial/by-id"
@@ -57,11 +58,30 @@ def by_id_links(dev_by_id=DEV_BY_ID):
     return out
 
 
-def hints_for(rec, sysfs=SYSFS_USB_SERIAL):
-    """Advice for one port record (a list of one-line strings)."""
+#: Where Windows keeps the FTDI latency timer (the driver's advanced port settings).
+WINDOWS_FTDI = ("FTDI adapter: set its latency timer to 1 ms for fast replies (the default 16 ms delays every "
+                "reply): Device Manager > Ports (COM & LPT) > USB Serial Port > Properties > Port Settings > "
+                "Advanced > Latency Timer (msec)")
+MACOS_FTDI = ("FTDI adapter: the latency timer (16 ms by default with FTDI's VCP driver) is set in the "
+              "driver's Info.plist (LatencyTimer); Apple's own driver (AppleUSBFTDI) uses a short one")
+MACOS_CH34X = ("CH34x adapter (the chip of IR Robot's own USB adapter): macOS 11 (Big Sur) and later have a "
+               "driver built in (/dev/cu.usbserial-*); older macOS versions need WCH's vendor driver "
+               "(CH34xVCPDriver)")
+
+
+def hints_for(rec, sysfs=SYSFS_USB_SERIAL, platform=None):
+    """Advice for one port record (a list of one-line strings). ``platform`` is a
+    ``sys.platform`` value (default: this machine's): the advice differs on Windows and macOS."""
+    platform = sys.platform if platform is None else platform
     hints = []
     name = rec["name"]
-    if rec["vid"] == FTDI_VID:
+    if rec["vid"] == FTDI_VID and platform.startswith("win"):
+        hints.append(WINDOWS_FTDI)
+    elif rec["vid"] == FTDI_VID and platform == "darwin":
+        hints.append(MACOS_FTDI)
+    elif rec["vid"] == WCH_VID and platform == "darwin":
+        hints.append(MACOS_CH34X)
+    elif rec["vid"] == FTDI_VID:
         lt = rec["latency_timer_ms"]
         path = os.path.join(sysfs, name, "latency_timer")
         if lt is None:
@@ -75,12 +95,27 @@ def hints_for(rec, sysfs=SYSFS_USB_SERIAL):
             hints.append(f"FTDI latency timer is {lt} ms (fastest)")
     elif rec["vid"] == WCH_VID:
         hints.append("CH34x adapter (the chip of IR Robot's own USB adapter): no latency timer to set")
-    if rec["permission"] is False:
+    tty_hint = outgoing_port_hint(rec["device"], platform)
+    if tty_hint:
+        hints.append(tty_hint)
+    if rec["permission"] is False and not platform.startswith("win"):
         group = rec.get("group")
         who = f"the group '{group}'" if group else "the device's group"
         hints.append(f"no read/write permission on {rec['device']}: add yourself to {who} "
                      f"(sudo usermod -aG {group or 'dialout'} $USER) and log in again")
     return hints
+
+
+def outgoing_port_hint(device, platform=None):
+    """A hint for a port name that is wrong for an outgoing connection, or None: on macOS,
+    ``/dev/tty.*`` waits for a carrier-detect signal that an adapter to an ECU or an actuator
+    bus never raises; ``/dev/cu.*`` is the calling-unit device for the same adapter."""
+    platform = sys.platform if platform is None else platform
+    dev = str(device or "")
+    if platform == "darwin" and dev.startswith("/dev/tty.") and not dev.startswith("/dev/tty.Bluetooth"):
+        return (f"{dev} is the dial-in device: opening it can wait for carrier detect; use "
+                f"/dev/cu.{dev[len('/dev/tty.'):]} for an outgoing connection")
+    return None
 
 
 def _group_of(path):
@@ -92,7 +127,7 @@ def _group_of(path):
         return None
 
 
-def port_record(info, sysfs=SYSFS_USB_SERIAL, links=None) -> dict:
+def port_record(info, sysfs=SYSFS_USB_SERIAL, links=None, platform=None) -> dict:
     """A record for one pyserial ``ListPortInfo``."""
     vid, pid = info.vid, info.pid
     name = getattr(info, "name", None) or os.path.basename(info.device)
@@ -114,11 +149,11 @@ def port_record(info, sysfs=SYSFS_USB_SERIAL, links=None) -> dict:
         "permission": os.access(info.device, os.R_OK | os.W_OK) if exists else None,
         "group": _group_of(info.device) if exists else None,
     }
-    rec["hints"] = hints_for(rec, sysfs)
+    rec["hints"] = hints_for(rec, sysfs, platform)
     return rec
 
 
-def port_records(comports=None, *, usb_only=False, sysfs=SYSFS_USB_SERIAL, dev_by_id=DEV_BY_ID):
+def port_records(comports=None, *, usb_only=False, sysfs=SYSFS_USB_SERIAL, dev_by_id=DEV_BY_ID, platform=None):
     """Records for every serial port pyserial finds, sorted by device (USB adapters only with
     ``usb_only``). ``comports`` defaults to ``serial.tools.list_ports.comports()``."""
     if comports is None:
@@ -130,5 +165,5 @@ def port_records(comports=None, *, usb_only=False, sysfs=SYSFS_USB_SERIAL, dev_b
     for info in sorted(comports, key=lambda p: p.device):
         if usb_only and info.vid is None:
             continue
-        out.append(port_record(info, sysfs, links))
+        out.append(port_record(info, sysfs, links, platform))
     return out

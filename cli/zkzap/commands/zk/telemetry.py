@@ -80,6 +80,9 @@ def resolve_port(port, sim, **sim_options) -> str:
         return sim_url("zk", **sim_options)
     if not port:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZK_PORT) or --sim")
+    from ..options import warn_port
+
+    warn_port(port)
     return port
 
 
