@@ -214,10 +214,14 @@ def _print_summary(s):
         mean = st["rpm_mean"]
         lines.append(f"  step {st['step']} ({st['target']}): "
                      + ("no frames" if mean is None else
-                        f"rpm {mean:.0f}, EGT {v(st['egt_c_mean'], ' °C')}, thrust {v(st['thrust_kg_mean'], ' kg')}"
+                        f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
                         + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else ""))
                      + (f" [{st['note']}]" if st["note"] else ""))
     click.echo("\n".join(lines), err=True)
+
+
+def _r(x, digits):
+    return None if x is None else round(x, digits)
 
 
 def _write_json(path, summary):
