@@ -8,14 +8,13 @@ counter at the end minus at the start). :func:`record` appends the run; :func:`r
 
 The database is opened in WAL mode with a busy timeout, and every run is one short ``INSERT``
 transaction, so two stands (or two processes) writing the same file are safe; a reader never
-blocks a writer.
+blocks a writer. sqlite3 itself is imported only when a logbook is opened.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import sqlite3
 import time
 
 from ..errors import OutputError, UsageError
@@ -73,6 +72,8 @@ class RunStats:
 
 def connect(path, *, create=True):
     """Open the logbook at ``path`` (created with its table when ``create``)."""
+    import sqlite3
+
     if not create and not os.path.exists(path):
         raise UsageError(f"logbook: {path}: no such file")
     try:
@@ -100,6 +101,8 @@ def record(path, run: dict) -> int:
     for k in _LISTS:
         row[k] = json.dumps(row.get(k) or [], ensure_ascii=False)
     keys = [c for c in COLUMNS if c != "id"]
+    import sqlite3
+
     try:
         db = connect(path)
         try:

@@ -334,8 +334,8 @@ class Schedule:
                     edge = (k + 0.5) * step           # where rounding moves to the next level
                     if lo < edge < hi:
                         ts = r.t + (edge - a) / (b - a) * (n.t - r.t)
-                        for j in (math.floor(ts * rate), math.ceil(ts * rate)):
-                            candidates.add(j)
+                        j = math.floor(ts * rate)
+                        candidates.update((j - 1, j, j + 1, j + 2))     # either side of the edge
                     k += 1
         last_period = int(self.length * rate + 1e-9)
         out = []

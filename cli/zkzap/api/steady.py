@@ -133,11 +133,14 @@ class StepAverager:
                                                         self.density)
             notes = []
             settled = True
-            if self.average is not None and w1 - w0 < self.average - 1e-9:
+            if w1 <= w0:
+                notes.append(f"step shorter than the settle time ({self.settle:g} s)")
+            elif self.average is not None and w1 - w0 < self.average - 1e-9:
                 notes.append(f"window cut to {w1 - w0:g} s by the step's end")
             if self.frames[i] == 0:
                 settled = None
-                notes.append("no frames in the window")
+                if w1 > w0:
+                    notes.append("no frames in the window")
             else:
                 h1, h2 = self.halves[i]
                 mean = acc["rpm"].mean()

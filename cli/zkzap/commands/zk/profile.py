@@ -20,10 +20,14 @@ EPILOG = ("On a real port a schedule that can start the engine (any row in state
                               "a new ECU error code (the abort command was sent)"))
 
 
-def example_text() -> str:
+#: The shipped examples (``--example [KIND]``).
+EXAMPLES = {"throttle": "example-profile.csv", "rpm": "example-rpm-profile.csv", "limits": "example.limits"}
+
+
+def example_text(kind="throttle") -> str:
     from importlib.resources import files
 
-    return files("zkzap.data").joinpath("example-profile.csv").read_text(encoding="utf-8")
+    return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
 def _read(path) -> str:
@@ -41,8 +45,9 @@ def _read(path) -> str:
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv")
-@click.option("--example", is_flag=True, help="Print the example schedule (a start, steps up to 100 %, "
-                                              "cool-down) and exit.")
+@click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
+              help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
+                   "(RPM-mode steps for steady-state averages) or limits (a limits file).")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
 @click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
@@ -97,6 +102,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     \b
     Examples:
       zk profile --example > run.csv
+      zk profile --example rpm > rpm.csv; zk profile --example limits > engine.limits
       zk profile run.csv -n
       zk profile run.csv -p 'sim://zk?speed=10' -o telemetry.csv
       zk profile run.csv -p /dev/ttyUSB0 --yes -o telemetry.csv --raw-log run.bin --summary-json summary.json
@@ -108,7 +114,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if example:
         if schedule:
             raise UsageError("example: prints the example schedule; give no SCHEDULE with it")
-        click.echo(example_text(), nl=False)
+        click.echo(example_text(example), nl=False)
         return
     if not schedule:
         raise UsageError("schedule: give SCHEDULE.csv ('-' for stdin), or --example to print one")
