@@ -53,10 +53,13 @@ def test_send_for_violated_by_the_simulators_egt_aborts_and_exits_5(cli):
 
 
 def test_monitor_limit_on_an_injected_error_exits_5_without_abort(cli, tmp_path):
-    log = tmp_path / "m.csv"
+    log, summary = tmp_path / "m.csv", tmp_path / "s.json"
     r = cli("zk", "monitor", "-p", SIM + "&error=egt-high&error_after=0.5", "--duration", "5", "-o", str(log),
-            "--limit", "error_code==0")
+            "--limit", "error_code==0", "--summary-json", str(summary))
     assert r.exit_code == 5 and "sent" not in r.stderr
+    s = json.loads(summary.read_text())
+    assert s["command"] == "zk monitor" and s["outcome"] == "limit" and s["exit_status"] == 5
+    assert s["limits"][0]["verdict"] == "violated" and s["limits"][0]["extreme"] == 8 and s["aborted"] is None
     rows = list(csv.DictReader(io.StringIO(log.read_text())))
     assert rows[-1]["limit"] == "error_code==0" and rows[-1]["error_code"] == "8"
     assert "warnings" in rows[0] and all(len(row) == len(rows[0]) for row in rows)
@@ -164,6 +167,9 @@ def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
     (["monitor", "--sim", "--on-limit", "exit"], "on-limit: give --limit"),
     (["monitor", "--sim", "--limit", "rpm<=1", "--on-limit", "abort"], "does not control the engine"),
     (["monitor", "--sim", "--logbook", "-"], "logbook: a file is needed"),
+    (["monitor", "--sim", "--summary-json", "-"], "'-' needs -o FILE"),
+    (["monitor", "--sim", "--summary-json", "/nonexistent/s.json"], "no such directory"),
+    (["send", "keepalive", "--sim", "--summary-json", "s.json"], "summary-json: applies only with --for"),
     (["send", "keepalive", "--sim", "--limit", "rpm<=1"], "limit: applies only with --for"),
     (["send", "keepalive", "--sim", "--for", "1", "--limit", "rpm<=1", "--on-limit", "abort"],
      "does not control the engine"),

@@ -191,10 +191,14 @@ def summary_lines(summary) -> list:
         if s["verdict"] == "unchecked":
             tail = "never checked: no frame carried the field"
         elif s["violations"]:
-            tail = f"VIOLATED first at {s['first_violation_t']:g} s ({s['violations']} frames)"
+            tail = f"VIOLATED first at {s['first_violation_t']:g} s ({_n(s['violations'])})"
         elif s["warnings"]:
-            tail = f"warning band first at {s['first_warning_t']:g} s ({s['warnings']} frames)"
+            tail = f"warning band first at {s['first_warning_t']:g} s ({_n(s['warnings'])})"
         else:
             tail = "ok"
-        lines.append(f"  limit {s['limit']}: {tail}; extreme {ext} over {s['checked']} frames")
+        lines.append(f"  limit {s['limit']}: {tail}; extreme {ext} over {_n(s['checked'])}")
     return lines
+
+
+def _n(count):
+    return f"{count} frame{'' if count == 1 else 's'}"

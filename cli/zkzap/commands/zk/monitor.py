@@ -14,7 +14,7 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import note, open_output, port_options, protocol_version_option
-from .stand import build_stand, limit_options, logbook_option, report
+from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         resolve_port, zk_timeout_help)
 
@@ -178,9 +178,10 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 @limit_options
 @logbook_option
+@summary_option
 def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
             count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
-            logbook):
+            logbook, summary_json):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -221,6 +222,7 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
         raise UsageError("rate: applies only with --keepalive")
     check_log_options(ids, snapshot, fmt)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook)
+    check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     control = None
     if keepalive:
         frame = zk.encode_control("keepalive")[0]
@@ -233,7 +235,7 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         count=count, duration=duration, control=control, rate=rate, stand=stand)
     report(stand, command="zk monitor", port=url or replay, files=(output, raw_log), outcome=outcome, tel=tel,
-           session=session)
+           session=session, summary_json=summary_json)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
         note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
              "sending; --keepalive does")

@@ -11,7 +11,7 @@ from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
 from ..options import (FilePath, close_output, consent, dry_run_option, note, port_options, protocol_version_option,
                        yes_option)
-from .stand import Finite, build_stand, limit_options, logbook_option, report
+from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -243,16 +243,7 @@ def _write_json(path, summary):
 
 
 def _check_dir(path, what):
-    """Refuse an output file whose directory is missing or read-only, before the run."""
-    import os
-
-    if not path or path == "-":
-        return
-    d = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(d):
-        raise UsageError(f"{what}: cannot write {path}: no such directory")
-    if not os.access(d, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise UsageError(f"{what}: cannot write {path}: permission denied")
+    check_output_dir(path, what)
 
 
 def _write_steps(path, rows):

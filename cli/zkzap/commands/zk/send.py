@@ -15,7 +15,7 @@ from ...errors import UsageError
 from .. import CONTEXT, Command, Group
 from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
                        protocol_version_option, warn, yes_option)
-from .stand import build_stand, limit_options, logbook_option, report
+from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
@@ -42,7 +42,8 @@ EXAMPLES = {
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
-             "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook"}
+             "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
+             "summary_json": "--summary-json"}
 
 
 def format_hex(frame) -> str:
@@ -72,6 +73,7 @@ def send_options(f):
         log_options,
         limit_options,
         logbook_option,
+        summary_option,
     ]
     f = apply_options(f, opts)
     if isinstance(f, click.Command):
@@ -85,7 +87,8 @@ def send_options(f):
 
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, for_s=None,
             rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
-            stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None):
+            stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
+            summary_json=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
@@ -93,7 +96,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
                                ("raw_log", raw_log), ("limit", limit or None),
                                ("limits_files", limits_files or None), ("on_limit", on_limit),
-                               ("logbook", logbook)) if v is not None}
+                               ("logbook", logbook), ("summary_json", summary_json)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -113,6 +116,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if for_s is not None:
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
                             controls=controls)
+        check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     hazard = zk.control_hazard(frame)
     if hazard and not zk_link.is_simulator(url):
         consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
@@ -127,7 +131,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
         stop_on_error=controls, title=f"{format_hex(frame)} to {url}", stand=stand)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
-           outcome=outcome, tel=tel, session=session)
+           outcome=outcome, tel=tel, session=session, summary_json=summary_json)
     outcome.raise_for_status()
     if tel.errors and not controls:
         note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")

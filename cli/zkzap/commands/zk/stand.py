@@ -49,6 +49,51 @@ def logbook_option(f):
                              "runs and totals).")(f)
 
 
+def summary_option(f):
+    return click.option("--summary-json", type=FilePath(), default=None, metavar="FILE",
+                        help="Write the run's summary (frames, max rpm and EGT, fuel, states, errors, each "
+                             "limit's verdict, extreme value and first violation) as JSON to FILE ('-': stdout).")(f)
+
+
+def check_output_dir(path, what, records_to_stdout=False):
+    """Refuse an output file whose directory is missing or read-only, before the run (and ``-``
+    when the records already go to stdout)."""
+    import os
+
+    if path == "-" and records_to_stdout:
+        raise UsageError(f"{what}: '-' needs -o FILE for the records (both would go to stdout)")
+    if not path or path == "-":
+        return
+    d = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(d):
+        raise UsageError(f"{what}: cannot write {path}: no such directory")
+    if not os.access(d, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UsageError(f"{what}: cannot write {path}: permission denied")
+
+
+def write_summary(path, *, command, port, outcome, tel, session, stand):
+    """The run summary as JSON (``-``: stdout)."""
+    import json
+
+    from ...errors import OutputError
+
+    out = {"command": command, "port": port, "outcome": outcome.reason, "exit_status": outcome.exit_code,
+           "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
+           "crc_errors": session.source.framer.bad}
+    out.update(tel.summary())
+    if stand is not None:
+        out.update(stand.summary())
+    text = json.dumps(out, ensure_ascii=False, indent=2) + "\n"
+    if path == "-":
+        click.echo(text, nl=False)
+        return
+    try:
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as e:
+        raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
+
+
 def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, controls=False, averager=None,
                 force=False):
     """A Stand for these options (None when none applies); raises UsageError (exit 2) first."""
@@ -73,8 +118,11 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
     return Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook)
 
 
-def report(stand, *, command, port, schedule=None, files=(), outcome, tel, session, quiet=False):
-    """After a run: the limits summary on stderr and the logbook entry."""
+def report(stand, *, command, port, schedule=None, files=(), outcome, tel, session, quiet=False, summary_json=None):
+    """After a run: the limits summary on stderr, the logbook entry and the ``--summary-json`` file."""
+    if summary_json:
+        write_summary(summary_json, command=command, port=port, outcome=outcome, tel=tel, session=session,
+                      stand=stand)
     if stand is None:
         return
     if stand.limits is not None and not quiet:
