@@ -68,7 +68,7 @@ class Stand:
         if not self.logbook:
             return None
         s = tel.summary()
-        duration = session.ended_t or 0.0 if session is not None else 0.0
+        duration = (session.ended_t or 0.0) if session is not None else 0.0
         wall0 = self.wall0 or time.time()
         run = {
             "started": _logbook.iso(wall0), "ended": _logbook.iso(wall0 + duration),
