@@ -117,3 +117,30 @@ def test_run_stats_count_starts_and_running_time():
         s.feed(t, {"id": 1, "engine_state_name": name})
         s.feed(t, {"id": 2})
     assert s.starts == 2 and s.running_s == 6.0
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+ops = st.sampled_from(["<", "<=", ">", ">="])
+
+
+@settings(max_examples=80, deadline=None)
+@given(ops, st.integers(0, 1000), st.lists(st.tuples(st.sampled_from([1, 2, 3]), st.integers(0, 1000)),
+                                           max_size=40))
+def test_limit_bookkeeping_matches_a_direct_count(op, threshold, stream):
+    cond = L.parse(f"egt_c{op}{threshold}", L.FIELDS)
+    lims = L.LimitSet([cond], "exit")
+    test = L.parse.__globals__["OPERATORS"][op]
+    for i, (sid, v) in enumerate(stream):
+        extra = lims.check(i * 0.05, frame(sid, egt_c=v) if sid == 1 else frame(sid))
+        assert ("limit" in extra) == (sid == 1 and not test(v, threshold))
+    carried = [(i, v) for i, (sid, v) in enumerate(stream) if sid == 1]
+    s = lims.summary()[0]
+    bad = [(i, v) for i, v in carried if not test(v, threshold)]
+    assert s["checked"] == len(carried) and s["violations"] == len(bad)
+    assert s["first_violation_t"] == (round(bad[0][0] * 0.05, 3) if bad else None)
+    values = [v for _, v in carried]
+    want = None if not values else (max(values) if op in ("<", "<=") else min(values))
+    assert s["extreme"] == want
+    assert (lims.tripped is not None) == bool(bad)

@@ -1,8 +1,8 @@
 """Steady-state reduction of a test-stand run: one averaged row per schedule step.
 
 For each step (a schedule row that holds for some time), the first ``settle`` seconds are let
-pass and the next ``average`` seconds (cut at the step's end; None: up to the step's end) are averaged: mean, min and max of
-each quantity in :data:`QUANTITIES`, over the status frames that carry it in that window.
+pass and the next ``average`` seconds (cut at the step's end; None: up to the step's end) are
+averaged: mean, min and max of each quantity in :data:`QUANTITIES`, over the status frames that carry it in that window.
 Derived per step: thrust-specific fuel consumption, fuel mass flow over thrust, from the mean
 fuel flow (L/min), the fuel density (kg/L) and the mean thrust (kgf):
 

@@ -388,13 +388,6 @@ def _kilo():
     return FuncFormatter(lambda v, _: f"{v / 1000:g}k" if v else "0")
 
 
-def _header_text(title, meta, summary):
-    lines = [title]
-    if meta:
-        lines.append("   ".join(f"{k}: {v}" for k, v in meta))
-    return lines
-
-
 def figure_histories(run, panels, steps, summary, title, meta):
     Figure = _mpl()
     n = max(len(panels), 1)

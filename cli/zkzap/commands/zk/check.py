@@ -62,7 +62,6 @@ def check(port, baud, timeout, sim, count, duration, limit, limits_files, on_lim
         count = 50
     url = resolve_port(port, sim)
     from ...codec import zk
-    from ...link import zk_link as L
 
     if fmt is None:
         fmt = "table" if is_tty(sys.stdout) else "json"

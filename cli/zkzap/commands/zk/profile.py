@@ -220,7 +220,8 @@ def _print_summary(s):
         mean = st["rpm_mean"]
         lines.append(f"  step {st['step']} ({st['target']}): "
                      + ("no frames" if mean is None else
-                        f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
+                        f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, "
+                        f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
                         + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else ""))
                      + (f" [{st['note']}]" if st["note"] else ""))
     click.echo("\n".join(lines), err=True)
