@@ -258,6 +258,9 @@ class Dashboard:
         info.append("last frame " + ("never" if age is None else f"{age:.1f} s ago"),
                     style="bold red" if stale or age is None else "dim")
         link.add_row("", info)
+        for line in h.get("limits") or ():          # limit events: (level, text), newest state
+            link.add_row("Limit" if line[0] == "violated" else "Warn",
+                         Text(line[1], style="bold white on red" if line[0] == "violated" else "bold yellow"))
 
         subtitle = None
         if stale:

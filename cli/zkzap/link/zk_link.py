@@ -360,6 +360,9 @@ class Telemetry:
         self.fuel_last = None
         self.states = []
         self._rate_window = deque()
+        #: ``on_frame(t, record)`` sees every decoded frame (before --ids); a dict it returns is
+        #: added to the frame's row (limit entries)
+        self.on_frame = None
 
     # frames in, records out
     def feed(self, t, frame) -> list:
@@ -392,6 +395,7 @@ class Telemetry:
     def _emit(self, t, frame):
         rec = self.decoder.decode(frame)
         sid = rec["id"]
+        extra = self.on_frame(t, rec) if self.on_frame is not None else None
         self.frames += 1
         self.last_seen[sid] = t
         if self.first_t is None:
@@ -430,6 +434,8 @@ class Telemetry:
             row["frame"] = frame.hex(" ").upper()
         row["stale"] = bool(stale)
         row["stale_ids"] = stale
+        if extra:
+            row.update(extra)
         return [row]
 
     def _engine(self, t, rec):
@@ -545,7 +551,7 @@ class SignalGuard:
 
 class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
-    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``pipe``."""
+    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``limit``, ``pipe``."""
 
     def __init__(self, reason, error=None, aborted=None):
         self.reason = reason
@@ -594,7 +600,7 @@ class Session:
 
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
-                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1):
+                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None):
         self.source = source
         self.telemetry = telemetry
         self.sink = sink
@@ -609,6 +615,7 @@ class Session:
         self.on_update = on_update
         self.notify = notify or (lambda message: None)
         self.update_interval = update_interval
+        self.limits = limits     # an api.limits.LimitSet: its first violation ends the session
         self.sent = 0
         self.last_sent = None
         self.ended_t = None
@@ -682,6 +689,9 @@ class Session:
                             outcome = Outcome("ecu-error", DeviceError(
                                 f"ECU error {code} ({name}: {text}) at t={et:.2f} s"))
                             break
+                        if self.limits is not None and self.limits.tripped is not None:
+                            outcome = Outcome("limit", self.limits.tripped)
+                            break
                     if outcome is not None:
                         break
                     now = src.now()
@@ -727,6 +737,8 @@ class Session:
             return
         if outcome.ok and not self.abort_at_end:
             return
+        if outcome.reason == "limit" and not self.limits.abort:
+            return
         known = self.telemetry.decoder.known
         frames = abort_frames(self.abort, known, pump=self.pump_on)
         try:
@@ -741,7 +753,7 @@ class Session:
         outcome.aborted = self.abort
         why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
                "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-               "error": "error"}.get(outcome.reason, "end of schedule")
+               "error": "error", "limit": "limit violated"}.get(outcome.reason, "end of schedule")
         self.notify(f"{why}: sent {describe_abort(self.abort)}")
 
 

@@ -14,6 +14,7 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import note, open_output, port_options, protocol_version_option
+from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         resolve_port, zk_timeout_help)
 
@@ -103,12 +104,13 @@ def _dashboard(title):
 
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
-                  stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
-                  abort_at_end=False, title=None):
+                  stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
+                  stop_on_error=False, abort_at_end=False, title=None, stand=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
-    after its own reporting. Files are closed (whole) before this returns.
+    after its own reporting. Files are closed (whole) before this returns. ``stand``: the
+    test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
     """
     from ...link import zk_link as L
     from ...link.port import fit_note
@@ -118,7 +120,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         told = fit_note("control rate", rate or L.DEFAULT_RATE, 4, baud, stop_bits)
         if told:
             note(told)
-    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
+    columns = L.record_columns if stand is None else stand.columns(L.record_columns)
+    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     raw = None
     source = None
     try:
@@ -134,11 +137,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
+        on_update = out.update if out.dashboard is not None else None
+        if stand is not None:
+            on_update = stand.attach(tel, source, on_update)
         session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
                             stop_on_error=stop_on_error, abort_at_end=abort_at_end,
-                            on_update=out.update if out.dashboard is not None else None, notify=note)
+                            on_update=on_update, notify=note,
+                            limits=stand.limits if stand is not None else None)
         with out:
             outcome = session.run()
     finally:
@@ -178,8 +185,12 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @protocol_version_option
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
-def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
-            count, duration, keepalive, rate, protocol_version, fail_on_error):
+@limit_options
+@logbook_option
+@summary_option
+def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after,
+            raw_log, count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
+            logbook, summary_json):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -222,6 +233,8 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     if rate is not None and not keepalive:
         raise UsageError("rate: applies only with --keepalive")
     check_log_options(ids, snapshot, fmt)
+    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook)
+    check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     control = None
     if keepalive:
         frame = zk.encode_control("keepalive")[0]
@@ -231,10 +244,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
 
     if baud == "auto":
         baud, stop_bits = _detect_line(url)
-    outcome, tel, _ = run_telemetry(
+    outcome, tel, session = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate)
+        stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate, stand=stand)
+    report(stand, command="zk monitor", port=url or replay, files=(output, raw_log), outcome=outcome, tel=tel,
+           session=session, summary_json=summary_json)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
         note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
              "sending; --keepalive does")

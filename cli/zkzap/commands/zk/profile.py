@@ -9,7 +9,9 @@ import click
 
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
+from ..options import (FilePath, close_output, consent, dry_run_option, note, port_options, protocol_version_option,
+                       yes_option)
+from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -18,10 +20,14 @@ EPILOG = ("On a real port a schedule that can start the engine (any row in state
                               "a new ECU error code (the abort command was sent)"))
 
 
-def example_text() -> str:
+#: The shipped examples (``--example [KIND]``).
+EXAMPLES = {"throttle": "example-profile.csv", "rpm": "example-rpm-profile.csv", "limits": "example.limits"}
+
+
+def example_text(kind="throttle") -> str:
     from importlib.resources import files
 
-    return files("zkzap.data").joinpath("example-profile.csv").read_text(encoding="utf-8")
+    return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
 def _read(path) -> str:
@@ -34,13 +40,14 @@ def _read(path) -> str:
         raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
     except UnicodeDecodeError:
         raise UsageError(f"schedule: {path} is not UTF-8 text "
-                         "(expected CSV rows time_s,throttle_pct[,state])") from None
+                         "(expected CSV rows time_s,throttle_pct[,state] or time_s,rpm=N[,state])") from None
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv")
-@click.option("--example", is_flag=True, help="Print the example schedule (a start, steps up to 100 %, "
-                                              "cool-down) and exit.")
+@click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
+              help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
+                   "(RPM-mode steps for steady-state averages) or limits (a limits file).")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
 @click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
@@ -51,20 +58,40 @@ def _read(path) -> str:
                    "engine cool); none sends nothing.")
 @click.option("--summary-json", type=click.Path(dir_okay=False, writable=True, allow_dash=True), default=None,
               metavar="FILE", help="Also write the summary as JSON to FILE ('-': stdout).")
+@click.option("--settle", type=Finite(0, 86400), default=None, metavar="SECONDS",
+              help="Per-step averages: let each step settle SECONDS before averaging (default 3 with "
+                   "--average or --steps-csv).")
+@click.option("--average", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
+              help="Per-step averages over the SECONDS after --settle (default: up to the step's end).")
+@click.option("--steps-csv", type=FilePath(), default=None, metavar="FILE",
+              help="Write one row per step to FILE: window, mean/min/max of rpm, egt_c, thrust_kg, "
+                   "fuel_flow_l_min, pump_voltage_v, throttle_pct, TSFC, and whether it settled.")
+@click.option("--fuel-density", type=Finite(0.5, 1.2), default=None, metavar="KG_PER_L",
+              help="Fuel density for TSFC (default 0.8: Jet A-1; kerosene 0.80, diesel 0.84).")
 @dry_run_option
 @port_options("zk")
 @yes_option
 @protocol_version_option
 @log_options
-def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, port, baud, stop_bits, timeout, sim, yes,
-            protocol_version, fmt, output, append, snapshot, ids, stale_after, raw_log):
-    """Run a throttle schedule on the engine while its telemetry is logged.
+@limit_options
+@logbook_option
+def profile(schedule, example, interpolate, rate, abort, summary_json, settle, average, steps_csv, fuel_density,
+            dry_run, port, baud, stop_bits, timeout, sim, yes, protocol_version, fmt, output, append, snapshot, ids,
+            stale_after, raw_log, limit, limits_files, on_limit, logbook):
+    """Run a throttle or RPM schedule on the engine while its telemetry is logged.
 
-    SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' (an optional header names the columns;
-    '-' reads stdin): from time_s on, that throttle (0..100 %) and state (pwm, stop, standby,
-    run; a row without one keeps the previous, the first defaults to run) are sent at --rate
-    Hz, as control ID 1 frames. Nothing is sent before the first row's time; the schedule ends
-    at the last row's time.
+    SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' or 'time_s,rpm=N[,state]' (an optional
+    header names the columns time_s, throttle_pct, rpm, state; '-' reads stdin; spreadsheet
+    exports with a byte order mark, quoted cells or ';' separators are read): from time_s on,
+    that throttle (0..100 %) and state (pwm, stop, standby, run; a row without one keeps the
+    previous, the first defaults to run) are sent at --rate Hz as control ID 1 frames. An rpm
+    target puts the ECU in RPM mode (ID 6 with the RPM factor that fits the highest target, and
+    ID 7 targets); a target above the ECU's reported max rpm stops the run (exit 5) before it is
+    sent, and the end and the abort leave RPM mode. Nothing is sent before the first row's time;
+    the schedule ends at the last row's time.
+
+    --settle/--average/--steps-csv reduce each step to averages (and TSFC); --limit stops the run
+    (the abort) when a field leaves its limit; --logbook records the run.
 
     Telemetry is written as 'zk monitor' writes it (the dashboard on a terminal, JSON Lines in a
     pipe, CSV snapshot rows with -f csv or -o FILE.csv, --raw-log). At the end a summary goes to
@@ -75,26 +102,37 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     \b
     Examples:
       zk profile --example > run.csv
+      zk profile --example rpm > rpm.csv; zk profile --example limits > engine.limits
       zk profile run.csv -n
       zk profile run.csv -p 'sim://zk?speed=10' -o telemetry.csv
       zk profile run.csv -p /dev/ttyUSB0 --yes -o telemetry.csv --raw-log run.bin --summary-json summary.json
+      zk profile run.csv --sim --limit 'egt_c<=850,warn=800' --settle 5 --average 5 --steps-csv steps.csv
     """
+    from ...api.schedule import Schedule
     from ...link import zk_link
 
     if example:
         if schedule:
             raise UsageError("example: prints the example schedule; give no SCHEDULE with it")
-        click.echo(example_text(), nl=False)
+        click.echo(example_text(example), nl=False)
         return
     if not schedule:
         raise UsageError("schedule: give SCHEDULE.csv ('-' for stdin), or --example to print one")
     name = "stdin" if schedule == "-" else schedule
-    sched = zk_link.Schedule.parse(_read(schedule), name=name, interpolate=interpolate)
+    sched = Schedule.parse(_read(schedule), name=name, interpolate=interpolate)
     for n in sched.notes[:5]:
         note(n)
     if len(sched.notes) > 5:
-        note(f"... and {len(sched.notes) - 5} more rounded throttle values")
+        note(f"... and {len(sched.notes) - 5} more rounded values")
+    averaging = settle is not None or average is not None or steps_csv is not None
+    if fuel_density is not None and not averaging:
+        raise UsageError("fuel-density: applies with --settle, --average or --steps-csv")
     if dry_run:
+        extra = [n for n, v in (("limit", limit), ("limits", limits_files), ("on-limit", on_limit),
+                                ("logbook", logbook), ("steps-csv", steps_csv), ("settle", settle),
+                                ("average", average), ("fuel-density", fuel_density)) if v]
+        if extra:
+            raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
         _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append)
         return
     if sched.length <= 0:
@@ -103,6 +141,19 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     url = resolve_port(port, sim)
     if ids is not None:
         zk_link.parse_ids(ids)
+    averager = None
+    if averaging:
+        from ...api.steady import DEFAULT_DENSITY, StepAverager
+
+        if steps_csv == "-" and (output in (None, "-")):
+            raise UsageError("steps-csv: '-' needs -o FILE for the telemetry (both would go to stdout)")
+        _check_dir(steps_csv, "steps-csv")
+        averager = StepAverager(sched.steps(), 3.0 if settle is None else settle, average,
+                                fuel_density or DEFAULT_DENSITY)
+    _check_dir(summary_json, "summary-json")
+    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
+                        averager=averager, force=True)
+    stand.schedule = sched
     if not zk_link.is_simulator(url):
         from ...codec import zk
 
@@ -114,10 +165,21 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
-        abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}")
+        stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
+        stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
+        title=f"profile {name} on {url}", stand=stand)
+    if sched.ends_in_rpm_mode and abort == "none":
+        note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
     summary = _summary(name, url, sched, outcome, tel, session)
+    summary.update(stand.summary())
+    if averager is not None:
+        summary["steps"] = averager.rows()
+        summary["fuel_density_kg_l"] = averager.density
     _print_summary(summary)
+    report(stand, command="zk profile", port=url, schedule=name, files=(output, raw_log, steps_csv, summary_json),
+           outcome=outcome, tel=tel, session=session)
+    if steps_csv:
+        _write_steps(steps_csv, summary["steps"])
     if summary_json:
         _write_json(summary_json, summary)
     outcome.raise_for_status()
@@ -135,7 +197,8 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
 
 
 _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated": "terminated",
-        "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed"}
+        "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
+        "limit": "limit violated"}
 
 
 def _print_summary(s):
@@ -153,7 +216,19 @@ def _print_summary(s):
         f"  states: {' > '.join(s['states']) or '-'}",
         "  errors: " + (", ".join(f"{e['code']} {e['name']} at {e['t']:g} s" for e in s["errors"]) or "none"),
     ]
+    for st in s.get("steps") or ():
+        mean = st["rpm_mean"]
+        lines.append(f"  step {st['step']} ({st['target']}): "
+                     + ("no frames" if mean is None else
+                        f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, "
+                        f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
+                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else ""))
+                     + (f" [{st['note']}]" if st["note"] else ""))
     click.echo("\n".join(lines), err=True)
+
+
+def _r(x, digits):
+    return None if x is None else round(x, digits)
 
 
 def _write_json(path, summary):
@@ -168,6 +243,28 @@ def _write_json(path, summary):
         raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
 
 
+def _check_dir(path, what):
+    check_output_dir(path, what)
+
+
+def _write_steps(path, rows):
+    from ...api.steady import columns
+    from ...io.writers import make_writer
+
+    stream = sys.stdout if path == "-" else None
+    try:
+        if stream is None:
+            stream = open(path, "w", encoding="utf-8", newline="")
+    except OSError as e:
+        raise OutputError(f"steps-csv: cannot write {path}: {e.strerror}") from None
+    writer = make_writer("csv", stream, columns())
+    try:
+        for r in rows:
+            writer.write(r)
+    finally:
+        close_output(writer, stream)
+
+
 def _print_plan(sched, rate, fmt, output, append):
     from ...codec.hexfmt import format_hex
     from ...io.writers import make_writer
@@ -175,10 +272,15 @@ def _print_plan(sched, rate, fmt, output, append):
 
     stream, had = open_output(output, append)
     fmt = resolve_format(fmt, stream)
-    cols = ["t", "state", "throttle_pct", "frame"]
+    cols = ["t", "mode", "state", "throttle_pct", "target_rpm", "frame"] if sched.has_rpm else \
+        ["t", "state", "throttle_pct", "frame"]
     writer = make_writer(fmt, stream, cols, header=not had)
     try:
-        for t, state, thr, frame in sched.plan(rate):
-            writer.write({"t": t, "state": state, "throttle_pct": thr, "frame": format_hex(frame)})
+        for t, mode, state, value, frames in sched.plan(rate):
+            rec = {"t": t, "state": state, "throttle_pct": value if mode == "throttle" else None,
+                   "frame": " + ".join(format_hex(f) for f in frames)}
+            if sched.has_rpm:
+                rec["mode"], rec["target_rpm"] = mode, value if mode == "rpm" else None
+            writer.write(rec)
     finally:
         close_output(writer, stream)

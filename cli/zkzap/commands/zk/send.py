@@ -15,6 +15,7 @@ from ...errors import UsageError
 from .. import CONTEXT, Command, Group
 from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
                        protocol_version_option, warn, yes_option)
+from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
@@ -40,7 +41,9 @@ EXAMPLES = {
 
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
-             "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log"}
+             "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
+             "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
+             "summary_json": "--summary-json"}
 
 
 def format_hex(frame) -> str:
@@ -68,6 +71,9 @@ def send_options(f):
         click.option("--no-wait", is_flag=True,
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
+        limit_options,
+        logbook_option,
+        summary_option,
     ]
     f = apply_options(f, opts)
     if isinstance(f, click.Command):
@@ -81,13 +87,16 @@ def send_options(f):
 
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, stop_bits=1, for_s=None,
             rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
-            stale_after=3, raw_log=None):
+            stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
+            summary_json=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
     given = {k: v for k, v in (("rate", rate), ("abort", abort), ("fmt", fmt), ("output", output),
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
-                               ("raw_log", raw_log)) if v is not None}
+                               ("raw_log", raw_log), ("limit", limit or None),
+                               ("limits_files", limits_files or None), ("on_limit", on_limit),
+                               ("logbook", logbook), ("summary_json", summary_json)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -102,6 +111,12 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
 
     if ids is not None:
         zk_link.parse_ids(ids)
+    controls = zk_link.controls_engine(frame)
+    stand = None
+    if for_s is not None:
+        stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
+                            controls=controls)
+        check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     hazard = zk.control_hazard(frame)
     if hazard and not zk_link.is_simulator(url):
         consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
@@ -110,12 +125,14 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         return
     from .monitor import run_telemetry
 
-    controls = zk_link.controls_engine(frame)
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
-        stop_on_error=controls, title=f"{format_hex(frame)} to {url}")
+        stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
+        abort=abort or zk_link.DEFAULT_ABORT, stop_on_error=controls, title=f"{format_hex(frame)} to {url}",
+        stand=stand)
+    report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
+           outcome=outcome, tel=tel, session=session, summary_json=summary_json)
     outcome.raise_for_status()
     if tel.errors and not controls:
         note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")

@@ -1,0 +1,204 @@
+"""Limit monitoring for ECU status streams: ``egt_c<=850,warn=800``, ``power_voltage_v>=7.2``, ...
+
+A :class:`LimitSet` holds conditions from :mod:`zkzap.api.expr` over status keys. It is fed every
+decoded status frame (:meth:`LimitSet.check`) and evaluates a condition only on frames that
+carry its field (status ID 1 carries ``egt_c``, every ID carries ``rpm``): a snapshot's older
+value is never tested twice. For each frame it returns the entries the record gets:
+``warnings`` (the conditions in their warning band) and ``limit`` (the conditions violated).
+
+``on_limit`` says what a violation does to the session: ``abort`` (the session's abort command,
+then exit status 5), ``exit`` (exit status 5, no abort) or ``warn`` (keep going; the summary
+still names it). :attr:`LimitSet.tripped` is the first violation that ends the session.
+
+:meth:`LimitSet.summary` gives, per condition, the frames that carried the field, the extreme
+value reached (in the violating direction), the first warning and first violation times, and
+the verdict (``ok``, ``warn``, ``violated``, or ``unchecked`` when no frame carried the field).
+"""
+
+from __future__ import annotations
+
+from ..codec import zk
+from ..errors import DeviceError, UsageError
+from .expr import parse, parse_lines
+
+#: What a violation does: abort (the abort command, then exit 5), exit (exit 5), warn (go on).
+ON_LIMIT = ("abort", "exit", "warn")
+#: Status keys a limit may name.
+FIELDS = frozenset(zk.STATUS_KEYS)
+#: Status keys each status frame ID carries.
+KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in zk.STATUS}
+
+
+class LimitViolation(DeviceError):
+    """A limit violated (exit status 5); carries the condition, time and value."""
+
+    def __init__(self, message, condition=None, t=None, value=None):
+        super().__init__(message)
+        self.condition = condition
+        self.t = t
+        self.value = value
+
+
+def read_limits(exprs=(), files=()) -> list:
+    """Conditions from ``--limit EXPR`` options and ``--limits FILE`` files (``-`` is stdin)."""
+    import sys
+
+    out = []
+    for path in files:
+        if path == "-":
+            text, name = sys.stdin.read(), "stdin"
+        else:
+            name = path
+            try:
+                with open(path, encoding="utf-8-sig") as f:
+                    text = f.read()
+            except OSError as e:
+                raise UsageError(f"limits: cannot read {path}: {e.strerror}") from None
+            except UnicodeDecodeError:
+                raise UsageError(f"limits: {path} is not UTF-8 text (expected FIELD OP NUMBER lines)") from None
+        out += parse_lines(text, FIELDS, name=name)
+    for e in exprs:
+        out.append(parse(e, FIELDS, where="limit"))
+    return out
+
+
+class _State:
+    __slots__ = ("checked", "extreme", "extreme_t", "first_warn", "first_violation", "warnings", "violations",
+                 "band")
+
+    def __init__(self):
+        self.checked = 0
+        self.extreme = None
+        self.extreme_t = None
+        self.first_warn = None
+        self.first_violation = None
+        self.warnings = 0
+        self.violations = 0
+        self.band = "ok"
+
+
+class LimitSet:
+    """Conditions evaluated on every frame that carries their field; see the module text.
+
+    ``notify(message)`` is told when a condition enters its warning band or is violated (once
+    per entry, not on every frame).
+    """
+
+    def __init__(self, conditions, on_limit="warn", notify=None):
+        if on_limit not in ON_LIMIT:
+            raise UsageError(f"on-limit: {on_limit!r}; allowed {', '.join(ON_LIMIT)}")
+        self.conditions = list(conditions)
+        self.on_limit = on_limit
+        self.notify = notify or (lambda message: None)
+        self.state = [_State() for _ in self.conditions]
+        self.tripped = None
+        self._by_id = {sid: [i for i, c in enumerate(self.conditions) if c.field in keys]
+                       for sid, keys in KEYS_BY_ID.items()}
+
+    def __bool__(self):
+        return bool(self.conditions)
+
+    @property
+    def abort(self) -> bool:
+        return self.on_limit == "abort"
+
+    def check(self, t, rec) -> dict:
+        """Evaluate the conditions whose field ``rec`` (one decoded status frame) carries.
+        Returns the record's extra entries: ``{"warnings": [...], "limit": [...]}`` (only the
+        non-empty ones)."""
+        extra = {}
+        for i in self._by_id.get(rec.get("id"), ()):
+            cond = self.conditions[i]
+            value = rec.get(cond.field)
+            verdict = cond.check(value)
+            if verdict is None:
+                continue
+            st = self.state[i]
+            st.checked += 1
+            worse = cond.worse(st.extreme, value)
+            if worse != st.extreme or st.extreme is None:
+                st.extreme, st.extreme_t = worse, t
+            if verdict == "warn":
+                st.warnings += 1
+                if st.first_warn is None:
+                    st.first_warn = t
+                extra.setdefault("warnings", []).append(cond.text)
+                if st.band != "warn":
+                    self.notify(f"limit warning: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})")
+            elif verdict == "violated":
+                st.violations += 1
+                if st.first_violation is None:
+                    st.first_violation = t
+                extra.setdefault("limit", []).append(cond.text)
+                if st.band != "violated":
+                    if self.on_limit == "warn":
+                        self.notify(f"limit violated: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})")
+                if self.tripped is None and self.on_limit != "warn":
+                    self.tripped = LimitViolation(
+                        f"limit violated: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})", cond, t, value)
+            st.band = verdict
+        return extra
+
+    def verdict(self, i) -> str:
+        st = self.state[i]
+        if st.checked == 0:
+            return "unchecked"
+        if st.violations:
+            return "violated"
+        return "warn" if st.warnings else "ok"
+
+    def summary(self) -> list:
+        out = []
+        for i, c in enumerate(self.conditions):
+            st = self.state[i]
+            out.append({
+                "limit": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn,
+                "verdict": self.verdict(i), "checked": st.checked, "extreme": st.extreme,
+                "extreme_t": None if st.extreme_t is None else round(st.extreme_t, 3),
+                "warnings": st.warnings,
+                "first_warning_t": None if st.first_warn is None else round(st.first_warn, 3),
+                "violations": st.violations,
+                "first_violation_t": None if st.first_violation is None else round(st.first_violation, 3),
+            })
+        return out
+
+    def dashboard_lines(self) -> list:
+        """``[(level, text)]`` for a live view: every condition violated so far (red) and those in
+        their warning band now (yellow)."""
+        out = []
+        for i, c in enumerate(self.conditions):
+            st = self.state[i]
+            if st.violations:
+                out.append(("violated", f"{c.text} violated at {st.first_violation:.1f} s, "
+                                        f"extreme {_v(st.extreme)}"))
+            elif st.band == "warn":
+                out.append(("warn", f"{c.text}: in the warning band, extreme {_v(st.extreme)}"))
+        return out
+
+    def violated(self) -> list:
+        return [c.text for i, c in enumerate(self.conditions) if self.state[i].violations]
+
+
+def _v(value):
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def summary_lines(summary) -> list:
+    """Human lines for a limits summary (stderr)."""
+    lines = []
+    for s in summary:
+        ext = "-" if s["extreme"] is None else _v(s["extreme"])
+        if s["verdict"] == "unchecked":
+            tail = "never checked: no frame carried the field"
+        elif s["violations"]:
+            tail = f"VIOLATED first at {s['first_violation_t']:g} s ({_n(s['violations'])})"
+        elif s["warnings"]:
+            tail = f"warning band first at {s['first_warning_t']:g} s ({_n(s['warnings'])})"
+        else:
+            tail = "ok"
+        lines.append(f"  limit {s['limit']}: {tail}; extreme {ext} over {_n(s['checked'])}")
+    return lines
+
+
+def _n(count):
+    return f"{count} frame{'' if count == 1 else 's'}"

@@ -1,0 +1,124 @@
+"""Schedules: throttle and RPM rows, spreadsheet exports, finite cells, and a plan whose cost does not
+depend on the schedule's duration."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zkzap.api.schedule import RPM_MAX, Schedule, ScheduleError, ScheduleTargetError
+from zkzap.codec import zk
+
+
+def parse(text, **kw):
+    return Schedule.parse(text, name="s.csv", **kw)
+
+
+@pytest.mark.parametrize("text", [
+    "time_s,throttle_pct,state\n0,10,run\n5,20\n",
+    "\ufefftime_s,throttle_pct,state\r\n0,10,run\r\n5,20,\r\n",                 # Excel UTF-8: BOM, CRLF
+    '"time_s","throttle_pct","state"\n"0","10","run"\n"5","20",""\n',         # quoted cells
+    "time_s;throttle_pct;state\n0;10;run\n5;20;;\n",                            # ';' separators, padding
+    "time_s;throttle_pct;state\n0;10,0;run\n5,0;20,0\n",                         # decimal commas
+    "time_s\tthrottle_pct\n0\t10\n5\t20\n",                                      # tab separated
+    "0,10\n5,20  # a comment\n",
+])
+def test_spreadsheet_exports_read_alike(text):
+    s = parse(text)
+    assert [(r.t, r.throttle, r.state) for r in s.rows] == [(0.0, 10.0, "run"), (5.0, 20.0, "run")]
+
+
+@pytest.mark.parametrize("text,where,what", [
+    ("0,nan\n", "s.csv:1", "throttle_pct: 'nan' is not a finite number"),
+    ("0,10\ninf,20\n", "s.csv:2", "time_s: 'inf' is not a finite number"),
+    ("0,10\n1e400,20\n", "s.csv:2", "time_s: '1e400' is not a finite number"),
+    ("time_s,rpm\n0,NaN\n", "s.csv:2", "rpm: 'NaN' is not a finite number"),
+    ("0,rpm=-inf\n", "s.csv:1", "rpm: '-inf' is not a finite number"),
+    ("0,10\n1,130\n", "s.csv:2", "throttle: 130 is out of range"),
+    ("0,rpm=300000\n", "s.csv:1", f"rpm: 300000 is out of range; allowed 0..{RPM_MAX}"),
+    ("0,rpm=90000,pwm\n", "s.csv:1", "state: 'pwm' with an rpm target"),
+    ("time_s,throttle_pct,rpm\n0,10,9000\n", "s.csv:2", "give throttle_pct or rpm, not both"),
+    ("time_s,throttle,state\n", "s.csv:1", "header"),
+    ("0,10\n2,10\n1,10\n", "s.csv:3", "times must not decrease"),
+    ("0,speed=3\n", "s.csv:1", "expected rpm=N or throttle_pct=N"),
+    ("0,10,run,4\n", "s.csv:1", "4 cells"),
+])
+def test_bad_cells_name_file_and_line(text, where, what):
+    with pytest.raises(ScheduleError) as e:
+        parse(text)
+    assert str(e.value).startswith(where) and what in str(e.value)
+
+
+def test_rpm_rows_choose_the_finest_factor_and_leave_rpm_mode():
+    s = parse("0,0,run\n10,rpm=95000\n20,rpm=120000\n30,0,standby\n40,0,standby\n")
+    assert s.has_rpm and s.rpm_factor == 3 and s.max_target == 120000      # 40950 x 3 >= 120000
+    plan = s.plan(20)
+    assert [(t, mode, state, value) for t, mode, state, value, _ in plan] == [
+        (0.0, "throttle", "run", 0.0), (10.0, "rpm", "run", 95010), (20.0, "rpm", "run", 120000),
+        (30.0, "throttle", "standby", 0.0)]
+    mode6, id7 = plan[1][4]
+    assert zk.decode_control(mode6)["rpm_factor"] == 3 and zk.decode_control(mode6)["state"] == "run"
+    assert zk.decode_control(id7)["rpm_value"] == 3167
+    # throttle rows in an RPM schedule pair ID 1 with ID 6 none: RPM mode is left
+    leave = [zk.decode_control(f) for f in plan[-1][4]]
+    assert leave[0]["id"] == 1 and leave[1] == dict(leave[1], id=6, rpm_factor=0, state="none")
+    assert any("rounded to 95010" in n for n in s.notes)
+
+
+class FakeEcu:
+    def __init__(self, max_rpm, version=6):
+        self.latest = {"max_rpm": max_rpm}
+        self.decoder = type("D", (), {"known": version})()
+
+
+def test_rpm_frames_wait_for_the_ecu_and_refuse_targets_above_its_max():
+    s = parse("0,rpm=150000\n5,rpm=150000\n").bind(FakeEcu(None))
+    assert s.frame_at(0.0) is None                            # max rpm not known yet: nothing sent
+    s.bind(FakeEcu(160000))
+    assert zk.decode_control(s.frame_at(0.0))["id"] in (6, 7)
+    s = parse("0,rpm=170000\n5,0\n").bind(FakeEcu(160000))
+    with pytest.raises(ScheduleTargetError, match=r"s.csv:1: rpm 170000 is above the ECU's max rpm 160000"):
+        s.frame_at(0.0)
+    s = parse("0,rpm=90000\n5,0\n").bind(FakeEcu(160000, version=3))
+    with pytest.raises(ScheduleTargetError, match="protocol version 4"):
+        s.frame_at(0.0)
+
+
+def test_plan_cost_does_not_grow_with_duration():
+    # a billion seconds at 200 Hz would be 2e11 periods if each one were evaluated
+    s = parse("0,10\n1e9,10\n1e9,0,standby\n")
+    assert [p[0] for p in s.plan(200)] == [0.0, 1e9]
+    s = parse("0,0\n1e9,100\n", interpolate="linear")
+    plan = s.plan(200)
+    assert len(plan) == 1001 and plan[-1][3] == 100.0
+
+
+def _brute(s, rate):
+    out, last = [], None
+    for i in range(int(s.length * rate + 1e-9) + 1):
+        cmd = s.command_at(i / rate)
+        if cmd is None:
+            continue
+        frames = s._frames(*cmd)
+        if frames != last:
+            out.append((round(i / rate, 3), frames))
+            last = frames
+    return out
+
+
+rows = st.lists(st.tuples(st.integers(0, 40), st.one_of(st.integers(0, 1000).map(lambda v: ("thr", v / 10)),
+                                                       st.integers(0, 16000).map(lambda v: ("rpm", v * 10)))),
+                min_size=1, max_size=6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows, st.sampled_from(["step", "linear"]), st.sampled_from([5, 20]))
+def test_plan_matches_stepping_every_period(spec, interpolate, rate):
+    t = 0.0
+    lines = []
+    for dt, (kind, v) in spec:
+        t += dt / 10
+        lines.append(f"{t:g},{v:g}" if kind == "thr" else f"{t:g},rpm={v:g}")
+    s = parse("\n".join(lines) + "\n", interpolate=interpolate)
+    assert [(t, f) for t, _, _, _, f in s.plan(rate)] == _brute(s, rate)

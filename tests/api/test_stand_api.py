@@ -1,0 +1,146 @@
+"""Limits on status frames, steady-state reduction with TSFC, and the SQLite logbook."""
+
+from __future__ import annotations
+
+import multiprocessing
+import sqlite3
+
+import pytest
+
+from zkzap.api import limits as L
+from zkzap.api import logbook as lb
+from zkzap.api.schedule import Schedule
+from zkzap.api.steady import SETTLED_FRACTION, StepAverager, columns, tsfc
+from zkzap.errors import UsageError
+
+
+def frame(sid, **values):
+    return dict({"kind": "status", "id": sid, "rpm": 50000}, **values)
+
+
+def test_limits_are_evaluated_only_on_frames_that_carry_the_field():
+    lims = L.LimitSet([L.parse("egt_c<=850,warn=800", L.FIELDS), L.parse("rpm<=165000", L.FIELDS)], "exit")
+    assert lims.check(0.0, frame(1, egt_c=700)) == {}
+    assert lims.check(0.05, frame(2, power_voltage_v=12.0)) == {}      # no egt_c: only rpm tested
+    assert lims.check(0.10, frame(1, egt_c=820)) == {"warnings": ["egt_c<=850,warn=800"]}
+    assert lims.tripped is None
+    assert lims.check(0.15, frame(1, egt_c=861)) == {"limit": ["egt_c<=850,warn=800"]}
+    assert lims.tripped is not None and lims.tripped.code == 5 and "egt_c=861 at t=0.15 s" in str(lims.tripped)
+    lims.check(0.20, frame(1, egt_c=870))
+    s = {x["limit"]: x for x in lims.summary()}
+    egt = s["egt_c<=850,warn=800"]
+    assert (egt["checked"], egt["extreme"], egt["first_warning_t"], egt["first_violation_t"], egt["verdict"]) == \
+        (4, 870, 0.1, 0.15, "violated")
+    assert s["rpm<=165000"]["checked"] == 5 and s["rpm<=165000"]["verdict"] == "ok"
+    assert lims.dashboard_lines()[0][0] == "violated"
+
+
+def test_lower_limits_keep_the_lowest_value_and_unseen_fields_are_unchecked():
+    lims = L.LimitSet([L.parse("power_voltage_v>=7.2", L.FIELDS), L.parse("prop_rpm<=100", L.FIELDS)], "warn")
+    for t, v in ((0, 8.0), (1, 7.1), (2, 7.5)):
+        lims.check(t, frame(2, power_voltage_v=v))
+    s = lims.summary()
+    assert s[0]["extreme"] == 7.1 and s[0]["extreme_t"] == 1 and s[0]["violations"] == 1
+    assert lims.tripped is None                      # warn: the session goes on
+    assert s[1]["verdict"] == "unchecked" and s[1]["checked"] == 0
+
+
+def test_limits_file_and_bad_expressions(tmp_path):
+    f = tmp_path / "engine.limits"
+    f.write_text("\ufeff# K-100 limits\negt_c <= 850, warn=800\n\nrpm<=165000  # redline\n")
+    assert [c.text for c in L.read_limits(["error_code==0"], [str(f)])] == \
+        ["egt_c <= 850, warn=800", "rpm<=165000", "error_code==0"]
+    f.write_text("egt_c<=850\negt<=3\n")
+    with pytest.raises(UsageError, match=f"{f}:2: 'egt<=3': unknown field 'egt'"):
+        L.read_limits([], [str(f)])
+    with pytest.raises(UsageError, match="cannot read"):
+        L.read_limits([], [str(tmp_path / "none")])
+    with pytest.raises(UsageError, match="not a finite number"):
+        L.read_limits(["egt_c<=nan"])
+
+
+def test_tsfc_worked_example():
+    # 0.5 L/min of Jet A-1 (0.8 kg/L) = 6.667 g/s; 10 kgf = 98.0665 N -> 67.98 g/(kN*s), 2.4 kg/(kgf*h)
+    assert tsfc(0.5, 10.0, 0.8) == (67.98, 2.4)
+    assert tsfc(0.5, 0.0, 0.8) == (None, None) and tsfc(None, 3, 0.8) == (None, None)
+    assert tsfc(0.5, 10.0, 0.84)[1] == 2.52                    # diesel
+
+
+def test_step_averages_windows_and_settling():
+    sched = Schedule.parse("0,30\n10,60\n20,60\n", name="s")
+    avg = StepAverager(sched.steps(), settle=2, average=5)
+    for i in range(200):
+        t = i * 0.1
+        rpm = 80000 if t < 10 else 100000 + (t - 10) * 2000      # step 2 keeps accelerating
+        avg.feed(t, {"id": 1, "rpm": rpm, "egt_c": 600})
+        avg.feed(t + 0.05, {"id": 4, "rpm": rpm, "thrust_kg": 5.0})
+        avg.feed(t + 0.07, {"id": 7, "rpm": rpm, "fuel_flow_l_min": 0.3})
+    one, two = avg.rows()
+    assert (one["window_start_s"], one["window_end_s"], one["rpm_mean"], one["settled"]) == (2, 7, 80000, True)
+    assert one["frames"] == 150 and one["thrust_kg_mean"] == 5.0 and one["tsfc_g_kn_s"] == tsfc(0.3, 5, 0.8)[0]
+    assert two["settled"] is False and "never settled" in two["note"] and two["target"] == "60 %"
+    assert f"more than {SETTLED_FRACTION * 100:g} %" in two["note"]
+    assert list(one) == columns()
+    cut = StepAverager(sched.steps(), settle=8, average=5).rows()[0]
+    assert cut["window_end_s"] == 10 and "window cut to 2 s" in cut["note"] and cut["settled"] is None
+
+
+def _write_runs(path, n, tag):
+    for i in range(n):
+        lb.record(path, {"started": "2026-01-01T00:00:00Z", "ended": "2026-01-01T00:01:00Z", "duration_s": 60.0,
+                         "running_s": 30.0, "starts": 1, "max_rpm": 100000, "max_egt_c": 700, "fuel_used_l": 0.25,
+                         "errors": [], "limits_violated": [], "command": tag, "port": "sim://zk", "schedule": None,
+                         "files": [], "outcome": "duration", "exit_status": 0})
+
+
+def test_logbook_two_concurrent_writers(tmp_path):
+    path = str(tmp_path / "engine.db")
+    lb.check_writable(path)
+    ctx = multiprocessing.get_context("spawn")
+    procs = [ctx.Process(target=_write_runs, args=(path, 25, f"stand {k}")) for k in (1, 2)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(60)
+        assert p.exitcode == 0
+    runs = lb.runs(path)
+    assert len(runs) == 50 and sorted({r["command"] for r in runs}) == ["stand 1", "stand 2"]
+    tot = lb.totals(runs)
+    assert tot["starts"] == 50 and tot["fuel_used_l"] == 12.5 and tot["running_hours"] == round(1500 / 3600, 4)
+    assert sqlite3.connect(path).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+
+
+def test_run_stats_count_starts_and_running_time():
+    s = lb.RunStats()
+    for t, name in ((0, "stop"), (1, "ignition"), (5, "running"), (9, "running"), (10, "cooling"), (12, "running"),
+                    (13, "stop")):
+        s.feed(t, {"id": 1, "engine_state_name": name})
+        s.feed(t, {"id": 2})
+    assert s.starts == 2 and s.running_s == 6.0
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+ops = st.sampled_from(["<", "<=", ">", ">="])
+
+
+@settings(max_examples=80, deadline=None)
+@given(ops, st.integers(0, 1000), st.lists(st.tuples(st.sampled_from([1, 2, 3]), st.integers(0, 1000)),
+                                           max_size=40))
+def test_limit_bookkeeping_matches_a_direct_count(op, threshold, stream):
+    cond = L.parse(f"egt_c{op}{threshold}", L.FIELDS)
+    lims = L.LimitSet([cond], "exit")
+    test = L.parse.__globals__["OPERATORS"][op]
+    for i, (sid, v) in enumerate(stream):
+        extra = lims.check(i * 0.05, frame(sid, egt_c=v) if sid == 1 else frame(sid))
+        assert ("limit" in extra) == (sid == 1 and not test(v, threshold))
+    carried = [(i, v) for i, (sid, v) in enumerate(stream) if sid == 1]
+    s = lims.summary()[0]
+    bad = [(i, v) for i, v in carried if not test(v, threshold)]
+    assert s["checked"] == len(carried) and s["violations"] == len(bad)
+    assert s["first_violation_t"] == (round(bad[0][0] * 0.05, 3) if bad else None)
+    values = [v for _, v in carried]
+    want = None if not values else (max(values) if op in ("<", "<=") else min(values))
+    assert s["extreme"] == want
+    assert (lims.tripped is not None) == bool(bad)

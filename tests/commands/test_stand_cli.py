@@ -1,0 +1,204 @@
+"""Test-stand commands in-process against sim://zk: limits on monitor / send --for / profile, zk check,
+RPM schedules, per-step averages, the logbook, and every new option's bad input."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+
+import pytest
+
+SIM = "sim://zk?speed=20"
+
+
+@pytest.fixture
+def pty_port():
+    """A pty whose other end nobody answers: (slave path, function returning what was written)."""
+    import select
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+
+    def written():
+        data = b""
+        while select.select([master], [], [], 0.05)[0]:
+            data += os.read(master, 4096)
+        return data
+
+    yield os.ttyname(slave), written
+    os.close(master)
+    os.close(slave)
+
+
+def jsonl(text):
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
+
+
+# --- limits ------------------------------------------------------------------------------------
+
+def test_send_for_violated_by_the_simulators_egt_aborts_and_exits_5(cli):
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "40", "--for", "20", "-p", SIM, "-f", "jsonl",
+            "--limit", "egt_c<=500,warn=400")
+    assert r.exit_code == 5, r
+    assert "limit violated: sent standby, throttle 0" in r.stderr
+    assert "error: limit violated: egt_c=" in r.stderr and "limit warning: egt_c=" in r.stderr
+    recs = jsonl(r.stdout)
+    assert recs[-1]["limit"] == ["egt_c<=500,warn=400"] and recs[-1]["egt_c"] > 500
+    assert any(rec.get("warnings") == ["egt_c<=500,warn=400"] for rec in recs)
+    assert all("limit" not in rec for rec in recs[:-1])
+    assert "limit egt_c<=500,warn=400: VIOLATED first at" in r.stderr
+
+
+def test_monitor_limit_on_an_injected_error_exits_5_without_abort(cli, tmp_path):
+    log, summary = tmp_path / "m.csv", tmp_path / "s.json"
+    r = cli("zk", "monitor", "-p", SIM + "&error=egt-high&error_after=0.5", "--duration", "5", "-o", str(log),
+            "--limit", "error_code==0", "--summary-json", str(summary))
+    assert r.exit_code == 5 and "sent" not in r.stderr
+    s = json.loads(summary.read_text())
+    assert s["command"] == "zk monitor" and s["outcome"] == "limit" and s["exit_status"] == 5
+    assert s["limits"][0]["verdict"] == "violated" and s["limits"][0]["extreme"] == 8 and s["aborted"] is None
+    rows = list(csv.DictReader(io.StringIO(log.read_text())))
+    assert rows[-1]["limit"] == "error_code==0" and rows[-1]["error_code"] == "8"
+    assert "warnings" in rows[0] and all(len(row) == len(rows[0]) for row in rows)
+
+
+def test_on_limit_warn_keeps_going_and_the_summary_names_it(cli, tmp_path):
+    summary = tmp_path / "s.json"
+    sched = tmp_path / "p.csv"
+    sched.write_text("0,0,run\n0.8,60\n1.0,0,standby\n1.2,0,standby\n")
+    r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--ids", "1", "--limit", "egt_c<=550",
+            "--limit", "prop_rpm<=10", "--on-limit", "warn", "--summary-json", str(summary))
+    assert r.exit_code == 0, r
+    s = json.loads(summary.read_text())
+    lim = {x["limit"]: x for x in s["limits"]}
+    assert lim["egt_c<=550"]["verdict"] == "violated" and lim["egt_c<=550"]["extreme"] > 550
+    assert lim["egt_c<=550"]["first_violation_t"] > 0 and lim["prop_rpm<=10"]["verdict"] == "ok"
+    assert s["outcome"] == "duration" and "limit violated: egt_c=" in r.stderr
+
+
+def test_limits_file_on_profile_aborts(cli, tmp_path):
+    lim = tmp_path / "engine.limits"
+    lim.write_text("# stand limits\nrpm<=60000\n")
+    sched = tmp_path / "p.csv"
+    sched.write_text("0,0,run\n1.0,100\n3,0,standby\n")
+    r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--ids", "2", "--limits", str(lim))
+    assert r.exit_code == 5 and "limit violated: sent standby" in r.stderr
+    assert "rpm<=60000" in r.stderr
+
+
+# --- zk check ----------------------------------------------------------------------------------
+
+def test_check_pass_fail_and_silent(cli, pty_port):
+    r = cli("zk", "check", "-p", SIM, "--count", "30", "--limit", "power_voltage_v>=7.4", "--limit", "egt_c<=100")
+    assert r.exit_code == 0, r
+    doc = json.loads(r.stdout)
+    assert doc["verdict"] == "pass" and [c["check"] for c in doc["checks"]] == \
+        ["power_voltage_v>=7.4", "egt_c<=100", "ECU error code"]
+    r = cli("zk", "check", "-p", SIM + "&battery=7.0", "--count", "30", "--limit", "power_voltage_v>=7.4",
+            "-f", "csv")
+    assert r.exit_code == 5 and "check failed: power_voltage_v>=7.4" in r.stderr
+    rows = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert rows[0]["verdict"] == "violated" and float(rows[0]["extreme"]) < 7.4
+    r = cli("zk", "check", "-p", SIM + "&error=13&error_after=0", "--count", "20")
+    assert r.exit_code == 5 and json.loads(r.stdout)["checks"][-1]["verdict"] == "violated"
+    r = cli("zk", "check", "-p", SIM + "&protocol_version=4", "--count", "12", "--limit", "prop_rpm<=5")
+    assert r.exit_code == 1 and json.loads(r.stdout)["verdict"] == "unchecked"
+    path, _ = pty_port
+    r = cli("zk", "check", "-p", path, "--timeout", "0.3")
+    assert r.exit_code == 3 and r.stdout == ""
+
+
+# --- RPM schedules, steps, logbook -------------------------------------------------------------
+
+def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
+    sched = tmp_path / "rpm.csv"
+    sched.write_text("time_s,throttle_pct,rpm,state\n0,0,,run\n0.9,,100000,\n1.6,0,,standby\n1.8,0,,standby\n")
+    steps, summary, book = tmp_path / "steps.csv", tmp_path / "s.json", tmp_path / "engine.db"
+    r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--settle", "0.3", "--steps-csv", str(steps),
+            "--summary-json", str(summary), "--logbook", str(book), "--fuel-density", "0.84")
+    assert r.exit_code == 0, r
+    recs = jsonl(r.stdout)
+    scl = [(rec["t"], rec["scl"]) for rec in recs if rec["id"] == 8]
+    assert any(v == 1 for _, v in scl) and scl[-1][1] == 0          # RPM mode on, then off again
+    rows = list(csv.DictReader(io.StringIO(steps.read_text())))
+    assert [row["target"] for row in rows] == ["0 %", "100000 rpm", "0 %"]
+    assert abs(float(rows[1]["rpm_mean"]) - 100000) < 3000 and float(rows[1]["tsfc_kg_kgf_h"]) > 0
+    s = json.loads(summary.read_text())
+    assert s["fuel_density_kg_l"] == 0.84 and s["steps"][1]["mode"] == "rpm" and s["starts"] == 1
+    r = cli("zk", "logbook", str(book), "-f", "json")
+    doc = json.loads(r.stdout)
+    run = doc["runs"][0]
+    assert run["command"] == "zk profile" and run["schedule"] == str(sched) and str(steps) in run["files"]
+    assert run["max_rpm"] >= 95000 and doc["totals"]["starts"] == 1 and doc["totals"]["running_s"] > 0
+
+
+def test_rpm_target_above_the_ecus_max_stops_before_sending_it(cli, tmp_path):
+    sched = tmp_path / "rpm.csv"
+    sched.write_text("0,rpm=150000,run\n2,0,standby\n")
+    r = cli("zk", "profile", str(sched), "-p", SIM + "&max_rpm=120000", "-f", "jsonl")
+    assert r.exit_code == 5 and "rpm 150000 is above the ECU's max rpm 120000" in r.stderr
+
+
+def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
+    book = str(tmp_path / "engine.db")
+    cli("zk", "monitor", "-p", SIM, "--count", "5", "-f", "jsonl", "--logbook", book)
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "1", "-p", SIM, "-f", "jsonl",
+            "--logbook", book)
+    assert r.exit_code == 0 and "run 2 recorded" in r.stderr
+    r = cli("zk", "logbook", book, "-f", "csv")
+    rows = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert [row["command"] for row in rows] == ["zk monitor", "zk send control"]
+    r = cli("zk", "logbook", book, "--totals", "-f", "jsonl")
+    assert jsonl(r.stdout)[0]["runs"] == 2
+
+
+# --- bad input: exit 2, nothing sent, nothing on stdout, no file touched ------------------------
+
+@pytest.mark.parametrize("args,msg", [
+    (["monitor", "--sim", "--limit", "egt<=3"], "unknown field 'egt'"),
+    (["monitor", "--sim", "--limit", "egt_c<<3"], "'egt_c<<3': '<3' is not a number"),
+    (["monitor", "--sim", "--limit", "egt_c~3"], "expected FIELD OP NUMBER"),
+    (["monitor", "--sim", "--limit", "egt_c<=inf"], "not a finite number"),
+    (["monitor", "--sim", "--limit", "egt_c<=800,warn=900"], "must be below the limit"),
+    (["monitor", "--sim", "--limits", "missing.limits"], "limits: cannot read missing.limits"),
+    (["monitor", "--sim", "--on-limit", "exit"], "on-limit: give --limit"),
+    (["monitor", "--sim", "--limit", "rpm<=1", "--on-limit", "abort"], "does not control the engine"),
+    (["monitor", "--sim", "--logbook", "-"], "logbook: a file is needed"),
+    (["monitor", "--sim", "--summary-json", "-"], "'-' needs -o FILE"),
+    (["monitor", "--sim", "--summary-json", "/nonexistent/s.json"], "no such directory"),
+    (["send", "keepalive", "--sim", "--summary-json", "s.json"], "summary-json: applies only with --for"),
+    (["send", "keepalive", "--sim", "--limit", "rpm<=1"], "limit: applies only with --for"),
+    (["send", "keepalive", "--sim", "--for", "1", "--limit", "rpm<=1", "--on-limit", "abort"],
+     "does not control the engine"),
+    (["profile", "{s}", "--sim", "--settle", "nan"], "'nan' is not a finite number"),
+    (["profile", "{s}", "--sim", "--average", "inf"], "inf is not in the range"),
+    (["profile", "{s}", "--sim", "--settle", "-inf"], "-inf is not in the range"),
+    (["profile", "{s}", "--sim", "--steps-csv", "x.csv", "--fuel-density", "3"], "fuel-density"),
+    (["profile", "{s}", "--sim", "--fuel-density", "0.8"], "applies with --settle"),
+    (["profile", "{s}", "--sim", "--steps-csv", "/nonexistent/x.csv"], "no such directory"),
+    (["profile", "{s}", "-n", "--limit", "rpm<=1"], "limit: not with -n"),
+    (["profile", "{bad}", "--sim"], ":2: throttle_pct: 'nan' is not a finite number"),
+    (["check", "--sim", "--duration", "nan"], "'nan' is not a finite number"),
+    (["check", "--sim", "--on-limit", "warn", "--limit", "rpm<=1"], "on-limit"),
+    (["logbook", "{nodb}"], "not a zkzap logbook"),
+    (["logbook", "missing.db"], "no such file"),
+    (["report", "{s}"], "give -o REPORT"),
+    (["report", "{s}", "-o", "r.txt"], "cannot tell the format"),
+    (["report", "{s}", "--terminal", "-o", "r.png"], "not with --terminal"),
+    (["report", "{s}", "-o", "r.png", "--meta", "novalue"], "meta: 'novalue' is not KEY=VALUE"),
+    (["report", "{s}", "-o", "{s}.png", "--steps", "{nodb}"], "expected the CSV"),
+    (["report", "{nodb}", "-o", "r.png"], "expected the CSV"),
+])
+def test_bad_input_exit_2(cli, tmp_path, monkeypatch, args, msg):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.csv").write_text("0,0,run\n1,0,standby\n")
+    (tmp_path / "bad.csv").write_text("0,0,run\n1,nan\n")
+    (tmp_path / "nodb").write_text("hello\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    subst = {"{s}": "s.csv", "{bad}": "bad.csv", "{nodb}": "nodb", "{s}.png": "s.png"}
+    r = cli("zk", *[subst.get(a, a) for a in args])
+    assert r.exit_code == 2 and msg in r.stderr and r.stdout == "", r
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -1,0 +1,122 @@
+"""zk report: a profile run rendered to PNG, SVG, PDF and self-contained HTML, from its CSV and from its
+raw log; skipped plots named; matplotlib optional; the terminal view."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from zkzap.io import report as R   # noqa: E402
+
+SIM = "sim://zk?speed=20"
+ALL_PANELS = ["Engine speed", "Exhaust gas temperature", "Thrust", "Throttle", "Fuel flow", "Voltages"]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One short profile run with every output a report reads."""
+    from click.testing import CliRunner
+
+    from zkzap.commands import root, run as run_cli
+
+    d = tmp_path_factory.mktemp("run")
+    sched = d / "stand.csv"
+    sched.write_text("0,0,run\n0.8,40\n1.2,80\n1.6,0,standby\n1.8,0,standby\n")
+    files = {k: str(d / n) for k, n in (("tel", "tel.csv"), ("raw", "raw.bin"), ("steps", "steps.csv"),
+                                        ("summary", "summary.json"))}
+    with CliRunner().isolation():
+        code = run_cli(root, "zkzap", ["zk", "profile", str(sched), "-p", SIM, "-o", files["tel"], "--raw-log",
+                                       files["raw"], "--settle", "0.2", "--steps-csv", files["steps"],
+                                       "--summary-json", files["summary"], "--limit", "egt_c<=600",
+                                       "--on-limit", "warn"])
+    assert code == 0
+    files["dir"] = d
+    return files
+
+
+def test_png_report_with_every_plot(cli, run):
+    out = run["dir"] / "report.png"
+    r = cli("zk", "report", run["tel"], "--steps", run["steps"], "--summary", run["summary"], "-o", str(out),
+            "--title", "K-100 acceptance", "--meta", "engine=K-100", "--meta", "serial=1234")
+    assert r.exit_code == 0 and r.stdout == "" and "skipped" not in r.stderr, r
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 50_000
+    panels, step_plots, skipped = R.plan(R.load_run(run["tel"]), R.load_steps(run["steps"]))
+    assert [p[0] for p in panels] == ALL_PANELS and skipped == []
+    assert [p[0] for p in step_plots] == ["Thrust vs rpm", "EGT vs rpm", "TSFC vs thrust"]
+    assert ("target_throttle_pct", "target") in panels[3][2]
+
+
+def test_html_report_is_one_self_contained_file(cli, run):
+    out = run["dir"] / "report.html"
+    r = cli("zk", "report", run["tel"], "--steps", run["steps"], "--summary", run["summary"], "-o", str(out),
+            "--meta", "engine=K-100")
+    assert r.exit_code == 0, r
+    html = out.read_text()
+    for marker in ('id="summary"', 'id="time-histories"', 'id="steady-state"', 'id="steps"', "<svg"):
+        assert marker in html
+    assert "Time histories: " + ", ".join(ALL_PANELS) in html
+    assert "Thrust vs rpm, EGT vs rpm, TSFC vs thrust" in html
+    assert "limit violated: egt_c&lt;=600" in html and "K-100" in html
+    assert "src=\"http" not in html and "<link" not in html and "<script" not in html
+    assert html.count("<svg") == 2
+
+
+@pytest.mark.parametrize("ext,magic", [("svg", b"<?xml"), ("pdf", b"%PDF")])
+def test_svg_and_pdf_from_the_raw_log(cli, run, ext, magic):
+    out = run["dir"] / f"raw.{ext}"
+    r = cli("zk", "report", run["raw"], "-o", str(out))
+    assert r.exit_code == 0, r
+    assert out.read_bytes()[:len(magic)] == magic
+    panels, _, skipped = R.plan(R.load_run(run["raw"]))
+    assert [p[0] for p in panels] == ALL_PANELS
+    assert "skipped steady-state plots" in r.stderr and skipped[0].startswith("steady-state plots")
+
+
+def test_missing_columns_say_which_plots_were_skipped(cli, run, tmp_path):
+    tel = tmp_path / "ids1.jsonl"
+    import csv
+
+    with open(run["tel"], encoding="utf-8") as f:
+        rows = [{k: row[k] for k in ("t", "rpm", "egt_c", "engine_state_name")} for row in csv.DictReader(f)]
+    tel.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    out = tmp_path / "r.png"
+    r = cli("zk", "report", str(tel), "-o", str(out))
+    assert r.exit_code == 0 and out.exists()
+    assert f"skipped thrust: {tel} has no column thrust_kg" in r.stderr
+    assert "skipped voltages" in r.stderr and "skipped engine speed" not in r.stderr
+
+
+def test_terminal_view(cli, run):
+    r = cli("zk", "report", run["tel"], "--terminal")
+    assert r.exit_code == 0 and "Engine speed — rpm" in r.stdout and "Voltages" in r.stdout and "█" in r.stdout
+
+
+def test_without_matplotlib_names_the_extra(cli, run, monkeypatch):
+    for name in list(sys.modules):
+        if name == "matplotlib" or name.startswith("matplotlib."):
+            monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    out = run["dir"] / "none.png"
+    r = cli("zk", "report", run["tel"], "-o", str(out))
+    assert r.exit_code == 2 and "pip install 'zkzap[plot]'" in r.stderr and not out.exists()
+    assert cli("zk", "report", run["tel"], "--terminal").exit_code == 0
+
+
+def test_other_commands_never_import_plotting_or_sqlite(tmp_path):
+    cli_dir = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "cli")
+    sched = tmp_path / "s.csv"
+    sched.write_text("0,10,run\n5,0,standby\n")
+    code = ("import sys; from zkzap import commands; sys.argv=['zk','monitor','--sim','--count','3','-f','jsonl'];"
+            "import atexit; atexit.register(lambda: print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('matplotlib','numpy','sqlite3','plotext')), file=sys.stderr)); commands.zk_main()")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, PYTHONPATH=cli_dir))
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.strip().splitlines()[-1] == "[]"
