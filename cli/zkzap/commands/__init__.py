@@ -83,6 +83,8 @@ def _long(option):
 
 
 def _is_negative_number(token: str) -> bool:
+    if token[1:].lower() in ("inf", "infinity", "nan"):
+        return True                 # refused by the value's own (finite) type, naming it
     if len(token) < 2 or token[0] != "-" or not (token[1].isdigit() or token[1] == "."):
         return False
     try:

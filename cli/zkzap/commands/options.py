@@ -5,6 +5,7 @@ Nothing here imports rich or pyserial: both are loaded by the functions that nee
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 
@@ -33,6 +34,36 @@ class SignedCommand(Command):
     """
 
     negative_numbers = True
+
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float that must be a finite number: ``nan``, ``inf`` and ``-inf`` are refused (exit 2,
+    naming the option), where click's FLOAT takes them and a timeout or duration never ends."""
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return rv
+
+
+class FiniteRange(click.FloatRange):
+    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
+    and ``inf`` wherever there is no upper bound). Every float option of zkzap is one of these
+    or a :class:`FiniteFloat`."""
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, float) or not math.isfinite(value):
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = 0.0        # not a number at all: click's own message below
+            if not math.isfinite(number):
+                self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+FINITE = FiniteFloat()
 
 
 def note(message: str) -> None:
@@ -174,7 +205,7 @@ def port_options(group: str):
         click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
                      default=DEFAULT_BAUD[group], show_default=True,
                      help=f"Baud rate [env {env['baud']}]."),
-        click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
+        click.option("--timeout", type=FiniteRange(0.001, 3600), default=None, metavar="SECONDS",
                      help="Reply timeout (default: derived from the baud rate)."),
         click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
     ]

@@ -273,7 +273,10 @@ class ReplaySource:
 def parse_ids(text):
     """``"1,2,6"`` or ``"1-3,9"`` -> frozenset of status IDs (1..14)."""
     ids = set()
-    for part in str(text).replace(" ", "").split(","):
+    import re
+
+    # "1 2" is two IDs (never 12); spaces around a range's dash are allowed ("1 - 3")
+    for part in re.split(r"[,\s]+", re.sub(r"\s*-\s*", "-", str(text).strip())):
         if not part:
             continue
         lo, sep, hi = part.partition("-")

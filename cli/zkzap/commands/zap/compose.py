@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, dry_run_option, port_options, yes_option
+from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, yes_option
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -214,7 +214,7 @@ def _link_args(common):
 @id_option()
 @click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
               help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
-@click.option("--interval", type=click.FloatRange(0, 3600), default=0.0, metavar="SECONDS",
+@click.option("--interval", type=FiniteRange(0, 3600), default=0.0, metavar="SECONDS",
               help="Pause between echoes with --count.")
 @_format("text", ("text", "table", "json", "jsonl", "csv"),
          "'text' prints one line per reply; the others give records with id, seq, error, errors, rtt_ms")
