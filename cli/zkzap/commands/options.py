@@ -6,7 +6,6 @@ Nothing here imports rich or pyserial: both are loaded by the functions that nee
 from __future__ import annotations
 
 import math
-import os
 import sys
 
 import click
@@ -129,15 +128,41 @@ def output_options(f):
     return f
 
 
-def open_output(path, append=False):
-    """(stream, had_content): a line-buffered text stream for ``path`` ('-' or None: stdout)."""
+def output_file(path, append=False, *, fmt=None, columns=None, inputs=None):
+    """The checked :class:`~zkzap.io.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
+    (exit 2) when it is one of ``inputs`` (option -> paths), cannot be written, or cannot be
+    appended to in ``fmt`` with ``columns``. Nothing is truncated until it is opened."""
+    from ..io.outfile import OutFile, refuse_same_files
+
     if not path or path == "-":
+        return None
+    refuse_same_files({"--output": path}, inputs)
+    return OutFile(path, append=append, fmt=fmt, columns=columns).check()
+
+
+def decode_inputs(inputs, binary, explicit):
+    """The files a decoder reads, for ``inputs=`` of :func:`output_file` (hex arguments: none)."""
+    if explicit:
+        return None
+    return {"--binary" if binary else "stdin": list(inputs) or ["-"]}
+
+
+def output_format(fmt, path):
+    """The format for ``-o PATH`` or stdout: given, else a table on a terminal, JSON Lines
+    otherwise (a file is never a terminal)."""
+    if fmt:
+        return fmt
+    return resolve_format(None) if not path or path == "-" else "jsonl"
+
+
+def open_output(path, append=False, *, fmt=None, columns=None, inputs=None):
+    """(stream, had_content) for ``path`` ('-' or None: stdout), checked as :func:`output_file`
+    checks it; ``had_content``: appending to existing records (no second header; a JSON array
+    continued)."""
+    out = output_file(path, append, fmt=fmt, columns=columns, inputs=inputs)
+    if out is None:
         return sys.stdout, False
-    try:
-        had = append and os.path.exists(path) and os.path.getsize(path) > 0
-        return open(path, "a" if append else "w", encoding="utf-8", newline=""), had
-    except OSError as e:
-        raise UsageError(f"output: cannot open {path}: {e.strerror}") from None
+    return out.open(), out.had
 
 
 def checked(check, frame, hint=""):

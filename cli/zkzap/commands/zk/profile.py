@@ -7,9 +7,10 @@ import sys
 
 import click
 
-from ...errors import OutputError, UsageError
+from ...errors import USAGE, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
+from ..options import (FiniteRange, close_output, consent, dry_run_option, note, port_options, protocol_version_option,
+                       yes_option)
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -95,7 +96,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     if len(sched.notes) > 5:
         note(f"... and {len(sched.notes) - 5} more rounded throttle values")
     if dry_run:
-        _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append)
+        _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append, schedule)
         return
     if sched.length <= 0:
         raise UsageError(f"schedule: {name}: the last row is at 0 s; the last row's time_s is the "
@@ -103,6 +104,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     url = resolve_port(port, sim)
     if ids is not None:
         zk_link.parse_ids(ids)
+    summary_file = _check_summary(summary_json, schedule, output, raw_log)
     if not zk_link.is_simulator(url):
         from ...codec import zk
 
@@ -111,15 +113,24 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
             consent(f"schedule {name} on {url}: {hazard}", yes)
     from .monitor import run_telemetry
 
-    outcome, tel, session = run_telemetry(
-        url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
-        stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
-        abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}")
+    try:
+        outcome, tel, session = run_telemetry(
+            url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
+            stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
+            duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
+            abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}",
+            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json})
+    except ZkzapError as e:
+        # a run that failed to start (no port, ...) still replaces an older summary: with its failure
+        if summary_file and e.code != USAGE:
+            _write_json(summary_file, {"schedule": name, "port": url, "outcome": "error", "exit_status": e.code,
+                                       "error": str(e), "aborted": None, "duration_s": 0.0,
+                                       "schedule_s": sched.length})
+        raise
     summary = _summary(name, url, sched, outcome, tel, session)
     _print_summary(summary)
     if summary_json:
-        _write_json(summary_json, summary)
+        _write_json(summary_file or summary_json, summary)
     outcome.raise_for_status()
 
 
@@ -156,26 +167,36 @@ def _print_summary(s):
     click.echo("\n".join(lines), err=True)
 
 
+def _check_summary(path, schedule, output, raw_log):
+    """--summary-json FILE, checked before anything starts (None for '-' or none)."""
+    from ...io.outfile import OutFile, refuse_same_files
+
+    if not path or path == "-":
+        return None
+    refuse_same_files({"--summary-json": path, "--output": output, "--raw-log": raw_log}, {"SCHEDULE": schedule})
+    OutFile(path, what="summary-json").check()
+    return path
+
+
 def _write_json(path, summary):
+    """The summary as JSON: to stdout for '-', else whole (a temporary file renamed over FILE)."""
+    from ...io.outfile import write_atomic
+
     text = json.dumps(summary, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return
-    try:
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(text)
-    except OSError as e:
-        raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
+    write_atomic(path, text, what="summary-json")
 
 
-def _print_plan(sched, rate, fmt, output, append):
+def _print_plan(sched, rate, fmt, output, append, path):
     from ...codec.hexfmt import format_hex
     from ...io.writers import make_writer
-    from ..options import open_output, resolve_format
+    from ..options import open_output, output_format
 
-    stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
+    fmt = output_format(fmt, output)
     cols = ["t", "state", "throttle_pct", "frame"]
+    stream, had = open_output(output, append, fmt=fmt, columns=cols, inputs={"SCHEDULE": path})
     writer = make_writer(fmt, stream, cols, header=not had)
     try:
         for t, state, thr, frame in sched.plan(rate):
