@@ -223,7 +223,10 @@ class ReplaySource:
 
     def _fill(self):
         while not self.queue and not self.eof:
-            block = self.file.read(READ_SIZE)
+            try:
+                block = self.file.read(READ_SIZE)
+            except OSError as e:
+                raise UsageError(f"replay: cannot read {self.path}: {e.strerror or e}") from None
             if block:
                 frames = self.framer.feed(block)
             else:

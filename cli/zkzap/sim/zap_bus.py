@@ -685,7 +685,9 @@ class ActuatorBus:
                 doc = json.load(f)
         except FileNotFoundError:
             return False
-        except (OSError, ValueError) as e:
+        except OSError as e:
+            raise ValueError(f"state {path}: cannot read: {e.strerror or e}") from None
+        except ValueError as e:
             raise ValueError(f"state {path}: cannot read: {e}") from None
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
@@ -731,7 +733,12 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
             for a in bus.actuators:
                 a.set("feedback-return-mode", int(return_mode))
         if state:
-            bus.save()
+            try:
+                bus.save()
+            except OSError as e:
+                raise ValueError(f"state {state}: cannot write: {e.strerror or e}"
+                                 + (f" (no directory {os.path.dirname(os.path.abspath(state))})"
+                                    if isinstance(e, FileNotFoundError) else "")) from None
     if voltage not in (None, ""):
         bus.inject(None, "voltage", parse_number("voltage", voltage, 0, 25.5))
     for text in str(faults or "").split(","):
