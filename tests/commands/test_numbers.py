@@ -135,3 +135,104 @@ def test_ids_lists_split_on_spaces_and_commas(text, ids):
     from zkzap.link.zk_link import parse_ids
 
     assert parse_ids(text) == ids
+
+
+# --- numbers read consistently, counted honestly ------------------------------------------
+
+@pytest.mark.parametrize("code,frame", [("242", "FF FF FF 00 02 F2 0B"), ("0xF2", "FF FF FF 00 02 F2 0B"),
+                                        ("F2", "FF FF FF 00 02 F2 0B"), ("f2", "FF FF FF 00 02 F2 0B"),
+                                        ("10", "FF FF FF 00 02 0A F3"), ("0x0A", "FF FF FF 00 02 0A F3"),
+                                        ("echo", "FF FF FF 00 02 F1 0C")])
+def test_instruction_codes_read_decimal_and_hex_as_register_addresses_do(cli, code, frame):
+    r = cli("zap", "raw", code, "-n")
+    assert r.exit_code == 0 and r.stdout.strip() == frame, r
+
+
+@pytest.mark.parametrize("code", ["256", "0x100", "999"])
+def test_instruction_codes_out_of_range(cli, code):
+    r = cli("zap", "raw", code, "-n")
+    assert r.exit_code == 2 and f"code {code} is out of range" in r.stderr
+
+
+@pytest.mark.parametrize("args,expected", [
+    ("present-position --length 1", ["present-position(partial)=0"]),
+    ("goal-position --length 3", ["goal-position=0", "goal-speed(partial)=255"]),
+])
+def test_a_value_cut_by_length_is_labelled_never_bare(cli, args, expected):
+    r = cli("zap", "load", *args.split(), "--sim")
+    assert r.exit_code == 0, r
+    assert r.stdout.split() == expected
+    assert "is not the register's value" in r.stderr
+    r = cli("zap", "load", *args.split(), "--sim", "-f", "jsonl")
+    import json
+
+    recs = [json.loads(x) for x in r.stdout.splitlines()]
+    assert recs[-1]["partial"] is True
+    assert all("partial" not in rec for rec in recs[:-1])
+
+
+def test_a_whole_value_stays_bare(cli):
+    r = cli("zap", "load", "present-position", "--sim")
+    assert r.stdout == "0\n" and "partial" not in r.stderr
+
+
+CONTROL, STATUS = "FF 1D F4 70", "F1 00 00 00 00 4C A0"
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--accept", "status", CONTROL, STATUS, CONTROL, STATUS], "2 frames decoded; 2 control frames left out "
+                                                               "(--accept status), 0 bad (CRC); 8 bytes skipped"),
+    (["--accept", "control", CONTROL, STATUS, CONTROL], "2 frames decoded; 1 status frame left out "
+                                                        "(--accept control), 0 bad (CRC); 7 bytes skipped"),
+    ([CONTROL, STATUS, "F1 00 00"], "2 frames decoded; 0 bad (CRC), 1 cut short by the end of the input; "
+                                    "3 bytes skipped"),
+    ([CONTROL, "F1 00 00 00 00 4C A1", CONTROL], "2 frames decoded; 1 bad (CRC); 7 bytes skipped"),
+])
+def test_decode_counts_left_out_and_cut_frames_apart_from_crc_errors(cli, args, needle):
+    r = cli("zk", "decode", *" ".join(args).split())
+    assert r.exit_code == 0, r
+    assert needle in r.stderr, r
+
+
+def test_zap_decode_counts_a_cut_tail_apart(cli):
+    r = cli("zap", "decode", *"FF FF FF 00 02 F1 0C FF FF FF 00 02".split())
+    assert "1 cut short by the end of the input" in r.stderr and "0 bad (checksum)" in r.stderr
+
+
+@pytest.fixture(scope="module")
+def raw_log(tmp_path_factory):
+    """A raw log of 80 status frames: 4 s at the simulator's 20 Hz."""
+    from click.testing import CliRunner
+
+    from zkzap.commands import run
+
+    log = tmp_path_factory.mktemp("replay") / "run.bin"
+    with CliRunner().isolation():
+        assert run(root, "zkzap", ["zk", "monitor", "-p", "sim://zk?speed=20", "--count", "80", "--protocol-version",
+                                   "6", "--raw-log", str(log), "-f", "jsonl"]) == 0
+    return log
+
+
+@pytest.mark.parametrize("duration", ["0.5", "1", "2.5"])
+def test_a_fast_replay_stops_at_its_duration_and_invents_no_wall_clock(cli, raw_log, duration):
+    import json
+
+    r = cli("zk", "monitor", "--replay", str(raw_log), "--fast", "--duration", duration, "-f", "jsonl")
+    assert r.exit_code == 0, r
+    recs = [json.loads(x) for x in r.stdout.splitlines()]
+    assert recs and max(rec["t"] for rec in recs) < float(duration)
+    assert len(recs) == round(float(duration) * 20)        # 20 Hz status rate
+    assert all(rec["time"] is None for rec in recs)        # a raw log holds no times
+
+
+@pytest.mark.parametrize("ids,version,code,needle", [
+    ("11", 6, 3, "the ECU never sends status ID 11 (its cycle is IDs 1-10)"),
+    ("11-14", 6, 3, "never sends status IDs 11-14"),
+    ("9,10", 4, 3, "never sends status IDs 9-10 (its cycle is IDs 1-8)"),
+    ("1,9", 4, 0, "never sends status ID 9 (its cycle is IDs 1-8)"),
+])
+def test_ids_the_ecu_never_sends_end_or_warn_instead_of_waiting(cli, ids, version, code, needle):
+    r = cli("zk", "monitor", "-p", f"sim://zk?speed=20&protocol_version={version}", "--ids", ids,
+            "--count", "40", "-f", "jsonl")
+    assert r.exit_code == code, r
+    assert needle in r.stderr

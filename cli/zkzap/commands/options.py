@@ -190,9 +190,21 @@ def close_output(writer, stream) -> None:
 
 
 def note_skipped(framer, what: str, check: str) -> None:
-    """Say on stderr what a decoding stream skipped, when it skipped anything."""
-    if framer.bad or framer.skipped:
-        note(f"{framer.frames} {what} decoded; {framer.bad} bad ({check}), {framer.skipped} bytes skipped")
+    """Say on stderr what a decoding stream skipped, when it skipped anything: frames of the
+    kind --accept leaves out and a frame cut short by the end are counted apart from the
+    frames that failed their check."""
+    if not (framer.bad or framer.skipped):
+        return
+    parts = []
+    filtered = getattr(framer, "filtered", 0)
+    if filtered:
+        kind = "control" if framer.accept == "status" else "status"
+        parts.append(f"{filtered} {kind} frame{'s' if filtered != 1 else ''} left out (--accept {framer.accept})")
+    parts.append(f"{framer.bad} bad ({check})")
+    truncated = getattr(framer, "truncated", 0)
+    if truncated:
+        parts.append(f"{truncated} cut short by the end of the input")
+    note(f"{framer.frames} {what} decoded; {', '.join(parts)}; {framer.skipped} bytes skipped")
 
 
 dry_run_option = click.option(
