@@ -123,3 +123,13 @@ def test_port_failures_are_one_line_exit_4_without_library_text(args, needle):
     assert code == 4, err
     line = _one_line(err)
     assert needle in line and "[Errno" not in line and "(25," not in line
+
+
+@needs_full
+@pytest.mark.parametrize("where", ["--raw-log", "-o"])
+def test_a_full_disk_while_controlling_the_engine_sends_the_abort(where):
+    code, err = _run(["zk", "send", "control", "--state", "run", "--throttle", "20", "--for", "5", "-p",
+                      "sim://zk?speed=20", "-f", "jsonl", where, FULL], stdout=subprocess.DEVNULL)
+    assert code == 7, err
+    assert "note: output failed: sent standby, throttle 0" in err
+    assert "cannot write /dev/full: No space left on device" in err and "Traceback" not in err

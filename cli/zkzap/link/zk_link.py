@@ -31,7 +31,7 @@ from collections import deque
 from ..codec import zk
 from ..codec.fields import FieldValueError
 from ..codec.framing import ZkFramer
-from ..errors import DeviceError, NoReply, PortError, UsageError, ZkzapError
+from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError, ZkzapError
 from ..errors import TERMINATED
 
 #: Control frames per second while a session controls the engine (``--rate``).
@@ -550,7 +550,8 @@ class SignalGuard:
 
 class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
-    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``pipe``."""
+    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``pipe``,
+    ``output`` (an output file could not be written)."""
 
     def __init__(self, reason, error=None, aborted=None):
         self.reason = reason
@@ -739,6 +740,8 @@ class Session:
                             break
             except PortError as e:
                 outcome = Outcome("port", e)
+            except OutputError as e:           # a full disk under -o or --raw-log
+                outcome = Outcome("output", e)
             except BrokenPipeError:
                 outcome = Outcome("pipe")
             finally:
@@ -779,7 +782,7 @@ class Session:
         outcome.aborted = self.abort
         why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
                "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-               "error": "error"}.get(outcome.reason, "end of schedule")
+               "output": "output failed", "error": "error"}.get(outcome.reason, "end of schedule")
         self.notify(f"{why}: sent {describe_abort(self.abort)}")
 
 

@@ -146,7 +146,8 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
 
 
 _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated": "terminated",
-        "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed"}
+        "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
+        "output": "output failed"}
 
 
 def _print_summary(s):
