@@ -56,8 +56,9 @@ def test_real_tool_dumps_read_back_exactly(tool, name, tmp_path):
 def test_od_six_digit_offsets_are_not_data():
     assert parse_hex("000000 ff 14 64 d3\n000004\n") == FRAME[:4]
     assert parse_hex("000000 ff 14 64 d3 f1 00 00 00 00 4c a0\n00000b\n") == FRAME
-    # a six-digit token that is no multiple of 16 is data, as written
+    # a six-digit token that does not start a dump is data, as written
     assert parse_hex("FF1464 D3") == FRAME[:4]
+    assert parse_hex("F10000 00 00 4C A0") == bytes.fromhex("F1000000004CA0")
 
 
 def test_a_repeat_expands_in_bounded_blocks():

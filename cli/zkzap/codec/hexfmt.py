@@ -5,8 +5,8 @@ Accepted input notations: ``FF 14 64``, ``ff1464``, ``0xFF,0x14,0x64``, ``FF:14:
 byte cells; a row that mixes ``0x..`` cells with others, such as a time column
 ``1e-05,0x1D`` or ``10,0xFF``, gives only its ``0x..`` cells), and dump lines from ``xxd``
 (``00000010: ff14 ...`` and its ASCII column), ``hexdump -C`` (offset, ``|ascii|`` gutter),
-``od -t x1`` (a 7-digit offset) and ``od -A x -t x1`` (a 6-digit offset, a multiple of 16,
-before single bytes). An offset is dropped only where it cannot be data: it ends in a colon,
+``od -t x1`` (a 7-digit offset) and ``od -A x -t x1`` (a 6-digit offset before single bytes:
+``000000`` on the first line, any on the lines of a dump after it). An offset is dropped only where it cannot be data: it ends in a colon,
 is followed by a ``|...|`` gutter, has an odd number of digits, or is od's 6-digit form.
 The ``*`` lines of ``hexdump``/``od``/``xxd -a`` (the line before repeats up to the next
 offset) are expanded, in blocks, whatever the length they stand for; the radix of od's
@@ -81,7 +81,7 @@ def _strip_dump(line: str, state=None):
     if m:
         return line[m.end():], m.group(0).strip(), True
     m = _rx.od6_offset.match(line)
-    if m and (int(m.group(1), 16) % 16 == 0 or (state is not None and state.get("dump"))):
+    if m and (m.group(1) == "000000" or (state is not None and state.get("dump"))):
         return line[m.end():], m.group(1), True
     return line, None, False
 
