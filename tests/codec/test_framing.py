@@ -101,4 +101,5 @@ def test_truncated_tail_is_counted_at_flush():
     g = ZapFramer()
     g.feed(zap.echo(0)[:5])
     g.flush()
-    assert g.skipped == 5 and g.bad == 1
+    assert f.truncated == 1 and f.bad == 0
+    assert g.skipped == 5 and g.truncated == 1 and g.bad == 0

@@ -237,6 +237,9 @@ class Field:
                 value = float(value) if any(c in value for c in ".eE") else int(value, 0)
             except ValueError:
                 raise FieldValueError(f"{self.label}: {value!r} is not a number") from None
+        if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
+            raise FieldValueError(f"{self.label}: {value} is not a finite number; allowed "
+                                  f"{self.describe_range(ctx)}")
         s = self.scale_for(ctx)
         if s is None:
             raise FieldValueError(f"{self.label}: needs {self.scale.param.replace('_', '-')} to convert")

@@ -25,8 +25,10 @@ frame still wins (both readings valid and unconfirmed, or garbage right after a 
 is measured by ``benchmarks/fuzz.py``.
 
 Counters: ``frames`` (good frames), ``bad`` (candidate frames whose CRC/checksum failed or
-that lost to a rival, each damaged region counted once), ``skipped`` (bytes that were not
-part of a good frame).
+that lost to a rival, each damaged region counted once), ``truncated`` (a frame cut short by
+the end of the stream: not a CRC error), ``filtered`` (whole, valid frames of the kind a
+:class:`ZkFramer` was told not to accept: not errors either), ``skipped`` (bytes that were
+not part of a good frame, including those of truncated and filtered frames).
 """
 
 from __future__ import annotations
@@ -54,6 +56,8 @@ class _Framer:
         self._valid = {}
         self.frames = 0
         self.bad = 0
+        self.truncated = 0
+        self.filtered = 0
         self.skipped = 0
 
     @property
@@ -113,13 +117,31 @@ class ZkFramer(_Framer):
             raise ValueError(f"accept: {accept!r}; allowed both, status, control")
         self.accept = accept
         lengths = [0] * 256
-        if accept in ("both", "status"):
-            for h in range(0xF1, 0xFF):
-                lengths[h] = 7
-        if accept in ("both", "control"):
-            lengths[0xFF] = 4
+        other = [0] * 256               # the kind left out: recognised, counted, not returned
+        for h in range(0xF1, 0xFF):
+            (lengths if accept in ("both", "status") else other)[h] = 7
+        (lengths if accept in ("both", "control") else other)[0xFF] = 4
         self._len = lengths
+        self._other = other
         super().__init__()
+
+    def _left_out(self, buf, i, final):
+        """Length of a valid frame of the kind not accepted at ``i`` (0: none; None: bytes
+        missing). A frame of the accepted kind starting inside it wins, as it would have."""
+        lo = self._other[buf[i]]
+        if not lo:
+            return 0
+        n = len(buf)
+        e = i + lo
+        if e > n:
+            return 0 if final else None
+        if not (buf[i + 1] < 0x90 and _T[_T[_T[buf[i + 1]] ^ buf[i + 2]] ^ buf[i + 3]] == 0 if lo == 4
+                else self._ok(buf, i, 7)):
+            return 0
+        wins = self._resync(buf, i, e, final)
+        if wins is None:
+            return None
+        return lo if wins else 0
 
     def feed(self, data) -> list:
         """Frames completed by ``data`` (a frame right after skipped bytes may be held back
@@ -194,9 +216,20 @@ class ZkFramer(_Framer):
         skipped = 0
         bad_until = self._bad_until
         synced = self._synced
+        other = self._other
         while i < n:
             ln = lens[buf[i]]
             if not ln:
+                if other[buf[i]]:
+                    lo = self._left_out(buf, i, final)
+                    if lo is None:
+                        break
+                    if lo:
+                        self.filtered += 1
+                        skipped += lo
+                        i += lo
+                        synced = True
+                        continue
                 skipped += 1
                 i += 1
                 synced = False
@@ -214,6 +247,9 @@ class ZkFramer(_Framer):
                     break
                 ok = False          # a truncated frame at the end of the stream
                 e = n
+                if i >= bad_until:
+                    self.truncated += 1
+                    bad_until = e
             else:
                 f = buf[i:e]
                 if f in valid:
@@ -367,6 +403,9 @@ class ZapFramer(_Framer):
                     break
                 ok = False              # a truncated packet at the end of the stream
                 end = n
+                if i >= bad_until:
+                    self.truncated += 1
+                    bad_until = end
             else:
                 size = buf[i + 4]
                 end = i + 5 + size
@@ -378,6 +417,9 @@ class ZapFramer(_Framer):
                         break
                     ok = False
                     end = n
+                    if i >= bad_until:
+                        self.truncated += 1
+                        bad_until = end
                 else:
                     p = buf[i:end]
                     if p in valid:

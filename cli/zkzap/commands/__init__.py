@@ -83,6 +83,8 @@ def _long(option):
 
 
 def _is_negative_number(token: str) -> bool:
+    if token[1:].lower() in ("inf", "infinity", "nan"):
+        return True                 # refused by the value's own (finite) type, naming it
     if len(token) < 2 or token[0] != "-" or not (token[1].isdigit() or token[1] == "."):
         return False
     try:
@@ -309,6 +311,11 @@ def run(cmd, prog_name=None, args=None) -> int:
             raise
         _error(str(e), prog_name or "zkzap")
         return e.code
+    except OSError as e:
+        # stdout on a full disk (> /dev/full): a dry run, a table, --help, a completion script
+        if debug or not _output_full(e):
+            raise
+        return _output_failed(e, prog_name)
     except Exception as e:
         if debug or not _bad_input(e):
             raise
@@ -337,12 +344,35 @@ def _quiet_stdout():
         pass
 
 
-def _exit(code):
+def _output_full(e) -> bool:
+    """The output cannot take more: disk full, quota exceeded, file too large."""
+    import errno
+
+    return e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def _output_failed(e, prog_name=None) -> int:
+    """stdout (or a file the error names) could not be written: one line, exit 7. What could
+    not be written is dropped so the interpreter's own final flush stays quiet."""
+    from ..errors import OUTPUT_ERROR
+
+    name = e.filename if isinstance(getattr(e, "filename", None), str) else "stdout"
+    _quiet_stdout()
+    _error(f"output: cannot write {name}: {e.strerror or e}", prog_name or "zkzap")
+    return OUTPUT_ERROR
+
+
+def _exit(code, prog_name=None):
     try:
         sys.stdout.flush()
     except BrokenPipeError:
         _quiet_stdout()
-    except (ValueError, OSError):
+    except OSError as e:
+        if code in (0, None) and _output_full(e):
+            code = _output_failed(e, prog_name)
+        else:
+            _quiet_stdout()
+    except ValueError:
         pass
     sys.exit(code)
 
@@ -358,7 +388,7 @@ def _start(cmd, prog):
     import gc
 
     gc.freeze()
-    _exit(run(cmd, prog))
+    _exit(run(cmd, prog), prog)
 
 
 def main():

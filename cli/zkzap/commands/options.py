@@ -5,7 +5,7 @@ Nothing here imports rich or pyserial: both are loaded by the functions that nee
 
 from __future__ import annotations
 
-import os
+import math
 import sys
 
 import click
@@ -39,6 +39,36 @@ class SignedCommand(Command):
     """
 
     negative_numbers = True
+
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float that must be a finite number: ``nan``, ``inf`` and ``-inf`` are refused (exit 2,
+    naming the option), where click's FLOAT takes them and a timeout or duration never ends."""
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return rv
+
+
+class FiniteRange(click.FloatRange):
+    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
+    and ``inf`` wherever there is no upper bound). Every float option of zkzap is one of these
+    or a :class:`FiniteFloat`."""
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, float) or not math.isfinite(value):
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = 0.0        # not a number at all: click's own message below
+            if not math.isfinite(number):
+                self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+FINITE = FiniteFloat()
 
 
 def note(message: str) -> None:
@@ -104,15 +134,41 @@ def output_options(f):
     return f
 
 
-def open_output(path, append=False):
-    """(stream, had_content): a line-buffered text stream for ``path`` ('-' or None: stdout)."""
+def output_file(path, append=False, *, fmt=None, columns=None, inputs=None):
+    """The checked :class:`~zkzap.io.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
+    (exit 2) when it is one of ``inputs`` (option -> paths), cannot be written, or cannot be
+    appended to in ``fmt`` with ``columns``. Nothing is truncated until it is opened."""
+    from ..io.outfile import OutFile, refuse_same_files
+
     if not path or path == "-":
+        return None
+    refuse_same_files({"--output": path}, inputs)
+    return OutFile(path, append=append, fmt=fmt, columns=columns).check()
+
+
+def decode_inputs(inputs, binary, explicit):
+    """The files a decoder reads, for ``inputs=`` of :func:`output_file` (hex arguments: none)."""
+    if explicit:
+        return None
+    return {"--binary" if binary else "stdin": list(inputs) or ["-"]}
+
+
+def output_format(fmt, path):
+    """The format for ``-o PATH`` or stdout: given, else a table on a terminal, JSON Lines
+    otherwise (a file is never a terminal)."""
+    if fmt:
+        return fmt
+    return resolve_format(None) if not path or path == "-" else "jsonl"
+
+
+def open_output(path, append=False, *, fmt=None, columns=None, inputs=None):
+    """(stream, had_content) for ``path`` ('-' or None: stdout), checked as :func:`output_file`
+    checks it; ``had_content``: appending to existing records (no second header; a JSON array
+    continued)."""
+    out = output_file(path, append, fmt=fmt, columns=columns, inputs=inputs)
+    if out is None:
         return sys.stdout, False
-    try:
-        had = append and os.path.exists(path) and os.path.getsize(path) > 0
-        return open(path, "a" if append else "w", encoding="utf-8", newline=""), had
-    except OSError as e:
-        raise UsageError(f"output: cannot open {path}: {e.strerror}") from None
+    return out.open(), out.had
 
 
 def checked(check, frame, hint=""):
@@ -140,9 +196,21 @@ def close_output(writer, stream) -> None:
 
 
 def note_skipped(framer, what: str, check: str) -> None:
-    """Say on stderr what a decoding stream skipped, when it skipped anything."""
-    if framer.bad or framer.skipped:
-        note(f"{framer.frames} {what} decoded; {framer.bad} bad ({check}), {framer.skipped} bytes skipped")
+    """Say on stderr what a decoding stream skipped, when it skipped anything: frames of the
+    kind --accept leaves out and a frame cut short by the end are counted apart from the
+    frames that failed their check."""
+    if not (framer.bad or framer.skipped):
+        return
+    parts = []
+    filtered = getattr(framer, "filtered", 0)
+    if filtered:
+        kind = "control" if framer.accept == "status" else "status"
+        parts.append(f"{filtered} {kind} frame{'s' if filtered != 1 else ''} left out (--accept {framer.accept})")
+    parts.append(f"{framer.bad} bad ({check})")
+    truncated = getattr(framer, "truncated", 0)
+    if truncated:
+        parts.append(f"{truncated} cut short by the end of the input")
+    note(f"{framer.frames} {what} decoded; {', '.join(parts)}; {framer.skipped} bytes skipped")
 
 
 dry_run_option = click.option(
@@ -218,7 +286,7 @@ def port_options(group: str, *, baud_auto: bool = False):
         click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
                      default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                      help=f"{STOP_BITS_HELP[group]} [env {env['stop_bits']}]."),
-        click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
+        click.option("--timeout", type=FiniteRange(0.001, 3600), default=None, metavar="SECONDS",
                      help="Reply timeout (default: derived from the baud rate)."),
         click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
     ]

@@ -14,6 +14,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Group
+from .options import FiniteRange
 
 
 def _listen(ctx, param, value):
@@ -38,7 +39,7 @@ def _listen(ctx, param, value):
 
 
 def serve_options(f):
-    f = click.option("--speed", type=click.FloatRange(0.001, 10000, min_open=False), default=1.0,
+    f = click.option("--speed", type=FiniteRange(0.001, 10000, min_open=False), default=1.0,
                      show_default=True, metavar="X",
                      help="Run model time X times faster than real time (tests use 10 or more).")(f)
     f = click.option("--link", "link", type=click.Path(dir_okay=False), default=None, metavar="PATH",
@@ -153,7 +154,7 @@ def zk(protocol_version, rate, baud, stop_bits, extra, speed, use_pty, listen, l
                    "it defines the bus and --ids/--baud/--return-mode are not applied.")
 @click.option("--return-mode", type=click.Choice(["0", "1", "2"]), default=None,
               help="Every actuator's feedback-return-mode at first start (default 1).")
-@click.option("--voltage", type=click.FloatRange(0, 25.5), default=None, metavar="VOLTS",
+@click.option("--voltage", type=FiniteRange(0, 25.5), default=None, metavar="VOLTS",
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")
 @click.option("--echo", is_flag=True, help="Echo the host's bytes back, like a half-duplex adapter.")
 @click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]",

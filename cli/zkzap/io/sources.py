@@ -42,7 +42,11 @@ def _binary_chunks(paths):
         read = getattr(stream, "read1", stream.read)
         try:
             while True:
-                block = read(CHUNK)
+                try:
+                    block = read(CHUNK)
+                except OSError as e:      # /proc/self/mem, a vanished network file, a directory on stdin
+                    raise UsageError(f"input: cannot read {'stdin' if path == '-' else path}: "
+                                     f"{e.strerror or e}") from None
                 if not block:
                     break
                 yield block

@@ -246,10 +246,18 @@ class JsonlWriter(LineWriter):
 
 
 class JsonWriter(Writer):
-    """One JSON array, written incrementally; ``[]`` when there are no records."""
+    """One JSON array, written incrementally; ``[]`` when there are no records. ``header=False``
+    continues an array whose closing bracket the caller removed (``--append``)."""
+
+    def __init__(self, stream, flush=True, header=True):
+        super().__init__(stream, flush)
+        self._open = not header
+
+    def _lead(self):
+        return ",\n" if self.count or self._open else "[\n"
 
     def write(self, rec):
-        self._put(("[\n" if self.count == 0 else ",\n") + _dumps(rec))
+        self._put(self._lead() + _dumps(rec))
         self.count += 1
 
     def write_many(self, recs):
@@ -257,11 +265,11 @@ class JsonWriter(Writer):
 
     def write_lines(self, lines):
         if lines:
-            self._emit(("[\n" if self.count == 0 else ",\n") + ",\n".join(lines))
+            self._emit(self._lead() + ",\n".join(lines))
             self.count += len(lines)
 
     def close(self):
-        self._put("[]\n" if self.count == 0 else "\n]\n")
+        self._put("\n]\n" if self.count or self._open else "[]\n")
         super().close()
 
 
@@ -335,7 +343,7 @@ def make_writer(fmt, stream, columns, *, title=None, table_columns=None, header=
     if fmt == "jsonl":
         return JsonlWriter(stream)
     if fmt == "json":
-        return JsonWriter(stream)
+        return JsonWriter(stream, header=header)
     if fmt == "csv":
         return CsvWriter(stream, columns, header=header)
     if fmt == "table":

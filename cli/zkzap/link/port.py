@@ -49,6 +49,7 @@ def fit_note(what: str, rate_hz: float, frame_bytes: int, baud: int, stop_bits: 
 def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1):
     """A pyserial port for ``url`` at ``baud`` (8 data bits, no parity, ``stop_bits`` 1 or 2),
     opened exclusively where the OS allows."""
+    _check_url(url)
     import serial
 
     if stop_bits not in STOP_BITS:
@@ -67,6 +68,28 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
         if "could not open port" in text or "No such file" in text or "Errno" in text:
             raise PortError(f"port {url}: cannot open: {_short(e)}") from None
         raise PortError(f"port {url}: {_short(e)}") from None
+
+
+#: URL schemes that need HOST:PORT (pyserial's own check fails with a TypeError's text).
+_NETWORK = ("socket", "rfc2217")
+
+
+def _check_url(url: str) -> None:
+    """Refuse a network URL without HOST:PORT before pyserial sees it (exit 2, one line)."""
+    scheme, sep, rest = url.partition("://")
+    if not sep or scheme.lower() not in _NETWORK:
+        return
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError:
+        port = None
+        parts = None
+    if parts is None or not parts.hostname or port is None:
+        raise UsageError(f"port: {url}: expected {scheme}://HOST:PORT (a host name or address and a port "
+                         f"number 0..65535)")
 
 
 def _no_delay(port) -> None:
@@ -114,7 +137,12 @@ def sim_url(kind: str, **options) -> str:
 
 
 def _short(e) -> str:
-    text = str(e)
-    if isinstance(e, OSError) and e.strerror:
-        return e.strerror
-    return text.split(": ", 1)[-1] if text.startswith("[Errno") else text
+    import re
+
+    text = e.strerror if isinstance(e, OSError) and isinstance(e.strerror, str) and e.strerror else str(e)
+    m = re.search(r"\((\d+), '([^']*)'\)", text)    # pyserial: "Could not configure port: (25, '...')"
+    if m:
+        return text[:m.start()] + m.group(2)
+    if "[Errno" in text:            # "Could not open port X: [Errno 111] Connection refused"
+        return text[text.rindex("[Errno"):].split("] ", 1)[-1]
+    return text

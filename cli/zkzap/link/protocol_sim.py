@@ -16,7 +16,7 @@ import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..sim import make_device
-from ..sim.base import Clock
+from ..sim.base import Clock, parse_number
 
 
 class Serial(SerialBase):
@@ -28,12 +28,12 @@ class Serial(SerialBase):
         if self.is_open:
             raise SerialException("port already open")
         kind, options = self.from_url(self._port)
-        speed = float(options.pop("speed", "1"))
         try:
-            self._clock = Clock(speed)
+            self._clock = Clock(parse_number("speed", options.pop("speed", "1"), 0.001, 10000))
             self._device = make_device(kind, **options)
         except (TypeError, ValueError) as e:
-            raise SerialException(f"sim://{kind}: {e}") from None
+            # bad input (exit 2 naming the option), not a port failure
+            raise ValueError(f"sim://{kind}: {e}") from None
         self._rx = bytearray()
         self.is_open = True
 

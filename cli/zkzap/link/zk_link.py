@@ -31,7 +31,7 @@ from collections import deque
 from ..codec import zk
 from ..codec.fields import FieldValueError
 from ..codec.framing import ZkFramer
-from ..errors import DeviceError, NoReply, PortError, UsageError, ZkzapError
+from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError, ZkzapError
 from ..errors import TERMINATED
 
 #: Control frames per second while a session controls the engine (``--rate``).
@@ -43,6 +43,8 @@ STALE_PERIODS = 3
 #: Frames held back while waiting for the first status ID 6 (the protocol version); more than a
 #: full cycle of IDs 1..10.
 HOLD_FRAMES = 12
+#: Whole status cycles seen before ``--ids`` the ECU never sends are reported.
+ID_CHECK_LAPS = 3
 #: Abort commands (``--abort``): the control state sent with throttle 0 on an abnormal end.
 ABORTS = ("standby", "stop", "none")
 DEFAULT_ABORT = "standby"
@@ -223,7 +225,10 @@ class ReplaySource:
 
     def _fill(self):
         while not self.queue and not self.eof:
-            block = self.file.read(READ_SIZE)
+            try:
+                block = self.file.read(READ_SIZE)
+            except OSError as e:
+                raise UsageError(f"replay: cannot read {self.path}: {e.strerror or e}") from None
             if block:
                 frames = self.framer.feed(block)
             else:
@@ -273,7 +278,10 @@ class ReplaySource:
 def parse_ids(text):
     """``"1,2,6"`` or ``"1-3,9"`` -> frozenset of status IDs (1..14)."""
     ids = set()
-    for part in str(text).replace(" ", "").split(","):
+    import re
+
+    # "1 2" is two IDs (never 12); spaces around a range's dash are allowed ("1 - 3")
+    for part in re.split(r"[,\s]+", re.sub(r"\s*-\s*", "-", str(text).strip())):
         if not part:
             continue
         lo, sep, hi = part.partition("-")
@@ -331,8 +339,10 @@ class Telemetry:
     """
 
     def __init__(self, protocol_version=None, ids=None, snapshot=False, stale_periods=STALE_PERIODS,
-                 wall0=None):
+                 wall0=None, wall_clock=True):
         self.decoder = zk.ZkDecoder(protocol_version)
+        #: False for a replay: a raw log holds no times, so records carry ``time: null``
+        self.wall_clock = wall_clock
         self.holding = protocol_version is None
         self.held = []
         self.ids = ids
@@ -424,12 +434,13 @@ class Telemetry:
             return []
         stale = self.stale_ids(t)
         self.records += 1
+        when = iso_utc(self.wall0 + t) if self.wall_clock else None
         if self.snapshot_rows:
-            row = {"time": iso_utc(self.wall0 + t), "t": round(t, 3), "id": sid}
+            row = {"time": when, "t": round(t, 3), "id": sid}
             for k in self.keys:
                 row[k] = latest[k]
         else:
-            row = {"time": iso_utc(self.wall0 + t), "t": round(t, 3)}
+            row = {"time": when, "t": round(t, 3)}
             row.update(rec)
             row["frame"] = frame.hex(" ").upper()
         row["stale"] = bool(stale)
@@ -551,7 +562,8 @@ class SignalGuard:
 
 class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
-    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``limit``, ``pipe``."""
+    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``limit``, ``pipe``,
+    ``output`` (an output file could not be written)."""
 
     def __init__(self, reason, error=None, aborted=None):
         self.reason = reason
@@ -623,6 +635,32 @@ class Session:
         self.controlling = False
         self.pump_on = False
         self.last_frame_t = None
+        # the status IDs seen, until the ECU's cycle is known (an ID comes again): then --ids
+        # that the ECU never sends are reported (all of them: the session ends)
+        self._cycle = set() if telemetry.ids is not None else None
+
+    def _check_ids(self, sid):
+        cycle = self._cycle
+        if not cycle:
+            self._first, self._laps = sid, 0
+        cycle.add(sid)
+        if sid == self._first:
+            self._laps += 1
+        if self._laps <= ID_CHECK_LAPS:     # whole cycles, so a lost frame is not a missing ID
+            return None
+        self._cycle = None
+        wanted = self.telemetry.ids
+        never = sorted(wanted - cycle)
+        if not never:
+            return None
+        sends = _id_list(cycle)
+        if len(never) == len(wanted):
+            return Outcome("silence", NoReply(
+                f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+                f"(its cycle is IDs {sends}); nothing to log"))
+        self.notify(f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+                    f"(its cycle is IDs {sends})")
+        return None
 
     def _send(self, frame):
         self.source.write(frame)
@@ -670,7 +708,14 @@ class Session:
                         outcome = Outcome("end")
                         break
                     for t, frame in got:
+                        if self.duration is not None and t + 1e-9 >= self.duration:
+                            outcome = Outcome("duration")     # a fast replay's batch reaches past it
+                            break
                         self.last_frame_t = t
+                        if self._cycle is not None:
+                            outcome = self._check_ids(frame[0] & 0x0F)
+                            if outcome is not None:
+                                break
                         if not told and tel.initial_error is not None and self.controlling:
                             told = True
                             self.notify(f"the ECU reports error {tel.initial_error[0]} ({tel.initial_error[1]}) "
@@ -711,6 +756,8 @@ class Session:
                             break
             except PortError as e:
                 outcome = Outcome("port", e)
+            except OutputError as e:           # a full disk under -o or --raw-log
+                outcome = Outcome("output", e)
             except BrokenPipeError:
                 outcome = Outcome("pipe")
             finally:
@@ -753,8 +800,20 @@ class Session:
         outcome.aborted = self.abort
         why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
                "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-               "error": "error", "limit": "limit violated"}.get(outcome.reason, "end of schedule")
+               "output": "output failed", "error": "error", "limit": "limit violated"}.get(outcome.reason,
+                                                                                          "end of schedule")
         self.notify(f"{why}: sent {describe_abort(self.abort)}")
+
+
+def _id_list(ids) -> str:
+    """``[1, 2, 3, 5]`` -> ``"1-3,5"``."""
+    out = []
+    for i in sorted(ids):
+        if out and out[-1][1] == i - 1:
+            out[-1][1] = i
+        else:
+            out.append([i, i])
+    return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in out)
 
 
 # --- throttle schedules ----------------------------------------------------------------------------

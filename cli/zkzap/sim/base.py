@@ -18,12 +18,28 @@ def parse_flag(key: str, value) -> bool:
     raise ValueError(f"{key}: {value!r} is not a boolean; allowed 0/1, true/false")
 
 
+def parse_number(key: str, value, lo=None, hi=None) -> float:
+    """A simulator's numeric option (a URL query or a command-line value): a finite number,
+    within ``lo..hi`` when given; ValueError naming ``key`` otherwise."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{key}: {value!r} is not a number") from None
+    if number != number or number in (float("inf"), float("-inf")):
+        raise ValueError(f"{key}: {value!r} is not a finite number")
+    if (lo is not None and number < lo) or (hi is not None and number > hi):
+        allowed = f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (
+            f"{lo:g} or more" if lo is not None else f"{hi:g} or less")
+        raise ValueError(f"{key}: {value} is out of range; allowed {allowed}")
+    return number
+
+
 class Clock:
     """Model time: real monotonic time scaled by ``speed`` (``speed=10`` runs ten times faster)."""
 
     def __init__(self, speed: float = 1.0):
-        if speed <= 0:
-            raise ValueError(f"speed: {speed} is out of range; must be > 0")
+        if not isinstance(speed, (int, float)) or speed != speed or not 0 < speed < float("inf"):
+            raise ValueError(f"speed: {speed} is out of range; allowed a finite number > 0")
         self.speed = speed
         self._t0 = time.monotonic()
 

@@ -47,7 +47,7 @@ from collections import deque
 from ..codec import zap
 from ..codec.framing import ZapFramer
 from ..link.port import wire_time
-from .base import parse_flag
+from .base import parse_flag, parse_number
 
 #: Actuator processing time before a reply starts (model seconds).
 TURNAROUND = 0.002
@@ -155,8 +155,10 @@ def parse_fault(text: str):
     value = None
     if raw:
         try:
-            value = float(raw) if kind in ("voltage", "delay") else int(raw, 0)
-        except ValueError:
+            value = parse_number(kind, raw) if kind in ("voltage", "delay") else int(raw, 0)
+        except ValueError as e:
+            if "finite" in str(e):
+                raise ValueError(f"fault {text!r}: {e}") from None
             raise ValueError(f"fault {text!r}: value {raw!r} is not a number") from None
         if kind == "voltage" and not 0 <= value <= 25.5:
             raise ValueError(f"fault {text!r}: voltage {value} is out of range; allowed 0..25.5 V")
@@ -683,7 +685,9 @@ class ActuatorBus:
                 doc = json.load(f)
         except FileNotFoundError:
             return False
-        except (OSError, ValueError) as e:
+        except OSError as e:
+            raise ValueError(f"state {path}: cannot read: {e.strerror or e}") from None
+        except ValueError as e:
             raise ValueError(f"state {path}: cannot read: {e}") from None
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
@@ -729,13 +733,14 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
             for a in bus.actuators:
                 a.set("feedback-return-mode", int(return_mode))
         if state:
-            bus.save()
+            try:
+                bus.save()
+            except OSError as e:
+                raise ValueError(f"state {state}: cannot write: {e.strerror or e}"
+                                 + (f" (no directory {os.path.dirname(os.path.abspath(state))})"
+                                    if isinstance(e, FileNotFoundError) else "")) from None
     if voltage not in (None, ""):
-        try:
-            v = float(voltage)
-        except ValueError:
-            raise ValueError(f"voltage: {voltage!r} is not a number") from None
-        bus.inject(None, "voltage", v)
+        bus.inject(None, "voltage", parse_number("voltage", voltage, 0, 25.5))
     for text in str(faults or "").split(","):
         if text.strip():
             bus.inject_text(text)

@@ -63,7 +63,7 @@ from collections import deque
 from ..codec import zk
 from ..codec.framing import ZkFramer
 from ..link.port import STOP_BITS, wire_time
-from .base import Device, parse_flag
+from .base import Device, parse_flag, parse_number
 from .uart import Line
 
 #: Below protocol version 5, a host silent for longer than this (model seconds) loses control:
@@ -554,21 +554,24 @@ def _error_code(value):
     return value
 
 
-def _num(kind):
+def _num(kind, lo=None, hi=None):
     def conv(key, v):
+        if kind is float:
+            return parse_number(key, v, lo, hi)
         try:
-            return kind(v) if kind is float or not isinstance(v, str) else int(v, 0)
+            return kind(v) if not isinstance(v, str) else int(v, 0)
         except (TypeError, ValueError):
-            raise ValueError(f"{key}: {v!r} is not {'a number' if kind is float else 'an integer'}") from None
+            raise ValueError(f"{key}: {v!r} is not an integer") from None
     return conv
 
 
-_INT, _FLOAT = _num(int), _num(float)
+_INT = _num(int)
 OPTIONS = {
-    "protocol_version": _INT, "rate": _INT, "max_rpm": _INT, "idle_rpm": _INT, "max_thrust": _FLOAT,
-    "ambient": _FLOAT, "battery": _FLOAT, "max_pump_voltage": _FLOAT, "esr": parse_flag, "baud": _INT,
-    "stop_bits": _INT,
-    "corrupt_every": _INT, "silent_after": _FLOAT, "error": lambda k, v: v, "error_after": _FLOAT,
+    "protocol_version": _INT, "rate": _INT, "max_rpm": _INT, "idle_rpm": _INT,
+    "max_thrust": _num(float, 0, 1000), "ambient": _num(float, -60, 100), "battery": _num(float, 0, 51),
+    "max_pump_voltage": _num(float, 0, 51), "esr": parse_flag, "baud": _INT, "stop_bits": _INT,
+    "corrupt_every": _INT,
+    "silent_after": _num(float, 0, 1e6), "error": lambda k, v: v, "error_after": _num(float, 0, 1e6),
 }
 #: Options accepted and handled elsewhere: ``speed`` scales the Clock that drives the device.
 PASSED_THROUGH = {"speed"}

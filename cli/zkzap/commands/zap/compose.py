@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, dry_run_option, port_options, yes_option
+from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, yes_option
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -221,7 +221,7 @@ def _link_args(common):
 @id_option()
 @click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
               help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
-@click.option("--interval", type=click.FloatRange(0, 3600), default=0.0, metavar="SECONDS",
+@click.option("--interval", type=FiniteRange(0, 3600), default=0.0, metavar="SECONDS",
               help="Pause between echoes with --count.")
 @_format("text", ("text", "table", "json", "jsonl", "csv"),
          "'text' prints one line per reply; the others give records with id, seq, error, errors, rtt_ms")
@@ -367,10 +367,12 @@ def load(reg, length, physical, fmt, ident, **common):
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         reply, values = bus.read_registers(ident, reg.address, length, check=False)
     records = register_records(reply.ident, values, reply.errors)
+    partial = _mark_partial(records, reg.address, length)
     if fmt == "value":
         for rec in records:
             v = rec["physical"] if physical and "physical" in rec else rec["value"]
-            click.echo(str(v) if len(records) == 1 else f"{rec['register']}={v}")
+            # a cut value is never printed bare, as if it were the register's whole value
+            click.echo(str(v) if len(records) == 1 and not partial else f"{rec['register']}={v}")
     else:
         from ...io.writers import make_writer
 
@@ -382,6 +384,21 @@ def load(reg, length, physical, fmt, ident, **common):
         _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
     if reply.error:
         raise device_error(reply)
+
+
+def _mark_partial(records, address, length) -> list:
+    """Records of registers that --length cut short get ``partial: true`` (their one byte read
+    is the register's low byte), with a note on stderr. Returns them."""
+    from ..options import note
+
+    cut = [r for r in records if r["register"].endswith("(partial)")]
+    for rec in cut:
+        name = rec["register"][:-len("(partial)")]
+        size = zap.REGISTER_BY_NAME[name].size
+        rec["partial"] = True
+        note(f"--length {length} from 0x{address:02X} reads 1 of {name}'s {size} bytes (its low byte): "
+             f"the value shown is not the register's value")
+    return cut
 
 
 def _write_command(name, builder, doc):
@@ -520,7 +537,7 @@ def raw(instruction, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
     INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move)
-    or a code (0xF2, F2). PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
+    or a code: 0xF2 (hex), 242 (decimal, as register addresses are read) or F2. PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
     port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
     a reply but does not fail without one.
 
@@ -543,7 +560,8 @@ def _instruction_code(text: str) -> int:
     if ins is not None:
         return ins.code
     try:
-        code = int(key, 16) if not key.startswith("0x") else int(key, 0)
+        # as register addresses: 0xF2 is hex, 242 decimal; bare hex with a letter (F2) is hex
+        code = int(key, 10) if key.isdigit() else int(key, 0) if key.startswith("0x") else int(key, 16)
     except ValueError:
         names = ", ".join(i.cli for i in zap.INSTRUCTIONS)
         raise UsageError(f"instruction: unknown {text!r}; allowed {names} or a code 0x00..0xFF") from None

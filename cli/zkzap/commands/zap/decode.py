@@ -9,7 +9,8 @@ from ...codec import zap
 from ...codec.framing import ZapFramer
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import checked, close_output, format_option, note_skipped, open_output, output_options, resolve_format
+from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
+                       output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -57,14 +58,15 @@ def decode(inputs, binary, fmt, output, append):
         chunks, explicit = binary_chunks(list(inputs)), False
     else:
         chunks, explicit = hex_chunks(inputs)
-    stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
+    fmt = output_format(fmt, output)
     framer = ZapFramer()
     decoder = zap.ZapDecoder()
     if explicit:
         probe = ZapFramer()
         if not probe.feed(chunks[0]):
             _explain_single(chunks[0])
+    stream, had = open_output(output, append, fmt=fmt, columns=COLUMNS,
+                              inputs=decode_inputs(inputs, binary, explicit))
     decode_one = (lambda p: _table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
     writer = make_writer(fmt, stream, COLUMNS, table_columns=TABLE_COLUMNS, header=not had)
     try:

@@ -15,7 +15,7 @@ import click
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, note, resolve_format, yes_option
+from ..options import FiniteRange, SignedCommand, consent, note, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
@@ -318,9 +318,9 @@ WATCH_LAST = zap.REGISTER_BY_NAME["moving"]
               help=f"Goal speed {SPEED.lo}..{SPEED.hi}, written first (default: leave as it is).")
 @click.option("-w", "--wait", is_flag=True,
               help="Wait until the actuator stops at the goal; print its final position.")
-@click.option("--wait-timeout", type=click.FloatRange(0.01, 86400), default=10.0, show_default=True,
+@click.option("--wait-timeout", type=FiniteRange(0.01, 86400), default=10.0, show_default=True,
               metavar="SECONDS", help="With --wait: give up after this long (exit status 3).")
-@click.option("--poll", type=click.FloatRange(0.0, 10), default=0.01, show_default=True, metavar="SECONDS",
+@click.option("--poll", type=FiniteRange(0.0, 10), default=0.01, show_default=True, metavar="SECONDS",
               help="With --wait: pause between position reads.")
 @link_options
 def move(position, ident, speed, wait, wait_timeout, poll, **common):
@@ -415,7 +415,7 @@ def _read_back(bus, ident, reg, within, silent):
 @click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
               help="The actuator's present ID 0..253 (factory default 0).")
 @click.option("--force", is_flag=True, help="Go ahead even if another actuator already answers to NEW.")
-@click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
+@click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
               help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options
@@ -454,7 +454,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
               help="Actuator ID 0..253.")
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")
-@click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
+@click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
               help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options

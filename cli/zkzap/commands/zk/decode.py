@@ -9,8 +9,8 @@ from ...codec import zk
 from ...codec.framing import ZkFramer
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import (checked, close_output, format_option, note, note_skipped, open_output, output_options,
-                       protocol_version_option, resolve_format)
+from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
+                       output_format, output_options, protocol_version_option)
 
 
 def columns(accept="both", raw=False):
@@ -92,8 +92,8 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
         chunks, explicit = binary_chunks(list(inputs)), False
     else:
         chunks, explicit = hex_chunks(inputs)
-    stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
+    fmt = output_format(fmt, output)
+    cols = columns(accept, raw)
     framer = ZkFramer(accept)
     decoder = zk.ZkDecoder(protocol_version, raw=raw)
     warned = []
@@ -117,7 +117,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
         if not frames:
             _explain_single(data)
         framer = ZkFramer(accept)
-    cols = columns(accept, raw)
+    stream, had = open_output(output, append, fmt=fmt, columns=cols, inputs=decode_inputs(inputs, binary, explicit))
     writer = make_writer(fmt, stream, cols, table_columns=TABLE_COLUMNS, header=not had)
     try:
         if fmt == "table":

@@ -9,7 +9,7 @@ import click
 
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import format_option, resolve_format
+from ..options import FiniteRange, format_option, resolve_format
 
 DETECT_COLUMNS = ["port", "found", "baud", "stop_bits", "protocol_version", "status_rate_hz", "frames_per_s",
                   "elapsed_s", "budget_s", "tried"]
@@ -57,9 +57,9 @@ def detect_options(f):
     f = click.option("--probe", is_flag=True,
                      help="Send keep-alives (control ID 0) at each setting while listening; by "
                           "default nothing is ever transmitted.")(f)
-    f = click.option("--budget", type=click.FloatRange(0.1, 600), default=None, metavar="SECONDS",
+    f = click.option("--budget", type=FiniteRange(0.1, 600), default=None, metavar="SECONDS",
                      help="Longest the whole search may take (default 12 s).")(f)
-    f = click.option("--window", type=click.FloatRange(0.05, 60), default=None, metavar="SECONDS",
+    f = click.option("--window", type=FiniteRange(0.05, 60), default=None, metavar="SECONDS",
                      help="Longest listening time per setting (default 0.35 s: three frames at 20 Hz); "
                           "a setting that gives only garbage is left sooner.")(f)
     return f

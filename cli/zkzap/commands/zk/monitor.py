@@ -13,49 +13,70 @@ import click
 from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import note, open_output, port_options, protocol_version_option
+from ..options import FiniteRange, note, output_file, port_options, protocol_version_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         resolve_port, zk_timeout_help)
 
 
 class Output:
-    """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal."""
+    """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    def __init__(self, fmt, output, append, snapshot, ids, title, columns_for):
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record (or by
+    :meth:`finish` after a run that ended well without one), so a run that fails to start —
+    no port, a silent ECU — leaves an existing file as it was."""
+
+    def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
 
         path = output if output and output != "-" else None
         if fmt is None and path:
             fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
-        self.stream, had = open_output(output, append)
         if fmt is None:
-            fmt = "table" if is_tty(self.stream) else "jsonl"
+            fmt = "table" if is_tty(sys.stdout) else "jsonl"
         self.fmt = fmt
+        self.stream = None if path else sys.stdout
         self.dashboard = None
         self.writer = None
+        self.file = None
         stdout_tty = is_tty(sys.stdout)
-        if fmt == "table" and self.stream is sys.stdout and stdout_tty:
+        if fmt == "table" and not path and stdout_tty:
             self.dashboard = _dashboard(title)
         elif path and stdout_tty:
             self.dashboard = _dashboard(title)
         if snapshot is None:
             snapshot = fmt == "csv"
-        if fmt == "table" and self.dashboard is not None and self.stream is sys.stdout:
+        if fmt == "table" and self.dashboard is not None and not path:
             snapshot = False
         self.snapshot = snapshot
-        if self.dashboard is None or self.stream is not sys.stdout:
-            from ...io.writers import make_writer
+        self._table = fmt == "table"
+        if self._table:
+            self.snapshot = False
+        self._columns = [] if self._table else columns_for(self.snapshot, ids)
+        if path:
+            self.file = output_file(path, append, fmt=fmt, columns=self._columns, inputs=inputs)
+        elif self.dashboard is None:
+            self._open()
 
-            if fmt == "table":
-                self.snapshot = False
-                self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
-                self._table = True
-            else:
-                self.writer = make_writer(fmt, self.stream, columns_for(self.snapshot, ids), header=not had)
-                self._table = False
+    def _open(self):
+        from ...io.writers import make_writer
+
+        had = False
+        if self.file is not None:
+            self.stream, had = self.file.open(), self.file.had
+        if self._table:
+            self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
+        else:
+            self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had)
+
+    def finish(self, ok):
+        """The run ended: a file no record opened is created only when the run went well."""
+        if ok and self.file is not None and self.writer is None:
+            self._open()
 
     def write(self, rec):
+        if self.writer is None and self.file is not None:
+            self._open()
         if self.writer is not None:
             if self._table:
                 from .decode import summary
@@ -88,7 +109,7 @@ class Output:
                 w.close()
             except BrokenPipeError:
                 pass
-        if self.stream is not sys.stdout and not self.stream.closed:
+        if self.stream is not None and self.stream is not sys.stdout and not self.stream.closed:
             self.stream.close()
 
 
@@ -105,38 +126,40 @@ def _dashboard(title):
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
-                  stop_on_error=False, abort_at_end=False, title=None, stand=None):
+                  stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
+    ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
+    an output.
     """
+    from ...io.outfile import OutFile, refuse_same_files
     from ...link import zk_link as L
     from ...link.port import fit_note
 
     id_set = L.parse_ids(ids) if ids is not None else None
+    refuse_same_files({"--output": output, "--raw-log": raw_log, **(extra_outputs or {})},
+                      {"--replay": replay, **(inputs or {})})
     if control is not None and url is not None:
         told = fit_note("control rate", rate or L.DEFAULT_RATE, 4, baud, stop_bits)
         if told:
             note(told)
     columns = L.record_columns if stand is None else stand.columns(L.record_columns)
     out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
-    raw = None
+    # opened by the first bytes received: a port that fails to open leaves an old log as it was
+    raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
     source = None
     try:
-        if raw_log:
-            try:
-                raw = open(raw_log, "ab" if append else "wb")
-            except OSError as e:
-                raise UsageError(f"raw-log: cannot open {raw_log}: {e.strerror}") from None
         if replay is not None:
             source = L.ReplaySource(replay, fast=fast)
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
-        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
+        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
+                          wall_clock=source.live)
         on_update = out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -148,6 +171,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                             limits=stand.limits if stand is not None else None)
         with out:
             outcome = session.run()
+            out.finish(outcome.ok)
+            if outcome.ok and raw is not None and raw.stream is None:
+                raw.open()
     finally:
         if source is not None:
             source.close()
@@ -175,12 +201,12 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @log_options
 @click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
               help="Stop after N records.")
-@click.option("--duration", type=click.FloatRange(0, min_open=True), default=None, metavar="SECONDS",
+@click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
               help="Stop after SECONDS.")
 @click.option("--keepalive", is_flag=True,
               help="Send keep-alives (ID 0) at --rate: ECUs before protocol version 5 report loss of "
                    "control signal when the host falls silent.")
-@click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
+@click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
               help="Keep-alive rate (default 20 Hz).")
 @protocol_version_option
 @click.option("--fail-on-error", is_flag=True,

@@ -7,10 +7,10 @@ import sys
 
 import click
 
-from ...errors import OutputError, UsageError
+from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, close_output, consent, dry_run_option, note, port_options, protocol_version_option,
-                       yes_option)
+from ..options import (FilePath, FiniteRange, close_output, consent, dry_run_option, note, port_options,
+                       protocol_version_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
@@ -50,7 +50,7 @@ def _read(path) -> str:
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
-@click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
+@click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
               help="Control frames per second (default 20).")
 @click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default="standby", show_default=True,
               help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
@@ -133,7 +133,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
                                 ("average", average), ("fuel-density", fuel_density)) if v]
         if extra:
             raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
-        _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append)
+        _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append, schedule)
         return
     if sched.length <= 0:
         raise UsageError(f"schedule: {name}: the last row is at 0 s; the last row's time_s is the "
@@ -150,7 +150,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         _check_dir(steps_csv, "steps-csv")
         averager = StepAverager(sched.steps(), 3.0 if settle is None else settle, average,
                                 fuel_density or DEFAULT_DENSITY)
-    _check_dir(summary_json, "summary-json")
+    summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True)
     stand.schedule = sched
@@ -162,12 +162,21 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             consent(f"schedule {name} on {url}: {hazard}", yes)
     from .monitor import run_telemetry
 
-    outcome, tel, session = run_telemetry(
-        url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
-        stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
-        stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
-        title=f"profile {name} on {url}", stand=stand)
+    try:
+        outcome, tel, session = run_telemetry(
+            url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
+            stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
+            stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
+            stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
+            title=f"profile {name} on {url}", stand=stand,
+            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
+    except ZkzapError as e:
+        # a run that failed to start (no port, ...) still replaces an older summary: with its failure
+        if summary_file and e.code != USAGE:
+            _write_json(summary_file, {"schedule": name, "port": url, "outcome": "error", "exit_status": e.code,
+                                       "error": str(e), "aborted": None, "duration_s": 0.0,
+                                       "schedule_s": sched.length})
+        raise
     if sched.ends_in_rpm_mode and abort == "none":
         note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
     summary = _summary(name, url, sched, outcome, tel, session)
@@ -181,7 +190,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if steps_csv:
         _write_steps(steps_csv, summary["steps"])
     if summary_json:
-        _write_json(summary_json, summary)
+        _write_json(summary_file or summary_json, summary)
     outcome.raise_for_status()
 
 
@@ -198,7 +207,7 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
 
 _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated": "terminated",
         "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-        "limit": "limit violated"}
+        "limit": "limit violated", "output": "output failed"}
 
 
 def _print_summary(s):
@@ -231,16 +240,26 @@ def _r(x, digits):
     return None if x is None else round(x, digits)
 
 
+def _check_summary(path, schedule, output, raw_log):
+    """--summary-json FILE, checked before anything starts (None for '-' or none)."""
+    from ...io.outfile import OutFile, refuse_same_files
+
+    if not path or path == "-":
+        return None
+    refuse_same_files({"--summary-json": path, "--output": output, "--raw-log": raw_log}, {"SCHEDULE": schedule})
+    OutFile(path, what="summary-json").check()
+    return path
+
+
 def _write_json(path, summary):
+    """The summary as JSON: to stdout for '-', else whole (a temporary file renamed over FILE)."""
+    from ...io.outfile import write_atomic
+
     text = json.dumps(summary, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return
-    try:
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(text)
-    except OSError as e:
-        raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
+    write_atomic(path, text, what="summary-json")
 
 
 def _check_dir(path, what):
@@ -265,15 +284,15 @@ def _write_steps(path, rows):
         close_output(writer, stream)
 
 
-def _print_plan(sched, rate, fmt, output, append):
+def _print_plan(sched, rate, fmt, output, append, path):
     from ...codec.hexfmt import format_hex
     from ...io.writers import make_writer
-    from ..options import open_output, resolve_format
+    from ..options import open_output, output_format
 
-    stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
+    fmt = output_format(fmt, output)
     cols = ["t", "mode", "state", "throttle_pct", "target_rpm", "frame"] if sched.has_rpm else \
         ["t", "state", "throttle_pct", "frame"]
+    stream, had = open_output(output, append, fmt=fmt, columns=cols, inputs={"SCHEDULE": path})
     writer = make_writer(fmt, stream, cols, header=not had)
     try:
         for t, mode, state, value, frames in sched.plan(rate):

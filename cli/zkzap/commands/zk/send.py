@@ -13,8 +13,8 @@ import click
 from ...codec import zk
 from ...errors import UsageError
 from .. import CONTEXT, Command, Group
-from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
-                       protocol_version_option, warn, yes_option)
+from ..options import (FINITE, FiniteRange, SignedCommand, apply_options, consent, dry_run_option, note,
+                       port_options, protocol_version_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
@@ -59,10 +59,10 @@ def send_options(f):
         port_options("zk"),
         yes_option,
         protocol_version_option,
-        click.option("--for", "for_s", type=click.FloatRange(0), default=None, metavar="SECONDS",
+        click.option("--for", "for_s", type=FiniteRange(0), default=None, metavar="SECONDS",
                      help="Keep sending at --rate for SECONDS (0: until Ctrl-C), writing the status "
                           "frames received meanwhile as 'zk monitor' does."),
-        click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
+        click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
                      help="With --for: frames per second (default 20)."),
         click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default=None,
                      help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
@@ -209,7 +209,7 @@ def _make(cmd):
                 ptype = click.Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = click.FLOAT if f.decimals else click.INT
+                ptype = FINITE if f.decimals else click.INT
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
@@ -218,7 +218,7 @@ def _make(cmd):
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
                 ptype = click.Choice(choices, case_sensitive=False)
             else:
-                ptype = click.FLOAT if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
+                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
         params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,

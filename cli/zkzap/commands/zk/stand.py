@@ -11,23 +11,15 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ..options import FilePath, apply_options, note
+from ..options import FilePath, FiniteRange, apply_options, note
 
 LIMIT_HELP = ("Stop when a status field leaves a limit: FIELD OP NUMBER with OP one of < <= > >= == != "
               "and an optional warning band (egt_c<=850,warn=800; power_voltage_v>=7.2; error_code==0). "
               "Evaluated on every frame that carries the field. Repeatable.")
 
 
-class Finite(click.FloatRange):
-    """A float range that also refuses nan and infinity (naming the option)."""
-
-    def convert(self, value, param, ctx):
-        import math
-
-        v = super().convert(value, param, ctx)
-        if not math.isfinite(v):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        return v
+#: The finite float range every float option uses (one definition, in the options module).
+Finite = FiniteRange
 
 
 def limit_options(f):
