@@ -225,7 +225,9 @@ def check_document(doc, name="document") -> dict:
                 rkey = f"{where}.{section}.{rname}"
                 reg = REG.get(str(rname))
                 if reg is None:
-                    close = [n for n in REG if str(rname).lower() in n or n in str(rname).lower()][:3]
+                    import difflib
+
+                    close = difflib.get_close_matches(str(rname).lower(), list(REG), n=3, cutoff=0.75)
                     fail(rkey, "unknown register" + (f"; did you mean {', '.join(close)}?" if close
                                                      else "; see 'zap registers'"))
                 if section_of(reg) != section:
@@ -417,6 +419,22 @@ def _yaml_value(text, name, lineno):
     return t
 
 
+def _strip_comment(text: str) -> str:
+    """``text`` without a trailing ``# comment`` (a ``#`` after a blank, outside quotes)."""
+    quote = None
+    prev = " "
+    for i, ch in enumerate(text):
+        if quote:
+            if ch == quote and (quote == "'" or prev != "\\"):
+                quote = None
+        elif ch in "\"'" and prev in " :[,":
+            quote = ch
+        elif ch == "#" and prev in " \t":
+            return text[:i].rstrip()
+        prev = ch
+    return text
+
+
 def yaml_loads(text: str, name: str = "document"):
     """The block subset of YAML that :func:`dumps` writes (and a person edits): nested mappings
     by indentation, scalars (integers, ``0x`` hex, null, true/false, quoted or plain strings,
@@ -435,11 +453,7 @@ def yaml_loads(text: str, name: str = "document"):
         if stripped.startswith("- "):
             raise DocumentError(f"{name}:{lineno}: block lists are not used in a fleet file")
         # a comment after a value, outside quotes
-        body = stripped
-        if " #" in body and not body.lstrip().startswith(('"', "'")):
-            k, _, v = body.partition(":")
-            if " #" in v and not v.strip().startswith(('"', "'")):
-                body = k + ":" + v.split(" #", 1)[0]
+        body = _strip_comment(stripped)
         m = _YAML_LINE.match(body)
         if not m:
             raise DocumentError(f"{name}:{lineno}: expected 'key: value' (got {stripped!r})")
