@@ -289,7 +289,11 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
     targets = [t for _, t in pairs]
+    from ...io.term import is_tty
     from ...link.zap_bus import device_error
+
+    if _real(common) and not yes and not plan_only and not (is_tty(sys.stdin) and is_tty(sys.stderr)):
+        consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
 
     with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
         current = {}
@@ -321,8 +325,6 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
                  "already equal)")
             return
         if _real(common) and not yes:
-            from ...io.term import is_tty
-
             if is_tty(sys.stderr):
                 _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
                             title=f"plan: {file}", stream=sys.stderr)
