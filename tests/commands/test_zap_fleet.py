@@ -277,7 +277,7 @@ def test_watch_csv_file_and_jsonl(cli, tmp_path):
 
 def test_watch_until_and_faults(cli):
     r = cli("zap", "watch", "present-position", "--ids", "1,2", "--until", "moving==0",
-            "-p", "sim://zap?ids=1,2&faults=2:silent/1")
+            "--retries", "0", "-p", "sim://zap?ids=1,2&faults=2:silent/1")
     assert r.exit_code == 0, r
     rows = jsonl(r.stdout)
     assert rows[1]["status"] == "no-reply" and rows[-1]["status"] == "ok" and "condition met" in r.stderr

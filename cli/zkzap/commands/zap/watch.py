@@ -41,8 +41,8 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     protocol has no sync read; registers far apart are read in separate blocks). Each read
     gives a snapshot row: time (ISO 8601 UTC, when it was read), t (seconds since the start),
     poll, id, one column per register (raw values, units as in 'zap registers'), errors,
-    status (ok, no-reply, bad-reply) and rtt_ms. A failed read is a row with empty values and
-    the watch goes on. On a terminal: a live table per actuator with units, sparklines, error
+    status (ok, no-reply, bad-reply) and rtt_ms. A read that fails after --retries is a row
+    with empty values, and the watch goes on. On a terminal: a live table per actuator with units, sparklines, error
     bits in colour and link health, and the achieved poll rate beside the asked one and the
     wire limit. JSON Lines in a pipe; CSV by -f csv or an -o *.csv name. A summary goes to
     stderr at the end. Exit status 3 when an actuator never answered.
@@ -74,7 +74,8 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     if output and os.path.isdir(output):
         raise UsageError(f"output: {output} is a directory")
     with open_link(ids=ids, **_link_args(common)) as bus:
-        watcher = Watcher(bus, ids, list(registers), rate=rate, count=count, duration=duration, until=conds)
+        watcher = Watcher(bus, ids, list(registers), rate=rate, count=count, duration=duration, until=conds,
+                          retries=common["retries"])
         columns = ["time", "t", "poll", "id"] + [r.name for r in watcher.shown] + ["errors", "status", "rtt_ms"]
         stream, had = (None, False)
         writer = None
