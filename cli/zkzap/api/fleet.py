@@ -625,8 +625,6 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
         if reg in skip:
             continue
         new = entry.values[reg]
-        if reg.name == "id" and target != entry.ident:
-            new = entry.values[reg]
         old = current.get(reg.name)
         if old == new:
             unchanged += 1
@@ -666,9 +664,7 @@ def execute(bus, writes, done: list, *, on_write=None) -> None:
         if reg.name == "id":
             where = w.new
             bus.wait_ready(where, within=2.0)
-        if reg.name == "baud-rate":
-            # takes effect at the next restart: the stored code reads back now
-            pass
+        # a new baud rate takes effect at the next restart: the stored code reads back at once
         r = bus.load(where, reg.address, reg.size, check=False)
         w.read_back = r.value
         if r.error:
