@@ -250,14 +250,14 @@ def test_setup_one_actuator_at_a_time_with_config_and_resume(bus_of, tmp_path):
         dev.actuators = [bench[n]]                  # "connect the next actuator alone"
         wired.append(bench[n])
         found = fleet.find_alone(bus, range(0, 6), (57600, 115200), prefer=[0, target])
-        state.mark_done(target, fleet.setup_one(bus, target, found=found, state=state, config=config))
+        state.mark_done(target, fleet.setup_one(bus, target, found=found, config=config))
     # a crash here; a second run resumes with ID 3
     state2 = fleet.SetupState.load(state_path, [1, 2, 3, 4])
     assert state2.pending() == [3, 4] and state2.done[1]["from_id"] == 0
     for n, target in enumerate(state2.pending(), start=2):
         dev.actuators = [bench[n]]
         found = fleet.find_alone(bus, range(0, 6), (57600, 115200), prefer=[0, target])
-        state2.mark_done(target, fleet.setup_one(bus, target, found=found, state=state2, config=config))
+        state2.mark_done(target, fleet.setup_one(bus, target, found=found, config=config))
     assert [a.ident for a in bench] == [1, 2, 3, 4]
     assert all(a.get("speed-limit") == 321 for a in bench)
     assert state2.done[3]["from_baud"] == 115200
@@ -275,3 +275,19 @@ def test_setup_refuses_two_actuators(bus_of):
     bus = bus_of("9")
     with pytest.raises(fleet.NotFound, match="no actuator answers"):
         fleet.find_alone(bus, range(0, 3), (57600, 19200))
+
+
+def test_port_lost_during_apply(bus_of):
+    from zkzap.errors import PortError
+
+    a, b = bus_of(), bus_of()
+    configured(a)
+    entries = fleet.check_document(fleet.read_bus(a, [1, 2, 3]))
+    writes = []
+    for ident, entry in entries.items():
+        writes += fleet.plan(entry, ident, fleet.PROCEDURES.read_map(b, ident)[0])[0]
+    done = []
+    with pytest.raises(PortError):
+        fleet.execute(b, writes, done, on_write=lambda w: b.port.close() if len(done) == 3 else None)
+    assert [w.status for w in done] == ["verified"] * 3
+    assert writes[3].status == "sending" and writes[4].status == "planned"

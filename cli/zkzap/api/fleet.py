@@ -789,10 +789,11 @@ def _ranges(ids):
     return ",".join(out)
 
 
-def setup_one(bus, target, *, found, state, config=None, on_write=None, procedures=PROCEDURES) -> dict:
+def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROCEDURES) -> dict:
     """Give the actuator found at ``found`` = (ID, baud) the ID ``target``, apply ``config``
     (an :class:`Entry`: its stored settings except id, baud-rate and protocol-type) and
-    verify. Returns the record kept in the state file."""
+    verify. Returns the record kept in the state file (with ``warning`` when the actuator's
+    model or firmware differs from ``config``'s)."""
     ident, baud = found
     record = {"from_id": ident, "from_baud": baud, "baud": baud, "writes": 0, "time": now_iso()}
     if bus.baud != baud:
@@ -806,6 +807,9 @@ def setup_one(bus, target, *, found, state, config=None, on_write=None, procedur
         raise CheckFailed(f"setup: the actuator reads back ID {got}, expected {target}")
     if config is not None:
         values, _ = procedures.read_map(bus, target)
+        mismatch = identity_mismatch(config, values)
+        if mismatch:
+            record["warning"] = f"the actuator is {mismatch}"
         writes, _ = plan(config, target, values)
         done: list = []
         execute(bus, writes, done, on_write=on_write)

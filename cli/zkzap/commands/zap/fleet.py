@@ -357,19 +357,24 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
 
 def _report_interrupted(writes, done, fmt, file, exc):
     """After an interruption: the writes made go to stdout, a summary to stderr."""
+    unsure = []
     for w in writes:
-        if w not in done:
+        if w.status == "sending":
+            w.status = "unknown"          # interrupted while its packet went out
+            unsure.append(w)
+        elif w not in done:
             w.status = "not-sent"
     try:
-        _write_rows([w.record() for w in done], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
+        _write_rows([w.record() for w in done + unsure], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                     title=f"interrupted: {file}")
     except Exception:  # noqa: BLE001 - a closed stdout must not hide the original failure
         pass
     what = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"stopped ({exc})"
     made = ", ".join(f"ID {w.target} {w.register.name}" + ("" if w.status in ("verified", "mismatch")
                                                             else " (not read back)") for w in done) or "none"
-    left = len(writes) - len(done)
-    click.echo(f"apply {what}: {len(done)} of {len(writes)} writes made: {made}; {left} not made. "
+    left = len(writes) - len(done) - len(unsure)
+    maybe = "".join(f"; ID {w.target} {w.register.name} may or may not have been written" for w in unsure)
+    click.echo(f"apply {what}: {len(done)} of {len(writes)} writes made: {made}{maybe}; {left} not made. "
                f"Run the same apply again to finish (writes already made are skipped).", err=True)
 
 
@@ -472,7 +477,9 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 if found[0] != target and bus.ping(target, retries=1) is not None:
                     raise fleet.TwoAnswer(f"ID {target} answers as well as ID {found[0]}; connect one "
                                           "actuator alone")
-                record = fleet.setup_one(bus, target, found=found, state=state, config=entry)
+                record = fleet.setup_one(bus, target, found=found, config=entry)
+                if record.get("warning"):
+                    warn(f"ID {target}: {record['warning']}")
             except (fleet.TwoAnswer, fleet.NotFound, NoReply, CheckFailed) as e:
                 if no_wait:
                     raise
