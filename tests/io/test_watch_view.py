@@ -1,5 +1,7 @@
 """The live view of zap watch, rendered to text: units, sparklines, link health, rates."""
 
+import re
+
 from rich.console import Console
 
 from zkzap.api.watch import Watcher
@@ -35,7 +37,9 @@ def test_view_shows_each_id_with_health_and_rates():
     assert "5 polls in" in text and "polls/s (20 Hz asked; wire limit" in text
     assert "ID 1" in text and "ID 2" in text and "ID 3" in text
     assert "12 V" in text
-    assert "5/5 answered, 0.0 % lost" in text and "0/5 answered, 100.0 % lost" in text
-    assert "errors: overload" in text and "STALE" in text          # ID 3 never answered
-    spark = [line for line in text.splitlines() if line.strip().startswith("│ present-position")][0]
-    assert any(ch in spark for ch in "▁▂▃▄▅▆▇█")
+    assert "5/5 ok, 0.0% lost" in text and "0/5 ok, 100.0% lost" in text
+    assert re.search(r"│ +│ +│ +│ +│ errors overload +│", text)                     # ID 2: a third row
+    assert text.count("errors none") == 2                                                  # IDs 1 and 3
+    assert "last no-reply STALE" in text                                                   # ID 3 never answered
+    spark = [line for line in text.splitlines() if "│ ID 1 " in line][0]
+    assert re.search(r"│ [▁▂▃▄▅▆▇█]{5} │", spark)          # five polls of a moving rod

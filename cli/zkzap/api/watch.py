@@ -71,8 +71,8 @@ def wire_limit(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> 
 
 
 class Health:
-    """Link health of one actuator: reads asked, answered, failed, the last round trip, the
-    time of the last good read, and the error bits seen."""
+    """Link health of one actuator, counted in polls (one row each): asked, answered, failed,
+    the last round trip, the time of the last good read, and the error bits seen."""
 
     __slots__ = ("asked", "answered", "failed", "last_rtt", "last_ok", "errors", "last_status")
 
@@ -140,7 +140,6 @@ class Watcher:
         h = self.health[ident]
         status, errors, rtt = "ok", [], 0.0
         for address, length, regs in self.reads:
-            h.asked += 1
             try:
                 reply = self.bus.load(ident, address, length, check=False, retries=self.retries)
             except NoReply:
@@ -154,6 +153,8 @@ class Watcher:
                     if reg.name in row:
                         row[reg.name] = raw
                 continue
+        h.asked += 1
+        if status != "ok":
             h.failed += 1
         now = self._clock()
         row["time"] = _iso(time.time())

@@ -1,8 +1,8 @@
-"""The live view of ``zap watch``: one table per actuator, on a terminal (rich).
+"""The live view of ``zap watch``: one section per actuator in one table, on a terminal (rich).
 
-Each table lists the watched registers with their value in the register's unit, a sparkline of
-the recent values, and a footer of link health: reads answered of asked, loss, the last round
-trip, the age of the last good read, and error bits (red). The header shows the achieved poll
+Each actuator's section lists the watched registers with their value in the register's unit
+and a sparkline of the recent values, beside its link health (reads answered of asked, loss,
+the last round trip, STALE when no read succeeded lately) and its error bits (red). The header shows the achieved poll
 rate beside the asked one and the wire limit.
 """
 
@@ -53,35 +53,40 @@ class WatchView:
                              f"  {w.polls} polls in {w.elapsed:.1f} s: ",
                              (f"{w.achieved:.1f} polls/s", "bold cyan"),
                              f" ({asked}; wire limit {limit:.1f}/s at {w.bus.baud} baud)")
-        parts = [head]
+        table = Table(header_style="bold", expand=False, show_edge=True)
+        for name, justify in (("id", "left"), ("register", "left"), ("value", "right"), ("trend", "left"),
+                              ("link", "left")):
+            table.add_column(name, justify=justify, no_wrap=True)
+        width = self.console.width if self.console is not None else 100
+        spark = max(5, min(24, width - 70))
         now = time.monotonic()
         period = max(0.5, STALE_POLLS / (w.achieved or 1.0))
         for ident in w.ids:
             h = w.health[ident]
             row = w.latest.get(ident) or {}
-            table = Table(title=f"ID {ident}", title_justify="left", header_style="bold", expand=False)
-            table.add_column("register")
-            table.add_column("value", justify="right")
-            table.add_column("trend")
-            for reg in w.shown:
-                raw = row.get(reg.name)
-                style = None
-                if reg.name == "moving" and raw:
-                    style = "yellow"
-                table.add_row(reg.name, Text(value_text(reg, raw), style=style),
-                              Text(sparkline(w.history[ident][reg.name], 30), style="cyan"))
             errs = sorted(h.errors | set(row.get("errors") or []))
             age = None if h.last_ok is None else now - h.last_ok
             stale = age is None or age > period
-            link = Text.assemble(
-                ("link ", "bold"),
-                (f"{h.answered}/{h.asked} answered", "green" if not h.failed else "yellow"),
-                f", {h.loss * 100:.1f} % lost",
-                f", rtt {h.last_rtt * 1000:.1f} ms" if h.last_rtt is not None else "",
-                (f", last {h.last_status}", "red") if h.last_status not in (None, "ok") else "",
-                ("  STALE" if stale else "", "bold white on red"),
-                "  errors: ", (", ".join(errs) if errs else "none", "bold red" if errs else "green"))
-            parts.append(Group(table, link))
+            link = [Text.assemble((f"{h.answered}/{h.asked} ok", "green" if not h.failed else "yellow"),
+                                  f", {h.loss * 100:.1f}% lost"),
+                    Text(" ").join(t for t in (
+                        Text(f"rtt {h.last_rtt * 1000:.1f} ms") if h.last_rtt is not None else None,
+                        Text(f"last {h.last_status}", style="red") if h.last_status not in (None, "ok") else None,
+                        Text("STALE", style="bold white on red") if stale else None) if t is not None),
+                    Text.assemble("errors ", (", ".join(errs) if errs else "none",
+                                              "bold red" if errs else "green"))]
+            lines = max(len(w.shown), len(link))
+            for n in range(lines):
+                reg = w.shown[n] if n < len(w.shown) else None
+                raw = row.get(reg.name) if reg is not None else None
+                style = "yellow" if reg is not None and reg.name == "moving" and raw else None
+                table.add_row(Text(f"ID {ident}", style="bold") if n == 0 else "",
+                              reg.name if reg is not None else "",
+                              Text(value_text(reg, raw), style=style) if reg is not None else "",
+                              Text(sparkline(w.history[ident][reg.name], spark), style="cyan") if reg is not None
+                              else "",
+                              link[n] if n < len(link) else "", end_section=n == lines - 1)
+        parts = [head, table]
         return Group(*parts)
 
     __rich__ = render
