@@ -318,3 +318,18 @@ def test_moves_and_writes_need_consent_on_a_real_port(cli, tmp_path):
         assert (r.exit_code, r.stdout) == (2, ""), r
         assert "--yes" in r.stderr
     assert not os.path.exists(tmp_path / "s.json")
+
+
+def test_error_bits_give_exit_5_after_the_data(cli, buses):
+    a, _, tmp = buses
+    f = str(tmp / "fleet.json")
+    r = cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    assert r.exit_code == 0
+    low = "sim://zap?ids=1,2,3&voltage=5"
+    r = cli("zap", "apply", f, "-p", low)
+    assert r.exit_code == 5 and "ID 1 reports error 0x01" in r.stderr
+    rows = jsonl(r.stdout)
+    assert len(rows) == 5 and all(x["status"] == "verified" and x["errors"] == ["input-voltage"] for x in rows)
+    out = tmp / "low.json"
+    r = cli("zap", "backup", "--ids", "1", "-p", low, "-o", str(out))
+    assert r.exit_code == 5 and json.loads(out.read_text())["actuators"]["1"]["errors"] == ["input-voltage"]
