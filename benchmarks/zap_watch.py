@@ -80,7 +80,8 @@ def main(argv=None):
                 bad = sum(h.failed for h in w.health.values())
                 model = 1.0 / (len(ids) * sum(wire_time(7 + n, args.baud) + TURNAROUND for _, n, _ in w.reads))
                 print(f"{label:22s} {len(ids)} IDs at {args.baud}: {w.achieved:7.1f} polls/s, wire limit "
-                      f"{w.limit():7.1f}/s -> {ratio:.2f}x  target >= {TARGET}x {'met' if ratio >= TARGET else 'NOT met'}"
+                      f"{w.limit():7.1f}/s -> {ratio:.2f}x  "
+                      f"target >= {TARGET}x {'met' if ratio >= TARGET else 'NOT met'}"
                       f"  (simulator's own timing {w.achieved / model:.2f}x; {rows} rows, {bad} failed reads)")
         env = dict(os.environ, NO_COLOR="1")
         cmd = tool("zap") + ["watch", "present-position", "present-current", "moving", "--ids", args.ids,

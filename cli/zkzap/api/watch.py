@@ -8,8 +8,9 @@ what another Load Data costs on the wire (:func:`split_gap`) is the block split.
 :class:`Watcher` yields one snapshot row per actuator and poll: ``time`` (ISO 8601 UTC, the
 time of the read), ``t`` (seconds since the start), ``poll``, ``id``, each register's raw
 value by name, ``errors`` (error bit names), ``status`` (``ok``, ``no-reply``, ``bad-reply``)
-and ``rtt_ms``; a port that fails ends the watch (:class:`~zkzap.errors.PortError`). A failed read gives a row with null values and the watch goes on;
-per-ID link health is kept in :attr:`Watcher.health`.
+and ``rtt_ms``; a port that fails ends the watch (:class:`~zkzap.errors.PortError`). A failed
+read gives a row with null values and the watch goes on; per-ID link health is kept in
+:attr:`Watcher.health`.
 
 :func:`wire_limit` is the fastest poll rate the line allows: every Load and reply on the wire
 at 10 bits a byte, plus the actuators' turnaround per transaction.

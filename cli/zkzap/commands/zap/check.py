@@ -70,7 +70,9 @@ def check(ids, no_move, move_timeout, fmt, yes, **common):
     errors = [i for i, v in verdicts.items() if v == "error"]
     failed = [i for i, v in verdicts.items() if v == "fail"]
     if errors:
-        raise DeviceError(f"ID{'s' if len(errors) > 1 else ''} {', '.join(map(str, errors))} {'report' if len(errors) > 1 else 'reports'} error bits"
+        several = len(errors) > 1
+        raise DeviceError(f"ID{'s' if several else ''} {', '.join(map(str, errors))} "
+                          f"{'report' if several else 'reports'} error bits"
                           + (f"; ID{'s' if len(failed) > 1 else ''} {', '.join(map(str, failed))} failed a check"
                              if failed else ""))
     if failed:

@@ -279,6 +279,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
       zap apply fleet.json --only goal-speed,led -p /dev/ttyUSB0       # volatile settings
     """
     entries = fleet.read_document(file)
+    file = "stdin" if file == "-" else file
     pairs = fleet.assignments(entries, ids=ids, mapping=mapping, to=to)
     only_regs = fleet.registers_option(only, "--only") if only is not None else None
     skip_regs = fleet.registers_option(skip, "--skip")
