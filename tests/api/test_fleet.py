@@ -291,3 +291,26 @@ def test_port_lost_during_apply(bus_of):
         fleet.execute(b, writes, done, on_write=lambda w: b.port.close() if len(done) == 3 else None)
     assert [w.status for w in done] == ["verified"] * 3
     assert writes[3].status == "sending" and writes[4].status == "planned"
+
+
+def test_return_mode_changes_are_protected_and_keep_the_link_usable(bus_of):
+    a, b = bus_of(), bus_of()
+    a.port.device.actuator(1).set("feedback-return-mode", 2)
+    a.port.device.actuator(2).set("feedback-return-mode", 0)
+    a.port.device.actuator(1).set("speed-limit", 600)
+    entries = fleet.check_document(fleet.read_bus(a, [1, 3]))
+    entries[2] = fleet.check_document({"format": fleet.FORMAT, "actuators": {"2": fleet.entry_from_values(
+        {"feedback-return-mode": 0, "id": 2}, baud=57600)}})[2]
+    cur = {i: fleet.PROCEDURES.read_map(b, i)[0] for i in (1, 2)}
+    assert [w.register.name for w in fleet.plan(entries[1], 1, cur[1])[0]] == ["speed-limit"]
+    with pytest.raises(UsageError, match="--only feedback-return-mode: .*--force"):
+        fleet.plan(entries[1], 1, cur[1], only=[R["feedback-return-mode"]])
+    mode = R["feedback-return-mode"]
+    writes = (fleet.plan(entries[1], 1, cur[1], only=[R["speed-limit"], mode], force=True)[0]
+              + fleet.plan(entries[2], 2, cur[2], only=[mode], force=True)[0])
+    assert [w.register.name for w in writes] == ["speed-limit", "feedback-return-mode", "feedback-return-mode"]
+    done = []
+    fleet.execute(b, writes, done)
+    assert [w.status for w in done] == ["verified", "verified", "unverifiable"]     # mode 0 cannot be read back
+    assert b.return_mode == 1 and b.read(3, R["speed-limit"]) == 1023       # the link still talks mode 1
+    assert b.port.device.actuator(2).get(mode) == 0 and b.port.device.actuator(1).get(mode) == 2

@@ -47,8 +47,8 @@ SECTIONS = ("stored", "volatile", "read-only")
 #: Entry keys besides the sections.
 META_KEYS = ("model", "firmware", "baud", "time", "errors")
 #: Settings an apply never writes unless named with ``only`` and ``force``: they change how
-#: (or whether) the actuator can be reached.
-PROTECTED = ("id", "baud-rate", "protocol-type")
+#: (or whether) the actuator can be reached and answers.
+PROTECTED = ("id", "baud-rate", "protocol-type", "feedback-return-mode")
 #: File suffixes and their formats.
 SUFFIXES = {".json": "json", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml"}
 
@@ -630,7 +630,7 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
             unchanged += 1
             continue
         writes.append(Write(target, entry.ident, reg, old, new))
-    order = {"baud-rate": 1, "id": 2}
+    order = {"feedback-return-mode": 1, "baud-rate": 2, "id": 3}
     writes.sort(key=lambda w: order.get(w.register.name, 0))
     return writes, unchanged
 
@@ -651,21 +651,38 @@ def execute(bus, writes, done: list, *, on_write=None) -> None:
     appended to ``done`` before its read-back, so after any exception (Ctrl-C, a vanished
     port, a silent actuator) ``done`` says exactly which writes were sent: status
     ``verified`` (read back equal), ``mismatch`` (read back another value) or ``sent`` (the
-    read-back did not complete). ``on_write(write)`` is called after each read-back."""
+    read-back did not complete) or ``unverifiable`` (feedback-return-mode 0 never answers a read).
+    ``on_write(write)`` is called after each read-back."""
     for w in writes:
         reg = w.register
+        mode = bus.return_mode
         w.status = "sending"
-        reply = bus.store(w.target, reg, w.new, force=reg.name in PROTECTED, check=False)
+        try:
+            reply = bus.store(w.target, reg, w.new, force=reg.name in PROTECTED, check=False)
+        finally:
+            if reg.name == "feedback-return-mode":
+                bus.return_mode = mode      # the link's mode is the bus's: one actuator changed
         w.status = "sent"
         done.append(w)
         if reply is not None and reply.error:
             w.errors = reply.errors
+        if reg.name == "feedback-return-mode" and w.new == 0:
+            w.status = "unverifiable"       # mode 0 never answers Load Data: it cannot be read back
+            if on_write is not None:
+                on_write(w)
+            continue
         where = w.target
         if reg.name == "id":
             where = w.new
             bus.wait_ready(where, within=2.0)
+        saved = bus.return_mode
+        if reg.name == "feedback-return-mode":
+            bus.return_mode = w.new
         # a new baud rate takes effect at the next restart: the stored code reads back at once
-        r = bus.load(where, reg.address, reg.size, check=False)
+        try:
+            r = bus.load(where, reg.address, reg.size, check=False)
+        finally:
+            bus.return_mode = saved
         w.read_back = r.value
         if r.error:
             w.errors = sorted(set(w.errors) | set(r.errors))

@@ -243,13 +243,14 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.option("--to", "to", type=IdList(), default=None, metavar="LIST",
               help="Clone the one selected actuator of FILE onto every bus ID listed, like 1-8.")
 @click.option("--only", "only", type=RegisterList(), default=None, metavar="REG,...",
-              help="Write only these registers (volatile ones too; id, baud-rate, protocol-type with --force).")
+              help="Write only these registers (volatile ones too; id, baud-rate, protocol-type and "
+                   "feedback-return-mode with --force).")
 @click.option("--skip", "skip", type=RegisterList(), default=None, metavar="REG,...",
               help="Never write these registers.")
 @click.option("--plan", "plan_only", is_flag=True, help="Print the writes it would make; write nothing.")
 @click.option("--force", is_flag=True,
-              help="Write id, baud-rate or protocol-type named in --only; apply a file from another model "
-                   "or firmware.")
+              help="Write id, baud-rate, protocol-type or feedback-return-mode named in --only; apply a file "
+                   "from another model or firmware.")
 @click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
@@ -261,9 +262,9 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     skipped: stored writes wear the actuator's memory), shows the plan, asks for consent once on
     a real port (--yes), writes, reads each back, and prints one row per write: id, register,
     old (the bus's value), new (FILE's), status (verified, mismatch; planned with --plan),
-    read_back. Volatile settings are written only when named in --only; id, baud-rate and
-    protocol-type only with --only and --force. A file from another model or firmware is
-    refused unless --force.
+    read_back. Volatile settings are written only when named in --only; id, baud-rate,
+    protocol-type and feedback-return-mode only with --only and --force. A file from another
+    model or firmware is refused unless --force.
 
     An interrupted apply (Ctrl-C, a vanished port, a silent actuator) prints the writes that
     were made and says which; running the same command again makes the rest. Exit status 0
@@ -342,7 +343,11 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             raise
     _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                 title=f"applied: {file}")
-    bad = [w for w in writes if w.status != "verified"]
+    for w in writes:
+        if w.status == "unverifiable":
+            warn(f"ID {w.target}: feedback-return-mode {w.new} written; in mode 0 it answers Echo only, so it "
+                 "cannot be read back")
+    bad = [w for w in writes if w.status not in ("verified", "unverifiable")]
     if bad:
         raise CheckFailed("; ".join(f"ID {w.target}: {w.register.name} reads back {w.read_back}, wrote {w.new}"
                                     for w in bad[:3]) + (f" (and {len(bad) - 3} more)" if len(bad) > 3 else ""))
@@ -371,8 +376,9 @@ def _report_interrupted(writes, done, fmt, file, exc):
     except Exception:  # noqa: BLE001 - a closed stdout must not hide the original failure
         pass
     what = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"stopped ({exc})"
-    made = ", ".join(f"ID {w.target} {w.register.name}" + ("" if w.status in ("verified", "mismatch")
-                                                            else " (not read back)") for w in done) or "none"
+    read = ("verified", "mismatch", "unverifiable")
+    made = ", ".join(f"ID {w.target} {w.register.name}" + ("" if w.status in read else " (not read back)")
+                     for w in done) or "none"
     left = len(writes) - len(done) - len(unsure)
     maybe = "".join(f"; ID {w.target} {w.register.name} may or may not have been written" for w in unsure)
     click.echo(f"apply {what}: {len(done)} of {len(writes)} writes made: {made}{maybe}; {left} not made. "
@@ -385,8 +391,8 @@ def _report_interrupted(writes, done, fmt, file, exc):
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")
 @click.option("--config", "config", type=FilePath(), default=None,
-              help="A backup file whose stored settings each actuator gets (id, baud-rate and protocol-type "
-                   "excepted).")
+              help="A backup file whose stored settings each actuator gets (id, baud-rate, protocol-type "
+                   "and feedback-return-mode excepted).")
 @click.option("--config-id", type=IdList(), default=None, metavar="ID",
               help="Which actuator of --config to copy (default: its only one).")
 @click.option("--state", "state_path", type=FilePath(), default="zap-setup.json", show_default=True,
