@@ -85,7 +85,7 @@ def test_backup_of_a_silent_id_writes_nothing(cli, buses):
 
 def test_diff_formats_and_all(cli, buses):
     a, b, tmp = buses
-    fa, fb = str(tmp / "a.json"), str(tmp / "b.toml")
+    fb = str(tmp / "b.toml")
     cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", str(tmp / "fa.json"))
     cli("zap", "backup", "--ids", "1-2", "-p", b, "-o", fb)
     r = cli("zap", "diff", str(tmp / "fa.json"), fb, "-f", "csv")
@@ -96,7 +96,10 @@ def test_diff_formats_and_all(cli, buses):
     assert rows[-1]["register"] == "(actuator)" and rows[-1]["b"] == "absent"
     r = cli("zap", "diff", fb, fb, "--all", "--compare", "all", "-f", "json")
     assert r.exit_code == 0 and all(x["equal"] for x in json.loads(r.stdout))
-    assert fa
+    r = cli("zap", "diff", str(tmp / "fa.json"), fb, "--ids", "2")
+    assert (r.exit_code, len(jsonl(r.stdout))) == (1, 1)                 # current-limit only
+    r = cli("zap", "diff", str(tmp / "fa.json"), fb, "--ids", "2,9")
+    assert (r.exit_code, r.stdout) == (2, "") and "ID 9 is in neither" in r.stderr
 
 
 def test_apply_clone_with_to_and_map(cli, buses):

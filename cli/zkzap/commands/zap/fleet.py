@@ -217,6 +217,10 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         with open_link(ids=wanted, probe=wanted[0], **_link_args(common)) as bus:
             live = _read_entries(bus, wanted, required=False)
         sides["A" if a == "bus" else "B"] = live
+    nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
+    if nowhere:
+        raise UsageError(f"--ids: ID{'s' if len(nowhere) > 1 else ''} {fleet._ranges(nowhere)} "
+                         f"{'are' if len(nowhere) > 1 else 'is'} in neither {a} nor {b}")
     rows = fleet.diff(sides["A"], sides["B"], compare=compare, ids=ids, everything=everything)
     title = f"A = {a}, B = {b}"
     table = DIFF_TABLE + ([("equal", "equal")] if everything else [])
