@@ -336,3 +336,16 @@ def test_error_bits_give_exit_5_after_the_data(cli, buses):
     out = tmp / "low.json"
     r = cli("zap", "backup", "--ids", "1", "-p", low, "-o", str(out))
     assert r.exit_code == 5 and json.loads(out.read_text())["actuators"]["1"]["errors"] == ["input-voltage"]
+
+
+def test_apply_through_line_faults(cli, buses):
+    a, _, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    # a corrupted and a truncated reply are retried; the writes still read back
+    r = cli("zap", "apply", f, "-p", "sim://zap?ids=1,2,3&faults=2:corrupt/1,3:truncate/2")
+    assert r.exit_code == 0, r
+    assert [x["status"] for x in jsonl(r.stdout)] == ["verified"] * 5
+    # a reply that stays corrupted after the retries: exit 6 before any write
+    r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
+    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: corrupted reply" in r.stderr
