@@ -214,6 +214,12 @@ ZAP_COMMANDS = {
     "set-id": (".zap.scan", "set_id", "Give an actuator a new ID, verified by read-back."),
     "set-baud": (".zap.scan", "set_baud", "Change an actuator's baud rate, verified."),
     "registers": (".zap.tables", "registers", "List the register map (12Lf)."),
+    "backup": (".zap.fleet", "backup", "Back up every register of every actuator to a file."),
+    "diff": (".zap.fleet", "diff", "Compare two fleets: backup files or the live bus."),
+    "apply": (".zap.fleet", "apply", "Make the bus match a backup, skipping writes that change nothing."),
+    "setup": (".zap.fleet", "setup", "Guided ID setup, one actuator at a time, resumable."),
+    "watch": (".zap.watch", "watch", "Poll registers of several actuators live, or log them."),
+    "check": (".zap.check", "check", "Self-check actuators: echo, voltage, errors, a full-stroke move."),
 }
 ROOT_COMMANDS = {
     "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),

@@ -1,0 +1,841 @@
+"""Actuator fleets: backup documents, diffs, apply plans with minimal writes, guided ID setup.
+
+A **backup document** holds every readable register of every actuator of a bus, grouped by ID,
+with the model number, firmware version and baud rate each answered at, the time, and the
+zkzap version. Registers sit in three sections named after their memory (from the register
+table, :data:`zkzap.codec.zap.REGISTERS`): ``stored`` (NV: survives power-off), ``volatile``
+(V: reset at power-on) and ``read-only`` (kept for reference, never written)::
+
+    {"format": "zkzap-fleet/1", "zkzap": "0.1.0", "time": "2026-12-01T10:00:00Z",
+     "actuators": {"1": {"model": 3148, "firmware": 20, "baud": 57600,
+                         "stored": {"id": 1, "baud-rate": 32, ...},
+                         "volatile": {"force-on-off": 1, ...},
+                         "read-only": {"model-number": 3148, ...}}}}
+
+Values are raw register values (the units of ``zap registers``). The same document is written
+as JSON, TOML or YAML, chosen by the file's suffix (:func:`dump_document`,
+:func:`read_document`); TOML and YAML are written by this module, TOML is read by the
+standard library's ``tomllib`` (``tomli`` before Python 3.11), YAML by this module's reader of
+the block subset it writes (mappings, scalars, comments).
+
+Every check of a document is strict and names ``FILE`` and the key (``fleet.json:
+actuators.1.stored.speed-limt: unknown register``): :class:`DocumentError`, a usage error.
+
+:func:`plan` computes the writes that make an actuator match a document entry, skipping
+every write that would change nothing (stored writes wear the actuator's memory), and
+:func:`execute` carries them out with a read-back each; its ``done`` list says exactly which
+writes happened when it is interrupted. Bus reads go through :class:`Procedures`, the one
+place that knows how an actuator is found and read.
+
+Nothing here imports click or rich.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+
+from ..codec import zap
+from ..codec.fields import FieldValueError
+from ..errors import CheckFailed, UsageError
+
+FORMAT = "zkzap-fleet/1"
+SETUP_FORMAT = "zkzap-setup/1"
+SECTIONS = ("stored", "volatile", "read-only")
+#: Entry keys besides the sections.
+META_KEYS = ("model", "firmware", "baud", "time", "errors")
+#: Settings an apply never writes unless named with ``only`` and ``force``: they change how
+#: (or whether) the actuator can be reached and answers.
+PROTECTED = ("id", "baud-rate", "protocol-type", "feedback-return-mode")
+#: File suffixes and their formats.
+SUFFIXES = {".json": "json", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml"}
+
+REG = zap.REGISTER_BY_NAME
+
+
+class DocumentError(UsageError):
+    """A backup document that cannot be used; the message names the file and the key."""
+
+
+def section_of(reg) -> str:
+    """The document section a register belongs to."""
+    return {"NV": "stored", "V": "volatile", "": "read-only"}[reg.memory]
+
+
+def unit_of(reg) -> str:
+    """The unit of a raw value: ``0.1 V`` for a scaled register, the register's unit, or ``""``."""
+    if reg.scale != 1:
+        return f"{reg.scale:g} {reg.unit}"
+    return reg.unit
+
+
+# -- reading a bus ---------------------------------------------------------------------------
+
+def map_blocks(gap=8):
+    """Contiguous runs of the register map as (address, length), gaps of at most ``gap`` unmapped
+    bytes read through: the few Load Data reads that cover every register."""
+    blocks = []
+    for reg in sorted(zap.REGISTERS, key=lambda r: r.address):
+        end = reg.address + reg.size
+        if blocks and reg.address - (blocks[-1][0] + blocks[-1][1]) <= gap:
+            blocks[-1][1] = end - blocks[-1][0]
+        else:
+            blocks.append([reg.address, reg.size])
+    return [tuple(b) for b in blocks]
+
+
+class Procedures:
+    """How actuators are found and read: ``find`` (Echo to each ID) and ``read_map`` (every
+    register in as few Load Data reads as the map has blocks). The single place a fleet
+    operation touches these procedures, so they can be pointed at another implementation."""
+
+    @staticmethod
+    def find(bus, ids, *, retries=0):
+        """IDs of ``ids`` that answer an Echo at the bus's baud rate, and those whose reply was
+        garbled (two actuators answering at once): ``(found, garbled)``."""
+        from ..errors import BadReply
+
+        found, garbled = [], []
+        for ident in ids:
+            try:
+                r = bus.ping(ident, retries=retries)
+            except BadReply:
+                garbled.append(ident)
+                continue
+            if r is not None:
+                found.append(ident)
+        return found, garbled
+
+    @staticmethod
+    def read_map(bus, ident):
+        """``({register name: raw}, error bits)`` of one actuator: every mapped register."""
+        values, error = {}, 0
+        for address, length in map_blocks():
+            reply, regs = bus.read_registers(ident, address, length, check=False)
+            error |= reply.error
+            for reg, raw in regs:
+                if zap.REGISTER_BY_ADDRESS.get(reg.address) is reg:
+                    values[reg.name] = raw
+        return values, error
+
+
+PROCEDURES = Procedures()
+
+
+def now_iso() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def entry_from_values(values: dict, *, baud, error=0, when=None) -> dict:
+    """A document entry for one actuator from its register values."""
+    entry = {"model": values.get("model-number"), "firmware": values.get("firmware-version"), "baud": baud,
+             "time": when or now_iso()}
+    if error:
+        entry["errors"] = zap.error_names(error)
+    for section in SECTIONS:
+        entry[section] = {}
+    for reg in zap.REGISTERS:
+        if reg.name in values:
+            entry[section_of(reg)][reg.name] = values[reg.name]
+    return entry
+
+
+def read_bus(bus, ids, *, procedures=PROCEDURES, on_actuator=None) -> dict:
+    """A backup document of actuators ``ids`` on ``bus`` (each must answer)."""
+    from .. import __version__
+
+    doc = {"format": FORMAT, "zkzap": __version__, "time": now_iso(), "actuators": {}}
+    for ident in ids:
+        values, error = procedures.read_map(bus, ident)
+        doc["actuators"][str(ident)] = entry_from_values(values, baud=bus.baud, error=error)
+        if on_actuator is not None:
+            on_actuator(ident, doc["actuators"][str(ident)])
+    return doc
+
+
+# -- documents: validation -------------------------------------------------------------------
+
+class Entry:
+    """One checked actuator of a document: ``ident``, ``model``, ``firmware``, ``baud`` and
+    ``values`` ({Register: raw}, every section)."""
+
+    __slots__ = ("ident", "model", "firmware", "baud", "values")
+
+    def __init__(self, ident, model, firmware, baud, values):
+        self.ident, self.model, self.firmware, self.baud, self.values = ident, model, firmware, baud, values
+
+    def settings(self, section):
+        return {r: v for r, v in self.values.items() if section_of(r) == section}
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def check_document(doc, name="document") -> dict:
+    """{ID: :class:`Entry`} from a parsed document; DocumentError naming ``name`` and the key."""
+    def fail(key, text):
+        raise DocumentError(f"{name}: {key}: {text}" if key else f"{name}: {text}")
+
+    if not isinstance(doc, dict):
+        fail("", f"not a zkzap fleet document (expected an object with format {FORMAT!r})")
+    fmt = doc.get("format")
+    if fmt != FORMAT:
+        fail("format", f"{fmt!r} is not {FORMAT!r}" if fmt is not None else f"missing; expected {FORMAT!r}")
+    for key in doc:
+        if key not in ("format", "zkzap", "time", "port", "actuators"):
+            fail(key, "unknown key; allowed format, zkzap, time, port, actuators")
+    actuators = doc.get("actuators")
+    if not isinstance(actuators, dict) or not actuators:
+        fail("actuators", "missing or empty; expected an object of actuators by ID")
+    out = {}
+    for key, entry in actuators.items():
+        where = f"actuators.{key}"
+        try:
+            ident = zap.check_id(str(key), allow_broadcast=False) if re.fullmatch(r"\s*\d+\s*", str(key)) else None
+        except FieldValueError:
+            ident = None
+        if ident is None:
+            fail(where, f"{key!r} is not an actuator ID; allowed 0..253")
+        if ident in out:
+            fail(where, f"ID {ident} is given twice")
+        if not isinstance(entry, dict):
+            fail(where, "expected an object with model, firmware, baud and the register sections")
+        for k in entry:
+            if k not in META_KEYS and k not in SECTIONS:
+                fail(f"{where}.{k}", f"unknown key; allowed {', '.join(META_KEYS + SECTIONS)}")
+        for k in ("model", "firmware", "baud"):
+            v = entry.get(k)
+            if v is not None and not _is_int(v):
+                fail(f"{where}.{k}", f"{v!r} is not an integer")
+        baud = entry.get("baud")
+        if baud is not None and baud not in zap.BAUD_TO_CODE:
+            fail(f"{where}.baud", f"{baud} is not an actuator baud rate; allowed "
+                                  f"{', '.join(str(b) for b in sorted(zap.BAUD_TO_CODE))}")
+        values = {}
+        for section in SECTIONS:
+            regs = entry.get(section, {})
+            if regs is None:
+                continue
+            if not isinstance(regs, dict):
+                fail(f"{where}.{section}", "expected an object of register names and values")
+            for rname, value in regs.items():
+                rkey = f"{where}.{section}.{rname}"
+                reg = REG.get(str(rname))
+                if reg is None:
+                    import difflib
+
+                    close = difflib.get_close_matches(str(rname).lower(), list(REG), n=3, cutoff=0.75)
+                    fail(rkey, "unknown register" + (f"; did you mean {', '.join(close)}?" if close
+                                                     else "; see 'zap registers'"))
+                if section_of(reg) != section:
+                    fail(rkey, f"{reg.name} is a {section_of(reg)} register, not {section}")
+                if not _is_int(value):
+                    fail(rkey, f"{value!r} is not an integer")
+                if section == "read-only":
+                    if not 0 <= value < 1 << (8 * reg.size):
+                        fail(rkey, f"{value} does not fit {reg.size} byte{'s' if reg.size > 1 else ''}")
+                else:
+                    try:
+                        reg.check(value)
+                    except FieldValueError as e:
+                        fail(rkey, str(e).split(": ", 1)[-1])
+                values[reg] = value
+        stored_id = values.get(REG["id"])
+        if stored_id is not None and stored_id != ident:
+            fail(f"{where}.stored.id", f"{stored_id} differs from the actuator's key {ident}")
+        out[ident] = Entry(ident, entry.get("model"), entry.get("firmware"), baud, values)
+    return out
+
+
+# -- documents: files ------------------------------------------------------------------------
+
+def format_of(path: str) -> str:
+    ext = os.path.splitext(path)[1].lower()
+    fmt = SUFFIXES.get(ext)
+    if fmt is None:
+        raise UsageError(f"{path}: unknown file type {ext or '(no suffix)'!r}; use .json, .toml or .yaml")
+    return fmt
+
+
+def dumps(doc: dict, fmt: str) -> str:
+    if fmt == "json":
+        return json.dumps(doc, indent=2) + "\n"
+    if fmt == "toml":
+        return _toml(doc)
+    if fmt == "yaml":
+        return _yaml(doc)
+    raise ValueError(fmt)
+
+
+def dump_document(doc: dict, path: str) -> None:
+    """Write ``doc`` to ``path`` in the format its suffix names, atomically (a failed or
+    interrupted write leaves any existing file as it was)."""
+    text = dumps(doc, format_of(path))
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        from ..errors import OutputError
+
+        raise OutputError(f"output: cannot write {path}: {e.strerror or e}") from None
+
+
+def loads(text: str, fmt: str, name: str):
+    if fmt == "json":
+        try:
+            return json.loads(text)
+        except ValueError as e:
+            raise DocumentError(f"{name}: not valid JSON: {e}") from None
+    if fmt == "toml":
+        try:
+            import tomllib
+        except ImportError:  # Python 3.10
+            try:
+                import tomli as tomllib
+            except ImportError:
+                raise UsageError(f"{name}: reading TOML on Python 3.10 needs tomli: "
+                                 "pip install 'zkzap[toml]'") from None
+        try:
+            return tomllib.loads(text)
+        except ValueError as e:
+            raise DocumentError(f"{name}: not valid TOML: {e}") from None
+    return yaml_loads(text, name)
+
+
+def read_document(path: str) -> dict:
+    """{ID: Entry} from a backup file (``-``: JSON on stdin)."""
+    import sys
+
+    if path == "-":
+        text, fmt, name = sys.stdin.read(), "json", "stdin"
+    else:
+        fmt = format_of(path)
+        name = path
+        try:
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+        except OSError as e:
+            raise UsageError(f"{path}: cannot read: {e.strerror or e}") from None
+    return check_document(loads(text, fmt, name), name)
+
+
+_BARE = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _toml_key(k) -> str:
+    k = str(k)
+    return k if _BARE.match(k) else json.dumps(k)
+
+
+def _toml_value(v) -> str:
+    if v is True or v is False:
+        return "true" if v else "false"
+    if _is_int(v) or isinstance(v, float):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def _toml(doc, prefix=()) -> str:
+    lines = []
+    scalars = {k: v for k, v in doc.items() if not isinstance(v, dict) and v is not None}
+    tables = {k: v for k, v in doc.items() if isinstance(v, dict)}
+    if prefix and (scalars or not tables):
+        lines.append("[" + ".".join(_toml_key(p) for p in prefix) + "]")
+    for k, v in scalars.items():
+        lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    out = "\n".join(lines) + ("\n" if lines else "")
+    for k, v in tables.items():
+        out += ("\n" if out else "") + _toml(v, prefix + (k,))
+    return out
+
+
+def _yaml_scalar(v) -> str:
+    if v is None:
+        return "null"
+    if v is True or v is False:
+        return "true" if v else "false"
+    if _is_int(v) or isinstance(v, float):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_yaml_scalar(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def _yaml(doc, indent=0) -> str:
+    out = []
+    pad = "  " * indent
+    for k, v in doc.items():
+        key = str(k) if _BARE.match(str(k)) and not str(k).isdigit() else json.dumps(str(k))
+        if isinstance(v, dict):
+            out.append(f"{pad}{key}:" + (" {}" if not v else ""))
+            if v:
+                out.append(_yaml(v, indent + 1).rstrip("\n"))
+        else:
+            out.append(f"{pad}{key}: {_yaml_scalar(v)}")
+    return "\n".join(out) + "\n"
+
+
+_YAML_LINE = re.compile(r'^(?P<key>"(?:[^"\\]|\\.)*"|\'[^\']*\'|[^:#\s][^:#]*?)\s*:(?:\s+(?P<value>.*?))?\s*$')
+
+
+def _yaml_value(text, name, lineno):
+    t = text.strip()
+    if t in ("", "~", "null", "Null", "NULL"):
+        return None
+    if t in ("true", "True", "TRUE"):
+        return True
+    if t in ("false", "False", "FALSE"):
+        return False
+    if t == "{}":
+        return {}
+    if t.startswith("[") and t.endswith("]"):
+        inner = t[1:-1].strip()
+        return [_yaml_value(x, name, lineno) for x in inner.split(",")] if inner else []
+    if t.startswith('"'):
+        try:
+            return json.loads(t)
+        except ValueError:
+            raise DocumentError(f"{name}:{lineno}: bad quoted string {t}") from None
+    if t.startswith("'") and t.endswith("'") and len(t) >= 2:
+        return t[1:-1].replace("''", "'")
+    if re.fullmatch(r"[-+]?(0x[0-9A-Fa-f]+|0o[0-7]+|\d+)", t):
+        return int(t, 0) if not re.fullmatch(r"[-+]?0\d+", t) else int(t, 10)
+    if re.fullmatch(r"[-+]?(\d+\.\d*|\.\d+|\d+)([eE][-+]?\d+)?", t):
+        return float(t)
+    if t[0] in "&*!|>{[%@`":
+        raise DocumentError(f"{name}:{lineno}: {t!r}: this YAML construct is not supported in a fleet "
+                            "file (block mappings of plain or quoted scalars only)")
+    return t
+
+
+def _strip_comment(text: str) -> str:
+    """``text`` without a trailing ``# comment`` (a ``#`` after a blank, outside quotes)."""
+    quote = None
+    prev = " "
+    for i, ch in enumerate(text):
+        if quote:
+            if ch == quote and (quote == "'" or prev != "\\"):
+                quote = None
+        elif ch in "\"'" and prev in " :[,":
+            quote = ch
+        elif ch == "#" and prev in " \t":
+            return text[:i].rstrip()
+        prev = ch
+    return text
+
+
+def yaml_loads(text: str, name: str = "document"):
+    """The block subset of YAML that :func:`dumps` writes (and a person edits): nested mappings
+    by indentation, scalars (integers, ``0x`` hex, null, true/false, quoted or plain strings,
+    ``[a, b]`` lists), ``#`` comments, an optional ``---``. Anything else is refused, naming
+    ``FILE:LINE``."""
+    root: dict = {}
+    stack = [(-1, root)]
+    pending = None                      # (indent, parent, key): a key that opened a mapping
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.rstrip()
+        stripped = line.lstrip()
+        if not stripped or stripped.startswith("#") or stripped in ("---", "..."):
+            continue
+        if "\t" in line[:len(line) - len(stripped)]:
+            raise DocumentError(f"{name}:{lineno}: tabs are not allowed for indentation in YAML")
+        if stripped.startswith("- "):
+            raise DocumentError(f"{name}:{lineno}: block lists are not used in a fleet file")
+        # a comment after a value, outside quotes
+        body = _strip_comment(stripped)
+        m = _YAML_LINE.match(body)
+        if not m:
+            raise DocumentError(f"{name}:{lineno}: expected 'key: value' (got {stripped!r})")
+        indent = len(line) - len(stripped)
+        if pending is not None:
+            p_indent, p_parent, p_key = pending
+            if indent > p_indent:
+                child: dict = {}
+                p_parent[p_key] = child
+                stack.append((indent, child))
+            else:
+                p_parent[p_key] = None
+            pending = None
+        while stack and indent < stack[-1][0]:
+            stack.pop()
+        if not stack or indent != stack[-1][0]:
+            if stack and stack[-1][0] == -1 and not stack[-1][1]:
+                stack[-1] = (indent, root)
+            else:
+                raise DocumentError(f"{name}:{lineno}: indentation does not match any mapping above")
+        parent = stack[-1][1]
+        key = m.group("key")
+        if key[0] in "\"'":
+            key = _yaml_value(key, name, lineno)
+        key = str(key).strip()
+        if key in parent:
+            raise DocumentError(f"{name}:{lineno}: key {key!r} is given twice")
+        value = m.group("value")
+        if value is None or value == "":
+            parent[key] = None
+            pending = (indent, parent, key)
+        else:
+            parent[key] = _yaml_value(value, name, lineno)
+    return root
+
+
+# -- diff ------------------------------------------------------------------------------------
+
+DIFF_COLUMNS = ["id", "register", "address", "memory", "a", "b", "unit", "equal"]
+#: Which sections a diff compares: ``stored`` (the default: settings that survive power-off),
+#: ``settings`` (stored and volatile), ``all`` (read-only values too).
+COMPARE = {"stored": ("stored",), "settings": ("stored", "volatile"), "all": SECTIONS}
+
+
+def diff(a: dict, b: dict, *, compare="stored", ids=None, everything=False) -> list:
+    """Rows (id, register, address, memory, a, b, unit, equal) comparing two {ID: Entry}. An
+    actuator present on one side only gives one row with register ``"(actuator)"``."""
+    sections = COMPARE[compare]
+    rows = []
+    wanted = sorted(set(a) | set(b)) if ids is None else list(ids)
+    for ident in wanted:
+        ea, eb = a.get(ident), b.get(ident)
+        if ea is None or eb is None:
+            rows.append({"id": ident, "register": "(actuator)", "address": None, "memory": None,
+                         "a": "present" if ea else "absent", "b": "present" if eb else "absent", "unit": "",
+                         "equal": False})
+            continue
+        for reg in zap.REGISTERS:
+            if section_of(reg) not in sections:
+                continue
+            va, vb = ea.values.get(reg), eb.values.get(reg)
+            if va is None and vb is None:
+                continue
+            equal = va == vb
+            if equal and not everything:
+                continue
+            rows.append({"id": ident, "register": reg.name, "address": reg.address, "memory": reg.memory or "R",
+                         "a": va, "b": vb, "unit": unit_of(reg), "equal": equal})
+    return rows
+
+
+# -- apply -----------------------------------------------------------------------------------
+
+class Write:
+    """One planned register write: on bus ID ``target`` (from the document's ``source``),
+    ``register`` from ``old`` (the bus's value now) to ``new``."""
+
+    __slots__ = ("target", "source", "register", "old", "new", "status", "read_back", "errors")
+
+    def __init__(self, target, source, register, old, new):
+        self.target, self.source, self.register, self.old, self.new = target, source, register, old, new
+        self.status = "planned"
+        self.read_back = None
+        self.errors = []
+
+    def record(self) -> dict:
+        reg = self.register
+        return {"id": self.target, "source": self.source, "register": reg.name, "address": reg.address,
+                "memory": reg.memory, "old": self.old, "new": self.new, "unit": unit_of(reg),
+                "status": self.status, "read_back": self.read_back, "errors": list(self.errors)}
+
+    def __repr__(self):
+        return f"Write(ID {self.target}: {self.register.name} {self.old} -> {self.new}, {self.status})"
+
+
+PLAN_COLUMNS = ["id", "source", "register", "address", "memory", "old", "new", "unit", "status", "read_back",
+                "errors"]
+
+
+def registers_option(names, what) -> list:
+    """Registers named in ``--only``/``--skip`` (UsageError for an unknown or read-only one)."""
+    out = []
+    for n in names or ():
+        try:
+            reg = zap.register(n)
+        except FieldValueError as e:
+            raise UsageError(f"{what}: {e}") from None
+        if zap.REGISTER_BY_ADDRESS.get(reg.address) is not reg:
+            raise UsageError(f"{what}: {n!r} is not a register of the map; see 'zap registers'")
+        if not reg.writable:
+            raise UsageError(f"{what}: {reg.name} is read-only; it is never written")
+        if reg not in out:
+            out.append(reg)
+    return out
+
+
+def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
+    """(document ID, bus ID) pairs: ``ids`` selects document IDs (default: all); ``mapping``
+    ({old: new}) sends document ID old to bus ID new; ``to`` clones the one selected document
+    actuator onto every bus ID listed. UsageError for IDs the document lacks or clashes."""
+    chosen = sorted(entries) if ids is None else list(ids)
+    for i in chosen:
+        if i not in entries:
+            raise UsageError(f"--ids: ID {i} is not in the file; it has {', '.join(map(str, sorted(entries)))}")
+    mapping = dict(mapping or {})
+    for old in mapping:
+        if old not in entries:
+            raise UsageError(f"--map: ID {old} is not in the file; it has {', '.join(map(str, sorted(entries)))}")
+        if old not in chosen:
+            chosen.append(old)
+    if to is not None:
+        if mapping:
+            raise UsageError("--to and --map do not go together: --to clones one actuator onto many")
+        if len(chosen) != 1:
+            raise UsageError(f"--to clones one actuator, but {len(chosen)} are selected "
+                             f"({', '.join(map(str, chosen))}); choose one with --ids")
+        return [(chosen[0], t) for t in to]
+    pairs = [(i, mapping.get(i, i)) for i in chosen]
+    targets = [t for _, t in pairs]
+    dup = sorted({t for t in targets if targets.count(t) > 1})
+    if dup:
+        raise UsageError(f"--map: bus ID {dup[0]} would get the settings of two actuators of the file")
+    return pairs
+
+
+def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=False) -> tuple:
+    """(writes, unchanged): the writes that make bus actuator ``target`` (register values
+    ``current``, {name: raw}) match ``entry``'s stored settings, and the volatile ones named in
+    ``only``; writes that would change nothing are left out (``unchanged`` counts them).
+
+    id, baud-rate and protocol-type are written only when named in ``only`` and ``force``
+    (UsageError when named without ``force``); id and baud-rate go last, since they change
+    how the actuator is reached.
+    """
+    only = list(only) if only else None
+    skip = set(skip or ())
+    if only is not None:
+        for reg in only:
+            if reg.name in PROTECTED and not force:
+                raise UsageError(f"--only {reg.name}: this changes how the actuator is reached; "
+                                 "add --force to write it")
+            if reg not in entry.values:
+                raise UsageError(f"--only {reg.name}: ID {entry.ident} of the file has no {reg.name}")
+        chosen = [r for r in zap.REGISTERS if r in only]
+    else:
+        chosen = [r for r in zap.REGISTERS if r.stored and r.name not in PROTECTED and r in entry.values]
+    writes, unchanged = [], 0
+    for reg in chosen:
+        if reg in skip:
+            continue
+        new = entry.values[reg]
+        old = current.get(reg.name)
+        if old == new:
+            unchanged += 1
+            continue
+        writes.append(Write(target, entry.ident, reg, old, new))
+    order = {"feedback-return-mode": 1, "baud-rate": 2, "id": 3}
+    writes.sort(key=lambda w: order.get(w.register.name, 0))
+    return writes, unchanged
+
+
+def identity_mismatch(entry: Entry, current: dict):
+    """A sentence when the bus actuator's model or firmware differs from the entry's, else None."""
+    problems = []
+    model, fw = current.get("model-number"), current.get("firmware-version")
+    if entry.model is not None and model is not None and model != entry.model:
+        problems.append(f"model 0x{model:04X}, the file's 0x{entry.model:04X}")
+    if entry.firmware is not None and fw is not None and fw != entry.firmware:
+        problems.append(f"firmware {fw}, the file's {entry.firmware}")
+    return "; ".join(problems) or None
+
+
+def execute(bus, writes, done: list, *, on_write=None) -> None:
+    """Carry out ``writes`` in order, each read back; every write whose packet went out is
+    appended to ``done`` before its read-back, so after any exception (Ctrl-C, a vanished
+    port, a silent actuator) ``done`` says exactly which writes were sent: status
+    ``verified`` (read back equal), ``mismatch`` (read back another value) or ``sent`` (the
+    read-back did not complete) or ``unverifiable`` (feedback-return-mode 0 never answers a read).
+    ``on_write(write)`` is called after each read-back."""
+    for w in writes:
+        reg = w.register
+        mode = bus.return_mode
+        w.status = "sending"
+        try:
+            reply = bus.store(w.target, reg, w.new, force=reg.name in PROTECTED, check=False)
+        finally:
+            if reg.name == "feedback-return-mode":
+                bus.return_mode = mode      # the link's mode is the bus's: one actuator changed
+        w.status = "sent"
+        done.append(w)
+        if reply is not None and reply.error:
+            w.errors = reply.errors
+        if reg.name == "feedback-return-mode" and w.new == 0:
+            w.status = "unverifiable"       # mode 0 never answers Load Data: it cannot be read back
+            if on_write is not None:
+                on_write(w)
+            continue
+        where = w.target
+        if reg.name == "id":
+            where = w.new
+            bus.wait_ready(where, within=2.0)
+        saved = bus.return_mode
+        if reg.name == "feedback-return-mode":
+            bus.return_mode = w.new
+        # a new baud rate takes effect at the next restart: the stored code reads back at once
+        try:
+            r = bus.load(where, reg.address, reg.size, check=False)
+        finally:
+            bus.return_mode = saved
+        w.read_back = r.value
+        if r.error:
+            w.errors = sorted(set(w.errors) | set(r.errors))
+        w.status = "verified" if r.value == w.new else "mismatch"
+        if on_write is not None:
+            on_write(w)
+
+
+# -- guided ID setup -------------------------------------------------------------------------
+
+class SetupState:
+    """The state file of a guided setup: which target IDs are done (and from which ID and baud
+    the actuator was found), which were skipped. Saved atomically after every change, so a
+    second run resumes where the first stopped."""
+
+    def __init__(self, path, ids):
+        self.path = path
+        self.ids = list(ids)
+        self.done = {}                    # target ID -> record
+        self.skipped = []
+
+    @classmethod
+    def load(cls, path, ids):
+        st = cls(path, ids)
+        if not path or not os.path.exists(path):
+            return st
+        try:
+            with open(path, encoding="utf-8") as f:
+                doc = json.load(f)
+        except (OSError, ValueError) as e:
+            raise UsageError(f"{path}: cannot read the setup state: {e}") from None
+        if not isinstance(doc, dict) or doc.get("format") != SETUP_FORMAT or not isinstance(doc.get("done"), dict):
+            raise UsageError(f"{path}: not a zkzap setup state file (format {SETUP_FORMAT})")
+        for key, rec in doc["done"].items():
+            if not str(key).isdigit() or not 0 <= int(key) <= zap.MAX_ID or not isinstance(rec, dict):
+                raise UsageError(f"{path}: done.{key}: not an actuator ID 0..253 with its record")
+            st.done[int(key)] = rec
+        skipped = doc.get("skipped", [])
+        if not isinstance(skipped, list) or not all(_is_int(i) for i in skipped):
+            raise UsageError(f"{path}: skipped: expected a list of IDs")
+        st.skipped = list(skipped)
+        return st
+
+    def save(self) -> None:
+        if not self.path:
+            return
+        doc = {"format": SETUP_FORMAT, "ids": self.ids, "done": {str(k): v for k, v in sorted(self.done.items())},
+               "skipped": sorted(set(self.skipped))}
+        tmp = f"{self.path}.tmp{os.getpid()}"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=1)
+            f.write("\n")
+        os.replace(tmp, self.path)
+
+    def pending(self) -> list:
+        return [i for i in self.ids if i not in self.done and i not in self.skipped]
+
+    def mark_done(self, target, record) -> None:
+        self.done[target] = record
+        if target in self.skipped:
+            self.skipped.remove(target)
+        self.save()
+
+    def mark_skipped(self, target) -> None:
+        if target not in self.skipped:
+            self.skipped.append(target)
+        self.save()
+
+    def redo(self, target) -> None:
+        self.done.pop(target, None)
+        if target in self.skipped:
+            self.skipped.remove(target)
+        self.save()
+
+
+class TwoAnswer(CheckFailed):
+    """More than one actuator answered during a setup search (exit status 1)."""
+
+
+class NotFound(CheckFailed):
+    """No actuator answered during a setup search (exit status 1)."""
+
+
+def find_alone(bus, ids, bauds, *, prefer=(), procedures=PROCEDURES, on_progress=None):
+    """(ID, baud) of the one actuator connected: at each baud rate in turn, the IDs in
+    ``prefer`` first, then the rest of ``ids``; at the first baud rate where anything answers
+    every ID of ``ids`` is asked, and two answers (or a garbled reply: two actuators with one
+    ID) raise :class:`TwoAnswer`. :class:`NotFound` when nothing answers at any rate."""
+    order = [i for i in prefer if i in ids] + [i for i in ids if i not in prefer]
+    for baud in bauds:
+        if bus.baud != baud:
+            bus.set_baud(baud)
+        if on_progress is not None:
+            on_progress(baud)
+        found, garbled = procedures.find(bus, order)
+        if garbled:
+            raise TwoAnswer(f"a garbled reply from ID {garbled[0]} at {baud} baud: two actuators answer to "
+                            "that ID; connect one actuator alone")
+        if len(found) > 1:
+            raise TwoAnswer(f"{len(found)} actuators answer at {baud} baud (IDs "
+                            f"{', '.join(map(str, found))}); connect one actuator alone")
+        if found:
+            return found[0], baud
+    raise NotFound(f"no actuator answers (IDs {_ranges(ids)} at {', '.join(map(str, bauds))} baud); "
+                   "check power and wiring")
+
+
+def _ranges(ids):
+    ids = sorted(ids)
+    out, start, prev = [], None, None
+    for i in ids:
+        if start is None:
+            start = prev = i
+        elif i == prev + 1:
+            prev = i
+        else:
+            out.append(f"{start}-{prev}" if prev != start else str(start))
+            start = prev = i
+    if start is not None:
+        out.append(f"{start}-{prev}" if prev != start else str(start))
+    return ",".join(out)
+
+
+def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROCEDURES) -> dict:
+    """Give the actuator found at ``found`` = (ID, baud) the ID ``target``, apply ``config``
+    (an :class:`Entry`: its stored settings except id, baud-rate and protocol-type) and
+    verify. Returns the record kept in the state file (with ``warning`` when the actuator's
+    model or firmware differs from ``config``'s)."""
+    ident, baud = found
+    record = {"from_id": ident, "from_baud": baud, "baud": baud, "writes": 0, "time": now_iso()}
+    if bus.baud != baud:
+        bus.set_baud(baud)
+    if ident != target:
+        bus.store(ident, REG["id"], target, force=True, check=False)
+        record["writes"] += 1
+        bus.wait_ready(target, within=2.0)
+    got = bus.read(target, REG["id"], check=False)
+    if got != target:
+        raise CheckFailed(f"setup: the actuator reads back ID {got}, expected {target}")
+    if config is not None:
+        values, _ = procedures.read_map(bus, target)
+        mismatch = identity_mismatch(config, values)
+        if mismatch:
+            record["warning"] = f"the actuator is {mismatch}"
+        writes, _ = plan(config, target, values)
+        done: list = []
+        execute(bus, writes, done, on_write=on_write)
+        bad = [w for w in done if w.status != "verified"]
+        if bad:
+            raise CheckFailed(f"setup: ID {target}: {bad[0].register.name} reads back {bad[0].read_back}, "
+                              f"expected {bad[0].new}")
+        record["writes"] += len(done)
+        record["config"] = len(done)
+    r = bus.echo(target, check=False)
+    record["errors"] = r.errors
+    return record

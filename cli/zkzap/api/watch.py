@@ -1,0 +1,216 @@
+"""Live register polling of several actuators: one Load Data per ID per poll.
+
+The IR protocol has no sync read, so a poll asks each actuator in turn. The registers asked
+for are read as one contiguous block from the lowest to the highest address (registers in
+between come along for free); only when the gap between two asked registers is wider than
+what another Load Data costs on the wire (:func:`split_gap`) is the block split.
+
+:class:`Watcher` yields one snapshot row per actuator and poll: ``time`` (ISO 8601 UTC, the
+time of the read), ``t`` (seconds since the start), ``poll``, ``id``, each register's raw
+value by name, ``errors`` (error bit names), ``status`` (``ok``, ``no-reply``, ``bad-reply``)
+and ``rtt_ms``; a port that fails ends the watch (:class:`~zkzap.errors.PortError`). A failed
+read gives a row with null values and the watch goes on; per-ID link health is kept in
+:attr:`Watcher.health`.
+
+:func:`wire_limit` is the fastest poll rate the line allows: every Load and reply on the wire
+at 10 bits a byte, plus the actuators' turnaround per transaction.
+
+Nothing here imports click or rich.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+from ..codec import zap
+from ..errors import BadReply, NoReply, UsageError
+from ..link.port import wire_time
+
+#: The actuator's processing time before it answers (seconds), as the link assumes it.
+TURNAROUND = 0.002
+#: Bytes of a Load Data command and of a reply without data.
+LOAD_BYTES = 9
+REPLY_BYTES = 7
+
+
+def split_gap(baud: int) -> int:
+    """Unrequested bytes worth reading through rather than sending another Load: a second
+    transaction costs its own command and reply header plus a turnaround."""
+    return LOAD_BYTES + REPLY_BYTES + int(TURNAROUND * baud / 10)
+
+
+def plan_reads(registers, baud: int = 57600) -> list:
+    """[(address, length, [Register, ...]), ...]: the Load Data reads covering ``registers``."""
+    regs = sorted(set(registers), key=lambda r: r.address)
+    if not regs:
+        raise UsageError("watch: no register given")
+    gap = split_gap(baud)
+    reads = []
+    for reg in regs:
+        if reads and reg.address - (reads[-1][0] + reads[-1][1]) <= gap:
+            start = reads[-1][0]
+            reads[-1][1] = max(reads[-1][1], reg.address + reg.size - start)
+            reads[-1][2].append(reg)
+        else:
+            reads.append([reg.address, reg.size, [reg]])
+    for address, length, _ in reads:
+        if address + length > 0x100:
+            raise UsageError(f"watch: a read from 0x{address:02X} of {length} bytes runs past address 0xFF")
+    return [tuple(r) for r in reads]
+
+
+def poll_time(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> float:
+    """Seconds one poll of ``n_ids`` actuators takes on the wire (no host overhead)."""
+    per_id = sum(wire_time(LOAD_BYTES + REPLY_BYTES + length, baud) + turnaround for _, length, _ in reads)
+    return per_id * n_ids
+
+
+def wire_limit(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> float:
+    """Polls per second the line allows."""
+    return 1.0 / poll_time(reads, baud, n_ids, turnaround)
+
+
+class Health:
+    """Link health of one actuator, counted in polls (one row each): asked, answered, failed,
+    the last round trip, the time of the last good read, and the error bits seen."""
+
+    __slots__ = ("asked", "answered", "failed", "last_rtt", "last_ok", "errors", "last_status")
+
+    def __init__(self):
+        self.asked = self.answered = self.failed = 0
+        self.last_rtt = None
+        self.last_ok = None
+        self.errors = set()
+        self.last_status = None
+
+    @property
+    def loss(self) -> float:
+        return self.failed / self.asked if self.asked else 0.0
+
+
+class Watcher:
+    """Poll ``registers`` of ``ids`` on ``bus``.
+
+    ``rate`` (Hz, None: as fast as the line allows) paces the polls; :meth:`rows` yields
+    snapshot rows until ``count`` polls, ``duration`` seconds, or every ID meets every
+    ``until`` condition (:class:`zkzap.api.expr.Condition` on register names). ``history``
+    keeps the last values per ID and register (for sparklines).
+    """
+
+    def __init__(self, bus, ids, registers, *, rate=None, count=None, duration=None, until=(), retries=0,
+                 history=40, clock=time.monotonic, sleep=time.sleep):
+        self.bus = bus
+        self.ids = list(ids)
+        self.registers = list(dict.fromkeys(registers))
+        for c in until:
+            c.field = c.field.replace("_", "-")
+        self.reads = plan_reads(self.registers + [zap.REGISTER_BY_NAME[c.field] for c in until], bus.baud)
+        self.shown = [r for _, _, regs in self.reads for r in regs]
+        self.rate = rate
+        self.count = count
+        self.duration = duration
+        self.until = list(until)
+        self.retries = retries
+        self.health = {i: Health() for i in self.ids}
+        self.latest = {i: {} for i in self.ids}
+        self.history = {i: {r.name: deque(maxlen=history) for r in self.shown} for i in self.ids}
+        self.polls = 0
+        self.started = None
+        self._clock = clock
+        self._sleep = sleep
+        self.stopped_by = None
+
+    @property
+    def elapsed(self) -> float:
+        return 0.0 if self.started is None else self._clock() - self.started
+
+    @property
+    def achieved(self) -> float:
+        """Polls per second so far."""
+        t = self.elapsed
+        return self.polls / t if t > 0 else 0.0
+
+    def limit(self) -> float:
+        return wire_limit(self.reads, self.bus.baud, len(self.ids))
+
+    def _read(self, ident):
+        row = {"time": None, "t": None, "poll": self.polls + 1, "id": ident}
+        for r in self.shown:
+            row[r.name] = None
+        h = self.health[ident]
+        status, errors, rtt = "ok", [], 0.0
+        for address, length, regs in self.reads:
+            try:
+                reply = self.bus.load(ident, address, length, check=False, retries=self.retries)
+            except NoReply:
+                status = "no-reply"
+            except BadReply:
+                status = "bad-reply"
+            else:
+                rtt += reply.rtt
+                errors = sorted(set(errors) | set(reply.errors))
+                for reg, raw in zap._register_values(address, reply.data):
+                    if reg.name in row:
+                        row[reg.name] = raw
+                continue
+        h.asked += 1
+        if status != "ok":
+            h.failed += 1
+        now = self._clock()
+        row["time"] = _iso(time.time())
+        row["t"] = round(now - self.started, 4)
+        row["errors"] = errors
+        row["status"] = status
+        row["rtt_ms"] = round(rtt * 1000, 2) if status == "ok" else None
+        h.last_status = status
+        if status == "ok":
+            h.answered += 1
+            h.last_rtt = rtt
+            h.last_ok = now
+            h.errors.update(errors)
+            self.latest[ident] = row
+            for r in self.shown:
+                self.history[ident][r.name].append(row[r.name])
+        return row
+
+    def done(self) -> bool:
+        if self.count is not None and self.polls >= self.count:
+            self.stopped_by = "count"
+            return True
+        if self.duration is not None and self.elapsed >= self.duration:
+            self.stopped_by = "duration"
+            return True
+        if self.until and self.polls and all(
+                all(c.holds(self.latest[i].get(c.field)) for c in self.until) for i in self.ids):
+            self.stopped_by = "until"
+            return True
+        return False
+
+    def rows(self):
+        """Snapshot rows, poll after poll, until a stop condition holds."""
+        self.started = self._clock()
+        period = 1.0 / self.rate if self.rate else 0.0
+        while not self.done():
+            if period:
+                due = self.started + self.polls * period
+                wait = due - self._clock()
+                if wait > 0:
+                    if self.duration is not None:
+                        wait = min(wait, max(0.0, self.started + self.duration - self._clock()))
+                    self._sleep(wait)
+                    if self.done():
+                        break
+            batch = [self._read(i) for i in self.ids]
+            self.polls += 1
+            yield from batch
+
+
+def _iso(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(t)) + f".{int(t % 1 * 1000):03d}Z"
+
+
+def until_fields(registers=None):
+    """Names allowed in ``--until``: every register of the map (kebab or snake case)."""
+    names = {r.name for r in zap.REGISTERS}
+    return names | {n.replace("-", "_") for n in names}

@@ -1,0 +1,531 @@
+"""Fleet commands: ``zap backup``, ``zap diff``, ``zap apply`` and ``zap setup``.
+
+Thin: options -> :mod:`zkzap.api.fleet` -> writers. The link options are the instructions'
+(:func:`.compose.link_options`).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ...api import fleet
+from ...codec import zap
+from ...errors import CheckFailed, NoReply, UsageError
+from .. import CONTEXT, Command
+from ..options import FilePath, consent, note, resolve_format, warn, yes_option
+from .compose import _link_args, link_options, open_link
+from .scan import BaudList, IdList
+
+DOC_FORMATS = ("json", "toml", "yaml")
+ROW_FORMATS = ("table", "json", "jsonl", "csv")
+
+
+def _real(common) -> bool:
+    from ...link.zap_bus import is_simulated
+
+    return not (common["sim"] or is_simulated(common["port"]))
+
+
+def _write_rows(rows, columns, fmt, *, table_columns, title, stream=None):
+    from ...io.writers import make_writer
+
+    stream = stream if stream is not None else sys.stdout
+    fmt = resolve_format(fmt, stream)
+    writer = make_writer(fmt, stream, columns, table_columns=table_columns, title=title)
+    try:
+        for row in rows:
+            if fmt == "table":
+                row = {k: ("-" if v is None or v == [] else v) for k, v in row.items()}
+            writer.write(row)
+    finally:
+        writer.close()
+
+
+class MapType(click.ParamType):
+    """``OLD:NEW,...`` pairs of actuator IDs."""
+
+    name = "map"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, dict):
+            return value
+        out = {}
+        for part in str(value).replace(" ", ",").split(","):
+            if not part:
+                continue
+            old, sep, new = part.partition(":")
+            try:
+                if not sep:
+                    raise ValueError
+                a = zap.check_id(old, allow_broadcast=False)
+                b = zap.check_id(new, allow_broadcast=False)
+            except Exception:  # FieldValueError, ValueError
+                raise UsageError(f"--map: {part!r} is not OLD:NEW with IDs 0..253 (like 1:5,2:6)") from None
+            if a in out:
+                raise UsageError(f"--map: ID {a} is mapped twice")
+            out[a] = b
+        if not out:
+            raise UsageError("--map: none given; expected OLD:NEW pairs like 1:5,2:6")
+        return out
+
+
+class RegisterList(click.ParamType):
+    """Register names, comma separated."""
+
+    name = "registers"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, list):
+            return value
+        return [p for p in str(value).replace(" ", ",").split(",") if p]
+
+    def shell_complete(self, ctx, param, incomplete):
+        from click.shell_completion import CompletionItem
+
+        head, _, last = incomplete.rpartition(",")
+        prefix = head + "," if head else ""
+        return [CompletionItem(prefix + r.name, help=r.help) for r in zap.REGISTERS
+                if r.writable and r.name.startswith(last)]
+
+
+def _read_entries(bus, ids, *, required=True):
+    """{ID: Entry} read from the bus. ``required``: every ID must answer (else NoReply)."""
+    entries = {}
+    for ident in ids:
+        if not required and bus.ping(ident, retries=1) is None:
+            continue
+        values, error = fleet.PROCEDURES.read_map(bus, ident)
+        entry = fleet.entry_from_values(values, baud=bus.baud, error=error)
+        doc = {"format": fleet.FORMAT, "actuators": {str(ident): entry}}
+        entries[ident] = fleet.check_document(doc, f"bus ID {ident}")[ident]
+    return entries
+
+
+# -- backup --------------------------------------------------------------------------------------
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
+              help="Actuators to back up, like 1,2,5-8 (each must answer); with --scan: the IDs to search.")
+@click.option("--scan", "scan_", is_flag=True,
+              help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud). The default "
+                   "without --ids.")
+@click.option("-o", "--output", type=FilePath(), default=None,
+              help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
+@click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
+              help="Document format (default: from --output's suffix; JSON on stdout).")
+@link_options
+def backup(ids, scan_, output, fmt, **common):
+    """Back up every readable register of every actuator: a fleet document.
+
+    The document groups the actuators by ID, each with its model number, firmware version and
+    the baud rate it answered at, the time, and the zkzap version; registers are in sections
+    'stored' (NV: survives power-off), 'volatile' (V) and 'read-only' (for reference, never
+    written back). Values are raw, in the units of 'zap registers'. The file is written
+    atomically once every actuator has been read; exit status 3 when a listed ID does not
+    answer (nothing written), 5 when one reports error bits (the backup is written first).
+
+    \b
+    Examples:
+      zap backup -p /dev/ttyUSB0 -o fleet.json                 # every actuator found
+      zap backup --ids 1-4 -p /dev/ttyUSB0 -o fleet.toml
+      zap backup --ids 1 -p /dev/ttyUSB0 -f yaml > one.yaml
+    """
+    if output and output != "-":
+        doc_fmt = fmt or fleet.format_of(output)
+    else:
+        doc_fmt = fmt or "json"
+    if common["return_mode"] == "0":
+        raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
+    search = scan_ or ids is None
+    targets = ids if ids is not None else list(range(zap.MAX_ID + 1))
+    sim_ids = ids if ids is not None else [0]
+    with open_link(ids=sim_ids, probe=sim_ids[0], **_link_args(common)) as bus:
+        if search:
+            found, garbled = fleet.PROCEDURES.find(bus, targets)
+            for g in garbled:
+                warn(f"ID {g}: garbled reply (two actuators with one ID?); not backed up")
+            if not found:
+                raise NoReply(f"no actuator answered (IDs {fleet._ranges(targets)} at {bus.baud} baud)")
+            targets = found
+        shown = sys.stderr.isatty() or common["verbose"]
+
+        def said(ident, entry):
+            if shown:
+                note(f"ID {ident}: model 0x{entry['model']:04X}, firmware {entry['firmware']}, "
+                     f"{len(entry['stored'])} stored settings")
+
+        doc = fleet.read_bus(bus, targets, on_actuator=said)
+    doc["port"] = "sim" if common["sim"] else common["port"]
+    if output and output != "-":
+        fleet.dump_document(doc, output)
+        note(f"{len(targets)} actuator{'s' if len(targets) != 1 else ''} ({fleet._ranges(targets)}) "
+             f"backed up to {output}")
+    else:
+        click.echo(fleet.dumps(doc, doc_fmt), nl=False)
+    bad = [(i, e["errors"]) for i, e in doc["actuators"].items() if e.get("errors")]
+    if bad:
+        from ...errors import DeviceError
+
+        raise DeviceError("; ".join(f"ID {i} reports {', '.join(errs)}" for i, errs in bad))
+
+
+# -- diff ----------------------------------------------------------------------------------------
+
+DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a", "A"), ("b", "B"),
+              ("unit", "unit")]
+
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.argument("a", metavar="A")
+@click.argument("b", metavar="B")
+@click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
+              help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
+@click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
+@click.option("--compare", type=click.Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
+              help="stored: the settings that survive power-off; settings: stored and volatile; all: "
+                   "read-only values too.")
+@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+              help="Output format (default: table on a terminal, jsonl otherwise).")
+@link_options
+def diff(a, b, ids, everything, compare, fmt, **common):
+    """Compare two fleets: A and B are backup files or 'bus' (the live bus on -p).
+
+    One row per actuator and register that differs: id, register, address, memory, a, b,
+    unit ('0.1 V' for raw values in tenths); an actuator on one side only is one row with
+    register '(actuator)'. Exit status 0 when equal, 1 when they differ (like diff), 2 for a
+    bad file.
+
+    \b
+    Examples:
+      zap diff fleet.json bus -p /dev/ttyUSB0
+      zap diff monday.json friday.yaml --compare settings
+      zap diff fleet.json bus -p /dev/ttyUSB0 -f csv > drift.csv
+    """
+    if a == "bus" and b == "bus":
+        raise UsageError("diff: A and B are both the bus; compare a file with the bus")
+    sides = {}
+    for label, src in (("A", a), ("B", b)):
+        if src != "bus":
+            sides[label] = fleet.read_document(src)
+    if "bus" in (a, b):
+        if common["return_mode"] == "0":
+            raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
+        other = next(iter(sides.values()))
+        wanted = ids if ids is not None else sorted(other)
+        with open_link(ids=wanted, probe=wanted[0], **_link_args(common)) as bus:
+            live = _read_entries(bus, wanted, required=False)
+        sides["A" if a == "bus" else "B"] = live
+    nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
+    if nowhere:
+        raise UsageError(f"--ids: ID{'s' if len(nowhere) > 1 else ''} {fleet._ranges(nowhere)} "
+                         f"{'are' if len(nowhere) > 1 else 'is'} in neither {a} nor {b}")
+    rows = fleet.diff(sides["A"], sides["B"], compare=compare, ids=ids, everything=everything)
+    title = f"A = {a}, B = {b}"
+    table = DIFF_TABLE + ([("equal", "equal")] if everything else [])
+    _write_rows(rows, fleet.DIFF_COLUMNS, fmt, table_columns=table, title=title)
+    different = sum(1 for r in rows if not r["equal"])
+    if different:
+        raise CheckFailed(f"{different} difference{'s' if different != 1 else ''} between {a} and {b}")
+    if sys.stderr.isatty() or common["verbose"]:
+        note(f"{a} and {b} are equal ({compare} registers)")
+
+
+# -- apply ---------------------------------------------------------------------------------------
+
+PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("old", "bus"), ("new", "file"),
+              ("unit", "unit"), ("status", "status"), ("read_back", "read back"), ("errors", "errors")]
+
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.argument("file", metavar="FILE", type=FilePath())
+@click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
+              help="Apply only these actuators of FILE (default: all of them).")
+@click.option("--map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
+              help="Apply FILE's actuator OLD to the bus's actuator NEW.")
+@click.option("--to", "to", type=IdList(), default=None, metavar="LIST",
+              help="Clone the one selected actuator of FILE onto every bus ID listed, like 1-8.")
+@click.option("--only", "only", type=RegisterList(), default=None, metavar="REG,...",
+              help="Write only these registers (volatile ones too; id, baud-rate, protocol-type and "
+                   "feedback-return-mode with --force).")
+@click.option("--skip", "skip", type=RegisterList(), default=None, metavar="REG,...",
+              help="Never write these registers.")
+@click.option("--plan", "plan_only", is_flag=True, help="Print the writes it would make; write nothing.")
+@click.option("--force", is_flag=True,
+              help="Write id, baud-rate, protocol-type or feedback-return-mode named in --only; apply a file "
+                   "from another model or firmware.")
+@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+              help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
+@yes_option
+@link_options
+def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **common):
+    """Make the bus match FILE: write the stored settings that differ, read each back.
+
+    Reads every target actuator, computes the writes (a write that would change nothing is
+    skipped: stored writes wear the actuator's memory), shows the plan, asks for consent once on
+    a real port (--yes), writes, reads each back, and prints one row per write: id, register,
+    old (the bus's value), new (FILE's), status (verified, mismatch; planned with --plan),
+    read_back. Volatile settings are written only when named in --only; id, baud-rate,
+    protocol-type and feedback-return-mode only with --only and --force. A file from another
+    model or firmware is refused unless --force.
+
+    An interrupted apply (Ctrl-C, a vanished port, a silent actuator) prints the writes that
+    were made and says which; running the same command again makes the rest. Exit status 0
+    when every write reads back, 1 when one reads back another value, 2 for a bad FILE or
+    option (nothing written), 3 when an actuator does not answer, 5 for error bits.
+
+    \b
+    Examples:
+      zap apply fleet.json -p /dev/ttyUSB0 --plan
+      zap apply fleet.json -p /dev/ttyUSB0 --yes
+      zap apply fleet.json --ids 1 --to 2-8 -p /dev/ttyUSB0 --yes     # clone ID 1 onto 2..8
+      zap apply old.json --map 1:5,2:6 --skip current-limit -p /dev/ttyUSB0 --yes
+      zap apply fleet.json --only goal-speed,led -p /dev/ttyUSB0       # volatile settings
+    """
+    entries = fleet.read_document(file)
+    file = "stdin" if file == "-" else file
+    pairs = fleet.assignments(entries, ids=ids, mapping=mapping, to=to)
+    only_regs = fleet.registers_option(only, "--only") if only is not None else None
+    skip_regs = fleet.registers_option(skip, "--skip")
+    if only_regs is not None:
+        for reg in only_regs:
+            if reg.name in fleet.PROTECTED and not force:
+                raise UsageError(f"--only {reg.name}: this changes how the actuator is reached; add --force")
+    if common["return_mode"] == "0":
+        raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
+    targets = [t for _, t in pairs]
+    from ...io.term import is_tty
+    from ...link.zap_bus import device_error
+
+    if _real(common) and not yes and not plan_only and not (is_tty(sys.stdin) and is_tty(sys.stderr)):
+        consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
+
+    with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
+        current = {}
+        writes = []
+        unchanged = 0
+        for source, target in pairs:
+            values, error = fleet.PROCEDURES.read_map(bus, target)
+            current[target] = values
+            entry = entries[source]
+            mismatch = fleet.identity_mismatch(entry, values)
+            if mismatch:
+                text = f"ID {target} is {mismatch} (ID {source} in {file})"
+                if not force:
+                    raise UsageError(f"{text}; pass --force to apply it anyway")
+                warn(text)
+            w, u = fleet.plan(entry, target, values, only=only_regs, skip=skip_regs, force=force)
+            writes += w
+            unchanged += u
+        n_act = len({w.target for w in writes})
+        summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
+                   f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")
+        if plan_only:
+            _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
+                        title=f"plan: {file}")
+            note(f"plan: {summary}; nothing written")
+            return
+        if not writes:
+            note(f"nothing to write: the bus matches {file} ({unchanged} setting{'s' if unchanged != 1 else ''} "
+                 "already equal)")
+            return
+        if _real(common) and not yes:
+            if is_tty(sys.stderr):
+                _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
+                            title=f"plan: {file}", stream=sys.stderr)
+            stored = sum(1 for w in writes if w.register.stored)
+            consent(f"apply {file} to {common['port']}: {summary}, {stored} of them stored settings that "
+                    "survive power-off", yes)
+        elif common["verbose"] or sys.stderr.isatty():
+            note(f"applying {file}: {summary}")
+        done: list = []
+        try:
+            fleet.execute(bus, writes, done)
+        except BaseException as e:
+            _report_interrupted(writes, done, fmt, file, e)
+            raise
+    _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
+                title=f"applied: {file}")
+    for w in writes:
+        if w.status == "unverifiable":
+            warn(f"ID {w.target}: feedback-return-mode {w.new} written; in mode 0 it answers Echo only, so it "
+                 "cannot be read back")
+    bad = [w for w in writes if w.status not in ("verified", "unverifiable")]
+    if bad:
+        raise CheckFailed("; ".join(f"ID {w.target}: {w.register.name} reads back {w.read_back}, wrote {w.new}"
+                                    for w in bad[:3]) + (f" (and {len(bad) - 3} more)" if len(bad) > 3 else ""))
+    errs = [w for w in writes if w.errors]
+    if errs:
+        from ...link.zap_bus import Reply
+
+        w = errs[0]
+        err = sum(1 << b for b, n in zap.ERROR_BITS.items() if n in w.errors)
+        raise device_error(Reply(w.target, err, b"", b""))
+    note(f"{len(writes)} write{'s' if len(writes) != 1 else ''} made and verified ({unchanged} already equal)")
+
+
+def _report_interrupted(writes, done, fmt, file, exc):
+    """After an interruption: the writes made go to stdout, a summary to stderr."""
+    unsure = []
+    for w in writes:
+        if w.status == "sending":
+            w.status = "unknown"          # interrupted while its packet went out
+            unsure.append(w)
+        elif w not in done:
+            w.status = "not-sent"
+    try:
+        _write_rows([w.record() for w in done + unsure], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
+                    title=f"interrupted: {file}")
+    except Exception:  # noqa: BLE001 - a closed stdout must not hide the original failure
+        pass
+    what = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"stopped ({exc})"
+    read = ("verified", "mismatch", "unverifiable")
+    made = ", ".join(f"ID {w.target} {w.register.name}" + ("" if w.status in read else " (not read back)")
+                     for w in done) or "none"
+    left = len(writes) - len(done) - len(unsure)
+    maybe = "".join(f"; ID {w.target} {w.register.name} may or may not have been written" for w in unsure)
+    click.echo(f"apply {what}: {len(done)} of {len(writes)} writes made: {made}{maybe}; {left} not made. "
+               f"Run the same apply again to finish (writes already made are skipped).", err=True)
+
+
+# -- setup ---------------------------------------------------------------------------------------
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
+              help="The IDs to give, in order, one actuator each: like 1-8.")
+@click.option("--config", "config", type=FilePath(), default=None,
+              help="A backup file whose stored settings each actuator gets (id, baud-rate, protocol-type "
+                   "and feedback-return-mode excepted).")
+@click.option("--config-id", type=IdList(), default=None, metavar="ID",
+              help="Which actuator of --config to copy (default: its only one).")
+@click.option("--state", "state_path", type=FilePath(), default="zap-setup.json", show_default=True,
+              help="The state file: a second run resumes where the first stopped.")
+@click.option("--skip", "skip", type=IdList(), default=None, metavar="LIST", help="IDs of --ids to leave out.")
+@click.option("--redo", "redo", type=IdList(), default=None, metavar="LIST",
+              help="Set these IDs up again although the state file has them done.")
+@click.option("--find-ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
+              help="The IDs to search for each new actuator.")
+@click.option("--find-baud", type=BaudList(), default="all", show_default=True, metavar="BAUDS",
+              help="The baud rates to search: a list or 'all' (57600 first).")
+@click.option("--no-wait", is_flag=True,
+              help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop.")
+@yes_option
+@link_options
+def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, no_wait, yes, **common):
+    """Guided ID setup: one actuator at a time, each gets the next ID of --ids.
+
+    For each pending ID it asks you to connect the next actuator alone and press Enter (s and
+    Enter skips the ID, q quits; the answers are read from stdin, so a script can pipe them).
+    It finds the actuator at any ID of --find-ids and any baud rate of --find-baud, refuses
+    when two actuators answer (or one that was set up already), gives it the ID, applies
+    --config's stored settings, and verifies by reading back. The state file records each ID
+    done, so a second run (after a crash, a Ctrl-C, or another day) resumes with the next one.
+    The actuator keeps the baud rate it was found at. Exit status 0 when every ID is done, 1
+    when some remain (stopped, skipped, or a refusal), 2 for bad options; on a real port the
+    ID changes need consent (--yes).
+
+    \b
+    Examples:
+      zap setup --ids 1-8 -p /dev/ttyUSB0 --yes
+      zap setup --ids 1-8 --config fleet.json --config-id 1 -p /dev/ttyUSB0 --yes
+      zap setup --ids 1-8 --redo 3 -p /dev/ttyUSB0 --yes      # set up ID 3 again
+    """
+    entry = None
+    if config:
+        entries = fleet.read_document(config)
+        if config_id is not None:
+            if len(config_id) != 1 or config_id[0] not in entries:
+                raise UsageError(f"--config-id: give one ID of {config} ({', '.join(map(str, sorted(entries)))})")
+            entry = entries[config_id[0]]
+        elif len(entries) != 1:
+            raise UsageError(f"--config: {config} has {len(entries)} actuators; choose one with --config-id")
+        else:
+            entry = next(iter(entries.values()))
+    elif config_id is not None:
+        raise UsageError("--config-id needs --config")
+    for opt, lst in (("--skip", skip), ("--redo", redo)):
+        for i in lst or ():
+            if i not in ids:
+                raise UsageError(f"{opt}: ID {i} is not in --ids")
+    if common["return_mode"] == "0":
+        raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be verified")
+    state = fleet.SetupState.load(state_path, ids)
+    state.ids = ids
+    for i in redo or ():
+        state.redo(i)
+    for i in skip or ():
+        state.mark_skipped(i)
+    if not state.pending():
+        note(f"every ID of {fleet._ranges(ids)} is done ({state_path}); --redo ID sets one up again")
+        _setup_summary(state)
+        return
+    if _real(common):
+        consent(f"setup gives actuators on {common['port']} new IDs (a stored setting)"
+                + (f" and {config}'s stored settings" if config else ""), yes)
+    args = _link_args(common)
+    args["baud"] = find_baud[0]
+    with open_link(ids=[0], **args) as bus:
+        while state.pending():
+            target = state.pending()[0]
+            if not no_wait:
+                answer = _ask(f"connect the actuator for ID {target} alone, then press Enter "
+                              f"(s: skip ID {target}, q: quit) ")
+                if answer is None or answer == "q":
+                    note(f"stopped before ID {target}; run the same command again to resume ({state_path})")
+                    break
+                if answer == "s":
+                    state.mark_skipped(target)
+                    note(f"ID {target} skipped")
+                    continue
+            done_ids = set(state.done)
+            try:
+                found = fleet.find_alone(bus, find_ids, find_baud, prefer=[0, target])
+                if found[0] in done_ids and found[0] != target:
+                    raise fleet.TwoAnswer(f"the actuator found answers as ID {found[0]} at {found[1]} baud, "
+                                          f"which this setup gave already; connect the next one "
+                                          f"(or --redo {found[0]})")
+                if found[0] != target and bus.ping(target, retries=1) is not None:
+                    raise fleet.TwoAnswer(f"ID {target} answers as well as ID {found[0]}; connect one "
+                                          "actuator alone")
+                record = fleet.setup_one(bus, target, found=found, config=entry)
+                if record.get("warning"):
+                    warn(f"ID {target}: {record['warning']}")
+            except (fleet.TwoAnswer, fleet.NotFound, NoReply, CheckFailed) as e:
+                if no_wait:
+                    raise
+                warn(f"ID {target}: {e}")
+                continue
+            state.mark_done(target, record)
+            note(f"ID {target} done: found at ID {found[0]}, {found[1]} baud"
+                 + (f"; {record.get('config', 0)} settings from {config}" if entry is not None else "")
+                 + " (verified)")
+            if no_wait:
+                break
+    _setup_summary(state)
+    left = state.pending() + [i for i in state.skipped if i in ids]
+    if left:
+        raise CheckFailed(f"setup not complete: ID{'s' if len(left) != 1 else ''} "
+                          f"{fleet._ranges(left)} not set up ({state_path})")
+
+
+def _ask(prompt):
+    """A line from stdin after a prompt on stderr: '' for Enter, 's', 'q'; None at end of input."""
+    click.echo(prompt, err=True, nl=False)
+    try:
+        line = sys.stdin.readline()
+    except (OSError, ValueError):
+        return None
+    if not line:
+        click.echo("", err=True)
+        return None
+    return line.strip().lower()[:1]
+
+
+def _setup_summary(state):
+    done = sorted(i for i in state.done if i in state.ids)
+    parts = [f"{len(done)} of {len(state.ids)} done" + (f" ({fleet._ranges(done)})" if done else "")]
+    skipped = [i for i in state.skipped if i in state.ids]
+    if skipped:
+        parts.append(f"skipped {fleet._ranges(skipped)}")
+    note("setup: " + "; ".join(parts))

@@ -1,0 +1,351 @@
+"""zap backup / diff / apply / setup / watch / check through the CLI, against simulated buses
+whose stored registers live in state files (one file per bus, kept across commands)."""
+
+import csv
+import io
+import json
+import os
+
+import pytest
+
+from zkzap.sim.zap_bus import from_options
+
+
+def jsonl(text):
+    return [json.loads(line) for line in text.splitlines()]
+
+
+def make_bus(path, ids="1,2,3", settings=None):
+    """A simulated bus in state file ``path``; ``settings``: {ID: {register: value}}."""
+    bus = from_options(ids=ids, state=str(path))
+    for ident, regs in (settings or {}).items():
+        for name, value in regs.items():
+            bus.actuator(ident).set(name, value)
+    bus.save()
+    return f"sim://zap?state={path}"
+
+
+def state_of(path):
+    return {a["registers"]["id"]: a["registers"] for a in json.load(open(path))["actuators"]}
+
+
+A_SETTINGS = {1: {"speed-limit": 500, "acceleration": 40}, 2: {"current-limit": 600},
+              3: {"long-stroke-limit": 3000, "alarm-led": 1}}
+
+
+@pytest.fixture
+def buses(tmp_path):
+    a = make_bus(tmp_path / "a.json", settings=A_SETTINGS)
+    b = make_bus(tmp_path / "b.json")           # factory fresh
+    return a, b, tmp_path
+
+
+@pytest.mark.parametrize("suffix", [".json", ".toml", ".yaml"])
+def test_backup_a_apply_to_fresh_b_then_diff_is_empty(cli, buses, suffix):
+    a, b, tmp = buses
+    fleet_file = str(tmp / f"fleet{suffix}")
+    r = cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", fleet_file)
+    assert (r.exit_code, r.stdout) == (0, ""), r
+    assert "3 actuators (1-3) backed up" in r.stderr
+    r = cli("zap", "diff", fleet_file, "bus", "-p", b)
+    assert r.exit_code == 1 and len(jsonl(r.stdout)) == 5 and "5 differences" in r.stderr
+    r = cli("zap", "apply", fleet_file, "--plan", "-p", b)
+    assert r.exit_code == 0 and [x["status"] for x in jsonl(r.stdout)] == ["planned"] * 5
+    assert state_of(tmp / "b.json")[1]["speed-limit"] == 1023          # --plan writes nothing
+    r = cli("zap", "apply", fleet_file, "-p", b)
+    assert r.exit_code == 0, r
+    rows = jsonl(r.stdout)
+    assert [(x["id"], x["register"], x["old"], x["new"], x["status"]) for x in rows] == [
+        (1, "speed-limit", 1023, 500, "verified"), (1, "acceleration", 20, 40, "verified"),
+        (2, "current-limit", 800, 600, "verified"), (3, "long-stroke-limit", 3686, 3000, "verified"),
+        (3, "alarm-led", 33, 1, "verified")]
+    assert "5 writes made and verified" in r.stderr
+    r = cli("zap", "diff", fleet_file, "bus", "-p", b)
+    assert (r.exit_code, r.stdout) == (0, ""), r
+    r = cli("zap", "apply", fleet_file, "-p", b)
+    assert (r.exit_code, r.stdout) == (0, "") and "nothing to write" in r.stderr
+
+
+def test_backup_to_stdout_and_scan(cli, buses):
+    a, _, _ = buses
+    r = cli("zap", "backup", "--scan", "--ids", "0-5", "-p", a)
+    assert r.exit_code == 0
+    doc = json.loads(r.stdout)
+    assert sorted(doc["actuators"]) == ["1", "2", "3"]
+    r = cli("zap", "backup", "--ids", "2", "-p", a, "-f", "yaml")
+    assert r.stdout.startswith('format: "zkzap-fleet/1"') and "current-limit: 600" in r.stdout
+
+
+def test_backup_of_a_silent_id_writes_nothing(cli, buses):
+    a, _, tmp = buses
+    out = tmp / "x.json"
+    r = cli("zap", "backup", "--ids", "1,7", "-p", a, "-o", str(out))
+    assert r.exit_code == 3 and not out.exists() and "no reply from ID 7" in r.stderr
+
+
+def test_diff_formats_and_all(cli, buses):
+    a, b, tmp = buses
+    fb = str(tmp / "b.toml")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", str(tmp / "fa.json"))
+    cli("zap", "backup", "--ids", "1-2", "-p", b, "-o", fb)
+    r = cli("zap", "diff", str(tmp / "fa.json"), fb, "-f", "csv")
+    rows = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert r.exit_code == 1
+    assert rows[0] == {"id": "1", "register": "speed-limit", "address": "21", "memory": "NV", "a": "500",
+                       "b": "1023", "unit": "", "equal": "false"}
+    assert rows[-1]["register"] == "(actuator)" and rows[-1]["b"] == "absent"
+    r = cli("zap", "diff", fb, fb, "--all", "--compare", "all", "-f", "json")
+    assert r.exit_code == 0 and all(x["equal"] for x in json.loads(r.stdout))
+    r = cli("zap", "diff", str(tmp / "fa.json"), fb, "--ids", "2")
+    assert (r.exit_code, len(jsonl(r.stdout))) == (1, 1)                 # current-limit only
+    r = cli("zap", "diff", str(tmp / "fa.json"), fb, "--ids", "2,9")
+    assert (r.exit_code, r.stdout) == (2, "") and "ID 9 is in neither" in r.stderr
+
+
+def test_apply_clone_with_to_and_map(cli, buses):
+    a, b, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    r = cli("zap", "apply", f, "--ids", "1", "--to", "1-3", "-p", b)
+    assert r.exit_code == 0, r
+    assert [(x["id"], x["register"]) for x in jsonl(r.stdout)] == [
+        (i, reg) for i in (1, 2, 3) for reg in ("speed-limit", "acceleration")]
+    st = state_of(tmp / "b.json")
+    assert all(st[i]["speed-limit"] == 500 for i in (1, 2, 3))
+    r = cli("zap", "apply", f, "--map", "2:3", "-p", b)
+    assert r.exit_code == 2 and "bus ID 3 would get the settings of two actuators" in r.stderr
+    r = cli("zap", "apply", f, "--ids", "2", "--map", "2:3", "-p", b)
+    assert r.exit_code == 0 and [(x["id"], x["source"], x["register"], x["new"]) for x in jsonl(r.stdout)] == [
+        (3, 2, "speed-limit", 1023), (3, 2, "acceleration", 20), (3, 2, "current-limit", 600)]
+
+
+def test_apply_only_skip_and_protected(cli, buses):
+    a, b, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    r = cli("zap", "apply", f, "--skip", "acceleration,alarm-led", "-p", b)
+    assert [x["register"] for x in jsonl(r.stdout)] == ["speed-limit", "current-limit", "long-stroke-limit"]
+    r = cli("zap", "apply", f, "--only", "id", "-p", b)
+    assert (r.exit_code, r.stdout) == (2, "") and "--force" in r.stderr
+    r = cli("zap", "apply", f, "--map", "1:2", "--ids", "1", "--only", "id", "--force", "--plan", "-p", b)
+    assert r.exit_code == 0 and [(x["id"], x["register"], x["new"]) for x in jsonl(r.stdout)] == [(2, "id", 1)]
+
+
+def _bad_file(tmp, text, name="bad.json"):
+    p = tmp / name
+    p.write_text(text)
+    return str(p)
+
+
+@pytest.mark.parametrize("content,name,message", [
+    ('{"format":"zkzap-fleet/1","actuators":{"1":{"stored":{"speed-limt":5}}}}', "bad.json",
+     "bad.json: actuators.1.stored.speed-limt: unknown register"),
+    ('{"format":"zkzap-fleet/1","actuators":{"1":{"stored":{"current-limit":5000}}}}', "bad.json",
+     "bad.json: actuators.1.stored.current-limit: 5000 is out of range; allowed 0..1600 mA"),
+    ('{"format":"zkzap-fleet/1","actuators":{"x1":{}}}', "bad.json", "bad.json: actuators.x1: 'x1' is not an actuator ID"),
+    ('format = "zkzap-fleet/1"\n[actuators.1.stored]\nspeed-limit = -1\n', "bad.toml",
+     "bad.toml: actuators.1.stored.speed-limit: -1 is out of range"),
+    ('format: "zkzap-fleet/1"\nactuators:\n  "1":\n    stored:\n      acceleration: 300\n', "bad.yaml",
+     "bad.yaml: actuators.1.stored.acceleration: 300 is out of range"),
+    ("{not json", "bad.json", "bad.json: not valid JSON"),
+])
+def test_bad_files_are_refused_before_any_write(cli, buses, content, name, message):
+    _, b, tmp = buses
+    before = (tmp / "b.json").read_bytes()
+    f = _bad_file(tmp, content, name)
+    for cmd in (("apply", f), ("diff", f, "bus")):
+        r = cli("zap", *cmd, "-p", b)
+        assert (r.exit_code, r.stdout) == (2, ""), r
+        assert message in r.stderr
+    assert (tmp / "b.json").read_bytes() == before
+
+
+def test_another_model_is_refused_unless_forced(cli, buses):
+    a, b, tmp = buses
+    f = tmp / "fleet.json"
+    cli("zap", "backup", "--ids", "1", "-p", a, "-o", str(f))
+    doc = json.loads(f.read_text())
+    doc["actuators"]["1"]["model"] = 0xA112
+    f.write_text(json.dumps(doc))
+    before = (tmp / "b.json").read_bytes()
+    r = cli("zap", "apply", str(f), "-p", b)
+    assert (r.exit_code, r.stdout) == (2, "") and "model 0x0C4C, the file's 0xA112" in r.stderr
+    assert (tmp / "b.json").read_bytes() == before
+    r = cli("zap", "apply", str(f), "--force", "-p", b)
+    assert r.exit_code == 0 and "warning:" in r.stderr and len(jsonl(r.stdout)) == 2
+
+
+def test_apply_ids_not_in_the_file(cli, tmp_path):
+    f = tmp_path / "f.json"
+    f.write_text('{"format":"zkzap-fleet/1","actuators":{"1":{"stored":{"speed-limit":5}}}}')
+    r = cli("zap", "apply", str(f), "--ids", "9", "-p", "sim://zap?ids=1")
+    assert (r.exit_code, r.stdout) == (2, "") and "--ids: ID 9 is not in the file; it has 1" in r.stderr
+
+
+def test_interrupted_apply_reports_and_rerun_finishes(cli, buses, monkeypatch):
+    a, b, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    from zkzap.api import fleet
+
+    real = fleet.execute
+
+    def interrupted(bus, writes, done, on_write=None):
+        def stop(w):
+            if len(done) == 2:
+                raise KeyboardInterrupt
+        return real(bus, writes, done, on_write=stop)
+
+    monkeypatch.setattr(fleet, "execute", interrupted)
+    r = cli("zap", "apply", f, "-p", b)
+    assert r.exit_code == 130
+    assert [(x["id"], x["register"], x["status"]) for x in jsonl(r.stdout)] == [
+        (1, "speed-limit", "verified"), (1, "acceleration", "verified")]
+    assert "2 of 5 writes made: ID 1 speed-limit, ID 1 acceleration; 3 not made" in r.stderr
+    monkeypatch.setattr(fleet, "execute", real)
+    r = cli("zap", "apply", f, "-p", b)
+    assert r.exit_code == 0 and [(x["id"], x["register"]) for x in jsonl(r.stdout)] == [
+        (2, "current-limit"), (3, "long-stroke-limit"), (3, "alarm-led")]
+
+
+def test_apply_to_a_silent_actuator_writes_nothing(cli, buses):
+    a, _, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    r = cli("zap", "apply", f, "-p", "sim://zap?ids=1,2")
+    assert r.exit_code == 3 and r.stdout == "" and "no reply from ID 3" in r.stderr
+
+
+# -- setup -------------------------------------------------------------------------------------
+
+def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, tmp_path):
+    state = str(tmp_path / "setup.json")
+    cfg = tmp_path / "cfg.json"
+    src = make_bus(tmp_path / "src.json", ids="1", settings={1: {"speed-limit": 700}})
+    cli("zap", "backup", "--ids", "1", "-p", src, "-o", str(cfg))
+    first = make_bus(tmp_path / "n1.json", ids="0")
+    second = make_bus(tmp_path / "n2.json", ids="0")
+    args = ("zap", "setup", "--ids", "4-5", "--state", state, "--find-ids", "0-7", "--find-baud", "57600",
+            "--config", str(cfg))
+    r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends
+    assert r.exit_code == 1 and r.stdout == ""
+    assert "ID 4 done: found at ID 0, 57600 baud; 1 settings from" in r.stderr
+    assert "stopped before ID 5" in r.stderr and "ID 5 not set up" in r.stderr
+    assert state_of(tmp_path / "n1.json")[4]["speed-limit"] == 700
+    # the same actuator again is refused: it was set up already
+    r = cli(*args, "-p", f"sim://zap?state={tmp_path / 'n1.json'}", input="\n")
+    assert r.exit_code == 1 and "answers as ID 4" in r.stderr and "gave already" in r.stderr
+    r = cli(*args, "-p", second, input="\n")
+    assert r.exit_code == 0, r
+    assert "ID 5 done" in r.stderr and "setup: 2 of 2 done (4-5)" in r.stderr
+    assert 5 in state_of(tmp_path / "n2.json")
+    r = cli(*args, "-p", second, input="")
+    assert r.exit_code == 0 and "every ID of 4-5 is done" in r.stderr
+    saved = json.load(open(state))
+    assert sorted(saved["done"]) == ["4", "5"] and saved["done"]["5"]["from_id"] == 0
+
+
+def test_setup_skip_redo_and_two_actuators(cli, tmp_path):
+    state = str(tmp_path / "setup.json")
+    two = make_bus(tmp_path / "two.json", ids="0,3")
+    base = ("zap", "setup", "--ids", "1-2", "--state", state, "--find-ids", "0-4", "--find-baud", "57600")
+    r = cli(*base, "-p", two, input="\n")
+    assert r.exit_code == 1 and "2 actuators answer at 57600 baud (IDs 0, 3)" in r.stderr
+    assert not state_of(tmp_path / "two.json").get(1)
+    one = make_bus(tmp_path / "one.json", ids="0")
+    r = cli(*base, "-p", one, input="s\n\n")
+    assert r.exit_code == 1 and "ID 1 skipped" in r.stderr and "ID 2 done" in r.stderr
+    assert "skipped 1" in r.stderr
+    r = cli(*base, "--redo", "2", "-p", f"sim://zap?state={tmp_path / 'one.json'}", "--no-wait")
+    assert r.exit_code == 1 and "ID 2 done: found at ID 2" in r.stderr      # ID 1 is still skipped
+    r = cli(*base, "--redo", "7", "-p", one)
+    assert r.exit_code == 2 and "--redo: ID 7 is not in --ids" in r.stderr
+
+
+# -- watch and check ---------------------------------------------------------------------------
+
+def test_watch_csv_file_and_jsonl(cli, tmp_path):
+    out = tmp_path / "w.csv"
+    r = cli("zap", "watch", "present-position", "present-voltage", "--ids", "1,2", "--count", "3",
+            "-p", "sim://zap?ids=1,2", "-o", str(out))
+    assert r.exit_code == 0 and r.stdout == ""
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == 6 and list(rows[0]) == ["time", "t", "poll", "id", "present-position", "present-voltage",
+                                                "errors", "status", "rtt_ms"]
+    assert rows[0]["present-voltage"] == "120"
+    assert "3 polls in" in r.stderr and "wire limit" in r.stderr and "ID 1 3/3" in r.stderr
+    r = cli("zap", "watch", "moving", "--ids", "1", "--count", "2", "-p", "sim://zap?ids=1")
+    assert [x["moving"] for x in jsonl(r.stdout)] == [0, 0]
+
+
+def test_watch_until_and_faults(cli):
+    r = cli("zap", "watch", "present-position", "--ids", "1,2", "--until", "moving==0",
+            "--retries", "0", "-p", "sim://zap?ids=1,2&faults=2:silent/1")
+    assert r.exit_code == 0, r
+    rows = jsonl(r.stdout)
+    assert rows[1]["status"] == "no-reply" and rows[-1]["status"] == "ok" and "condition met" in r.stderr
+    r = cli("zap", "watch", "present-position", "--ids", "1,5", "--count", "2", "-p", "sim://zap?ids=1")
+    assert r.exit_code == 3 and "no reply from ID 5" in r.stderr and len(jsonl(r.stdout)) == 4
+
+
+@pytest.mark.parametrize("args,message", [
+    (("nope",), "unknown name 'nope'"),
+    (("present-position", "--until", "bogus==1"), "unknown field 'bogus'"),
+    (("present-position", "--until", "moving=0"), "expected FIELD OP NUMBER"),
+    (("present-position", "--count", "2", "--duration", "1"), "--count and --duration"),
+])
+def test_watch_bad_input(cli, args, message):
+    r = cli("zap", "watch", *args, "--sim")
+    assert (r.exit_code, r.stdout) == (2, "") and message in r.stderr
+
+
+def test_check_exit_codes(cli):
+    r = cli("zap", "check", "--ids", "1", "-p", "sim://zap?ids=1&speed=4")
+    assert r.exit_code == 0, r
+    assert [x["verdict"] for x in jsonl(r.stdout)] == ["pass"] * 8
+    r = cli("zap", "check", "--ids", "1,2", "-p", "sim://zap?ids=1,2&speed=4&faults=2:stuck", "-f", "csv")
+    assert r.exit_code == 1 and "ID 2 failed a check" in r.stderr
+    r = cli("zap", "check", "--ids", "1", "--no-move", "-p", "sim://zap?ids=1&faults=1:overload")
+    assert r.exit_code == 5 and "ID 1 reports error bits" in r.stderr
+    assert jsonl(r.stdout)[3] == {"id": 1, "check": "errors", "verdict": "error", "value": "overload", "limit": None,
+                                  "detail": jsonl(r.stdout)[3]["detail"]}
+
+
+def test_moves_and_writes_need_consent_on_a_real_port(cli, tmp_path):
+    f = tmp_path / "f.json"
+    f.write_text('{"format":"zkzap-fleet/1","actuators":{"1":{"stored":{"speed-limit":5}}}}')
+    dev = str(tmp_path / "ttyUSB9")          # a real-port name: refused before it is opened
+    for args in (("check", "--ids", "1"), ("setup", "--ids", "1", "--state", str(tmp_path / "s.json")),
+                 ("apply", str(f))):
+        r = cli("zap", *args, "-p", dev)
+        assert (r.exit_code, r.stdout) == (2, ""), r
+        assert "--yes" in r.stderr
+    assert not os.path.exists(tmp_path / "s.json")
+
+
+def test_error_bits_give_exit_5_after_the_data(cli, buses):
+    a, _, tmp = buses
+    f = str(tmp / "fleet.json")
+    r = cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    assert r.exit_code == 0
+    low = "sim://zap?ids=1,2,3&voltage=5"
+    r = cli("zap", "apply", f, "-p", low)
+    assert r.exit_code == 5 and "ID 1 reports error 0x01" in r.stderr
+    rows = jsonl(r.stdout)
+    assert len(rows) == 5 and all(x["status"] == "verified" and x["errors"] == ["input-voltage"] for x in rows)
+    out = tmp / "low.json"
+    r = cli("zap", "backup", "--ids", "1", "-p", low, "-o", str(out))
+    assert r.exit_code == 5 and json.loads(out.read_text())["actuators"]["1"]["errors"] == ["input-voltage"]
+
+
+def test_apply_through_line_faults(cli, buses):
+    a, _, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+    # a corrupted and a truncated reply are retried; the writes still read back
+    r = cli("zap", "apply", f, "-p", "sim://zap?ids=1,2,3&faults=2:corrupt/1,3:truncate/2")
+    assert r.exit_code == 0, r
+    assert [x["status"] for x in jsonl(r.stdout)] == ["verified"] * 5
+    # a reply that stays corrupted after the retries: exit 6 before any write
+    r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
+    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: corrupted reply" in r.stderr
