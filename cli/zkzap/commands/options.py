@@ -177,8 +177,29 @@ def port_options(group: str):
         click.option("--timeout", type=click.FloatRange(0.001, 3600), default=None, metavar="SECONDS",
                      help="Reply timeout (default: derived from the baud rate)."),
         click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
+        capture_option(group),
     ]
     return lambda f: apply_options(f, options)
+
+
+def capture_option(protocol: str):
+    """``--capture FILE``: record every chunk read from and written to the port, timestamped, in
+    pcapng (the port's link type: 147 for ZK, 148 for mightyZAP). Not a parameter of the command:
+    :func:`zkzap.link.port.open_port` taps whatever port the command opens."""
+
+    def callback(ctx, param, value):
+        if ctx.resilient_parsing:
+            return
+        from ..link import capture
+
+        capture.request(value, protocol)
+        if value:
+            ctx.call_on_close(capture.finish)
+
+    return click.option("--capture", type=FilePath(), default=None, metavar="FILE", expose_value=False,
+                        callback=callback,
+                        help="Record every byte read and written, timestamped with its direction, in "
+                             "FILE (pcapng; Wireshark opens it with zkzap's dissector).")
 
 
 def _complete_ports(ctx, param, incomplete):

@@ -16,8 +16,10 @@ def wire_time(nbytes: int, baud: int) -> float:
     return nbytes * 10.0 / baud
 
 
-def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
-    """A pyserial port for ``url`` at ``baud``, opened exclusively where the OS allows."""
+def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, capture=None):
+    """A pyserial port for ``url`` at ``baud``, opened exclusively where the OS allows; recorded
+    to a pcapng capture when one was asked for (``capture`` = (path, protocol), else the one
+    named by :func:`zkzap.link.capture.request`)."""
     import serial
 
     if _HANDLERS not in serial.protocol_handler_packages:
@@ -26,7 +28,7 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
         port = serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
                                      exclusive=True)
         _no_delay(port)
-        return port
+        return _tap(port, url, baud, capture)
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:
@@ -34,6 +36,16 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None):
         if "could not open port" in text or "No such file" in text or "Errno" in text:
             raise PortError(f"port {url}: cannot open: {_short(e)}") from None
         raise PortError(f"port {url}: {_short(e)}") from None
+
+
+def _tap(port, url, baud, capture):
+    from .capture import tap
+
+    try:
+        return tap(port, url, baud, capture)
+    except BaseException:
+        close_port(port)
+        raise
 
 
 def _no_delay(port) -> None:
