@@ -123,7 +123,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             except OSError as e:
                 raise UsageError(f"raw-log: cannot open {raw_log}: {e.strerror}") from None
         if replay is not None:
-            source = L.ReplaySource(replay, fast=fast)
+            from ...api.capture import replay_source
+
+            source = replay_source(replay, fast=fast)
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
@@ -154,7 +156,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @port_options("zk")
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
-              help="Decode a raw log (--raw-log) instead of a port, paced in real time.")
+              help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
+                   "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
 @click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
@@ -182,8 +185,8 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
     Voltages are decoded in the ECU's own unit: frames are held back until the first status ID 6
     (the protocol version; at most 12 frames) unless --protocol-version is given.
 
-    A replay's 't' is rebuilt from the status rate the frames report (a raw log holds bytes, not
-    times).
+    A raw log's 't' is rebuilt from the status rate the frames report (a raw log holds bytes, not
+    times); a pcapng capture's 't' and 'time' are its own timestamps.
 
     \b
     Examples:
