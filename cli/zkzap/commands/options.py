@@ -190,6 +190,8 @@ def capture_option(protocol: str):
     def callback(ctx, param, value):
         if ctx.resilient_parsing:
             return
+        if not value and "zkzap.link.capture" not in sys.modules:
+            return                        # nothing asked, nothing to reset: import nothing
         from ..link import capture
 
         capture.request(value, protocol)

@@ -53,7 +53,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode FF FF FF 01 05 F3 86 FF 07 7A
       zap decode FF FF FF 00 04 F2 8C 02 7B FF FF FF 00 04 00 FF 07 F5 -f json
       zap decode --binary bus.bin -f csv -o bus.csv
-      zap decode bus.pcapng -f json
+      zap decode bus.pcapng -f json -o bus.json
     """
     from ...api.capture import capture_inputs
     from ...io.sources import binary_chunks, hex_chunks, run_decode

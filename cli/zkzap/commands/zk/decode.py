@@ -85,7 +85,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       zk decode FF 1D F4 70
       zk decode F1 00 00 00 00 4C A0 -f json
       zk decode --binary capture.bin -f csv -o capture.csv
-      zk decode run.pcapng -f csv
+      zk decode run.pcapng -o run.csv
       xxd capture.bin | zk decode --accept status
     """
     from ...api.capture import capture_inputs
