@@ -92,7 +92,7 @@ def test_sniff_zap_pairs_every_reply_and_writes_nothing(zap_link, tmp_path):
     assert all(r["pairing"] == "ok" and 0 < r["latency_ms"] < 1000 for r in fb), [(r["pairing"], r.get("latency_ms")) for r in fb]
     assert fb[1]["request"] == "load" and fb[1]["register"] == "present-position" and fb[1]["value"] == value
     assert [r["dir"] for r in recs if r["kind"] == "command"] == ["h2d"] * 4
-    assert recs[5]["request"] == "echo" and recs[5]["waited_ms"] >= 50
+    assert recs[5]["request"] == "echo" and recs[5]["waited_ms"] > 30   # until the next request or the timeout
     assert "replies: 3" in err and "missing 1" in err
     assert zap_link.sniffer_wrote == b""                # not one byte written to its port
     # the capture holds exactly the bytes on the wire, both directions in one stream

@@ -196,7 +196,7 @@ def capture_option(protocol: str):
 
         capture.request(value, protocol)
         if value:
-            ctx.call_on_close(capture.finish)
+            ctx.call_on_close(lambda: capture.request(None, protocol))   # close it, ask for no more
 
     return click.option("--capture", type=FilePath(), default=None, metavar="FILE", expose_value=False,
                         callback=callback,
