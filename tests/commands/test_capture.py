@@ -132,3 +132,28 @@ def test_a_capture_of_the_other_protocol_is_refused(cli, tmp_path):
     _synthetic(cap, "zk", [(1.0, zk.encode_status(1, 6), INBOUND)])
     r = cli("zap", "decode", str(cap))
     assert r.exit_code == 2 and "a ZK capture (link type 147); expected mightyZAP" in r.stderr
+
+
+@pytest.mark.parametrize("fmt", ["jsonl", "csv", "json"])
+def test_the_text_path_gives_the_records_of_the_record_path(cli, tmp_path, fmt):
+    import csv as csvmod
+    import io
+
+    from zkzap.api.capture import TIME_KEYS, CaptureFrames, zk_records
+    from zkzap.commands.zk.decode import columns
+    from zkzap.io.writers import csv_cell
+
+    cap = tmp_path / "run.pcapng"
+    assert cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "1", "--yes",
+               "-p", "sim://zk?speed=20", "--capture", str(cap), "-f", "jsonl").exit_code == 0
+    expected = list(zk_records(CaptureFrames(str(cap), "zk"), zk.ZkDecoder()))
+    out = cli("zk", "decode", str(cap), "-f", fmt).stdout
+    if fmt == "jsonl":
+        assert [json.loads(x) for x in out.splitlines()] == expected
+    elif fmt == "json":
+        assert json.loads(out) == expected
+    else:
+        rows = list(csvmod.reader(io.StringIO(out)))
+        cols = TIME_KEYS + columns()
+        assert rows[0] == cols
+        assert rows[1:] == [[csv_cell(r.get(c)) for c in cols] for r in expected]

@@ -57,6 +57,13 @@ class CaptureFrames:
         return f
 
     def __iter__(self):
+        for ts, direction, frames in self.chunks():
+            for frame in frames:
+                yield ts, direction, frame
+
+    def chunks(self):
+        """``(ts, direction, [frames])`` per chunk that completed any frame (then the frames
+        the framers still held at the end)."""
         last = {}
         try:
             for pkt in self.reader:
@@ -67,13 +74,15 @@ class CaptureFrames:
                 last[key] = pkt.ts
                 if framer is None:
                     continue
-                for frame in framer.feed(pkt.data):
-                    yield pkt.ts, pkt.direction, frame
+                frames = framer.feed(pkt.data)
+                if frames:
+                    yield pkt.ts, pkt.direction, frames
             self.truncated = self.reader.truncated
             for key, framer in self.framers.items():
                 if framer is not None:
-                    for frame in framer.flush():
-                        yield last[key], key[1], frame
+                    frames = framer.flush()
+                    if frames:
+                        yield last[key], key[1], frames
         finally:
             self.reader.close()
 
@@ -101,6 +110,26 @@ class CaptureFrames:
 
 def _dir(direction):
     return {INBOUND: "d2h", OUTBOUND: "h2d"}.get(direction)
+
+
+def zk_lines(frames: CaptureFrames, lines, csv: bool):
+    """Blocks of text lines (JSON objects or CSV rows of ``TIME_KEYS`` + the decode columns) of
+    a ZK capture, rendered by ``lines`` (a :class:`zkzap.codec.zk.ZkLines`): the same records as
+    :func:`zk_records`, through the table-generated text encoders, one block per chunk."""
+    from ..io.writers import _dumps
+
+    t0 = None
+    for ts, direction, block in frames.chunks():
+        if t0 is None:
+            t0 = frames.t0
+        t = round(ts - t0, 6)
+        d = _dir(direction)
+        if csv:
+            head = f"{iso_utc(ts)},{t!r},{d or ''},"
+            yield [head + line for line in lines.encode_all(block)]
+        else:
+            head = '{"time":"%s","t":%s,"dir":%s,' % (iso_utc(ts), _dumps(t), _dumps(d))
+            yield [head + line[1:] for line in lines.encode_all(block)]
 
 
 def zk_records(frames: CaptureFrames, decoder: zk.ZkDecoder, decode=None):

@@ -43,7 +43,22 @@ def zk_decode_captures(paths, *, fmt, output, append, protocol_version, accept, 
     try:
         for path in paths:
             frames = CaptureFrames(path, "zk", accept)
-            _run(zk_records(frames, decoder, decode), writer, done)
+            if fmt == "table":
+                _run(zk_records(frames, decoder, decode), writer, done)
+            else:
+                # straight to text: the table-generated encoders and their memo, as for raw bytes
+                from ..api.capture import zk_lines
+                from ..io.writers import csv_dialect, json_dialect
+
+                lines = decoder.lines(csv_dialect(columns(accept, raw)) if fmt == "csv" else json_dialect())
+                pending = []
+                for block in zk_lines(frames, lines, fmt == "csv"):
+                    pending += block
+                    if len(pending) >= BLOCK:
+                        writer.write_lines(pending)
+                        pending = []
+                if pending:
+                    writer.write_lines(pending)
             done.append(frames)
     finally:
         close_output(writer, stream)
