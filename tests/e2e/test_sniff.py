@@ -187,3 +187,34 @@ def test_sniff_port_counts_are_usage_errors(sh):
     assert r.exit_code == 2 and "a mightyZAP bus is half-duplex" in r.stderr and r.stdout == ""
     r = sh("zkzap", "sniff", "zk", "-p", "a", "-p", "b", "-p", "c")
     assert r.exit_code == 2 and "3 ports given" in r.stderr
+
+
+def test_live_summary_on_a_terminal_and_records_in_the_pipe(tmp_path):
+    """stderr a terminal, stdout a pipe: the summary is drawn on the terminal, JSON Lines go to
+    the pipe, --stats is printed at the end."""
+    import pty
+
+    master, slave = pty.openpty()
+    p = subprocess.Popen([executable("zkzap"), "sniff", "zk", "-p", "sim://zk?speed=10", "--duration", "1.5",
+                          "--stats"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave,
+                         env=clean_env(TERM="xterm", COLUMNS="100"))
+    os.close(slave)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        shown += chunk
+    out, _ = p.communicate(timeout=15)
+    os.close(master)
+    assert p.returncode == 0
+    recs = [json.loads(x) for x in out.decode().splitlines()]
+    assert len(recs) > 10 and all(r["dir"] == "d2h" for r in recs)
+    text = shown.decode(errors="replace")
+    import re
+
+    assert re.search(r"sniffing \d+ s  d2h: \d+/s", text), text        # the live summary
+    assert "CRC errors: 0" in text and "by ID: d2h ID 1:" in text         # --stats at the end

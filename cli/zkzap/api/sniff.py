@@ -131,10 +131,10 @@ class _Reader(threading.Thread):
             try:
                 data = port.read(1)
                 if data:
-                    ts = time.time()
                     waiting = getattr(port, "in_waiting", 0)
                     if waiting:
                         data += port.read(waiting)
+                    ts = time.time()          # when the chunk's last byte had arrived
                     if self.capture is not None:
                         w, if_id, direction = self.capture
                         w.packet(if_id, ts, bytes(data), direction)
@@ -165,6 +165,7 @@ class Sniffer:
         self._held = []
         self._ready = []
         self._seq = 0
+        self._last_ts = {}
         self.framers = []
 
     # -- ports ---------------------------------------------------------------------------------
@@ -279,16 +280,22 @@ class Sniffer:
         return out
 
     def chunk(self, ts, index, data):
-        """Records of the frames a chunk completes. A chunk's time is when its first byte was
-        read; each frame is dated when its last byte was on the wire (the chunk time plus the
-        line time of the bytes up to its end, as far as they are in this chunk)."""
+        """Records of the frames a chunk completes. A chunk's time is when it was read (its last
+        byte had arrived); each frame is dated when its own last byte was on the line: the
+        chunk time less the line time of the bytes after it (never before the port's previous
+        frame, so each port's frames stay in order)."""
         out = []
         frames = self.framers[index].feed(data)
         byte_s = 10.0 / self.baud
-        end = 0
+        n = len(data)
+        after = sum(len(f) for f in frames)
+        last = self._last_ts.get(index, 0.0)
         for frame in frames:
-            end = min(len(data), end + len(frame))
-            out += self.frame(ts + max(0, end - 1) * byte_s, index, frame)
+            after -= len(frame)
+            t = max(last, ts - min(after, n) * byte_s)
+            last = t
+            out += self.frame(t, index, frame)
+        self._last_ts[index] = last
         self._count_framers()
         return out
 

@@ -39,6 +39,10 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, capture=
 
 
 def _tap(port, url, baud, capture):
+    import sys
+
+    if not capture and "zkzap.link.capture" not in sys.modules:
+        return port                      # no capture asked for (nothing imported the module)
     from .capture import tap
 
     try:
