@@ -55,16 +55,18 @@ def test_zap_capture_gives_latencies(cli, tmp_path):
     assert csv[0].startswith("time,t,dir,kind,id,") and csv[0].endswith(",frame,latency_ms")
 
 
-def test_several_ports_share_one_capture_and_a_dry_run_writes_none(cli, tmp_path):
-    cap = tmp_path / "scan.pcapng"
+def test_a_dry_run_writes_no_capture_and_a_port_gets_an_interface(cli, tmp_path):
+    cap = tmp_path / "dump.pcapng"
     assert cli("zap", "echo", "-n", "--capture", str(cap)).exit_code == 0
     assert not cap.exists()
-    r = cli("zap", "scan", "--sim", "--sim-ids", "3", "-b", "57600,115200", "--capture", str(cap), "-f", "jsonl")
+    r = cli("zap", "dump", "--id", "3", "--sim", "--capture", str(cap), "-f", "jsonl")
     assert r.exit_code == 0, r.stderr
     rd = Reader(str(cap), "zap")
     pkts = list(rd)
-    assert len(rd.interfaces) >= 1 and pkts
-    assert any(zap.packet(3, 0, b"")[3] == p.data[3] for p in pkts if p.direction == INBOUND)
+    assert rd.interfaces == [("zap", "sim://zap?ids=3&baud=57600", 1_000_000)]
+    replies = [p.data for p in pkts if p.direction == INBOUND]
+    assert replies and all(d[3] == 3 for d in replies)
+    assert len(pkts) == 2 * len(replies)
 
 
 def test_capture_that_cannot_be_opened_is_a_usage_error(cli, tmp_path):
@@ -144,7 +146,7 @@ def test_the_text_path_gives_the_records_of_the_record_path(cli, tmp_path, fmt):
     from zkzap.io.writers import csv_cell
 
     cap = tmp_path / "run.pcapng"
-    assert cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "1", "--yes",
+    assert cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "0.5", "--yes",
                "-p", "sim://zk?speed=20", "--capture", str(cap), "-f", "jsonl").exit_code == 0
     expected = list(zk_records(CaptureFrames(str(cap), "zk"), zk.ZkDecoder()))
     out = cli("zk", "decode", str(cap), "-f", fmt).stdout

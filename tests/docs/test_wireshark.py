@@ -160,7 +160,8 @@ def zap_captures(tmp_path_factory):
     out = []
     sim = "sim://zap?ids=1,2&return_mode=2&faults=2:voltage=6.5"
     for n, args in enumerate([
-        ["scan", "--sim", "--sim-ids", "1,3"],
+        ["echo", "--id", "5", "-p", "sim://zap?ids=1"],          # never answered: three tries
+        ["scan", "--sim", "--sim-ids", "1,3", "--ids", "0-40"],
         ["dump", "--id", "1", "-p", sim],
         ["store", "goal-position", "2000", "--id", "1", "-p", sim, "--return-mode", "2"],
         ["load", "present-voltage", "--id", "2", "-p", sim],
@@ -171,7 +172,7 @@ def zap_captures(tmp_path_factory):
         path = d / f"c{n}.pcapng"
         with CliRunner().isolation():
             code = run(root, "zkzap", ["zap", *args, "--capture", str(path)])
-        assert code in (0, 5) and path.exists(), args
+        assert code in (0, 3, 5) and path.exists(), args
         out.append(path)
     return out
 
@@ -189,4 +190,4 @@ def test_tshark_decodes_zap_captures_as_zkzap_does_and_links_replies(cli, zap_ca
                 assert abs(float(f["zap.latency_ms"][0]) - rec["latency_ms"]) <= 0.002
                 assert "zap.request_in" in f
                 linked += 1
-    assert total > 200 and linked >= 8
+    assert total > 60 and linked >= 10

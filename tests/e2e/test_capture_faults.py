@@ -35,9 +35,9 @@ def test_capture_is_whole_after_a_signal(start_sim, tmp_path, sig):
 
 
 def test_capture_on_a_full_disk_keeps_its_whole_blocks(start_sim, tmp_path):
-    url, _ = start_sim(["zk", "--speed", "20", "--pty"])
+    url, _ = start_sim(["zk", "--speed", "100", "--pty"])
     cap = tmp_path / "run.pcapng"
-    r = subprocess.run([executable("zk"), "monitor", "-p", url, "--count", "5000", "-f", "jsonl", "--capture",
+    r = subprocess.run([executable("zk"), "monitor", "-p", url, "--count", "20000", "-f", "jsonl", "--capture",
                         str(cap)], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                        text=True, env=clean_env(), preexec_fn=small_disk, timeout=120)
     assert r.returncode == 7, r.stderr
