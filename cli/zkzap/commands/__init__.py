@@ -226,6 +226,7 @@ ROOT_COMMANDS = {
     "zap": (".zap", "zap", "mightyZAP actuators: scan, move, load, store, decode."),
     "crc": (".crc", "crc", "Compute or check CRCs and checksums of both protocols."),
     "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
+    "sniff": (".sniff", "sniff", "Watch a live ZK or mightyZAP link passively (never transmits)."),
     "ports": (".ports", "ports", "List serial ports, with adapter hints."),
     "completion": (".completion", "completion", "Print the shell completion script."),
 }

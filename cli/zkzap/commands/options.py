@@ -289,6 +289,7 @@ def port_options(group: str, *, baud_auto: bool = False):
         click.option("--timeout", type=FiniteRange(0.001, 3600), default=None, metavar="SECONDS",
                      help="Reply timeout (default: derived from the baud rate)."),
         click.option("--sim", is_flag=True, help="Talk to the built-in simulator instead of a port."),
+        capture_option(group),
     ]
     return lambda f: apply_options(f, options)
 
@@ -300,6 +301,26 @@ def warn_port(url) -> None:
     hint = outgoing_port_hint(url)
     if hint:
         warn(hint)
+def capture_option(protocol: str):
+    """``--capture FILE``: record every chunk read from and written to the port, timestamped, in
+    pcapng (the port's link type: 147 for ZK, 148 for mightyZAP). Not a parameter of the command:
+    :func:`zkzap.link.port.open_port` taps whatever port the command opens."""
+
+    def callback(ctx, param, value):
+        if ctx.resilient_parsing:
+            return
+        if not value and "zkzap.link.capture" not in sys.modules:
+            return                        # nothing asked, nothing to reset: import nothing
+        from ..link import capture
+
+        capture.request(value, protocol)
+        if value:
+            ctx.call_on_close(lambda: capture.request(None, protocol))   # close it, ask for no more
+
+    return click.option("--capture", type=FilePath(), default=None, metavar="FILE", expose_value=False,
+                        callback=callback,
+                        help="Record every byte read and written, timestamped with its direction, in "
+                             "FILE (pcapng; Wireshark opens it with zkzap's dissector).")
 
 
 def _complete_ports(ctx, param, incomplete):

@@ -123,10 +123,21 @@ def _parse_set(ctx, param, values):
                    "setting reads garbage (the host's receiver is modelled strictly).")
 @click.option("--set", "extra", multiple=True, callback=_parse_set, metavar="KEY=VALUE",
               help="Any other ECU simulator option (max_rpm, idle_rpm, battery, faults, ...); repeatable.")
+@click.option("--replay", type=click.Path(dir_okay=False), default=None, metavar="CAPTURE",
+              help="Play the ECU's status frames of a pcapng capture (--capture) at their recorded "
+                   "times instead of the engine model.")
+@click.option("--loop", is_flag=True, help="With --replay: start again at the end.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="With --replay: log the host's control frames, decoded, to FILE (JSON Lines; CSV "
+                   "for *.csv).")
 @serve_options
-def zk(protocol_version, rate, baud, stop_bits, extra, speed, use_pty, listen, link):
+def zk(protocol_version, rate, baud, stop_bits, extra, replay, loop, output, speed, use_pty, listen, link):
     """The ZK turbine ECU simulator: status frames at the configured rate, an engine model
     that starts, runs, follows the throttle and cools down.
+
+    With --replay CAPTURE it plays a recorded session instead: the ECU's frames of the capture at
+    their recorded times (scaled by --speed; --loop to repeat), to whatever host connects; the
+    host's control frames are decoded and, with -o FILE, logged.
 
     \b
     Examples:
@@ -134,13 +145,61 @@ def zk(protocol_version, rate, baud, stop_bits, extra, speed, use_pty, listen, l
       zkzap sim zk --listen 127.0.0.1:0 --speed 10
       zkzap sim zk --protocol-version 4 --set max_rpm=120000
       zkzap sim zk --baud 9600 --stop-bits 2          # for 'zk detect'
+      zkzap sim zk --replay flight.pcapng --loop -o host.jsonl
     """
-    for key, value in (("baud", baud), ("stop_bits", stop_bits)):
-        if value is not None and key in extra:
-            raise UsageError(f"--{key.replace('_', '-')} and --set {key}=...: give one")
-    device = _make("zk", protocol_version=None if protocol_version is None else str(protocol_version),
-                   rate=rate, baud=baud, stop_bits=stop_bits, **extra)
-    _serve(device, speed, use_pty, listen, link)
+    if replay is None:
+        for name, value in (("loop", loop), ("output", output)):
+            if value:
+                raise UsageError(f"--{name}: only with --replay")
+        for key, value in (("baud", baud), ("stop_bits", stop_bits)):
+            if value is not None and key in extra:
+                raise UsageError(f"--{key.replace('_', '-')} and --set {key}=...: give one")
+        device = _make("zk", protocol_version=None if protocol_version is None else str(protocol_version),
+                       rate=rate, baud=baud, stop_bits=stop_bits, **extra)
+        _serve(device, speed, use_pty, listen, link)
+        return
+    if protocol_version is not None or rate is not None or extra or baud is not None or stop_bits is not None:
+        raise UsageError("--replay plays a recording: --protocol-version, --rate, --baud, --stop-bits and --set "
+                         "do not apply")
+    from ..sim.replay import ZkReplay
+
+    _check_capture(replay, "zk")
+    log, close = _host_log(output)
+    try:
+        try:
+            device = ZkReplay(replay, loop=loop, log=log)
+        except ValueError as e:
+            raise UsageError(f"--replay: {e}") from None
+        _serve(device, speed, use_pty, listen, link)
+    finally:
+        close()
+
+
+def _check_capture(path, protocol):
+    from ..io.pcapng import check_capture
+
+    check_capture(path, protocol)
+
+
+def _host_log(output):
+    """(log function, close function) for -o FILE: records flushed one by one."""
+    if not output:
+        return None, lambda: None
+    from ..io.writers import make_writer
+    from .options import open_output
+    from .zk.decode import columns
+
+    stream, had = open_output(output)
+    fmt = "csv" if output.lower().endswith(".csv") else "jsonl"
+    writer = make_writer(fmt, stream, ["t", "dir"] + columns("control"), header=not had)
+
+    def close():
+        try:
+            writer.close()
+        finally:
+            stream.close()
+
+    return writer.write, close
 
 
 @sim.command("zap", context_settings=CONTEXT)
@@ -161,8 +220,11 @@ def zk(protocol_version, rate, baud, stop_bits, extra, speed, use_pty, listen, l
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")
+@click.option("--replay", type=click.Path(dir_okay=False), default=None, metavar="CAPTURE",
+              help="Answer every request recorded in a pcapng capture (--capture) with its recorded "
+                   "reply, after its recorded latency; other requests go to the model.")
 @serve_options
-def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, listen, link):
+def zap(ids, baud, state, return_mode, voltage, echo, faults, replay, speed, use_pty, listen, link):
     """The mightyZAP actuator-bus simulator: 12Lf actuators with the full register map, moving
     at goal speed, answering as their feedback-return mode says.
 
@@ -179,6 +241,13 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, li
       zkzap sim zap --ids 1,2,3                  # prints /dev/pts/N
       zkzap sim zap --ids 1,2 --listen 127.0.0.1:0 --state bus.json
       zkzap sim zap --ids 1 --echo --fault 1:delay=5
+      zkzap sim zap --replay field.pcapng        # a recorded bus, answered as recorded
+
+    With --replay CAPTURE, a request recorded in the capture (the same ID, instruction and
+    parameters) gets the reply recorded for it, after the recorded latency (several replies to
+    one request play in order, then the last again; a request recorded without a reply stays
+    unanswered); any other request goes to the model, whose actuators are --ids or, by
+    default, the IDs that answered in the capture.
     """
     from ..sim.zap_bus import parse_fault
 
@@ -187,9 +256,22 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, li
             parse_fault(text)
         except ValueError as e:
             raise UsageError(f"--fault: {e}") from None
+    recorded = None
+    if replay is not None:
+        from ..sim.replay import recorded_replies
+
+        _check_capture(replay, "zap")
+        recorded = recorded_replies(replay)
+        ctx = click.get_current_context()
+        if ctx.get_parameter_source("ids") == click.core.ParameterSource.DEFAULT and recorded[1]:
+            ids = ",".join(str(i) for i in sorted(recorded[1]))
     device = _make("zap", ids=ids, baud=baud, state=state, return_mode=return_mode,
                    voltage=None if voltage is None else str(voltage), echo="1" if echo else "0",
                    faults=",".join(faults))
+    if replay is not None:
+        from ..sim.replay import ZapReplay
+
+        device = ZapReplay(replay, device)
     if state and getattr(device, "restored", False):
         shown = ", ".join(str(a.ident) for a in device.actuators)
         click.echo(f"note: {state}: {len(device.actuators)} actuator(s) restored (IDs {shown}); "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-USAGE = "usage: python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR}"
+USAGE = "usage: python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR}"  # all: + share/wireshark/zkzap.lua
 
 
 def main(argv=None) -> int:
@@ -14,11 +14,12 @@ def main(argv=None) -> int:
         print(USAGE, file=sys.stderr if not args else sys.stdout)
         return 2 if not args else 0
     what, rest = args[0], args[1:]
-    from . import completions, man
+    from . import completions, man, wireshark
 
     if what == "all" and len(rest) <= 1:
         root = rest[0] if rest else os.getcwd()
         written = man.generate(os.path.join(root, "man")) + completions.generate(os.path.join(root, "completions"))
+        written += wireshark.generate(root)
     elif what == "man" and len(rest) == 1:
         written = man.generate(rest[0])
     elif what == "completions" and len(rest) == 1:

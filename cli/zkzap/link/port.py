@@ -46,9 +46,10 @@ def fit_note(what: str, rate_hz: float, frame_bytes: int, baud: int, stop_bits: 
             f"{baud} baud carries at most {most:.1f} a second")
 
 
-def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1):
+def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1, capture=None):
     """A pyserial port for ``url`` at ``baud`` (8 data bits, no parity, ``stop_bits`` 1 or 2),
-    opened exclusively where the OS allows."""
+    opened exclusively where the OS allows; recorded to a pcapng capture when one was asked for
+    (``capture`` = (path, protocol), else the one named by :func:`zkzap.link.capture.request`)."""
     _check_url(url)
     import serial
 
@@ -60,7 +61,7 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
         port = serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
                                      exclusive=True, stopbits=stop_bits)
         _no_delay(port)
-        return port
+        return _tap(port, url, baud, capture)
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:
@@ -90,6 +91,18 @@ def _check_url(url: str) -> None:
     if parts is None or not parts.hostname or port is None:
         raise UsageError(f"port: {url}: expected {scheme}://HOST:PORT (a host name or address and a port "
                          f"number 0..65535)")
+def _tap(port, url, baud, capture):
+    import sys
+
+    if not capture and "zkzap.link.capture" not in sys.modules:
+        return port                      # no capture asked for (nothing imported the module)
+    from .capture import tap
+
+    try:
+        return tap(port, url, baud, capture)
+    except BaseException:
+        close_port(port)
+        raise
 
 
 def _no_delay(port) -> None:

@@ -28,7 +28,7 @@ from urllib.parse import urlsplit
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
-from ..errors import BadReply, DeviceError, NoReply, PortError, UsageError
+from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from .port import close_port, wire_time
 
 #: Allowance for the actuator's processing before it answers (seconds).
@@ -220,7 +220,7 @@ class ZapBus:
             self.port.reset_input_buffer()
             self.port.write(pkt)
         except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
-            if isinstance(e, (KeyboardInterrupt, PortError)):
+            if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):
                 raise
             raise self._port_error(e) from None
         self.sent += 1
@@ -235,7 +235,7 @@ class ZapBus:
                 self._port_timeout = timeout
             return self.port.read(n)
         except Exception as e:
-            if isinstance(e, KeyboardInterrupt):
+            if isinstance(e, (KeyboardInterrupt, OutputError)):
                 raise
             raise self._port_error(e) from None
 

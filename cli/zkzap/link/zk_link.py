@@ -135,6 +135,8 @@ class ZkLink:
     def read(self) -> bytes:
         try:
             data = self.ser.read(READ_SIZE)
+        except ZkzapError:       # a capture that cannot be written (exit 7)
+            raise
         except Exception as e:   # SerialException, OSError, and whatever a URL handler raises
             raise PortError(f"port {self.url} failed: {_reason(e)}") from None
         if data:
@@ -148,6 +150,8 @@ class ZkLink:
         try:
             self.ser.write(frame)
             self.ser.flush()
+        except ZkzapError:
+            raise
         except Exception as e:
             raise PortError(f"port {self.url} failed: {_reason(e)}") from None
         self.frames_out += 1

@@ -45,15 +45,26 @@ def decode(inputs, binary, fmt, output, append):
     answers, so its data is named by register. Bad packets in a stream are skipped and counted
     on stderr; a single packet given as arguments with a bad checksum is an error (exit 1).
 
+    pcapng captures (--capture FILE; recognised by their content) add 'time', 't' (seconds since
+    the capture began), 'dir' (h2d host to actuator, d2h actuator to host) and, on feedback,
+    'latency_ms' since the request it answers.
+
     \b
     Examples:
       zap decode FF FF FF 01 05 F3 86 FF 07 7A
       zap decode FF FF FF 00 04 F2 8C 02 7B FF FF FF 00 04 00 FF 07 F5 -f json
       zap decode --binary bus.bin -f csv -o bus.csv
+      zap decode bus.pcapng -f json -o bus.json
     """
+    from ...api.capture import capture_inputs
     from ...io.sources import binary_chunks, hex_chunks, run_decode
     from ...io.writers import make_writer
 
+    captures = capture_inputs(inputs, binary)
+    if captures is not None:
+        from ..capture_decode import zap_decode_captures
+
+        return zap_decode_captures(captures, fmt=fmt, output=output, append=append, table_cells=_table_cells)
     if binary:
         chunks, explicit = binary_chunks(list(inputs)), False
     else:

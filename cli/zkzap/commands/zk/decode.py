@@ -70,7 +70,9 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
     """Decode ZK frames to a table, JSON, JSON Lines or CSV.
 
     Input is hex in any common notation (FF 14 64 D3, ff1464d3, 0xFF,0x14, xxd and
-    hexdump -C dumps) as arguments or on stdin, or raw bytes with --binary. A stream may mix
+    hexdump -C dumps) as arguments or on stdin, raw bytes with --binary, or pcapng captures
+    (--capture FILE; recognised by their content): their records add 'time', 't' (seconds
+    since the capture began) and 'dir' (h2d host to ECU, d2h ECU to host). A stream may mix
     control and status frames and garbage: bad frames are skipped and counted on stderr. A
     single frame given as arguments with a bad CRC is an error (exit 1).
 
@@ -83,11 +85,19 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       zk decode FF 1D F4 70
       zk decode F1 00 00 00 00 4C A0 -f json
       zk decode --binary capture.bin -f csv -o capture.csv
+      zk decode run.pcapng -o run.csv
       xxd capture.bin | zk decode --accept status
     """
+    from ...api.capture import capture_inputs
     from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
     from ...io.writers import csv_dialect, json_dialect, make_writer
 
+    captures = capture_inputs(inputs, binary)
+    if captures is not None:
+        from ..capture_decode import zk_decode_captures
+
+        return zk_decode_captures(captures, fmt=fmt, output=output, append=append,
+                                  protocol_version=protocol_version, accept=accept, raw=raw)
     if binary:
         chunks, explicit = binary_chunks(list(inputs)), False
     else:

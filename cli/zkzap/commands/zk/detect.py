@@ -9,7 +9,7 @@ import click
 
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, format_option, resolve_format
+from ..options import FiniteRange, capture_option, format_option, resolve_format
 
 DETECT_COLUMNS = ["port", "found", "baud", "stop_bits", "protocol_version", "status_rate_hz", "frames_per_s",
                   "elapsed_s", "budget_s", "tried"]
@@ -94,6 +94,7 @@ def run_detection(url, bauds, stop_bits, window, budget, probe):
 @click.option("--stop-bits", type=click.Choice(["1", "2", "both"]), default="both", show_default=True,
               help="Stop-bit settings to consider.")
 @detect_options
+@capture_option("zk")
 @format_option(choices=("table", "json", "jsonl"))
 def detect(port, sim, bauds, stop_bits, probe, budget, window, fmt):
     """Find the ECU's line settings by listening: baud rate, stop bits, protocol version and

@@ -153,13 +153,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     source = None
     try:
         if replay is not None:
-            source = L.ReplaySource(replay, fast=fast)
+            from ...api.capture import replay_source
+
+            source = replay_source(replay, fast=fast)
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                          wall_clock=source.live)
+                          wall_clock=getattr(source, "wall_clock", source.live))
         on_update = out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -196,7 +198,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
-              help="Decode a raw log (--raw-log) instead of a port, paced in real time.")
+              help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
+                   "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
 @click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
@@ -228,8 +231,8 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     Voltages are decoded in the ECU's own unit: frames are held back until the first status ID 6
     (the protocol version; at most 12 frames) unless --protocol-version is given.
 
-    A replay's 't' is rebuilt from the status rate the frames report (a raw log holds bytes, not
-    times).
+    A raw log's 't' is rebuilt from the status rate the frames report (a raw log holds bytes, not
+    times); a pcapng capture's 't' and 'time' are its own timestamps.
 
     \b
     Examples:

@@ -1,0 +1,325 @@
+"""Reading zkzap's pcapng captures back: frames with their capture time and direction, and the
+records ``zk decode`` / ``zap decode`` / ``zk monitor --replay`` make of them.
+
+Chunks are cut into frames by one framer per interface and direction (a frame split across
+two reads is whole again; the two directions never mix). A frame's time is the time of the
+chunk that completed it. Records carry ``time`` (ISO 8601 UTC), ``t`` (seconds since the
+capture's first chunk), ``dir`` (``h2d`` host -> device, ``d2h`` device -> host, null when the
+capture could not tell: a sniffer on a half-duplex line) and, for mightyZAP feedback,
+``latency_ms`` since the request it answers.
+"""
+
+from __future__ import annotations
+
+from ..codec import zap, zk
+from ..codec.framing import ZapFramer, ZkFramer
+from ..io.pcapng import INBOUND, OUTBOUND, Reader
+
+#: Keys captures add in front of a record (and ``latency_ms`` after a mightyZAP one).
+TIME_KEYS = ["time", "t", "dir"]
+
+
+def iso_utc(ts: float) -> str:
+    from ..link.zk_link import iso_utc as _iso
+
+    return _iso(ts)
+
+
+class CaptureFrames:
+    """``(ts, direction, frame)`` for every whole frame of the capture at ``path``, in order.
+
+    ``accept`` (ZK only): ``both``, ``status`` or ``control``; a ZK stream of known direction
+    takes only its own kind (host -> ECU: control frames, ECU -> host: status frames).
+    Afterwards: :attr:`truncated`, :attr:`frames`, :attr:`bad`, :attr:`skipped`, :attr:`t0`.
+    """
+
+    def __init__(self, path: str, protocol: str, accept: str = "both"):
+        self.path = path
+        self.protocol = protocol
+        self.accept = accept
+        self.reader = Reader(path, protocol)
+        self.framers = {}
+        self.t0 = None
+        self.truncated = False
+
+    def _framer(self, key, direction):
+        f = self.framers.get(key)
+        if f is None:
+            if self.protocol == "zap":
+                f = ZapFramer()
+            elif direction == OUTBOUND:
+                f = ZkFramer("control") if self.accept != "status" else None
+            elif direction == INBOUND:
+                f = ZkFramer("status") if self.accept != "control" else None
+            else:
+                f = ZkFramer(self.accept)
+            self.framers[key] = f
+        return f
+
+    def __iter__(self):
+        for ts, direction, frames in self.chunks():
+            for frame in frames:
+                yield ts, direction, frame
+
+    def chunks(self):
+        """``(ts, direction, [frames])`` per chunk that completed any frame (then the frames
+        the framers still held at the end)."""
+        last = {}
+        try:
+            for pkt in self.reader:
+                if self.t0 is None:
+                    self.t0 = pkt.ts
+                key = (pkt.interface, pkt.direction)
+                framer = self._framer(key, pkt.direction)
+                last[key] = pkt.ts
+                if framer is None:
+                    continue
+                frames = framer.feed(pkt.data)
+                if frames:
+                    yield pkt.ts, pkt.direction, frames
+            self.truncated = self.reader.truncated
+            for key, framer in self.framers.items():
+                if framer is not None:
+                    frames = framer.flush()
+                    if frames:
+                        yield last[key], key[1], frames
+        finally:
+            self.reader.close()
+
+    def _sum(self, attr):
+        return sum(getattr(f, attr) for f in self.framers.values() if f is not None)
+
+    @property
+    def frames(self):
+        return self._sum("frames")
+
+    @property
+    def bad(self):
+        return self._sum("bad")
+
+    @property
+    def skipped(self):
+        return self._sum("skipped")
+
+    def truncation_note(self) -> str | None:
+        if not self.truncated:
+            return None
+        return (f"{self.path}: the capture is truncated: decoded up to its last whole block "
+                f"({self.reader.packets} chunks)")
+
+
+def _dir(direction):
+    return {INBOUND: "d2h", OUTBOUND: "h2d"}.get(direction)
+
+
+def zk_lines(frames: CaptureFrames, lines, csv: bool):
+    """Blocks of text lines (JSON objects or CSV rows of ``TIME_KEYS`` + the decode columns) of
+    a ZK capture, rendered by ``lines`` (a :class:`zkzap.codec.zk.ZkLines`): the same records as
+    :func:`zk_records`, through the table-generated text encoders, one block per chunk."""
+    from ..io.writers import _dumps
+
+    t0 = None
+    for ts, direction, block in frames.chunks():
+        if t0 is None:
+            t0 = frames.t0
+        t = round(ts - t0, 6)
+        d = _dir(direction)
+        if csv:
+            head = f"{iso_utc(ts)},{t!r},{d or ''},"
+            yield [head + line for line in lines.encode_all(block)]
+        else:
+            head = '{"time":"%s","t":%s,"dir":%s,' % (iso_utc(ts), _dumps(t), _dumps(d))
+            yield [head + line[1:] for line in lines.encode_all(block)]
+
+
+def zk_records(frames: CaptureFrames, decoder: zk.ZkDecoder, decode=None):
+    """Records of a ZK capture: ``time``, ``t``, ``dir``, then the decoded frame (``decode``:
+    a function of the frame, default ``decoder.decode``) and its ``frame`` hex."""
+    decode = decode or decoder.decode
+    for ts, direction, frame in frames:
+        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": _dir(direction)}
+        rec.update(decode(frame))
+        rec["frame"] = frame.hex(" ").upper()
+        yield rec
+
+
+class ZapPairing:
+    """Pairs mightyZAP feedback with the request it answers, for latencies: a command (not the
+    echo a half-duplex adapter returns) opens a request to its ID, the next feedback from that
+    ID closes it."""
+
+    def __init__(self):
+        self.pending = {}
+
+    def command(self, ident, ts, direction):
+        if direction != INBOUND and ident != zap.BROADCAST:
+            self.pending[ident] = ts
+
+    def feedback(self, ident, ts):
+        sent = self.pending.pop(ident, None)
+        return None if sent is None else round((ts - sent) * 1000.0, 3)
+
+
+def zap_records(frames: CaptureFrames, decoder: zap.ZapDecoder | None = None, decode=None):
+    """Records of a mightyZAP capture: ``time``, ``t``, ``dir``, the decoded packet, its
+    ``frame`` hex and, for feedback, ``latency_ms`` (null when no request was seen)."""
+    decoder = decoder or zap.ZapDecoder()
+    decode = decode or decoder.decode
+    pairing = ZapPairing()
+    for ts, direction, pkt in frames:
+        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": _dir(direction)}
+        rec.update(decode(pkt))
+        rec["frame"] = pkt.hex(" ").upper()
+        if rec["kind"] == "command":
+            pairing.command(pkt[3], ts, direction)
+        else:
+            rec["latency_ms"] = pairing.feedback(pkt[3], ts)
+        yield rec
+
+
+CAPTURE_SUFFIXES = (".pcapng", ".pcap", ".ntar")
+
+
+def capture_inputs(inputs, binary: bool):
+    """The decode inputs as captures: a list of paths when every input is a pcapng file (with or
+    without ``--binary``), else None (hex or raw bytes, as before). A file named like a capture
+    that is not one, or not a zkzap link type, is refused here (exit 2) before any output."""
+    from ..io.pcapng import CaptureError, describe_start, is_pcapng
+    from ..errors import UsageError
+
+    paths = [p for p in inputs if p != "-"]
+    if not paths or len(paths) != len(inputs):
+        return None
+    import os
+
+    flags = []
+    for p in paths:
+        if not os.path.isfile(p):
+            if binary:
+                return None           # the raw reader names the unreadable file
+            return None if not p.lower().endswith(CAPTURE_SUFFIXES) else _missing(p)
+        pc = is_pcapng(p)
+        if not pc and p.lower().endswith(CAPTURE_SUFFIXES):
+            with open(p, "rb") as f:
+                raise CaptureError(f"{p}: not a pcapng capture: {describe_start(f.read(64))}")
+        flags.append(pc)
+    if not any(flags):
+        return None
+    if not all(flags):
+        raise UsageError("input: pcapng captures and raw files cannot be mixed; decode them separately")
+    return paths
+
+
+def _missing(path):
+    from ..errors import UsageError
+
+    raise UsageError(f"input: cannot read {path}: no such file")
+
+
+def check_captures(paths, protocol: str) -> None:
+    """Refuse any of ``paths`` that is not a zkzap capture of ``protocol`` (exit 2)."""
+    from ..io.pcapng import check_capture
+
+    for p in paths:
+        check_capture(p, protocol)
+
+
+def first_time(path: str, protocol: str):
+    """The timestamp of a capture's first chunk (None when it has none)."""
+    with Reader(path, protocol) as r:
+        for pkt in r:
+            return pkt.ts
+    return None
+
+
+class CaptureReplaySource:
+    """``zk monitor --replay CAPTURE``: the status frames of a ZK capture at their recorded
+    times (``t`` from the capture's first chunk, ``time`` the capture's own clock), paced in real
+    time or, with ``fast``, as fast as they decode. The interface of
+    :class:`zkzap.link.zk_link.ReplaySource`."""
+
+    live = False
+    #: a capture keeps the receive time of every chunk: records get real wall-clock times
+    wall_clock = True
+
+    def __init__(self, path, fast=False):
+        import time
+
+        self.path = path
+        self.fast = fast
+        self.frames = CaptureFrames(path, "zk", "status")
+        first = first_time(path, "zk")
+        self.wall0 = first if first is not None else time.time()
+        self.framer = self.frames          # frames/bad/skipped for the summary and the notes
+        self._it = iter(self.frames)
+        self._next = None
+        self.last_t = 0.0
+        self.t0 = time.monotonic()
+
+    def _peek(self):
+        if self._next is None:
+            item = next(self._it, None)
+            if item is None:
+                return None
+            ts, _direction, frame = item
+            self._next = (ts - self.wall0, frame)
+        return self._next
+
+    def now(self) -> float:
+        import time
+
+        return self.last_t if self.fast else time.monotonic() - self.t0
+
+    def poll(self):
+        """Due frames as ``[(t, frame), ...]``; None at the end of the capture."""
+        import time
+
+        head = self._peek()
+        if head is None:
+            return None
+        out = []
+        if self.fast:
+            while head is not None and len(out) < 256:
+                out.append(head)
+                self._next = None
+                head = self._peek()
+        else:
+            elapsed = time.monotonic() - self.t0
+            if head[0] > elapsed:
+                time.sleep(min(head[0] - elapsed, 0.05))
+                elapsed = time.monotonic() - self.t0
+            while head is not None and head[0] <= elapsed:
+                out.append(head)
+                self._next = None
+                head = self._peek()
+        if out:
+            self.last_t = out[-1][0]
+        return out
+
+    def write(self, frame):   # pragma: no cover - sessions never control a replay
+        from ..errors import UsageError
+
+        raise UsageError("replay: nothing can be sent to a replay")
+
+    def close(self):
+        self.frames.reader.close()
+        note = self.frames.truncation_note()
+        if note:
+            import sys
+
+            print(f"note: {note}", file=sys.stderr)
+
+
+def replay_source(path, fast=False):
+    """The source for ``zk monitor --replay FILE``: a capture by its content, else a raw log."""
+    from ..io.pcapng import is_pcapng
+    from ..link.zk_link import ReplaySource
+
+    if is_pcapng(path):
+        return CaptureReplaySource(path, fast)
+    if path.lower().endswith(CAPTURE_SUFFIXES):
+        from ..io.pcapng import CaptureError, describe_start
+
+        with open(path, "rb") as f:
+            raise CaptureError(f"{path}: not a pcapng capture: {describe_start(f.read(64))}")
+    return ReplaySource(path, fast=fast)

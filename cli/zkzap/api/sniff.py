@@ -1,0 +1,460 @@
+"""A passive sniffer for both protocols: it reads ports and never writes a byte.
+
+- ZK (:class:`ZkSniffer`): one port sees whatever mixture arrives (control and status frames are
+  told apart by the framer), or two receive-only taps of a flight-controller <-> ECU link, one
+  per direction (the host's TX line, the ECU's TX line), merged by time into one stream with a
+  ``dir`` field; status frames decode version-aware (the protocol version from status ID 6).
+- mightyZAP (:class:`ZapSniffer`): one adapter on the half-duplex bus sees both directions;
+  every feedback is paired with the request it answers (``latency_ms``), a request that expects
+  an answer and gets none within ``reply_timeout`` becomes a ``missing`` record, and a feedback
+  from another ID than the one asked (``pairing: unexpected-id``) or with no request
+  (``unsolicited``) is marked.
+
+Records carry ``time`` (ISO 8601 UTC), ``t`` (seconds since the sniffer started), ``dir``
+(``h2d`` host -> device, ``d2h`` device -> host) and the decoded frame with its ``frame`` hex.
+:class:`Stats` keeps the live summary: frames per second per direction and per ID, CRC errors,
+gaps, the slowest replies. Nothing here imports click or rich.
+"""
+
+from __future__ import annotations
+
+import heapq
+import queue
+import threading
+import time
+from collections import Counter, deque
+
+from ..codec import zap, zk
+from ..codec.framing import ZapFramer, ZkFramer
+from ..errors import PortError, UsageError
+from ..io.pcapng import INBOUND, OUTBOUND, UNKNOWN
+from .capture import iso_utc
+
+#: How long chunks from two ports are held back so they can be merged in time order.
+MERGE_WINDOW_S = 0.03
+#: Read timeout of each port's reader thread.
+READ_SLICE_S = 0.02
+#: A mightyZAP request unanswered after this long is a missing reply (the manual's guidance is
+#: ~10 ms; real actuators and USB adapters are seen up to ~20 ms late).
+DEFAULT_REPLY_TIMEOUT_S = 0.1
+#: A gap in the ECU's status stream: longer than this many status periods without a frame.
+GAP_PERIODS = 3
+#: How many of the slowest replies the summary keeps.
+SLOWEST = 5
+
+ROLES = {"both": UNKNOWN, "host": OUTBOUND, "device": INBOUND}
+
+
+def _dir_name(direction):
+    return {INBOUND: "d2h", OUTBOUND: "h2d"}.get(direction)
+
+
+class Stats:
+    """Counters for the live summary and ``--stats``."""
+
+    def __init__(self):
+        self.started = time.monotonic()
+        self.frames = Counter()            # by dir
+        self.by_id = Counter()             # by (dir, id)
+        self.recent = deque()              # (t, dir) of the last second
+        self.crc_errors = 0
+        self.skipped = 0
+        self.gaps = 0
+        self.longest_gap = 0.0
+        self.missing = 0
+        self.unexpected = 0
+        self.unsolicited = 0
+        self.slowest = []                  # heap of (latency, t, id, instruction)
+        self.replies = 0
+        self.latency_sum = 0.0
+
+    def frame(self, t, d, ident):
+        self.frames[d] += 1
+        self.by_id[(d, ident)] += 1
+        self.recent.append((t, d))
+        while self.recent and self.recent[0][0] < t - 1.0:
+            self.recent.popleft()
+
+    def reply(self, t, ident, instruction, latency):
+        self.replies += 1
+        self.latency_sum += latency
+        item = (latency, t, ident, instruction)
+        if len(self.slowest) < SLOWEST:
+            heapq.heappush(self.slowest, item)
+        elif latency > self.slowest[0][0]:
+            heapq.heapreplace(self.slowest, item)
+
+    def rates(self, now):
+        """Frames per second by direction over the last second before ``now``."""
+        c = Counter(d for t, d in self.recent if t >= now - 1.0)
+        return dict(c)
+
+    def summary(self, elapsed) -> dict:
+        dirs = sorted(self.frames, key=str)
+        out = {
+            "duration_s": round(elapsed, 3),
+            "frames": {str(d): n for d, n in ((d, self.frames[d]) for d in dirs)},
+            "frames_per_s": {str(d): round(self.frames[d] / elapsed, 2) if elapsed > 0 else None for d in dirs},
+            "by_id": {f"{d}:{i}": n for (d, i), n in sorted(self.by_id.items(), key=lambda x: (str(x[0][0]), x[0][1]))},
+            "crc_errors": self.crc_errors,
+            "skipped_bytes": self.skipped,
+            "gaps": self.gaps,
+            "longest_gap_s": round(self.longest_gap, 3),
+        }
+        if self.replies or self.missing or self.unexpected or self.unsolicited:
+            out.update({
+                "replies": self.replies,
+                "mean_latency_ms": round(self.latency_sum / self.replies, 3) if self.replies else None,
+                "missing_replies": self.missing,
+                "unexpected_id": self.unexpected,
+                "unsolicited": self.unsolicited,
+                "slowest": [{"latency_ms": lat, "t": t, "id": i, "instruction": ins}
+                            for lat, t, i, ins in sorted(self.slowest, reverse=True)],
+            })
+        return out
+
+
+class _Reader(threading.Thread):
+    """Reads one port until stopped; chunks go to the shared queue with their time (and to the
+    capture). A read returns as soon as bytes arrive (one byte, then whatever is waiting), so a
+    request and its reply come in separate chunks with their own times."""
+
+    def __init__(self, index, port, url, out, capture=None):
+        super().__init__(daemon=True, name=f"sniff-{index}")
+        self.index, self.port, self.url, self.out = index, port, url, out
+        self.capture = capture            # (Writer, interface ID, direction) or None
+        self.stopping = threading.Event()
+
+    def run(self):
+        port = self.port
+        while not self.stopping.is_set():
+            try:
+                data = port.read(1)
+                if data:
+                    waiting = getattr(port, "in_waiting", 0)
+                    if waiting:
+                        data += port.read(waiting)
+                    ts = time.time()          # when the chunk's last byte had arrived
+                    if self.capture is not None:
+                        w, if_id, direction = self.capture
+                        w.packet(if_id, ts, bytes(data), direction)
+            except Exception as e:  # noqa: BLE001 - SerialException, OSError; an OutputError of the capture
+                self.out.put((time.time(), self.index, e))
+                return
+            if data:
+                self.out.put((ts, self.index, bytes(data)))
+
+
+class Sniffer:
+    """The part both protocols share: ports, reader threads, the merge by time, stop rules."""
+
+    protocol = ""
+
+    def __init__(self, ports, baud, *, capture=None):
+        """``ports``: [(url, role)], role 'both' (one port sees both directions), 'host' (the
+        host's TX line) or 'device' (the device's TX line). ``capture``: a pcapng path."""
+        self.ports_spec = list(ports)
+        self.baud = baud
+        self.capture = capture
+        self.ports = []
+        self.readers = []
+        self.queue = queue.Queue()
+        self.stats = Stats()
+        self.t0 = None
+        self.wall0 = None
+        self._held = []
+        self._ready = []
+        self._seq = 0
+        self._last_ts = {}
+        self.framers = []
+
+    # -- ports ---------------------------------------------------------------------------------
+    def open(self):
+        from ..link import capture as cap
+        from ..link.port import close_port, open_port
+
+        taps = []
+        try:
+            for url, role in self.ports_spec:
+                # capture=(): no tap by open_port; the reader threads record whole chunks themselves
+                p = open_port(url, self.baud, timeout=READ_SLICE_S, capture=())
+                self.ports.append(p)
+                if self.capture:
+                    w = cap.writer_for(self.capture, self.protocol)
+                    taps.append((w, w.interface(self.protocol, url, self.baud), ROLES[role]))
+                else:
+                    taps.append(None)
+                self.framers.append(self._framer(role))
+        except BaseException:
+            for p in self.ports:
+                close_port(p)
+            raise
+        self.t0 = time.monotonic()
+        self.wall0 = time.time()
+        for i, p in enumerate(self.ports):
+            r = _Reader(i, p, self.ports_spec[i][0], self.queue, taps[i])
+            self.readers.append(r)
+            r.start()
+        return self
+
+    def close(self):
+        from ..link.port import close_port
+
+        for r in self.readers:
+            r.stopping.set()
+        for r in self.readers:
+            r.join(1.0)
+        for p in self.ports:
+            close_port(p)
+        if self.capture:
+            from ..link import capture as cap
+
+            cap.finish()
+
+    def __enter__(self):
+        return self.open()
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- the loop ------------------------------------------------------------------------------
+    def poll(self, wait=0.1):
+        """Records from the chunks read since the last call, in time order."""
+        try:
+            item = self.queue.get(timeout=wait)
+        except queue.Empty:
+            item = None
+        items = [] if item is None else [item]
+        while True:
+            try:
+                items.append(self.queue.get_nowait())
+            except queue.Empty:
+                break
+        for ts, index, data in items:
+            if isinstance(data, BaseException):
+                from ..errors import ZkzapError
+
+                if isinstance(data, ZkzapError):
+                    raise data
+                url = self.ports_spec[index][0]
+                raise PortError(f"port {url} failed: {data}")
+            heapq.heappush(self._held, (ts, index, data))
+        # with one port the chunks are in order already; with two, chunks and then records are
+        # held for the window, so both lines merge into one stream in time order
+        window = MERGE_WINDOW_S if len(self.ports) > 1 else 0.0
+        horizon = time.time() - window
+        fresh = []
+        while self._held and self._held[0][0] <= horizon:
+            ts, index, data = heapq.heappop(self._held)
+            fresh += self.chunk(ts, index, data)
+        fresh += self.tick(time.time())
+        if not window:
+            return fresh
+        for rec in fresh:
+            self._seq += 1
+            heapq.heappush(self._ready, (rec["t"], self._seq, rec))
+        out = []
+        limit = horizon - window - self.wall0
+        while self._ready and self._ready[0][0] <= limit:
+            out.append(heapq.heappop(self._ready)[2])
+        return out
+
+    def drain(self):
+        """Records of everything still held (the end)."""
+        out = []
+        while self._held:
+            ts, index, data = heapq.heappop(self._held)
+            out += self.chunk(ts, index, data)
+        now = time.time()
+        for i, framer in enumerate(self.framers):
+            for frame in framer.flush():
+                out += self.frame(now, i, frame)
+        out += self.finish(now)
+        self._count_framers()
+        for rec in out:
+            self._seq += 1
+            heapq.heappush(self._ready, (rec["t"], self._seq, rec))
+        out = []
+        while self._ready:
+            out.append(heapq.heappop(self._ready)[2])
+        return out
+
+    def chunk(self, ts, index, data):
+        """Records of the frames a chunk completes. A chunk's time is when it was read (its last
+        byte had arrived); each frame is dated when its own last byte was on the line: the
+        chunk time less the line time of the bytes after it (never before the port's previous
+        frame, so each port's frames stay in order)."""
+        out = []
+        frames = self.framers[index].feed(data)
+        byte_s = 10.0 / self.baud
+        n = len(data)
+        after = sum(len(f) for f in frames)
+        last = self._last_ts.get(index, 0.0)
+        for frame in frames:
+            after -= len(frame)
+            t = max(last, ts - min(after, n) * byte_s)
+            last = t
+            out += self.frame(t, index, frame)
+        self._last_ts[index] = last
+        self._count_framers()
+        return out
+
+    def _count_framers(self):
+        self.stats.crc_errors = sum(f.bad for f in self.framers)
+        self.stats.skipped = sum(f.skipped for f in self.framers)
+
+    def _base(self, ts, direction):
+        return {"time": iso_utc(ts), "t": round(ts - self.wall0, 6), "dir": _dir_name(direction)}
+
+    def elapsed(self):
+        return time.monotonic() - self.t0
+
+    # -- per protocol --------------------------------------------------------------------------
+    def _framer(self, role):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def frame(self, ts, index, frame):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def tick(self, now):
+        return []
+
+    def finish(self, now):
+        return []
+
+
+class ZkSniffer(Sniffer):
+    protocol = "zk"
+
+    def __init__(self, ports, baud, *, capture=None, protocol_version=None):
+        super().__init__(ports, baud, capture=capture)
+        self.decoder = zk.ZkDecoder(protocol_version)
+        self.rate = 20
+        self.last_status = None
+        self.roles = [role for _, role in self.ports_spec]
+
+    def _framer(self, role):
+        return ZkFramer({"both": "both", "host": "control", "device": "status"}[role])
+
+    def frame(self, ts, index, frame):
+        rec = self.decoder.decode(frame)
+        direction = OUTBOUND if rec["kind"] == "control" else INBOUND
+        out = self._base(ts, direction)
+        out.update(rec)
+        out["frame"] = frame.hex(" ").upper()
+        t = out["t"]
+        self.stats.frame(t, out["dir"], rec["id"])
+        if rec["kind"] == "status":
+            if rec["id"] == 6 and rec.get("status_rate_hz"):
+                self.rate = rec["status_rate_hz"]
+            if self.last_status is not None:
+                gap = t - self.last_status
+                if gap > GAP_PERIODS / self.rate:
+                    self.stats.gaps += 1
+                    self.stats.longest_gap = max(self.stats.longest_gap, gap)
+            self.last_status = t
+        return [out]
+
+
+class ZapSniffer(Sniffer):
+    protocol = "zap"
+
+    def __init__(self, ports, baud, *, capture=None, reply_timeout=DEFAULT_REPLY_TIMEOUT_S):
+        super().__init__(ports, baud, capture=capture)
+        self.decoder = zap.ZapDecoder()
+        self.reply_timeout = reply_timeout
+        self.pending = None                 # (ts, id, instruction, expected)
+        self.acks = set()                   # IDs seen acknowledging writes (return mode 2)
+
+    def _framer(self, role):
+        return ZapFramer()
+
+    def _expects(self, pkt):
+        ident, code = pkt[3], pkt[5]
+        if ident == zap.BROADCAST:
+            return False
+        if code in (0xF1, 0xF2):            # Echo always, Load Data in the usual modes 1 and 2
+            return True
+        return ident in self.acks
+
+    def frame(self, ts, index, pkt):
+        out = []
+        rec = self.decoder.decode(pkt)
+        if rec["kind"] == "command":
+            out += self._close_pending(ts)
+            base = self._base(ts, OUTBOUND)
+            base.update(rec)
+            base["frame"] = pkt.hex(" ").upper()
+            self.stats.frame(base["t"], "h2d", rec["id"])
+            self.pending = (ts, pkt[3], rec["instruction"], self._expects(pkt))
+            out.append(base)
+            return out
+        base = self._base(ts, INBOUND)
+        base.update(rec)
+        base["frame"] = pkt.hex(" ").upper()
+        self.stats.frame(base["t"], "d2h", rec["id"])
+        p = self.pending
+        if p is None:
+            base["pairing"] = "unsolicited"
+            self.stats.unsolicited += 1
+        elif p[1] != pkt[3]:
+            base["pairing"] = "unexpected-id"
+            base["request"] = p[2]
+            base["expected_id"] = p[1]
+            self.stats.unexpected += 1
+            self.pending = None
+        else:
+            latency = round((ts - p[0]) * 1000.0, 3)
+            base["pairing"] = "ok"
+            base["request"] = p[2]
+            base["latency_ms"] = latency
+            self.stats.reply(base["t"], pkt[3], p[2], latency)
+            if p[2] not in ("echo", "load"):
+                self.acks.add(pkt[3])
+            self.pending = None
+        out.append(base)
+        return out
+
+    def _close_pending(self, now):
+        p = self.pending
+        self.pending = None
+        if p is None or not p[3]:
+            return []
+        self.stats.missing += 1
+        rec = self._base(p[0], OUTBOUND)
+        rec.update({"kind": "missing", "id": p[1], "request": p[2],
+                    "waited_ms": round((now - p[0]) * 1000.0, 3)})
+        return [rec]
+
+    def tick(self, now):
+        p = self.pending
+        if p is not None and now - p[0] > self.reply_timeout and not self._held:
+            return self._close_pending(now)
+        return []
+
+    def finish(self, now):
+        p = self.pending
+        if p is not None and now - p[0] > self.reply_timeout:
+            return self._close_pending(now)
+        return []
+
+
+def check_ports(protocol: str, ports) -> list:
+    """``-p`` values -> [(url, role)]: one port for mightyZAP; one or two for ZK (the host's TX
+    line first, then the ECU's). Anything else is a usage error."""
+    ports = list(ports)
+    if not ports:
+        raise UsageError(f"no port: give -p PORT{' (twice for a tapped link: HOST_TX, ECU_TX)' if protocol == 'zk' else ''}")
+    if protocol == "zap":
+        if len(ports) != 1:
+            raise UsageError(f"port: {len(ports)} ports given; a mightyZAP bus is half-duplex: one adapter "
+                             "sees both directions, give one -p")
+        return [(ports[0], "both")]
+    if len(ports) > 2:
+        raise UsageError(f"port: {len(ports)} ports given; give one -p (both directions on one line) or two "
+                         "(the host's TX line, then the ECU's)")
+    if len(ports) == 1:
+        return [(ports[0], "both")]
+    if ports[0] == ports[1]:
+        raise UsageError(f"port: {ports[0]} given twice; the two -p are the host's TX line and the ECU's")
+    return [(ports[0], "host"), (ports[1], "device")]

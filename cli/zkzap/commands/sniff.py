@@ -1,0 +1,316 @@
+"""``zkzap sniff zk|zap``: watch a live link without taking part in it (nothing is ever written
+to a port). The logic is :mod:`zkzap.api.sniff`; this module parses options and renders."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..errors import UsageError
+from . import CONTEXT, Command, Group
+from .options import DEFAULT_BAUD, ENV, FilePath, FiniteRange, capture_option, close_output, open_output
+
+EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
+             "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
+             "Every record already written stays whole.")
+
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+
+
+@click.group(cls=Group, context_settings=CONTEXT)
+def sniff():
+    """Watch a live link passively: decode both directions, pair replies with requests.
+
+    The sniffer only reads: no byte is ever written to a port. Records go to stdout (a table on a
+    terminal, JSON Lines in a pipe, -f csv|json) or -o FILE; --capture FILE keeps every chunk
+    in pcapng; on a terminal a live summary shows on stderr; --stats prints it at the end.
+
+    \b
+    Examples:
+      zkzap sniff zap -p /dev/ttyUSB0 --stats
+      zkzap sniff zk -p /dev/ttyUSB0 -p /dev/ttyUSB1 -o link.jsonl --capture link.pcapng
+    """
+
+
+def _common(protocol):
+    env = ENV[protocol]
+
+    def deco(f):
+        opts = [
+            click.option("-p", "--port", "ports", multiple=True, metavar="PORT",
+                         help=("Serial device or pyserial URL; for a tapped link give two: the host's TX "
+                               "line, then the ECU's; one port takes whatever mixture arrives."
+                               if protocol == "zk" else
+                               "Serial device or pyserial URL of an adapter on the bus (one: it sees both "
+                               "directions).") + f" [env {env['port']}]"),
+            click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
+                         default=DEFAULT_BAUD[protocol], show_default=True, help=f"Baud rate [env {env['baud']}]."),
+            capture_option(protocol),
+            click.option("-f", "--format", "fmt", type=click.Choice(["table", "jsonl", "json", "csv"]), default=None,
+                         help="Output format (default: table on a terminal, jsonl otherwise, or by the "
+                              "extension of -o)."),
+            click.option("-o", "--output", type=FilePath(), default=None, help="Write records to FILE."),
+            click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
+            click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+                         help="Stop after N records."),
+            click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
+                         help="Stop after SECONDS."),
+            click.option("--stats", "show_stats", is_flag=True,
+                         help="Print the summary (frames/s per direction and ID, CRC errors, gaps, "
+                              "slowest replies) on stderr at the end."),
+            click.option("--stats-json", type=FilePath(), default=None, metavar="FILE",
+                         help="Write the summary as JSON to FILE at the end."),
+        ]
+        for o in reversed(opts):
+            f = o(f)
+        return f
+
+    return deco
+
+
+@sniff.command("zk", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@_common("zk")
+@click.option("--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+              help="ECU protocol version assumed until a status ID 6 frame reveals it (default 4).")
+def zk(ports, baud, fmt, output, append, count, duration, show_stats, stats_json, protocol_version):
+    """Sniff a ZK flight-controller <-> ECU link.
+
+    With two receive-only adapters (-p HOST_TX -p ECU_TX) both directions are merged by time into
+    one stream; with one port, control and status frames are told apart as they arrive. Records
+    are 'zk decode' records with 'time', 't' (seconds since the start) and 'dir' (h2d: host to
+    ECU, d2h: ECU to host); status frames decode in the ECU's own protocol version. A gap is a
+    silence in the status stream longer than 3 status periods.
+
+    \b
+    Examples:
+      zkzap sniff zk -p /dev/ttyUSB0 -p /dev/ttyUSB1
+      zkzap sniff zk -p /dev/ttyUSB0 --duration 60 -f csv -o flight.csv --stats
+    """
+    from ..api.sniff import ZkSniffer, check_ports
+    from .zk.decode import columns, summary
+
+    spec = check_ports("zk", _ports(ports, "zk"))
+    sniffer = ZkSniffer(spec, baud, capture=_capture(), protocol_version=protocol_version)
+    cols = ["time", "t", "dir"] + columns()
+    _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json,
+         table=lambda r: summary(r))
+
+
+@sniff.command("zap", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@_common("zap")
+@click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.1, show_default=True,
+              metavar="SECONDS", help="A request that expects an answer and gets none for this long is a "
+                                      "missing reply.")
+def zap(ports, baud, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout):
+    """Sniff a mightyZAP bus (one adapter sees both directions; nothing is sent).
+
+    Every feedback is paired with the request it answers: 'latency_ms', 'request' and 'pairing'
+    (ok, unexpected-id with 'expected_id', or unsolicited: an answer nobody asked for, like the
+    acknowledgements official libraries leave unread in return mode 2). A request that expects
+    an answer (Echo, Load Data, and anything to an ID seen acknowledging writes) and gets none
+    within --reply-timeout gives a record of kind 'missing' with 'waited_ms'.
+
+    \b
+    Examples:
+      zkzap sniff zap -p /dev/ttyUSB0 --stats
+      zkzap sniff zap -p /dev/ttyUSB0 -f csv -o bus.csv --capture bus.pcapng
+    """
+    from ..api.sniff import ZapSniffer, check_ports
+    from ..codec import zap as zapc
+
+    spec = check_ports("zap", _ports(ports, "zap"))
+    sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout)
+    cols = ["time", "t", "dir"] + list(zapc.ZAP_KEYS) + ["frame", "pairing", "request", "expected_id",
+                                                          "latency_ms", "waited_ms"]
+    _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table=_zap_cell)
+
+
+def _zap_cell(rec):
+    kind = rec["kind"]
+    if kind == "missing":
+        return f"no reply to {rec['request']} after {rec['waited_ms']:g} ms"
+    if kind == "command":
+        what = rec["instruction"]
+        if "register" in rec:
+            what += f" {rec['register']}" + (f"={rec['value']}" if "value" in rec else "")
+        return what
+    parts = [",".join(rec["errors"]) or "ok"]
+    if "register" in rec and "value" in rec:
+        parts.append(f"{rec['register']}={rec['value']}")
+    if rec.get("latency_ms") is not None:
+        parts.append(f"{rec['latency_ms']:g} ms")
+    if rec.get("pairing") not in (None, "ok"):
+        parts.append(rec["pairing"] + (f" (asked ID {rec['expected_id']})" if "expected_id" in rec else ""))
+    return "  ".join(parts)
+
+
+def _ports(ports, protocol):
+    if ports:
+        return ports
+    import os
+
+    env = os.environ.get(ENV[protocol]["port"])
+    return [env] if env else []
+
+
+def _capture():
+    from ..link import capture
+
+    req = capture.requested()
+    capture.request(None, "zk")           # the sniffer taps its ports itself, with their directions
+    return req[0] if req else None
+
+
+class LineTable:
+    """Records as aligned text lines on a terminal, one per record as it comes."""
+
+    def __init__(self, stream, cell):
+        self.stream = stream
+        self.cell = cell
+        self.count = 0
+
+    def write_many(self, recs):
+        lines = []
+        for r in recs:
+            lines.append(f"{r['t']:>10.3f}  {r.get('dir') or '?':<3}  {r['kind']:<8}  {r['id']:>3}  {self.cell(r)}")
+        if lines:
+            self.stream.write("\n".join(lines) + "\n")
+            self.stream.flush()
+            self.count += len(lines)
+
+    def close(self):
+        self.stream.flush()
+
+
+def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table):
+    import os
+    import time
+
+    from ..io.term import is_tty
+    from ..io.writers import make_writer
+    from ..link.zk_link import SignalGuard
+
+    if fmt is None and output and output != "-":
+        fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(output)[1].lower(), "jsonl")
+    if stats_json:
+        try:
+            open(stats_json, "a").close()
+        except OSError as e:
+            raise UsageError(f"stats-json: cannot open {stats_json}: {e.strerror}") from None
+    stream, had = open_output(output, append)
+    if fmt is None:
+        fmt = "table" if is_tty(stream) else "jsonl"
+    if fmt == "table":
+        writer = LineTable(stream, table)
+    else:
+        writer = make_writer(fmt, stream, cols, header=not had)
+    live = _live(sniffer) if is_tty(sys.stderr) else None
+    written = 0
+    reason = None
+    try:
+        with sniffer, SignalGuard() as guard:
+            end = None if duration is None else time.monotonic() + duration
+            shown = ", ".join(f"{url} ({role})" if role != "both" else url for url, role in sniffer.ports_spec)
+            click.echo(f"note: sniffing {shown} at {sniffer.baud} baud; nothing is sent", err=True)
+            if live is not None:
+                live.start()
+            while True:
+                recs = sniffer.poll(0.05)
+                if recs:
+                    if count is not None:
+                        recs = recs[:count - written]
+                    writer.write_many(recs)
+                    written += len(recs)
+                if live is not None:
+                    live.refresh()
+                if count is not None and written >= count:
+                    reason = "count"
+                    break
+                if end is not None and time.monotonic() >= end:
+                    reason = "duration"
+                    break
+                if guard.signum is not None:
+                    import signal
+
+                    reason = "interrupted" if guard.signum == signal.SIGINT else "terminated"
+                    break
+            rest = sniffer.drain()
+            if rest and reason != "count":
+                writer.write_many(rest)
+    finally:
+        if live is not None:
+            live.stop()
+        close_output(writer, stream)
+    summary = sniffer.stats.summary(sniffer.elapsed())
+    if show_stats:
+        for line in stats_lines(summary):
+            click.echo(line, err=True)
+    if stats_json:
+        import json
+
+        with open(stats_json, "w", encoding="utf-8") as f:
+            json.dump(summary, f, indent=2)
+            f.write("\n")
+    if reason == "interrupted":
+        raise KeyboardInterrupt
+    if reason == "terminated":
+        from ..errors import TERMINATED, ZkzapError
+
+        raise ZkzapError("terminated (SIGTERM)", TERMINATED)
+
+
+def stats_lines(s) -> list:
+    lines = [f"sniffed {s['duration_s']:g} s: " + ", ".join(
+        f"{d} {n} frames ({s['frames_per_s'][d]:g}/s)" for d, n in s["frames"].items()) if s["frames"]
+        else f"sniffed {s['duration_s']:g} s: no frames"]
+    if s["by_id"]:
+        lines.append("by ID: " + ", ".join(f"{k.replace(':', ' ID ')}: {n}" for k, n in s["by_id"].items()))
+    lines.append(f"CRC errors: {s['crc_errors']} ({s['skipped_bytes']} bytes skipped); gaps: {s['gaps']}"
+                 + (f" (longest {s['longest_gap_s']:g} s)" if s["gaps"] else ""))
+    if "replies" in s:
+        lines.append(f"replies: {s['replies']}" + (f", mean {s['mean_latency_ms']:g} ms" if s["replies"] else "")
+                     + f"; missing {s['missing_replies']}, unexpected ID {s['unexpected_id']}, "
+                       f"unsolicited {s['unsolicited']}")
+        if s["slowest"]:
+            lines.append("slowest: " + ", ".join(f"{x['latency_ms']:g} ms ({x['instruction']} ID {x['id']} "
+                                                 f"at t={x['t']:g})" for x in s["slowest"]))
+    return lines
+
+
+def _live(sniffer):
+    """The live summary on stderr (a terminal): rich, imported only here."""
+    from rich.console import Console
+    from rich.live import Live
+    from rich.text import Text
+
+    console = Console(file=sys.stderr)
+
+    def render():
+        now = sniffer.elapsed() if sniffer.t0 is not None else 0.0
+        s = sniffer.stats.summary(now)
+        rates = sniffer.stats.rates(now)
+        head = "  ".join(f"{d}: {rates.get(d, 0)}/s" for d in sorted(set(s["frames"]) | set(rates), key=str))
+        lines = [f"sniffing {now:.0f} s  {head or 'waiting for frames'}"] + stats_lines(s)[1:]
+        return Text("\n".join(lines), style="dim")
+
+    class _L:
+        def __init__(self):
+            self.live = Live(render(), console=console, refresh_per_second=4, transient=True,
+                             redirect_stdout=False, redirect_stderr=False)
+            self.next = 0.0
+
+        def start(self):
+            self.live.start()
+
+        def refresh(self):
+            import time
+
+            if time.monotonic() >= self.next:
+                self.live.update(render())
+                self.next = time.monotonic() + 0.25
+
+        def stop(self):
+            self.live.stop()
+
+    return _L()

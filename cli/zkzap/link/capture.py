@@ -1,0 +1,103 @@
+"""``--capture FILE.pcapng``: a tap on the port object, so every command that opens a port
+records what crossed it (see :mod:`zkzap.io.pcapng` for the format).
+
+:func:`request` names the capture a command asked for (the shared port options call it);
+:func:`zkzap.link.port.open_port` then wraps the port it opens in a :class:`TappedPort`, which
+writes every chunk read (inbound, device -> host) and written (outbound, host -> device) with
+a microsecond timestamp. Several ports opened by one command share one file (one interface
+each). A failed capture write (disk full) raises :class:`~zkzap.errors.OutputError` from the
+read or write that caused it, after cutting the file back to its last whole block.
+"""
+
+from __future__ import annotations
+
+import time
+
+from ..io.pcapng import INBOUND, OUTBOUND, UNKNOWN, Writer
+
+_requested = None      # (path, protocol) named by the command being run
+_writer = None         # the Writer of that capture, opened with the first port
+
+
+def request(path, protocol: str) -> None:
+    """Capture the ports this process opens from now on to ``path`` (None: stop asking);
+    ``protocol`` ('zk'/'zap') selects the link type."""
+    global _requested
+    finish()
+    _requested = (path, protocol) if path else None
+
+
+def requested():
+    return _requested
+
+
+def writer_for(path, protocol):
+    """The shared Writer for ``path`` (opened now: a bad path is an error before any port use)."""
+    global _writer
+    if _writer is None or _writer.path != path:
+        if _writer is not None:
+            _writer.close()
+        _writer = Writer(path)
+        _writer.open()
+    return _writer
+
+
+def finish() -> None:
+    """Close the capture file (every block is already on disk)."""
+    global _writer
+    if _writer is not None:
+        _writer.close()
+        _writer = None
+
+
+def tap(port, url: str, baud=None, capture=None, direction=None):
+    """Wrap ``port`` when a capture is asked for (``capture``: (path, protocol), else the one
+    :func:`request` named). ``direction`` fixes the direction of everything read (a sniffer's
+    receive-only port on one side of a link); by default reads are inbound, writes outbound."""
+    capture = capture if capture is not None else _requested
+    if not capture:
+        return port
+    path, protocol = capture
+    w = writer_for(path, protocol)
+    if_id = w.interface(protocol, url, baud)
+    return TappedPort(port, w, if_id, INBOUND if direction is None else direction)
+
+
+class TappedPort:
+    """A pyserial port whose reads and writes are recorded; everything else is the port's."""
+
+    __slots__ = ("_port", "_writer", "_if", "_rx_dir")
+
+    def __init__(self, port, writer, if_id, rx_dir=INBOUND):
+        object.__setattr__(self, "_port", port)
+        object.__setattr__(self, "_writer", writer)
+        object.__setattr__(self, "_if", if_id)
+        object.__setattr__(self, "_rx_dir", rx_dir)
+
+    def read(self, size=1):
+        data = self._port.read(size)
+        if data:
+            self._writer.packet(self._if, time.time(), bytes(data), self._rx_dir)
+        return data
+
+    def write(self, data):
+        ts = time.time()
+        n = self._port.write(data)
+        sent = bytes(data) if n is None else bytes(data)[:n]
+        self._writer.packet(self._if, ts, sent, OUTBOUND)
+        return n
+
+    def __getattr__(self, name):
+        return getattr(self._port, name)
+
+    def __setattr__(self, name, value):
+        setattr(self._port, name, value)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._port.close()
+
+
+__all__ = ["request", "requested", "finish", "tap", "TappedPort", "INBOUND", "OUTBOUND", "UNKNOWN"]

@@ -1,0 +1,626 @@
+-- zkzap.lua: Wireshark dissector for zkzap's pcapng captures (zkzap ... --capture FILE).
+-- GENERATED from zkzap's protocol tables by `python -m zkzap.docs all`; do not edit.
+--
+-- Link types: 147 (DLT_USER0) the ZK turbine ECU protocol, 148 (DLT_USER1) mightyZAP IR.
+-- Direction: the pcapng epb_flags (inbound = device -> host, outbound = host -> device);
+-- a capture of unknown direction (a sniffer on one line) is framed as a mixture.
+-- Fields carry zkzap's own keys: zk.rpm, zk.egt_c, zk.engine_state_name, zap.register, ...
+--
+-- Use: wireshark -X lua_script:zkzap.lua capture.pcapng, or copy this file to
+-- ~/.local/lib/wireshark/plugins/ (tshark -X lua_script:zkzap.lua -r capture.pcapng -V).
+
+local LINKTYPE_ZK, LINKTYPE_ZAP = 147, 148
+local ZK_DEFAULT_VERSION = 4
+local ZK_CONTROL = {[0] = {name = "keepalive", fields = {}}, [1] = {name = "control", fields = {{key = "sw", parts = {{1, 3, 2}}, offset = 0, decimals = 0, names = {[0] = "pwm", [1] = "stop", [2] = "standby", [3] = "run"}, name_key = "state", float = false}, {key = "throttle_pct", parts = {{1, 1, 0}, {2, 7, 0}}, offset = 0, decimals = 1, scale = 0.1, float = true}}}, [2] = {name = "action", fields = {{key = "param", parts = {{2, 7, 0}}, offset = 0, decimals = 0, names = {[1] = "drain-oil", [2] = "test-glowplug", [3] = "test-main-valve", [4] = "test-ignition-valve", [5] = "test-pump", [6] = "test-starter", [7] = "rate-20hz", [8] = "rate-50hz", [9] = "rate-100hz", [10] = "reset-fuel", [11] = "zero-thrust", [12] = "pump-on", [13] = "pump-off"}, name_key = "action", float = false}}}, [3] = {name = "unlock", fields = {}}, [4] = {name = "ignition-voltage", fields = {{key = "ignition_voltage_v", parts = {{2, 7, 0}}, offset = 0, decimals = 2, scale = 0.02, float = true}}}, [5] = {name = "accel-curve", fields = {{key = "accel_curve", parts = {{2, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}}}, [6] = {name = "mode", fields = {{key = "rpm_factor", parts = {{2, 4, 2}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "sw", parts = {{2, 1, 0}}, offset = 0, decimals = 0, names = {[0] = "none", [1] = "stop", [2] = "standby", [3] = "run"}, name_key = "state", float = false}}}, [7] = {name = "rpm", fields = {{key = "target_rpm", parts = {{1, 3, 0}, {2, 7, 0}}, offset = 0, decimals = 0, raw_key = "rpm_value", cscale = {param = "rpm_factor", factor = 10}, float = false}}}, [8] = {name = "pressure", fields = {{key = "pressure_hpa", parts = {{1, 1, 0}, {2, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}}}}
+local ZK_STATUS = {[1] = {name = "engine", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "engine_state", parts = {{3, 4, 0}}, offset = 0, decimals = 0, names = {[0] = "stop", [1] = "standby", [2] = "ignition-min-throttle", [3] = "ignition", [4] = "preheat", [5] = "fuel-ramp", [6] = "learn-max-throttle", [7] = "learn-min-throttle", [8] = "learn-idle", [9] = "running-min-throttle", [10] = "running-pump-limit", [11] = "running", [12] = "cooling", [13] = "restart", [14] = "test-glowplug", [15] = "test-main-valve", [16] = "test-ignition-valve", [17] = "test-pump", [18] = "test-starter", [19] = "fuel-exhaust-air"}, name_key = "engine_state_name", float = false}, {key = "error_code", parts = {{4, 1, 0}, {3, 7, 5}}, offset = 0, decimals = 0, names = {[0] = "none", [1] = "timeout", [2] = "voltage-low", [3] = "glowplug-failure", [4] = "pump-failure", [5] = "starter-failure", [6] = "rpm-low", [7] = "rpm-instability", [8] = "egt-high", [9] = "egt-low", [10] = "egt-sensor-failure", [11] = "ignition-valve-failure", [12] = "main-valve-failure", [13] = "loss-of-control-signal", [14] = "starter-controller-overheat", [15] = "pump-controller-overheat", [16] = "clutch-failure", [17] = "current-overload", [18] = "engine-offline"}, name_key = "error_name", float = false}, {key = "egt_c", parts = {{4, 4, 2}, {5, 7, 0}}, offset = -50, decimals = 0, scale = 1, float = false}, {key = "sw_state", parts = {{4, 6, 5}}, offset = 0, decimals = 0, names = {[0] = "stop", [1] = "standby", [2] = "run"}, name_key = "sw_state_name", float = false}}}, [2] = {name = "voltages", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "radio_voltage_v", parts = {{3, 7, 0}}, offset = 0, decimals = 1, vscale = {steps = {{3, 0.1}}, default = 0.2}, float = true}, {key = "power_voltage_v", parts = {{4, 7, 0}}, offset = 0, decimals = 1, vscale = {steps = {{3, 0.1}}, default = 0.2}, float = true}, {key = "pump_voltage_v", parts = {{5, 7, 0}}, offset = 0, decimals = 1, vscale = {steps = {{3, 0.1}}, default = 0.2}, float = true}}}, [3] = {name = "throttle", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "throttle_pct", parts = {{3, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "pressure_pa", parts = {{5, 7, 0}, {4, 7, 0}}, offset = 0, decimals = 0, scale = 2, float = false}}}, [4] = {name = "load", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "current_a", parts = {{4, 0, 0}, {3, 7, 0}}, offset = 0, decimals = 1, scale = 0.1, float = true}, {key = "thrust_kg", parts = {{4, 7, 1}, {5, 7, 0}}, offset = 0, decimals = 1, since = 2, scale = 0.1, float = true}}}, [5] = {name = "ignition", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "ignition_pump_voltage_v", parts = {{3, 7, 0}}, offset = 0, decimals = 2, scale = 0.02, float = true}, {key = "curve_inc", parts = {{4, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "curve_dec", parts = {{5, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}}}, [6] = {name = "config", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "max_rpm", parts = {{3, 7, 0}}, offset = 0, decimals = 0, scale = 1000, float = false}, {key = "max_pump_voltage_v", parts = {{4, 7, 0}}, offset = 0, decimals = 1, vscale = {steps = {{3, 0.1}}, default = 0.2}, float = true}, {key = "protocol_version", parts = {{5, 7, 2}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "status_rate_hz", parts = {{5, 1, 0}}, offset = 0, decimals = 0, values = {[0] = 20, [1] = 50, [2] = 100}, float = false}}}, [7] = {name = "fuel", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "fuel_flow_l_min", parts = {{4, 1, 0}, {3, 7, 0}}, offset = 0, decimals = 2, scale = 0.01, float = true}, {key = "fuel_used_l", parts = {{5, 7, 0}, {4, 7, 2}}, offset = 0, decimals = 1, since = 2, scale = 0.1, float = true}}}, [8] = {name = "setup", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "idle_rpm", parts = {{3, 7, 0}}, offset = 0, decimals = 0, scale = 1000, float = false}, {key = "esr", parts = {{4, 5, 5}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "scl", parts = {{4, 4, 4}}, offset = 0, decimals = 0, scale = 1, float = false}, {key = "startup_time_s", parts = {{4, 3, 0}, {5, 7, 0}}, offset = 0, decimals = 1, scale = 0.1, float = true}}}, [9] = {name = "ecu", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "ecu_temp_c", parts = {{3, 7, 0}}, offset = -50, decimals = 0, since = 5, scale = 1, float = false}, {key = "prop_rpm", parts = {{5, 7, 0}, {4, 7, 0}}, offset = 0, decimals = 0, since = 6, scale = 1, float = false}}}, [10] = {name = "pump", fields = {{key = "rpm", parts = {{2, 7, 0}, {1, 7, 0}}, offset = 0, decimals = 0, scale = 10, float = false}, {key = "fuel_pump_rpm", parts = {{5, 7, 0}, {4, 7, 0}}, offset = 0, decimals = 0, scale = 1, float = false}}}}
+local ZK_RESERVED = {[0] = {[0] = 0, [1] = 15, [2] = 255, [3] = 0}, [1] = {[0] = 0, [1] = 0, [2] = 0, [3] = 0}, [2] = {[0] = 0, [1] = 15, [2] = 0, [3] = 0}, [3] = {[0] = 0, [1] = 15, [2] = 255, [3] = 0}, [4] = {[0] = 0, [1] = 15, [2] = 0, [3] = 0}, [5] = {[0] = 0, [1] = 15, [2] = 0, [3] = 0}, [6] = {[0] = 0, [1] = 15, [2] = 224, [3] = 0}, [7] = {[0] = 0, [1] = 0, [2] = 0, [3] = 0}, [8] = {[0] = 0, [1] = 12, [2] = 0, [3] = 0}}
+local ZK_FIELD_TYPES = {sw = "uint32", state = "string", throttle_pct = "double", param = "uint32", action = "string", ignition_voltage_v = "double", accel_curve = "uint32", rpm_factor = "uint32", target_rpm = "uint32", rpm_value = "uint32", pressure_hpa = "uint32", rpm = "uint32", engine_state = "uint32", engine_state_name = "string", error_code = "uint32", error_name = "string", egt_c = "int32", sw_state = "uint32", sw_state_name = "string", radio_voltage_v = "double", power_voltage_v = "double", pump_voltage_v = "double", pressure_pa = "uint32", current_a = "double", thrust_kg = "double", ignition_pump_voltage_v = "double", curve_inc = "uint32", curve_dec = "uint32", max_rpm = "uint32", max_pump_voltage_v = "double", protocol_version = "uint32", status_rate_hz = "uint32", fuel_flow_l_min = "double", fuel_used_l = "double", idle_rpm = "uint32", esr = "uint32", scl = "uint32", startup_time_s = "double", ecu_temp_c = "int32", prop_rpm = "uint32", fuel_pump_rpm = "uint32"}
+local ZK_KEY_ORDER = {"rpm", "engine_state", "engine_state_name", "error_code", "error_name", "egt_c", "sw_state", "sw_state_name", "radio_voltage_v", "power_voltage_v", "pump_voltage_v", "throttle_pct", "pressure_pa", "current_a", "thrust_kg", "ignition_pump_voltage_v", "curve_inc", "curve_dec", "max_rpm", "max_pump_voltage_v", "protocol_version", "status_rate_hz", "fuel_flow_l_min", "fuel_used_l", "idle_rpm", "esr", "scl", "startup_time_s", "ecu_temp_c", "prop_rpm", "fuel_pump_rpm", "sw", "state", "param", "action", "ignition_voltage_v", "accel_curve", "rpm_factor", "rpm_value", "target_rpm", "pressure_hpa"}
+local ZAP_INSTRUCTIONS = {[241] = {name = "echo", title = "Echo"}, [242] = {name = "load", title = "Load Data"}, [243] = {name = "store", title = "Store Data"}, [244] = {name = "send", title = "Send Data"}, [245] = {name = "execute", title = "Execution"}, [246] = {name = "factory-reset", title = "Factory Reset"}, [248] = {name = "restart", title = "Restart"}, [115] = {name = "sync-move", title = "Symmetric Store"}}
+local ZAP_REGISTERS = {[0] = {name = "model-number", size = 2, scale = 1, unit = ""}, [2] = {name = "firmware-version", size = 1, scale = 1, unit = ""}, [3] = {name = "id", size = 1, scale = 1, unit = ""}, [4] = {name = "baud-rate", size = 1, scale = 1, unit = ""}, [6] = {name = "short-stroke-limit", size = 2, scale = 1, unit = ""}, [8] = {name = "long-stroke-limit", size = 2, scale = 1, unit = ""}, [10] = {name = "protocol-type", size = 1, scale = 1, unit = ""}, [12] = {name = "lowest-limit-voltage", size = 1, scale = 0.1, unit = "V"}, [13] = {name = "highest-limit-voltage", size = 1, scale = 0.1, unit = "V"}, [14] = {name = "motor-operating-rate-limit", size = 2, scale = 1, unit = ""}, [16] = {name = "feedback-return-mode", size = 1, scale = 1, unit = ""}, [17] = {name = "alarm-led", size = 1, scale = 1, unit = ""}, [18] = {name = "alarm-shutdown", size = 1, scale = 1, unit = ""}, [19] = {name = "start-compliance-margin", size = 1, scale = 1, unit = ""}, [20] = {name = "end-compliance-margin", size = 1, scale = 1, unit = ""}, [21] = {name = "speed-limit", size = 2, scale = 1, unit = ""}, [24] = {name = "calibration-short-stroke", size = 2, scale = 1, unit = ""}, [26] = {name = "calibration-long-stroke", size = 2, scale = 1, unit = ""}, [33] = {name = "acceleration", size = 1, scale = 1, unit = ""}, [34] = {name = "deceleration", size = 1, scale = 1, unit = ""}, [35] = {name = "current-i-gain", size = 1, scale = 1, unit = ""}, [36] = {name = "current-p-gain", size = 1, scale = 1, unit = ""}, [37] = {name = "speed-d-gain", size = 1, scale = 1, unit = ""}, [38] = {name = "speed-i-gain", size = 1, scale = 1, unit = ""}, [39] = {name = "speed-p-gain", size = 1, scale = 1, unit = ""}, [46] = {name = "min-position-calibration", size = 1, scale = 1, unit = ""}, [47] = {name = "max-position-calibration", size = 1, scale = 1, unit = ""}, [52] = {name = "current-limit", size = 2, scale = 1, unit = "mA"}, [128] = {name = "force-on-off", size = 1, scale = 1, unit = ""}, [129] = {name = "led", size = 1, scale = 1, unit = ""}, [134] = {name = "goal-position", size = 2, scale = 1, unit = ""}, [136] = {name = "goal-speed", size = 2, scale = 1, unit = ""}, [138] = {name = "goal-current", size = 2, scale = 1, unit = "mA"}, [140] = {name = "present-position", size = 2, scale = 1, unit = ""}, [142] = {name = "present-current", size = 2, scale = 1, unit = "mA"}, [144] = {name = "present-motor-operating-rate", size = 2, scale = 1, unit = ""}, [146] = {name = "present-voltage", size = 1, scale = 0.1, unit = "V"}, [150] = {name = "moving", size = 1, scale = 1, unit = ""}}
+local ZAP_ERROR_BITS = {[5] = "overload", [0] = "input-voltage"}
+local ZAP_BROADCAST = 254
+
+-- ---------------------------------------------------------------------------------------------
+-- runtime
+
+local zk_proto = Proto("zk", "ZK turbine ECU protocol (zkzap)")
+local zap_proto = Proto("zap", "mightyZAP IR protocol (zkzap)")
+
+local f_dir = Field.new("frame.packet_flags_direction")
+local f_if = Field.new("frame.interface_id")
+
+local ZK_F = {
+  frame = ProtoField.bytes("zk.frame", "ZK frame", base.SPACE),
+  kind = ProtoField.string("zk.kind", "kind"),
+  id = ProtoField.uint8("zk.id", "id"),
+  command = ProtoField.string("zk.command", "command"),
+  payload = ProtoField.string("zk.payload", "payload"),
+  reserved = ProtoField.string("zk.reserved", "reserved"),
+  dir = ProtoField.string("zk.dir", "dir"),
+  crc = ProtoField.uint8("zk.crc", "crc", base.HEX),
+  crc_ok = ProtoField.bool("zk.crc_ok", "crc_ok"),
+  bad = ProtoField.bytes("zk.bad", "bad frame", base.SPACE),
+}
+for key, kind in pairs(ZK_FIELD_TYPES) do
+  if ZK_F[key] == nil then
+    if kind == "double" then ZK_F[key] = ProtoField.double("zk." .. key, key)
+    elseif kind == "int32" then ZK_F[key] = ProtoField.int32("zk." .. key, key)
+    elseif kind == "string" then ZK_F[key] = ProtoField.string("zk." .. key, key)
+    else ZK_F[key] = ProtoField.uint32("zk." .. key, key) end
+  end
+end
+local zk_fields = {}
+for _, f in pairs(ZK_F) do zk_fields[#zk_fields + 1] = f end
+zk_proto.fields = zk_fields
+
+local ZAP_F = {
+  frame = ProtoField.bytes("zap.frame", "mightyZAP packet", base.SPACE),
+  kind = ProtoField.string("zap.kind", "kind"),
+  id = ProtoField.uint8("zap.id", "id"),
+  instruction = ProtoField.string("zap.instruction", "instruction"),
+  code = ProtoField.uint8("zap.code", "code", base.HEX),
+  error = ProtoField.uint8("zap.error", "error", base.HEX),
+  errors = ProtoField.string("zap.errors", "errors"),
+  params = ProtoField.string("zap.params", "params"),
+  address = ProtoField.uint8("zap.address", "address", base.HEX),
+  register = ProtoField.string("zap.register", "register"),
+  length = ProtoField.uint8("zap.length", "length"),
+  value = ProtoField.uint32("zap.value", "value"),
+  physical = ProtoField.double("zap.physical", "physical"),
+  unit = ProtoField.string("zap.unit", "unit"),
+  values = ProtoField.string("zap.values", "values"),
+  targets = ProtoField.string("zap.targets", "targets"),
+  reset_id = ProtoField.bool("zap.reset_id", "reset_id"),
+  reset_baud = ProtoField.bool("zap.reset_baud", "reset_baud"),
+  malformed = ProtoField.string("zap.malformed", "malformed"),
+  dir = ProtoField.string("zap.dir", "dir"),
+  checksum = ProtoField.uint8("zap.checksum", "checksum", base.HEX),
+  checksum_ok = ProtoField.bool("zap.checksum_ok", "checksum_ok"),
+  request_in = ProtoField.framenum("zap.request_in", "request in", base.NONE, frametype.REQUEST),
+  response_in = ProtoField.framenum("zap.response_in", "response in", base.NONE, frametype.RESPONSE),
+  latency_ms = ProtoField.double("zap.latency_ms", "latency_ms"),
+  bad = ProtoField.bytes("zap.bad", "bad packet", base.SPACE),
+}
+local zap_fields = {}
+for _, f in pairs(ZAP_F) do zap_fields[#zap_fields + 1] = f end
+zap_proto.fields = zap_fields
+
+local ex_zk_crc = ProtoExpert.new("zk.crc_bad", "ZK frame CRC mismatch", expert.group.CHECKSUM, expert.severity.WARN)
+local ex_zap_chk = ProtoExpert.new("zap.checksum_bad", "mightyZAP checksum mismatch", expert.group.CHECKSUM,
+                                   expert.severity.WARN)
+local ex_zap_nopair = ProtoExpert.new("zap.unpaired", "feedback without a request from this ID",
+                                      expert.group.SEQUENCE, expert.severity.NOTE)
+zk_proto.experts = {ex_zk_crc}
+zap_proto.experts = {ex_zap_chk, ex_zap_nopair}
+
+-- CRC-8/MAXIM-DOW (reflected polynomial 0x8C)
+local CRC = {}
+for i = 0, 255 do
+  local c = i
+  for _ = 1, 8 do
+    if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), 0x8C) else c = bit32.rshift(c, 1) end
+  end
+  CRC[i] = c
+end
+local function crc8(b, first, last)
+  local c = 0
+  for i = first, last do c = CRC[bit32.bxor(c, b[i])] end
+  return c
+end
+
+local function hex(b, first, last)
+  local t = {}
+  for i = first, last do t[#t + 1] = string.format("%02X", b[i]) end
+  return table.concat(t, " ")
+end
+
+local function round(x, d)
+  local m = 10 ^ d
+  local v = x * m
+  if v >= 0 then return math.floor(v + 0.5) / m end
+  return -math.floor(-v + 0.5) / m
+end
+
+local function raw_of(b, parts)   -- b: 0-based frame bytes
+  local v = 0
+  for _, p in ipairs(parts) do
+    local width = p[2] - p[3] + 1
+    v = v * 2 ^ width + bit32.extract(b[p[1]], p[3], width)
+  end
+  return v
+end
+
+-- state of the first pass, by packet number: what each packet completed
+local results = {}
+local streams = {}
+
+local function reset_state()
+  results = {}
+  streams = {}
+  ZK_STATE = {version = nil, known = nil, source = "default", rpm_factor = nil}
+  ZAP_STATE = {load = {}, pending = {}, response_of = {}}
+end
+reset_state()
+function zk_proto.init() reset_state() end
+function zap_proto.init() reset_state() end
+
+local function direction(pinfo)
+  local d = f_dir()
+  if d ~= nil then
+    local v = d.value
+    if v == 1 then return 1 end
+    if v == 2 then return 2 end
+  end
+  return 0
+end
+
+local function stream_of(prefix, pinfo)
+  local i = f_if()
+  local key = prefix .. ":" .. tostring(i and i.value or 0) .. ":" .. direction(pinfo)
+  local s = streams[key]
+  if s == nil then
+    s = {buf = {}, n = 0}
+    streams[key] = s
+  end
+  return s
+end
+
+-- append this packet's bytes to the stream; returns the 1-based buffer and the index of the
+-- packet's first byte in it
+local function feed(s, tvb)
+  local buf = s.buf
+  local start = #buf + 1
+  for i = 0, tvb:len() - 1 do buf[#buf + 1] = tvb(i, 1):uint() end
+  return buf, start
+end
+
+local function keep_from(s, pos)
+  local buf, out = s.buf, {}
+  for i = pos, #buf do out[#out + 1] = buf[i] end
+  s.buf = out
+end
+
+local function frame_bytes(buf, p, n)   -- 0-based copy of buf[p .. p+n-1]
+  local b = {}
+  for i = 0, n - 1 do b[i] = buf[p + i] end
+  return b
+end
+
+-- ZK ------------------------------------------------------------------------------------------
+
+local function zk_decode_fields(fields, b, ctx, known, out)
+  for _, f in ipairs(fields) do
+    local r = raw_of(b, f.parts)
+    if f.since ~= nil and known ~= nil and known < f.since then
+      out[#out + 1] = {f.key, nil}
+      if f.name_key then out[#out + 1] = {f.name_key, nil} end
+    else
+      if f.raw_key then out[#out + 1] = {f.raw_key, r} end
+      if f.values then
+        out[#out + 1] = {f.key, f.values[r]}
+      elseif f.names then
+        out[#out + 1] = {f.key, r}
+        out[#out + 1] = {f.name_key, f.names[r] or ("undocumented-" .. r)}
+      else
+        local s = f.scale
+        if f.vscale then
+          s = f.vscale.default
+          for _, step in ipairs(f.vscale.steps) do
+            if ctx.version ~= nil and ctx.version <= step[1] then s = step[2]; break end
+          end
+        elseif f.cscale then
+          local p = ctx[f.cscale.param]
+          if p == nil or p == 0 then s = nil else s = f.cscale.factor * p end
+        end
+        if s == nil then
+          out[#out + 1] = {f.key, nil}
+        else
+          local v = r * s + f.offset
+          if f.float then v = round(v, f.decimals) end
+          out[#out + 1] = {f.key, v}
+        end
+      end
+    end
+  end
+end
+
+local function zk_decode(b, n)
+  local st = ZK_STATE
+  local out = {}
+  if n == 7 then
+    local sid = b[0] % 16
+    out[#out + 1] = {"kind", "status"}
+    out[#out + 1] = {"id", sid}
+    local frame = ZK_STATUS[sid]
+    if frame == nil then
+      out[#out + 1] = {"rpm", (b[2] * 256 + b[1]) * 10}
+      out[#out + 1] = {"payload", hex(b, 3, 5)}
+      return out
+    end
+    local version, known = st.version or ZK_DEFAULT_VERSION, st.known
+    if sid == 6 then
+      version = bit32.rshift(b[5], 2)
+      known = version
+      st.version, st.known, st.source = version, version, "frame"
+    end
+    zk_decode_fields(frame.fields, b, {version = version}, known, out)
+    return out
+  end
+  local cid = bit32.rshift(b[1], 4)
+  out[#out + 1] = {"kind", "control"}
+  out[#out + 1] = {"id", cid}
+  local cmd = ZK_CONTROL[cid]
+  if cmd == nil then
+    out[#out + 1] = {"command", nil}
+    out[#out + 1] = {"payload", string.format("%X%02X", b[1] % 16, b[2])}
+    return out
+  end
+  out[#out + 1] = {"command", cmd.name}
+  zk_decode_fields(cmd.fields, b, {rpm_factor = st.rpm_factor}, nil, out)
+  if cid == 6 then
+    for _, kv in ipairs(out) do if kv[1] == "rpm_factor" then st.rpm_factor = kv[2] end end
+  end
+  local res = {}
+  for byte, mask in pairs(ZK_RESERVED[cid] or {}) do
+    local v = bit32.band(b[byte], mask)
+    if v ~= 0 then res[#res + 1] = {byte, string.format("b%d=0x%02x", byte, v)} end
+  end
+  if #res > 0 then
+    table.sort(res, function(x, y) return x[1] < y[1] end)
+    local t = {}
+    for _, x in ipairs(res) do t[#t + 1] = x[2] end
+    out[#out + 1] = {"reserved", table.concat(t, " ")}
+  end
+  return out
+end
+
+-- scan a ZK stream: complete frames (and CRC failures at frame boundaries)
+local function zk_scan(buf, dir)
+  local want_control = dir ~= 1
+  local want_status = dir ~= 2
+  local found, i, n, aligned = {}, 1, #buf, true
+  while i <= n do
+    local h = buf[i]
+    local need = nil
+    if want_control and h == 0xFF then need = 4
+    elseif want_status and h >= 0xF1 and h <= 0xFE then need = 7 end
+    if need ~= nil and i + need - 1 > n then break end      -- wait for the rest
+    local ok = false
+    if need == 4 then
+      ok = crc8(buf, i + 1, i + 2) == buf[i + 3] and bit32.rshift(buf[i + 1], 4) <= 8
+    elseif need == 7 then
+      ok = crc8(buf, i, i + 5) == buf[i + 6]
+    end
+    if ok then
+      found[#found + 1] = {pos = i, len = need, ok = true}
+      i = i + need
+      aligned = true
+    else
+      if need ~= nil and aligned then
+        local expected = need == 4 and crc8(buf, i + 1, i + 2) or crc8(buf, i, i + 5)
+        found[#found + 1] = {pos = i, len = need, ok = false, expected = expected}
+      end
+      aligned = false
+      i = i + 1
+    end
+  end
+  return found, i
+end
+
+local ZK_NAMES = {[0] = "keepalive"}
+local function zk_summary(values)
+  local kind, id, extra = nil, nil, nil
+  for _, kv in ipairs(values) do
+    if kv[1] == "kind" then kind = kv[2] elseif kv[1] == "id" then id = kv[2]
+    elseif kv[1] == "command" then extra = kv[2] end
+  end
+  if kind == "control" then return string.format("control ID %d %s", id, extra or "?") end
+  local st = ZK_STATUS[id]
+  return string.format("status ID %d %s", id, st and st.name or "?")
+end
+
+function zk_proto.dissector(tvb, pinfo, tree)
+  pinfo.cols.protocol = "ZK"
+  local res = results[pinfo.number]
+  if res == nil then
+    res = {}
+    local dir = direction(pinfo)
+    local s = stream_of("zk", pinfo)
+    local buf, start = feed(s, tvb)
+    local found, rest = zk_scan(buf, dir)
+    for _, fr in ipairs(found) do
+      local b = frame_bytes(buf, fr.pos, fr.len)
+      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
+                    offset = fr.pos >= start and fr.pos - start or nil}
+      if fr.ok then item.values = zk_decode(b, fr.len) end
+      item.dir = (fr.len == 4) and "h2d" or "d2h"
+      res[#res + 1] = item
+    end
+    keep_from(s, rest)
+    results[pinfo.number] = res
+  end
+  local info = {}
+  for _, item in ipairs(res) do
+    local range
+    if item.offset ~= nil then
+      range = tvb(item.offset, item.len)
+    else
+      local hexs = {}
+      for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
+      range = ByteArray.new(table.concat(hexs, " ")):tvb("reassembled ZK frame")()
+    end
+    if item.ok then
+      local t = tree:add(zk_proto, range, "ZK " .. zk_summary(item.values))
+      t:add(ZK_F.frame, range)
+      t:add(ZK_F.dir, item.dir)
+      for _, kv in ipairs(item.values) do
+        local f = ZK_F[kv[1]]
+        if f ~= nil and kv[2] ~= nil then t:add(f, kv[2]) end
+      end
+      t:add(ZK_F.crc, item.bytes[item.len - 1])
+      t:add(ZK_F.crc_ok, true)
+      info[#info + 1] = zk_summary(item.values)
+    else
+      local t = tree:add(zk_proto, range, "bad ZK frame")
+      t:add(ZK_F.bad, range)
+      t:add(ZK_F.crc_ok, false)
+      t:add_proto_expert_info(ex_zk_crc, string.format("CRC mismatch: expected %02X, found %02X",
+                                                        item.expected, item.bytes[item.len - 1]))
+      info[#info + 1] = "bad CRC"
+    end
+  end
+  pinfo.cols.info = (#info > 0) and table.concat(info, "; ") or "(part of a frame)"
+  return tvb:len()
+end
+
+-- mightyZAP -----------------------------------------------------------------------------------
+
+local function zap_register_values(address, data)   -- data: 1-based list
+  local out, i = {}, 1
+  while i <= #data do
+    local addr = address + i - 1
+    local reg = ZAP_REGISTERS[addr]
+    if reg ~= nil and i + reg.size - 1 <= #data then
+      local raw = 0
+      for k = reg.size - 1, 0, -1 do raw = raw * 256 + data[i + k] end
+      out[#out + 1] = {reg = reg, name = reg.name, raw = raw}
+      i = i + reg.size
+    else
+      local name = reg == nil and string.format("0x%02x", addr) or (reg.name .. "(partial)")
+      out[#out + 1] = {name = name, raw = data[i], reg = {scale = 1, unit = ""}}
+      i = i + 1
+    end
+  end
+  return out
+end
+
+local function zap_with_register(out, address, data)
+  local values = zap_register_values(address, data)
+  out[#out + 1] = {"address", address}
+  if #values == 1 then
+    local v = values[1]
+    out[#out + 1] = {"register", v.name}
+    out[#out + 1] = {"value", v.raw}
+    if v.reg.scale ~= 1 then
+      out[#out + 1] = {"physical", round(v.raw * v.reg.scale, 3)}
+      out[#out + 1] = {"unit", v.reg.unit}
+    end
+  else
+    local names, kv = {}, {}
+    for _, v in ipairs(values) do
+      names[#names + 1] = v.name
+      kv[#kv + 1] = v.name .. "=" .. v.raw
+    end
+    out[#out + 1] = {"register", table.concat(names, ",")}
+    out[#out + 1] = {"values", table.concat(kv, ";")}
+  end
+end
+
+local function zap_decode(b, n, request)
+  local ident, code = b[3], b[5]
+  local params = {}
+  for i = 6, n - 2 do params[#params + 1] = b[i] end
+  local phex = hex(b, 6, n - 2)
+  local out = {}
+  local ins = ZAP_INSTRUCTIONS[code]
+  if ins ~= nil then
+    out[#out + 1] = {"kind", "command"}
+    out[#out + 1] = {"id", ident}
+    out[#out + 1] = {"instruction", ins.name}
+    out[#out + 1] = {"code", code}
+    out[#out + 1] = {"params", phex}
+    if code == 0xF2 and #params == 2 then
+      local reg = ZAP_REGISTERS[params[1]]
+      out[#out + 1] = {"address", params[1]}
+      out[#out + 1] = {"register", reg and reg.name or string.format("0x%02x", params[1])}
+      out[#out + 1] = {"length", params[2]}
+    elseif (code == 0xF3 or code == 0xF4) and #params >= 2 then
+      local data = {}
+      for i = 2, #params do data[#data + 1] = params[i] end
+      zap_with_register(out, params[1], data)
+    elseif code == 0xF6 and #params == 1 then
+      out[#out + 1] = {"reset_id", bit32.band(params[1], 1) ~= 0}
+      out[#out + 1] = {"reset_baud", bit32.band(params[1], 2) ~= 0}
+    elseif code == 0x73 and #params >= 2 then
+      local addr, length = params[1], params[2]
+      local reg = ZAP_REGISTERS[addr]
+      out[#out + 1] = {"address", addr}
+      out[#out + 1] = {"register", reg and reg.name or string.format("0x%02x", addr)}
+      out[#out + 1] = {"length", length}
+      local body = #params - 2
+      local step = 1 + length
+      if length > 0 and body % step == 0 then
+        local t = {}
+        for j = 3, #params, step do
+          local v = 0
+          for k = step - 1, 1, -1 do v = v * 256 + params[j + k] end
+          t[#t + 1] = params[j] .. "=" .. v
+        end
+        out[#out + 1] = {"targets", table.concat(t, ";")}
+      else
+        out[#out + 1] = {"malformed", string.format("%d data bytes are not a multiple of %d", body, step)}
+      end
+    end
+    return out
+  end
+  out[#out + 1] = {"kind", "feedback"}
+  out[#out + 1] = {"id", ident}
+  out[#out + 1] = {"error", code}
+  local names = {}
+  for bitno, name in pairs(ZAP_ERROR_BITS) do
+    if bit32.band(code, 2 ^ bitno) ~= 0 then names[#names + 1] = {bitno, name} end
+  end
+  table.sort(names, function(x, y) return x[1] > y[1] end)     -- zkzap's order: overload, input-voltage
+  local t = {}
+  for _, x in ipairs(names) do t[#t + 1] = x[2] end
+  local other = bit32.band(code, bit32.bnot(0x21))
+  if other ~= 0 then t[#t + 1] = string.format("undocumented-0x%02x", other) end
+  out[#out + 1] = {"errors", table.concat(t, ",")}
+  out[#out + 1] = {"params", phex}
+  if request ~= nil and #params > 0 and request[5] == 0xF2 and request.n == 9 then
+    zap_with_register(out, request[6], params)
+  elseif (#params == 1 or #params == 2) and request == nil then
+    local v = 0
+    for k = #params, 1, -1 do v = v * 256 + params[k] end
+    out[#out + 1] = {"value", v}
+  end
+  return out
+end
+
+local function zap_scan(buf)
+  local found, i, n, aligned = {}, 1, #buf, true
+  while i <= n do
+    if buf[i] == 0xFF then
+      -- the header is the last three FFs of a run
+      local p = i
+      while p + 3 <= n and buf[p + 3] == 0xFF do p = p + 1 end
+      if p + 4 > n then break end                          -- header, ID or SIZE still to come
+      if buf[p + 1] == 0xFF and buf[p + 2] == 0xFF and buf[p + 3] ~= 0xFF and buf[p + 4] >= 2 then
+        local len = buf[p + 4] + 5
+        if p + len - 1 > n then break end
+        local sum = 0
+        for k = p + 3, p + len - 2 do sum = sum + buf[k] end
+        local chk = 0xFF - (sum % 256)
+        if chk == buf[p + len - 1] then
+          if p > i then aligned = false end
+          found[#found + 1] = {pos = p, len = len, ok = true}
+          i = p + len
+          aligned = true
+        else
+          if aligned then found[#found + 1] = {pos = p, len = len, ok = false, expected = chk} end
+          aligned = false
+          i = p + 1
+        end
+      elseif p + 2 > n then
+        break
+      else
+        aligned = false
+        i = i + 1
+      end
+    else
+      aligned = false
+      i = i + 1
+    end
+  end
+  return found, i
+end
+
+function zap_proto.dissector(tvb, pinfo, tree)
+  pinfo.cols.protocol = "mightyZAP"
+  local res = results[pinfo.number]
+  local st = ZAP_STATE
+  if res == nil then
+    res = {}
+    local dir = direction(pinfo)
+    local s = stream_of("zap", pinfo)
+    local buf, start = feed(s, tvb)
+    local found, rest = zap_scan(buf)
+    for _, fr in ipairs(found) do
+      local b = frame_bytes(buf, fr.pos, fr.len)
+      b.n = fr.len
+      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
+                    offset = fr.pos >= start and fr.pos - start or nil}
+      if fr.ok then
+        local ident, code = b[3], b[5]
+        if ZAP_INSTRUCTIONS[code] ~= nil then
+          item.values = zap_decode(b, fr.len, nil)
+          if code == 0xF2 then st.load[ident] = b else st.load[ident] = nil end
+          if dir ~= 1 and ident ~= ZAP_BROADCAST then
+            st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
+          end
+          item.dir = "h2d"
+        else
+          local req = st.load[ident]
+          st.load[ident] = nil
+          item.values = zap_decode(b, fr.len, req)
+          local p = st.pending[ident]
+          st.pending[ident] = nil
+          if p ~= nil then
+            item.request_in = p.num
+            item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+            st.response_of[p.num] = pinfo.number
+          end
+          item.dir = "d2h"
+        end
+      end
+      res[#res + 1] = item
+    end
+    keep_from(s, rest)
+    results[pinfo.number] = res
+  end
+  local info = {}
+  for _, item in ipairs(res) do
+    local range
+    if item.offset ~= nil then
+      range = tvb(item.offset, item.len)
+    else
+      local hexs = {}
+      for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
+      range = ByteArray.new(table.concat(hexs, " ")):tvb("reassembled mightyZAP packet")()
+    end
+    if item.ok then
+      local summary
+      local v = {}
+      for _, kv in ipairs(item.values) do v[kv[1]] = kv[2] end
+      if v.kind == "command" then
+        summary = string.format("%s to ID %d", v.instruction, v.id)
+      else
+        summary = string.format("feedback from ID %d%s", v.id, (v.errors ~= "" and (" (" .. v.errors .. ")") or ""))
+      end
+      if v.register ~= nil then summary = summary .. " " .. v.register end
+      local t = tree:add(zap_proto, range, "mightyZAP " .. summary)
+      t:add(ZAP_F.frame, range)
+      t:add(ZAP_F.dir, item.dir)
+      for _, kv in ipairs(item.values) do
+        local f = ZAP_F[kv[1]]
+        if f ~= nil and kv[2] ~= nil then t:add(f, kv[2]) end
+      end
+      t:add(ZAP_F.checksum, item.bytes[item.len - 1])
+      t:add(ZAP_F.checksum_ok, true)
+      if item.request_in ~= nil then
+        t:add(ZAP_F.request_in, item.request_in)
+        t:add(ZAP_F.latency_ms, item.latency_ms)
+      elseif v.kind == "feedback" then
+        t:add_proto_expert_info(ex_zap_nopair)
+      end
+      local resp = ZAP_STATE.response_of[pinfo.number]
+      if v.kind == "command" and resp ~= nil then t:add(ZAP_F.response_in, resp) end
+      info[#info + 1] = summary
+    else
+      local t = tree:add(zap_proto, range, "bad mightyZAP packet")
+      t:add(ZAP_F.bad, range)
+      t:add(ZAP_F.checksum_ok, false)
+      t:add_proto_expert_info(ex_zap_chk, string.format("checksum mismatch: expected %02X, found %02X",
+                                                         item.expected, item.bytes[item.len - 1]))
+      info[#info + 1] = "bad checksum"
+    end
+  end
+  pinfo.cols.info = (#info > 0) and table.concat(info, "; ") or "(part of a packet)"
+  return tvb:len()
+end
+
+local encap = DissectorTable.get("wtap_encap")
+local encaps = wtap_encaps or wtap
+encap:add(encaps.USER0, zk_proto)       -- link type 147
+encap:add(encaps.USER1, zap_proto)      -- link type 148
