@@ -150,11 +150,13 @@ class Sniffer:
 
     protocol = ""
 
-    def __init__(self, ports, baud, *, capture=None):
+    def __init__(self, ports, baud, *, capture=None, stop_bits=1):
         """``ports``: [(url, role)], role 'both' (one port sees both directions), 'host' (the
-        host's TX line) or 'device' (the device's TX line). ``capture``: a pcapng path."""
+        host's TX line) or 'device' (the device's TX line). ``capture``: a pcapng path;
+        ``stop_bits``: the line's (1 or 2)."""
         self.ports_spec = list(ports)
         self.baud = baud
+        self.stop_bits = stop_bits
         self.capture = capture
         self.ports = []
         self.readers = []
@@ -177,7 +179,7 @@ class Sniffer:
         try:
             for url, role in self.ports_spec:
                 # capture=(): no tap by open_port; the reader threads record whole chunks themselves
-                p = open_port(url, self.baud, timeout=READ_SLICE_S, capture=())
+                p = open_port(url, self.baud, timeout=READ_SLICE_S, capture=(), stop_bits=self.stop_bits)
                 self.ports.append(p)
                 if self.capture:
                     w = cap.writer_for(self.capture, self.protocol)
@@ -286,7 +288,7 @@ class Sniffer:
         frame, so each port's frames stay in order)."""
         out = []
         frames = self.framers[index].feed(data)
-        byte_s = 10.0 / self.baud
+        byte_s = (9.0 + self.stop_bits) / self.baud
         n = len(data)
         after = sum(len(f) for f in frames)
         last = self._last_ts.get(index, 0.0)
@@ -326,8 +328,8 @@ class Sniffer:
 class ZkSniffer(Sniffer):
     protocol = "zk"
 
-    def __init__(self, ports, baud, *, capture=None, protocol_version=None):
-        super().__init__(ports, baud, capture=capture)
+    def __init__(self, ports, baud, *, capture=None, protocol_version=None, stop_bits=1):
+        super().__init__(ports, baud, capture=capture, stop_bits=stop_bits)
         self.decoder = zk.ZkDecoder(protocol_version)
         self.rate = 20
         self.last_status = None
@@ -359,8 +361,8 @@ class ZkSniffer(Sniffer):
 class ZapSniffer(Sniffer):
     protocol = "zap"
 
-    def __init__(self, ports, baud, *, capture=None, reply_timeout=DEFAULT_REPLY_TIMEOUT_S):
-        super().__init__(ports, baud, capture=capture)
+    def __init__(self, ports, baud, *, capture=None, reply_timeout=DEFAULT_REPLY_TIMEOUT_S, stop_bits=1):
+        super().__init__(ports, baud, capture=capture, stop_bits=stop_bits)
         self.decoder = zap.ZapDecoder()
         self.reply_timeout = reply_timeout
         self.pending = None                 # (ts, id, instruction, expected)

@@ -9,7 +9,8 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import DEFAULT_BAUD, ENV, FilePath, FiniteRange, capture_option, close_output, open_output
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, capture_option,
+                      close_output, open_output)
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
              "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
@@ -44,8 +45,11 @@ def _common(protocol):
                                if protocol == "zk" else
                                "Serial device or pyserial URL of an adapter on the bus (one: it sees both "
                                "directions).") + f" [env {env['port']}]"),
-            click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
+            click.option("-b", "--baud", type=BaudType(), envvar=env["baud"],
                          default=DEFAULT_BAUD[protocol], show_default=True, help=f"Baud rate [env {env['baud']}]."),
+            click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+                         default="1", show_default=True, callback=lambda ctx, param, v: int(v),
+                         help=f"{STOP_BITS_HELP[protocol]} [env {env['stop_bits']}]."),
             capture_option(protocol),
             click.option("-f", "--format", "fmt", type=click.Choice(["table", "jsonl", "json", "csv"]), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
@@ -73,7 +77,7 @@ def _common(protocol):
 @_common("zk")
 @click.option("--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
               help="ECU protocol version assumed until a status ID 6 frame reveals it (default 4).")
-def zk(ports, baud, fmt, output, append, count, duration, show_stats, stats_json, protocol_version):
+def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, protocol_version):
     """Sniff a ZK flight-controller <-> ECU link.
 
     With two receive-only adapters (-p HOST_TX -p ECU_TX) both directions are merged by time into
@@ -91,7 +95,7 @@ def zk(ports, baud, fmt, output, append, count, duration, show_stats, stats_json
     from .zk.decode import columns, summary
 
     spec = check_ports("zk", _ports(ports, "zk"))
-    sniffer = ZkSniffer(spec, baud, capture=_capture(), protocol_version=protocol_version)
+    sniffer = ZkSniffer(spec, baud, capture=_capture(), protocol_version=protocol_version, stop_bits=stop_bits)
     cols = ["time", "t", "dir"] + columns()
     _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json,
          table=lambda r: summary(r))
@@ -102,7 +106,7 @@ def zk(ports, baud, fmt, output, append, count, duration, show_stats, stats_json
 @click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.1, show_default=True,
               metavar="SECONDS", help="A request that expects an answer and gets none for this long is a "
                                       "missing reply.")
-def zap(ports, baud, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout):
+def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout):
     """Sniff a mightyZAP bus (one adapter sees both directions; nothing is sent).
 
     Every feedback is paired with the request it answers: 'latency_ms', 'request' and 'pairing'
@@ -120,7 +124,7 @@ def zap(ports, baud, fmt, output, append, count, duration, show_stats, stats_jso
     from ..codec import zap as zapc
 
     spec = check_ports("zap", _ports(ports, "zap"))
-    sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout)
+    sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout, stop_bits=stop_bits)
     cols = ["time", "t", "dir"] + list(zapc.ZAP_KEYS) + ["frame", "pairing", "request", "expected_id",
                                                           "latency_ms", "waited_ms"]
     _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table=_zap_cell)
