@@ -27,6 +27,12 @@ class Output:
         path = output if output and output != "-" else None
         if fmt is None and path:
             fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+        if fmt == "mcap":
+            from .mcap_output import open_mcap
+
+            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot)
+            self.fmt, self.dashboard, self._table = fmt, (_dashboard(title) if is_tty(sys.stdout) and path else None), False
+            return
         self.stream, had = open_output(output, append)
         if fmt is None:
             fmt = "table" if is_tty(self.stream) else "jsonl"
@@ -51,7 +57,8 @@ class Output:
                 self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
                 self._table = True
             else:
-                self.writer = make_writer(fmt, self.stream, columns_for(self.snapshot, ids), header=not had)
+                self.writer = make_writer(fmt, self.stream, columns_for(self.snapshot, ids), header=not had,
+                                          measurement="status")
                 self._table = False
 
     def write(self, rec):
@@ -87,7 +94,7 @@ class Output:
                 w.close()
             except BrokenPipeError:
                 pass
-        if self.stream is not sys.stdout and not self.stream.closed:
+        if self.stream not in (sys.stdout, getattr(sys.stdout, "buffer", None)) and not self.stream.closed:
             self.stream.close()
 
 
@@ -112,10 +119,24 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     """
     from ...link import zk_link as L
 
+    from .bridging import make_bridges
+
     id_set = L.parse_ids(ids) if ids is not None else None
-    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
+    bridges = make_bridges(notify=note)
+    if fmt == "mcap" or (fmt is None and output and output.lower().endswith(".mcap")):
+        from .mcap_output import check_mcap
+
+        check_mcap(output, append, snapshot)
+    if bridges:
+        bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
+    try:
+        out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
+    except BaseException:
+        bridges.close()
+        raise
     raw = None
     source = None
+    tel = None
     try:
         if raw_log:
             try:
@@ -129,11 +150,17 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s))
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
-        session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
+        sink, on_update = out.write, out.update if out.dashboard is not None else None
+        if bridges or out.fmt == "mcap":
+            from .taps import tap_session
+
+            source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+        session = L.Session(source, tel, sink, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
                             stop_on_error=stop_on_error, abort_at_end=abort_at_end,
-                            on_update=out.update if out.dashboard is not None else None, notify=note)
+                            on_update=on_update, notify=note)
+        session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
     finally:
@@ -142,6 +169,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         out.close()
         if raw is not None:
             raw.close()
+        if bridges:
+            bridges.close()
+            session_stats = bridges.stats()
+            for line in bridges.lines():
+                note(line)
+    if bridges:
+        session.bridges = session_stats
     if tel.version_note:
         note(tel.version_note)
     framer = source.framer
