@@ -106,6 +106,7 @@ class MqttBridge(Bridge):
         self.refused = None
         self._connected = threading.Event()
         self._closing = threading.Event()
+        self._answered = threading.Event()
         self._lock = threading.RLock()
         self._state_mids = set()
         self._state_topic = f"{url.prefix}/state"
@@ -115,6 +116,7 @@ class MqttBridge(Bridge):
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
         if getattr(reason_code, "is_failure", False):
             self.refused = str(reason_code)
+            self._answered.set()
             return
         self.refused = None
         if self.connects:
@@ -122,6 +124,7 @@ class MqttBridge(Bridge):
         self.connects += 1
         self._publish_state(client, "online")
         self._connected.set()
+        self._answered.set()
 
     def _publish_state(self, client, text):
         with self._lock:
@@ -170,7 +173,7 @@ class MqttBridge(Bridge):
             c.loop_start()
             return
         c.loop_start()
-        if not self._connected.wait(CONNECT_TIMEOUT_S) or self.refused:
+        if not self._answered.wait(CONNECT_TIMEOUT_S) or self.refused:
             why = f"refused: {self.refused}" if self.refused else f"no answer within {CONNECT_TIMEOUT_S:g} s"
             if not self.optional:
                 c.loop_stop()
