@@ -117,11 +117,27 @@ def refuse_without(why: str) -> None:
         raise UsageError(f"{name.replace('_', '-')}: applies only with {why}")
 
 
+class _NoBridges:
+    """No bridge asked for (the bridge modules stay unimported)."""
+
+    def __bool__(self):
+        return False
+
+    def close(self):
+        pass
+
+    def stats(self):
+        return {}
+
+
 def make_bridges(given=None, notify=None):
-    """The bridges asked for (not started): a :class:`~zkzap.io.bridges.Bridges`."""
+    """The bridges asked for (not started): a :class:`~zkzap.io.bridges.Bridges`, or a falsy
+    stand-in when there are none."""
+    given = requested() if given is None else given
+    if not given:
+        return _NoBridges()
     from ...io.bridges import Bridges
 
-    given = requested() if given is None else given
     out = []
     if "mavlink" in given:
         from ...io.bridges import mavlink
