@@ -258,6 +258,13 @@ class Dashboard:
         info.append("last frame " + ("never" if age is None else f"{age:.1f} s ago"),
                     style="bold red" if stale or age is None else "dim")
         link.add_row("", info)
+        for name, b in (h.get("bridges") or {}).items():
+            line = Text(f"{name}: {b.get('published', b.get('submitted', 0)):,} sent")
+            dropped = b.get("dropped") or 0
+            line.append(f"  dropped {dropped:,}", style="bold yellow" if dropped else "")
+            if b.get("connected") is False:
+                line.append("  broker away", style="bold red")
+            link.add_row("Bridge" if name == next(iter(h["bridges"])) else "", line)
 
         subtitle = None
         if stale:

@@ -131,6 +131,8 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "schedule_s": sched.length, "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
+    if getattr(session, "bridges", None):
+        out["bridges"] = session.bridges
     return out
 
 

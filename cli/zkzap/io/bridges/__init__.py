@@ -46,6 +46,7 @@ class Bridge:
         self.dropped = 0
         self.error = None
         self._thread = None
+        self._closing = threading.Event()
 
     # the serial loop's side
     def submit(self, rec) -> None:
@@ -64,6 +65,7 @@ class Bridge:
 
     def close(self, timeout=DRAIN_S) -> None:
         """Hand over what is queued (at most ``timeout`` s), then disconnect."""
+        self._closing.set()
         if self._thread is not None:
             try:
                 self.queue.put(_STOP, timeout=timeout)
@@ -81,6 +83,18 @@ class Bridge:
         return f"{s['submitted']} records, {s['dropped']} dropped"
 
     # the bridge's side
+    def drain(self, q, stop) -> tuple:
+        """(records waiting, stop seen) without blocking."""
+        out = []
+        while True:
+            try:
+                rec = q.get_nowait()
+            except queue.Empty:
+                return out, False
+            if rec is stop:
+                return out, True
+            out.append(rec)
+
     def _run(self):
         try:
             self.run(self.queue, _STOP)

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 import os
-import queue
 import time
 
 from ...codec import zk
@@ -113,6 +112,8 @@ class MavlinkBridge(Bridge):
 
     def connect(self):
         os.environ.setdefault("MAVLINK20", "1")
+        # only the common dialect (EFI_STATUS is there): mavutil loads every dialect by default
+        os.environ.setdefault("MAVLINK_DIALECT", "common")
         from pymavlink import mavutil
 
         try:
@@ -219,23 +220,13 @@ class MavlinkBridge(Bridge):
         next_hb = next_efi = now
         next_slow = now + 1.0
         while True:
-            wait = max(0.0, min(next_hb, next_efi) - clock())
-            try:
-                rec = q.get(timeout=wait)
-            except queue.Empty:
-                rec = None
-            if rec is stop:
-                break
-            if rec is not None:
+            # wake for the next message due, not for every record (they wait in the queue)
+            self._closing.wait(max(0.0, min(next_hb, next_efi) - clock()))
+            recs, stopped = self.drain(q, stop)
+            for rec in recs:
                 self.absorb(rec)
-                while True:               # take what else is waiting before sending
-                    try:
-                        rec = q.get_nowait()
-                    except queue.Empty:
-                        break
-                    if rec is stop:
-                        return
-                    self.absorb(rec)
+            if stopped:
+                return
             now = clock()
             if now >= next_hb:
                 self._pump_input()
