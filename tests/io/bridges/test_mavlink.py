@@ -184,3 +184,20 @@ def test_udpin_answers_the_ground_station_that_calls(cli, gcs):
     t.join(30)
     assert result["r"].exit_code == 0, result["r"]
     assert rx.of("EFI_STATUS") and rx.of("HEARTBEAT")
+
+
+def test_the_readme_mapping_table_is_the_code_mapping():
+    readme = os.path.join(os.path.dirname(__file__), "..", "..", "..", "README.md")
+    with open(readme, encoding="utf-8") as f:
+        text = f.read()
+    table = text.split("<!-- efi-status-mapping -->", 1)[1].strip().split("\n\n", 1)[0].splitlines()[2:]
+    rows = {}
+    for row in table:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        rows[cells[0].strip("`")] = cells
+    assert set(rows) == set(bridge.EFI_FIELDS) | {"health", "ecu_index"}
+    for field, (key, factor, unit) in bridge.EFI_FIELDS.items():
+        assert f"`{key}`" in rows[field][2], field
+        assert rows[field][1].replace("³", "^3").replace("°C", "degC") == unit, field
+        if factor != 1:
+            assert ("× 1000" if factor == 1000 else "÷ 1000") in rows[field][2], field
