@@ -161,16 +161,19 @@ def main():
     stop = threading.Event()
     uport, gcs = ground_station(stop)
     mcap = os.path.join(work, "run.mcap")
-    plain_cpu, bridged_cpu = [], []
+    plain_cpu, bridged_cpu, plain_start, bridged_start = [], [], [], []
+    plain_args = ["-f", "jsonl"]
     lat, worst_gap, dropped, fps = [], 0.0, 0, []
     try:
+        bridged_args = ["-o", mcap, "--mqtt", f"mqtt://127.0.0.1:{mport}/bench", "--mavlink", f"udpout:127.0.0.1:{uport}"]
         for r in range(a.rounds):
-            cpu, out, _ = run_monitor(["-p", pty, "--duration", str(a.seconds), "-f", "jsonl"])
+            # start-up and shut-down alone: the same commands for half a second
+            plain_start.append(run_monitor(["-p", pty, "--duration", "0.5", *plain_args])[0])
+            bridged_start.append(run_monitor(["-p", pty, "--duration", "0.5", *bridged_args])[0])
+            cpu, out, _ = run_monitor(["-p", pty, "--duration", str(a.seconds), *plain_args])
             plain_cpu.append(cpu)
             n_plain = out.count("\n")
-            cpu, _, err = run_monitor(["-p", pty, "--duration", str(a.seconds), "-o", mcap,
-                                       "--mqtt", f"mqtt://127.0.0.1:{mport}/bench",
-                                       "--mavlink", f"udpout:127.0.0.1:{uport}"])
+            cpu, _, err = run_monitor(["-p", pty, "--duration", str(a.seconds), *bridged_args])
             bridged_cpu.append(cpu)
             with open(mcap, "rb") as f:
                 ts = sorted(m.log_time / 1e9 for _, _, m in make_reader(f).iter_messages(log_time_order=False))
@@ -197,6 +200,12 @@ def main():
     print(f"CPU, median of {a.rounds} x {a.seconds:g} s at 100 Hz: plain JSON Lines {statistics.median(plain_cpu):.2f} s, "
           f"MQTT+MAVLink+MCAP {statistics.median(bridged_cpu):.2f} s: {ratio:.2f}x (target <= 2x: "
           f"{'met' if ratio <= 2 else 'NOT met'})")
+    med = statistics.median
+    steady_plain = (med(plain_cpu) - med(plain_start)) / (a.seconds - 0.5)
+    steady_bridged = (med(bridged_cpu) - med(bridged_start)) / (a.seconds - 0.5)
+    print(f"start-up and shut-down: plain {med(plain_start):.2f} s, bridged {med(bridged_start):.2f} s CPU; "
+          f"steady state: plain {steady_plain * 1000:.1f} ms/s, bridged {steady_bridged * 1000:.1f} ms/s CPU: "
+          f"{steady_bridged / steady_plain:.2f}x")
     print(f"lag: {min(fps):.1f}..{max(fps):.1f} records/s of 100, longest gap {worst_gap * 1000:.0f} ms, "
           f"{dropped} dropped by the bridges, MQTT latency p50 {p50:.1f} ms p99 {p99:.1f} ms, "
           f"{gcs['datagrams']} MAVLink datagrams")

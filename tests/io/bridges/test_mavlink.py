@@ -201,3 +201,27 @@ def test_the_readme_mapping_table_is_the_code_mapping():
         assert rows[field][1].replace("³", "^3").replace("°C", "degC") == unit, field
         if factor != 1:
             assert ("× 1000" if factor == 1000 else "÷ 1000") in rows[field][2], field
+
+
+def test_an_unreachable_tcp_ground_station_is_exit_4_with_nothing_on_stdout(cli):
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()                                  # nobody listens there
+    r = cli("zk", "monitor", "-p", "/dev/nonexistent-zkzap", "--mavlink", f"tcp:127.0.0.1:{port}")
+    assert r.exit_code == 4 and r.stdout == "" and "mavlink: cannot open" in r.stderr, r
+
+
+def test_profile_sends_mavlink_and_reports_the_bridge_in_its_summary(cli, gcs, tmp_path):
+    rx = gcs()
+    sched = tmp_path / "s.csv"
+    sched.write_text("0,0,stop\n1,0,stop\n")
+    summary = tmp_path / "summary.json"
+    r = cli("zk", "profile", str(sched), "-p", "sim://zk?speed=10", "--mavlink", f"udpout:127.0.0.1:{rx.port}",
+            "-f", "jsonl", "-o", str(tmp_path / "t.jsonl"), "--summary-json", str(summary))
+    assert r.exit_code == 0, r
+    data = json.loads(summary.read_text())
+    b = data["bridges"]["mavlink"]
+    assert b["dropped"] == 0 and b["submitted"] >= data["records"] and b["sent"]["EFI_STATUS"] >= 5

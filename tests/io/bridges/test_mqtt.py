@@ -235,3 +235,25 @@ def test_a_password_from_the_environment_logs_in(cli, broker, subscriber, monkey
             "-f", "jsonl")
     assert r.exit_code == 0, r
     assert stats_from(r.stderr)["confirmed"] == 3
+
+
+def test_an_optional_broker_that_comes_later_gets_the_queued_records(broker, subscriber):
+    sub = subscriber("late/#")                 # a persistent session: the broker keeps its messages
+    broker.stop()
+    exe = os.path.join(os.path.dirname(sys.executable), "zk")
+    p = subprocess.Popen([exe, "monitor", "-p", "sim://zk", "--duration", "3", "--mqtt", f"{broker.url}/late",
+                          "--mqtt-optional", "--mqtt-qos", "1", "-f", "jsonl"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "unreachable" in p.stderr.readline()      # the session runs without its broker
+        broker.start()
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, err
+    want = [json.loads(x) for x in out.splitlines()]
+    s = stats_from(err)
+    assert s["dropped"] == 0 and s["published"] == s["confirmed"] == len(want)
+    got = sub.wait_for(len(want))
+    assert [rec for _, rec in got] == want

@@ -118,7 +118,7 @@ class MavlinkBridge(Bridge):
 
         try:
             self.conn = mavutil.mavlink_connection(self.url, source_system=self.sysid, source_component=self.compid,
-                                                   dialect="common", autoreconnect=True)
+                                                   dialect="common", autoreconnect=True, retries=0)
         except (OSError, ValueError) as e:
             raise PortError(f"mavlink: cannot open {self.url}: {getattr(e, 'strerror', None) or e}") from None
         self.mav = self.conn.mav

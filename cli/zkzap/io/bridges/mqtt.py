@@ -11,7 +11,7 @@ says ``offline`` when the session dies without a word).
 The serial loop never waits for the broker: records go through a bounded queue
 (:data:`~zkzap.io.bridges.QUEUE_SIZE`) to the bridge's thread, which publishes only while
 connected and holds at most :data:`MAX_OUTSTANDING` unconfirmed messages; what does not fit is
-dropped and counted. paho reconnects by itself (0.2 s, doubling up to 5 s); QoS 1 and 2
+dropped and counted. The bridge reconnects (after 0.2 s, doubling up to 5 s); QoS 1 and 2
 messages in flight when the connection fails are sent again after the reconnect. Counters:
 ``submitted`` (records handed over), ``published`` (given to the broker connection),
 ``confirmed`` (QoS 1/2: acknowledged by the broker; QoS 0: written to the socket), ``dropped``
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import threading
 import time
 from urllib.parse import unquote, urlsplit
@@ -36,6 +37,8 @@ PASSWORD_ENV = "ZKZAP_MQTT_PASSWORD"
 MAX_OUTSTANDING = 500
 #: Records published together (seconds gathered): fewer thread wake-ups at 100 Hz.
 BATCH_S = 0.05
+RECONNECT_MIN_S = 0.2
+RECONNECT_MAX_S = 5.0
 CONNECT_TIMEOUT_S = 5.0
 KEEPALIVE_S = 10
 
@@ -110,10 +113,13 @@ class MqttBridge(Bridge):
         self._answered = threading.Event()
         self._lock = threading.RLock()
         self._state_mids = set()
+        self._backoff = RECONNECT_MIN_S
+        self._next_try = 0.0
+        self._done = False
         self._state_topic = f"{url.prefix}/state"
         self._topics = {}
 
-    # connection (paho's network thread calls the callbacks)
+    # connection: paho's callbacks run inside client.loop(), in the thread that calls it
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
         if getattr(reason_code, "is_failure", False):
             self.refused = str(reason_code)
@@ -123,6 +129,7 @@ class MqttBridge(Bridge):
         if self.connects:
             self.reconnects += 1
         self.connects += 1
+        self._backoff = RECONNECT_MIN_S
         self._publish_state(client, "online")
         self._connected.set()
         self._answered.set()
@@ -144,6 +151,9 @@ class MqttBridge(Bridge):
                 self.confirmed += 1
 
     def connect(self):
+        """Connect and wait for the broker's answer (this thread drives paho until the bridge's
+        own thread takes over: paho runs no network thread of its own, so a record costs no
+        extra thread wake-up)."""
         import paho.mqtt.client as mqtt
 
         u = self.url
@@ -154,13 +164,13 @@ class MqttBridge(Bridge):
         if u.tls:
             c.tls_set()
         c.will_set(self._state_topic, "offline", qos=1, retain=True)
-        c.reconnect_delay_set(0.2, 5)
         c.max_inflight_messages_set(100)
         c.connect_timeout = CONNECT_TIMEOUT_S
         c.on_connect = self._on_connect
         c.on_disconnect = self._on_disconnect
         c.on_publish = self._on_publish
         self.client = c
+        self._mqtt = mqtt
         where = f"{u.host}:{u.port}"
         try:
             c.connect(u.host, u.port, keepalive=KEEPALIVE_S)
@@ -170,17 +180,19 @@ class MqttBridge(Bridge):
                 raise PortError(f"mqtt: cannot connect to the broker at {where}: {reason}") from None
             self.notify(f"mqtt: broker at {where} unreachable ({reason}); records are queued until it answers "
                         f"(--mqtt-optional)")
-            c.connect_async(u.host, u.port, keepalive=KEEPALIVE_S)
-            c.loop_start()
+            self._next_try = time.monotonic() + self._backoff
             return
-        c.loop_start()
-        if not self._answered.wait(CONNECT_TIMEOUT_S) or self.refused:
+        deadline = time.monotonic() + CONNECT_TIMEOUT_S
+        while not self._answered.is_set() and time.monotonic() < deadline:
+            if c.loop(timeout=0.05) != 0 and not self._answered.is_set():
+                break
+        if not self._answered.is_set() or self.refused:
             why = f"refused: {self.refused}" if self.refused else f"no answer within {CONNECT_TIMEOUT_S:g} s"
             if not self.optional:
-                c.loop_stop()
                 c.disconnect()
                 raise PortError(f"mqtt: broker at {where} {why}")
             self.notify(f"mqtt: broker at {where} {why}; still trying (--mqtt-optional)")
+            self._next_try = time.monotonic() + self._backoff
 
     def _topic(self, rec):
         key = (rec.get("kind") or "status", rec.get("id"))
@@ -193,63 +205,104 @@ class MqttBridge(Bridge):
         with self._lock:
             return self.published - self.confirmed
 
+    def _service(self):
+        """Let paho read acknowledgements and send keep-alives; reconnect when it is time."""
+        c = self.client
+        if c.socket() is not None:            # connected, or waiting for the broker's answer
+            if c.loop(timeout=0) == 0:
+                return
+            self._connected.clear()
+            self._next_try = time.monotonic() + self._backoff
+            return
+        now = time.monotonic()
+        if now < self._next_try:
+            return
+        try:
+            c.reconnect()
+        except (OSError, ValueError):
+            pass
+        self._backoff = min(self._backoff * 2, RECONNECT_MAX_S)
+        self._next_try = now + self._backoff
+
     def run(self, q, stop):
         client = self.client
         connected = self._connected
         closing = self._closing
         deadline = None
         while True:
-            first = q.get()
-            if first is stop:
-                return
-            # publish in batches: one wake-up of paho's network thread for several records
-            closing.wait(BATCH_S)
-            recs, stopped = self.drain(q, stop)
-            recs.insert(0, first)
-            for i, rec in enumerate(recs):
-                while not connected.is_set() or self._outstanding() >= MAX_OUTSTANDING:
-                    # the broker is away or slow: wait (the queue in front of us fills, then drops)
-                    connected.wait(0.05)
-                    if closing.is_set():
-                        # at the end: a broker that is away gets a second, a slow one DRAIN_S
-                        deadline = deadline or time.monotonic() + (DRAIN_S if connected.is_set() else 1.0)
-                        if time.monotonic() > deadline:
-                            rest, _ = self.drain(q, stop)
-                            self.dropped += len(recs) - i + len(rest)
-                            return
+            # wake every BATCH_S (at once when closing): several records per wake-up
+            if not closing.is_set():
+                closing.wait(BATCH_S)
+            else:
+                time.sleep(0.005)
+            self._service()
+            stopped = False
+            while connected.is_set() and self._outstanding() < MAX_OUTSTANDING:
+                try:
+                    rec = q.get_nowait()
+                except queue.Empty:
+                    break
+                if rec is stop:
+                    stopped = True
+                    break
                 # a QoS 0 message published as the connection fails is lost (paho keeps QoS 1/2
-                # ones): it stays unconfirmed
+                # ones and sends them again after a reconnect): it stays unconfirmed
                 client.publish(self._topic(rec), _dumps({k: v for k, v in rec.items() if k[:1] != "_"}),
                                qos=self.qos)
                 with self._lock:
                     self.published += 1
             if stopped:
-                return
+                break
+            if closing.is_set():
+                # at the end: a broker that is away gets a second, a slow one DRAIN_S
+                deadline = deadline or time.monotonic() + (DRAIN_S if connected.is_set() else 1.0)
+                if time.monotonic() > deadline:
+                    rest, _ = self.drain(q, stop)
+                    self.dropped += len(rest)
+                    break
+        self._finish()
+
+    def _finish(self):
+        """Wait (at most DRAIN_S) for the broker to confirm what was published, say offline, and
+        disconnect."""
+        c = self.client
+        deadline = time.monotonic() + DRAIN_S
+        while self._connected.is_set() and self._outstanding() > 0 and time.monotonic() < deadline:
+            if c.loop(timeout=0.02) != 0:
+                break
+        if self._connected.is_set():
+            info = self._publish_state(c, "offline")
+            end = time.monotonic() + 1.0
+            while not info.is_published() and time.monotonic() < end:
+                if c.loop(timeout=0.02) != 0:
+                    break
+        with self._lock:
+            self.unconfirmed = max(0, self.published - self.confirmed)
+        try:
+            c.disconnect()
+            c.loop(timeout=0)
+        except (OSError, ValueError):
+            pass
+        self._connected.clear()
+        self._done = True
 
     def disconnect(self):
         c = self.client
-        if c is None:
-            return
-        deadline = time.monotonic() + DRAIN_S
-        while self._outstanding() > 0 and self._connected.is_set() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        if self._connected.is_set():
-            info = self._publish_state(c, "offline")
+        if c is not None and not self._done:
+            # the thread never ran or did not finish in time: just close the connection
+            with self._lock:
+                self.unconfirmed = max(0, self.published - self.confirmed)
             try:
-                info.wait_for_publish(1.0)
-            except (RuntimeError, ValueError):
+                c.disconnect()
+            except (OSError, ValueError):
                 pass
-        with self._lock:
-            self.unconfirmed = max(0, self.published - self.confirmed)
-        c.disconnect()
-        c.loop_stop()
         self.client = None
 
     def stats(self) -> dict:
         s = super().stats()
         with self._lock:
             s.update({"published": self.published, "confirmed": self.confirmed,
-                      "unconfirmed": max(0, self.published - self.confirmed) if self.client else self.unconfirmed,
+                      "unconfirmed": self.unconfirmed if self._done else max(0, self.published - self.confirmed),
                       "reconnects": self.reconnects, "connected": self._connected.is_set(), "qos": self.qos})
         return s
 
