@@ -170,6 +170,8 @@ def main():
             # start-up and shut-down alone: the same commands for half a second
             plain_start.append(run_monitor(["-p", pty, "--duration", "0.5", *plain_args])[0])
             bridged_start.append(run_monitor(["-p", pty, "--duration", "0.5", *bridged_args])[0])
+            time.sleep(0.3)
+            sub.take()                                  # not this run's latencies
             cpu, out, _ = run_monitor(["-p", pty, "--duration", str(a.seconds), *plain_args])
             plain_cpu.append(cpu)
             n_plain = out.count("\n")
