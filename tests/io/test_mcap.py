@@ -58,26 +58,12 @@ def test_units_and_types_in_a_worked_schema():
     assert control_schema("control")["properties"]["throttle_pct"]["description"].endswith("(%)")
 
 
-def test_replayed_run_in_mcap_equals_its_json_lines(cli, tmp_path):
-    raw = tmp_path / "run.bin"
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "1.5", "-p", "sim://zk?speed=10",
-            "-f", "jsonl", "-o", str(tmp_path / "live.jsonl"), "--raw-log", str(raw))
-    assert r.exit_code == 0, r
-    r = cli("zk", "monitor", "--replay", str(raw), "--fast", "-f", "jsonl")
-    assert r.exit_code == 0, r
-    want = [json.loads(x) for x in r.stdout.splitlines()]
-    out = tmp_path / "run.mcap"
-    r = cli("zk", "monitor", "--replay", str(raw), "--fast", "-o", str(out))
-    assert r.exit_code == 0 and r.stdout == "", r
-    summary, messages = read(out)
-    assert summary is not None and summary.chunk_indexes, "chunked and indexed"
-    assert summary.statistics.message_count == len(messages) == len(want) > 100
-    assert {c.topic for c in summary.channels.values()} == {f"/zk/status/{i}" for i in range(1, 11)}
-    assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
-    assert {c.message_encoding for c in summary.channels.values()} == {"json"}
-    got = sorted(messages, key=lambda m: (m[2].log_time, m[3]["t"]))
-    strip = lambda rec: {k: v for k, v in rec.items() if k != "time"}   # noqa: E731 - replays start anew
-    assert [strip(m[3]) for m in got] == [strip(w) for w in want]
+def _compare(messages, want, summary, timing=True):
+    got = [m[3] for m in sorted(messages, key=lambda m: (m[2].log_time, m[3]["t"]))]
+    # a live run's times are its own; the frames, their order and every decoded value are the same
+    skip = {"time"} if timing else {"time", "t", "stale", "stale_ids"}
+    strip = lambda rec: {k: v for k, v in rec.items() if k not in skip}   # noqa: E731
+    assert [strip(g) for g in got] == [strip(w) for w in want]
     per_channel = {}
     for _, channel, message, data in messages:
         assert channel.topic == f"/zk/status/{data['id']}"
@@ -86,6 +72,28 @@ def test_replayed_run_in_mcap_equals_its_json_lines(cli, tmp_path):
         per_channel[channel.id] = message.sequence + 1
         schema = json.loads(summary.schemas[channel.schema_id].data)
         assert set(data) <= set(schema["properties"])
+
+
+def test_a_live_run_in_mcap_equals_the_json_lines_of_its_frames(cli, tmp_path):
+    raw, out = tmp_path / "run.bin", tmp_path / "run.mcap"
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "1.5", "-o", str(out), "--raw-log", str(raw))
+    assert r.exit_code == 0 and r.stdout == "", r
+    r = cli("zk", "monitor", "--replay", str(raw), "--fast", "-f", "jsonl")
+    assert r.exit_code == 0, r
+    want = [json.loads(x) for x in r.stdout.splitlines()]
+    summary, messages = read(out)
+    assert summary is not None and summary.chunk_indexes, "chunked and indexed"
+    assert summary.statistics.message_count == len(messages) == len(want) > 100
+    assert {c.topic for c in summary.channels.values()} == {f"/zk/status/{i}" for i in range(1, 11)}
+    assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+    assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+    _compare(messages, want, summary, timing=False)
+    # a replay into MCAP gives the very records of the replay into JSON Lines, times included
+    out2 = tmp_path / "replay.mcap"
+    r = cli("zk", "monitor", "--replay", str(raw), "--fast", "-o", str(out2))
+    assert r.exit_code == 0, r
+    summary, messages = read(out2)
+    _compare(messages, want, summary)
 
 
 def test_a_controlling_session_logs_its_control_frames_too(cli, tmp_path):
