@@ -98,3 +98,12 @@ def test_no_bridge_library_is_imported_unless_asked_for(args):
     mods = p.stderr.strip().splitlines()[-1].split()
     bad = [m for m in mods if any(m == b or m.startswith(b + ".") for b in BRIDGE_LIBS)]
     assert not bad, bad
+
+
+def test_dry_runs_refuse_the_bridges(cli, tmp_path):
+    r = cli("zk", "send", "control", "--state", "stop", "-n", "--mavlink", "udpout:127.0.0.1:14550")
+    assert r.exit_code == 2 and r.stdout == "" and "mavlink: applies only with --for" in r.stderr, r
+    sched = tmp_path / "s.csv"
+    sched.write_text("0,10\n5,0,stop\n")
+    r = cli("zk", "profile", str(sched), "-n", "--mqtt", "mqtt://h/p")
+    assert r.exit_code == 2 and r.stdout == "" and "mqtt: applies only with a run" in r.stderr, r

@@ -259,7 +259,9 @@ class Dashboard:
                     style="bold red" if stale or age is None else "dim")
         link.add_row("", info)
         for name, b in (h.get("bridges") or {}).items():
-            line = Text(f"{name}: {b.get('published', b.get('submitted', 0)):,} sent")
+            line = Text(f"{name}: {b.get('submitted', 0):,} records")
+            if "published" in b:
+                line.append(f", {b['published']:,} published")
             dropped = b.get("dropped") or 0
             line.append(f"  dropped {dropped:,}", style="bold yellow" if dropped else "")
             if b.get("connected") is False:

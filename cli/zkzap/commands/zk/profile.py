@@ -95,6 +95,9 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
     if len(sched.notes) > 5:
         note(f"... and {len(sched.notes) - 5} more rounded throttle values")
     if dry_run:
+        from .bridging import refuse_without
+
+        refuse_without("a run (not with -n/--dry-run)")
         _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append)
         return
     if sched.length <= 0:

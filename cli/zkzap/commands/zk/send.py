@@ -91,6 +91,9 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
+        from .bridging import refuse_without
+
+        refuse_without("--for (not with -n/--dry-run)")
         click.echo(format_hex(frame))
         return
     if for_s is None and given:
