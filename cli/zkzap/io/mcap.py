@@ -13,9 +13,9 @@ failure).
 from __future__ import annotations
 
 import json
-import time
 
 from ..codec import zk
+from .writers import IsoNs
 
 #: The extra that provides this module's library.
 EXTRA = "mcap"
@@ -87,16 +87,6 @@ def control_schema(name: str) -> dict:
             "required": ["time", "t", "kind", "id", "command"]}
 
 
-def _iso_ns(text) -> int:
-    """``2024-05-01T12:00:00.123Z`` -> nanoseconds (the record's receive time)."""
-    import calendar
-
-    sec = calendar.timegm(time.strptime(text[:19], "%Y-%m-%dT%H:%M:%S"))
-    frac = text[19:].rstrip("Z")
-    ns = int((frac[1:] + "000000000")[:9]) if frac.startswith(".") and frac[1:].isdigit() else 0
-    return sec * 1_000_000_000 + ns
-
-
 class McapWriter:
     """Records (status and control, as dicts) into an MCAP file on a binary ``stream``."""
 
@@ -122,8 +112,7 @@ class McapWriter:
         self._last_ns = 0
         self.count = 0
         self._closed = False
-        self._sec_prefix = None
-        self._sec = 0
+        self._ns = IsoNs()
 
     def _channel(self, rec):
         kind = rec.get("kind") or "status"
@@ -147,16 +136,9 @@ class McapWriter:
         return ch
 
     def _time_ns(self, rec):
-        text = rec.get("time")
-        if not isinstance(text, str) or len(text) < 19:
-            return self._last_ns
-        prefix = text[:19]
-        if prefix != self._sec_prefix:
-            self._sec = _iso_ns(prefix) // 1_000_000_000
-            self._sec_prefix = prefix
-        frac = text[19:].rstrip("Z")
-        ns = int((frac[1:] + "000000000")[:9]) if frac.startswith(".") and frac[1:].isdigit() else 0
-        self._last_ns = self._sec * 1_000_000_000 + ns
+        ns = self._ns(rec.get("time"))
+        if ns is not None:
+            self._last_ns = ns
         return self._last_ns
 
     def write(self, rec):

@@ -369,7 +369,7 @@ def lp_field_value(v):
     return '"' + _lp_string(v).replace("\n", "\\n").replace("\r", "\\r") + '"'
 
 
-class _IsoNs:
+class IsoNs:
     """``2024-05-01T12:00:00.123Z`` -> nanoseconds since the epoch; the seconds part is
     memoised (consecutive records share it)."""
 
@@ -403,7 +403,7 @@ class InfluxWriter(LineWriter):
     def __init__(self, stream, flush=True, default_measurement="record"):
         super().__init__(stream, flush)
         self.default_measurement = default_measurement
-        self._ns = _IsoNs()
+        self._ns = IsoNs()
         self._keys = {}
 
     def line(self, rec) -> str:

@@ -228,11 +228,11 @@ def test_a_password_from_the_environment_logs_in(cli, broker, subscriber, monkey
     broker.conf.write_text(broker.conf.read_text().replace("allow_anonymous true", "allow_anonymous false")
                            + f"password_file {passwd}\n")
     broker.start()
-    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "3", "--mqtt", f"mqtt://pilot@127.0.0.1:{broker.port}/a")
+    url = f"mqtt://pilot@127.0.0.1:{broker.port}/a"
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "3", "--mqtt", url)
     assert r.exit_code == 4 and "refused" in r.stderr, r
     monkeypatch.setenv("ZKZAP_MQTT_PASSWORD", "s3cret")
-    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "3", "--mqtt", f"mqtt://pilot@127.0.0.1:{broker.port}/a",
-            "-f", "jsonl")
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "3", "--mqtt", url, "-f", "jsonl")
     assert r.exit_code == 0, r
     assert stats_from(r.stderr)["confirmed"] == 3
 

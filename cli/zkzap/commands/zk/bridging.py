@@ -46,7 +46,8 @@ def check_mavlink_url(url: str) -> str:
     if low.startswith(_MAVLINK_PREFIXES):
         rest = url.split(":", 1)[1]
         host, sep, port = rest.rpartition(":")
-        if not sep or not port.isdigit() or not 0 < int(port) < 65536 or (not host and not low.startswith(("udpin:", "tcpin:", "udp:"))):
+        listening = low.startswith(("udpin:", "tcpin:", "udp:"))    # may omit the host: every address
+        if not sep or not port.isdigit() or not 0 < int(port) < 65536 or not (host or listening):
             raise UsageError(f"mavlink: {url}: expected {url.split(':', 1)[0]}:HOST:PORT (port 1..65535)")
         return url
     device = url.split(",", 1)

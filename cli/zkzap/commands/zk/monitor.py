@@ -31,7 +31,8 @@ class Output:
             from .mcap_output import open_mcap
 
             self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot)
-            self.fmt, self.dashboard, self._table = fmt, (_dashboard(title) if is_tty(sys.stdout) and path else None), False
+            self.fmt, self._table = fmt, False
+            self.dashboard = _dashboard(title) if path and is_tty(sys.stdout) else None
             return
         self.stream, had = open_output(output, append)
         if fmt is None:
@@ -118,7 +119,6 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     after its own reporting. Files are closed (whole) before this returns.
     """
     from ...link import zk_link as L
-
     from .bridging import make_bridges
 
     id_set = L.parse_ids(ids) if ids is not None else None
@@ -136,7 +136,6 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         raise
     raw = None
     source = None
-    tel = None
     try:
         if raw_log:
             try:
