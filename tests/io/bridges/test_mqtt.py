@@ -257,3 +257,40 @@ def test_an_optional_broker_that_comes_later_gets_the_queued_records(broker, sub
     assert s["dropped"] == 0 and s["published"] == s["confirmed"] == len(want)
     got = sub.wait_for(len(want))
     assert [rec for _, rec in got] == want
+
+
+def test_mqtts_with_the_systems_certificate_store(cli, broker, subscriber, monkeypatch, tmp_path):
+    """TLS: the broker's certificate is checked against the default store, which
+    SSL_CERT_FILE points at a private CA here (as a lab with its own CA would)."""
+    import shutil as _shutil
+
+    if _shutil.which("openssl") is None:
+        pytest.skip("openssl is not installed")
+    d = tmp_path / "tls"
+    d.mkdir()
+
+    def ssl(*args):
+        subprocess.run(["openssl", *args], cwd=d, check=True, capture_output=True)
+
+    ssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "2",
+        "-subj", "/CN=zkzap test CA")
+    ssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=localhost")
+    (d / "ext").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    ssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+        "-out", "server.pem", "-days", "2", "-extfile", "ext")
+    from .conftest import free_port
+
+    tls_port = free_port()
+    broker.stop()
+    broker.conf.write_text(broker.conf.read_text() + f"listener {tls_port} 127.0.0.1\ncafile {d}/ca.pem\n"
+                           f"certfile {d}/server.pem\nkeyfile {d}/server.key\n")
+    broker.start()
+    sub = subscriber("tls/#", clean=True)
+    url = f"mqtts://localhost:{tls_port}/tls"
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "5", "--mqtt", url, "-f", "jsonl")
+    assert r.exit_code == 4 and "certificate" in r.stderr.lower(), r      # an unknown CA is refused
+    monkeypatch.setenv("SSL_CERT_FILE", str(d / "ca.pem"))
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--count", "5", "--mqtt", url, "-f", "jsonl")
+    assert r.exit_code == 0, r
+    want = [json.loads(x) for x in r.stdout.splitlines()]
+    assert [rec for _, rec in sub.wait_for(5)] == want
