@@ -225,3 +225,39 @@ def test_profile_sends_mavlink_and_reports_the_bridge_in_its_summary(cli, gcs, t
     data = json.loads(summary.read_text())
     b = data["bridges"]["mavlink"]
     assert b["dropped"] == 0 and b["submitted"] >= data["records"] and b["sent"]["EFI_STATUS"] >= 5
+
+
+def test_a_serial_telemetry_radio_gets_the_same_messages(cli, tmp_path):
+    """A serial device (here a pty standing in for the radio) with its baud rate."""
+    import select
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    path = os.ttyname(slave)
+    got = bytearray()
+    stop = threading.Event()
+
+    def read():
+        while not stop.is_set():
+            if select.select([master], [], [], 0.05)[0]:
+                try:
+                    got.extend(os.read(master, 4096))
+                except OSError:
+                    return
+
+    t = threading.Thread(target=read, daemon=True)
+    t.start()
+    try:
+        r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "1.5", "--mavlink", f"{path},57600",
+                "-f", "jsonl")
+    finally:
+        stop.set()
+        t.join(5)
+        os.close(slave)
+        os.close(master)
+    assert r.exit_code == 0, r
+    parser = mavutil.mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    kinds = {m.get_type() for m in parser.parse_buffer(bytes(got)) or []}
+    assert {"HEARTBEAT", "EFI_STATUS", "NAMED_VALUE_FLOAT", "STATUSTEXT"} <= kinds, kinds
