@@ -83,14 +83,17 @@ def test_timestamps_are_nanoseconds_from_the_record_time():
 # --- through an independent parser ----------------------------------------------------------------
 
 _text = st.text(st.characters(blacklist_categories=("Cs", "Cc")), min_size=1, max_size=12)
-# names: the spec leaves a backslash before a separator ambiguous; zkzap's kinds and keys have none
+# names: the spec leaves a backslash before a separator ambiguous, and a line starting with '#' is a
+# comment; zkzap's kinds and keys have neither
 _name = st.text(st.characters(blacklist_categories=("Cs", "Cc"), blacklist_characters="\\"), min_size=1,
-                max_size=12)
+                max_size=12).filter(lambda s: not s.startswith("#"))
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(kind=_name, key=_name.filter(lambda k: not k.startswith("_") and k not in ("id", "kind", "time")),
-       value=st.one_of(st.integers(-2**63, 2**63 - 1), st.floats(allow_nan=False, allow_infinity=False),
+       # (the parser's strtod refuses subnormal floats, which InfluxDB reads; no ZK field has one)
+       value=st.one_of(st.integers(-2**63, 2**63 - 1),
+                       st.floats(allow_nan=False, allow_infinity=False, allow_subnormal=False),
                        st.booleans(), _text), ident=st.integers(0, 253))
 def test_any_record_parses_back_with_line_protocol_parser(kind, key, value, ident):
     rec = {"time": "2024-05-01T12:00:00.001Z", "kind": kind, "id": ident, key: value}
