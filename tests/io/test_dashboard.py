@@ -229,3 +229,15 @@ def test_updates_from_another_thread_while_rendering():
         t.join()
     assert not errors
     assert len(d.rpm_history.values) > 1
+
+
+def test_bridges_show_their_figures_under_the_link():
+    d = Dashboard(None, "ZK")
+    d.update(running_snapshot(), health(frames=5, bridges={
+        "mavlink": {"submitted": 5, "dropped": 0},
+        "mqtt": {"submitted": 10, "published": 8, "dropped": 2, "connected": False}}))
+    text = text_of(d)
+    assert "Bridge" in text and "mavlink: 5 records" in text
+    assert "mqtt: 10 records, 8 published  dropped 2  broker away" in text
+    d.update(running_snapshot(), health(frames=6))
+    assert "Bridge" not in text_of(d)

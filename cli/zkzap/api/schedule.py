@@ -327,12 +327,14 @@ class Schedule:
                     continue
                 a = r.rpm if r.rpm is not None else r.throttle
                 b = n.rpm if n.rpm is not None else n.throttle
+                if a == b:
+                    continue                          # a flat segment: nothing changes inside it
                 step = 10 * self.rpm_factor if r.mode == "rpm" else _THROTTLE.scale
                 lo, hi = sorted((a, b))
                 k = math.floor(lo / step)
                 while k * step <= hi + step:
                     edge = (k + 0.5) * step           # where rounding moves to the next level
-                    if lo < edge < hi:
+                    if lo <= edge <= hi:                 # inclusive: a value on an edge rounds half to even
                         ts = r.t + (edge - a) / (b - a) * (n.t - r.t)
                         j = math.floor(ts * rate)
                         candidates.update((j - 1, j, j + 1, j + 2))     # either side of the edge

@@ -261,6 +261,15 @@ class Dashboard:
         for line in h.get("limits") or ():          # limit events: (level, text), newest state
             link.add_row("Limit" if line[0] == "violated" else "Warn",
                          Text(line[1], style="bold white on red" if line[0] == "violated" else "bold yellow"))
+        for name, b in (h.get("bridges") or {}).items():
+            line = Text(f"{name}: {b.get('submitted', 0):,} records")
+            if "published" in b:
+                line.append(f", {b['published']:,} published")
+            dropped = b.get("dropped") or 0
+            line.append(f"  dropped {dropped:,}", style="bold yellow" if dropped else "")
+            if b.get("connected") is False:
+                line.append("  broker away", style="bold red")
+            link.add_row("Bridge" if name == next(iter(h["bridges"])) else "", line)
 
         subtitle = None
         if stale:

@@ -1,4 +1,4 @@
-"""Record writers by format: ``jsonl``, ``json``, ``csv`` and ``table``.
+"""Record writers by format: ``jsonl``, ``json``, ``csv``, ``influx`` and ``table``.
 
 A writer takes dict records one at a time (:meth:`write`) and is closed at the end
 (:meth:`close`). JSON Lines and CSV are flushed record by record (``flush=True``) so a
@@ -7,6 +7,11 @@ in memory. ``table`` is for people: rich, only on a terminal, imported only when
 
 Value rendering in CSV: None -> empty, booleans -> ``true``/``false``, lists joined with
 ``;``, dicts as ``key=value`` joined with ``;``.
+
+InfluxDB line protocol (``influx``): one line per record, the measurement is the record's
+``kind``, ``id`` and ``kind`` are tags, every other key with a value is a field (integers with
+``i``, floats, booleans, strings quoted; lists joined with ``;``), and the timestamp is the
+record's ``time`` in nanoseconds (none when the record has no time: the server's clock then).
 
 Bulk decoding writes blocks: :meth:`Writer.write_many` (records) and :meth:`Writer.write_lines`
 (text already rendered by a dialect: :func:`json_dialect`, :func:`csv_dialect`) hand the
@@ -337,9 +342,114 @@ class TableWriter(Writer):
         super().close()
 
 
-def make_writer(fmt, stream, columns, *, title=None, table_columns=None, header=True):
+def _lp_escaper(chars):
+    table = str.maketrans({c: "\\" + c for c in chars})
+    return lambda s: s.translate(table)
+
+
+#: Line protocol escaping: measurements escape commas and spaces; tag keys, tag values and
+#: field keys also equals signs; string field values backslashes and double quotes.
+lp_measurement = _lp_escaper(", ")
+lp_key = _lp_escaper(",= ")
+_lp_string = _lp_escaper('\\"')
+_LP_TAGS = ("id", "kind")
+
+
+def lp_field_value(v):
+    """A field value in line protocol, or None when it has no representation (None, NaN, inf)."""
+    if v is None:
+        return None
+    if v is True:
+        return "true"
+    if v is False:
+        return "false"
+    if isinstance(v, int):
+        return f"{v}i"
+    if isinstance(v, float):
+        return repr(v) if v == v and v not in (float("inf"), float("-inf")) else None
+    if isinstance(v, (list, tuple)):
+        v = ";".join(csv_cell(x) for x in v)
+    elif isinstance(v, dict):
+        v = _dumps(v)
+    else:
+        v = str(v)
+    # a newline would end the line: line protocol strings cannot hold one
+    return '"' + _lp_string(v).replace("\n", "\\n").replace("\r", "\\r") + '"'
+
+
+class IsoNs:
+    """``2024-05-01T12:00:00.123Z`` -> nanoseconds since the epoch; the seconds part is
+    memoised (consecutive records share it)."""
+
+    def __init__(self):
+        self._prefix = None
+        self._sec = 0
+
+    def __call__(self, text):
+        if not isinstance(text, str) or len(text) < 19:
+            return None
+        prefix = text[:19]
+        if prefix != self._prefix:
+            import calendar
+            import time as _time
+
+            try:
+                self._sec = calendar.timegm(_time.strptime(prefix, "%Y-%m-%dT%H:%M:%S"))
+            except ValueError:
+                return None
+            self._prefix = prefix
+        frac = text[19:].rstrip("Z")
+        ns = 0
+        if frac.startswith(".") and frac[1:].isdigit():
+            ns = int((frac[1:] + "000000000")[:9])
+        return self._sec * 1_000_000_000 + ns
+
+
+class InfluxWriter(LineWriter):
+    """InfluxDB line protocol, one record per line (see the module's description)."""
+
+    def __init__(self, stream, flush=True, default_measurement="record"):
+        super().__init__(stream, flush)
+        self.default_measurement = default_measurement
+        self._ns = IsoNs()
+        self._keys = {}
+
+    def line(self, rec) -> str:
+        kind = rec.get("kind")
+        head = lp_measurement(str(kind) if kind not in (None, "") else self.default_measurement)
+        for tag in _LP_TAGS:
+            v = rec.get(tag)
+            if v is not None and v != "":
+                head += f",{tag}={lp_key(str(v))}"
+        keys = self._keys
+        fields = []
+        for k, v in rec.items():
+            if k in _LP_TAGS or k == "time" or k[:1] == "_":
+                continue
+            text = lp_field_value(v)
+            if text is None:
+                continue
+            ek = keys.get(k)
+            if ek is None:
+                ek = keys[k] = lp_key(k)
+            fields.append(f"{ek}={text}")
+        if not fields:          # a line needs a field
+            fields.append("present=true")
+        ns = self._ns(rec.get("time"))
+        return f"{head} {','.join(fields)}" + (f" {ns}" if ns is not None else "")
+
+    def write(self, rec):
+        self._put(self.line(rec) + "\n")
+        self.count += 1
+
+    def write_many(self, recs):
+        self.write_lines([self.line(rec) for rec in recs])
+
+
+def make_writer(fmt, stream, columns, *, title=None, table_columns=None, header=True, measurement="record"):
     """A writer for ``fmt``. ``columns`` fixes the CSV column set (and the table's, unless
-    ``table_columns`` is given)."""
+    ``table_columns`` is given); ``measurement`` names the line-protocol measurement of records
+    without a ``kind``."""
     if fmt == "jsonl":
         return JsonlWriter(stream)
     if fmt == "json":
@@ -348,4 +458,6 @@ def make_writer(fmt, stream, columns, *, title=None, table_columns=None, header=
         return CsvWriter(stream, columns, header=header)
     if fmt == "table":
         return TableWriter(stream, table_columns or columns, title=title)
+    if fmt == "influx":
+        return InfluxWriter(stream, default_measurement=measurement)
     raise ValueError(f"format: {fmt!r}; allowed {', '.join(FORMATS)}")

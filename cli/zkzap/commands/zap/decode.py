@@ -8,6 +8,7 @@ import click
 from ...codec import zap
 from ...codec.framing import ZapFramer
 from ...errors import UsageError
+from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
                        output_options)
@@ -35,7 +36,7 @@ def _table_cells(rec):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
-@format_option()
+@format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options
 def decode(inputs, binary, fmt, output, append):
     """Decode mightyZAP packets to a table, JSON, JSON Lines or CSV.

@@ -8,6 +8,7 @@ import click
 from ...codec import zk
 from ...codec.framing import ZkFramer
 from ...errors import UsageError
+from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
                        output_format, output_options, protocol_version_option)
@@ -60,7 +61,7 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
-@format_option()
+@format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options
 @protocol_version_option
 @click.option("--accept", type=click.Choice(["both", "status", "control"]), default="both", show_default=True,
@@ -130,7 +131,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
     stream, had = open_output(output, append, fmt=fmt, columns=cols, inputs=decode_inputs(inputs, binary, explicit))
     writer = make_writer(fmt, stream, cols, table_columns=TABLE_COLUMNS, header=not had)
     try:
-        if fmt == "table":
+        if fmt in ("table", "influx"):
             run_decode(chunks, framer, decode_one, writer)
         else:
             # straight to text: encoders generated from the tables, a memo of repeated frames

@@ -32,6 +32,13 @@ class Output:
         path = output if output and output != "-" else None
         if fmt is None and path:
             fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+        if fmt == "mcap":
+            from .mcap_output import open_mcap
+
+            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot)
+            self.fmt, self._table, self.file = fmt, False, None
+            self.dashboard = _dashboard(title) if path and is_tty(sys.stdout) else None
+            return
         if fmt is None:
             fmt = "table" if is_tty(sys.stdout) else "jsonl"
         self.fmt = fmt
@@ -67,7 +74,7 @@ class Output:
         if self._table:
             self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
         else:
-            self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had)
+            self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
     def finish(self, ok):
         """The run ended: a file no record opened is created only when the run went well."""
@@ -109,7 +116,8 @@ class Output:
                 w.close()
             except BrokenPipeError:
                 pass
-        if self.stream is not None and self.stream is not sys.stdout and not self.stream.closed:
+        if self.stream is not None and self.stream not in (sys.stdout, getattr(sys.stdout, "buffer", None)) \
+                and not self.stream.closed:
             self.stream.close()
 
 
@@ -138,6 +146,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     from ...io.outfile import OutFile, refuse_same_files
     from ...link import zk_link as L
     from ...link.port import fit_note
+    from .bridging import make_bridges
 
     id_set = L.parse_ids(ids) if ids is not None else None
     refuse_same_files({"--output": output, "--raw-log": raw_log, **(extra_outputs or {})},
@@ -146,8 +155,20 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         told = fit_note("control rate", rate or L.DEFAULT_RATE, 4, baud, stop_bits)
         if told:
             note(told)
+    bridges = make_bridges(notify=note)
+    if fmt == "mcap" or (fmt is None and output and output.lower().endswith(".mcap")):
+        from .mcap_output import check_mcap
+
+        check_mcap(output, append, snapshot)
+    if bridges:
+        bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
     columns = L.record_columns if stand is None else stand.columns(L.record_columns)
-    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
+    try:
+        out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
+    except BaseException:
+        if bridges:
+            bridges.close()
+        raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
     source = None
@@ -162,15 +183,20 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
                           wall_clock=getattr(source, "wall_clock", source.live))
-        on_update = out.update if out.dashboard is not None else None
+        sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
-        session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
+        if bridges or out.fmt == "mcap":
+            from .taps import tap_session
+
+            source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+        session = L.Session(source, tel, sink, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
                             stop_on_error=stop_on_error, abort_at_end=abort_at_end,
                             on_update=on_update, notify=note,
                             limits=stand.limits if stand is not None else None)
+        session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
             out.finish(outcome.ok)
@@ -182,6 +208,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         out.close()
         if raw is not None:
             raw.close()
+        if bridges:
+            bridges.close()
+            session_stats = bridges.stats()
+            for line in bridges.lines():
+                note(line)
+    if bridges:
+        session.bridges = session_stats
     if tel.version_note:
         note(tel.version_note)
     if url is not None and tel.frames:

@@ -133,6 +133,9 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
                                 ("average", average), ("fuel-density", fuel_density)) if v]
         if extra:
             raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
+        from .bridging import refuse_without
+
+        refuse_without("a run (not with -n/--dry-run)")
         _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append, schedule)
         return
     if sched.length <= 0:
@@ -202,6 +205,8 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "schedule_s": sched.length, "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
+    if getattr(session, "bridges", None):
+        out["bridges"] = session.bridges
     return out
 
 

@@ -100,10 +100,17 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
+        from .bridging import refuse_without
+
+        refuse_without("--for (not with -n/--dry-run)")
         click.echo(format_hex(frame))
         return
     if for_s is None and given:
         raise UsageError(f"{_FOR_ONLY[next(iter(given))].lstrip('-')}: applies only with --for")
+    if for_s is None:
+        from .bridging import refuse_without
+
+        refuse_without("--for")
     if for_s is not None and no_wait:
         raise UsageError("no-wait: not with --for")
     url = resolve_port(port, sim)

@@ -11,11 +11,13 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ...io import FORMATS
+from ...io import LOG_FORMATS
 from ..options import FilePath, apply_options
+from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
-FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx",
+                    ".mcap": "mcap"}
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
              "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
@@ -27,9 +29,11 @@ EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad us
 def log_options(f):
     """Options for where and how status records are written (monitor, send --for, profile)."""
     opts = [
-        click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
-                     help="Output format: table is the live dashboard on a terminal; default table on a "
-                          "terminal, jsonl in a pipe, or by the extension of -o (.csv, .json, .jsonl)."),
+        click.option("-f", "--format", "fmt", type=click.Choice(LOG_FORMATS), default=None,
+                     help="Output format: table is the live dashboard on a terminal; influx is InfluxDB line "
+                          "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
+                          "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
+                          "-o (.csv, .json, .jsonl, .lp, .mcap)."),
         click.option("-o", "--output", type=FilePath(),
                      help="Write records to FILE (the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
@@ -44,6 +48,7 @@ def log_options(f):
         click.option("--raw-log", type=FilePath(), default=None,
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
                                           "or 'zk decode --binary')."),
+        bridge_options,
     ]
     return apply_options(f, opts)
 

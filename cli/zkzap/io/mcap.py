@@ -1,0 +1,183 @@
+"""MCAP files of ZK telemetry, for Foxglove and PlotJuggler (the optional ``mcap`` extra).
+
+One channel per status ID (``/zk/status/<id>``) and per control command
+(``/zk/control/<command>``), JSON message encoding, and a JSON Schema per channel generated from
+the protocol tables (:mod:`zkzap.codec.zk`): every key with its type, and its description and
+unit from the table. A message's log time is the record's receive time (its ``time``), its
+sequence the channel's message count. The file is chunked (zstd or lz4 when available) and
+indexed, so large runs open quickly; :meth:`McapWriter.close` writes the summary and the
+indexes, which a session does on every end it can see (count, duration, Ctrl-C, SIGTERM, a port
+failure).
+"""
+
+from __future__ import annotations
+
+import json
+
+from ..codec import zk
+from .writers import IsoNs
+
+#: The extra that provides this module's library.
+EXTRA = "mcap"
+CHUNK_SIZE = 256 * 1024
+
+_dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
+
+_COMMON = {
+    "time": {"type": ["string", "null"], "format": "date-time",
+             "description": "receive time, ISO 8601 UTC (null in a replay of a raw log, which holds no times)"},
+    "t": {"type": "number", "description": "seconds since the start of the session (s)"},
+    "kind": {"type": "string", "description": "status (ECU to host) or control (host to ECU)"},
+    "frame": {"type": "string", "description": "the frame as hex bytes"},
+}
+_STALE = {
+    "stale": {"type": "boolean", "description": "some status ID has not been seen for --stale-after periods"},
+    "stale_ids": {"type": "array", "items": {"type": "integer"}, "description": "the stale status IDs"},
+}
+
+
+def _describe(field) -> str:
+    text = field.help or field.key
+    return f"{text} ({field.unit})" if field.unit else text
+
+
+def _properties(layout) -> dict:
+    props = {}
+    by_name_key = {f.name_key: f for f in layout.fields if f.name_key}
+    for key in layout.keys():
+        f = layout.by_key.get(key)
+        if f is not None:
+            integral = not isinstance(f.scale, float) and f.scale == 1 or f.names is not None
+            if f.values is not None:
+                integral = all(isinstance(v, int) for v in f.values.values())
+            props[key] = {"type": ["integer" if integral else "number", "null"], "description": _describe(f)}
+        elif key in by_name_key:
+            props[key] = {"type": ["string", "null"], "description": f"name of {by_name_key[key].key}"}
+        else:
+            props[key] = {"type": ["number", "string", "null"], "description": key.replace("_", " ")}
+    return props
+
+
+def status_schema(sid: int) -> dict:
+    """The JSON Schema of status ID ``sid`` records as ``zk monitor`` writes them."""
+    spec = zk.STATUS_BY_ID.get(sid)
+    props = dict(_COMMON)
+    props["id"] = {"type": "integer", "const": sid, "description": "status frame ID"}
+    if spec is not None:
+        props.update(_properties(spec.layout))
+        title = f"ZK status ID {sid} ({spec.name})"
+    else:
+        props["rpm"] = {"type": ["integer", "null"], "description": "engine speed (rpm)"}
+        props["payload"] = {"type": "string", "description": "undecoded bytes 3..5 of an undocumented ID"}
+        title = f"ZK status ID {sid} (undocumented)"
+    props.update(_STALE)
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title, "type": "object",
+            "properties": props, "required": ["time", "t", "kind", "id"]}
+
+
+def control_schema(name: str) -> dict:
+    """The JSON Schema of control records of command ``name`` (``control``, ``action``, ...)."""
+    spec = zk.CONTROL_BY_NAME[name]
+    props = dict(_COMMON)
+    props["id"] = {"type": "integer", "const": spec.id, "description": "control frame ID"}
+    props["command"] = {"type": "string", "const": name, "description": spec.help}
+    props.update(_properties(spec.layout))
+    props["reserved"] = {"type": "string", "description": "reserved bits that are set"}
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "title": f"ZK control ID {spec.id} ({name})", "type": "object", "properties": props,
+            "required": ["time", "t", "kind", "id", "command"]}
+
+
+class McapWriter:
+    """Records (status and control, as dicts) into an MCAP file on a binary ``stream``."""
+
+    def __init__(self, stream, *, library="zkzap"):
+        from mcap.writer import CompressionType, IndexType, Writer
+
+        compression = CompressionType.NONE
+        for name, kind in (("zstandard", CompressionType.ZSTD), ("lz4", CompressionType.LZ4)):
+            try:
+                __import__(name)
+            except ImportError:
+                continue
+            compression = kind
+            break
+        self.stream = stream
+        self._w = Writer(stream, chunk_size=CHUNK_SIZE, compression=compression, index_types=IndexType.ALL,
+                         use_chunking=True, use_statistics=True, use_summary_offsets=True)
+        from .. import __version__
+
+        self._w.start(profile="", library=f"{library} {__version__}")
+        self._channels = {}
+        self._seq = {}
+        self._last_ns = 0
+        self.count = 0
+        self._closed = False
+        self._ns = IsoNs()
+
+    def _channel(self, rec):
+        kind = rec.get("kind") or "status"
+        if kind == "control":
+            key = ("control", rec.get("command") or f"id-{rec.get('id')}")
+        else:
+            key = ("status", rec.get("id"))
+        ch = self._channels.get(key)
+        if ch is None:
+            if key[0] == "control":
+                name = key[1]
+                schema = control_schema(name) if name in zk.CONTROL_BY_NAME else {"type": "object"}
+                topic, sname = f"/zk/control/{name}", f"zk.control.{name}"
+            else:
+                schema = status_schema(key[1])
+                topic, sname = f"/zk/status/{key[1]}", f"zk.status.{key[1]}"
+            sid = self._w.register_schema(name=sname, encoding="jsonschema",
+                                          data=json.dumps(schema, ensure_ascii=False).encode("utf-8"))
+            ch = self._channels[key] = self._w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+            self._seq[ch] = 0
+        return ch
+
+    def _time_ns(self, rec):
+        ns = self._ns(rec.get("time"))
+        if ns is None and rec.get("time") is None and isinstance(rec.get("t"), (int, float)):
+            ns = round(rec["t"] * 1e9)     # no wall-clock time (a raw log's replay): time since its start
+        if ns is not None:
+            self._last_ns = ns
+        return self._last_ns
+
+    def write(self, rec):
+        if self._closed:
+            return
+        ch = self._channel(rec)
+        seq = self._seq[ch]
+        self._seq[ch] = seq + 1
+        ns = self._time_ns(rec)
+        data = _dumps({k: v for k, v in rec.items() if k[:1] != "_"}).encode("utf-8")
+        try:
+            self._w.add_message(channel_id=ch, log_time=ns, data=data, publish_time=ns, sequence=seq)
+        except OSError as e:
+            self._fail(e)
+        self.count += 1
+
+    def _fail(self, e):
+        from ..errors import OutputError
+
+        self._closed = True
+        name = getattr(self.stream, "name", None)
+        name = "stdout" if not isinstance(name, str) or name == "<stdout>" else name
+        raise OutputError(f"output: cannot write {name}: {e.strerror or e}") from None
+
+    def write_many(self, recs):
+        for rec in recs:
+            self.write(rec)
+
+    def close(self):
+        if self._closed:
+            return
+        try:
+            self._w.finish()
+            self.stream.flush()
+        except BrokenPipeError:
+            self._closed = True
+        except OSError as e:
+            self._fail(e)
+        self._closed = True
