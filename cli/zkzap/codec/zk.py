@@ -408,6 +408,17 @@ def check_status(frame) -> None:
         raise CrcError(f"status frame: CRC mismatch: expected {crc:02X}, found {frame[6]:02X}", crc, frame[6])
 
 
+#: Head byte of status ID 6, the frame that carries the ECU's protocol version.
+VERSION_HEAD = STATUS_HEAD | 6
+
+
+def protocol_version_of(frame):
+    """The protocol version a status ID 6 frame reports (``b5[7:2]``), or None for any other frame."""
+    if len(frame) == STATUS_LEN and frame[0] == VERSION_HEAD:
+        return frame[5] >> 2
+    return None
+
+
 def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False) -> dict:
     """Decode a checked status frame. ``version`` sets version-dependent units; ``known`` is the
     version actually known (seen or given) and gates fields newer than it (None: ungated)."""
@@ -419,7 +430,7 @@ def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False
         rec["payload"] = bytes(frame[3:6]).hex(" ").upper()
         return rec
     if sid == 6:
-        version = known = frame[5] >> 2
+        version = known = protocol_version_of(frame)
     rec.update(st.layout.decode(frame, {"version": version}, known, raw))
     return rec
 
@@ -468,8 +479,8 @@ class ZkDecoder:
 
     def decode(self, frame) -> dict:
         if len(frame) == STATUS_LEN:
-            if frame[0] == 0xF6:
-                v = frame[5] >> 2
+            v = protocol_version_of(frame)
+            if v is not None:
                 self.version = self.known = v
                 self.version_source = "frame"
             elif self.version_source == "default" and frame[0] & 0x0F in VERSIONED_STATUS:
@@ -614,7 +625,7 @@ class ZkLines:
             if st is None:
                 return self._generic(f), None
             if sid == 6:
-                d.version = d.known = version = known = f[5] >> 2
+                d.version = d.known = version = known = protocol_version_of(f)
                 d.version_source = "frame"
             else:
                 version, known = d.version, d.known
@@ -650,17 +661,89 @@ class ZkLines:
 HAZARDOUS_ACTIONS = frozenset({1, 2, 3, 4, 5, 6, 12})
 
 
-def control_hazard(frame) -> str | None:
-    """What a control frame can do to an engine, or None when it is harmless.
+class ControlFrame:
+    """A control frame (host -> ECU) and what sending it means, answered here once.
 
-    Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
-    fuel, fire the igniter, open valves, run the pump or the starter.
+    ``frame`` (the 4 bytes), ``id`` (the command ID), ``command`` (the
+    :class:`ControlCommand`, None for an undefined ID). :attr:`hazard` says what it can do to
+    an engine (consent on a real port); :attr:`controls_engine` whether a session sending it
+    is in control of the engine (and gets the abort command on an abnormal end).
     """
-    cmd_id = frame[1] >> 4
-    if cmd_id == 1 and (frame[1] >> 2) & 3 == 3:
-        return "state run can start the engine"
-    if cmd_id == 6 and frame[2] & 3 == 3:
-        return "state run can start the engine"
-    if cmd_id == 2 and frame[2] in HAZARDOUS_ACTIONS:
-        return f"action {ACTIONS[frame[2]]} runs ECU hardware ({ACTION_TEXT[frame[2]].lower()})"
-    return None
+
+    __slots__ = ("frame", "id", "command")
+
+    def __init__(self, frame):
+        self.frame = bytes(frame)
+        self.id = self.frame[1] >> 4
+        self.command = CONTROL_BY_ID.get(self.id)
+
+    @classmethod
+    def build(cls, name_or_id, **values) -> "ControlFrame":
+        """Encode a command from physical values (see :func:`encode_control`)."""
+        return cls(encode_control(name_or_id, **values)[0])
+
+    def __repr__(self):
+        return f"ControlFrame({self.frame.hex(' ').upper()})"
+
+    def __eq__(self, other):
+        return isinstance(other, ControlFrame) and other.frame == self.frame
+
+    def __hash__(self):
+        return hash(self.frame)
+
+    @property
+    def sw(self) -> int:
+        """The state bits: ID 1 ``b1[3:2]``, ID 6 ``b2[1:0]`` (0 for other IDs)."""
+        if self.id == 1:
+            return (self.frame[1] >> 2) & 3
+        if self.id == 6:
+            return self.frame[2] & 3
+        return 0
+
+    @property
+    def action(self):
+        """ID 2's action name (None for other IDs or an undefined parameter)."""
+        return ACTIONS.get(self.frame[2]) if self.id == 2 else None
+
+    @property
+    def hazard(self) -> str | None:
+        """What the frame can do to an engine, or None when it is harmless.
+
+        Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
+        fuel, fire the igniter, open valves, run the pump or the starter.
+        """
+        if self.id in (1, 6) and self.sw == 3:
+            return "state run can start the engine"
+        if self.id == 2 and self.frame[2] in HAZARDOUS_ACTIONS:
+            return f"action {ACTIONS[self.frame[2]]} runs ECU hardware ({ACTION_TEXT[self.frame[2]].lower()})"
+        return None
+
+    @property
+    def hazardous(self) -> bool:
+        """True when sending it on a real port needs consent (see :attr:`hazard`)."""
+        return self.hazard is not None
+
+    @property
+    def controls_engine(self) -> bool:
+        """True when sending it controls the engine: ID 1 with a state other than pwm, ID 6 with
+        a state or an RPM factor, ID 7, or an action that runs hardware. Keep-alives, unlock,
+        settings, air pressure and harmless actions (rates, reset-fuel, zero-thrust, pump-off)
+        do not."""
+        if self.id == 1:
+            return self.sw != 0
+        if self.id == 6:
+            return self.frame[2] & 0x1F != 0
+        if self.id == 7:
+            return True
+        if self.id == 2:
+            return self.hazardous
+        return False
+
+    def decode(self, ctx=None) -> dict:
+        """The frame's record (as ``zk decode`` gives it)."""
+        return decode_control(self.frame, ctx)
+
+
+def control_hazard(frame) -> str | None:
+    """What a control frame can do to an engine, or None (see :attr:`ControlFrame.hazard`)."""
+    return ControlFrame(frame).hazard

@@ -111,40 +111,13 @@ def device_error(reply: Reply) -> DeviceError:
 
 
 def stored_writes(pkt: bytes) -> list:
-    """Names of the stored (NV) settings a command packet writes (for consent and pauses)."""
-    code, params = pkt[5], pkt[6:-1]
-    if code in (0xF3, 0xF4) and len(params) >= 2:
-        return _stored_in(params[0], len(params) - 1)
-    if code == 0x73 and len(params) >= 2:
-        return _stored_in(params[0], params[1])
-    if code == 0xF6:
-        return ["every stored setting (factory reset)"]
-    return []
-
-
-def _stored_in(address: int, length: int) -> list:
-    names = []
-    for addr in range(address, min(address + length, 256)):
-        reg = zap.REGISTER_BY_ADDRESS.get(addr)
-        if reg is not None and reg.stored and reg.name not in names:
-            names.append(reg.name)
-    return names
+    """Names of the stored (NV) settings a command packet writes (see :class:`zap.Command`)."""
+    return zap.Command(pkt).stored_writes
 
 
 def leaves_protocol(pkt: bytes) -> bool:
-    """True when the packet writes 0 (Modbus RTU) to protocol-type: the actuator would leave
-    this protocol and no longer answer it."""
-    code, params = pkt[5], bytes(pkt[6:-1])
-    addr = zap.REGISTER_BY_NAME["protocol-type"].address
-    if code in (0xF3, 0xF4) and len(params) >= 2 and params[0] <= addr < params[0] + len(params) - 1:
-        return params[1 + addr - params[0]] == 0
-    if code == 0x73 and len(params) >= 2 and params[1]:
-        start, length = params[0], params[1]
-        if start <= addr < start + length:
-            body = params[2:]
-            step = 1 + length
-            return any(body[j + 1 + addr - start] == 0 for j in range(0, len(body) - step + 1, step))
-    return False
+    """True when the packet writes 0 (Modbus RTU) to protocol-type (see :class:`zap.Command`)."""
+    return zap.Command(pkt).leaves_protocol
 
 
 class ZapBus:
@@ -257,7 +230,7 @@ class ZapBus:
         if reply is None:
             reply = self.expects_reply(pkt)
         stored = stored_writes(pkt)
-        restart = pkt[5] in (0xF6, 0xF8)
+        restart = pkt[5] in zap.RESTART_CODES
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
         if not reply:
@@ -390,11 +363,11 @@ class ZapBus:
         pkt = bytes(pkt)
         code, params = pkt[5], pkt[6:-1]
         kw = {}
-        if code == 0xF2 and len(params) == 2:
+        if code == zap.LOAD_DATA and len(params) == 2:
             kw["data_len"] = params[1]
-        if code == 0xF3 and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["id"].address:
+        if code == zap.STORE_DATA and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["id"].address:
             kw["accept_ids"] = {pkt[3], params[1]}
-        if code == 0xF3 and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["feedback-return-mode"].address \
+        if code == zap.STORE_DATA and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["feedback-return-mode"].address \
                 and pkt[3] != zap.BROADCAST and params[1] <= 2:
             # the reply follows the old or the new mode (firmware-dependent): wait if either answers
             new = params[1]

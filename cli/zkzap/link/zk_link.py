@@ -57,21 +57,8 @@ def is_simulator(url: str) -> bool:
 
 
 def controls_engine(frame) -> bool:
-    """True when sending ``frame`` controls the engine: ID 1 with a state other than pwm, ID 6 with
-    a state or an RPM factor, ID 7, or an action that runs hardware. Such sessions get the abort
-    command on an abnormal end; keep-alives, unlock, settings, air pressure and harmless actions
-    (rates, reset-fuel, zero-thrust, pump-off) do not."""
-    rec = zk.decode_control(frame)
-    cid = rec["id"]
-    if cid == 1:
-        return rec["sw"] != 0
-    if cid == 6:
-        return rec["sw"] != 0 or rec["rpm_factor"] != 0
-    if cid == 7:
-        return True
-    if cid == 2:
-        return zk.control_hazard(frame) is not None
-    return False
+    """True when sending ``frame`` controls the engine (see :attr:`zk.ControlFrame.controls_engine`)."""
+    return zk.ControlFrame(frame).controls_engine
 
 
 def abort_frames(kind: str, version=None, pump=False) -> list:
@@ -231,7 +218,7 @@ class ReplaySource:
                 frames = self.framer.flush()      # frames held for look-ahead come out here
             for f in frames:
                 self.queue.append((self.next_t, f))
-                if f[0] == 0xF6:
+                if f[0] == zk.VERSION_HEAD:
                     rate = zk.decode_status(f).get("status_rate_hz")
                     if rate:
                         self.period = 1.0 / rate
@@ -365,7 +352,7 @@ class Telemetry:
     def feed(self, t, frame) -> list:
         if self.holding:
             self.held.append((t, frame))
-            if frame[0] == 0xF6 or len(self.held) >= HOLD_FRAMES:
+            if frame[0] == zk.VERSION_HEAD or len(self.held) >= HOLD_FRAMES:
                 return self._release()
             return []
         return self._emit(t, frame)
@@ -376,7 +363,7 @@ class Telemetry:
 
     def _release(self):
         self.holding = False
-        six = next((f for _, f in self.held if f[0] == 0xF6), None)
+        six = next((f for _, f in self.held if f[0] == zk.VERSION_HEAD), None)
         if six is not None:
             self.decoder.decode(six)
         else:

@@ -77,15 +77,10 @@ def _say(message: str) -> None:
 
 def targets_of(packets) -> list:
     """The actuator IDs packets address (for the default simulated bus)."""
-    ids = []
+    ids = set()
     for p in packets:
-        if p[3] != zap.BROADCAST:
-            ids.append(p[3])
-        elif p[5] == 0x73 and len(p) > 9:
-            length = p[7]
-            body = p[8:-1]
-            ids.extend(body[j] for j in range(0, len(body), 1 + length))
-    return sorted(set(ids)) or [0]
+        ids.update(zap.Command(p).target_ids())
+    return sorted(ids) or [0]
 
 
 def require_port(port, sim) -> None:
