@@ -13,9 +13,9 @@ import sys
 import click
 
 from .. import __version__
-from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError
+from ..errors import INTERRUPTED, USAGE, ZkzapError, exit_status_help
 
-EXIT_EPILOG = "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "."
+EXIT_EPILOG = exit_status_help()
 
 
 HELP_TEXT = "Show this message and exit."
@@ -303,7 +303,9 @@ def run(cmd, prog_name=None, args=None) -> int:
     except ZkzapError as e:
         if debug:
             raise
-        _error(str(e), prog_name or "zkzap")
+        from .hints import with_hint
+
+        _error(with_hint(e), prog_name or "zkzap")
         return e.code
     except Exception as e:
         if debug or not _bad_input(e):

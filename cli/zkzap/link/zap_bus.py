@@ -105,9 +105,8 @@ def error_message(reply: Reply) -> str:
 
 
 def device_error(reply: Reply) -> DeviceError:
-    e = DeviceError(error_message(reply))
-    e.reply = reply
-    return e
+    """The :class:`DeviceError` for a reply with error bits (``reply``, ``ident``, ``errors`` attached)."""
+    return DeviceError(error_message(reply), reply=reply, ident=reply.ident, errors=reply.errors)
 
 
 def stored_writes(pkt: bytes) -> list:
@@ -338,21 +337,19 @@ class ZapBus:
                 return None
             ms = limit * 1000
             echo = any(p[1] == "echo only" for p in problems)
-            hint = " (only our own bytes came back: the adapter echoes)" if echo else ""
+            note = " (only our own bytes came back: the adapter echoes)" if echo else ""
             ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
-            mode_hint = ""
-            if ins is not None and ins.reply != "always":
-                mode_hint = "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
             raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {ms:.1f} ms "
-                          f"({tries} {'try' if tries == 1 else 'tries'}){hint}; check the ID, the baud rate "
-                          f"('zap scan --baud all'), power and wiring{mode_hint}")
+                          f"({tries} {'try' if tries == 1 else 'tries'}){note}",
+                          ident=ident, baud=self.baud, timeout=limit, tries=tries, echo_only=echo,
+                          mode_dependent=ins is not None and ins.reply != "always", protocol="zap")
         bad = [p for p in problems if p[0] != "none"][-1]
         seen = bad[2].hex(" ").upper() if bad[2] else "nothing"
         if len(seen) > 120:
             seen = seen[:117] + "..."
-        e = BadReply(f"ID {ident}: {bad[1]} after {tries} {'try' if tries == 1 else 'tries'}; received {seen}")
-        e.kind = bad[0]
-        raise e
+        raise BadReply(f"ID {ident}: {bad[1]} after {tries} {'try' if tries == 1 else 'tries'}; received {seen}",
+                       kind=bad[0], ident=ident, baud=self.baud, timeout=limit, tries=tries, received=bad[2],
+                       protocol="zap")
 
     # -- instructions -------------------------------------------------------------------------
 
@@ -468,7 +465,8 @@ class ZapBus:
                     raise device_error(r)
                 return r
             if time.monotonic() >= end:
-                raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s")
+                raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s",
+                              ident=ident, baud=self.baud, timeout=within, protocol="zap")
             time.sleep(0.005)
 
 

@@ -295,24 +295,6 @@ def echo(ident, count, interval, fmt, **common):
 LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meaning", "errors"]
 
 
-def register_records(ident, values, errors=()):
-    """Records (id, register, address, value, physical/unit where scaled, meaning where the
-    register has named values) for [(Register, raw), ...]."""
-    out = []
-    for reg, raw in values:
-        rec = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
-        if reg.scale != 1:
-            rec["physical"] = reg.physical(raw)
-            rec["unit"] = reg.unit
-        elif reg.unit:
-            rec["unit"] = reg.unit
-        if reg.choices and raw in reg.choices:
-            rec["meaning"] = reg.choices[raw]
-        rec["errors"] = list(errors)
-        out.append(rec)
-    return out
-
-
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("reg", metavar="REGISTER", type=REGISTER)
 @click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
@@ -354,6 +336,8 @@ def load(reg, length, physical, fmt, ident, **common):
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         reply, values = bus.read_registers(ident, reg.address, length, check=False)
+    from ...api.zap import register_records
+
     records = register_records(reply.ident, values, reply.errors)
     if fmt == "value":
         for rec in records:
