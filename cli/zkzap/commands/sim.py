@@ -164,7 +164,7 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, li
       zkzap sim zap --ids 1,2 --listen 127.0.0.1:0 --state bus.json
       zkzap sim zap --ids 1 --echo --fault 1:delay=5
     """
-    from ..sim.zap_bus import parse_fault
+    from ..sim.zap_actuators import parse_fault
 
     for text in faults:
         try:

@@ -26,7 +26,7 @@ RETURN_MODES = ("0", "1", "2", "auto")
 def _check_sim_ids(ctx, param, value):
     if value is None:
         return None
-    from ...sim.zap_bus import parse_ids
+    from ...sim.zap_actuators import parse_ids
 
     try:
         parse_ids(value)
