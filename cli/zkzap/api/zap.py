@@ -60,7 +60,7 @@ class Reading(float):
         return self
 
     def __repr__(self):
-        return f"{float(self):g} {self.unit}".rstrip()
+        return f"{float(self)!r} {self.unit}".rstrip()
 
     __str__ = __repr__
 
