@@ -190,6 +190,7 @@ ZK_COMMANDS = {
     "states": (".zk.tables", "states", "List the engine states (appendix table)."),
     "errors": (".zk.tables", "errors", "List the engine error codes (appendix table)."),
     "fields": (".zk.tables", "fields", "List every control and status field with bits, unit and range."),
+    "batch": (".zk.batch", "batch", "Run many zk commands over one open port (JSON Lines)."),
 }
 ZAP_COMMANDS = {
     "echo": (".zap.compose", "echo", "Echo: check that an actuator answers."),
@@ -208,6 +209,7 @@ ZAP_COMMANDS = {
     "set-id": (".zap.scan", "set_id", "Give an actuator a new ID, verified by read-back."),
     "set-baud": (".zap.scan", "set_baud", "Change an actuator's baud rate, verified."),
     "registers": (".zap.tables", "registers", "List the register map (12Lf)."),
+    "batch": (".zap.batch", "batch", "Run many zap commands over one open port (JSON Lines)."),
 }
 ROOT_COMMANDS = {
     "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),
@@ -271,11 +273,12 @@ def _error(message: str, prog: str = "zkzap") -> None:
                color=color_enabled(sys.stderr))
 
 
-def run(cmd, prog_name=None, args=None) -> int:
-    """Run a click command with zkzap's error conventions; returns the exit status."""
+def run(cmd, prog_name=None, args=None, **extra) -> int:
+    """Run a click command with zkzap's error conventions; returns the exit status. ``extra``
+    goes to the command's context (``default_map``)."""
     debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
     try:
-        rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False)
+        rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False, **extra)
         return rv if isinstance(rv, int) else 0
     except click.exceptions.Exit as e:
         return e.exit_code

@@ -108,9 +108,20 @@ class ZkLink:
     @classmethod
     def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S):
         from .port import open_port
+        from .shared import shared
 
+        lent = shared("zk")
+        if lent is not None:        # a batch: the one open port, left open by close()
+            return lent.borrow(raw_log, slice_s)
         ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0)
         return cls(ser, url, raw_log)
+
+    def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
+        """A link over this one's port for one command; its close() leaves the port open."""
+        self.ser.timeout = slice_s
+        link = ZkLink(self.ser, self.url, raw_log)
+        link.close = lambda: None
+        return link
 
     @property
     def device(self):

@@ -114,10 +114,17 @@ def refuse_protocol_change(packets, force) -> None:
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
-    from ...link.zap_bus import open_bus
+    from ...link.shared import Borrowed, shared
+    from ...link.zap_bus import RETRIES, open_bus
 
-    require_port(port, sim)
     mode = 1 if return_mode == "auto" else int(return_mode)
+    lent = shared("zap")
+    if lent is not None:            # a batch: every command over the one open port
+        bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout)
+        if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
+            lent.detect_return_mode(probe)
+        return bus
+    require_port(port, sim)
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
