@@ -21,7 +21,10 @@ imported when the port opens.
 from __future__ import annotations
 
 import time
-from typing import Callable, Iterable, Iterator, Mapping, Optional, Union
+TYPE_CHECKING = False
+
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Callable, Iterable, Iterator, Mapping, Optional, Union
 
 from ..codec import zap
 from ..errors import BadReply, CheckFailed, NoReply, UsageError
@@ -43,7 +46,8 @@ SPEED = zap.REGISTER_BY_NAME["goal-speed"]
 ID_REG = zap.REGISTER_BY_NAME["id"]
 BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
 
-RegisterSpec = Union[str, int, zap.Register]
+#: A register: its name, its address or the Register itself.
+RegisterSpec = "str | int | zap.Register"
 
 
 class Reading(float):

@@ -25,7 +25,10 @@ Built on :mod:`zkzap.link.zk_link` (:class:`~zkzap.link.zk_link.ZkLink`,
 from __future__ import annotations
 
 import time
-from typing import Callable, Iterator, Optional, Union
+TYPE_CHECKING = False
+
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Callable, Iterator, Optional, Union
 
 from ..codec import zk
 from ..errors import DeviceError, NoReply, UsageError

@@ -23,7 +23,7 @@ import threading
 
 import click
 
-from ..errors import INTERRUPTED, USAGE, UsageError
+from ..errors import INTERRUPTED, USAGE, UsageError, ZkzapError
 from .options import consent, note
 
 #: Options a batch line may not carry: the port is the batch's.
@@ -35,7 +35,7 @@ EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 class Line:
     """One command of a batch: where it is, its text, its tokens and its command path."""
 
-    __slots__ = ("where", "number", "text", "tokens", "path", "params", "frames", "hazards")
+    __slots__ = ("where", "number", "text", "tokens", "path", "params", "frames", "hazards", "leaf")
 
     def __init__(self, where, number, text, tokens):
         self.where, self.number, self.text, self.tokens = where, number, text, tokens
@@ -43,6 +43,7 @@ class Line:
         self.params = {}
         self.frames = []
         self.hazards = []
+        self.leaf = None
 
 
 def read_lines(source, name):
@@ -106,12 +107,19 @@ def check_lines(group, lines, protocol, defaults):
     ``-n`` where the command can; a bad line raises UsageError naming ``FILE:LINE``."""
     from . import run
 
+    seen = {}
     for line in lines:
+        twin = seen.get(tuple(line.tokens))
+        if twin is not None:               # the same text checks the same: reuse the first's findings
+            line.path, line.params, line.frames, line.leaf = twin.path, twin.params, twin.frames, twin.leaf
+            continue
+        seen[tuple(line.tokens)] = line
         bad = [t for t in line.tokens if t.split("=", 1)[0] in PORT_TOKENS]
         if bad:
             raise UsageError(f"{line.where}: {bad[0].split('=', 1)[0]}: the port is the batch's; give it to "
                              f"'{protocol} batch', not to a line")
         line.path, leaf, args, parent = _resolve(group, line, protocol)
+        line.leaf = (leaf, parent)
         try:
             with leaf.make_context(line.path[-1], list(args), parent=parent,
                                    default_map=defaults) as ctx:
@@ -277,11 +285,44 @@ class _Interrupt:
         return False
 
 
+def invoke(line, protocol) -> int:
+    """Run a checked line's command with the parameters its check parsed (the same defaults,
+    so the same values as parsing it again), with the command line's error conventions.
+    Returns its exit status."""
+    from . import PipeClosed, _bad_input, _error
+    from .hints import with_hint
+
+    leaf, parent = line.leaf
+    prog = protocol
+    try:
+        ctx = click.Context(leaf, info_name=line.path[-1], parent=parent)
+        ctx.params = dict(line.params)
+        with ctx:
+            leaf.invoke(ctx)
+        return 0
+    except click.exceptions.Exit as e:
+        return e.exit_code
+    except click.ClickException as e:
+        _error(" ".join(e.format_message().split()), prog)
+        return e.exit_code
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        return INTERRUPTED
+    except (BrokenPipeError, PipeClosed):
+        raise
+    except ZkzapError as e:
+        _error(with_hint(e), prog)
+        return e.code
+    except Exception as e:
+        if not _bad_input(e):
+            raise
+        _error(str(e), prog)
+        return USAGE
+
+
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
     """Run checked lines in order (the port already shared); write one record per line to
     ``out``. Returns the batch's exit status: 0, or the first failure's code."""
     from ..link.shared import Borrowed
-    from . import run
 
     first = 0
     with _Interrupt() as stop:
@@ -292,7 +333,7 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
             Borrowed.keep_baud = line.path[0] in keep_baud_after
             try:
                 with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
-                    code = run(group, protocol, list(line.tokens), default_map=_nested(line.path, defaults))
+                    code = invoke(line, protocol)
             finally:
                 Borrowed.keep_baud = False
             messages = err.getvalue()

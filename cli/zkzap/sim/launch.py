@@ -21,7 +21,9 @@ import os
 import selectors
 import socket
 import threading
-from typing import Iterable, Optional, Sequence, Union
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Optional, Sequence, Union
 
 from . import INSTANCES
 from .base import Clock
