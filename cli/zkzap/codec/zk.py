@@ -657,6 +657,11 @@ class ZkLines:
         return enc(f), None
 
 
+#: What a session controlling the engine sends on an abnormal end: control ID 1 with that state
+#: and throttle 0, or ``none`` (nothing). ``standby`` lets a hot engine cool.
+ABORTS = ("standby", "stop", "none")
+DEFAULT_ABORT = "standby"
+
 #: Control ID 2 actions that run hardware: each needs consent on a real port.
 HAZARDOUS_ACTIONS = frozenset({1, 2, 3, 4, 5, 6, 12})
 

@@ -44,8 +44,8 @@ STALE_PERIODS = 3
 #: full cycle of IDs 1..10.
 HOLD_FRAMES = 12
 #: Abort commands (``--abort``): the control state sent with throttle 0 on an abnormal end.
-ABORTS = ("standby", "stop", "none")
-DEFAULT_ABORT = "standby"
+ABORTS = zk.ABORTS
+DEFAULT_ABORT = zk.DEFAULT_ABORT
 #: Longest a read blocks, so control frames go out on time and signals are seen promptly.
 READ_SLICE_S = 0.01
 READ_SIZE = 4096

@@ -204,8 +204,9 @@ ECHO_COLUMNS = ["id", "seq", "error", "errors", "rtt_ms"]
 
 
 def _format(default, choices, what):
-    return click.option("-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
-                        help=f"Output format: {what}.")
+    from ..options import format_option
+
+    return format_option(choices=choices, default=default, help=f"Output format: {what}.")
 
 
 def _link_args(common):

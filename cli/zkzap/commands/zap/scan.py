@@ -16,7 +16,7 @@ from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
 from ...errors import NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, note, resolve_format, yes_option
+from ..options import SignedCommand, consent, format_option, id_option, note, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
 
@@ -111,8 +111,7 @@ def _consent_real(port, sim, yes, action):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="IDs to probe, like 0-253 or 1,2,5-8.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
-              help="Output format (default: table on a terminal, jsonl otherwise).")
+@format_option()
 @link_options(baud_type=BaudList(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
                                               "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
 def scan(ids, fmt, **common):
@@ -197,10 +196,8 @@ DUMP_TABLE = [("_address", "addr"), ("register", "register"), ("value", "value")
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="Actuator ID 0..253.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
-              help="Output format (default: table on a terminal, jsonl otherwise).")
+@id_option(allow_broadcast=False)
+@format_option()
 @link_options
 def dump(ident, fmt, **common):
     """Read back the whole register map of one actuator (12Lf), with names, units and values.
@@ -239,8 +236,7 @@ def dump(ident, fmt, **common):
 
 @click.command(cls=SignedCommand, context_settings=CONTEXT)
 @click.argument("position", type=INT, metavar="POSITION")
-@click.option("-i", "--id", "ident", type=IdType(), default=0, show_default=True,
-              help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
+@id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
 @click.option("-s", "--speed", type=INT, default=None,
               help=f"Goal speed {SPEED.lo}..{SPEED.hi}, written first (default: leave as it is).")
 @click.option("-w", "--wait", is_flag=True,
@@ -306,8 +302,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
 
 @click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="The actuator's present ID 0..253 (factory default 0).")
+@id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).")
 @click.option("--force", is_flag=True, help="Go ahead even if another actuator already answers to NEW.")
 @click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
               help="How long to wait for the actuator to answer after the change.")
@@ -336,8 +331,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
 
 @click.command("set-baud", cls=Command, context_settings=CONTEXT)
 @click.argument("new_baud", type=click.Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="Actuator ID 0..253.")
+@id_option(allow_broadcast=False)
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")
 @click.option("--ready-timeout", type=click.FloatRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",

@@ -7,7 +7,7 @@ import sys
 import click
 
 from .. import CONTEXT, Command
-from ..options import consent, note, port_options, yes_option
+from ..options import abort_option, consent, note, port_options, yes_option
 from .telemetry import resolve_port
 
 
@@ -15,7 +15,7 @@ from .telemetry import resolve_port
 @click.argument("file", required=False, default="-", metavar="[FILE|-]")
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
-@click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default="standby", show_default=True,
+@abort_option(default="standby",
               help="Sent when the batch stops early (a failure, Ctrl-C) after a line that controlled the "
                    "engine: that state with throttle 0; none sends nothing.")
 @yes_option

@@ -9,7 +9,8 @@ import click
 
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
+from ..options import (abort_option, close_output, consent, dry_run_option, note, port_options,
+                       protocol_version_option, rate_option, yes_option)
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -43,9 +44,8 @@ def _read(path) -> str:
                                               "cool-down) and exit.")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
-@click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
-              help="Control frames per second (default 20).")
-@click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default="standby", show_default=True,
+@rate_option()
+@abort_option(default="standby",
               help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
                    "schedule that ends in state run: that state with throttle 0 (standby lets a hot "
                    "engine cool); none sends nothing.")

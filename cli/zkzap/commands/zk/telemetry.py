@@ -11,8 +11,7 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ...io import FORMATS
-from ..options import FilePath, apply_options
+from ..options import FilePath, apply_options, format_option
 
 #: Output format by the extension of -o FILE when --format is not given.
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
@@ -27,9 +26,8 @@ EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad us
 def log_options(f):
     """Options for where and how status records are written (monitor, send --for, profile)."""
     opts = [
-        click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
-                     help="Output format: table is the live dashboard on a terminal; default table on a "
-                          "terminal, jsonl in a pipe, or by the extension of -o (.csv, .json, .jsonl)."),
+        format_option(help="Output format: table is the live dashboard on a terminal; default table on a "
+                           "terminal, jsonl in a pipe, or by the extension of -o (.csv, .json, .jsonl)."),
         click.option("-o", "--output", type=FilePath(),
                      help="Write records to FILE (the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
