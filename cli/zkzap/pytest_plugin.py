@@ -26,6 +26,7 @@ import pytest
 
 
 def pytest_configure(config):
+    """Register the ``zap_sim`` and ``zk_sim`` markers."""
     config.addinivalue_line("markers", "zap_sim(**options): options for the zap_sim fixture "
                                        "(zkzap.sim.start_zap: ids, baud, return_mode, faults, transport, ...)")
     config.addinivalue_line("markers", "zk_sim(**options): options for the zk_sim fixture "

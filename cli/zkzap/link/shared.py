@@ -57,6 +57,7 @@ class Borrowed:
         self.close()
 
     def close(self):
+        """Give the bus back: restore its settings (and baud rate), leave the port open."""
         for k, v in self.saved.items():
             setattr(self.bus, k, v)
         if not Borrowed.keep_baud and self.bus.baud != self.baud:
