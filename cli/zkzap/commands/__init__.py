@@ -216,6 +216,7 @@ ROOT_COMMANDS = {
     "zap": (".zap", "zap", "mightyZAP actuators: scan, move, load, store, decode."),
     "crc": (".crc", "crc", "Compute or check CRCs and checksums of both protocols."),
     "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
+    "shell": (".shell", "shell", "An interactive zap or zk session over one open port."),
     "ports": (".ports", "ports", "List serial ports, with adapter hints."),
     "completion": (".completion", "completion", "Print the shell completion script."),
 }
