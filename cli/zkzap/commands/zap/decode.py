@@ -50,7 +50,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode FF FF FF 00 04 F2 8C 02 7B FF FF FF 00 04 00 FF 07 F5 -f json
       zap decode --binary bus.bin -f csv -o bus.csv
     """
-    from ...io.sources import binary_chunks, hex_chunks, run_decode
+    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
     from ...io.writers import make_writer
 
     if binary:
@@ -65,10 +65,16 @@ def decode(inputs, binary, fmt, output, append):
         probe = ZapFramer()
         if not probe.feed(chunks[0]):
             _explain_single(chunks[0])
-    decode_one = (lambda p: _table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
     writer = make_writer(fmt, stream, COLUMNS, table_columns=TABLE_COLUMNS, header=not had)
     try:
-        run_decode(chunks, framer, decode_one, writer)
+        if fmt == "table":
+            run_decode(chunks, framer, lambda p: _table_cells(decoder.decode(p)), writer)
+        else:                   # text formats: each distinct (request, packet) rendered once
+            from ...io.writers import csv_dialect, json_dialect
+            from ...io.zap_lines import ZapLines
+
+            lines = ZapLines(decoder, csv_dialect(COLUMNS) if fmt == "csv" else json_dialect())
+            run_text_decode(chunks, framer, lines, writer)
     finally:
         close_output(writer, stream)
     note_skipped(framer, "packets", "checksum")
