@@ -120,6 +120,17 @@ def exit_code(exc: BaseException) -> int:
     return CHECK_FAILED
 
 
-def exit_status_help() -> str:
-    """'Exit status: 0 success; 1 ...' from :data:`EXIT_CODES` (for help texts)."""
-    return "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "."
+def exit_status_help(meanings=None, tail="") -> str:
+    """'Exit status: 0 success; 1 ...' from :data:`EXIT_CODES` (for help texts).
+
+    ``meanings`` maps the codes a command can exit with to what they mean for it (a command's
+    own wording), listed in the table's order (143 after 130); a code that is not in the table
+    raises ValueError. ``tail`` follows the list."""
+    if meanings is None:
+        return "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "." + tail
+    order = [c for c, _ in EXIT_CODES]
+    order.insert(order.index(INTERRUPTED) + 1, TERMINATED)
+    unknown = sorted(set(meanings) - set(order))
+    if unknown:
+        raise ValueError(f"exit codes {unknown} are not in the exit-code table")
+    return "Exit status: " + "; ".join(f"{c} {meanings[c]}" for c in order if c in meanings) + "." + tail
