@@ -7,7 +7,7 @@ never names a command.
 
 from __future__ import annotations
 
-from ..errors import CheckFailed, NoReply
+from ..errors import CheckFailed, NoReply, UsageError
 
 
 def hint(e) -> str:
@@ -18,6 +18,11 @@ def hint(e) -> str:
         if facts.get("mode_dependent"):
             text += "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
         return text
+    if isinstance(e, UsageError):
+        if facts.get("assumed_mode"):
+            return "; give --return-mode 1 or 2 if the actuator is set so"
+        if facts.get("no_port") == "zap":
+            return ": give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet"
     if isinstance(e, CheckFailed):
         if facts.get("taken"):
             return "; choose a free ID ('zap scan') or pass --force"

@@ -388,8 +388,8 @@ class ZapBus:
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
         """Load Data: ``length`` bytes from ``address``."""
         if self.return_mode == 0:
-            raise UsageError("load: in feedback-return-mode 0 Load Data is never answered; "
-                             "give --return-mode 1 or 2 if the actuator is set so")
+            raise UsageError("load: in feedback-return-mode 0 Load Data is never answered",
+                             ident=ident, return_mode=0, assumed_mode=True)
         return self.transact(zap.load(ident, address, length), reply=True, data_len=length, **kw)
 
     def read(self, ident: int, reg, **kw) -> int:
@@ -484,7 +484,7 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         url = sim_url("zap", **opts)
     else:
         if not port:
-            raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
+            raise UsageError("no port", no_port="zap")
         url = port
     p = open_port(url, baud, timeout=0.1)
     return ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)
