@@ -28,6 +28,17 @@ from .options import consent, note
 
 #: Options a batch line may not carry: the port is the batch's.
 PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud")
+#: Port options a command takes as its own argument: the baud rates a scan tries.
+OWN_TOKENS = {"scan": ("-b", "--baud")}
+
+
+def port_tokens(tokens) -> list:
+    """The port options among a line's tokens (which a line may not give)."""
+    own = OWN_TOKENS.get(tokens[0], ()) if tokens else ()
+    return [t.split("=", 1)[0] for t in tokens if t.split("=", 1)[0] in PORT_TOKENS
+            and t.split("=", 1)[0] not in own]
+
+
 #: Commands a batch line cannot run.
 EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 
@@ -114,9 +125,9 @@ def check_lines(group, lines, protocol, defaults):
             line.path, line.params, line.frames, line.leaf = twin.path, twin.params, twin.frames, twin.leaf
             continue
         seen[tuple(line.tokens)] = line
-        bad = [t for t in line.tokens if t.split("=", 1)[0] in PORT_TOKENS]
+        bad = port_tokens(line.tokens)
         if bad:
-            raise UsageError(f"{line.where}: {bad[0].split('=', 1)[0]}: the port is the batch's; give it to "
+            raise UsageError(f"{line.where}: {bad[0]}: the port is the batch's; give it to "
                              f"'{protocol} batch', not to a line")
         line.path, leaf, args, parent = _resolve(group, line, protocol)
         line.leaf = (leaf, parent)

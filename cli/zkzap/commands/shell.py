@@ -15,7 +15,7 @@ import sys
 import click
 
 from . import CONTEXT, Command, Group
-from .batch import EXCLUDED, PORT_TOKENS
+from .batch import EXCLUDED, PORT_TOKENS, port_tokens
 from .options import port_options
 
 BUILTINS = ("help", "exit", "quit")
@@ -141,9 +141,9 @@ def loop(group, protocol, defaults, *, interactive) -> int:
             if tokens[0] == "help":
                 _help(group, protocol)
                 continue
-            bad = [t for t in tokens if t.split("=", 1)[0] in PORT_TOKENS]
+            bad = port_tokens(tokens)
             if bad or tokens[0] in EXCLUDED[protocol]:
-                what = (f"{bad[0].split('=', 1)[0]}: the port is the shell's" if bad
+                what = (f"{bad[0]}: the port is the shell's" if bad
                         else f"{tokens[0]}: not in a shell")
                 click.echo(f"{protocol}: error: {what}", err=True)
                 last = 2
