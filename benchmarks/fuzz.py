@@ -40,6 +40,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
 
 from zkzap.codec import zap, zk  # noqa: E402
 from zkzap.codec.framing import ZapFramer, ZkFramer  # noqa: E402
+from zkzap.io.zk_lines import ZkLines  # noqa: E402
 
 ZK_HEADS = bytes(range(0xF1, 0x100))
 
@@ -207,8 +208,8 @@ class Encoders:
 
             self.records = zk.ZkDecoder()
             cols = columns(accept or "both")
-            self.json = zk.ZkDecoder().lines(json_dialect())
-            self.csv = zk.ZkDecoder().lines(csv_dialect(cols))
+            self.json = ZkLines(zk.ZkDecoder(), json_dialect())
+            self.csv = ZkLines(zk.ZkDecoder(), csv_dialect(cols))
         else:
             self.records = zap.ZapDecoder()
             self.json = self.csv = None
@@ -220,7 +221,7 @@ class Encoders:
             self.csv.encode_all(frames)
             if case is not None:
                 # the fused path (framing and rendering in one pass) gives the same lines
-                fused = zk.ZkDecoder().lines(self.json.dialect, cache=16)
+                fused = ZkLines(zk.ZkDecoder(), self.json.dialect, cache=16)
                 framer = ZkFramer(case.accept)
                 got = []
                 prev = 0

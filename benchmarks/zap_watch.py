@@ -63,7 +63,7 @@ def main(argv=None):
     from zkzap.link.port import wire_time
     from zkzap.link.port import open_port
     from zkzap.link.zap_bus import ZapBus
-    from zkzap.sim.zap_bus import parse_ids
+    from zkzap.sim.zap_actuators import parse_ids
 
     ids = [i for i, _ in parse_ids(args.ids)]
     sim, port = start_sim(args.ids, args.baud)

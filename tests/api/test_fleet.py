@@ -9,7 +9,7 @@ from zkzap.api import fleet
 from zkzap.codec import zap
 from zkzap.errors import NoReply, UsageError
 from zkzap.link.zap_bus import open_bus
-from zkzap.sim.zap_bus import Actuator
+from zkzap.sim.zap_actuators import Actuator
 
 R = zap.REGISTER_BY_NAME
 

@@ -22,6 +22,7 @@ from zkzap.codec import zap, zk
 from zkzap.codec.framing import ZapFramer, ZkFramer
 from zkzap.commands.zk.decode import columns
 from zkzap.io.writers import csv_dialect, json_dialect
+from zkzap.io.zk_lines import ZkLines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 _spec = importlib.util.spec_from_file_location("zkzap_fuzz", os.path.join(ROOT, "benchmarks", "fuzz.py"))
@@ -187,7 +188,7 @@ def test_text_lines_equal_rendered_records(frames, version, raw, accept):
     for dialect in (json_dialect(), csv_dialect(columns(accept, raw))):
         fast = zk.ZkDecoder(version, raw=raw)
         slow = zk.ZkDecoder(version, raw=raw)
-        lines = fast.lines(dialect, cache=8).encode_all(frames)
+        lines = ZkLines(fast, dialect, cache=8).encode_all(frames)
         for frame, line in zip(frames, lines):
             rec = slow.decode(frame)
             rec["frame"] = frame.hex(" ").upper()
@@ -197,7 +198,7 @@ def test_text_lines_equal_rendered_records(frames, version, raw, accept):
 
 
 def test_memo_stays_bounded():
-    lines = zk.ZkDecoder().lines(json_dialect(), cache=64)
+    lines = ZkLines(zk.ZkDecoder(), json_dialect(), cache=64)
     rng = random.Random(5)
     frames = [zk.status_frame(rng.randint(1, 10), rng.randbytes(5)) for _ in range(1000)]
     lines.encode_all(frames)

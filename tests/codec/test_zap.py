@@ -1,4 +1,4 @@
-"""mightyZAP packets: every worked example (as corrected by NOTES.md), the register map, round trips."""
+"""mightyZAP packets: every worked example (as corrected in the README's decisions), the register map, round trips."""
 
 import pytest
 from hypothesis import given
@@ -13,7 +13,7 @@ def h(text):
 
 
 EXAMPLES = [
-    # (what, built, expected hex) — the document's packets, corrected where NOTES.md says so
+    # (what, built, expected hex) — the document's packets, corrected where the README's decisions say so
     ("echo", lambda: zap.echo(0), "FF FF FF 00 02 F1 0C"),
     ("factory reset ID", lambda: zap.factory_reset(1, reset_id=True), "FF FF FF 01 03 F6 01 04"),
     ("restart", lambda: zap.restart(0), "FF FF FF 00 02 F8 05"),

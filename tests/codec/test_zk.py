@@ -64,7 +64,7 @@ def test_wrong_lengths_and_heads():
         zk.check_control(h("FE1464D3"))
 
 
-# --- field layouts from NOTES.md ------------------------------------------------------------------
+# --- field layouts (docs/protocol.md) -----------------------------------------------------------
 
 def test_every_control_command_has_its_id_in_b1_high_nibble():
     for cmd in zk.CONTROL:

@@ -8,7 +8,7 @@ import os
 
 import pytest
 
-from zkzap.sim.zap_bus import from_options
+from zkzap.sim.zap_actuators import from_options
 
 
 def jsonl(text):

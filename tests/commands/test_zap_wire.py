@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from zkzap.sim.zap_bus import MODEL_NUMBER
+from zkzap.sim.zap_actuators import MODEL_NUMBER
 
 
 def url(ids="1,2", **opts):
@@ -286,7 +286,7 @@ def test_set_id_verified(cli, tmp_path):
 
 
 def test_read_back_mismatch_exit_1(cli, monkeypatch):
-    from zkzap.sim.zap_bus import Actuator
+    from zkzap.sim.zap_actuators import Actuator
 
     accept = Actuator._accept
     # an actuator whose firmware ignores writes to its ID and baud rate

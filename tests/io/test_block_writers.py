@@ -13,6 +13,7 @@ import time
 from zkzap.codec import zk
 from zkzap.codec.framing import ZkFramer
 from zkzap.io.writers import csv_dialect, json_dialect, make_writer
+from zkzap.io.zk_lines import ZkLines
 
 RECS = [{"kind": "status", "id": 1, "rpm": 0, "x": 1.5, "n": None, "l": ["a", "b"]},
         {"kind": "control", "id": 2, "text": 'a,"b"'}]
@@ -55,7 +56,7 @@ def test_rendered_lines_through_the_writers():
         buf = io.StringIO()
         w = make_writer(fmt, buf, COLS)
         framer = ZkFramer()
-        w.write_lines(framer.feed_lines(b"".join(frames), zk.ZkDecoder().lines(dialect)))
+        w.write_lines(framer.feed_lines(b"".join(frames), ZkLines(zk.ZkDecoder(), dialect)))
         w.close()
         assert len(buf.getvalue().splitlines()) == 10 + (fmt == "csv")
 

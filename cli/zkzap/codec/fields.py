@@ -1,7 +1,8 @@
 """Declarative bit fields: one declaration per field drives encoding, decoding and the CLI.
 
-A :class:`Field` names the bits it occupies in NOTES.md notation (``"b4[1:0] b3[7:5]"``: the
-parts are concatenated most significant first), its scale/offset to physical units, its range,
+A :class:`Field` names the bits it occupies in the notation of docs/protocol.md
+(``"b4[1:0] b3[7:5]"``: the parts are concatenated most significant first), its scale/offset to
+physical units, its range,
 its unit, the protocol version it appeared in and, for enumerations, the names of its values.
 A :class:`Layout` is an ordered set of fields over a fixed-size frame; it generates a decoder
 function from the declarations (like ``collections.namedtuple`` does) so decoding is one call

@@ -156,7 +156,7 @@ class ZkFramer(_Framer):
 
     def feed_lines(self, data, lines) -> list:
         """:meth:`feed`, returning ``lines.line(frame)`` for each frame instead of the frame,
-        where ``lines`` is a :class:`~zkzap.codec.zk.ZkLines`. A frame in step whose line is
+        where ``lines`` is a :class:`~zkzap.io.zk_lines.ZkLines`. A frame in step whose line is
         in ``lines.memo`` (where only checked frames go) costs one look-up."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
         return self._scan(buf, False, lines)

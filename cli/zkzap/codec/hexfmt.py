@@ -42,6 +42,8 @@ class _Patterns:
     """The patterns above, compiled on first use: composing a frame only formats hex."""
 
     def __getattr__(self, name):
+        if name not in _PATTERNS:
+            raise AttributeError(name)
         rx = re.compile(_PATTERNS[name])
         setattr(self, name, rx)
         return rx

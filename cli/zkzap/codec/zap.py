@@ -45,17 +45,31 @@ class Instruction:
         return return_mode >= 2
 
 
+#: Instruction codes by name (the byte after SIZE in a command packet).
+ECHO = 0xF1
+LOAD_DATA = 0xF2
+STORE_DATA = 0xF3
+SEND_DATA = 0xF4
+EXECUTION = 0xF5
+FACTORY_RESET = 0xF6
+RESTART = 0xF8
+SYMMETRIC_STORE = 0x73
+#: Instructions that write a register block: ``address, data...``.
+WRITE_CODES = frozenset((STORE_DATA, SEND_DATA))
+#: Instructions after which the actuator restarts (and is deaf for a moment).
+RESTART_CODES = frozenset((FACTORY_RESET, RESTART))
+
 INSTRUCTIONS = (
-    Instruction(0xF1, "Echo", "echo", "Ask for a feedback packet (connection check).", "always"),
-    Instruction(0xF2, "Load Data", "load", "Read LENGTH bytes from ADDRESS.", "load", "address, length"),
-    Instruction(0xF3, "Store Data", "store", "Write data at ADDRESS.", "all", "address, data..."),
-    Instruction(0xF4, "Send Data", "send", "Stage data at ADDRESS, applied by Execution.", "all",
+    Instruction(ECHO, "Echo", "echo", "Ask for a feedback packet (connection check).", "always"),
+    Instruction(LOAD_DATA, "Load Data", "load", "Read LENGTH bytes from ADDRESS.", "load", "address, length"),
+    Instruction(STORE_DATA, "Store Data", "store", "Write data at ADDRESS.", "all", "address, data..."),
+    Instruction(SEND_DATA, "Send Data", "send", "Stage data at ADDRESS, applied by Execution.", "all",
                 "address, data..."),
-    Instruction(0xF5, "Execution", "execute", "Apply the data staged by Send Data.", "all"),
-    Instruction(0xF6, "Factory Reset", "factory-reset", "Restore factory settings.", "all",
+    Instruction(EXECUTION, "Execution", "execute", "Apply the data staged by Send Data.", "all"),
+    Instruction(FACTORY_RESET, "Factory Reset", "factory-reset", "Restore factory settings.", "all",
                 "option (bit0 ID, bit1 baud rate)"),
-    Instruction(0xF8, "Restart", "restart", "Restart the actuator.", "all"),
-    Instruction(0x73, "Symmetric Store", "sync-move", "Write the same address of several actuators.",
+    Instruction(RESTART, "Restart", "restart", "Restart the actuator.", "all"),
+    Instruction(SYMMETRIC_STORE, "Symmetric Store", "sync-move", "Write the same address of several actuators.",
                 "all", "address, length, {id, data x length}..."),
 )
 INSTRUCTION_BY_CODE = {i.code: i for i in INSTRUCTIONS}
@@ -238,7 +252,7 @@ def _id(ident):
 
 
 def echo(ident=0) -> bytes:
-    return packet(_id(ident), 0xF1)
+    return packet(_id(ident), ECHO)
 
 
 def load(ident, reg, length=None) -> bytes:
@@ -246,7 +260,7 @@ def load(ident, reg, length=None) -> bytes:
     length = reg.size if length is None else length
     if not isinstance(length, int) or not 1 <= length <= 0xFF:
         raise FieldValueError(f"length: {length} is out of range; allowed 1..255")
-    return packet(_id(ident), 0xF2, bytes((reg.address, length)))
+    return packet(_id(ident), LOAD_DATA, bytes((reg.address, length)))
 
 
 def _write(code, ident, reg, value, *, force=False):
@@ -259,24 +273,24 @@ def _write(code, ident, reg, value, *, force=False):
 
 def store(ident, reg, value, *, force=False) -> bytes:
     """Store Data: write ``value`` (raw, in the register's units) little-endian in its size."""
-    return _write(0xF3, ident, reg, value, force=force)
+    return _write(STORE_DATA, ident, reg, value, force=force)
 
 
 def send_data(ident, reg, value, *, force=False) -> bytes:
     """Send Data: stage a write, applied by :func:`execute`."""
-    return _write(0xF4, ident, reg, value, force=force)
+    return _write(SEND_DATA, ident, reg, value, force=force)
 
 
 def execute(ident=BROADCAST) -> bytes:
-    return packet(_id(ident), 0xF5)
+    return packet(_id(ident), EXECUTION)
 
 
 def factory_reset(ident, reset_id=False, reset_baud=False) -> bytes:
-    return packet(_id(ident), 0xF6, bytes(((1 if reset_id else 0) | (2 if reset_baud else 0),)))
+    return packet(_id(ident), FACTORY_RESET, bytes(((1 if reset_id else 0) | (2 if reset_baud else 0),)))
 
 
 def restart(ident) -> bytes:
-    return packet(_id(ident), 0xF8)
+    return packet(_id(ident), RESTART)
 
 
 def symmetric_store(reg, targets) -> list:
@@ -306,12 +320,124 @@ def symmetric_store(reg, targets) -> list:
         for ident, value in chunk:
             params.append(ident)
             params += reg.to_bytes(value)
-        out.append(packet(BROADCAST, 0x73, params))
+        out.append(packet(BROADCAST, SYMMETRIC_STORE, params))
     return out
 
 
 def max_per_packet(length: int) -> int:
     return (MAX_SIZE - 4) // (1 + length)
+
+
+# --- command packets as objects ----------------------------------------------------------------
+
+class Command:
+    """A command packet (host -> actuators) and what it means, answered here once.
+
+    ``ident`` (the target ID, 254 broadcast), ``code`` (the instruction byte), ``instruction``
+    (the :class:`Instruction`, None for an undocumented code), ``params`` (parameter bytes),
+    ``packet`` (the whole packet). For Store/Send Data ``address`` and ``data``; for Load Data
+    ``address`` and ``length``; for Symmetric Store ``address``, ``length`` and ``targets``
+    (``[(id, data bytes), ...]``, the body parsed once; None when malformed).
+    """
+
+    __slots__ = ("packet", "ident", "code", "instruction", "params", "address", "length", "data", "targets")
+
+    def __init__(self, pkt):
+        pkt = bytes(pkt)
+        self.packet = pkt
+        self.ident = pkt[3]
+        self.code = pkt[5]
+        self.instruction = INSTRUCTION_BY_CODE.get(self.code)
+        self.params = params = pkt[6:-1]
+        self.address = self.length = self.data = self.targets = None
+        code = self.code
+        if code == LOAD_DATA and len(params) == 2:
+            self.address, self.length = params[0], params[1]
+        elif code in WRITE_CODES and len(params) >= 2:
+            self.address, self.data = params[0], params[1:]
+            self.length = len(self.data)
+        elif code == SYMMETRIC_STORE and len(params) >= 2:
+            self.address, self.length = params[0], params[1]
+            body, step = params[2:], 1 + params[1]
+            if params[1] and len(body) % step == 0:
+                self.targets = [(body[j], body[j + 1:j + step]) for j in range(0, len(body), step)]
+
+    def __repr__(self):
+        name = self.instruction.cli if self.instruction else f"0x{self.code:02X}"
+        return f"Command({name}, id={self.ident}, params={self.params.hex(' ')})"
+
+    @property
+    def broadcast(self) -> bool:
+        """Sent to every actuator (ID 254): never answered."""
+        return self.ident == BROADCAST
+
+    @property
+    def restarts(self) -> bool:
+        """Restart or Factory Reset: the actuator restarts afterwards."""
+        return self.code in RESTART_CODES
+
+    def expects_reply(self, return_mode: int) -> bool:
+        """Whether an actuator in feedback-return-mode ``return_mode`` answers this command."""
+        return self.instruction is not None and self.instruction.answered(return_mode, self.ident)
+
+    @property
+    def reply_data_length(self):
+        """Data bytes the reply carries: Load Data's length, 0 for other documented
+        instructions, None for an undocumented code."""
+        if self.code == LOAD_DATA:
+            return self.length
+        return 0 if self.instruction is not None else None
+
+    def writes(self):
+        """``[(address, data bytes), ...]``: the register blocks this command writes (one per
+        target for Symmetric Store)."""
+        if self.code in WRITE_CODES and self.data is not None:
+            return [(self.address, self.data)]
+        if self.code == SYMMETRIC_STORE and self.targets:
+            return [(self.address, d) for _, d in self.targets]
+        return []
+
+    @property
+    def stored_writes(self) -> list:
+        """Names of the stored (NV) settings this command writes (consent, memory pauses)."""
+        if self.code == FACTORY_RESET:
+            return ["every stored setting (factory reset)"]
+        names = []
+        span = None
+        if self.code in WRITE_CODES and self.data is not None:
+            span = (self.address, len(self.data))
+        elif self.code == SYMMETRIC_STORE and self.length is not None:
+            span = (self.address, self.length)
+        if span:
+            for addr in range(span[0], min(span[0] + span[1], 256)):
+                reg = REGISTER_BY_ADDRESS.get(addr)
+                if reg is not None and reg.stored and reg.name not in names:
+                    names.append(reg.name)
+        return names
+
+    def written_value(self, reg):
+        """The values this command writes to ``reg`` (one per target), or ``[]``."""
+        reg = register(reg)
+        out = []
+        for addr, data in self.writes():
+            offset = reg.address - addr
+            if 0 <= offset and offset + reg.size <= len(data):
+                out.append(int.from_bytes(data[offset:offset + reg.size], "little"))
+            elif 0 <= offset < len(data):
+                out.append(data[offset])
+        return out
+
+    @property
+    def leaves_protocol(self) -> bool:
+        """True when it writes 0 (Modbus RTU) to protocol-type: the actuator would leave this
+        protocol and no longer answer it."""
+        return 0 in self.written_value(REGISTER_BY_NAME["protocol-type"])
+
+    def target_ids(self) -> list:
+        """The actuator IDs this command addresses (Symmetric Store: its targets)."""
+        if self.code == SYMMETRIC_STORE and self.targets:
+            return [i for i, _ in self.targets]
+        return [] if self.broadcast else [self.ident]
 
 
 # --- decoding ----------------------------------------------------------------------------------
@@ -401,40 +527,34 @@ def decode_packet(pkt, request=None) -> dict:
     params = bytes(pkt[6:-1])
     rec = {"kind": "command" if is_command(code) else "feedback", "id": ident}
     if rec["kind"] == "command":
-        ins = INSTRUCTION_BY_CODE[code]
-        rec["instruction"] = ins.cli
+        cmd = Command(pkt)
+        rec["instruction"] = cmd.instruction.cli
         rec["code"] = code
         rec["params"] = params.hex(" ").upper()
-        if code == 0xF2 and len(params) == 2:
-            reg = REGISTER_BY_ADDRESS.get(params[0])
-            rec["address"] = params[0]
-            rec["register"] = reg.name if reg else f"0x{params[0]:02x}"
-            rec["length"] = params[1]
-        elif code in (0xF3, 0xF4) and len(params) >= 2:
-            _with_register(rec, params[0], params[1:])
-        elif code == 0xF6 and len(params) == 1:
+        if code == LOAD_DATA and cmd.address is not None:
+            reg = REGISTER_BY_ADDRESS.get(cmd.address)
+            rec["address"] = cmd.address
+            rec["register"] = reg.name if reg else f"0x{cmd.address:02x}"
+            rec["length"] = cmd.length
+        elif code in WRITE_CODES and cmd.data is not None:
+            _with_register(rec, cmd.address, cmd.data)
+        elif code == FACTORY_RESET and len(params) == 1:
             rec["reset_id"] = bool(params[0] & 1)
             rec["reset_baud"] = bool(params[0] & 2)
-        elif code == 0x73 and len(params) >= 2:
-            addr, length = params[0], params[1]
-            reg = REGISTER_BY_ADDRESS.get(addr)
-            rec["address"] = addr
-            rec["register"] = reg.name if reg else f"0x{addr:02x}"
-            rec["length"] = length
-            targets = {}
-            body = params[2:]
-            step = 1 + length
-            if length and len(body) % step == 0:
-                for j in range(0, len(body), step):
-                    targets[str(body[j])] = int.from_bytes(body[j + 1:j + step], "little")
-                rec["targets"] = targets
+        elif code == SYMMETRIC_STORE and cmd.address is not None:
+            reg = REGISTER_BY_ADDRESS.get(cmd.address)
+            rec["address"] = cmd.address
+            rec["register"] = reg.name if reg else f"0x{cmd.address:02x}"
+            rec["length"] = cmd.length
+            if cmd.targets is not None:
+                rec["targets"] = {str(i): int.from_bytes(d, "little") for i, d in cmd.targets}
             else:
-                rec["malformed"] = f"{len(body)} data bytes are not a multiple of {step}"
+                rec["malformed"] = f"{len(params) - 2} data bytes are not a multiple of {1 + cmd.length}"
     else:
         rec["error"] = code
         rec["errors"] = error_names(code)
         rec["params"] = params.hex(" ").upper()
-        if request is not None and params and request[5] == 0xF2 and len(request) == 9:
+        if request is not None and params and request[5] == LOAD_DATA and len(request) == 9:
             _with_register(rec, request[6], params)
         elif len(params) in (1, 2) and request is None:
             rec["value"] = int.from_bytes(params, "little")
@@ -451,7 +571,7 @@ class ZapDecoder:
     def decode(self, pkt) -> dict:
         ident, code = pkt[3], pkt[5]
         if is_command(code):
-            if code == 0xF2:
+            if code == LOAD_DATA:
                 self.pending[ident] = bytes(pkt)
             else:
                 self.pending.pop(ident, None)

@@ -408,6 +408,17 @@ def check_status(frame) -> None:
         raise CrcError(f"status frame: CRC mismatch: expected {crc:02X}, found {frame[6]:02X}", crc, frame[6])
 
 
+#: Head byte of status ID 6, the frame that carries the ECU's protocol version.
+VERSION_HEAD = STATUS_HEAD | 6
+
+
+def protocol_version_of(frame):
+    """The protocol version a status ID 6 frame reports (``b5[7:2]``), or None for any other frame."""
+    if len(frame) == STATUS_LEN and frame[0] == VERSION_HEAD:
+        return frame[5] >> 2
+    return None
+
+
 def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False) -> dict:
     """Decode a checked status frame. ``version`` sets version-dependent units; ``known`` is the
     version actually known (seen or given) and gates fields newer than it (None: ungated)."""
@@ -419,7 +430,7 @@ def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False
         rec["payload"] = bytes(frame[3:6]).hex(" ").upper()
         return rec
     if sid == 6:
-        version = known = frame[5] >> 2
+        version = known = protocol_version_of(frame)
     rec.update(st.layout.decode(frame, {"version": version}, known, raw))
     return rec
 
@@ -468,8 +479,8 @@ class ZkDecoder:
 
     def decode(self, frame) -> dict:
         if len(frame) == STATUS_LEN:
-            if frame[0] == 0xF6:
-                v = frame[5] >> 2
+            v = protocol_version_of(frame)
+            if v is not None:
                 self.version = self.known = v
                 self.version_source = "frame"
             elif self.version_source == "default" and frame[0] & 0x0F in VERSIONED_STATUS:
@@ -480,187 +491,99 @@ class ZkDecoder:
             self.rpm_factor = rec["rpm_factor"]
         return rec
 
-    def lines(self, dialect, cache=None):
-        """A :class:`ZkLines` rendering this decoder's records straight to ``dialect``'s text."""
-        return ZkLines(self, dialect, LINE_CACHE if cache is None else cache)
 
-
-#: Rendered lines remembered per decoding context, in two generations of this many (a capture
-#: repeats frames heavily; the recently used ones survive a rotation).
-LINE_CACHE = 16384
-_MAX_CONTEXTS = 8
-#: Compiled text encoders, shared by every ZkLines: (dialect key, raw, ID, context) -> function.
-_ENCODERS = {}
-
-
-class ZkLines:
-    """Frames to text lines (no newline) of one dialect: the records :class:`ZkDecoder` gives,
-    with the frame's hex under ``frame``, rendered by encoders generated from the tables.
-
-    Equal to rendering ``decoder.decode(frame) | {"frame": hex}`` with the dialect, line for
-    line, and it updates the decoder's state the same way. A bounded memo maps a frame's bytes
-    to its line for each decoding context (version, known version, RPM factor): a frame that
-    would change the context is never served from it, so state changes are never skipped.
-    """
-
-    def __init__(self, decoder, dialect, cache=LINE_CACHE):
-        self.decoder = decoder
-        self.dialect = dialect
-        self.cache = cache
-        self._contexts = {}
-        self._select()
-
-    def _select(self):
-        d = self.decoder
-        key = (d.version, d.known, d.rpm_factor)
-        c = self._contexts.get(key)
-        if c is None:
-            if len(self._contexts) >= _MAX_CONTEXTS:
-                self._contexts.clear()
-            # [young memo, old memo, status encoders by head byte that keep this context]
-            c = self._contexts[key] = [{}, {}, {}]
-        self._key = key
-        self._memo, self._old, self._fast = c
-        self.memo = self._memo
-        self._ctx = c
-
-    def _rotate(self):
-        c = self._ctx
-        c[1] = c[0]
-        c[0] = {}
-        self._memo, self._old = c[0], c[1]
-        self.memo = self._memo
-        return c[0]
-
-    def line(self, f) -> str:
-        """The line of one checked frame (bytes), after a miss in :attr:`memo` (the current
-        context's young memo, which a framer may read directly: see ZkFramer.feed_lines)."""
-        line = self._old.get(f)
-        if line is None:
-            enc = self._fast.get(f[0])
-            if enc is None:
-                return self._miss(f)
-            line = enc(f)
-        memo = self._memo
-        if len(memo) >= self.cache:
-            memo = self._rotate()
-        memo[f] = line
-        return line
-
-    def encode_all(self, frames) -> list:
-        """The lines of ``frames`` (bytes objects, as a framer returns them), in order."""
-        out = []
-        append = out.append
-        memo = self._memo
-        get = memo.get
-        old = self._old.get
-        fast = self._fast.get
-        cap = self.cache
-        for f in frames:
-            line = get(f)
-            if line is None:
-                line = old(f)
-                if line is None:
-                    enc = fast(f[0])
-                    if enc is None:
-                        line = self._miss(f)
-                        memo = self._memo
-                        get = memo.get
-                        old = self._old.get
-                        fast = self._fast.get
-                        append(line)
-                        continue
-                    line = enc(f)
-                if len(memo) >= cap:
-                    memo = self._rotate()
-                    get = memo.get
-                    old = self._old.get
-                memo[f] = line
-            append(line)
-        return out
-
-    def encode(self, frame) -> str:
-        return self.encode_all([bytes(frame)])[0]
-
-    def _miss(self, f):
-        """A frame with no line in the memo and no fast encoder: render it the full way, then
-        remember it (or its encoder) unless it changed the decoding context."""
-        key = self._key
-        line, enc = self._render(f)
-        d = self.decoder
-        if (d.version, d.known, d.rpm_factor) == key:
-            if self.cache:
-                if len(self._memo) >= self.cache:
-                    self._rotate()
-                self._memo[bytes(f)] = line
-            if enc is not None:
-                self._fast[f[0]] = enc
-        else:
-            self._select()
-        return line
-
-    def _generic(self, f):
-        rec = self.decoder.decode(f)
-        rec["frame"] = f.hex(" ").upper()
-        return self.dialect.record(rec)
-
-    def _render(self, f):
-        """(line, the status encoder when it may serve this head byte from now on, else None)."""
-        d = self.decoder
-        raw = d.raw
-        if len(f) == STATUS_LEN:
-            sid = f[0] & 0x0F
-            st = STATUS_BY_ID.get(sid)
-            if st is None:
-                return self._generic(f), None
-            if sid == 6:
-                d.version = d.known = version = known = f[5] >> 2
-                d.version_source = "frame"
-            else:
-                version, known = d.version, d.known
-                if d.version_source == "default" and sid in VERSIONED_STATUS:
-                    d.assumed = True
-            k = (getattr(self.dialect, "key", id(self.dialect)), raw, sid, version, known)
-            enc = _ENCODERS.get(k)
-            if enc is None:
-                if len(_ENCODERS) >= 512:
-                    _ENCODERS.clear()
-                enc = _ENCODERS[k] = st.layout.text_encoder(
-                    self.dialect, {"version": version}, known, raw,
-                    head=(("kind", "const", "status"), ("id", "const", sid)),
-                    tail=(("frame", "str", "b.hex(' ').upper()"),))
-            return enc(f), (None if sid == 6 else enc)
-        cmd_id = f[1] >> 4
-        cmd = CONTROL_BY_ID.get(cmd_id)
-        if cmd is None or cmd_id == 6 or cmd.layout.reserved_bits(f):
-            return self._generic(f), None
-        k = (getattr(self.dialect, "key", id(self.dialect)), raw, "control", cmd_id, d.rpm_factor)
-        enc = _ENCODERS.get(k)
-        if enc is None:
-            if len(_ENCODERS) >= 512:
-                _ENCODERS.clear()
-            enc = _ENCODERS[k] = cmd.layout.text_encoder(
-                self.dialect, {"rpm_factor": d.rpm_factor}, None, raw,
-                head=(("kind", "const", "control"), ("id", "const", cmd_id), ("command", "const", cmd.name)),
-                tail=(("frame", "str", "b.hex(' ').upper()"),))
-        return enc(f), None
-
+#: What a session controlling the engine sends on an abnormal end: control ID 1 with that state
+#: and throttle 0, or ``none`` (nothing). ``standby`` lets a hot engine cool.
+ABORTS = ("standby", "stop", "none")
+DEFAULT_ABORT = "standby"
 
 #: Control ID 2 actions that run hardware: each needs consent on a real port.
 HAZARDOUS_ACTIONS = frozenset({1, 2, 3, 4, 5, 6, 12})
 
 
-def control_hazard(frame) -> str | None:
-    """What a control frame can do to an engine, or None when it is harmless.
+class ControlFrame:
+    """A control frame (host -> ECU) and what sending it means, answered here once.
 
-    Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
-    fuel, fire the igniter, open valves, run the pump or the starter.
+    ``frame`` (the 4 bytes), ``id`` (the command ID), ``command`` (the
+    :class:`ControlCommand`, None for an undefined ID). :attr:`hazard` says what it can do to
+    an engine (consent on a real port); :attr:`controls_engine` whether a session sending it
+    is in control of the engine (and gets the abort command on an abnormal end).
     """
-    cmd_id = frame[1] >> 4
-    if cmd_id == 1 and (frame[1] >> 2) & 3 == 3:
-        return "state run can start the engine"
-    if cmd_id == 6 and frame[2] & 3 == 3:
-        return "state run can start the engine"
-    if cmd_id == 2 and frame[2] in HAZARDOUS_ACTIONS:
-        return f"action {ACTIONS[frame[2]]} runs ECU hardware ({ACTION_TEXT[frame[2]].lower()})"
-    return None
+
+    __slots__ = ("frame", "id", "command")
+
+    def __init__(self, frame):
+        self.frame = bytes(frame)
+        self.id = self.frame[1] >> 4
+        self.command = CONTROL_BY_ID.get(self.id)
+
+    @classmethod
+    def build(cls, name_or_id, **values) -> "ControlFrame":
+        """Encode a command from physical values (see :func:`encode_control`)."""
+        return cls(encode_control(name_or_id, **values)[0])
+
+    def __repr__(self):
+        return f"ControlFrame({self.frame.hex(' ').upper()})"
+
+    def __eq__(self, other):
+        return isinstance(other, ControlFrame) and other.frame == self.frame
+
+    def __hash__(self):
+        return hash(self.frame)
+
+    @property
+    def sw(self) -> int:
+        """The state bits: ID 1 ``b1[3:2]``, ID 6 ``b2[1:0]`` (0 for other IDs)."""
+        if self.id == 1:
+            return (self.frame[1] >> 2) & 3
+        if self.id == 6:
+            return self.frame[2] & 3
+        return 0
+
+    @property
+    def action(self):
+        """ID 2's action name (None for other IDs or an undefined parameter)."""
+        return ACTIONS.get(self.frame[2]) if self.id == 2 else None
+
+    @property
+    def hazard(self) -> str | None:
+        """What the frame can do to an engine, or None when it is harmless.
+
+        Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
+        fuel, fire the igniter, open valves, run the pump or the starter.
+        """
+        if self.id in (1, 6) and self.sw == 3:
+            return "state run can start the engine"
+        if self.id == 2 and self.frame[2] in HAZARDOUS_ACTIONS:
+            return f"action {ACTIONS[self.frame[2]]} runs ECU hardware ({ACTION_TEXT[self.frame[2]].lower()})"
+        return None
+
+    @property
+    def hazardous(self) -> bool:
+        """True when sending it on a real port needs consent (see :attr:`hazard`)."""
+        return self.hazard is not None
+
+    @property
+    def controls_engine(self) -> bool:
+        """True when sending it controls the engine: ID 1 with a state other than pwm, ID 6 with
+        a state or an RPM factor, ID 7, or an action that runs hardware. Keep-alives, unlock,
+        settings, air pressure and harmless actions (rates, reset-fuel, zero-thrust, pump-off)
+        do not."""
+        if self.id == 1:
+            return self.sw != 0
+        if self.id == 6:
+            return self.frame[2] & 0x1F != 0
+        if self.id == 7:
+            return True
+        if self.id == 2:
+            return self.hazardous
+        return False
+
+    def decode(self, ctx=None) -> dict:
+        """The frame's record (as ``zk decode`` gives it)."""
+        return decode_control(self.frame, ctx)
+
+
+def control_hazard(frame) -> str | None:
+    """What a control frame can do to an engine, or None (see :attr:`ControlFrame.hazard`)."""
+    return ControlFrame(frame).hazard

@@ -13,9 +13,9 @@ import sys
 import click
 
 from .. import __version__
-from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError
+from ..errors import INTERRUPTED, USAGE, ZkzapError, exit_status_help
 
-EXIT_EPILOG = "Exit status: " + "; ".join(f"{c} {t}" for c, t in EXIT_CODES) + "."
+EXIT_EPILOG = exit_status_help()
 
 
 HELP_TEXT = "Show this message and exit."
@@ -196,6 +196,7 @@ ZK_COMMANDS = {
     "errors": (".zk.tables", "errors", "List the engine error codes (appendix table)."),
     "fields": (".zk.tables", "fields", "List every control and status field with bits, unit and range."),
     "detect": (".zk.detect", "detect", "Find the ECU's baud rate and stop bits by listening."),
+    "batch": (".zk.batch", "batch", "Run many zk commands over one open port (JSON Lines)."),
 }
 ZAP_COMMANDS = {
     "echo": (".zap.compose", "echo", "Echo: check that an actuator answers."),
@@ -220,6 +221,7 @@ ZAP_COMMANDS = {
     "setup": (".zap.fleet", "setup", "Guided ID setup, one actuator at a time, resumable."),
     "watch": (".zap.watch", "watch", "Poll registers of several actuators live, or log them."),
     "check": (".zap.check", "check", "Self-check actuators: echo, voltage, errors, a full-stroke move."),
+    "batch": (".zap.batch", "batch", "Run many zap commands over one open port (JSON Lines)."),
 }
 ROOT_COMMANDS = {
     "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),
@@ -227,6 +229,7 @@ ROOT_COMMANDS = {
     "crc": (".crc", "crc", "Compute or check CRCs and checksums of both protocols."),
     "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
     "sniff": (".sniff", "sniff", "Watch a live ZK or mightyZAP link passively (never transmits)."),
+    "shell": (".shell", "shell", "An interactive zap or zk session over one open port."),
     "ports": (".ports", "ports", "List serial ports, with adapter hints."),
     "completion": (".completion", "completion", "Print the shell completion script."),
 }
@@ -284,11 +287,12 @@ def _error(message: str, prog: str = "zkzap") -> None:
                color=color_enabled(sys.stderr))
 
 
-def run(cmd, prog_name=None, args=None) -> int:
-    """Run a click command with zkzap's error conventions; returns the exit status."""
+def run(cmd, prog_name=None, args=None, **extra) -> int:
+    """Run a click command with zkzap's error conventions; returns the exit status. ``extra``
+    goes to the command's context (``default_map``)."""
     debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
     try:
-        rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False)
+        rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False, **extra)
         return rv if isinstance(rv, int) else 0
     except click.exceptions.Exit as e:
         return e.exit_code
@@ -316,7 +320,9 @@ def run(cmd, prog_name=None, args=None) -> int:
     except ZkzapError as e:
         if debug:
             raise
-        _error(str(e), prog_name or "zkzap")
+        from .hints import with_hint
+
+        _error(with_hint(e), prog_name or "zkzap")
         return e.code
     except OSError as e:
         # stdout on a full disk (> /dev/full): a dry run, a table, --help, a completion script

@@ -43,14 +43,15 @@ def zk_decode_captures(paths, *, fmt, output, append, protocol_version, accept, 
     try:
         for path in paths:
             frames = CaptureFrames(path, "zk", accept)
-            if fmt == "table":
+            if fmt not in ("csv", "json", "jsonl"):      # table, influx: record by record
                 _run(zk_records(frames, decoder, decode), writer, done)
             else:
                 # straight to text: the table-generated encoders and their memo, as for raw bytes
                 from ..api.capture import zk_lines
                 from ..io.writers import csv_dialect, json_dialect
+                from ..io.zk_lines import ZkLines
 
-                lines = decoder.lines(csv_dialect(columns(accept, raw)) if fmt == "csv" else json_dialect())
+                lines = ZkLines(decoder, csv_dialect(columns(accept, raw)) if fmt == "csv" else json_dialect())
                 pending = []
                 for block in zk_lines(frames, lines, fmt == "csv"):
                     pending += block

@@ -83,11 +83,37 @@ def warn(message: str) -> None:
                color=color_enabled(sys.stderr))
 
 
-def format_option(*, choices=FORMATS, help_extra=""):
-    """``--format``/``-f``: default a table on a terminal, JSON Lines otherwise."""
+def format_option(*, choices=FORMATS, help_extra="", default=None, help=None):
+    """``-f/--format``, the one definition: by default a table on a terminal, JSON Lines
+    otherwise; a command with its own ``default`` (``value``, ``text``) or ``help`` says so."""
     return click.option(
-        "-f", "--format", "fmt", type=click.Choice(choices), default=None,
-        help="Output format (default: table on a terminal, jsonl otherwise)." + help_extra)
+        "-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=default is not None,
+        help=(help if help is not None else "Output format (default: table on a terminal, jsonl otherwise).")
+        + help_extra)
+
+
+def rate_option(help="Control frames per second (default 20)."):
+    """``--rate HZ``: how often a ZK session sends its control frame (1..200 Hz)."""
+    return click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ", help=help)
+
+
+def abort_option(help, default=None):
+    """``--abort standby|stop|none``: what a ZK session sends when it ends abnormally (the
+    choices are :data:`zkzap.codec.zk.ABORTS`)."""
+    from ..codec.zk import ABORTS
+
+    return click.option("--abort", type=click.Choice(list(ABORTS)), default=default,
+                        show_default=default is not None, help=help)
+
+
+def id_option(default=0, allow_broadcast=True, help=None):
+    """``-i/--id``: a mightyZAP actuator ID 0..253, and 254/'broadcast' where allowed."""
+    from .zap.params import IdType
+
+    if help is None:
+        help = "Actuator ID 0..253" + (" (254 or 'broadcast': all, never answered)." if allow_broadcast else ".")
+    return click.option("-i", "--id", "ident", type=IdType(allow_broadcast), default=default, show_default=True,
+                        help=help)
 
 
 def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl"):

@@ -249,7 +249,7 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, replay, speed, use
     unanswered); any other request goes to the model, whose actuators are --ids or, by
     default, the IDs that answered in the capture.
     """
-    from ..sim.zap_bus import parse_fault
+    from ..sim.zap_actuators import parse_fault
 
     for text in faults:
         try:

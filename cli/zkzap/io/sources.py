@@ -87,7 +87,7 @@ def _records(frames, decode, writer, frame_key):
 
 def run_text_decode(chunks, framer, lines, writer, after=None):
     """Like :func:`run_decode` for the text formats: ``lines.encode_all(frames)`` renders the
-    records (see :class:`zkzap.codec.zk.ZkLines`) and ``writer.write_lines`` writes each block.
+    records (see :class:`zkzap.io.zk_lines.ZkLines`) and ``writer.write_lines`` writes each block.
     ``after()`` runs after each block. Returns the number of records written."""
     count = 0
     write_lines = writer.write_lines

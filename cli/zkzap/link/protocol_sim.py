@@ -28,12 +28,21 @@ class Serial(SerialBase):
         if self.is_open:
             raise SerialException("port already open")
         kind, options = self.from_url(self._port)
-        try:
-            self._clock = Clock(parse_number("speed", options.pop("speed", "1"), 0.001, 10000))
-            self._device = make_device(kind, **options)
-        except (TypeError, ValueError) as e:
-            # bad input (exit 2 naming the option), not a port failure
-            raise ValueError(f"sim://{kind}: {e}") from None
+        self._shared = "instance" in options
+        if self._shared:                # a simulator started from Python (zkzap.sim.start)
+            from ..sim import INSTANCES
+
+            found = INSTANCES.get(options["instance"])
+            if found is None:
+                raise SerialException(f"sim://{kind}: no running simulator instance {options['instance']!r}")
+            self._device, self._clock = found
+        else:
+            try:
+                self._clock = Clock(parse_number("speed", options.pop("speed", "1"), 0.001, 10000))
+                self._device = make_device(kind, **options)
+            except (TypeError, ValueError) as e:
+                # bad input (exit 2 naming the option), not a port failure
+                raise ValueError(f"sim://{kind}: {e}") from None
         self._rx = bytearray()
         self.is_open = True
 
@@ -50,7 +59,8 @@ class Serial(SerialBase):
     def close(self):
         if self.is_open:
             self.is_open = False
-            self._device.close()
+            if not self._shared:        # a shared instance belongs to its starter
+                self._device.close()
 
     def _pump(self):
         out = self._device.poll(self._clock.now())

@@ -105,46 +105,18 @@ def error_message(reply: Reply) -> str:
 
 
 def device_error(reply: Reply) -> DeviceError:
-    e = DeviceError(error_message(reply))
-    e.reply = reply
-    return e
+    """The :class:`DeviceError` for a reply with error bits (``reply``, ``ident``, ``errors`` attached)."""
+    return DeviceError(error_message(reply), reply=reply, ident=reply.ident, errors=reply.errors)
 
 
 def stored_writes(pkt: bytes) -> list:
-    """Names of the stored (NV) settings a command packet writes (for consent and pauses)."""
-    code, params = pkt[5], pkt[6:-1]
-    if code in (0xF3, 0xF4) and len(params) >= 2:
-        return _stored_in(params[0], len(params) - 1)
-    if code == 0x73 and len(params) >= 2:
-        return _stored_in(params[0], params[1])
-    if code == 0xF6:
-        return ["every stored setting (factory reset)"]
-    return []
-
-
-def _stored_in(address: int, length: int) -> list:
-    names = []
-    for addr in range(address, min(address + length, 256)):
-        reg = zap.REGISTER_BY_ADDRESS.get(addr)
-        if reg is not None and reg.stored and reg.name not in names:
-            names.append(reg.name)
-    return names
+    """Names of the stored (NV) settings a command packet writes (see :class:`zap.Command`)."""
+    return zap.Command(pkt).stored_writes
 
 
 def leaves_protocol(pkt: bytes) -> bool:
-    """True when the packet writes 0 (Modbus RTU) to protocol-type: the actuator would leave
-    this protocol and no longer answer it."""
-    code, params = pkt[5], bytes(pkt[6:-1])
-    addr = zap.REGISTER_BY_NAME["protocol-type"].address
-    if code in (0xF3, 0xF4) and len(params) >= 2 and params[0] <= addr < params[0] + len(params) - 1:
-        return params[1 + addr - params[0]] == 0
-    if code == 0x73 and len(params) >= 2 and params[1]:
-        start, length = params[0], params[1]
-        if start <= addr < start + length:
-            body = params[2:]
-            step = 1 + length
-            return any(body[j + 1 + addr - start] == 0 for j in range(0, len(body) - step + 1, step))
-    return False
+    """True when the packet writes 0 (Modbus RTU) to protocol-type (see :class:`zap.Command`)."""
+    return zap.Command(pkt).leaves_protocol
 
 
 class ZapBus:
@@ -261,7 +233,7 @@ class ZapBus:
         if reply is None:
             reply = self.expects_reply(pkt)
         stored = stored_writes(pkt)
-        restart = pkt[5] in (0xF6, 0xF8)
+        restart = pkt[5] in zap.RESTART_CODES
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
         if not reply:
@@ -369,21 +341,19 @@ class ZapBus:
                 return None
             ms = limit * 1000
             echo = any(p[1] == "echo only" for p in problems)
-            hint = " (only our own bytes came back: the adapter echoes)" if echo else ""
+            note = " (only our own bytes came back: the adapter echoes)" if echo else ""
             ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
-            mode_hint = ""
-            if ins is not None and ins.reply != "always":
-                mode_hint = "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
             raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {ms:.1f} ms "
-                          f"({tries} {'try' if tries == 1 else 'tries'}){hint}; check the ID, the baud rate "
-                          f"('zap scan --baud all'), power and wiring{mode_hint}")
+                          f"({tries} {'try' if tries == 1 else 'tries'}){note}",
+                          ident=ident, baud=self.baud, timeout=limit, tries=tries, echo_only=echo,
+                          mode_dependent=ins is not None and ins.reply != "always", protocol="zap")
         bad = [p for p in problems if p[0] != "none"][-1]
         seen = bad[2].hex(" ").upper() if bad[2] else "nothing"
         if len(seen) > 120:
             seen = seen[:117] + "..."
-        e = BadReply(f"ID {ident}: {bad[1]} after {tries} {'try' if tries == 1 else 'tries'}; received {seen}")
-        e.kind = bad[0]
-        raise e
+        raise BadReply(f"ID {ident}: {bad[1]} after {tries} {'try' if tries == 1 else 'tries'}; received {seen}",
+                       kind=bad[0], ident=ident, baud=self.baud, timeout=limit, tries=tries, received=bad[2],
+                       protocol="zap")
 
     # -- instructions -------------------------------------------------------------------------
 
@@ -394,11 +364,11 @@ class ZapBus:
         pkt = bytes(pkt)
         code, params = pkt[5], pkt[6:-1]
         kw = {}
-        if code == 0xF2 and len(params) == 2:
+        if code == zap.LOAD_DATA and len(params) == 2:
             kw["data_len"] = params[1]
-        if code == 0xF3 and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["id"].address:
+        if code == zap.STORE_DATA and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["id"].address:
             kw["accept_ids"] = {pkt[3], params[1]}
-        if code == 0xF3 and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["feedback-return-mode"].address \
+        if code == zap.STORE_DATA and len(params) == 2 and params[0] == zap.REGISTER_BY_NAME["feedback-return-mode"].address \
                 and pkt[3] != zap.BROADCAST and params[1] <= 2:
             # the reply follows the old or the new mode (firmware-dependent): wait if either answers
             new = params[1]
@@ -422,8 +392,8 @@ class ZapBus:
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
         """Load Data: ``length`` bytes from ``address``."""
         if self.return_mode == 0:
-            raise UsageError("load: in feedback-return-mode 0 Load Data is never answered; "
-                             "give --return-mode 1 or 2 if the actuator is set so")
+            raise UsageError("load: in feedback-return-mode 0 Load Data is never answered",
+                             ident=ident, return_mode=0, assumed_mode=True)
         return self.transact(zap.load(ident, address, length), reply=True, data_len=length, **kw)
 
     def read(self, ident: int, reg, **kw) -> int:
@@ -499,7 +469,8 @@ class ZapBus:
                     raise device_error(r)
                 return r
             if time.monotonic() >= end:
-                raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s")
+                raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s",
+                              ident=ident, baud=self.baud, timeout=within, protocol="zap")
             time.sleep(0.005)
 
 
@@ -517,7 +488,7 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         url = sim_url("zap", **opts)
     else:
         if not port:
-            raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
+            raise UsageError("no port", no_port="zap")
         url = port
     p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
     return ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)

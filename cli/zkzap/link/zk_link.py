@@ -46,8 +46,8 @@ HOLD_FRAMES = 12
 #: Whole status cycles seen before ``--ids`` the ECU never sends are reported.
 ID_CHECK_LAPS = 3
 #: Abort commands (``--abort``): the control state sent with throttle 0 on an abnormal end.
-ABORTS = ("standby", "stop", "none")
-DEFAULT_ABORT = "standby"
+ABORTS = zk.ABORTS
+DEFAULT_ABORT = zk.DEFAULT_ABORT
 #: Longest a read blocks, so control frames go out on time and signals are seen promptly.
 READ_SLICE_S = 0.01
 READ_SIZE = 4096
@@ -59,21 +59,8 @@ def is_simulator(url: str) -> bool:
 
 
 def controls_engine(frame) -> bool:
-    """True when sending ``frame`` controls the engine: ID 1 with a state other than pwm, ID 6 with
-    a state or an RPM factor, ID 7, or an action that runs hardware. Such sessions get the abort
-    command on an abnormal end; keep-alives, unlock, settings, air pressure and harmless actions
-    (rates, reset-fuel, zero-thrust, pump-off) do not."""
-    rec = zk.decode_control(frame)
-    cid = rec["id"]
-    if cid == 1:
-        return rec["sw"] != 0
-    if cid == 6:
-        return rec["sw"] != 0 or rec["rpm_factor"] != 0
-    if cid == 7:
-        return True
-    if cid == 2:
-        return zk.control_hazard(frame) is not None
-    return False
+    """True when sending ``frame`` controls the engine (see :attr:`zk.ControlFrame.controls_engine`)."""
+    return zk.ControlFrame(frame).controls_engine
 
 
 def abort_frames(kind: str, version=None, pump=False) -> list:
@@ -123,9 +110,20 @@ class ZkLink:
     @classmethod
     def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S, stop_bits=1):
         from .port import open_port
+        from .shared import shared
 
+        lent = shared("zk")
+        if lent is not None:        # a batch: the one open port, left open by close()
+            return lent.borrow(raw_log, slice_s)
         ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
         return cls(ser, url, raw_log)
+
+    def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
+        """A link over this one's port for one command; its close() leaves the port open."""
+        self.ser.timeout = slice_s
+        link = ZkLink(self.ser, self.url, raw_log)
+        link.close = lambda: None
+        return link
 
     @property
     def device(self):
@@ -240,7 +238,7 @@ class ReplaySource:
                 frames = self.framer.flush()      # frames held for look-ahead come out here
             for f in frames:
                 self.queue.append((self.next_t, f))
-                if f[0] == 0xF6:
+                if f[0] == zk.VERSION_HEAD:
                     rate = zk.decode_status(f).get("status_rate_hz")
                     if rate:
                         self.period = 1.0 / rate
@@ -382,7 +380,7 @@ class Telemetry:
     def feed(self, t, frame) -> list:
         if self.holding:
             self.held.append((t, frame))
-            if frame[0] == 0xF6 or len(self.held) >= HOLD_FRAMES:
+            if frame[0] == zk.VERSION_HEAD or len(self.held) >= HOLD_FRAMES:
                 return self._release()
             return []
         return self._emit(t, frame)
@@ -393,7 +391,7 @@ class Telemetry:
 
     def _release(self):
         self.holding = False
-        six = next((f for _, f in self.held if f[0] == 0xF6), None)
+        six = next((f for _, f in self.held if f[0] == zk.VERSION_HEAD), None)
         if six is not None:
             self.decoder.decode(six)
         else:

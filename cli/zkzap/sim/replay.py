@@ -7,7 +7,7 @@
   the same request (same ID, instruction and parameters: the same bytes), after the recorded
   latency; several recorded replies to one request are played in order, then the last again; a
   request recorded without a reply stays unanswered (a silent actuator is reproduced). Other
-  requests go to the actuator-bus model (:class:`zkzap.sim.zap_bus.ActuatorBus`).
+  requests go to the actuator-bus model (:class:`zkzap.sim.zap_actuators.ActuatorBus`).
 """
 
 from __future__ import annotations

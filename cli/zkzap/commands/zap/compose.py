@@ -26,7 +26,7 @@ RETURN_MODES = ("0", "1", "2", "auto")
 def _check_sim_ids(ctx, param, value):
     if value is None:
         return None
-    from ...sim.zap_bus import parse_ids
+    from ...sim.zap_actuators import parse_ids
 
     try:
         parse_ids(value)
@@ -77,15 +77,10 @@ def _say(message: str) -> None:
 
 def targets_of(packets) -> list:
     """The actuator IDs packets address (for the default simulated bus)."""
-    ids = []
+    ids = set()
     for p in packets:
-        if p[3] != zap.BROADCAST:
-            ids.append(p[3])
-        elif p[5] == 0x73 and len(p) > 9:
-            length = p[7]
-            body = p[8:-1]
-            ids.extend(body[j] for j in range(0, len(body), 1 + length))
-    return sorted(set(ids)) or [0]
+        ids.update(zap.Command(p).target_ids())
+    return sorted(ids) or [0]
 
 
 def require_port(port, sim) -> None:
@@ -124,10 +119,17 @@ def refuse_protocol_change(packets, force) -> None:
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
               **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
-    from ...link.zap_bus import open_bus
+    from ...link.shared import Borrowed, shared
+    from ...link.zap_bus import RETRIES, open_bus
 
-    require_port(port, sim)
     mode = 1 if return_mode == "auto" else int(return_mode)
+    lent = shared("zap")
+    if lent is not None:            # a batch: every command over the one open port
+        bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout)
+        if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
+            lent.detect_return_mode(probe)
+        return bus
+    require_port(port, sim)
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
@@ -208,8 +210,9 @@ ECHO_COLUMNS = ["id", "seq", "error", "errors", "rtt_ms"]
 
 
 def _format(default, choices, what):
-    return click.option("-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
-                        help=f"Output format: {what}.")
+    from ..options import format_option
+
+    return format_option(choices=choices, default=default, help=f"Output format: {what}.")
 
 
 def _link_args(common):
@@ -307,24 +310,6 @@ def echo(ident, count, interval, fmt, **common):
 LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meaning", "errors"]
 
 
-def register_records(ident, values, errors=()):
-    """Records (id, register, address, value, physical/unit where scaled, meaning where the
-    register has named values) for [(Register, raw), ...]."""
-    out = []
-    for reg, raw in values:
-        rec = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
-        if reg.scale != 1:
-            rec["physical"] = reg.physical(raw)
-            rec["unit"] = reg.unit
-        elif reg.unit:
-            rec["unit"] = reg.unit
-        if reg.choices and raw in reg.choices:
-            rec["meaning"] = reg.choices[raw]
-        rec["errors"] = list(errors)
-        out.append(rec)
-    return out
-
-
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("reg", metavar="REGISTER", type=REGISTER)
 @click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
@@ -366,6 +351,8 @@ def load(reg, length, physical, fmt, ident, **common):
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         reply, values = bus.read_registers(ident, reg.address, length, check=False)
+    from ...api.zap import register_records
+
     records = register_records(reply.ident, values, reply.errors)
     partial = _mark_partial(records, reg.address, length)
     if fmt == "value":

@@ -58,7 +58,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode bus.pcapng -f json -o bus.json
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, run_decode
+    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -79,10 +79,18 @@ def decode(inputs, binary, fmt, output, append):
             _explain_single(chunks[0])
     stream, had = open_output(output, append, fmt=fmt, columns=COLUMNS,
                               inputs=decode_inputs(inputs, binary, explicit))
-    decode_one = (lambda p: _table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
     writer = make_writer(fmt, stream, COLUMNS, table_columns=TABLE_COLUMNS, header=not had)
     try:
-        run_decode(chunks, framer, decode_one, writer)
+        if fmt == "table":
+            run_decode(chunks, framer, lambda p: _table_cells(decoder.decode(p)), writer)
+        elif fmt not in ("csv", "json", "jsonl"):      # influx: record by record
+            run_decode(chunks, framer, decoder.decode, writer)
+        else:                   # text formats: each distinct (request, packet) rendered once
+            from ...io.writers import csv_dialect, json_dialect
+            from ...io.zap_lines import ZapLines
+
+            lines = ZapLines(decoder, csv_dialect(COLUMNS) if fmt == "csv" else json_dialect())
+            run_text_decode(chunks, framer, lines, writer)
     finally:
         close_output(writer, stream)
     note_skipped(framer, "packets", "checksum")

@@ -61,7 +61,8 @@ REGISTER = RegisterType()
 INT = IntValue()
 
 
-def id_option(default=0, allow_broadcast=True):
-    return click.option("-i", "--id", "ident", type=IdType(allow_broadcast), default=default, show_default=True,
-                        help="Actuator ID 0..253" + (" (254 or 'broadcast': all, never answered)."
-                                                     if allow_broadcast else "."))
+def id_option(default=0, allow_broadcast=True, help=None):
+    """``-i/--id`` (defined once, in :func:`zkzap.commands.options.id_option`)."""
+    from ..options import id_option as option
+
+    return option(default, allow_broadcast, help)

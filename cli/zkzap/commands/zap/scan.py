@@ -12,21 +12,17 @@ import time
 
 import click
 
+from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
-from ...errors import CheckFailed, NoReply, UsageError
+from ...errors import NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, SignedCommand, consent, note, resolve_format, yes_option
-from .compose import _link_args, link_options, open_link, register_records
+from ..options import FiniteRange, SignedCommand, consent, format_option, id_option, note, resolve_format, yes_option
+from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
 
 SCAN_COLUMNS = ["id", "baud", "model", "firmware", "return_mode", "status", "errors"]
 SCAN_TABLE = [("id", "id"), ("baud", "baud"), ("_model", "model"), ("firmware", "firmware"),
               ("return_mode", "return mode"), ("status", "status"), ("_errors", "errors")]
-#: The order ``--baud all`` tries: the factory default first, then the others fastest first.
-ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
-#: The block ``scan`` reads from each actuator found: model-number .. feedback-return-mode.
-INFO_FIRST = zap.REGISTER_BY_NAME["model-number"]
-INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
 
 
 class IdList(click.ParamType):
@@ -115,8 +111,7 @@ def _consent_real(port, sim, yes, action):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="IDs to probe, like 0-253 or 1,2,5-8.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
-              help="Output format (default: table on a terminal, jsonl otherwise).")
+@format_option()
 @link_options(baud_type=BaudList(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
                                               "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
 def scan(ids, fmt, **common):
@@ -135,7 +130,6 @@ def scan(ids, fmt, **common):
       zap scan -b all --ids 0-20 -p /dev/ttyUSB0 -f json
       zap scan --sim --sim-ids 1,2,3
     """
-    from ...errors import BadReply
     from ...io.writers import make_writer
 
     bauds = common["baud"]
@@ -148,31 +142,17 @@ def scan(ids, fmt, **common):
     args["return_mode"] = "1"
     args["baud"] = bauds[0]
     try:
-        with open_link(ids=[0], **args) as bus:
+        with open_link(ids=[0], **args) as link:
             progress = _progress(len(ids) * len(bauds), "scanning")
-            for baud in bauds:
-                bus.set_baud(baud)
-                for ident in ids:
-                    if progress is not None:
-                        progress.update(0, description=f"{baud} baud, ID {ident:3d} ({len(found)} found)")
-                    rec = {"id": ident, "baud": baud, "model": None, "firmware": None, "return_mode": None,
-                           "status": "ok", "errors": []}
-                    try:
-                        r = bus.ping(ident, retries=common["retries"])
-                    except BadReply as e:
-                        rec["status"] = "garbled"
-                        rec["errors"] = [str(e)]
-                        r = None
-                        _emit(writer, rec, found, fmt)
-                    if progress is not None:
-                        progress.advance(0)
-                    if r is None:
-                        continue
-                    rec["errors"] = r.errors
-                    if r.error:
-                        rec["status"] = "error"
-                    _identify(bus, ident, rec)
-                    _emit(writer, rec, found, fmt)
+
+            def probed(baud, ident, n):
+                if progress is not None:
+                    progress.update(0, description=f"{baud} baud, ID {ident:3d} ({n} found)")
+                    progress.advance(0)
+
+            for rec in Bus.over(link).scan(ids, bauds, retries=common["retries"],
+                                           on_probe=probed if progress is not None else None):
+                _emit(writer, rec, found, fmt)
     finally:
         if progress is not None:
             progress.stop()
@@ -183,27 +163,6 @@ def scan(ids, fmt, **common):
         raise NoReply(f"no actuator answered ({where}, {took:.2f} s)")
     if common["verbose"] or sys.stderr.isatty():
         note(f"{len(found)} actuator{'s' if len(found) != 1 else ''} found ({where}, {took:.2f} s)")
-
-
-def _identify(bus, ident, rec):
-    """Model, firmware and return mode in one Load Data (answered in return modes 1 and 2)."""
-    from ...errors import BadReply
-
-    length = INFO_LAST.address + INFO_LAST.size - INFO_FIRST.address
-    try:
-        r = bus.transact(zap.load(ident, INFO_FIRST.address, length), reply=True, data_len=length,
-                         optional=True, check=False)
-    except BadReply as e:
-        rec["status"] = "garbled"
-        rec["errors"] = rec["errors"] + [str(e)]
-        return
-    if r is None:
-        rec["return_mode"] = 0                     # answers Echo but not Load Data
-        return
-    values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
-    rec["model"] = values.get("model-number")
-    rec["firmware"] = values.get("firmware-version")
-    rec["return_mode"] = values.get("feedback-return-mode")
 
 
 def _emit(writer, rec, found, fmt):
@@ -236,24 +195,9 @@ DUMP_TABLE = [("_address", "addr"), ("register", "register"), ("value", "value")
               ("meaning", "meaning"), ("access", "access"), ("memory", "memory")]
 
 
-def map_blocks(gap=8):
-    """Contiguous runs of the register map, as (address, length): few, efficient Load Data reads
-    (gaps of at most ``gap`` unmapped bytes are read through)."""
-    blocks = []
-    for reg in sorted(zap.REGISTERS, key=lambda r: r.address):
-        end = reg.address + reg.size
-        if blocks and reg.address - (blocks[-1][0] + blocks[-1][1]) <= gap:
-            blocks[-1][1] = end - blocks[-1][0]
-        else:
-            blocks.append([reg.address, reg.size])
-    return [tuple(b) for b in blocks]
-
-
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="Actuator ID 0..253.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
-              help="Output format (default: table on a terminal, jsonl otherwise).")
+@id_option(allow_broadcast=False)
+@format_option()
 @link_options
 def dump(ident, fmt, **common):
     """Read back the whole register map of one actuator (12Lf), with names, units and values.
@@ -272,25 +216,12 @@ def dump(ident, fmt, **common):
 
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    records = []
-    worst = None
-    with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
-        if bus.return_mode == 0:
-            raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
-        for address, length in map_blocks():
-            reply, values = bus.read_registers(ident, address, length, check=False)
-            if reply.error and worst is None:
-                worst = reply
-            mapped = [(reg, raw) for reg, raw in values if zap.REGISTER_BY_ADDRESS.get(reg.address) is reg]
-            records += register_records(ident, mapped, reply.errors)
+    with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
+        records, worst = Bus.over(link).dump_records(ident)
     fmt = resolve_format(fmt)
     writer = make_writer(fmt, sys.stdout, DUMP_COLUMNS, table_columns=DUMP_TABLE,
                          title=f"mightyZAP ID {ident}")
     for rec in records:
-        reg = zap.REGISTER_BY_ADDRESS[rec["address"]]
-        rec.pop("errors", None)
-        rec["access"] = reg.access
-        rec["memory"] = reg.memory
         if fmt == "table":
             unit = rec.get("unit", "")
             shown = rec.get("physical", rec["value"]) if unit else ""
@@ -303,17 +234,9 @@ def dump(ident, fmt, **common):
 
 # -- move ----------------------------------------------------------------------------------------
 
-POSITION = zap.REGISTER_BY_NAME["goal-position"]
-SPEED = zap.REGISTER_BY_NAME["goal-speed"]
-#: present-position .. moving, read in one Load Data while waiting.
-WATCH_FIRST = zap.REGISTER_BY_NAME["present-position"]
-WATCH_LAST = zap.REGISTER_BY_NAME["moving"]
-
-
 @click.command(cls=SignedCommand, context_settings=CONTEXT)
 @click.argument("position", type=INT, metavar="POSITION")
-@click.option("-i", "--id", "ident", type=IdType(), default=0, show_default=True,
-              help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
+@id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
 @click.option("-s", "--speed", type=INT, default=None,
               help=f"Goal speed {SPEED.lo}..{SPEED.hi}, written first (default: leave as it is).")
 @click.option("-w", "--wait", is_flag=True,
@@ -343,77 +266,43 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
         SPEED.check(speed)
     if wait and ident == zap.BROADCAST:
         raise UsageError("--wait: a broadcast is never answered; give one actuator's ID to wait for it")
-    with open_link(ids=[ident], probe=ident if wait else None, **_link_args(common)) as bus:
-        if speed is not None:
-            bus.store(ident, SPEED, speed)
-        bus.store(ident, POSITION, position)
+    with open_link(ids=[ident], probe=ident if wait else None, **_link_args(common)) as link:
+        bus = Bus.over(link)
         if not wait:
+            bus.move(ident, position, speed=speed, wait=False)
             if common["verbose"]:
                 note(f"ID {ident}: goal-position {position}" + (f" at speed {speed}" if speed is not None else ""))
             return
+        if speed is not None:
+            bus.store(ident, SPEED, speed)
+        bus.store(ident, POSITION, position)
         if bus.return_mode == 0:
             raise UsageError(f"--wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data")
-        final = _wait(bus, ident, position, wait_timeout, poll, common["verbose"])
-    click.echo(str(final))
+        progress = _progress(None, f"ID {ident} -> {position}")
 
+        def show(pos, goal, first):
+            total = max(1, abs(goal - first))
+            progress.update(0, total=total, completed=total - min(total, abs(goal - pos)),
+                            description=f"ID {ident}: {pos} -> {goal}")
 
-def _wait(bus, ident, position, limit, poll, verbose):
-    goal = bus.read(ident, POSITION)
-    margin = bus.read(ident, zap.REGISTER_BY_NAME["end-compliance-margin"])
-    if goal != position:
-        note(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits")
-    length = WATCH_LAST.address + WATCH_LAST.size - WATCH_FIRST.address
-    start = time.monotonic()
-    progress = _progress(None, f"ID {ident} -> {goal}")
-    first = None
-    try:
-        while True:
-            _, values = bus.read_registers(ident, WATCH_FIRST.address, length)
-            v = {reg.name: raw for reg, raw in values}
-            pos, moving = v["present-position"], v["moving"]
-            if first is None:
-                first = pos
+        start = time.monotonic()
+        try:
+            final = bus.wait_stopped(ident, position, timeout=wait_timeout, poll=poll,
+                                     on_progress=show if progress is not None else None, notify=note)
+        finally:
             if progress is not None:
-                total = max(1, abs(goal - first))
-                progress.update(0, total=total, completed=total - min(total, abs(goal - pos)),
-                                description=f"ID {ident}: {pos} -> {goal}")
-            if not moving:
-                if abs(pos - goal) <= max(margin, 1):
-                    if verbose:
-                        note(f"ID {ident} stopped at {pos} (goal {goal}) after {time.monotonic() - start:.2f} s")
-                    return pos
-                force = bus.read(ident, zap.REGISTER_BY_NAME["force-on-off"])
-                why = "; the force is off" if not force else ""
-                raise CheckFailed(f"ID {ident} stopped at {pos}, {abs(pos - goal)} away from the goal {goal}{why}")
-            if time.monotonic() - start >= limit:
-                raise NoReply(f"ID {ident} still moving after {limit:g} s (position {pos}, goal {goal})")
-            if poll:
-                time.sleep(poll)
-    finally:
-        if progress is not None:
-            progress.stop()
+                progress.stop()
+        if common["verbose"]:
+            note(f"ID {ident} stopped at {final} (goal {bus.load(ident, POSITION)}) after "
+                 f"{time.monotonic() - start:.2f} s")
+    click.echo(str(final))
 
 
 # -- set-id / set-baud ---------------------------------------------------------------------------
 
-ID_REG = zap.REGISTER_BY_NAME["id"]
-BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
-
-
-def _read_back(bus, ident, reg, within, silent):
-    """After a change: wait until ``ident`` answers again, then read ``reg``. ``silent`` is the
-    failure (exit 1) when it does not answer within ``within`` seconds."""
-    try:
-        bus.wait_ready(ident, within=within)
-        return bus.read(ident, reg)
-    except NoReply:
-        raise CheckFailed(silent) from None
-
-
 @click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="The actuator's present ID 0..253 (factory default 0).")
+@id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).")
 @click.option("--force", is_flag=True, help="Go ahead even if another actuator already answers to NEW.")
 @click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
               help="How long to wait for the actuator to answer after the change.")
@@ -435,23 +324,14 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
         note(f"ID {ident} already; nothing to do")
         return
     _consent_real(common["port"], common["sim"], yes, f"change ID {ident} to {new}")
-    with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
-        bus.echo(ident)
-        if not force and bus.ping(new) is not None:
-            raise CheckFailed(f"ID {new} is already taken by another actuator; choose a free ID "
-                              "('zap scan') or pass --force")
-        bus.store(ident, ID_REG, new)
-        value = _read_back(bus, new, ID_REG, ready_timeout,
-                           f"set-id: ID {new} does not answer after the change; check with 'zap scan'")
-    if value != new:
-        raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}")
+    with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
+        Bus.over(link).set_id(ident, new, force=force, ready_timeout=ready_timeout)
     note(f"ID {ident} is now ID {new} (verified)")
 
 
 @click.command("set-baud", cls=Command, context_settings=CONTEXT)
 @click.argument("new_baud", type=click.Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
-@click.option("-i", "--id", "ident", type=IdType(allow_broadcast=False), default=0, show_default=True,
-              help="Actuator ID 0..253.")
+@id_option(allow_broadcast=False)
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")
 @click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
@@ -472,22 +352,10 @@ def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
       zap set-baud 57600 --id 1 -b 115200 -p /dev/ttyUSB0 --yes
     """
     baud = int(new_baud)
-    code = zap.BAUD_TO_CODE[baud]
     _consent_real(common["port"], common["sim"], yes, f"change ID {ident}'s baud rate to {baud}")
-    with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
-        bus.echo(ident)
-        bus.store(ident, BAUD_REG, code)
-        if no_restart:
-            value = bus.read(ident, BAUD_REG)
-            if value != code:
-                raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate {value}, expected {code}")
-            note(f"ID {ident}: baud rate {baud} stored (verified); it takes effect at the next restart")
-            return
-        bus.restart(ident)
-        bus.set_baud(baud)
-        value = _read_back(bus, ident, BAUD_REG, ready_timeout,
-                           f"set-baud: ID {ident} does not answer at {baud} baud after the restart; "
-                           f"try 'zap scan --baud all'")
-    if value != code:
-        raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})")
+    with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
+        Bus.over(link).set_baud(ident, baud, restart=not no_restart, ready_timeout=ready_timeout)
+    if no_restart:
+        note(f"ID {ident}: baud rate {baud} stored (verified); it takes effect at the next restart")
+        return
     note(f"ID {ident} now talks at {baud} baud (verified); use -b {baud} from now on")

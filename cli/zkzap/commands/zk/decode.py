@@ -135,7 +135,9 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
             run_decode(chunks, framer, decode_one, writer)
         else:
             # straight to text: encoders generated from the tables, a memo of repeated frames
-            lines = decoder.lines(csv_dialect(cols) if fmt == "csv" else json_dialect())
+            from ...io.zk_lines import ZkLines
+
+            lines = ZkLines(decoder, csv_dialect(cols) if fmt == "csv" else json_dialect())
             run_text_decode(chunks, framer, lines, writer, check_assumed)
     finally:
         close_output(writer, stream)

@@ -13,7 +13,7 @@ import click
 from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option
+from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         resolve_port, zk_timeout_help)
@@ -242,8 +242,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.option("--keepalive", is_flag=True,
               help="Send keep-alives (ID 0) at --rate: ECUs before protocol version 5 report loss of "
                    "control signal when the host falls silent.")
-@click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
-              help="Keep-alive rate (default 20 Hz).")
+@rate_option(help="Keep-alive rate (default 20 Hz).")
 @protocol_version_option
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")

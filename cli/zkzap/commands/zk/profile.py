@@ -9,8 +9,8 @@ import click
 
 from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, FiniteRange, close_output, consent, dry_run_option, note, port_options,
-                       protocol_version_option, yes_option)
+from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
+                       port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
 
@@ -50,9 +50,8 @@ def _read(path) -> str:
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
-@click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
-              help="Control frames per second (default 20).")
-@click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default="standby", show_default=True,
+@rate_option()
+@abort_option(default="standby",
               help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
                    "schedule that ends in state run: that state with throttle 0 (standby lets a hot "
                    "engine cool); none sends nothing.")

@@ -13,8 +13,8 @@ import click
 from ...codec import zk
 from ...errors import UsageError
 from .. import CONTEXT, Command, Group
-from ..options import (FINITE, FiniteRange, SignedCommand, apply_options, consent, dry_run_option, note,
-                       port_options, protocol_version_option, warn, yes_option)
+from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
+                       note, port_options, protocol_version_option, rate_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
 
@@ -62,10 +62,8 @@ def send_options(f):
         click.option("--for", "for_s", type=FiniteRange(0), default=None, metavar="SECONDS",
                      help="Keep sending at --rate for SECONDS (0: until Ctrl-C), writing the status "
                           "frames received meanwhile as 'zk monitor' does."),
-        click.option("--rate", type=FiniteRange(1, 200), default=None, metavar="HZ",
-                     help="With --for: frames per second (default 20)."),
-        click.option("--abort", type=click.Choice(["standby", "stop", "none"]), default=None,
-                     help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
+        rate_option(help="With --for: frames per second (default 20)."),
+        abort_option(help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
                           "an ECU error when the command controls the engine (default standby: throttle "
                           "0, a hot engine cools)."),
         click.option("--no-wait", is_flag=True,

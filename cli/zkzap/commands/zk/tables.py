@@ -105,7 +105,7 @@ _ENUM_TABLES = {id(zk.ENGINE_STATES): "zk states", id(zk.ERRORS): "zk errors",
 
 
 def bits_text(field) -> str:
-    """A field's bits in NOTES.md notation: ``b4[1:0] b3[7:5]``, ``b2``, ``b4[5]``."""
+    """A field's bits in the notation of docs/protocol.md: ``b4[1:0] b3[7:5]``, ``b2``, ``b4[5]``."""
     parts = []
     for byte, hi, lo in field.bits:
         if (hi, lo) == (7, 0):

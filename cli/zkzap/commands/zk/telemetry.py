@@ -10,30 +10,36 @@ from __future__ import annotations
 
 import click
 
-from ...errors import UsageError
+from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
+                       UsageError, exit_status_help)
 from ...io import LOG_FORMATS
-from ..options import FilePath, apply_options
+from ..options import FilePath, apply_options, format_option
 from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx",
                     ".mcap": "mcap"}
 
-EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
-             "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
-             "--fail-on-error, an ECU error code was seen; 7 the output could not be written (disk full); "
-             "130 Ctrl-C; 143 SIGTERM. Every record already "
-             "written stays whole.")
+EXIT_HELP = exit_status_help({
+    OK: "done (--count, --duration, end of replay)",
+    USAGE: "bad usage",
+    NO_REPLY: "no status frame within --timeout (at the start or later)",
+    PORT_ERROR: "port failed or vanished",
+    DEVICE_ERROR: "with --fail-on-error, an ECU error code was seen",
+    OUTPUT_ERROR: "the output could not be written (disk full)",
+    INTERRUPTED: "Ctrl-C",
+    TERMINATED: "SIGTERM",
+}, tail=" Every record already written stays whole.")
 
 
 def log_options(f):
     """Options for where and how status records are written (monitor, send --for, profile)."""
     opts = [
-        click.option("-f", "--format", "fmt", type=click.Choice(LOG_FORMATS), default=None,
-                     help="Output format: table is the live dashboard on a terminal; influx is InfluxDB line "
-                          "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
-                          "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
-                          "-o (.csv, .json, .jsonl, .lp, .mcap)."),
+        format_option(choices=LOG_FORMATS,
+                      help="Output format: table is the live dashboard on a terminal; influx is InfluxDB line "
+                           "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
+                           "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
+                           "-o (.csv, .json, .jsonl, .lp, .mcap)."),
         click.option("-o", "--output", type=FilePath(),
                      help="Write records to FILE (the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,

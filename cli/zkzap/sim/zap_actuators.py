@@ -404,49 +404,45 @@ class Actuator:
         out = b""
         nv = False
         restart = False
-        if code == 0xF1:                                    # Echo
+        if code == zap.ECHO:
             if params:
                 return None
-        elif code == 0xF2:                                  # Load Data
+        elif code == zap.LOAD_DATA:
             if len(params) != 2:
                 return None
             address, length = params
             length = min(length, 256 - address, zap.MAX_SIZE - 2)
             out = bytes(self.mem[address:address + length])
-        elif code == 0xF3:                                  # Store Data
+        elif code == zap.STORE_DATA:
             if len(params) < 2:
                 return None
             nv = self.write(params[0], params[1:])
-        elif code == 0xF4:                                  # Send Data
+        elif code == zap.SEND_DATA:
             if len(params) < 2:
                 return None
             self.staged = (params[0], params[1:])
-        elif code == 0xF5:                                  # Execution
+        elif code == zap.EXECUTION:
             if params:
                 return None
             if self.staged is not None:
                 nv = self.write(*self.staged)
                 self.staged = None
-        elif code == 0xF6:                                  # Factory Reset
+        elif code == zap.FACTORY_RESET:
             if len(params) != 1:
                 return None
             self.factory_reset(params[0])
             nv = restart = True
-        elif code == 0xF8:                                  # Restart
+        elif code == zap.RESTART:
             if params:
                 return None
             restart = True
-        elif code == 0x73:                                  # Symmetric Store
-            if len(params) < 2:
+        elif code == zap.SYMMETRIC_STORE:
+            cmd = zap.Command(pkt)
+            if cmd.targets is None:
                 return None
-            address, length = params[0], params[1]
-            body = params[2:]
-            step = 1 + length
-            if not length or len(body) % step:
-                return None
-            for j in range(0, len(body), step):
-                if body[j] == self.ident:
-                    nv = self.write(address, body[j + 1:j + step])
+            for target, data in cmd.targets:
+                if target == self.ident:
+                    nv = self.write(cmd.address, data)
         done = start + (NV_WRITE_TIME if nv else 0.0)
         self.busy_until = done
         self.nv_dirty = self.nv_dirty or nv

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from zkzap.codec import zap
 from zkzap.codec.framing import ZapFramer
 from zkzap.sim import make_device
-from zkzap.sim.zap_bus import (BOOT_TIME, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
+from zkzap.sim.zap_actuators import (BOOT_TIME, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
                                from_options, parse_fault, parse_ids)
 
 

@@ -1,0 +1,553 @@
+"""mightyZAP actuators from Python: :class:`Bus` (one port, every instruction and procedure)
+and :class:`Actuator` (one ID, registers as attributes).
+
+>>> from zkzap import Bus
+>>> with Bus("sim://zap?ids=1,2") as bus:          # doctest: +SKIP
+...     bus[1].goal_position = 2000
+...     print(bus[1].present_voltage)               # 12.0 V
+
+Registers are named as in ``zap registers`` (``goal-position``), with underscores
+(``goal_position``), or by address (``0x86``). Values are raw integers in the register's
+units; a register with a unit (present-voltage, 0.1 V) reads through :meth:`Bus.read` and
+:class:`Actuator` attributes as a :class:`Reading`, a float that knows its unit and raw value.
+
+The procedures the ``zap`` commands run live here: :meth:`Bus.scan`, :meth:`Bus.identify`,
+:meth:`Bus.dump`, :meth:`Bus.move` (with waiting), :meth:`Bus.set_id` and :meth:`Bus.set_baud`
+(both verified by reading back). Failures raise :mod:`zkzap.errors` exceptions carrying the
+facts (ID, baud rate, timeout, tries). Nothing here imports click or rich; pyserial is
+imported when the port opens.
+"""
+
+from __future__ import annotations
+
+import time
+TYPE_CHECKING = False
+
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Callable, Iterable, Iterator, Mapping, Optional, Union
+
+from ..codec import zap
+from ..errors import BadReply, CheckFailed, NoReply, UsageError
+
+__all__ = ["Bus", "Actuator", "Reading", "ALL_BAUDS", "register_records", "map_blocks"]
+
+#: Baud rates an actuator can talk at, in the order a scan over all of them tries: the factory
+#: default first, then the others fastest first.
+ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
+
+#: The block :meth:`Bus.identify` reads: model-number .. feedback-return-mode.
+INFO_FIRST = zap.REGISTER_BY_NAME["model-number"]
+INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
+#: present-position .. moving, read in one Load Data while waiting for a move.
+WATCH_FIRST = zap.REGISTER_BY_NAME["present-position"]
+WATCH_LAST = zap.REGISTER_BY_NAME["moving"]
+POSITION = zap.REGISTER_BY_NAME["goal-position"]
+SPEED = zap.REGISTER_BY_NAME["goal-speed"]
+ID_REG = zap.REGISTER_BY_NAME["id"]
+BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
+
+#: A register: its name, its address or the Register itself.
+RegisterSpec = "str | int | zap.Register"
+
+
+class Reading(float):
+    """A register value in its unit: a float (``12.0``) with ``unit`` (``"V"``), ``raw`` (the
+    integer on the wire, ``120``) and ``register`` (the :class:`zkzap.codec.zap.Register`)."""
+
+    __slots__ = ("unit", "raw", "register")
+
+    def __new__(cls, register: zap.Register, raw: int):
+        self = super().__new__(cls, register.physical(raw))
+        self.unit = register.unit
+        self.raw = raw
+        self.register = register
+        return self
+
+    def __repr__(self):
+        return f"{float(self)!r} {self.unit}".rstrip()
+
+    __str__ = __repr__
+
+
+def _value(reg: zap.Register, raw: int):
+    return Reading(reg, raw) if reg.unit else raw
+
+
+def register_records(ident: int, values, errors=()) -> list:
+    """Records (id, register, address, value, physical/unit where scaled, meaning where the
+    register has named values, errors) for ``[(Register, raw), ...]``."""
+    out = []
+    for reg, raw in values:
+        rec = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
+        if reg.scale != 1:
+            rec["physical"] = reg.physical(raw)
+            rec["unit"] = reg.unit
+        elif reg.unit:
+            rec["unit"] = reg.unit
+        if reg.choices and raw in reg.choices:
+            rec["meaning"] = reg.choices[raw]
+        rec["errors"] = list(errors)
+        out.append(rec)
+    return out
+
+
+def map_blocks(gap: int = 8) -> list:
+    """Contiguous runs of the register map, as ``(address, length)``: few, efficient Load Data
+    reads (gaps of at most ``gap`` unmapped bytes are read through)."""
+    blocks = []
+    for reg in sorted(zap.REGISTERS, key=lambda r: r.address):
+        end = reg.address + reg.size
+        if blocks and reg.address - (blocks[-1][0] + blocks[-1][1]) <= gap:
+            blocks[-1][1] = end - blocks[-1][0]
+        else:
+            blocks.append([reg.address, reg.size])
+    return [tuple(b) for b in blocks]
+
+
+def _span(first: zap.Register, last: zap.Register) -> int:
+    return last.address + last.size - first.address
+
+
+class Bus:
+    """A mightyZAP bus on one port: a context manager (the port closes on exit).
+
+    ``port`` is a device path, any pyserial URL, ``sim://zap?ids=1,2`` or a simulator started
+    with :func:`zkzap.sim.start`; ``baud`` the line speed; ``return_mode`` the actuators'
+    feedback-return-mode (0 answers Echo only, 1 Load Data and Echo, 2 every command; ``"auto"``
+    asks the first actuator addressed); ``timeout`` overrides the reply timeout derived from
+    the baud rate; ``retries`` after a failed attempt.
+    """
+
+    def __init__(self, port=None, *, baud: int = 57600, return_mode: Union[int, str] = 1, timeout=None,
+                 retries: int = 2, _link=None):
+        if _link is None:
+            from ..link.zap_bus import RETRIES, open_bus
+
+            url = getattr(port, "url", port)
+            if not url:
+                raise UsageError("no port given", baud=baud)
+            mode = 1 if return_mode == "auto" else int(return_mode)
+            _link = open_bus(url, baud, timeout=timeout, return_mode=mode,
+                             retries=RETRIES if retries is None else retries)
+            self._auto = return_mode == "auto"
+        else:
+            self._auto = False
+        self.link = _link
+        """The :class:`zkzap.link.zap_bus.ZapBus` doing the transactions."""
+
+    @classmethod
+    def over(cls, link) -> "Bus":
+        """A Bus over an open :class:`~zkzap.link.zap_bus.ZapBus` (closing the Bus closes it)."""
+        return cls(_link=link)
+
+    # -- the line ------------------------------------------------------------------------------
+
+    @property
+    def baud(self) -> int:
+        """The port's line speed."""
+        return self.link.baud
+
+    @baud.setter
+    def baud(self, value: int) -> None:
+        self.link.set_baud(value)
+
+    @property
+    def return_mode(self) -> int:
+        """The feedback-return-mode the bus assumes (0, 1 or 2)."""
+        return self.link.return_mode
+
+    @return_mode.setter
+    def return_mode(self, value: int) -> None:
+        self.link.return_mode = int(value)
+
+    @property
+    def url(self) -> str:
+        """The port's device path or URL."""
+        return self.link.url
+
+    def close(self) -> None:
+        """Close the port."""
+        self.link.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __getitem__(self, ident: int) -> "Actuator":
+        return Actuator(self, zap.check_id(ident))
+
+    def _mode_for(self, ident: int) -> None:
+        if self._auto and ident != zap.BROADCAST:
+            self._auto = False
+            self.link.detect_return_mode(ident)
+
+    def detect_return_mode(self, ident: int) -> int:
+        """Ask actuator ``ident`` its feedback-return-mode; the bus assumes it from now on."""
+        self._auto = False
+        return self.link.detect_return_mode(zap.check_id(ident, allow_broadcast=False))
+
+    # -- instructions --------------------------------------------------------------------------
+
+    def echo(self, ident: int, *, check: bool = True):
+        """Echo: the actuator's feedback (a :class:`~zkzap.link.zap_bus.Reply` with ``rtt``).
+        Error bits raise DeviceError unless ``check=False``."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        return self.link.echo(ident, check=check)
+
+    def ping(self, ident: int, *, retries: int = 0):
+        """Echo that returns None when nothing answers (a corrupted reply raises BadReply)."""
+        return self.link.ping(zap.check_id(ident, allow_broadcast=False), retries=retries)
+
+    def load_reply(self, ident: int, reg: RegisterSpec, length: Optional[int] = None, *, check: bool = True):
+        """Load Data: ``(reply, [(Register, raw), ...])`` for ``length`` bytes from ``reg``."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        reg = zap.register(reg)
+        length = reg.size if length is None else length
+        self._mode_for(ident)
+        if self.link.return_mode == 0:
+            raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data",
+                             ident=ident)
+        return self.link.read_registers(ident, reg.address, length, check=check)
+
+    def load(self, ident: int, reg: RegisterSpec, length: Optional[int] = None):
+        """Load Data: the raw value of ``reg``; with a ``length`` spanning several registers a
+        dict ``{name: raw}``."""
+        _, values = self.load_reply(ident, reg, length)
+        if len(values) == 1:
+            return values[0][1]
+        return {r.name: raw for r, raw in values}
+
+    def read(self, ident: int, reg: RegisterSpec):
+        """One register's value: a :class:`Reading` for a register with a unit, else an int."""
+        reg = zap.register(reg)
+        return _value(reg, self.load(ident, reg))
+
+    def _write(self, builder, ident, reg, value, force):
+        ident = zap.check_id(ident)
+        reg = zap.register(reg)
+        raw = getattr(value, "raw", value)
+        pkt = builder(ident, reg, raw, force=force)
+        cmd = zap.Command(pkt)
+        if cmd.leaves_protocol and not force:
+            raise UsageError("protocol-type: 0 switches the actuator to Modbus RTU and it no longer "
+                             "answers this protocol; pass force=True to do it anyway", ident=ident)
+        self._mode_for(ident)
+        return self.link.command(pkt)
+
+    def store(self, ident: int, reg: RegisterSpec, value: int, *, force: bool = False):
+        """Store Data: write ``value`` (raw) to ``reg``. Returns the acknowledgement (return
+        mode 2) or None."""
+        return self._write(zap.store, ident, reg, value, force)
+
+    def send(self, ident: int, reg: RegisterSpec, value: int, *, force: bool = False):
+        """Send Data: stage ``value`` for ``reg``; :meth:`execute` applies it."""
+        return self._write(zap.send_data, ident, reg, value, force)
+
+    def execute(self, ident: int = zap.BROADCAST):
+        """Execution: apply the writes staged by :meth:`send` (default: every actuator)."""
+        return self.link.command(zap.execute(zap.check_id(ident)))
+
+    def sync_move(self, targets: Mapping[int, int], register: RegisterSpec = "goal-position") -> None:
+        """Symmetric Store to broadcast: ``{id: value}`` of one register (default
+        goal-position), split over as many packets as needed. Never answered."""
+        packets = zap.symmetric_store(register, targets)
+        if any(zap.Command(p).leaves_protocol for p in packets):
+            raise UsageError("protocol-type: 0 switches the actuators to Modbus RTU; not done")
+        for p in packets:
+            self.link.command(p)
+
+    def factory_reset(self, ident: int, *, reset_id: bool = False, reset_baud: bool = False):
+        """Factory Reset: restore factory settings (also the ID and/or baud rate if asked)."""
+        return self.link.command(zap.factory_reset(zap.check_id(ident), reset_id, reset_baud))
+
+    def restart(self, ident: int):
+        """Restart the actuator (a stored baud-rate change takes effect)."""
+        return self.link.command(zap.restart(zap.check_id(ident)))
+
+    def command(self, packet: bytes, *, check: bool = True):
+        """Send any command packet; returns the reply it gets (inferred from the packet), or None."""
+        return self.link.command(bytes(packet), check=check)
+
+    # -- procedures ----------------------------------------------------------------------------
+
+    def identify(self, ident: int) -> dict:
+        """``{"model", "firmware", "return_mode"}`` of an actuator that answers Echo, in one Load
+        Data; an actuator that answers Echo but not Load Data is in return mode 0."""
+        length = _span(INFO_FIRST, INFO_LAST)
+        r = self.link.transact(zap.load(ident, INFO_FIRST.address, length), reply=True, data_len=length,
+                               optional=True, check=False)
+        if r is None:
+            return {"model": None, "firmware": None, "return_mode": 0}
+        values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
+        return {"model": values.get("model-number"), "firmware": values.get("firmware-version"),
+                "return_mode": values.get("feedback-return-mode")}
+
+    def scan(self, ids: Iterable[int] = range(254), bauds: Iterable[int] = (57600,), *, retries: int = 2,
+             on_probe: Optional[Callable[[int, int, int], None]] = None,
+             include_garbled: bool = True) -> Iterator[dict]:
+        """Find actuators: Echo each ID at each baud rate, then :meth:`identify` those that
+        answer. Yields records as found: ``id``, ``baud``, ``model``, ``firmware``,
+        ``return_mode``, ``status`` (``ok``, ``error``, ``garbled``) and ``errors``. An ID that
+        does not answer is not asked again; ``retries`` applies to garbled replies.
+        ``on_probe(baud, id, found)`` is called after each probe (for progress). The port is
+        left at the last baud rate scanned."""
+        ids = list(ids)
+        found = 0
+        for baud in bauds:
+            if baud not in zap.BAUD_TO_CODE:
+                raise UsageError(f"baud: {baud} is not an actuator baud rate; allowed "
+                                 f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
+            self.link.set_baud(baud)
+            for ident in ids:
+                rec = {"id": ident, "baud": baud, "model": None, "firmware": None, "return_mode": None,
+                       "status": "ok", "errors": []}
+                try:
+                    r = self.link.ping(ident, retries=retries)
+                except BadReply as e:
+                    r = None
+                    if include_garbled:
+                        rec["status"] = "garbled"
+                        rec["errors"] = [str(e)]
+                        found += 1
+                        yield rec
+                if on_probe is not None:
+                    on_probe(baud, ident, found)
+                if r is None:
+                    continue
+                rec["errors"] = r.errors
+                if r.error:
+                    rec["status"] = "error"
+                try:
+                    rec.update(self.identify(ident))
+                except BadReply as e:
+                    rec["status"] = "garbled"
+                    rec["errors"] = rec["errors"] + [str(e)]
+                found += 1
+                yield rec
+
+    def dump_records(self, ident: int):
+        """``(records, reply with error bits or None)``: the whole register map of one actuator,
+        read in as few Load Data reads as it has contiguous blocks (see :meth:`dump`)."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        records = []
+        worst = None
+        for address, length in map_blocks():
+            reply, values = self.load_reply(ident, address, length, check=False)
+            if reply.error and worst is None:
+                worst = reply
+            mapped = [(reg, raw) for reg, raw in values if zap.REGISTER_BY_ADDRESS.get(reg.address) is reg]
+            for rec in register_records(ident, mapped, reply.errors):
+                reg = zap.REGISTER_BY_ADDRESS[rec["address"]]
+                rec.pop("errors", None)
+                rec["access"] = reg.access
+                rec["memory"] = reg.memory
+                records.append(rec)
+        return records, worst
+
+    def dump(self, ident: int) -> list:
+        """The whole register map of one actuator as records: id, register, address, value,
+        physical and unit (scaled registers), meaning (coded ones), access (R/RW) and memory
+        (NV stored, V volatile). Error bits in a reply raise DeviceError."""
+        from ..link.zap_bus import device_error
+
+        records, worst = self.dump_records(ident)
+        if worst is not None:
+            raise device_error(worst)
+        return records
+
+    def move(self, ident: int, position: int, *, wait: bool = True, speed: Optional[int] = None,
+             timeout: float = 10.0, poll: float = 0.01,
+             on_progress: Optional[Callable[[int, int, int], None]] = None,
+             notify: Optional[Callable[[str], None]] = None):
+        """Move to ``position`` (0..4095), writing goal-speed first when ``speed`` is given.
+
+        With ``wait`` (the default) it reads the goal back (the actuator clamps it to its stroke
+        limits; ``notify`` is told), then polls present-position and moving every ``poll`` s
+        until the actuator stops, and returns the final position. Raises NoReply when it is
+        still moving after ``timeout`` s, CheckFailed when it stopped away from the goal (beyond
+        end-compliance-margin), DeviceError on error bits (overload cuts the force).
+        ``on_progress(position, goal, first_position)`` is called on every read. Without
+        ``wait`` it returns None at once."""
+        POSITION.check(position)
+        if speed is not None:
+            SPEED.check(speed)
+        ident = zap.check_id(ident)
+        if wait and ident == zap.BROADCAST:
+            raise UsageError("wait: a broadcast is never answered; give one actuator's ID to wait for it")
+        if wait:
+            self._mode_for(ident)
+        if speed is not None:
+            self.store(ident, SPEED, speed)
+        self.store(ident, POSITION, position)
+        if not wait:
+            return None
+        if self.link.return_mode == 0:
+            raise UsageError(f"wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data",
+                             ident=ident)
+        return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
+                                 notify=notify)
+
+    def wait_stopped(self, ident: int, position: int, *, timeout: float = 10.0, poll: float = 0.01,
+                     on_progress=None, notify=None) -> int:
+        """Wait until actuator ``ident``, sent to ``position``, stops; its final position (see
+        :meth:`move`)."""
+        goal = self.load(ident, POSITION)
+        margin = self.load(ident, "end-compliance-margin")
+        if goal != position and notify is not None:
+            notify(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits")
+        length = _span(WATCH_FIRST, WATCH_LAST)
+        start = time.monotonic()
+        first = None
+        while True:
+            _, values = self.link.read_registers(ident, WATCH_FIRST.address, length)
+            v = {reg.name: raw for reg, raw in values}
+            pos, moving = v["present-position"], v["moving"]
+            if first is None:
+                first = pos
+            if on_progress is not None:
+                on_progress(pos, goal, first)
+            if not moving:
+                if abs(pos - goal) <= max(margin, 1):
+                    return pos
+                force = self.load(ident, "force-on-off")
+                why = "; the force is off" if not force else ""
+                raise CheckFailed(f"ID {ident} stopped at {pos}, {abs(pos - goal)} away from the goal {goal}{why}",
+                                  ident=ident, position=pos, goal=goal)
+            if time.monotonic() - start >= timeout:
+                raise NoReply(f"ID {ident} still moving after {timeout:g} s (position {pos}, goal {goal})",
+                              ident=ident, position=pos, goal=goal, timeout=timeout)
+            if poll:
+                time.sleep(poll)
+
+    def _read_back(self, ident, reg, within, message, change):
+        try:
+            self.link.wait_ready(ident, within=within)
+            return self.link.read(ident, reg)
+        except NoReply:
+            raise CheckFailed(message, ident=ident, baud=self.baud, timeout=within, after_change=change) from None
+
+    def set_id(self, ident: int, new: int, *, force: bool = False, ready_timeout: float = 2.0) -> int:
+        """Give the actuator at ``ident`` the ID ``new``, verified by reading it back from
+        ``new``. Checks first that ``ident`` answers and that ``new`` is free (two actuators with
+        one ID garble every reply; ``force`` skips that). Raises CheckFailed when ``new`` is
+        taken, does not answer afterwards or reads back another ID. Returns ``new``."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        new = zap.check_id(new, allow_broadcast=False)
+        if new == ident:
+            return new
+        self.link.echo(ident)
+        if not force and self.link.ping(new) is not None:
+            raise CheckFailed(f"ID {new} is already taken by another actuator", ident=new, taken=True)
+        self.link.store(ident, ID_REG, new)
+        value = self._read_back(new, ID_REG, ready_timeout,
+                                f"set-id: ID {new} does not answer after the change", "id")
+        if value != new:
+            raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}", ident=new, value=value)
+        return new
+
+    def set_baud(self, ident: int, baud: int, *, restart: bool = True, ready_timeout: float = 2.0) -> int:
+        """Change actuator ``ident``'s baud rate to ``baud``, verified: store baud-rate, restart
+        the actuator (unless ``restart=False``: then the rate takes effect at the next power-up),
+        switch this port to ``baud``, wait for the actuator there and read baud-rate back.
+        Raises CheckFailed when it does not answer at ``baud`` or reads back another rate."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        if baud not in zap.BAUD_TO_CODE:
+            raise UsageError(f"baud: {baud} is not an actuator baud rate; allowed "
+                             f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
+        code = zap.BAUD_TO_CODE[baud]
+        self.link.echo(ident)
+        self.link.store(ident, BAUD_REG, code)
+        if not restart:
+            value = self.link.read(ident, BAUD_REG)
+            if value != code:
+                raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate {value}, expected {code}",
+                                  ident=ident, value=value)
+            return baud
+        self.link.restart(ident)
+        self.link.set_baud(baud)
+        value = self._read_back(ident, BAUD_REG, ready_timeout,
+                                f"set-baud: ID {ident} does not answer at {baud} baud after the restart", "baud")
+        if value != code:
+            raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})",
+                              ident=ident, value=value)
+        return baud
+
+
+def _attr_register(name: str) -> zap.Register:
+    key = name.replace("_", "-")
+    reg = zap.REGISTER_BY_NAME.get(key)
+    if reg is None:
+        raise AttributeError(f"no register {key!r}; see 'zap registers'")
+    return reg
+
+
+class Actuator:
+    """One actuator on a :class:`Bus` (``bus[3]``): its registers read and write as attributes
+    (``act.goal_position = 2000``; ``act.present_voltage`` -> ``12.0 V``), and the bus's
+    instructions and procedures without the ID."""
+
+    __slots__ = ("bus", "ident")
+
+    def __init__(self, bus: Bus, ident: int):
+        object.__setattr__(self, "bus", bus)
+        object.__setattr__(self, "ident", ident)
+
+    def __repr__(self):
+        return f"Actuator(id={self.ident}, port={self.bus.url!r})"
+
+    def __dir__(self):
+        return sorted(set(super().__dir__()) | {r.name.replace("-", "_") for r in zap.REGISTERS})
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return self.bus.read(self.ident, _attr_register(name))
+
+    def __setattr__(self, name, value):
+        if name in Actuator.__slots__:
+            raise AttributeError(f"{name} is fixed")
+        self.bus.store(self.ident, _attr_register(name), value)
+
+    def __getitem__(self, reg: RegisterSpec):
+        return self.bus.read(self.ident, reg)
+
+    def __setitem__(self, reg: RegisterSpec, value: int):
+        self.bus.store(self.ident, reg, value)
+
+    def echo(self):
+        """Echo (see :meth:`Bus.echo`)."""
+        return self.bus.echo(self.ident)
+
+    def load(self, reg: RegisterSpec, length: Optional[int] = None):
+        """Load Data (see :meth:`Bus.load`)."""
+        return self.bus.load(self.ident, reg, length)
+
+    def read(self, reg: RegisterSpec):
+        """One register's value (see :meth:`Bus.read`)."""
+        return self.bus.read(self.ident, reg)
+
+    def store(self, reg: RegisterSpec, value: int, *, force: bool = False):
+        """Store Data (see :meth:`Bus.store`)."""
+        return self.bus.store(self.ident, reg, value, force=force)
+
+    def send(self, reg: RegisterSpec, value: int, *, force: bool = False):
+        """Send Data (see :meth:`Bus.send`)."""
+        return self.bus.send(self.ident, reg, value, force=force)
+
+    def move(self, position: int, **kw):
+        """Move, waiting by default (see :meth:`Bus.move`)."""
+        return self.bus.move(self.ident, position, **kw)
+
+    def identify(self) -> dict:
+        """Model, firmware and return mode (see :meth:`Bus.identify`)."""
+        return self.bus.identify(self.ident)
+
+    def dump(self) -> list:
+        """The whole register map (see :meth:`Bus.dump`)."""
+        return self.bus.dump(self.ident)
+
+    def restart(self):
+        """Restart (see :meth:`Bus.restart`)."""
+        return self.bus.restart(self.ident)

@@ -1,0 +1,294 @@
+"""A ZK turbine ECU from Python: :class:`Ecu`, a context manager over one port.
+
+>>> from zkzap import Ecu
+>>> with Ecu("sim://zk?speed=10") as ecu:                 # doctest: +SKIP
+...     for rec in ecu.hold("control", 3, state="run", throttle_pct=40):
+...         if rec.id == 1:
+...             print(rec.engine_state_name, rec.rpm)
+
+Status records are :class:`Status` objects: dicts (the keys ``zk monitor`` writes: ``time``,
+``t``, ``kind``, ``id``, the fields, ``frame``, ``stale``, ``stale_ids``) whose keys also read
+as attributes. Voltages are decoded in the ECU's own unit: until the first status ID 6 reveals
+the protocol version, frames are held back (at most a cycle), unless ``protocol_version`` is
+given.
+
+Safety: a session that sent a frame controlling the engine (see
+:attr:`zkzap.codec.zk.ControlFrame.controls_engine`) sends the abort command (``abort``:
+standby or stop with throttle 0; ``none`` sends nothing) when a :meth:`Ecu.hold` ends
+abnormally (an exception, Ctrl-C, the generator closed early) and when the Ecu closes.
+
+Built on :mod:`zkzap.link.zk_link` (:class:`~zkzap.link.zk_link.ZkLink`,
+:class:`~zkzap.link.zk_link.LiveSource`, :class:`~zkzap.link.zk_link.Telemetry`,
+:class:`~zkzap.link.zk_link.Session`, :class:`~zkzap.link.zk_link.Schedule`).
+"""
+
+from __future__ import annotations
+
+import time
+TYPE_CHECKING = False
+
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Callable, Iterator, Optional, Union
+
+from ..codec import zk
+from ..errors import DeviceError, NoReply, UsageError
+
+__all__ = ["Ecu", "Status", "ProfileResult"]
+
+
+class Status(dict):
+    """One status record: a dict whose keys also read as attributes (``rec.rpm``, ``rec.egt_c``)."""
+
+    __slots__ = ()
+
+    def __getattr__(self, name):
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}") from None
+
+
+class ProfileResult:
+    """How :meth:`Ecu.run_profile` ended: ``outcome`` (:class:`~zkzap.link.zk_link.Outcome`:
+    ``reason``, ``error``, ``aborted``, ``exit_code``), ``summary`` (max rpm, max EGT, fuel,
+    states, errors, as ``zk profile --summary-json`` writes it) and ``records`` written."""
+
+    def __init__(self, outcome, summary, records):
+        self.outcome = outcome
+        self.summary = summary
+        self.records = records
+
+    @property
+    def ok(self) -> bool:
+        """True when the schedule ran to its end."""
+        return self.outcome.ok
+
+    def __repr__(self):
+        return f"ProfileResult(reason={self.outcome.reason!r}, records={self.records})"
+
+
+class Ecu:
+    """A ZK ECU on one port: a context manager (on exit the abort command goes out if the
+    session controlled the engine, then the port closes).
+
+    ``port`` is a device path, any pyserial URL, ``sim://zk?speed=10`` or a simulator started
+    with :func:`zkzap.sim.start`; ``baud`` the line speed; ``protocol_version`` the ECU's (None:
+    read from status ID 6); ``silence`` the longest wait for a status frame before NoReply;
+    ``abort`` the abort command (``standby``, ``stop`` or ``none``).
+    """
+
+    def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
+                 silence: float = 2.0, abort: str = "standby"):
+        from ..link import zk_link as L
+
+        if abort not in L.ABORTS:
+            raise UsageError(f"abort: {abort!r}; allowed {', '.join(L.ABORTS)}")
+        url = getattr(port, "url", port)
+        if not url:
+            raise UsageError("no port given", baud=baud)
+        self._L = L
+        self.url = url
+        """The port's device path or URL."""
+        self.baud = baud
+        """The line speed."""
+        self.abort_kind = abort
+        """The abort command sent on an abnormal end and at close (standby, stop, none)."""
+        self.silence = silence
+        self.link = L.ZkLink.open(url, baud)
+        """The :class:`~zkzap.link.zk_link.ZkLink` (the port)."""
+        self.source = L.LiveSource(self.link)
+        self.telemetry = L.Telemetry(protocol_version, wall0=self.source.wall0)
+        """The :class:`~zkzap.link.zk_link.Telemetry`: snapshot, errors, summary."""
+        self.controlling = False
+        """True once a frame that controls the engine was sent."""
+        self.pump_on = False
+        self.sent = 0
+        self._last_frame_t = None
+        self._closed = False
+
+    # -- context -------------------------------------------------------------------------------
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self) -> None:
+        """Send the abort command if the session controlled the engine, then close the port."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.controlling:
+                self.abort()
+        finally:
+            self.link.close()
+
+    # -- frames out ----------------------------------------------------------------------------
+
+    @property
+    def protocol_version(self) -> int:
+        """The ECU's protocol version (from status ID 6, given, or the default 4)."""
+        return self.telemetry.decoder.version
+
+    def frame(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+        """The control frame ``kind`` (a ``zk send`` name or ID) with physical ``fields``
+        (``state="run", throttle_pct=40``), checked; nothing is sent."""
+        values = dict(fields)
+        if "state" in values and "sw" not in values:
+            values["sw"] = values.pop("state")
+        if "action" in values and "param" not in values:
+            values["param"] = values.pop("action")
+        frame, note = zk.encode_control(kind, **values)
+        return zk.ControlFrame(frame)
+
+    def _write(self, cf: zk.ControlFrame) -> None:
+        self.link.write(cf.frame)
+        self.sent += 1
+        if cf.controls_engine:
+            self.controlling = True
+        if cf.action == "pump-on":
+            self.pump_on = True
+        elif cf.action == "pump-off":
+            self.pump_on = False
+
+    def send(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+        """Send one control frame (see :meth:`frame`); returns it."""
+        cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        self._write(cf)
+        return cf
+
+    def abort(self) -> list:
+        """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
+        on protocol version 4 or later also leaves RPM mode; pump-off after a pump-on).
+        Returns the frames sent."""
+        frames = self._L.abort_frames(self.abort_kind, self.telemetry.decoder.known, pump=self.pump_on)
+        for f in frames:
+            self.link.write(f)
+        if frames:
+            time.sleep(0.02)
+            self.link.write(frames[0])
+            self.controlling = False
+            self.pump_on = False
+        return frames
+
+    # -- status in -----------------------------------------------------------------------------
+
+    def _records(self, control=None, period=None, duration=None, count=None) -> Iterator[Status]:
+        src, tel = self.source, self.telemetry
+        start = src.now()
+        if self._last_frame_t is None:
+            self._last_frame_t = start
+        next_send = start
+        n = 0
+        while True:
+            now = src.now()
+            if duration is not None and now - start >= duration:
+                return
+            if control is not None and now >= next_send:
+                self._write(control)
+                next_send += period
+                if next_send <= now:
+                    next_send = now + period
+            for t, frame in src.poll():
+                self._last_frame_t = t
+                for rec in tel.feed(t, frame):
+                    yield Status(rec)
+                    n += 1
+                    if count is not None and n >= count:
+                        return
+            if self.silence is not None and src.now() - self._last_frame_t > self.silence:
+                raise NoReply(f"no status frame from the ECU on {self.url} for {self.silence:g} s",
+                              port=self.url, baud=self.baud, timeout=self.silence, protocol="zk")
+            if tel.new_error is not None and control is not None and self.controlling:
+                code, name, et = tel.new_error
+                tel.new_error = None
+                raise DeviceError(f"ECU error {code} ({name}: {zk.ERROR_TEXT.get(code, 'undocumented')}) "
+                                  f"at t={et:.2f} s", ecu_error=code)
+
+    def status(self, *, count: Optional[int] = None, duration: Optional[float] = None) -> Iterator[Status]:
+        """Status records as they arrive (forever, or ``count`` records / ``duration`` s).
+        Raises NoReply when the ECU is silent for ``silence`` s."""
+        return self._records(count=count, duration=duration)
+
+    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, **fields) -> Iterator[Status]:
+        """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
+        yielding the status records received meanwhile. A new ECU error while controlling
+        raises DeviceError; any abnormal end sends the abort command."""
+        if not 1 <= rate <= 200:
+            raise UsageError(f"rate: {rate:g} is out of range; allowed 1..200 Hz")
+        cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        done = False
+        try:
+            yield from self._records(cf, 1.0 / rate, duration=seconds)
+            done = True
+        finally:
+            if not done and self.controlling and self.abort_kind != "none":
+                try:
+                    self.abort()
+                except Exception:  # noqa: BLE001 - the port may be what failed; the first error wins
+                    pass
+
+    def keepalive(self, seconds: float, *, rate: float = 20.0) -> Iterator[Status]:
+        """Send keep-alives (ID 0) for ``seconds`` s, yielding status records (ECUs before
+        protocol version 5 report loss of control signal when the host falls silent)."""
+        return self.hold("keepalive", seconds, rate=rate)
+
+    @property
+    def health(self) -> dict:
+        """Link health: ``frames``, ``frames_per_s`` (over the last second), ``crc_errors``,
+        ``skipped`` bytes, ``stale`` (and :meth:`stale_ids`), ``protocol_version`` and
+        ``version_source``."""
+        now = self.source.now()
+        h = self.telemetry.health(now, self.source.framer)
+        h["stale_ids"] = self.telemetry.stale_ids(now)
+        return h
+
+    def stale_ids(self) -> list:
+        """Status IDs not seen for more than three of their periods."""
+        return self.telemetry.stale_ids(self.source.now())
+
+    @property
+    def snapshot(self) -> dict:
+        """Every status field's latest value."""
+        return self.telemetry.snapshot(self.source.now())
+
+    # -- schedules -----------------------------------------------------------------------------
+
+    def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
+                    on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
+        """Run a throttle schedule: a :class:`~zkzap.link.zk_link.Schedule`, CSV text
+        (``time_s,throttle_pct[,state]`` rows) or a list of ``(time_s, throttle_pct[, state])``.
+
+        Control ID 1 frames go out at ``rate`` Hz; every status record goes to ``on_record``.
+        Ends at the schedule's last row (the abort command follows when it ends in state run),
+        or on Ctrl-C/SIGTERM, a port failure, a silent ECU or a new ECU error (the abort command
+        is sent). With ``check`` a failure is raised (DeviceError, NoReply, PortError,
+        KeyboardInterrupt) after the abort; otherwise the result says how it ended."""
+        L = self._L
+        sched = schedule
+        if isinstance(schedule, str):
+            sched = L.Schedule.parse(schedule, interpolate=interpolate)
+        elif not isinstance(schedule, L.Schedule):
+            text = "\n".join(",".join(str(c) for c in row) for row in schedule)
+            sched = L.Schedule.parse(text, interpolate=interpolate)
+        if sched.length <= 0:
+            raise UsageError("schedule: the last row is at 0 s; the last row's time_s is the schedule's length")
+        source = L.LiveSource(self.link)
+        source.framer = self.source.framer
+        tel = L.Telemetry(self.telemetry.decoder.known, wall0=source.wall0)
+        sink = (lambda rec: on_record(Status(rec))) if on_record is not None else (lambda rec: None)
+        session = L.Session(source, tel, sink, control=sched.frame_at, rate=rate, abort=self.abort_kind,
+                            duration=sched.length, silence=self.silence, stop_on_error=True,
+                            abort_at_end=sched.final_state == "run")
+        outcome = session.run()
+        summary = {"outcome": outcome.reason, "exit_status": outcome.exit_code, "aborted": outcome.aborted,
+                   "duration_s": round(session.ended_t or 0.0, 3), "schedule_s": sched.length,
+                   "crc_errors": source.framer.bad}
+        summary.update(tel.summary())
+        result = ProfileResult(outcome, summary, session.written)
+        if check:
+            outcome.raise_for_status()
+        return result

@@ -1,0 +1,391 @@
+"""``zap batch`` and ``zk batch``: many commands over one open port, one JSON Lines record each.
+
+A batch file has one command per line in the command line's own grammar, without the program
+name and the port options (``load present-position --id 1``; ``# comments`` and blank lines
+are skipped). Every line is parsed and checked — and, for commands that compose frames, composed
+as with ``-n`` — before anything is sent: a bad line is refused naming ``FILE:LINE`` (exit 2).
+One consent (``--yes``, or one prompt on a terminal) covers every stored write and every
+engine-starting command of the batch. Then the lines run in order over the one port (see
+:mod:`zkzap.link.shared`); each gives a record ``{"line", "command", "exit", "result"}`` (and
+``"error"``, the message, when it failed): ``result`` is what the command printed, parsed as
+JSON where it is JSON (a bare value, a record, or a list of records), else its text.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shlex
+import signal
+import sys
+import threading
+
+import click
+
+from ..errors import INTERRUPTED, USAGE, UsageError, ZkzapError
+from .options import consent, note
+
+#: Options a batch line may not carry: the port is the batch's.
+PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture")
+#: Port options a command takes as its own argument: the baud rates a scan tries.
+OWN_TOKENS = {"scan": ("-b", "--baud")}
+
+
+def port_tokens(tokens) -> list:
+    """The port options among a line's tokens (which a line may not give)."""
+    own = OWN_TOKENS.get(tokens[0], ()) if tokens else ()
+    return [t.split("=", 1)[0] for t in tokens if t.split("=", 1)[0] in PORT_TOKENS
+            and t.split("=", 1)[0] not in own]
+
+
+#: Commands a batch line cannot run.
+EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
+
+
+class Line:
+    """One command of a batch: where it is, its text, its tokens and its command path."""
+
+    __slots__ = ("where", "number", "text", "tokens", "path", "params", "frames", "hazards", "leaf")
+
+    def __init__(self, where, number, text, tokens):
+        self.where, self.number, self.text, self.tokens = where, number, text, tokens
+        self.path = []
+        self.params = {}
+        self.frames = []
+        self.hazards = []
+        self.leaf = None
+
+
+def read_lines(source, name):
+    """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split
+    is refused naming ``NAME:LINE``."""
+    out = []
+    for number, raw in enumerate(source, 1):
+        text = raw.strip()
+        if not text or text.startswith("#"):
+            continue
+        where = f"{name}:{number}"
+        try:
+            tokens = shlex.split(text, comments=True)
+        except ValueError as e:
+            raise UsageError(f"{where}: {e}") from None
+        if not tokens:
+            continue
+        out.append(Line(where, number, " ".join(shlex.quote(t) for t in tokens), tokens))
+    return out
+
+
+def _resolve(group, line, protocol):
+    """The command path of a line (``["send", "control"]``) and the leaf command."""
+    ctx = click.Context(group, info_name=protocol)
+    cmd = group
+    args = list(line.tokens)
+    path = []
+    while isinstance(cmd, click.Group):
+        if not args:
+            raise UsageError(f"{line.where}: {' '.join([protocol] + path)}: a sub-command is missing")
+        name = args.pop(0)
+        if not path and name in EXCLUDED[protocol]:
+            raise UsageError(f"{line.where}: {name}: not in a batch")
+        sub = cmd.get_command(ctx, name)
+        if sub is None:
+            names = ", ".join(n for n in cmd.list_commands(ctx) if n not in EXCLUDED[protocol] or path)
+            raise UsageError(f"{line.where}: unknown command {name!r}; allowed {names}")
+        path.append(name)
+        ctx = click.Context(sub, info_name=name, parent=ctx)
+        cmd = sub
+    return path, cmd, args, ctx.parent
+
+
+def _nested(path, values):
+    dm = dict(values)
+    for name in reversed(path):
+        dm = {name: dm}
+    return dm
+
+
+def _refuse(line, e):
+    if isinstance(e, click.ClickException):
+        text = " ".join(e.format_message().split())
+    else:
+        text = str(e)
+    raise UsageError(f"{line.where}: {' '.join(line.path)}: {text}") from None
+
+
+def check_lines(group, lines, protocol, defaults):
+    """Parse every line as its command would (types, ranges) and compose its frames with
+    ``-n`` where the command can; a bad line raises UsageError naming ``FILE:LINE``."""
+    from . import run
+
+    seen = {}
+    for line in lines:
+        twin = seen.get(tuple(line.tokens))
+        if twin is not None:               # the same text checks the same: reuse the first's findings
+            line.path, line.params, line.frames, line.leaf = twin.path, twin.params, twin.frames, twin.leaf
+            continue
+        seen[tuple(line.tokens)] = line
+        bad = port_tokens(line.tokens)
+        if bad:
+            raise UsageError(f"{line.where}: {bad[0]}: the port is the batch's; give it to "
+                             f"'{protocol} batch', not to a line")
+        line.path, leaf, args, parent = _resolve(group, line, protocol)
+        line.leaf = (leaf, parent)
+        try:
+            with leaf.make_context(line.path[-1], list(args), parent=parent,
+                                   default_map=defaults) as ctx:
+                line.params = dict(ctx.params)
+        except Exception as e:  # noqa: BLE001 - click's, the codec's and zkzap's: all name the problem
+            _refuse(line, e)
+        _pre_check(line)
+        dry = _dry_run_values(line, leaf)
+        if dry is None:
+            continue
+        tokens = _without(line.tokens, leaf, set(dry))
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = run(group, protocol, tokens, default_map=_nested(line.path, dict(defaults, **dry)))
+        if code != 0:
+            message = err.getvalue().strip().splitlines()
+            text = message[-1].split("error: ", 1)[-1] if message else f"exit status {code}"
+            raise UsageError(f"{line.where}: {' '.join(line.path)}: {text}")
+        line.frames = _frames(out.getvalue())
+
+
+def _without(tokens, leaf, names):
+    """``tokens`` without the options of ``leaf`` named ``names`` (and their values)."""
+    opts = {}
+    for p in leaf.params:
+        if isinstance(p, click.Option) and p.name in names:
+            for o in p.opts + p.secondary_opts:
+                opts[o] = p.is_flag or p.count
+    out = []
+    skip = False
+    for t in tokens:
+        if skip:
+            skip = False
+            continue
+        name = t.split("=", 1)[0]
+        if name in opts:
+            skip = not opts[name] and "=" not in t
+            continue
+        out.append(t)
+    return out
+
+
+def _pre_check(line):
+    """Range checks a command makes only once it runs (before the port opens)."""
+    from ..codec import zap
+
+    p = line.params
+    try:
+        if line.path == ["move"]:
+            zap.REGISTER_BY_NAME["goal-position"].check(p["position"])
+            if p.get("speed") is not None:
+                zap.REGISTER_BY_NAME["goal-speed"].check(p["speed"])
+    except ValueError as e:
+        _refuse(line, e)
+
+
+def _dry_run_values(line, leaf):
+    names = {p.name for p in leaf.params}
+    if "dry_run" not in names:
+        return None
+    values = {"dry_run": True}
+    if line.path[0] == "send" and "for_s" in names:          # zk send: compose only
+        values.update(for_s=None, no_wait=False, rate=None, abort=None, fmt=None, output=None, append=False,
+                      snapshot=None, ids=None, raw_log=None)
+    if line.path == ["profile"]:
+        values.update(fmt="jsonl", output=None, append=False)
+    return values
+
+
+def _frames(text):
+    from ..codec.hexfmt import parse_hex
+
+    frames = []
+    for row in text.splitlines():
+        row = row.strip()
+        if not row:
+            continue
+        if row.startswith("{"):
+            frame = json.loads(row).get("frame")
+            if frame:
+                frames.append(parse_hex(frame))
+            continue
+        frames.append(parse_hex(row))
+    return frames
+
+
+def zap_consent_items(lines):
+    """``["FILE:LINE store id (id)", ...]``: the lines that write stored settings."""
+    from ..codec import zap
+
+    items = []
+    for line in lines:
+        names = []
+        for f in line.frames:
+            names += [n for n in zap.Command(f).stored_writes if n not in names]
+        if line.path == ["set-id"]:
+            names.append("id")
+        elif line.path == ["set-baud"]:
+            names.append("baud-rate")
+        if names:
+            items.append(f"{line.where} {line.text} ({', '.join(names)})")
+    return items
+
+
+def zk_consent_items(lines):
+    """``["FILE:LINE send control ... (state run can start the engine)", ...]``."""
+    from ..codec import zk
+
+    items = []
+    for line in lines:
+        hazards = []
+        for f in line.frames:
+            h = zk.ControlFrame(f).hazard
+            if h and h not in hazards:
+                hazards.append(h)
+        if hazards:
+            items.append(f"{line.where} {line.text} ({'; '.join(hazards)})")
+    return items
+
+
+def parse_result(text):
+    """What a command printed: None, a JSON value (a bare value, a record, a JSON array), a
+    list of JSON Lines values, or the text itself."""
+    if not text.strip():
+        return None
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    values = []
+    for r in text.splitlines():
+        if not r.strip():
+            continue
+        try:
+            values.append(json.loads(r))
+        except ValueError:
+            return text.rstrip("\n")
+    return values
+
+
+class _Interrupt:
+    """SIGINT/SIGTERM while a batch runs: finish the current command, then stop. A second
+    signal interrupts at once."""
+
+    def __init__(self):
+        self.signum = None
+        self._old = {}
+
+    def _handler(self, signum, frame):
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGINT, signal.SIGTERM):
+                self._old[s] = signal.signal(s, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+        return False
+
+
+def invoke(line, protocol) -> int:
+    """Run a checked line's command with the parameters its check parsed (the same defaults,
+    so the same values as parsing it again), with the command line's error conventions.
+    Returns its exit status."""
+    from . import PipeClosed, _bad_input, _error
+    from .hints import with_hint
+
+    leaf, parent = line.leaf
+    prog = protocol
+    try:
+        ctx = click.Context(leaf, info_name=line.path[-1], parent=parent)
+        ctx.params = dict(line.params)
+        with ctx:
+            leaf.invoke(ctx)
+        return 0
+    except click.exceptions.Exit as e:
+        return e.exit_code
+    except click.ClickException as e:
+        _error(" ".join(e.format_message().split()), prog)
+        return e.exit_code
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        return INTERRUPTED
+    except (BrokenPipeError, PipeClosed):
+        raise
+    except ZkzapError as e:
+        _error(with_hint(e), prog)
+        return e.code
+    except Exception as e:
+        if not _bad_input(e):
+            raise
+        _error(str(e), prog)
+        return USAGE
+
+
+def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
+    """Run checked lines in order (the port already shared); write one record per line to
+    ``out``. Returns the batch's exit status: 0, or the first failure's code."""
+    from ..link.shared import Borrowed
+
+    first = 0
+    with _Interrupt() as stop:
+        for line in lines:
+            if stop.signum is not None:
+                break
+            buf, err = io.StringIO(), io.StringIO()
+            Borrowed.keep_baud = line.path[0] in keep_baud_after
+            try:
+                with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
+                    code = invoke(line, protocol)
+            finally:
+                Borrowed.keep_baud = False
+            messages = err.getvalue()
+            if messages:
+                sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
+                sys.stderr.flush()
+            rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(buf.getvalue())}
+            if code:
+                errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
+                rec["error"] = errors[-1] if errors else None
+            out.write(json.dumps(rec, ensure_ascii=False) + "\n")
+            out.flush()
+            if code and not first:
+                first = code
+            if code in (INTERRUPTED, 143) or (code and not keep_going):
+                break
+        if stop.signum is not None:
+            note("interrupted: the batch stopped after the current command")
+            return INTERRUPTED if stop.signum == signal.SIGINT else 143
+    return first
+
+
+def read_source(path):
+    """(lines of text, the name for messages) of FILE or '-' (stdin)."""
+    if path in (None, "-"):
+        if sys.stdin is None:
+            raise UsageError("batch: no standard input")
+        return sys.stdin.read().splitlines(), "stdin"
+    try:
+        with open(path, encoding="utf-8") as f:
+            return f.read().splitlines(), path
+    except OSError as e:
+        raise UsageError(f"batch: cannot read {path}: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"batch: {path} is not UTF-8 text") from None
+
+
+def batch_exit(code):
+    """End the batch command with ``code`` (0: return normally)."""
+    if code:
+        raise click.exceptions.Exit(code)
+
+
+__all__ = ["read_lines", "check_lines", "run_lines", "zap_consent_items", "zk_consent_items", "USAGE"]

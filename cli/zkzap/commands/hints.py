@@ -1,0 +1,38 @@
+"""What to try next: the hints the command line adds to a library error's facts.
+
+The library's errors state facts (ID, baud rate, timeout, tries; see :mod:`zkzap.errors`);
+what a user of the command line should try next is this module's business, so the library
+never names a command.
+"""
+
+from __future__ import annotations
+
+from ..errors import CheckFailed, NoReply, UsageError
+
+
+def hint(e) -> str:
+    """The hint for ``e`` (with its leading separator), or ``""``."""
+    facts = getattr(e, "facts", {})
+    if isinstance(e, NoReply) and facts.get("protocol") == "zap" and facts.get("tries") is not None:
+        text = "; check the ID, the baud rate ('zap scan --baud all'), power and wiring"
+        if facts.get("mode_dependent"):
+            text += "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
+        return text
+    if isinstance(e, UsageError):
+        if facts.get("assumed_mode"):
+            return "; give --return-mode 1 or 2 if the actuator is set so"
+        if facts.get("no_port") == "zap":
+            return ": give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet"
+    if isinstance(e, CheckFailed):
+        if facts.get("taken"):
+            return "; choose a free ID ('zap scan') or pass --force"
+        if facts.get("after_change") == "id":
+            return "; check with 'zap scan'"
+        if facts.get("after_change") == "baud":
+            return "; try 'zap scan --baud all'"
+    return ""
+
+
+def with_hint(e) -> str:
+    """The error's message followed by its hint."""
+    return str(e) + hint(e)

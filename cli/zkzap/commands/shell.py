@@ -1,0 +1,254 @@
+"""``zkzap shell zap|zk``: the commands of one protocol at an interactive prompt, over one open
+port, with completion (commands, options, register names, choices) and history (readline).
+
+Each line is a command without the program name and the port options, as in a batch
+(:mod:`.batch`); its output is the command's own (a table on a terminal). Standard input that
+is not a terminal is read line by line without a prompt, so a shell session can be scripted.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+
+import click
+
+from . import CONTEXT, Command, Group
+from .batch import EXCLUDED, PORT_TOKENS, port_tokens
+from .options import port_options
+
+BUILTINS = ("help", "exit", "quit")
+
+
+def history_path() -> str:
+    """Where the history is kept: $ZKZAP_HISTORY, else $XDG_STATE_HOME/zkzap/history
+    (~/.local/state/zkzap/history)."""
+    given = os.environ.get("ZKZAP_HISTORY")
+    if given:
+        return given
+    state = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
+    return os.path.join(state, "zkzap", "history")
+
+
+class Completer:
+    """readline completion from the click application: sub-commands, options, and the values
+    their types complete (register names, choices, 'broadcast')."""
+
+    def __init__(self, group, protocol):
+        self.group = group
+        self.protocol = protocol
+        self.matches = []
+
+    def candidates(self, buffer: str, text: str) -> list:
+        """Completions of ``text``, the last word of ``buffer`` (the line up to the cursor)."""
+        from click.shell_completion import ShellComplete
+
+        head = buffer[:len(buffer) - len(text)]
+        try:
+            args = shlex.split(head)
+        except ValueError:
+            args = head.split()
+        if not args:
+            names = [n for n in self.group.list_commands(click.Context(self.group))
+                     if n not in EXCLUDED[self.protocol]]
+            return sorted(n for n in list(names) + list(BUILTINS) if n.startswith(text))
+        comp = ShellComplete(self.group, {}, self.protocol, "_ZKZAP_COMPLETE")
+        try:
+            items = comp.get_completions(args, text)
+        except Exception:  # noqa: BLE001 - a half-typed line: nothing to offer
+            return []
+        return [i.value for i in items if i.type == "plain" and i.value not in PORT_TOKENS]
+
+    def __call__(self, text, state):
+        if state == 0:
+            import readline
+
+            self.matches = self.candidates(readline.get_line_buffer()[:readline.get_endidx()], text)
+        return self.matches[state] + " " if state < len(self.matches) else None
+
+
+def _defaults_for(group, tokens, defaults) -> dict:
+    """The nested default_map giving the command a line names (``send control``) ``defaults``."""
+    ctx = click.Context(group)
+    path, cmd = [], group
+    for name in tokens:
+        if not isinstance(cmd, click.Group):
+            break
+        sub = cmd.get_command(ctx, name)
+        if sub is None:
+            break
+        path.append(name)
+        cmd, ctx = sub, click.Context(sub, info_name=name, parent=ctx)
+    dm = dict(defaults)
+    for name in reversed(path):
+        dm = {name: dm}
+    return dm
+
+
+def _help(group, protocol):
+    ctx = click.Context(group, info_name=protocol)
+    rows = [(n, group.lazy[n][2] if n in getattr(group, "lazy", {}) else "") for n in group.list_commands(ctx)
+            if n not in EXCLUDED[protocol]]
+    width = max(len(n) for n, _ in rows)
+    click.echo("\n".join(f"  {n:<{width}}  {h}" for n, h in rows))
+    click.echo("  'COMMAND --help' for its options; exit, quit or Ctrl-D to leave.")
+
+
+def loop(group, protocol, defaults, *, interactive) -> int:
+    """Read and run lines until exit or end of input; returns the last failure's status."""
+    from . import run
+
+    if interactive:
+        import readline
+
+        path = history_path()
+        try:
+            readline.read_history_file(path)
+        except OSError:
+            pass
+        readline.set_history_length(1000)
+        readline.set_completer_delims(" \t\n")
+        readline.set_completer(Completer(group, protocol))
+        readline.parse_and_bind("tab: complete")
+    last = 0
+    try:
+        while True:
+            try:
+                text = input(f"{protocol}> ") if interactive else sys.stdin.readline()
+            except KeyboardInterrupt:
+                click.echo("", err=True)
+                continue
+            except EOFError:
+                if interactive:
+                    click.echo("", err=True)
+                break
+            if not interactive and not text:
+                break
+            text = text.strip()
+            if not text or text.startswith("#"):
+                continue
+            try:
+                tokens = shlex.split(text, comments=True)
+            except ValueError as e:
+                click.echo(f"{protocol}: error: {e}", err=True)
+                last = 2
+                continue
+            if not tokens:
+                continue
+            if tokens[0] in ("exit", "quit"):
+                break
+            if tokens[0] == "help":
+                _help(group, protocol)
+                continue
+            bad = port_tokens(tokens)
+            if bad or tokens[0] in EXCLUDED[protocol]:
+                what = (f"{bad[0]}: the port is the shell's" if bad
+                        else f"{tokens[0]}: not in a shell")
+                click.echo(f"{protocol}: error: {what}", err=True)
+                last = 2
+                continue
+            last = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
+    finally:
+        if interactive:
+            import readline
+
+            try:
+                os.makedirs(os.path.dirname(history_path()), exist_ok=True)
+                readline.write_history_file(history_path())
+            except OSError:
+                pass
+    return last
+
+
+@click.group(cls=Group, context_settings=CONTEXT)
+def shell():
+    """An interactive zap or zk session over one open port, with completion and history.
+
+    \b
+    Examples:
+      zkzap shell zap -p /dev/ttyUSB0
+      zkzap shell zk --sim
+      printf 'load present-position --id 1\\n' | zkzap shell zap --sim --sim-ids 1
+    """
+
+
+def _description(protocol):
+    return (f"Run {protocol} commands at a '{protocol}> ' prompt over one open port.\n\n"
+            "Each line is a command as on the command line without the program name and the port "
+            f"options (as in '{protocol} batch'); its output is the command's own. TAB completes "
+            "commands, options, register names and choices; the history is kept in "
+            "$ZKZAP_HISTORY (default ~/.local/state/zkzap/history). 'help' lists the commands; "
+            "exit, quit or Ctrl-D leaves; Ctrl-C stops the running command (a ZK session sends "
+            "its abort as usual) and returns to the prompt. Consent is asked per command on a "
+            "real port (--yes on the line). Standard input that is not a terminal is run line "
+            "by line without a prompt; the exit status is the last failed command's.")
+
+
+def _make_zap():
+    from .zap.compose import link_options
+
+    @click.command("zap", cls=Command, context_settings=CONTEXT, help=_description("zap") + """
+
+\b
+Examples:
+  zkzap shell zap -p /dev/ttyUSB0
+  zkzap shell zap --sim --sim-ids 1,2""")
+    @link_options
+    def zap_shell(**common):
+        from ..link.shared import sharing
+        from .zap import zap as group
+        from .zap.compose import open_link
+
+        defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
+                                           "verbose")}
+        ids = common["sim_ids"] or "0"
+        args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "retries", "stop_bits")}
+        args["sim_ids"] = ids
+        args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
+        with open_link(ids=[0], **args) as bus, sharing("zap", bus):
+            code = loop(group, "zap", defaults, interactive=_interactive())
+        if code:
+            raise click.exceptions.Exit(code)
+
+    return zap_shell
+
+
+def _make_zk():
+    @click.command("zk", cls=Command, context_settings=CONTEXT, help=_description("zk") + """
+
+\b
+Examples:
+  zkzap shell zk -p /dev/ttyUSB0
+  zkzap shell zk -p 'sim://zk?speed=10'""")
+    @port_options("zk")
+    def zk_shell(port, baud, stop_bits, timeout, sim):
+        from ..link import zk_link
+        from ..link.shared import sharing
+        from .zk import zk as group
+        from .zk.telemetry import resolve_port
+
+        url = resolve_port(port, sim)
+        defaults = {"port": url, "sim": False, "baud": baud}
+        if timeout is not None:
+            defaults["timeout"] = timeout
+        link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
+        try:
+            with sharing("zk", link):
+                code = loop(group, "zk", defaults, interactive=_interactive())
+        finally:
+            link.close()
+        if code:
+            raise click.exceptions.Exit(code)
+
+    return zk_shell
+
+
+def _interactive() -> bool:
+    from ..io.term import is_tty
+
+    return is_tty(sys.stdin) and is_tty(sys.stdout)
+
+
+shell.add_command(_make_zap())
+shell.add_command(_make_zk())

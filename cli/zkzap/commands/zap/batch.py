@@ -1,0 +1,75 @@
+"""``zap batch [FILE|-]``: many actuator commands over one open port (see :mod:`..batch`)."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ...codec import zap
+from .. import CONTEXT, Command
+from ..options import consent, yes_option
+from .compose import link_options, open_link
+
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.option("-k", "--keep-going", is_flag=True,
+              help="Run past a failed command; the batch still exits with the first failure's status.")
+@yes_option
+@link_options
+def batch(file, keep_going, yes, **common):
+    """Run the zap commands of FILE (or stdin: '-', the default) over one open port.
+
+    One command per line, as on the command line without 'zap' and the port options
+    (load present-position --id 1; store goal-speed 600 --id 2); '#' comments and blank lines
+    are skipped. Every line is checked (and its packets composed) before anything is sent: a
+    bad line is refused naming FILE:LINE (stdin:LINE), exit status 2. On a real port the
+    stored writes of the whole batch need one consent (--yes, or one prompt listing them).
+
+    Each command gives one JSON Lines record on stdout: line, command, exit (the status the
+    command would have exited with), result (what it printed: a value, a record or a list of
+    records, else its text) and error (the message) when it failed. The batch stops at the
+    first failure unless --keep-going, and exits with the first failure's status. Ctrl-C stops
+    after the current command (exit 130). The link options (-b, --timeout, --return-mode,
+    --retries) are every line's defaults.
+
+    \b
+    Examples:
+      printf 'load present-position --id 1\\nmove 2000 --id 1 --wait\\n' | zap batch --sim --sim-ids 1
+      zap batch setup.txt -p /dev/ttyUSB0 --yes
+      zap batch moves.txt -p /dev/ttyUSB0 --keep-going | jq -c 'select(.exit != 0)'
+    """
+    from .. import zap as _  # noqa: F401 - the group, for the lines
+    from ...link.shared import sharing
+    from ...link.zap_bus import is_simulated
+    from ..batch import check_lines, read_lines, read_source, run_lines, zap_consent_items
+    from . import zap as group
+
+    text, name = read_source(file)
+    lines = read_lines(text, name)
+    defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
+                                       "verbose")}
+    defaults["yes"] = True
+    check_lines(group, lines, "zap", defaults)
+    if not lines:
+        return
+    if not (common["sim"] or is_simulated(common["port"])):
+        items = zap_consent_items(lines)
+        if items:
+            consent(f"this batch writes stored settings on {common['port']}; they survive power-off: "
+                    + "; ".join(items), yes)
+    ids = set()
+    for line in lines:
+        ident = line.params.get("ident")
+        if isinstance(ident, int) and ident != zap.BROADCAST:
+            ids.add(ident)
+        for f in line.frames:
+            ids.update(zap.Command(f).target_ids())
+    args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "retries", "stop_bits")}
+    args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
+    with open_link(ids=sorted(ids) or [0], **args) as bus, sharing("zap", bus):
+        code = run_lines(group, "zap", lines, defaults, sys.stdout, keep_going=keep_going,
+                         keep_baud_after=("set-baud",))
+    if code:
+        raise click.exceptions.Exit(code)

@@ -1,0 +1,76 @@
+"""``zk batch [FILE|-]``: many ECU commands over one open port (see :mod:`..batch`)."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .. import CONTEXT, Command
+from ..options import abort_option, consent, note, port_options, yes_option
+from .telemetry import resolve_port
+
+
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.option("-k", "--keep-going", is_flag=True,
+              help="Run past a failed command; the batch still exits with the first failure's status.")
+@abort_option(default="standby",
+              help="Sent when the batch stops early (a failure, Ctrl-C) after a line that controlled the "
+                   "engine: that state with throttle 0; none sends nothing.")
+@yes_option
+@port_options("zk")
+def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
+    """Run the zk commands of FILE (or stdin: '-', the default) over one open port.
+
+    One command per line, as on the command line without 'zk' and the port options
+    (send control --state run --throttle 30 --for 10; monitor --count 20); '#' comments and
+    blank lines are skipped. Every line is checked (and its frames composed) before anything is
+    sent: a bad line is refused naming FILE:LINE (stdin:LINE), exit status 2. On a real port
+    the engine-starting commands of the whole batch need one consent (--yes, or one prompt
+    listing them).
+
+    Each command gives one JSON Lines record on stdout: line, command, exit, result (what it
+    printed) and error when it failed; the status records of a 'send --for' or 'monitor' line
+    are its result. The batch stops at the first failure unless --keep-going and exits with
+    the first failure's status. Ctrl-C stops after the current command (a 'send --for' line
+    sends its abort command as usual); a batch that stops early after controlling the engine
+    sends --abort.
+
+    \b
+    Examples:
+      printf 'send keepalive\\nmonitor --count 5\\n' | zk batch --sim
+      zk batch run.txt -p /dev/ttyUSB0 --yes
+    """
+    from ...codec import zk
+    from ...link import zk_link
+    from ...link.shared import sharing
+    from ..batch import check_lines, read_lines, read_source, run_lines, zk_consent_items
+    from . import zk as group
+
+    text, name = read_source(file)
+    lines = read_lines(text, name)
+    url = resolve_port(port, sim)
+    defaults = {"port": url, "sim": False, "baud": baud, "yes": True}
+    if timeout is not None:
+        defaults["timeout"] = timeout
+    check_lines(group, lines, "zk", defaults)
+    if not lines:
+        return
+    if not zk_link.is_simulator(url):
+        items = zk_consent_items(lines)
+        if items:
+            consent(f"this batch on {url} can start the engine or run ECU hardware: " + "; ".join(items), yes)
+    controls = any(zk.ControlFrame(f).controls_engine for line in lines for f in line.frames)
+    link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
+    try:
+        with sharing("zk", link):
+            code = run_lines(group, "zk", lines, defaults, sys.stdout, keep_going=keep_going)
+        if code and controls and abort != "none":
+            for f in zk_link.abort_frames(abort):
+                link.write(f)
+            note(f"batch stopped early: sent {zk_link.describe_abort(abort)}")
+    finally:
+        link.close()
+    if code:
+        raise click.exceptions.Exit(code)

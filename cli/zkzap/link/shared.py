@@ -1,0 +1,64 @@
+"""One open port for many commands (``zap batch``, ``zk batch``, ``zkzap shell``).
+
+While :func:`sharing` is active, the commands' own port openings (:func:`zkzap.commands.zap.
+compose.open_link`, :meth:`zkzap.link.zk_link.ZkLink.open`) borrow the shared link instead of
+opening the port again: each command runs over the same open port, and its "close" leaves the
+port open. The line settings a command changes for itself (the return mode, retries and timeout
+of the bus; a scan's baud rate) are put back when it returns it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+#: The shared link by protocol: "zap" -> ZapBus, "zk" -> ZkLink.
+_SHARED: dict = {}
+
+
+@contextlib.contextmanager
+def sharing(protocol: str, link):
+    """Share ``link`` (a ZapBus or a ZkLink) for ``protocol`` while the block runs."""
+    old = _SHARED.get(protocol)
+    _SHARED[protocol] = link
+    try:
+        yield link
+    finally:
+        if old is None:
+            _SHARED.pop(protocol, None)
+        else:
+            _SHARED[protocol] = old
+
+
+def shared(protocol: str):
+    """The link shared for ``protocol``, or None."""
+    return _SHARED.get(protocol)
+
+
+class Borrowed:
+    """A shared ZapBus lent to one command: ``with`` gives the bus itself; leaving the block
+    restores the bus's settings (and its baud rate, unless ``keep_baud``) instead of closing."""
+
+    keep_baud = False
+
+    def __init__(self, bus, **settings):
+        self.bus = bus
+        self.saved = {k: getattr(bus, k) for k in ("return_mode", "retries", "timeout")}
+        self.baud = bus.baud
+        for k, v in settings.items():
+            setattr(bus, k, v)
+
+    def __getattr__(self, name):
+        return getattr(self.bus, name)
+
+    def __enter__(self):
+        return self.bus
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Give the bus back: restore its settings (and baud rate), leave the port open."""
+        for k, v in self.saved.items():
+            setattr(self.bus, k, v)
+        if not Borrowed.keep_baud and self.bus.baud != self.baud:
+            self.bus.set_baud(self.baud)

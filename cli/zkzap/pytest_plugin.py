@@ -1,0 +1,59 @@
+"""pytest fixtures for testing your own code against the zkzap simulators.
+
+Installed with zkzap (a ``pytest11`` entry point), so in any project's tests:
+
+.. code-block:: python
+
+    def test_my_controller(zap_sim):
+        with zkzap.Bus(zap_sim.url) as bus:
+            my_controller(bus)
+            assert bus[1].present_position > 0
+
+    @pytest.mark.zap_sim(ids=[1, 2, 3], return_mode=2, transport="pty")
+    def test_three(zap_sim): ...
+
+    @pytest.mark.zk_sim(protocol_version=4, speed=20)
+    def test_ecu(zk_sim): ...
+
+``zap_sim`` is :func:`zkzap.sim.start_zap` (default: actuator ID 1, in-process), ``zk_sim``
+:func:`zkzap.sim.start_zk` (default: ten times real time, in-process); the marker's keyword
+arguments are passed on. Each test gets a fresh simulator, stopped afterwards.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+
+def pytest_configure(config):
+    """Register the ``zap_sim`` and ``zk_sim`` markers."""
+    config.addinivalue_line("markers", "zap_sim(**options): options for the zap_sim fixture "
+                                       "(zkzap.sim.start_zap: ids, baud, return_mode, faults, transport, ...)")
+    config.addinivalue_line("markers", "zk_sim(**options): options for the zk_sim fixture "
+                                       "(zkzap.sim.start_zk: protocol_version, speed, error, transport, ...)")
+
+
+def _options(request, name, defaults):
+    options = dict(defaults)
+    marker = request.node.get_closest_marker(name)
+    if marker is not None:
+        options.update(marker.kwargs)
+    return options
+
+
+@pytest.fixture
+def zap_sim(request):
+    """A running actuator-bus simulator (:class:`zkzap.sim.launch.Simulator`); open ``.url``."""
+    from zkzap.sim import start_zap
+
+    with start_zap(**_options(request, "zap_sim", {"ids": (1,)})) as sim:
+        yield sim
+
+
+@pytest.fixture
+def zk_sim(request):
+    """A running ECU simulator (:class:`zkzap.sim.launch.Simulator`); open ``.url``."""
+    from zkzap.sim import start_zk
+
+    with start_zk(**_options(request, "zk_sim", {"speed": 10.0})) as sim:
+        yield sim

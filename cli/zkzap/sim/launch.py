@@ -1,0 +1,271 @@
+"""Start a simulator from Python with typed arguments and get its URL.
+
+>>> from zkzap.sim import start_zap
+>>> with start_zap(ids=[1, 2], return_mode=2) as sim:      # doctest: +SKIP
+...     with Bus(sim) as bus:                                # or Bus(sim.url)
+...         bus[1].goal_position = 2000
+
+Transports: ``"inprocess"`` (default: a ``sim://KIND?instance=N`` URL that any zkzap port in
+this process opens; the fastest, no threads), ``"pty"`` (a pseudo-terminal, path in ``url``)
+and ``"tcp"`` (``socket://127.0.0.1:PORT``). The pty and TCP servers run on a background
+thread of this process, so other processes (``zap``, ``zk``, any serial tool) can talk to them
+until :meth:`Simulator.close`. ``device`` is the simulated device itself
+(:class:`~zkzap.sim.zk_ecu.ZkEcu` or :class:`~zkzap.sim.zap_actuators.ActuatorBus`) for
+inspection and fault injection; with a server thread running, do that under ``lock``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import selectors
+import socket
+import threading
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Optional, Sequence, Union
+
+from . import INSTANCES
+from .base import Clock
+
+__all__ = ["Simulator", "start", "start_zk", "start_zap"]
+
+TRANSPORTS = ("inprocess", "pty", "tcp")
+_keys = itertools.count(1)
+
+
+class Simulator:
+    """A running simulator: ``kind`` (``zk``/``zap``), ``url`` (what to open), ``transport``,
+    ``device``, ``clock`` (model time) and ``lock``. A context manager; :meth:`close` stops it."""
+
+    def __init__(self, kind: str, device, clock: Clock, transport: str = "inprocess",
+                 host: str = "127.0.0.1", port: int = 0):
+        if transport not in TRANSPORTS:
+            raise ValueError(f"transport: {transport!r}; allowed {', '.join(TRANSPORTS)}")
+        self.kind = kind
+        self.device = device
+        self.clock = clock
+        self.transport = transport
+        self.lock = threading.RLock()
+        self.key = str(next(_keys))
+        self._stop = None
+        self._thread = None
+        self._closed = False
+        INSTANCES[self.key] = (device, clock)
+        if transport == "inprocess":
+            self.url = f"sim://{kind}?instance={self.key}"
+        else:
+            self._wake_r, self._wake_w = os.pipe()
+            ready = threading.Event()
+            target = self._serve_pty if transport == "pty" else self._serve_tcp
+            self._thread = threading.Thread(target=target, args=(ready, host, port), daemon=True,
+                                            name=f"zkzap-sim-{kind}-{transport}")
+            self._error = None
+            self._thread.start()
+            ready.wait(10)
+            if self._error is not None:
+                raise self._error
+
+    def __repr__(self):
+        return f"Simulator({self.kind!r}, url={self.url!r})"
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        """Stop the simulator (its server thread, if any) and release the device."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._thread is not None:
+            os.write(self._wake_w, b"x")
+            self._thread.join(5)
+            os.close(self._wake_r)
+            os.close(self._wake_w)
+        INSTANCES.pop(self.key, None)
+        with self.lock:
+            self.device.close()
+
+    def inject(self, *args, **kw):
+        """Inject a fault (the device's ``inject``/``inject_error``), under :attr:`lock`."""
+        with self.lock:
+            fn = getattr(self.device, "inject", None) or getattr(self.device, "inject_error")
+            return fn(*args, **kw)
+
+    # -- servers --------------------------------------------------------------------------------
+
+    def _timeout(self):
+        wake = self.device.next_wakeup(self.clock.now())
+        if wake is None:
+            return 0.5
+        return min(0.5, self.clock.real_delay(wake - self.clock.now()))
+
+    def _serve_pty(self, ready, host, port):
+        from .serve import _BAUDS, _deliver, _outgoing, _termios, host_settings
+
+        termios, tty = _termios()
+        speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
+
+        try:
+            master, slave = os.openpty()
+            tty.setraw(slave)
+            self.url = os.ttyname(slave)
+        except OSError as e:
+            self._error = e
+            ready.set()
+            return
+        sel = selectors.DefaultSelector()
+        sel.register(master, selectors.EVENT_READ, "data")
+        sel.register(self._wake_r, selectors.EVENT_READ, "stop")
+        ready.set()
+        try:
+            while True:
+                for key, _ in sel.select(self._timeout()):
+                    if key.data == "stop":
+                        return
+                    try:
+                        data = os.read(master, 4096)
+                    except OSError:
+                        data = b""
+                    if data:
+                        with self.lock:
+                            _deliver(self.device, data, self.clock.now(), host_settings(termios, slave, speeds))
+                with self.lock:
+                    reply = self.device.poll(self.clock.now())
+                if reply:
+                    os.write(master, _outgoing(self.device, reply, host_settings(termios, slave, speeds)))
+        finally:
+            sel.close()
+            os.close(master)
+            os.close(slave)
+
+    def _serve_tcp(self, ready, host, port):
+        try:
+            srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+            srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            srv.bind((host, port))
+            srv.listen(1)
+        except OSError as e:
+            self._error = e
+            ready.set()
+            return
+        shown = f"[{host}]" if ":" in host else host
+        self.url = f"socket://{shown}:{srv.getsockname()[1]}"
+        sel = selectors.DefaultSelector()
+        sel.register(srv, selectors.EVENT_READ, "accept")
+        sel.register(self._wake_r, selectors.EVENT_READ, "stop")
+        client = None
+        ready.set()
+
+        def drop():
+            nonlocal client
+            sel.unregister(client)
+            client.close()
+            client = None
+
+        try:
+            while True:
+                for key, _ in sel.select(self._timeout()):
+                    if key.data == "stop":
+                        return
+                    if key.data == "accept":
+                        conn, _ = srv.accept()
+                        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                        if client is not None:
+                            drop()
+                        client = conn
+                        sel.register(client, selectors.EVENT_READ, "client")
+                        continue
+                    try:
+                        data = client.recv(4096)
+                    except OSError:
+                        data = b""
+                    if data:
+                        with self.lock:
+                            self.device.receive(data, self.clock.now(), None)
+                    else:
+                        drop()
+                with self.lock:
+                    reply = self.device.poll(self.clock.now())
+                if reply and client is not None:
+                    try:
+                        client.sendall(reply)
+                    except OSError:
+                        drop()
+        finally:
+            if client is not None:
+                client.close()
+            sel.close()
+            srv.close()
+
+
+def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, max_rpm: int = 160000,
+             idle_rpm: int = 40000, max_thrust: float = 14.0, ambient: float = 20.0, battery: float = 12.0,
+             max_pump_voltage: float = 10.0, esr: bool = False, baud: Optional[int] = None,
+             corrupt_every: int = 0, silent_after: Optional[float] = None, error: Union[int, str, None] = None,
+             error_after: float = 0.0, transport: str = "inprocess", host: str = "127.0.0.1",
+             port: int = 0) -> Simulator:
+    """Start the ECU simulator (a :class:`~zkzap.sim.zk_ecu.ZkEcu`): ``protocol_version``,
+    status ``rate`` (20/50/100 Hz), ``speed`` (model time runs this many times faster), engine
+    figures, and faults (``corrupt_every`` Nth frame, ``silent_after`` s, ``error`` code at
+    ``error_after`` s). ValueError names a bad argument."""
+    from .zk_ecu import ZkEcu
+
+    device = ZkEcu(protocol_version=protocol_version, rate=rate, max_rpm=max_rpm, idle_rpm=idle_rpm,
+                   max_thrust=max_thrust, ambient=ambient, battery=battery, max_pump_voltage=max_pump_voltage,
+                   esr=esr, baud=baud, corrupt_every=corrupt_every, silent_after=silent_after,
+                   error=error, error_after=error_after)
+    return Simulator("zk", device, Clock(speed), transport, host, port)
+
+
+def start_zap(*, ids: Union[Iterable[int], str] = (0,), baud: int = 57600, return_mode: Optional[int] = None,
+              echo: bool = False, voltage: Optional[float] = None, faults: Sequence = (),
+              state: Optional[str] = None, speed: float = 1.0, transport: str = "inprocess",
+              host: str = "127.0.0.1", port: int = 0) -> Simulator:
+    """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
+    actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate) at
+    ``baud``, every one in feedback-return-mode ``return_mode`` (None: the factory 1), an
+    adapter that echoes (``echo``), a supply ``voltage``, ``faults`` as ``(id or None, kind,
+    value, count)`` tuples or ``[ID:]KIND[=VALUE][/COUNT]`` strings, and ``state`` (a JSON file
+    keeping stored registers across runs). ValueError names a bad argument."""
+    from ..codec import zap
+    from .zap_actuators import Actuator, ActuatorBus, parse_ids
+
+    if baud not in zap.BAUD_TO_CODE:
+        raise ValueError(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+    if isinstance(ids, str):
+        pairs = parse_ids(ids)
+    else:
+        pairs = [(i, None) if isinstance(i, int) else (int(i[0]), int(i[1])) for i in ids]
+    for ident, _ in pairs:
+        zap.check_id(ident, allow_broadcast=False)
+    bus = ActuatorBus([], state_path=state, echo=bool(echo))
+    if not (state and bus.load_state()):
+        bus.actuators = [Actuator(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
+        if return_mode is not None:
+            if return_mode not in (0, 1, 2):
+                raise ValueError(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
+            for a in bus.actuators:
+                a.set("feedback-return-mode", return_mode)
+        if state:
+            bus.save()
+    if voltage is not None:
+        bus.inject(None, "voltage", float(voltage))
+    for fault in faults:
+        if isinstance(fault, str):
+            bus.inject_text(fault)
+        else:
+            bus.inject(*fault)
+    return Simulator("zap", bus, Clock(speed), transport, host, port)
+
+
+def start(kind: str, **options) -> Simulator:
+    """Start the ``"zk"`` or ``"zap"`` simulator (see :func:`start_zk`, :func:`start_zap`)."""
+    if kind == "zk":
+        return start_zk(**options)
+    if kind == "zap":
+        return start_zap(**options)
+    raise ValueError(f"simulator: unknown kind {kind!r}; allowed zk, zap")

@@ -1,0 +1,72 @@
+"""zap/zk batch in-process: records, the shared port's settings, results; hints and exit-status help."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from zkzap.commands.batch import parse_result
+from zkzap.commands.hints import with_hint
+from zkzap.errors import CheckFailed, NoReply, UsageError, exit_status_help
+
+
+def records(text):
+    return [json.loads(line) for line in text.splitlines()]
+
+
+def test_a_scan_gives_the_port_back_at_the_batch_baud(cli):
+    r = cli("zap", "batch", "-", "--sim", "--sim-ids", "1", input="scan --ids 1 --baud all\nload id --id 1\n")
+    assert r.exit_code == 0, r.stderr
+    recs = records(r.stdout)
+    assert recs[0]["result"]["id"] == 1 and recs[1]["result"] == 1
+
+
+def test_set_baud_keeps_the_new_rate_for_the_lines_after(cli):
+    r = cli("zap", "batch", "-", "--sim", "--sim-ids", "1",
+            input="set-baud 115200 --id 1\nload baud-rate --id 1\n")
+    assert r.exit_code == 0, r.stderr
+    assert records(r.stdout)[1]["result"] == 16
+
+
+def test_line_options_override_the_batch_defaults(cli):
+    r = cli("zap", "batch", "-", "--sim", "--sim-ids", "1", "--return-mode", "2",
+            input="store goal-speed 300 --id 1 -v\nload goal-speed --id 1 --return-mode 1\n")
+    assert r.exit_code == 0, r.stderr
+    assert "acknowledged" in r.stderr and records(r.stdout)[1]["result"] == 300
+
+
+def test_empty_batch_and_comments(cli):
+    r = cli("zap", "batch", "-", "--sim", input="# nothing\n\n")
+    assert (r.exit_code, r.stdout) == (0, "")
+
+
+def test_unreadable_file(cli, tmp_path):
+    r = cli("zap", "batch", str(tmp_path / "missing.txt"), "--sim")
+    assert r.exit_code == 2 and "cannot read" in r.stderr
+
+
+@pytest.mark.parametrize("text,value", [("", None), ("2047\n", 2047), ("12.0\n", 12.0),
+                                        ('{"a":1}\n{"a":2}\n', [{"a": 1}, {"a": 2}]),
+                                        ('[\n{"a":1}\n]\n', [{"a": 1}]), ("model-number=1\nid=2\n",
+                                                                         "model-number=1\nid=2")])
+def test_results_are_parsed(text, value):
+    assert parse_result(text) == value
+
+
+def test_hints_come_from_facts():
+    e = NoReply("no reply from ID 3", protocol="zap", ident=3, baud=57600, tries=3, mode_dependent=True)
+    assert with_hint(e).endswith("power and wiring; or the actuator's feedback-return-mode does not answer this "
+                                 "(try 'zap echo')")
+    assert with_hint(CheckFailed("ID 2 is already taken", taken=True)).endswith("or pass --force")
+    assert with_hint(CheckFailed("x", after_change="baud")) == "x; try 'zap scan --baud all'"
+    assert with_hint(UsageError("no port", no_port="zap")).startswith("no port: give -p PORT")
+    assert with_hint(NoReply("silent", protocol="zk")) == "silent"
+
+
+def test_exit_status_help_from_the_table():
+    assert exit_status_help().startswith("Exit status: 0 success; 1 check failed")
+    text = exit_status_help({143: "SIGTERM", 0: "done", 130: "Ctrl-C"}, tail=" End.")
+    assert text == "Exit status: 0 done; 130 Ctrl-C; 143 SIGTERM. End."
+    with pytest.raises(ValueError, match="42"):
+        exit_status_help({42: "the answer"})
