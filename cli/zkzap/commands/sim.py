@@ -141,12 +141,18 @@ def zk(protocol_version, rate, extra, speed, use_pty, listen, link):
 @click.option("--voltage", type=click.FloatRange(0, 25.5), default=None, metavar="VOLTS",
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")
 @click.option("--echo", is_flag=True, help="Echo the host's bytes back, like a half-duplex adapter.")
+@click.option("--turnaround", type=click.FloatRange(0, 1000), default=None, metavar="MS",
+              help="Milliseconds from a command's last byte to the reply's first (default 2; real "
+                   "actuators and adapters: up to about 20).")
+@click.option("--gap", type=click.FloatRange(0, 100), default=None, metavar="MS",
+              help="Milliseconds between two reply bytes, like a device or USB adapter that "
+                   "trickles its bytes (default 0).")
 @click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]",
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")
 @serve_options
-def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, listen, link):
+def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, speed, use_pty, listen, link):
     """The mightyZAP actuator-bus simulator: 12Lf actuators with the full register map, moving
     at goal speed, answering as their feedback-return mode says.
 
@@ -163,6 +169,11 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, li
       zkzap sim zap --ids 1,2,3                  # prints /dev/pts/N
       zkzap sim zap --ids 1,2 --listen 127.0.0.1:0 --state bus.json
       zkzap sim zap --ids 1 --echo --fault 1:delay=5
+      zkzap sim zap --ids 1-4 --turnaround 20 --gap 1    # a slow device that trickles its bytes
+
+    Timing: a command is heard once its last byte has crossed the line at the host's baud
+    rate; the reply starts --turnaround ms later (5 ms more after a stored write), takes its
+    time on the wire plus --gap ms between bytes, and replies never overlap.
     """
     from ..sim.zap_bus import parse_fault
 
@@ -173,7 +184,8 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, speed, use_pty, li
             raise UsageError(f"--fault: {e}") from None
     device = _make("zap", ids=ids, baud=baud, state=state, return_mode=return_mode,
                    voltage=None if voltage is None else str(voltage), echo="1" if echo else "0",
-                   faults=",".join(faults))
+                   turnaround=None if turnaround is None else str(turnaround),
+                   gap=None if gap is None else str(gap), faults=",".join(faults))
     if state and getattr(device, "restored", False):
         shown = ", ".join(str(a.ident) for a in device.actuators)
         click.echo(f"note: {state}: {len(device.actuators)} actuator(s) restored (IDs {shown}); "

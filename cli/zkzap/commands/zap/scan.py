@@ -14,19 +14,15 @@ import click
 
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
+from ...link.zap_scan import ALL_BAUDS
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, note, resolve_format, yes_option
+from ..options import SignedCommand, consent, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
 SCAN_COLUMNS = ["id", "baud", "model", "firmware", "return_mode", "status", "errors"]
 SCAN_TABLE = [("id", "id"), ("baud", "baud"), ("_model", "model"), ("firmware", "firmware"),
               ("return_mode", "return mode"), ("status", "status"), ("_errors", "errors")]
-#: The order ``--baud all`` tries: the factory default first, then the others fastest first.
-ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
-#: The block ``scan`` reads from each actuator found: model-number .. feedback-return-mode.
-INFO_FIRST = zap.REGISTER_BY_NAME["model-number"]
-INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
 
 
 class IdList(click.ParamType):
@@ -123,11 +119,15 @@ def scan(ids, fmt, **common):
     """Find every actuator on the bus: Echo to each ID at each baud rate, then read the model,
     firmware and return mode of those that answer.
 
-    The wait per ID is derived from the baud rate (about 7 ms at 57600 on a local port; see
-    --timeout), so a full 0-253 scan takes about 2 s per baud rate. An ID that does not answer
-    is not asked again; --retries applies to garbled replies. Results stream as found: a
-    table on a terminal, JSON Lines otherwise (--format), with keys id, baud, model, firmware,
-    return_mode, status (ok, error, garbled) and errors. Exit status 3 when nothing answers.
+    The first pass waits per ID only for the bus's typical turnaround (about 5 ms at 57600
+    with 2 ms actuators: a full 0-253 scan takes about 1.3 s per baud rate). A reply that
+    comes later is recognised by its ID, and that ID and those probed meanwhile are probed
+    again with the full allowance (20 ms), as are the IDs near bytes that make no packet;
+    --retries applies to garbled replies. Results stream as found: a table on a terminal,
+    JSON Lines otherwise (--format), with keys id, baud, model, firmware, return_mode,
+    status (ok, error, garbled, duplicate, unidentified) and errors. A failed identify read
+    leaves model, firmware and return_mode null (status unidentified). Two actuators with
+    one ID (replies that collide) are reported on stderr. Exit status 3 when nothing answers.
 
     \b
     Examples:
@@ -135,8 +135,8 @@ def scan(ids, fmt, **common):
       zap scan -b all --ids 0-20 -p /dev/ttyUSB0 -f json
       zap scan --sim --sim-ids 1,2,3
     """
-    from ...errors import BadReply
     from ...io.writers import make_writer
+    from ...link.zap_scan import scan as scan_bus
 
     bauds = common["baud"]
     fmt = resolve_format(fmt)
@@ -150,29 +150,16 @@ def scan(ids, fmt, **common):
     try:
         with open_link(ids=[0], **args) as bus:
             progress = _progress(len(ids) * len(bauds), "scanning")
-            for baud in bauds:
-                bus.set_baud(baud)
-                for ident in ids:
+            for event in scan_bus(bus, ids, bauds, retries=common["retries"]):
+                if event[0] == "probe":
                     if progress is not None:
-                        progress.update(0, description=f"{baud} baud, ID {ident:3d} ({len(found)} found)")
-                    rec = {"id": ident, "baud": baud, "model": None, "firmware": None, "return_mode": None,
-                           "status": "ok", "errors": []}
-                    try:
-                        r = bus.ping(ident, retries=common["retries"])
-                    except BadReply as e:
-                        rec["status"] = "garbled"
-                        rec["errors"] = [str(e)]
-                        r = None
-                        _emit(writer, rec, found, fmt)
-                    if progress is not None:
-                        progress.advance(0)
-                    if r is None:
-                        continue
-                    rec["errors"] = r.errors
-                    if r.error:
-                        rec["status"] = "error"
-                    _identify(bus, ident, rec)
-                    _emit(writer, rec, found, fmt)
+                        _, baud, ident, count, first = event
+                        progress.update(0, description=f"{baud} baud, ID {ident:3d} ({count} found)",
+                                        advance=1 if first else 0)
+                elif event[0] == "record":
+                    _emit(writer, event[1], found, fmt)
+                else:
+                    warn(event[1])
     finally:
         if progress is not None:
             progress.stop()
@@ -183,27 +170,6 @@ def scan(ids, fmt, **common):
         raise NoReply(f"no actuator answered ({where}, {took:.2f} s)")
     if common["verbose"] or sys.stderr.isatty():
         note(f"{len(found)} actuator{'s' if len(found) != 1 else ''} found ({where}, {took:.2f} s)")
-
-
-def _identify(bus, ident, rec):
-    """Model, firmware and return mode in one Load Data (answered in return modes 1 and 2)."""
-    from ...errors import BadReply
-
-    length = INFO_LAST.address + INFO_LAST.size - INFO_FIRST.address
-    try:
-        r = bus.transact(zap.load(ident, INFO_FIRST.address, length), reply=True, data_len=length,
-                         optional=True, check=False)
-    except BadReply as e:
-        rec["status"] = "garbled"
-        rec["errors"] = rec["errors"] + [str(e)]
-        return
-    if r is None:
-        rec["return_mode"] = 0                     # answers Echo but not Load Data
-        return
-    values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
-    rec["model"] = values.get("model-number")
-    rec["firmware"] = values.get("firmware-version")
-    rec["return_mode"] = values.get("feedback-return-mode")
 
 
 def _emit(writer, rec, found, fmt):
@@ -422,9 +388,12 @@ def _read_back(bus, ident, reg, within, silent):
 def set_id(new, ident, force, ready_timeout, yes, **common):
     """Give the actuator at --id the ID NEW, verified by reading it back from NEW.
 
-    Checks first that --id answers and that NEW is free (two actuators with one ID garble
-    every reply; --force skips that check). Exit status 1 when the read-back differs or NEW
-    does not answer afterwards. On a real port it asks for consent (--yes).
+    Checks first that --id answers and that NEW is free: NEW is probed up to three times with
+    the full reply allowance, and any reply (error bits, garbled or late) means taken (two
+    actuators with one ID garble every reply; --force skips that check). Afterwards NEW must
+    read back its ID and --id must be silent. Exit status 1 when NEW is taken, the read-back
+    differs, NEW does not answer or --id still answers. On a real port it asks for consent
+    (--yes).
 
     \b
     Examples:
@@ -437,12 +406,15 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
     _consent_real(common["port"], common["sim"], yes, f"change ID {ident} to {new}")
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
         bus.echo(ident)
-        if not force and bus.ping(new) is not None:
+        if not force and bus.answers(new):
             raise CheckFailed(f"ID {new} is already taken by another actuator; choose a free ID "
                               "('zap scan') or pass --force")
         bus.store(ident, ID_REG, new)
         value = _read_back(bus, new, ID_REG, ready_timeout,
                            f"set-id: ID {new} does not answer after the change; check with 'zap scan'")
+        if value == new and bus.answers(ident, tries=2):
+            raise CheckFailed(f"set-id: ID {ident} still answers after the change (ID {new} reads back "
+                              f"{value}): two actuators may have had ID {ident}; check with 'zap scan'")
     if value != new:
         raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}")
     note(f"ID {ident} is now ID {new} (verified)")
