@@ -578,7 +578,7 @@ class ZapBus:
         if state["mismatch"] is not None:
             n = state["mismatch"][0]
             return ("length", f"reply carries {n} data bytes, expected {data_len}", bytes(received))
-        if pending and not bad_before and bytes(received).find(zap.HEADER) >= 0:
+        if pending and not bad_before and bytes(received[-pending:]).startswith(b"\xff"):
             return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet)",
                     bytes(received))
         if framer.bad:
