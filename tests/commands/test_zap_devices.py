@@ -71,3 +71,41 @@ def test_return_mode_auto_on_slow_devices(cli, device):
     r = cli("zap", "store", "goal-position", "500", "--id", "1", "-p", url, "--return-mode", "auto", "-v")
     assert r.exit_code == 0, r
     assert "acknowledged in" in r.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["store", "id", "5", "--id", "1"],
+    ["store", "id", "5", "--id", "broadcast"],
+    ["send", "id", "5", "--id", "1"],
+    ["sync-move", "1:5", "--register", "id"],
+    ["raw", "store", "03", "05", "--id", "1"],
+    ["raw", "store", "02", "14", "05", "--id", "1"],
+])
+def test_direct_id_writes_need_force(cli, args):
+    url = sim_url("zap", ids="1,2")
+    r = cli("zap", *args, "-p", url)
+    assert (r.exit_code, r.stdout) == (2, ""), r
+    assert "--force" in r.stderr and "id:" in r.stderr
+    assert cli("zap", *args, "-n").exit_code == 0               # a dry run sends nothing: no check
+    assert cli("zap", *args, "-p", url, "--force").exit_code == 0
+
+
+def test_set_id_refuses_a_taken_id_even_when_its_owner_is_slow(cli):
+    url = sim_url("zap", ids="1,2", faults="2:delay=30")           # answers after the first wait
+    r = cli("zap", "set-id", "2", "--id", "1", "-p", url)
+    assert r.exit_code == 1 and "already taken" in r.stderr, r
+    r = cli("zap", "set-id", "3", "--id", "1", "-p", url)
+    assert r.exit_code == 0 and "verified" in r.stderr, r
+
+
+def test_set_id_refuses_an_id_two_actuators_share(cli, tmp_path):
+    state = tmp_path / "bus.json"                                  # two actuators share ID 1
+    state.write_text(json.dumps({"format": "zkzap-zap-bus/1", "actuators": [
+        {"slot": 0, "position": 0, "registers": {"id": 1}},
+        {"slot": 1, "position": 2000, "registers": {"id": 1}}]}))
+    url = sim_url("zap", state=str(state))
+    r = cli("zap", "set-id", "5", "--id", "1", "-p", url)
+    assert r.exit_code == 1 and "collide" in r.stderr and "verified" not in r.stderr, r
+    r = cli("zap", "scan", "--ids", "0-3", "-p", url)
+    assert [json.loads(x)["status"] for x in r.stdout.splitlines()] == ["duplicate"]
+    assert "two actuators" in r.stderr

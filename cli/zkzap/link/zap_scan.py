@@ -169,6 +169,20 @@ def _finish(bus, rec, retries):
         yield ("warning", duplicate_warning(ident, baud))
 
 
+def collides(bus, ident: int, retries: int = 2) -> bool:
+    """Whether two actuators seem to answer to ``ident``: its live registers (which differ
+    between two units) come back garbled on every try."""
+    length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
+    try:
+        bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
+                     retries=retries, check=False)
+    except BadReply:
+        return True
+    except NoReply:
+        pass
+    return False
+
+
 def identify(bus, rec, retries=2) -> None:
     """Fill ``model``, ``firmware`` and ``return_mode`` of ``rec`` from one Load Data, or leave
     them null with status ``unidentified`` (or ``duplicate`` when the reply is garbled) and the

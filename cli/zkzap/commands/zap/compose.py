@@ -117,6 +117,21 @@ def refuse_protocol_change(packets, force) -> None:
                          "longer reach it; pass --force to do it anyway")
 
 
+def refuse_id_write(packets, force) -> None:
+    """Writing the ID register directly skips set-id's checks: refused without --force."""
+    from ...link.zap_bus import writes_id
+
+    if force:
+        return
+    for p in packets:
+        if writes_id(p):
+            if p[3] == zap.BROADCAST:
+                raise UsageError("id: a broadcast ID write gives every actuator on the bus the same ID, and "
+                                 "their replies then collide; pass --force to do it anyway")
+            raise UsageError("id: writing the ID directly skips the checks of 'zap set-id NEW --id OLD' (that "
+                             "NEW is free, read back from NEW); use set-id, or pass --force")
+
+
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
     from ...link.zap_bus import open_bus
@@ -177,6 +192,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
         return
     require_port(port, sim)
     refuse_protocol_change(packets, force)
+    refuse_id_write(packets, force)
     ask_consent(packets, port=port, sim=sim, yes=yes)
     from ...link.zap_bus import device_error
 
@@ -382,7 +398,8 @@ def _write_command(name, builder, doc):
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
     @click.argument("value", metavar="VALUE", type=INT)
     @id_option()
-    @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
+    @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and direct ID "
+                                                "writes (which skip set-id's checks).")
     @wire_options
     def command(reg, value, ident, force, **common):
         pkt = builder(ident, reg, value)
@@ -401,7 +418,8 @@ register asks for consent (--yes); the simulator (--sim, sim://) and loop:// nev
 store = _write_command("store", zap.store, """Store Data (0xF3): write VALUE to REGISTER.
 
 VALUE is an integer in the register's units ('zap registers' lists ranges), written
-little-endian in the register's size. Read-only registers and values out of range are refused.
+little-endian in the register's size. Read-only registers and values out of range are refused. Writing the id register needs
+--force: 'zap set-id' checks first that the new ID is free and reads it back.
 """ + _WIRE_NOTE + """
 \b
 Examples:
@@ -485,7 +503,8 @@ def parse_targets(pairs):
 @click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
-@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
+@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and ID writes "
+                                            "(which skip set-id's checks).")
 @wire_options
 def sync_move(targets, reg, force, **common):
     """Symmetric Store (0x73) to broadcast: write one register of several actuators at once.
@@ -507,7 +526,8 @@ def sync_move(targets, reg, force, **common):
 @click.argument("instruction", metavar="INSTRUCTION")
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()
-@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol).")
+@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol) and ID "
+                                            "writes (which skip set-id's checks).")
 @wire_options
 def raw(instruction, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.

@@ -405,14 +405,19 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
         return
     _consent_real(common["port"], common["sim"], yes, f"change ID {ident} to {new}")
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
+        from ...link.zap_scan import collides
+
         bus.echo(ident)
+        if bus.return_mode and collides(bus, ident):
+            raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it; "
+                              "connect the one to change alone")
         if not force and bus.answers(new):
             raise CheckFailed(f"ID {new} is already taken by another actuator; choose a free ID "
                               "('zap scan') or pass --force")
         bus.store(ident, ID_REG, new)
         value = _read_back(bus, new, ID_REG, ready_timeout,
                            f"set-id: ID {new} does not answer after the change; check with 'zap scan'")
-        if value == new and bus.answers(ident, tries=2):
+        if value == new and (bus.answers(ident, tries=2) or collides(bus, new)):
             raise CheckFailed(f"set-id: ID {ident} still answers after the change (ID {new} reads back "
                               f"{value}): two actuators may have had ID {ident}; check with 'zap scan'")
     if value != new:
