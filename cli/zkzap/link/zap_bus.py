@@ -654,7 +654,8 @@ class ZapBus:
                 return self.transact(pkt, check=check, **kw)
             finally:
                 self.return_mode = new
-        if code not in zap.INSTRUCTION_BY_CODE and pkt[3] != zap.BROADCAST:
+        ins = zap.INSTRUCTION_BY_CODE.get(code)
+        if (ins is None or not ins.documented) and pkt[3] != zap.BROADCAST:
             kw["reply"] = True
             kw["optional"] = True
         if optional is not None:

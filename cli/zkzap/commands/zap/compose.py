@@ -532,8 +532,9 @@ def sync_move(targets, reg, force, **common):
 def raw(instruction, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
-    INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move)
-    or a code (0xF2, F2). PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
+    INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move;
+    the undocumented vendor codes system-write, status, sync-read, bulk-read, bulk-write) or a
+    code (0xF2, F2). PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
     port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
     a reply but does not fail without one.
 
@@ -558,7 +559,7 @@ def _instruction_code(text: str) -> int:
     try:
         code = int(key, 16) if not key.startswith("0x") else int(key, 0)
     except ValueError:
-        names = ", ".join(i.cli for i in zap.INSTRUCTIONS)
+        names = ", ".join(i.cli for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS)
         raise UsageError(f"instruction: unknown {text!r}; allowed {names} or a code 0x00..0xFF") from None
     if not 0 <= code <= 0xFF:
         raise UsageError(f"instruction: code {text} is out of range; allowed 0x00..0xFF")
