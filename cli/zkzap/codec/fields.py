@@ -321,8 +321,28 @@ class Layout:
         key = (tuple(sorted(ctx.items())), known, raw)
         fn = self._decoders.get(key)
         if fn is None:
-            fn = self._decoders[key] = compile_dict(*self.items(ctx, known, raw))
+            fn = self._decoders[key] = compile_dict(*self.items(ctx, known, raw),
+                                                    checks=self.range_checks(known))
         return fn
+
+    def range_checks(self, known=None):
+        """``(key, rvar, bad)`` for every field whose raw values are not all documented: ``bad``
+        is a tuple of booleans by raw value (True: outside the field's range or name table).
+        A decoded record lists such fields under :data:`OUT_OF_RANGE`, values unchanged."""
+        checks = []
+        for i, f in enumerate(self.fields):
+            if f.since > 1 and known is not None and known < f.since:
+                continue
+            every = range(1 << f.width)
+            if f.names is not None:
+                bad = tuple(v not in f.names or not f.lo <= v <= f.hi for v in every)
+            elif f.values is not None:
+                bad = tuple(f.values.get(v) is None for v in every)
+            else:
+                bad = tuple(not f.lo <= v <= f.hi for v in every)
+            if any(bad):
+                checks.append((f.key, f"r{i}", bad))
+        return checks
 
     def _reserved_masks(self, covered):
         masks = {}
@@ -391,7 +411,14 @@ class Layout:
         declarations as :meth:`decoder`, value for value.
         """
         code, items = self.items(ctx, known, raw)
-        return compile_text(code, list(head) + items + list(tail), dialect)
+        checks = self.range_checks(known)
+        fallback = None
+        if checks:
+            # a frame with a value out of range renders through the dict decoder (which adds
+            # the out_of_range list): rare, so the fast template stays as it is
+            decode = self.decoder(ctx, known, raw)
+            fallback = _fallback(decode, head, tail, dialect)
+        return compile_text(code, list(head) + items + list(tail), dialect, checks, fallback)
 
 
     def keys(self):
@@ -402,6 +429,8 @@ class Layout:
             out.append(f.key)
             if f.name_key:
                 out.append(f.name_key)
+        if self.range_checks():
+            out.append(OUT_OF_RANGE)
         return out
 
     def reserved_bits(self, frame):
@@ -409,6 +438,22 @@ class Layout:
         found = [f"b{byte}={frame[byte] & mask:#04x}" for byte, mask in self.reserved.items()
                  if frame[byte] & mask]
         return " ".join(found) or None
+
+
+#: The record key listing the fields whose decoded value is outside its documented range.
+OUT_OF_RANGE = "out_of_range"
+
+
+def _fallback(decode, head, tail, dialect):
+    """``frame -> text`` through the dict decoder, with the same head and tail items."""
+    consts = [(k, what) for k, kind, what in head if kind == "const"]
+    ns = {"DECODE": decode, "RECORD": dialect.record, "HEAD": consts}
+    lines = ["def render(b):", "    rec = dict(HEAD)", "    rec.update(DECODE(b))"]
+    for key, kind, what in tail:
+        lines.append(f"    rec[{key!r}] = {what if kind != 'const' else repr(what)}")
+    lines.append("    return RECORD(rec)")
+    exec("\n".join(lines), ns)  # noqa: S102 - generated from the static tables
+    return ns["render"]
 
 
 def _phys_item(r, sc, offset, decimals):
@@ -420,8 +465,10 @@ def _phys_item(r, sc, offset, decimals):
     return "int", f"{r} * {sc!r} + {offset!r}"
 
 
-def compile_dict(code, items):
-    """Compile ``code`` + ``items`` (see :meth:`Layout.items`) into ``frame -> dict``."""
+def compile_dict(code, items, checks=()):
+    """Compile ``code`` + ``items`` (see :meth:`Layout.items`) into ``frame -> dict``; with
+    ``checks`` (see :meth:`Layout.range_checks`) a record with values out of range gets the
+    :data:`OUT_OF_RANGE` list of their keys."""
     ns = {}
     entries = []
     for n, (key, kind, what) in enumerate(items):
@@ -434,12 +481,24 @@ def compile_dict(code, items):
             entries.append(f"{key!r}: t{n}[{expr}]")
         else:
             entries.append(f"{key!r}: {what}")
-    src = ["def decode(b):"] + [f"    {line}" for line in code] + ["    return {" + ", ".join(entries) + "}"]
+    src = ["def decode(b):"] + [f"    {line}" for line in code]
+    if not checks:
+        src.append("    return {" + ", ".join(entries) + "}")
+    else:
+        src.append("    d = {" + ", ".join(entries) + "}")
+        tests = []
+        for j, (key, rvar, bad) in enumerate(checks):
+            ns[f"k{j}"] = bad
+            tests.append((key, f"k{j}[{rvar}]"))
+        src.append(f"    if {' or '.join(t for _, t in tests)}:")
+        pairs = ", ".join(f"({key!r}, {t})" for key, t in tests)
+        src.append(f"        d[{OUT_OF_RANGE!r}] = [k for k, bad in ({pairs},) if bad]")
+        src.append("    return d")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["decode"]
 
 
-def compile_text(code, items, dialect):
+def compile_text(code, items, dialect, checks=(), fallback=None):
     """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
     giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
 
@@ -475,10 +534,19 @@ def compile_text(code, items, dialect):
         else:  # pragma: no cover - the kinds above are all Layout.items produces
             raise ValueError(f"item kind {kind!r}")
     template, args = dialect.template(cells)
-    used = set(re.findall(r"\br\d+\b", " ".join(args)))
+    guard = []
+    if checks and fallback is not None:
+        ns["FALLBACK"] = fallback
+        for j, (_key, rvar, bad) in enumerate(checks):
+            ns[f"k{j}"] = bad
+            guard.append(f"k{j}[{rvar}]")
+    used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + " ".join(guard)))
     body = [line for line in code if line.split(" = ")[0] in used]
     ns["TEMPLATE"] = template
     src = ["def encode(b):"] + [f"    {line}" for line in body]
+    if guard:
+        src.append(f"    if {' or '.join(guard)}:")
+        src.append("        return FALLBACK(b)")
     src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["encode"]

@@ -12,6 +12,7 @@ command renders it):
    half-duplex line their probes may have collided with it). Bytes that make no packet
    (a collision) put every ID probed within one full allowance before them up for another
    probe. After the last ID the scan waits one full allowance for stragglers.
+   Records come out in ID order: one is held while a lower ID may still turn out to be there.
 3. **Identify.** Each actuator found is asked for model number .. feedback-return-mode in one
    Load Data (full allowance, retries). No reply at all, with the full derived wait, and an
    Echo answered: return mode 0 (Echo only). A read that fails otherwise leaves ``model``,
@@ -86,6 +87,20 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                     window = bus.turnaround + bus.margin + 0.005
                     recheck.update(i for ts, i in sent_at if t - window <= ts <= t and i not in done)
 
+        held = []                             # found, not yet released: (ID, time, events)
+
+        def release(final=False):
+            # in ID order: a record waits while a lower ID may still turn out to be there
+            held.sort(key=lambda h: h[0])
+            settle = bus.turnaround + bus.margin + 0.005
+            now = time.monotonic()
+            while held:
+                ident, t, events = held[0]
+                if not final and (now - t < settle or any(i < ident for i in recheck - done)):
+                    break
+                held.pop(0)
+                yield from events
+
         for ident in ids:
             yield ("probe", baud, ident, found, True)
             sent_at.append((time.monotonic(), ident))
@@ -94,7 +109,9 @@ def scan(bus, ids, bauds, *, retries: int = 2):
             if rec is not None:
                 done.add(ident)
                 found += 1
-                yield from _finish(bus, rec, retries)
+                held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
+                account(bus.take_events())
+            yield from release()
         # stragglers: a reply to one of the last probes may still be on its way
         bus.linger(bus.turnaround + bus.margin)
         account(bus.take_events())
@@ -110,7 +127,7 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                 if rec is not None:
                     done.add(ident)
                     found += 1
-                    yield from _finish(bus, rec, retries)
+                    held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
             bus.linger(bus.turnaround + bus.margin)
             account(bus.take_events())
         for ident in sorted(late_seen - done):
@@ -121,7 +138,8 @@ def scan(bus, ids, bauds, *, retries: int = 2):
             rec["errors"] = [f"ID {ident} answers only after the wait ({wait:.1f} ms): its replies came late; "
                              "give a longer --timeout"]
             found += 1
-            yield ("record", rec)
+            held.append((ident, 0.0, [("record", rec)]))
+        yield from release(final=True)
 
 
 def _record(ident, baud):

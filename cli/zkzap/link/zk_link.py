@@ -405,6 +405,7 @@ class Telemetry:
         for k, v in rec.items():
             if k in latest:
                 latest[k] = v
+        latest[zk.OUT_OF_RANGE] = rec.get(zk.OUT_OF_RANGE)   # this frame's, never a stale one
         rpm = rec.get("rpm")
         if rpm is not None and (self.max_rpm is None or rpm > self.max_rpm):
             self.max_rpm = rpm
