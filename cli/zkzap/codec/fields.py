@@ -412,13 +412,16 @@ class Layout:
         """
         code, items = self.items(ctx, known, raw)
         checks = self.range_checks(known)
-        fallback = None
-        if checks:
-            # a frame with a value out of range renders through the dict decoder (which adds
-            # the out_of_range list): rare, so the fast template stays as it is
-            decode = self.decoder(ctx, known, raw)
-            fallback = _fallback(decode, head, tail, dialect)
-        return compile_text(code, list(head) + items + list(tail), dialect, checks, fallback)
+        head, tail = list(head), list(tail)
+        if not checks:
+            return compile_text(code, head + items + tail, dialect)
+        # a frame with a value out of range (rare) gets the out_of_range cell before the tail,
+        # looked up by the bit mask of the failed checks: one table look-up per checked field
+        tables = {f"K{j}": bad for j, (_key, _r, bad) in enumerate(checks)}
+        mask = " | ".join(f"(K{j}[{r}] << {j})" for j, (_key, r, _bad) in enumerate(checks))
+        lists = [[key for j, (key, _r, _bad) in enumerate(checks) if m >> j & 1] for m in range(1 << len(checks))]
+        return compile_text(code, head + items + tail, dialect,
+                            flagged=(len(head) + len(items), mask, lists, tables))
 
 
     def keys(self):
@@ -442,18 +445,6 @@ class Layout:
 
 #: The record key listing the fields whose decoded value is outside its documented range.
 OUT_OF_RANGE = "out_of_range"
-
-
-def _fallback(decode, head, tail, dialect):
-    """``frame -> text`` through the dict decoder, with the same head and tail items."""
-    consts = [(k, what) for k, kind, what in head if kind == "const"]
-    ns = {"DECODE": decode, "RECORD": dialect.record, "HEAD": consts}
-    lines = ["def render(b):", "    rec = dict(HEAD)", "    rec.update(DECODE(b))"]
-    for key, kind, what in tail:
-        lines.append(f"    rec[{key!r}] = {what if kind != 'const' else repr(what)}")
-    lines.append("    return RECORD(rec)")
-    exec("\n".join(lines), ns)  # noqa: S102 - generated from the static tables
-    return ns["render"]
 
 
 def _phys_item(r, sc, offset, decimals):
@@ -498,13 +489,15 @@ def compile_dict(code, items, checks=()):
     return ns["decode"]
 
 
-def compile_text(code, items, dialect, checks=(), fallback=None):
+def compile_text(code, items, dialect, flagged=None):
     """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
     giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
 
     The dialect renders values (``dialect.value(v)``), gives the template piece of a dynamic
     string (``dialect.str_piece``) and arranges the ``(key, piece, arg)`` cells into one
-    %-template (``dialect.template(cells) -> (template, args)``).
+    %-template (``dialect.template(cells) -> (template, args)``). ``flagged`` is
+    ``(position, mask expression, lists by mask, tables)``: when the mask is non-zero a second
+    template renders the :data:`OUT_OF_RANGE` list at ``position``.
     """
     import re
 
@@ -534,19 +527,21 @@ def compile_text(code, items, dialect, checks=(), fallback=None):
         else:  # pragma: no cover - the kinds above are all Layout.items produces
             raise ValueError(f"item kind {kind!r}")
     template, args = dialect.template(cells)
-    guard = []
-    if checks and fallback is not None:
-        ns["FALLBACK"] = fallback
-        for j, (_key, rvar, bad) in enumerate(checks):
-            ns[f"k{j}"] = bad
-            guard.append(f"k{j}[{rvar}]")
-    used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + " ".join(guard)))
+    mask = ""
+    if flagged is not None:
+        position, mask, lists, tables = flagged
+        ns.update(tables)
+        ns["OOR"] = tuple(dialect.value(v) for v in lists)
+        template2, args2 = dialect.template(cells[:position] + [(OUT_OF_RANGE, "%s", "OOR[m]")] + cells[position:])
+        ns["TEMPLATE2"] = template2
+    used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + mask))
     body = [line for line in code if line.split(" = ")[0] in used]
     ns["TEMPLATE"] = template
     src = ["def encode(b):"] + [f"    {line}" for line in body]
-    if guard:
-        src.append(f"    if {' or '.join(guard)}:")
-        src.append("        return FALLBACK(b)")
+    if flagged is not None:
+        src.append(f"    m = {mask}")
+        src.append("    if m:")
+        src.append(f"        return TEMPLATE2 % ({''.join(a + ', ' for a in args2)})")
     src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["encode"]
