@@ -52,7 +52,7 @@ def test_slow_and_trickling_devices_with_default_timing(opts):
 
 
 def test_bytes_more_than_the_inter_byte_allowance_apart_are_a_truncated_reply():
-    bus = make(gap="20")
+    bus = make(gap="30")
     with pytest.raises(BadReply, match="truncated reply"):
         bus.read(1, "present-position", retries=0)
 

@@ -329,11 +329,16 @@ class Layout:
         """``(key, rvar, bad)`` for every field whose raw values are not all documented: ``bad``
         is a tuple of booleans by raw value (True: outside the field's range or name table).
         A decoded record lists such fields under :data:`OUT_OF_RANGE`, values unchanged."""
+        cache = self.__dict__.setdefault("_checks", {})
+        if known in cache:
+            return cache[known]
         checks = []
         for i, f in enumerate(self.fields):
             if f.since > 1 and known is not None and known < f.since:
                 continue
             every = range(1 << f.width)
+            if f.names is None and f.values is None and f.lo == 0 and f.hi == (1 << f.width) - 1:
+                continue                          # every raw value is in range
             if f.names is not None:
                 bad = tuple(v not in f.names or not f.lo <= v <= f.hi for v in every)
             elif f.values is not None:
@@ -342,6 +347,7 @@ class Layout:
                 bad = tuple(not f.lo <= v <= f.hi for v in every)
             if any(bad):
                 checks.append((f.key, f"r{i}", bad))
+        cache[known] = checks
         return checks
 
     def _reserved_masks(self, covered):

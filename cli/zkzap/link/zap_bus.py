@@ -57,7 +57,7 @@ TURNAROUND = 0.002
 #: The default allowance for the actuator's turnaround before its first reply byte.
 MAX_TURNAROUND = 0.020
 #: Allowance between two reply bytes (on top of one byte time and the margin).
-INTER_BYTE = 0.003
+INTER_BYTE = 0.010
 #: Host allowance of a quick probe (a late reply is still recognised afterwards).
 QUICK_MARGIN = 0.0005
 #: How long an unanswered attempt may still be answered: its reply is then recognised as late.
@@ -312,8 +312,11 @@ class ZapBus:
         text = str(e) or e.__class__.__name__
         return PortError(f"port {self.url}: failed: {text}")
 
-    def _write(self, pkt: bytes) -> None:
+    def _write(self, pkt: bytes) -> float:
+        """Drain, then write ``pkt``; returns the time just before the write (round trips are
+        measured from there, so a host that is preempted after writing never shortens them)."""
         self._drain()
+        t0 = time.monotonic()
         try:
             self.port.write(pkt)
         except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
@@ -322,6 +325,7 @@ class ZapBus:
             raise self._port_error(e) from None
         self.sent += 1
         self._recent.append(bytes(pkt))
+        return t0
 
     def _set_timeout(self, value) -> None:
         if self._port_timeout != value:
@@ -350,12 +354,14 @@ class ZapBus:
                 raise
             raise self._port_error(e) from None
 
-    def _drain(self, until=None, ids=None) -> None:
+    def _drain(self, until=None, ids=None, token=None):
         """Read what has arrived since the last transaction and account for it: late replies to
         unanswered attempts are counted (and reported as events), the rest skipped as stale. A
         packet caught half-way is read to its end. With ``until``/``ids``: also wait (at most
-        until ``until``) for the owed replies of those IDs."""
+        until ``until``) for the owed replies of those IDs. With ``token``: a late reply to an
+        earlier attempt of that request is returned (as its :class:`Reply`), not counted."""
         framer = ZapFramer()
+        answer = None
         while True:
             now = time.monotonic()
             while self._owed and self._owed[0].until < now:
@@ -371,7 +377,7 @@ class ZapBus:
                     if isinstance(e, KeyboardInterrupt):
                         raise
                     raise self._port_error(e) from None
-                return
+                return None
             owed = ids is not None and any(o.token is not None and o.ids & ids for o in self._owed)
             if waiting:
                 data = self._read(waiting, now) if self._fd is not None else self._read_waiting(waiting)
@@ -386,12 +392,13 @@ class ZapBus:
                     break
             else:
                 break
-            for p in framer.feed(data):
-                self._stray(bytes(p))
+            for p in framer.feed(data) if data else ():
+                answer = self._stray(bytes(p), token) or answer
         for p in framer.flush():
-            self._stray(bytes(p))
+            answer = self._stray(bytes(p), token) or answer
         if framer.bad or framer.skipped:
             self.events.append(("garbled", None, time.monotonic()))
+        return answer
 
     def _read_waiting(self, n: int) -> bytes:
         try:
@@ -402,17 +409,22 @@ class ZapBus:
                 raise
             raise self._port_error(e) from None
 
-    def _stray(self, p: bytes) -> bool:
-        """Account for a packet that is not the reply in hand; True when it was an owed (late) one."""
+    def _stray(self, p: bytes, token=None):
+        """Account for a packet read between attempts: a late reply to an earlier attempt of
+        request ``token`` is returned as its Reply; other late replies are counted."""
         if p in self._recent or zap.is_command(p[5]):
-            return False                   # our own echo, or another master's command
+            return None                    # our own echo, or another master's command
+        if token is not None:
+            owed = self._take_owed(p, token)
+            if owed is not None:
+                return self._reply(p, time.monotonic() - owed.t0)
         owed = self._take_owed(p)
         if owed is not None and owed.token is not None:
             self.late += 1
             self.events.append(("late", p[3], time.monotonic()))
-            return True
+            return None
         self.stale += 1
-        return False
+        return None
 
     def _take_owed(self, p, token=None):
         now = time.monotonic()
@@ -482,12 +494,14 @@ class ZapBus:
             # window pass) so that it cannot be taken for the answer to this one
             self._drain(time.monotonic() + LATE_WINDOW, accept)
         for attempt in range(tries):
+            got = None
             if attempt:
                 self.retried += 1
-            self._settle()
-            self._write(pkt)
-            t0 = time.monotonic()
-            got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
+                got = self._drain(token=token)     # the last attempt's reply, come just too late?
+            if got is None:
+                self._settle()
+                t0 = self._write(pkt)
+                got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
             if isinstance(got, Reply):
                 self.replies += 1
                 self._learn(got.rtt, len(pkt), rx_len)
@@ -576,6 +590,8 @@ class ZapBus:
                 deadline = max(deadline, more)
         pending, bad_before = framer.pending, framer.bad
         got = examine(framer.flush())               # a packet held back to rule out a rival
+        if framer.bad or len(received) > state["explained"]:
+            self.events.append(("garbled", None, time.monotonic()))   # a collision, for scans
         if got is not None:
             return got
         copies = state["copies"]

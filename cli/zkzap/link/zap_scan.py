@@ -10,8 +10,8 @@ command renders it):
    its ID while later IDs are probed (the bus counts it as late). Its ID is probed again with
    the full allowance, and so are the IDs probed while that reply was on its way (on a real
    half-duplex line their probes may have collided with it). Bytes that make no packet
-   (a collision) put every ID probed within one full allowance before them up for another
-   probe. After the last ID the scan waits one full allowance for stragglers.
+   (a collision) put every ID probed within one full allowance (plus :data:`GARBLED_WINDOW`)
+   before them up for another probe. After the last ID the scan waits one full allowance for stragglers.
    Records come out in ID order: one is held while a lower ID may still turn out to be there.
 3. **Identify.** Each actuator found is asked for model number .. feedback-return-mode in one
    Load Data (full allowance, retries). No reply at all, with the full derived wait, and an
@@ -45,6 +45,10 @@ INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
 #: Live registers read to reveal two actuators sharing an ID: present-position .. present-voltage.
 LIVE_FIRST = zap.REGISTER_BY_NAME["present-position"]
 LIVE_LAST = zap.REGISTER_BY_NAME["present-voltage"]
+#: How far back (beyond one full allowance) bytes that make no packet put IDs up for another probe.
+GARBLED_WINDOW = 0.03
+#: ... and at least this many of the probes before them.
+GARBLED_PROBES = 8
 STATUSES = ("ok", "error", "garbled", "duplicate", "unidentified")
 
 
@@ -84,8 +88,13 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                     if since is not None:
                         recheck.update(i for ts, i in sent_at if since <= ts <= t and i not in done)
                 elif kind == "garbled":
-                    window = bus.turnaround + bus.margin + 0.005
+                    # the colliding reply may have been asked for a full allowance earlier, and
+                    # have trickled for a while before the probe that saw it ended
+                    window = bus.turnaround + bus.margin + GARBLED_WINDOW
                     recheck.update(i for ts, i in sent_at if t - window <= ts <= t and i not in done)
+                    # a host that was held up stretches time: the last few probes, whatever the clock
+                    before = [i for ts, i in sent_at if ts <= t][-GARBLED_PROBES:]
+                    recheck.update(i for i in before if i not in done)
 
         held = []                             # found, not yet released: (ID, time, events)
 
