@@ -15,7 +15,7 @@ from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import note, open_output, port_options, protocol_version_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
-                        resolve_port, zk_timeout_help)
+                        reconnect_option, resolve_port, zk_timeout_help)
 
 
 class Output:
@@ -104,7 +104,7 @@ def _dashboard(title):
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
-                  abort_at_end=False, title=None):
+                  abort_at_end=False, title=None, reconnect=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
@@ -127,7 +127,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
-            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s))
+            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s), reconnect=reconnect)
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
         session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
@@ -167,10 +167,11 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.option("--rate", type=click.FloatRange(1, 200), default=None, metavar="HZ",
               help="Keep-alive rate (default 20 Hz).")
 @protocol_version_option
+@reconnect_option
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after, raw_log,
-            count, duration, keepalive, rate, protocol_version, fail_on_error):
+            count, duration, keepalive, rate, protocol_version, fail_on_error, reconnect=None):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -220,7 +221,7 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
     outcome, tel, _ = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        count=count, duration=duration, control=control, rate=rate)
+        count=count, duration=duration, control=control, rate=rate, reconnect=reconnect)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
         note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
              "sending; --keepalive does")

@@ -10,7 +10,7 @@ import click
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
 from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
-from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
+from .telemetry import EXIT_HELP, log_options, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
           "a prompt on a terminal; sim:// and --sim never ask. "
@@ -56,8 +56,9 @@ def _read(path) -> str:
 @yes_option
 @protocol_version_option
 @log_options
+@reconnect_option
 def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, port, baud, timeout, sim, yes,
-            protocol_version, fmt, output, append, snapshot, ids, stale_after, raw_log):
+            protocol_version, fmt, output, append, snapshot, ids, stale_after, raw_log, reconnect=None):
     """Run a throttle schedule on the engine while its telemetry is logged.
 
     SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' (an optional header names the columns;
@@ -115,7 +116,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
-        abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}")
+        abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}", reconnect=reconnect)
     summary = _summary(name, url, sched, outcome, tel, session)
     _print_summary(summary)
     if summary_json:

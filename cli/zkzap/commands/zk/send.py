@@ -15,7 +15,8 @@ from ...errors import UsageError
 from .. import CONTEXT, Command, Group
 from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
                        protocol_version_option, warn, yes_option)
-from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
+from .telemetry import (EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port,
+                        zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,
@@ -40,7 +41,8 @@ EXAMPLES = {
 
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
-             "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log"}
+             "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
+             "reconnect": "--reconnect"}
 
 
 def format_hex(frame) -> str:
@@ -68,6 +70,7 @@ def send_options(f):
         click.option("--no-wait", is_flag=True,
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
+        reconnect_option,
     ]
     f = apply_options(f, opts)
     if isinstance(f, click.Command):
@@ -81,13 +84,13 @@ def send_options(f):
 
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, for_s=None,
             rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
-            stale_after=3, raw_log=None):
+            stale_after=3, raw_log=None, reconnect=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
     given = {k: v for k, v in (("rate", rate), ("abort", abort), ("fmt", fmt), ("output", output),
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
-                               ("raw_log", raw_log)) if v is not None}
+                               ("raw_log", raw_log), ("reconnect", reconnect)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -115,7 +118,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
-        stop_on_error=controls, title=f"{format_hex(frame)} to {url}")
+        stop_on_error=controls, title=f"{format_hex(frame)} to {url}", reconnect=reconnect)
     outcome.raise_for_status()
     if tel.errors and not controls:
         note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")

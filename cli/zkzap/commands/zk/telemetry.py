@@ -48,6 +48,18 @@ def log_options(f):
     return apply_options(f, opts)
 
 
+#: --reconnect without a value: keep trying this long (seconds).
+RECONNECT_DEFAULT = 30.0
+
+reconnect_option = click.option(
+    "--reconnect", type=click.FloatRange(0.1, 86400), default=None, is_flag=False,
+    flag_value=RECONNECT_DEFAULT, metavar="[S]",
+    help="When the port fails or vanishes (a USB adapter dropping out), keep reopening the same "
+         f"device for up to S seconds (default {RECONNECT_DEFAULT:g} without a value; off without the "
+         "option), write a gap record and go on writing the same files. A session that controls the "
+         "engine sends the abort the moment the port is back, before anything else, and only logs "
+         "from then on (exit status 4 at the end).")
+
 TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
                 "longer means exit 3.")
 
