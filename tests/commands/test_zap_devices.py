@@ -109,3 +109,17 @@ def test_set_id_refuses_an_id_two_actuators_share(cli, tmp_path):
     r = cli("zap", "scan", "--ids", "0-3", "-p", url)
     assert [json.loads(x)["status"] for x in r.stdout.splitlines()] == ["duplicate"]
     assert "two actuators" in r.stderr
+
+
+def test_vendor_instructions_from_the_command_line(cli):
+    r = cli("zap", "raw", "system-write", "01", "--id", "1", "-n")
+    assert r.stdout.strip() == "FF FF FF 01 03 F9 01 01"
+    r = cli("zap", "raw", "system-write", "01", "--id", "1", "--sim")        # no reply is promised
+    assert r.exit_code == 0, r
+    r = cli("zap", "decode", "FF FF FF 01 03 F9 01 01")
+    rec = json.loads(r.stdout)
+    assert (rec["kind"], rec["instruction"], rec["documented"]) == ("command", "system-write", False)
+    r = cli("zap", "decode", "FF FF FF 01 02 40 BC", "-f", "table")
+    assert r.exit_code == 0 and "unknown 0x40" in r.stdout
+    r = cli("zap", "load", "present-temperature", "--id", "1", "--sim")
+    assert (r.exit_code, r.stdout) == (0, "0\n")
