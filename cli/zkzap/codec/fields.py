@@ -495,6 +495,13 @@ def compile_dict(code, items, checks=()):
     return ns["decode"]
 
 
+def _check_vars(mask):
+    """The raw variables of a mask expression ``(K0[r1] << 0) | (K1[r4] << 1)``, in order."""
+    import re
+
+    return re.findall(r"K\d+\[(r\d+)\]", mask)
+
+
 def compile_text(code, items, dialect, flagged=None):
     """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
     giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
@@ -543,11 +550,15 @@ def compile_text(code, items, dialect, flagged=None):
     used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + mask))
     body = [line for line in code if line.split(" = ")[0] in used]
     ns["TEMPLATE"] = template
-    src = ["def encode(b):"] + [f"    {line}" for line in body]
     if flagged is not None:
-        src.append(f"    m = {mask}")
-        src.append("    if m:")
+        # the check tables as default arguments: local look-ups on the fast path
+        names = [f"K{j}" for j in range(len(tables))]
+        src = [f"def encode(b, {', '.join(f'{k}={k}' for k in names)}):"] + [f"    {line}" for line in body]
+        src.append(f"    if {' or '.join(f'{k}[{r}]' for k, r in zip(names, _check_vars(mask)))}:")
+        src.append(f"        m = {mask}")
         src.append(f"        return TEMPLATE2 % ({''.join(a + ', ' for a in args2)})")
+    else:
+        src = ["def encode(b):"] + [f"    {line}" for line in body]
     src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["encode"]
