@@ -9,7 +9,10 @@ Starts ``zkzap sim zap --ids 1,2,3`` (it prints its pty on the first line), then
    present-position read, the command ``zap load`` runs), next to the wire's own limit at
    that baud rate (request + reply bytes, 10 bits each);
 2. ``zap load present-position`` as a command, one process per read (what a shell loop gets);
-3. a full 0..253 ``zap scan`` at one baud rate, as a command. Target: <= 2 s.
+3. full 0..253 ``zap scan`` runs at one baud rate, as commands (best of ``--scans``), against
+   four buses: 2 ms actuators (target <= 1.5 s), some actuators answering 18 ms late (target
+   <= 3 s), every actuator at a 20 ms turnaround with bytes 1 ms apart, and the same behind an
+   echoing adapter; each must find every actuator.
 """
 
 from __future__ import annotations
@@ -29,9 +32,9 @@ def tool(name):
     return [exe] if os.path.exists(exe) else [sys.executable, "-m", "zkzap"]
 
 
-def start_sim(ids, baud):
+def start_sim(ids, baud, extra=()):
     env = dict(os.environ, NO_COLOR="1")
-    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids],
+    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids, "-b", str(baud), *extra],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     port = p.stdout.readline().strip()
     if not port:
@@ -45,6 +48,7 @@ def main(argv=None):
     ap.add_argument("--baud", type=int, default=57600)
     ap.add_argument("--count", type=int, default=2000, help="library round trips")
     ap.add_argument("--commands", type=int, default=20, help="zap load processes")
+    ap.add_argument("--scans", type=int, default=3, help="scans per bus (best kept)")
     args = ap.parse_args(argv)
 
     from zkzap.codec import zap
@@ -72,16 +76,36 @@ def main(argv=None):
         dt = time.perf_counter() - t0
         print(f"zap load as a command: {args.commands / dt:.1f}/s ({dt / args.commands * 1e3:.0f} ms per process)")
 
-        cmd = tool("zap") + ["scan", "-p", port, "-b", str(args.baud), "-f", "jsonl"]
-        t0 = time.perf_counter()
-        r = subprocess.run(cmd, capture_output=True, text=True, env=env)
-        dt = time.perf_counter() - t0
-        found = [line for line in r.stdout.splitlines() if line.strip()]
-        print(f"full 0..253 scan at {args.baud} baud: {dt:.2f} s, {len(found)} found (exit {r.returncode})  "
-              f"target <= 2 s {'met' if dt <= 2 else 'NOT met'}")
     finally:
         sim.terminate()
         sim.wait(5)
+    buses = [
+        ("2 ms actuators", "1,2,3,50,100,200,253", (), 1.5),
+        ("some 18 ms late", "1,2,3,50,100,200,253", ("--fault", "3:delay=18", "--fault", "100:delay=18",
+                                                     "--fault", "253:delay=18"), 3.0),
+        ("all 20 ms, bytes 1 ms apart", "1,2,3,50,100,200,253", ("--turnaround", "20", "--gap", "1"), None),
+        ("the same, echoing adapter", "1,2,3,50,100,200,253", ("--turnaround", "20", "--gap", "1", "--echo"), None),
+    ]
+    env = dict(os.environ, NO_COLOR="1")
+    for label, ids, extra, target in buses:
+        sim, port = start_sim(ids, args.baud, extra)
+        try:
+            cmd = tool("zap") + ["scan", "-p", port, "-b", str(args.baud), "-f", "jsonl"]
+            best, found = None, []
+            for _ in range(args.scans):
+                t0 = time.perf_counter()
+                r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+                dt = time.perf_counter() - t0
+                got = [line for line in r.stdout.splitlines() if line.strip()]
+                if best is None or dt < best:
+                    best, found = dt, got
+            want = len(ids.split(","))
+            verdict = "" if target is None else f"  target <= {target:g} s {'met' if best <= target else 'NOT met'}"
+            print(f"full 0..253 scan at {args.baud} baud, {label}: {best:.2f} s, {len(found)}/{want} found"
+                  f"{verdict}")
+        finally:
+            sim.terminate()
+            sim.wait(5)
     return 0
 
 

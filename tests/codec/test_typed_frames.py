@@ -82,8 +82,10 @@ def test_command_writes_and_replies():
     assert zap.Command(zap.echo(3)).expects_reply(0)
     assert zap.Command(zap.factory_reset(1)).stored_writes == ["every stored setting (factory reset)"]
     assert zap.Command(zap.restart(1)).restarts
-    odd = zap.Command(zap.packet(1, 0xF9, b"\x01"))
+    odd = zap.Command(zap.packet(1, 0xE0, b"\x01"))
     assert odd.instruction is None and odd.reply_data_length is None and not odd.expects_reply(2)
+    vendor = zap.Command(zap.packet(1, 0xF9, b"\x01"))          # IR Robot's system write: named, undocumented
+    assert vendor.instruction.cli == "system-write" and not vendor.instruction.documented
 
 
 @given(st.integers(0, 253), st.sampled_from([r for r in zap.REGISTERS if r.writable]), st.data())

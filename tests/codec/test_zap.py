@@ -163,7 +163,7 @@ def test_any_packet_round_trips(ident, code, params):
     pkt = zap.packet(ident, code, params)
     zap.check_packet(pkt)
     rec = zap.decode_packet(pkt)
-    assert rec["id"] == ident and rec["kind"] == ("command" if zap.is_command(code) else "feedback")
+    assert rec["id"] == ident and rec["kind"] == zap.packet_kind(code)
     assert rec["params"] == params.hex(" ").upper()
 
 
@@ -174,3 +174,37 @@ def test_symmetric_store_round_trip(targets):
         zap.check_packet(p)
         got.update({int(k): v for k, v in zap.decode_packet(p)["targets"].items()})
     assert got == targets
+
+
+@pytest.mark.parametrize("code,name", [(0xF9, "system-write"), (0x55, "status"), (0x82, "sync-read"),
+                                       (0x92, "bulk-read"), (0x93, "bulk-write")])
+def test_vendor_instructions_decode_by_name_never_as_errors(code, name):
+    rec = zap.decode_packet(zap.packet(1, code, b"\x01"))
+    assert (rec["kind"], rec["instruction"], rec["code"], rec["documented"]) == ("command", name, code, False)
+    assert "errors" not in rec
+
+
+def test_ir_robots_factory_reset_is_system_write():
+    pkt = bytes.fromhex("FFFFFF0103F901") + bytes((zap.zap_checksum(bytes.fromhex("0103F901")),))
+    zap.check_packet(pkt)
+    assert zap.decode_packet(pkt)["instruction"] == "system-write"
+    assert zap.INSTRUCTION_BY_NAME["factory-mode"].code == 0xF9
+
+
+@pytest.mark.parametrize("code,kind", [(0x00, "feedback"), (0x01, "feedback"), (0x20, "feedback"),
+                                       (0x21, "feedback"), (0x02, "unknown"), (0x40, "unknown"),
+                                       (0x99, "unknown"), (0xF2, "command")])
+def test_byte_after_size_kinds(code, kind):
+    rec = zap.decode_packet(zap.packet(3, code, b""))
+    assert rec["kind"] == kind
+    if kind == "unknown":
+        assert rec["code"] == code and "errors" not in rec
+
+
+def test_undocumented_addresses_read_raw():
+    for name, addr in (("present-temperature", 0x93), ("registered-instruction", 0x94), ("lock", 0x97)):
+        reg = zap.register(name)
+        assert reg.address == addr and zap.register(addr) is reg and reg.scale == 1
+        assert reg not in zap.REGISTERS
+    assert [(r.name, v) for r, v in zap._register_values(0x92, bytes((120, 245)))] == [
+        ("present-voltage", 120), ("present-temperature", 245)]

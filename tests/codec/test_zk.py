@@ -259,3 +259,39 @@ def test_status_round_trip(st_frame, data, version):
         version = raws["protocol_version"]
     again = zk.encode_status(st_frame.id, version=version, **phys)
     assert again == bytes(frame) or any(rec[f.key] is None for f in st_frame.fields)
+
+
+def _status(payload):
+    from zkzap.codec.crc import crc8_maxim
+
+    b = bytes(payload)
+    return b + bytes((crc8_maxim(b),))
+
+
+@pytest.mark.parametrize("payload,flagged", [
+    ([0xF3, 0, 0, 102, 0, 0], ["throttle_pct"]),                 # throttle above 100 %
+    ([0xF3, 0, 0, 100, 0, 0], []),
+    ([0xF5, 0, 0, 0, 9, 71], ["curve_inc", "curve_dec"]),        # accel curve outside 10..70
+    ([0xF5, 0, 0, 0, 10, 70], []),
+    ([0xF1, 0, 0, 20, 0, 0], ["engine_state"]),                  # states beyond the appendix
+    ([0xF1, 0, 0, 0x19, 0x03, 0], ["engine_state", "error_code"]),
+    ([0xF1, 0, 0, 0, 0x60, 0], ["sw_state"]),
+    ([0xF6, 0, 0, 160, 0, (4 << 2) | 3], ["status_rate_hz"]),
+    ([0xF6, 0, 0, 160, 0, (4 << 2) | 2], []),
+])
+def test_out_of_range_values_are_listed_and_kept(payload, flagged):
+    from zkzap.io.writers import csv_dialect, json_dialect
+    from zkzap.io.zk_lines import ZkLines
+
+    frame = _status(payload)
+    rec = zk.decode_status(frame, known=6)
+    assert rec.get("out_of_range", []) == flagged
+    for key in flagged:
+        assert rec[key] is not None or key == "status_rate_hz"      # the value itself is unchanged
+    # the generated text encoders say the same, line for line, as the dict decoder
+    for dialect in (json_dialect(), csv_dialect(["kind", "id"] + zk.STATUS_KEYS + ["frame"])):
+        lines = ZkLines(zk.ZkDecoder(6), dialect)
+        want = dialect.record(dict(zk.ZkDecoder(6).decode(frame), frame=frame.hex(" ").upper()))
+        assert lines.encode(frame) == want
+        assert lines.encode(frame) == want                          # from the memo, too
+    assert zk.STATUS_KEYS[-1] == "out_of_range"

@@ -30,7 +30,7 @@ def test_status_keys_exact(cli):
         2: ["rpm", "radio_voltage_v", "power_voltage_v", "pump_voltage_v"],
         3: ["rpm", "throttle_pct", "pressure_pa"],
         4: ["rpm", "current_a", "thrust_kg"],
-        5: ["rpm", "ignition_pump_voltage_v", "curve_inc", "curve_dec"],
+        5: ["rpm", "ignition_pump_voltage_v", "curve_inc", "curve_dec", "out_of_range"],   # curves 4, 5 < 10
         6: ["rpm", "max_rpm", "max_pump_voltage_v", "protocol_version", "status_rate_hz"],
         7: ["rpm", "fuel_flow_l_min", "fuel_used_l"],
         8: ["rpm", "idle_rpm", "esr", "scl", "startup_time_s"],

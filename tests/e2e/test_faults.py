@@ -103,6 +103,22 @@ COMMANDS = {
 }
 
 
+def _wait_for_rows(path, proc, timeout=30.0):
+    """Until ``path`` holds a header and a first record (the readiness signal), or fail."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            with open(path, "rb") as f:
+                if f.read().count(b"\n") >= 2:
+                    return
+        except FileNotFoundError:
+            pass
+        if proc.poll() is not None:
+            pytest.fail(f"exited {proc.returncode} before its first record: {proc.stderr.read()}")
+        time.sleep(0.01)
+    pytest.fail(f"no record in {path} within {timeout} s")
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.parametrize("what", list(COMMANDS))
 def test_signal_at_a_random_moment(start_sim, tmp_path, what, sig):
@@ -114,8 +130,9 @@ def test_signal_at_a_random_moment(start_sim, tmp_path, what, sig):
     p = subprocess.Popen([executable("zk"), *(a.replace("{schedule}", str(schedule)) for a in args),
                           "-p", url, "-o", str(out)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=clean_env())
-    moment = random.Random(f"{what}{sig}").uniform(0.3, 1.5)
-    time.sleep(moment)
+    _wait_for_rows(out, p)                   # ready: the session has written its first record
+    moment = random.Random(f"{what}{sig}").uniform(0.0, 0.5)
+    time.sleep(moment)                       # then a random moment of the run
     p.send_signal(sig)
     _, err = p.communicate(timeout=15)
     assert p.returncode == (130 if sig == signal.SIGINT else 143), (moment, err)

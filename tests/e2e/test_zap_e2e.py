@@ -164,3 +164,28 @@ def test_full_scan_takes_about_two_seconds(start_sim, sh):
     took = time.monotonic() - t
     assert [x["id"] for x in jsonl(r.stdout)] == [3]
     assert took < 3.0, f"a full 254-ID scan at 57600 baud took {took:.2f} s"
+
+
+@pytest.mark.parametrize("sim_args", [
+    ["--fault", "3:delay=18", "--fault", "9:delay=18"],               # some actuators answer 20 ms late
+    ["--turnaround", "20", "--gap", "1"],                             # every one slow and trickling
+    ["--turnaround", "20", "--gap", "1", "--echo"],                   # ... behind an echoing adapter
+], ids=["some-late", "slow-trickling", "slow-trickling-echo"])
+def test_scan_finds_every_slow_actuator_over_a_pty(start_sim, sh, sim_args):
+    url, _ = start_sim(["zap", "--ids", "1,2,3,9,30", "--pty", *sim_args])
+    r = sh("zap", "scan", "--ids", "0-40", "-p", url)
+    assert r.exit_code == 0, r.stderr
+    recs = jsonl(r.stdout)
+    assert [(x["id"], x["status"], x["return_mode"]) for x in recs] == [(i, "ok", 1) for i in (1, 2, 3, 9, 30)]
+
+
+def test_issue_examples_slow_actuators_over_a_pty(start_sim, sh):
+    url, _ = start_sim(["zap", "--ids", "1,2", "--pty", "--fault", "all:delay=12"])
+    r = sh("zap", "echo", "--id", "1", "-p", url)
+    assert r.exit_code == 0 and "reply from ID 1" in r.stdout
+    rtt = float(r.stdout.split()[-2])
+    assert rtt >= 12 + 2 + 2.4 - 0.5                                   # delay + turnaround + both packets
+    r = sh("zap", "set-id", "5", "--id", "2", "--yes", "-p", url)
+    assert r.exit_code == 0 and "verified" in r.stderr, r.stderr
+    r = sh("zap", "scan", "--ids", "0-8", "-p", url)
+    assert [x["id"] for x in jsonl(r.stdout)] == [1, 5]

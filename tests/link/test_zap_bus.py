@@ -7,7 +7,7 @@ import pytest
 from zkzap.codec import zap
 from zkzap.errors import BadReply, DeviceError, NoReply, PortError, UsageError
 from zkzap.link.port import open_port, sim_url
-from zkzap.link.zap_bus import (MARGIN, NETWORK_MARGIN, TURNAROUND, ZapBus, host_margin, is_simulated,
+from zkzap.link.zap_bus import (MARGIN, MAX_TURNAROUND, NETWORK_MARGIN, ZapBus, host_margin, is_simulated,
                                 leaves_protocol, open_bus, stored_writes, wire_time)
 
 
@@ -28,9 +28,9 @@ def test_timeout_is_derived_from_the_baud_rate():
     assert wire_time(10, 57600) == pytest.approx(10 * 10 / 57600)
     assert b.margin == MARGIN
     t57 = b.reply_timeout(7, 7)
-    assert t57 == pytest.approx(14 * 10 / 57600 + TURNAROUND + MARGIN)
+    assert t57 == pytest.approx(14 * 10 / 57600 + MAX_TURNAROUND + MARGIN)
     b.set_baud(115200)
-    assert b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + TURNAROUND + MARGIN)
+    assert b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + MAX_TURNAROUND + MARGIN)
     assert b.reply_timeout(7, 7) < t57
     b.timeout = 0.5
     assert b.reply_timeout(7, 7) == 0.5

@@ -61,13 +61,42 @@ def test_echo_reply_is_the_documented_feedback():
     assert h.ask(zap.echo(0)) == [bytes.fromhex("FFFFFF000200FD")]
 
 
-def test_reply_waits_for_turnaround_and_wire_time(bus):
+def test_reply_waits_for_the_request_turnaround_and_wire_time(bus):
     bus.receive(zap.echo(1), 1.0, 57600)
-    wire = 7 * 10 / 57600
-    assert bus.poll(1.0 + TURNAROUND + wire - 1e-4) == b""
-    assert bus.next_wakeup(1.0) == pytest.approx(1.0 + TURNAROUND + wire)
-    assert bus.poll(1.0 + TURNAROUND + wire + 1e-6) == zap.packet(1, 0)
+    wire = 7 * 10 / 57600                                   # the request's and the reply's time on the line
+    assert bus.poll(1.0 + wire + TURNAROUND + wire - 1e-4) == b""
+    assert bus.next_wakeup(1.0) == pytest.approx(1.0 + wire + TURNAROUND + wire)
+    assert bus.poll(1.0 + wire + TURNAROUND + wire + 1e-6) == zap.packet(1, 0)
     assert bus.next_wakeup(2.0) is None
+
+
+def test_turnaround_and_byte_gap_options():
+    bus = from_options(ids="1", turnaround="20", gap="1")
+    bus.receive(zap.echo(1), 0.0, 57600)
+    byte = 10 / 57600
+    first = 7 * byte + 0.020 + byte
+    assert bus.next_wakeup(0.0) == pytest.approx(first)
+    got = b""
+    t = 0.0
+    times = []
+    while bus.next_wakeup(t) is not None:
+        t = bus.next_wakeup(t)
+        out = bus.poll(t)
+        got += out
+        times.append(t)
+    assert got == zap.packet(1, 0)
+    assert len(times) == 7 and times[-1] == pytest.approx(first + 6 * (byte + 0.001))
+    with pytest.raises(ValueError, match="turnaround"):
+        from_options(ids="1", turnaround="nan")
+    with pytest.raises(ValueError, match="gap"):
+        from_options(ids="1", gap="-1")
+
+
+def test_bytes_written_back_to_back_queue_on_the_line(bus):
+    """Two commands written at once are heard one after the other, each after its own bytes."""
+    bus.receive(zap.echo(1) + zap.echo(2), 0.0, 57600)
+    byte = 10 / 57600
+    assert bus.next_wakeup(0.0) >= 14 * byte + TURNAROUND
 
 
 def test_defaults_follow_the_register_map(host):
@@ -325,7 +354,8 @@ def test_stuck_keeps_moving_without_progress(host, bus):
 def test_adapter_echo_comes_first(bus):
     bus.echo = True
     bus.receive(zap.echo(1), 0.0, 57600)
-    assert bus.poll(0.0) == zap.echo(1)
+    assert bus.poll(0.0) == b""                          # the echo crosses the line with the command
+    assert bus.poll(7 * 10 / 57600) == zap.echo(1)
     assert bus.poll(1.0) == zap.packet(1, 0)
 
 

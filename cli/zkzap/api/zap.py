@@ -33,7 +33,7 @@ __all__ = ["Bus", "Actuator", "Reading", "ALL_BAUDS", "register_records", "map_b
 
 #: Baud rates an actuator can talk at, in the order a scan over all of them tries: the factory
 #: default first, then the others fastest first.
-ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
+from ..link.zap_scan import ALL_BAUDS  # noqa: E402 - the order 'scan --baud all' tries
 
 #: The block :meth:`Bus.identify` reads: model-number .. feedback-return-mode.
 INFO_FIRST = zap.REGISTER_BY_NAME["model-number"]
@@ -272,60 +272,47 @@ class Bus:
 
     # -- procedures ----------------------------------------------------------------------------
 
-    def identify(self, ident: int) -> dict:
-        """``{"model", "firmware", "return_mode"}`` of an actuator that answers Echo, in one Load
-        Data; an actuator that answers Echo but not Load Data is in return mode 0."""
-        length = _span(INFO_FIRST, INFO_LAST)
-        r = self.link.transact(zap.load(ident, INFO_FIRST.address, length), reply=True, data_len=length,
-                               optional=True, check=False)
-        if r is None:
-            return {"model": None, "firmware": None, "return_mode": 0}
-        values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
-        return {"model": values.get("model-number"), "firmware": values.get("firmware-version"),
-                "return_mode": values.get("feedback-return-mode")}
+    def identify(self, ident: int, *, retries: int = 2) -> dict:
+        """``{"model", "firmware", "return_mode", "status", "errors"}`` of an actuator that answers
+        Echo, from one Load Data. An actuator that answers Echo but not Load Data (after a full
+        wait) is in return mode 0; a read that fails leaves the fields None with status
+        ``unidentified`` (``duplicate`` when the reply is garbled), never a guess."""
+        from ..link.zap_scan import identify
+
+        rec = {"id": ident, "model": None, "firmware": None, "return_mode": None, "status": "ok", "errors": []}
+        identify(self.link, rec, retries)
+        rec.pop("id")
+        return rec
 
     def scan(self, ids: Iterable[int] = range(254), bauds: Iterable[int] = (57600,), *, retries: int = 2,
              on_probe: Optional[Callable[[int, int, int], None]] = None,
+             on_warning: Optional[Callable[[str], None]] = None,
              include_garbled: bool = True) -> Iterator[dict]:
-        """Find actuators: Echo each ID at each baud rate, then :meth:`identify` those that
-        answer. Yields records as found: ``id``, ``baud``, ``model``, ``firmware``,
-        ``return_mode``, ``status`` (``ok``, ``error``, ``garbled``) and ``errors``. An ID that
-        does not answer is not asked again; ``retries`` applies to garbled replies.
-        ``on_probe(baud, id, found)`` is called after each probe (for progress). The port is
-        left at the last baud rate scanned."""
-        ids = list(ids)
-        found = 0
+        """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, a second full
+        wait for the IDs near a late or garbled reply, then the model, firmware and return mode of
+        each actuator found (see :mod:`zkzap.link.zap_scan` for the policy). Yields records in ID
+        order: ``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status`` (``ok``,
+        ``error``, ``garbled``, ``duplicate``, ``unidentified``) and ``errors``.
+        ``on_probe(baud, id, found)`` is called before each first probe (for progress) and
+        ``on_warning(text)`` for what a scan should say (duplicate IDs, garbled replies). The port
+        is left at the last baud rate scanned."""
+        from ..link.zap_scan import scan as scan_bus
+
+        ids, bauds = list(ids), list(bauds)
         for baud in bauds:
             if baud not in zap.BAUD_TO_CODE:
                 raise UsageError(f"baud: {baud} is not an actuator baud rate; allowed "
                                  f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
-            self.link.set_baud(baud)
-            for ident in ids:
-                rec = {"id": ident, "baud": baud, "model": None, "firmware": None, "return_mode": None,
-                       "status": "ok", "errors": []}
-                try:
-                    r = self.link.ping(ident, retries=retries)
-                except BadReply as e:
-                    r = None
-                    if include_garbled:
-                        rec["status"] = "garbled"
-                        rec["errors"] = [str(e)]
-                        found += 1
-                        yield rec
-                if on_probe is not None:
+        for event in scan_bus(self.link, ids, bauds, retries=retries):
+            if event[0] == "probe":
+                _, baud, ident, found, first = event
+                if on_probe is not None and first:
                     on_probe(baud, ident, found)
-                if r is None:
-                    continue
-                rec["errors"] = r.errors
-                if r.error:
-                    rec["status"] = "error"
-                try:
-                    rec.update(self.identify(ident))
-                except BadReply as e:
-                    rec["status"] = "garbled"
-                    rec["errors"] = rec["errors"] + [str(e)]
-                found += 1
-                yield rec
+            elif event[0] == "record":
+                if include_garbled or event[1]["status"] != "garbled":
+                    yield event[1]
+            elif on_warning is not None:
+                on_warning(event[1])
 
     def dump_records(self, ident: int):
         """``(records, reply with error bits or None)``: the whole register map of one actuator,
@@ -437,12 +424,20 @@ class Bus:
         new = zap.check_id(new, allow_broadcast=False)
         if new == ident:
             return new
+        from ..link.zap_scan import collides
+
         self.link.echo(ident)
-        if not force and self.link.ping(new) is not None:
+        if self.link.return_mode and collides(self.link, ident):
+            raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
+                              ident=ident, duplicate=True)
+        if not force and self.link.answers(new):           # three full waits: never a guess
             raise CheckFailed(f"ID {new} is already taken by another actuator", ident=new, taken=True)
         self.link.store(ident, ID_REG, new)
         value = self._read_back(new, ID_REG, ready_timeout,
                                 f"set-id: ID {new} does not answer after the change", "id")
+        if value == new and (self.link.answers(ident, tries=2) or collides(self.link, new)):
+            raise CheckFailed(f"set-id: ID {ident} still answers after the change (ID {new} reads back {value}): "
+                              f"two actuators may have had ID {ident}", ident=ident, duplicate=True)
         if value != new:
             raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}", ident=new, value=value)
         return new

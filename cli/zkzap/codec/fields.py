@@ -325,8 +325,34 @@ class Layout:
         key = (tuple(sorted(ctx.items())), known, raw)
         fn = self._decoders.get(key)
         if fn is None:
-            fn = self._decoders[key] = compile_dict(*self.items(ctx, known, raw))
+            fn = self._decoders[key] = compile_dict(*self.items(ctx, known, raw),
+                                                    checks=self.range_checks(known))
         return fn
+
+    def range_checks(self, known=None):
+        """``(key, rvar, bad)`` for every field whose raw values are not all documented: ``bad``
+        is a tuple of booleans by raw value (True: outside the field's range or name table).
+        A decoded record lists such fields under :data:`OUT_OF_RANGE`, values unchanged."""
+        cache = self.__dict__.setdefault("_checks", {})
+        if known in cache:
+            return cache[known]
+        checks = []
+        for i, f in enumerate(self.fields):
+            if f.since > 1 and known is not None and known < f.since:
+                continue
+            every = range(1 << f.width)
+            if f.names is None and f.values is None and f.lo == 0 and f.hi == (1 << f.width) - 1:
+                continue                          # every raw value is in range
+            if f.names is not None:
+                bad = tuple(v not in f.names or not f.lo <= v <= f.hi for v in every)
+            elif f.values is not None:
+                bad = tuple(f.values.get(v) is None for v in every)
+            else:
+                bad = tuple(not f.lo <= v <= f.hi for v in every)
+            if any(bad):
+                checks.append((f.key, f"r{i}", bad))
+        cache[known] = checks
+        return checks
 
     def _reserved_masks(self, covered):
         masks = {}
@@ -395,7 +421,17 @@ class Layout:
         declarations as :meth:`decoder`, value for value.
         """
         code, items = self.items(ctx, known, raw)
-        return compile_text(code, list(head) + items + list(tail), dialect)
+        checks = self.range_checks(known)
+        head, tail = list(head), list(tail)
+        if not checks:
+            return compile_text(code, head + items + tail, dialect)
+        # a frame with a value out of range (rare) gets the out_of_range cell before the tail,
+        # looked up by the bit mask of the failed checks: one table look-up per checked field
+        tables = {f"K{j}": bad for j, (_key, _r, bad) in enumerate(checks)}
+        mask = " | ".join(f"(K{j}[{r}] << {j})" for j, (_key, r, _bad) in enumerate(checks))
+        lists = [[key for j, (key, _r, _bad) in enumerate(checks) if m >> j & 1] for m in range(1 << len(checks))]
+        return compile_text(code, head + items + tail, dialect,
+                            flagged=(len(head) + len(items), mask, lists, tables))
 
 
     def keys(self):
@@ -406,6 +442,8 @@ class Layout:
             out.append(f.key)
             if f.name_key:
                 out.append(f.name_key)
+        if self.range_checks():
+            out.append(OUT_OF_RANGE)
         return out
 
     def reserved_bits(self, frame):
@@ -413,6 +451,10 @@ class Layout:
         found = [f"b{byte}={frame[byte] & mask:#04x}" for byte, mask in self.reserved.items()
                  if frame[byte] & mask]
         return " ".join(found) or None
+
+
+#: The record key listing the fields whose decoded value is outside its documented range.
+OUT_OF_RANGE = "out_of_range"
 
 
 def _phys_item(r, sc, offset, decimals):
@@ -424,8 +466,10 @@ def _phys_item(r, sc, offset, decimals):
     return "int", f"{r} * {sc!r} + {offset!r}"
 
 
-def compile_dict(code, items):
-    """Compile ``code`` + ``items`` (see :meth:`Layout.items`) into ``frame -> dict``."""
+def compile_dict(code, items, checks=()):
+    """Compile ``code`` + ``items`` (see :meth:`Layout.items`) into ``frame -> dict``; with
+    ``checks`` (see :meth:`Layout.range_checks`) a record with values out of range gets the
+    :data:`OUT_OF_RANGE` list of their keys."""
     ns = {}
     entries = []
     for n, (key, kind, what) in enumerate(items):
@@ -438,18 +482,39 @@ def compile_dict(code, items):
             entries.append(f"{key!r}: t{n}[{expr}]")
         else:
             entries.append(f"{key!r}: {what}")
-    src = ["def decode(b):"] + [f"    {line}" for line in code] + ["    return {" + ", ".join(entries) + "}"]
+    src = ["def decode(b):"] + [f"    {line}" for line in code]
+    if not checks:
+        src.append("    return {" + ", ".join(entries) + "}")
+    else:
+        src.append("    d = {" + ", ".join(entries) + "}")
+        tests = []
+        for j, (key, rvar, bad) in enumerate(checks):
+            ns[f"k{j}"] = bad
+            tests.append((key, f"k{j}[{rvar}]"))
+        src.append(f"    if {' or '.join(t for _, t in tests)}:")
+        pairs = ", ".join(f"({key!r}, {t})" for key, t in tests)
+        src.append(f"        d[{OUT_OF_RANGE!r}] = [k for k, bad in ({pairs},) if bad]")
+        src.append("    return d")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["decode"]
 
 
-def compile_text(code, items, dialect):
+def _check_vars(mask):
+    """The raw variables of a mask expression ``(K0[r1] << 0) | (K1[r4] << 1)``, in order."""
+    import re
+
+    return re.findall(r"K\d+\[(r\d+)\]", mask)
+
+
+def compile_text(code, items, dialect, flagged=None):
     """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
     giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
 
     The dialect renders values (``dialect.value(v)``), gives the template piece of a dynamic
     string (``dialect.str_piece``) and arranges the ``(key, piece, arg)`` cells into one
-    %-template (``dialect.template(cells) -> (template, args)``).
+    %-template (``dialect.template(cells) -> (template, args)``). ``flagged`` is
+    ``(position, mask expression, lists by mask, tables)``: when the mask is non-zero a second
+    template renders the :data:`OUT_OF_RANGE` list at ``position``.
     """
     import re
 
@@ -479,10 +544,25 @@ def compile_text(code, items, dialect):
         else:  # pragma: no cover - the kinds above are all Layout.items produces
             raise ValueError(f"item kind {kind!r}")
     template, args = dialect.template(cells)
-    used = set(re.findall(r"\br\d+\b", " ".join(args)))
+    mask = ""
+    if flagged is not None:
+        position, mask, lists, tables = flagged
+        ns.update(tables)
+        ns["OOR"] = tuple(dialect.value(v) for v in lists)
+        template2, args2 = dialect.template(cells[:position] + [(OUT_OF_RANGE, "%s", "OOR[m]")] + cells[position:])
+        ns["TEMPLATE2"] = template2
+    used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + mask))
     body = [line for line in code if line.split(" = ")[0] in used]
     ns["TEMPLATE"] = template
-    src = ["def encode(b):"] + [f"    {line}" for line in body]
+    if flagged is not None:
+        # the check tables as default arguments: local look-ups on the fast path
+        names = [f"K{j}" for j in range(len(tables))]
+        src = [f"def encode(b, {', '.join(f'{k}={k}' for k in names)}):"] + [f"    {line}" for line in body]
+        src.append(f"    if {' or '.join(f'{k}[{r}]' for k, r in zip(names, _check_vars(mask)))}:")
+        src.append(f"        m = {mask}")
+        src.append(f"        return TEMPLATE2 % ({''.join(a + ', ' for a in args2)})")
+    else:
+        src = ["def encode(b):"] + [f"    {line}" for line in body]
     src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["encode"]

@@ -28,15 +28,18 @@ ERROR_TEXT = {
 
 class Instruction:
     """One instruction. ``reply`` says when a non-broadcast command is answered:
-    ``"always"`` (Echo), ``"load"`` (Load Data: return modes 1 and 2), ``"all"`` (mode 2 only)."""
+    ``"always"`` (Echo), ``"load"`` (Load Data: return modes 1 and 2), ``"all"`` (mode 2 only),
+    ``"unknown"`` (an undocumented vendor instruction: a reply may or may not come)."""
 
-    def __init__(self, code, name, cli, help, reply, params_help=""):
+    def __init__(self, code, name, cli, help, reply, params_help="", documented=True):
         self.code, self.name, self.cli, self.help, self.reply = code, name, cli, help, reply
         self.params_help = params_help
+        self.documented = documented
 
     def answered(self, return_mode: int, target_id: int) -> bool:
-        """Whether an actuator in ``return_mode`` replies to this instruction sent to ``target_id``."""
-        if target_id == BROADCAST:
+        """Whether an actuator in ``return_mode`` replies to this instruction sent to ``target_id``
+        (False for an undocumented one: nobody can promise a reply)."""
+        if target_id == BROADCAST or self.reply == "unknown":
             return False
         if self.reply == "always":
             return True
@@ -72,12 +75,28 @@ INSTRUCTIONS = (
     Instruction(SYMMETRIC_STORE, "Symmetric Store", "sync-move", "Write the same address of several actuators.",
                 "all", "address, length, {id, data x length}..."),
 )
-INSTRUCTION_BY_CODE = {i.code: i for i in INSTRUCTIONS}
-INSTRUCTION_BY_NAME = {i.cli: i for i in INSTRUCTIONS}
+#: Instruction codes IR Robot's own Arduino header (utility/IR_Protocol_format.h, Dynamixel
+#: heritage) defines beyond the eight documented ones. None is documented for the 12Lf: they are
+#: decoded by these names (never as feedback error bits) and sent only raw (``zap raw``).
+VENDOR_INSTRUCTIONS = (
+    Instruction(0xF9, "System Write", "system-write",
+                "CMD_SYSTEM_WRITE / CMD_FACTORY_MODE; IR Robot's Python library sends FF FF FF ID 03 F9 01 "
+                "as its factory reset.", "unknown", "option", documented=False),
+    Instruction(0x55, "Status", "status", "Dynamixel-style status (undocumented).", "unknown", documented=False),
+    Instruction(0x82, "Sync Read", "sync-read", "Dynamixel-style sync read (undocumented).", "unknown",
+                documented=False),
+    Instruction(0x92, "Bulk Read", "bulk-read", "Dynamixel-style bulk read (undocumented).", "unknown",
+                documented=False),
+    Instruction(0x93, "Bulk Write", "bulk-write", "Dynamixel-style bulk write (undocumented).", "unknown",
+                documented=False),
+)
+INSTRUCTION_BY_CODE = {i.code: i for i in INSTRUCTIONS + VENDOR_INSTRUCTIONS}
+INSTRUCTION_BY_NAME = {i.cli: i for i in INSTRUCTIONS + VENDOR_INSTRUCTIONS}
 INSTRUCTION_BY_NAME.update({i.name.lower().replace(" ", "-"): i for i in INSTRUCTIONS})
 INSTRUCTION_BY_NAME["symmetric-store"] = INSTRUCTION_BY_NAME["sync-move"]
 INSTRUCTION_BY_NAME["send-data"] = INSTRUCTION_BY_NAME["send"]
 INSTRUCTION_BY_NAME["execution"] = INSTRUCTION_BY_NAME["execute"]
+INSTRUCTION_BY_NAME["factory-mode"] = INSTRUCTION_BY_NAME["system-write"]
 
 BAUD_CODES = {16: 115200, 32: 57600, 48: 38400, 64: 19200, 128: 9600}
 BAUD_TO_CODE = {v: k for k, v in BAUD_CODES.items()}
@@ -190,6 +209,16 @@ del R
 REGISTER_BY_NAME = {r.name: r for r in REGISTERS}
 REGISTER_BY_ADDRESS = {r.address: r for r in REGISTERS}
 
+#: Addresses IR Robot's Arduino header names but the 12Lf map does not document: readable by
+#: name or address, shown raw (no unit, no range), never part of the map (``zap dump``).
+UNDOCUMENTED_REGISTERS = (
+    Register(0x93, "present-temperature", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
+    Register(0x94, "registered-instruction", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
+    Register(0x97, "lock", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
+)
+UNDOCUMENTED_BY_NAME = {r.name: r for r in UNDOCUMENTED_REGISTERS}
+UNDOCUMENTED_BY_ADDRESS = {r.address: r for r in UNDOCUMENTED_REGISTERS}
+
 
 def register(spec) -> Register:
     """A register by kebab-case name, or by address (``0x86``, ``134``). An address outside the
@@ -200,6 +229,8 @@ def register(spec) -> Register:
         key = spec.strip().lower().replace("_", "-")
         if key in REGISTER_BY_NAME:
             return REGISTER_BY_NAME[key]
+        if key in UNDOCUMENTED_BY_NAME:
+            return UNDOCUMENTED_BY_NAME[key]
         try:
             addr = int(key, 0)
         except ValueError:
@@ -210,7 +241,7 @@ def register(spec) -> Register:
         addr = spec
     if not 0 <= addr <= 0xFF:
         raise FieldValueError(f"register: address {addr} is out of range; allowed 0x00..0xFF")
-    reg = REGISTER_BY_ADDRESS.get(addr)
+    reg = REGISTER_BY_ADDRESS.get(addr) or UNDOCUMENTED_BY_ADDRESS.get(addr)
     if reg is None:
         reg = Register(addr, f"0x{addr:02x}", 1, "RW", help="not in the 12Lf map")
     return reg
@@ -471,8 +502,21 @@ def check_packet(pkt) -> None:
 
 
 def is_command(code: int) -> bool:
-    """The byte after SIZE tells command from feedback: instruction codes vs. error bits."""
+    """The byte after SIZE tells command from feedback: instruction codes (documented and
+    vendor) vs. error bits."""
     return code in INSTRUCTION_BY_CODE
+
+
+#: Every error bit the protocol documents.
+ERROR_MASK = sum(1 << bit for bit in ERROR_BITS)
+
+
+def packet_kind(code: int) -> str:
+    """``command`` (an instruction code), ``feedback`` (documented error bits only) or
+    ``unknown`` (neither: an undocumented instruction or undocumented error bits)."""
+    if code in INSTRUCTION_BY_CODE:
+        return "command"
+    return "feedback" if not code & ~ERROR_MASK else "unknown"
 
 
 def error_names(err: int) -> list:
@@ -489,7 +533,7 @@ def _register_values(address: int, data: bytes) -> list:
     i = 0
     while i < len(data):
         addr = address + i
-        reg = REGISTER_BY_ADDRESS.get(addr)
+        reg = REGISTER_BY_ADDRESS.get(addr) or UNDOCUMENTED_BY_ADDRESS.get(addr)
         if reg is not None and i + reg.size <= len(data):
             raw = int.from_bytes(data[i:i + reg.size], "little")
             out.append((reg, raw))
@@ -525,12 +569,18 @@ def decode_packet(pkt, request=None) -> dict:
     """
     ident, code = pkt[3], pkt[5]
     params = bytes(pkt[6:-1])
-    rec = {"kind": "command" if is_command(code) else "feedback", "id": ident}
-    if rec["kind"] == "command":
+    rec = {"kind": packet_kind(code), "id": ident}
+    if rec["kind"] == "unknown":
+        # neither an instruction nor documented error bits: the byte is shown, not interpreted
+        rec["code"] = code
+        rec["params"] = params.hex(" ").upper()
+    elif rec["kind"] == "command":
         cmd = Command(pkt)
         rec["instruction"] = cmd.instruction.cli
         rec["code"] = code
         rec["params"] = params.hex(" ").upper()
+        if not cmd.instruction.documented:
+            rec["documented"] = False
         if code == LOAD_DATA and cmd.address is not None:
             reg = REGISTER_BY_ADDRESS.get(cmd.address)
             rec["address"] = cmd.address
@@ -580,5 +630,5 @@ class ZapDecoder:
         return decode_packet(pkt, req)
 
 
-ZAP_KEYS = ("kind", "id", "instruction", "code", "error", "errors", "register", "address", "length",
-            "value", "physical", "unit", "values", "targets", "reset_id", "reset_baud", "params")
+ZAP_KEYS = ("kind", "id", "instruction", "code", "documented", "error", "errors", "register", "address",
+            "length", "value", "physical", "unit", "values", "targets", "reset_id", "reset_baud", "params")

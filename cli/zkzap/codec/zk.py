@@ -12,7 +12,7 @@ bytes 0..5. ``bN`` below is byte N of the frame.
 from __future__ import annotations
 
 from .crc import crc8_maxim
-from .fields import ContextScale, Field, FieldValueError, Layout, VersionScale
+from .fields import OUT_OF_RANGE, ContextScale, Field, FieldValueError, Layout, VersionScale
 
 CONTROL_HEAD = 0xFF
 STATUS_HEAD = 0xF0
@@ -194,7 +194,7 @@ STATUS = (
         Field("pump_voltage_v", "b5", scale=VOLTAGE, unit="V", help="fuel pump voltage"),
     )),
     StatusFrame(3, "throttle", (
-        Field("throttle_pct", "b3", unit="%", help="throttle"),
+        Field("throttle_pct", "b3", unit="%", hi=100, help="throttle"),
         Field("pressure_pa", "b5 b4", scale=2, unit="Pa", help="air pressure"),
     )),
     StatusFrame(4, "load", (
@@ -204,8 +204,8 @@ STATUS = (
     )),
     StatusFrame(5, "ignition", (
         Field("ignition_pump_voltage_v", "b3", scale=0.02, unit="V", help="ignition pump voltage"),
-        Field("curve_inc", "b4", help="acceleration curve INC (raw, unit not documented)"),
-        Field("curve_dec", "b5", help="acceleration curve DEC (raw, unit not documented)"),
+        Field("curve_inc", "b4", lo=10, hi=70, help="acceleration curve INC (raw, unit not documented)"),
+        Field("curve_dec", "b5", lo=10, hi=70, help="acceleration curve DEC (raw, unit not documented)"),
     )),
     StatusFrame(6, "config", (
         Field("max_rpm", "b3", scale=1000, unit="rpm", help="maximum engine speed"),
@@ -245,7 +245,12 @@ for _c in CONTROL:
     for _k in _c.layout.keys():
         if _k not in CONTROL_KEYS:
             CONTROL_KEYS.append(_k)
-del _s, _c, _k
+# the list of out-of-range fields comes last (a CSV column after every field)
+for _keys in (STATUS_KEYS, CONTROL_KEYS):
+    if OUT_OF_RANGE in _keys:
+        _keys.remove(OUT_OF_RANGE)
+        _keys.append(OUT_OF_RANGE)
+del _s, _c, _k, _keys
 
 
 class FrameError(ValueError):

@@ -26,6 +26,8 @@ def hint(e) -> str:
     if isinstance(e, CheckFailed):
         if facts.get("taken"):
             return "; choose a free ID ('zap scan') or pass --force"
+        if facts.get("duplicate"):
+            return "; connect the one to change alone and check with 'zap scan'"
         if facts.get("after_change") == "id":
             return "; check with 'zap scan'"
         if facts.get("after_change") == "baud":

@@ -216,6 +216,12 @@ def _host_log(output):
 @click.option("--voltage", type=FiniteRange(0, 25.5), default=None, metavar="VOLTS",
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")
 @click.option("--echo", is_flag=True, help="Echo the host's bytes back, like a half-duplex adapter.")
+@click.option("--turnaround", type=FiniteRange(0, 1000), default=None, metavar="MS",
+              help="Milliseconds from a command's last byte to the reply's first (default 2; real "
+                   "actuators and adapters: up to about 20).")
+@click.option("--gap", type=FiniteRange(0, 100), default=None, metavar="MS",
+              help="Milliseconds between two reply bytes, like a device or USB adapter that "
+                   "trickles its bytes (default 0).")
 @click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]",
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
@@ -224,7 +230,7 @@ def _host_log(output):
               help="Answer every request recorded in a pcapng capture (--capture) with its recorded "
                    "reply, after its recorded latency; other requests go to the model.")
 @serve_options
-def zap(ids, baud, state, return_mode, voltage, echo, faults, replay, speed, use_pty, listen, link):
+def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, replay, speed, use_pty, listen, link):
     """The mightyZAP actuator-bus simulator: 12Lf actuators with the full register map, moving
     at goal speed, answering as their feedback-return mode says.
 
@@ -241,7 +247,12 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, replay, speed, use
       zkzap sim zap --ids 1,2,3                  # prints /dev/pts/N
       zkzap sim zap --ids 1,2 --listen 127.0.0.1:0 --state bus.json
       zkzap sim zap --ids 1 --echo --fault 1:delay=5
+      zkzap sim zap --ids 1-4 --turnaround 20 --gap 1    # a slow device that trickles its bytes
       zkzap sim zap --replay field.pcapng        # a recorded bus, answered as recorded
+
+    Timing: a command is heard once its last byte has crossed the line at the host's baud
+    rate; the reply starts --turnaround ms later (5 ms more after a stored write), takes its
+    time on the wire plus --gap ms between bytes, and replies never overlap.
 
     With --replay CAPTURE, a request recorded in the capture (the same ID, instruction and
     parameters) gets the reply recorded for it, after the recorded latency (several replies to
@@ -267,7 +278,8 @@ def zap(ids, baud, state, return_mode, voltage, echo, faults, replay, speed, use
             ids = ",".join(str(i) for i in sorted(recorded[1]))
     device = _make("zap", ids=ids, baud=baud, state=state, return_mode=return_mode,
                    voltage=None if voltage is None else str(voltage), echo="1" if echo else "0",
-                   faults=",".join(faults))
+                   turnaround=None if turnaround is None else str(turnaround),
+                   gap=None if gap is None else str(gap), faults=",".join(faults))
     if replay is not None:
         from ..sim.replay import ZapReplay
 

@@ -61,6 +61,8 @@ def _field(f) -> dict:
     else:
         d["scale"] = f.scale
     d["float"] = _is_float(f)
+    if f.names is not None or f.values is not None or f.lo != 0 or f.hi != (1 << f.width) - 1:
+        d["check"] = {"lo": f.lo, "hi": f.hi}     # values outside are listed under out_of_range
     return d
 
 
@@ -96,7 +98,7 @@ def tables() -> str:
     reserved = {c.id: {b: m for b, m in c.layout.reserved.items()} for c in zk.CONTROL}
     instructions = {i.code: {"name": i.cli, "title": i.name} for i in zap.INSTRUCTIONS}
     registers = {r.address: {"name": r.name, "size": r.size, "scale": r.scale, "unit": r.unit}
-                 for r in zap.REGISTERS}
+                 for r in zap.REGISTERS + zap.UNDOCUMENTED_REGISTERS}
     lines = [
         f"local LINKTYPE_ZK, LINKTYPE_ZAP = {LINKTYPE_ZK}, {LINKTYPE_ZAP}",
         f"local ZK_DEFAULT_VERSION = {zk.DEFAULT_PROTOCOL_VERSION}",
@@ -143,6 +145,7 @@ local ZK_F = {
   command = ProtoField.string("zk.command", "command"),
   payload = ProtoField.string("zk.payload", "payload"),
   reserved = ProtoField.string("zk.reserved", "reserved"),
+  out_of_range = ProtoField.string("zk.out_of_range", "out_of_range"),
   dir = ProtoField.string("zk.dir", "dir"),
   crc = ProtoField.uint8("zk.crc", "crc", base.HEX),
   crc_ok = ProtoField.bool("zk.crc_ok", "crc_ok"),
@@ -296,12 +299,17 @@ end
 -- ZK ------------------------------------------------------------------------------------------
 
 local function zk_decode_fields(fields, b, ctx, known, out)
+  local bad = {}
   for _, f in ipairs(fields) do
     local r = raw_of(b, f.parts)
     if f.since ~= nil and known ~= nil and known < f.since then
       out[#out + 1] = {f.key, nil}
       if f.name_key then out[#out + 1] = {f.name_key, nil} end
     else
+      if f.check and (r < f.check.lo or r > f.check.hi or (f.names and f.names[r] == nil)
+                      or (f.values and f.values[r] == nil)) then
+        bad[#bad + 1] = f.key
+      end
       if f.raw_key then out[#out + 1] = {f.raw_key, r} end
       if f.values then
         out[#out + 1] = {f.key, f.values[r]}
@@ -329,6 +337,7 @@ local function zk_decode_fields(fields, b, ctx, known, out)
       end
     end
   end
+  if #bad > 0 then out[#out + 1] = {"out_of_range", table.concat(bad, ",")} end
 end
 
 local function zk_decode(b, n)

@@ -5,11 +5,30 @@ Which commands are answered depends on the actuator's feedback-return mode (regi
 never. :class:`ZapBus` is told the mode (``return_mode``, default 1, or :meth:`detect_return_mode`)
 and waits only when a reply will come.
 
-Timeouts are derived from the baud rate: the bytes on the wire both ways at 10 bits per byte,
-plus the actuator's turnaround (:data:`TURNAROUND`), plus a host margin (:data:`MARGIN`, plus
-the USB adapter's latency timer when the port is a ``/dev/ttyUSB*`` with one, plus
-:data:`NETWORK_MARGIN` for a ``socket://``/``rfc2217://`` port on another host), plus the
-memory pause after a write to stored registers. ``timeout=`` overrides the whole figure.
+Timing policy (every figure in seconds, derived from the baud rate at 10 bits per byte):
+
+- **Deadline for a reply**: both packets on the wire, plus the turnaround allowance
+  (:data:`MAX_TURNAROUND`, 20 ms: real actuators and USB adapters answer up to that late), plus
+  a host margin (:data:`MARGIN`, plus the USB adapter's latency timer when the port is a
+  ``/dev/ttyUSB*`` with one, plus :data:`NETWORK_MARGIN` for a ``socket://``/``rfc2217://``
+  port on another host), plus the memory pause after a write to stored registers. A reply
+  that comes at once ends the wait at once: the allowance costs time only when nothing comes.
+  ``timeout=`` replaces the whole figure.
+- **Trickling bytes**: once reply bytes arrive, the deadline extends to :data:`INTER_BYTE`
+  (plus one byte time and the margin) after the latest byte, as long as a packet is
+  incomplete, so a device or adapter that sends its bytes 1 ms apart is read whole.
+- **Learned turnaround**: every answered attempt gives a turnaround estimate (round trip
+  minus both packets' wire time). Probes where silence is the expected answer (:meth:`ZapBus.ping`
+  with ``quick=True``, used by scans) wait only for the first byte within the bus's typical
+  turnaround (the median estimate, x1.25, at least :data:`TURNAROUND`), so a bus whose
+  actuators answer in 2 ms is scanned at wire speed; a slower reply is caught as late.
+- **Attribution**: before each attempt the bytes already received are read and examined
+  (never thrown away unseen); every attempt that went unanswered is remembered for
+  :data:`LATE_WINDOW` as owing a reply (its ID and the reply's data length). A reply that
+  matches an owed attempt of another request is counted as late (:attr:`ZapBus.late`, and an
+  event for scans) and never taken as the answer to the request in hand; a reply to an
+  earlier attempt of the same request answers it, with the round trip measured from that
+  attempt.
 
 Every reply is checked: checksum (through :class:`~zkzap.codec.framing.ZapFramer`), ID, data
 length. A half-duplex adapter that echoes our own bytes is recognised (a copy of what we sent)
@@ -22,6 +41,7 @@ port that fails or vanishes as :class:`~zkzap.errors.PortError` (exit 4).
 from __future__ import annotations
 
 import os
+import select
 import time
 from collections import deque
 from urllib.parse import urlsplit
@@ -31,8 +51,19 @@ from ..codec.framing import ZapFramer
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from .port import close_port, wire_time
 
-#: Allowance for the actuator's processing before it answers (seconds).
+#: The typical actuator turnaround (a 12Lf answers in about 2 ms): the floor of the quick
+#: probes' allowance before any reply has been seen.
 TURNAROUND = 0.002
+#: The default allowance for the actuator's turnaround before its first reply byte.
+MAX_TURNAROUND = 0.020
+#: Allowance between two reply bytes (on top of one byte time and the margin).
+INTER_BYTE = 0.010
+#: Host allowance of a quick probe (a late reply is still recognised afterwards).
+QUICK_MARGIN = 0.0005
+#: How long an unanswered attempt may still be answered: its reply is then recognised as late.
+LATE_WINDOW = 0.15
+#: Read granularity on ports without a file descriptor (URL ports).
+QUANTUM = 0.001
 #: Host-side allowance: scheduling, pty/USB transfer.
 MARGIN = 0.0025
 #: Extra allowance for a socket:// or rfc2217:// port on another host.
@@ -119,25 +150,58 @@ def leaves_protocol(pkt: bytes) -> bool:
     return zap.Command(pkt).leaves_protocol
 
 
+def writes_id(pkt: bytes) -> bool:
+    """True when the packet writes the ID register (Store/Send Data, Symmetric Store)."""
+    code, params = pkt[5], bytes(pkt[6:-1])
+    addr = zap.REGISTER_BY_NAME["id"].address
+    if code in (0xF3, 0xF4) and len(params) >= 2:
+        return params[0] <= addr < params[0] + len(params) - 1
+    if code == 0x73 and len(params) >= 2:
+        return params[1] > 0 and params[0] <= addr < params[0] + params[1]
+    return False
+
+
+class _Owed:
+    """An attempt that went unanswered: its reply may still come (late)."""
+
+    __slots__ = ("token", "ids", "data_len", "t0", "until")
+
+    def __init__(self, token, ids, data_len, t0, until):
+        self.token, self.ids, self.data_len, self.t0, self.until = token, ids, data_len, t0, until
+
+    def matches(self, p) -> bool:
+        return p[3] in self.ids and (self.data_len is None or len(p) - 7 == self.data_len)
+
+
 class ZapBus:
     """Transactions on one port. ``return_mode`` is the bus's feedback-return mode (0, 1, 2);
-    ``timeout`` (seconds) overrides the derived reply timeout; ``retries`` after a failure."""
+    ``timeout`` (seconds) overrides the derived reply timeout; ``retries`` after a failure;
+    ``turnaround`` (seconds) is the allowance for the actuator's turnaround (default
+    :data:`MAX_TURNAROUND`)."""
 
     def __init__(self, port, *, return_mode: int = 1, timeout=None, retries: int = RETRIES, margin=None,
-                 url=None):
+                 url=None, turnaround=None):
         self.port = port
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
         self.return_mode = return_mode
         self.timeout = timeout
         self.retries = retries
         self.margin = host_margin(self.url) if margin is None else margin
+        self.turnaround = MAX_TURNAROUND if turnaround is None else turnaround
         self.adapter_echo = False          # learned: the adapter echoes what we send
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
+        self._owed = deque()               # unanswered attempts whose reply may still come
+        self._turnarounds = deque(maxlen=32)   # turnaround estimates of answered attempts
         self._quiet_until = 0.0
         self._port_timeout = object()
+        fd = getattr(port, "fd", None)
+        self._fd = fd if isinstance(fd, int) and hasattr(port, "in_waiting") else None
+        self.events = []                   # ("late", ID, time) / ("garbled", None, time), for scans
         self.sent = 0
         self.replies = 0
         self.retried = 0
+        self.late = 0                      # replies recognised as late (answers to earlier attempts)
+        self.stale = 0                     # other stray packets skipped (acks nobody waited for)
 
     # -- line -----------------------------------------------------------------------------------
 
@@ -162,6 +226,7 @@ class ZapBus:
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
         except Exception as e:  # serial.SerialException
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
+        self._owed.clear()                 # nothing said at the old speed is heard at the new one
 
     def close(self) -> None:
         close_port(self.port)
@@ -173,10 +238,46 @@ class ZapBus:
         self.close()
 
     def reply_timeout(self, tx_bytes: int, rx_bytes: int, extra: float = 0.0) -> float:
-        """The derived timeout: both packets on the wire + turnaround + margin + ``extra``."""
+        """The derived timeout: both packets on the wire + turnaround allowance + margin +
+        ``extra`` (or ``timeout`` when given)."""
         if self.timeout is not None:
             return self.timeout
-        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + TURNAROUND + self.margin + extra
+        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + self.turnaround + self.margin + extra
+
+    def reply_timeout_derived(self, tx_bytes: int, rx_bytes: int, extra: float = 0.0) -> float:
+        """The derived timeout, whatever ``timeout`` says."""
+        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + self.turnaround + self.margin + extra
+
+    def linger(self, seconds: float) -> None:
+        """Keep reading for ``seconds`` (late replies are accounted for; see :attr:`events`)."""
+        end = time.monotonic() + seconds
+        while True:
+            self._drain()
+            left = end - time.monotonic()
+            if left <= 0:
+                break
+            time.sleep(min(0.002, left))
+        self._drain()
+
+    @property
+    def typical_turnaround(self):
+        """The median turnaround estimate of the answered attempts so far (None before any)."""
+        if not self._turnarounds:
+            return None
+        values = sorted(self._turnarounds)
+        return values[len(values) // 2]
+
+    def quick_timeout(self, tx_bytes: int) -> float:
+        """A probe's wait when silence is the expected answer: our packet and the reply's first
+        byte on the wire, plus the typical turnaround x1.25 (at least :data:`TURNAROUND` plus the
+        adapter's latency), plus :data:`QUICK_MARGIN`. A slower reply is caught as late."""
+        if self.timeout is not None:
+            return self.timeout
+        floor = TURNAROUND + max(0.0, self.margin - MARGIN)
+        typical = self.typical_turnaround
+        allowance = floor if typical is None else max(floor, typical * 1.25)
+        allowance = min(allowance, self.turnaround + self.margin)
+        return wire_time(tx_bytes + 1, self.baud, self.stop_bits) + allowance + QUICK_MARGIN
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
@@ -187,9 +288,12 @@ class ZapBus:
         text = str(e) or e.__class__.__name__
         return PortError(f"port {self.url}: failed: {text}")
 
-    def _write(self, pkt: bytes) -> None:
+    def _write(self, pkt: bytes) -> float:
+        """Drain, then write ``pkt``; returns the time just before the write (round trips are
+        measured from there, so a host that is preempted after writing never shortens them)."""
+        self._drain()
+        t0 = time.monotonic()
         try:
-            self.port.reset_input_buffer()
             self.port.write(pkt)
         except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
             if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):
@@ -197,36 +301,140 @@ class ZapBus:
             raise self._port_error(e) from None
         self.sent += 1
         self._recent.append(bytes(pkt))
+        return t0
 
-    def _read(self, n: int, timeout: float) -> bytes:
-        if timeout <= 0:
-            return b""
+    def _set_timeout(self, value) -> None:
+        if self._port_timeout != value:
+            self.port.timeout = value
+            self._port_timeout = value
+
+    def _read(self, n: int, deadline: float) -> bytes:
+        """Bytes received by ``deadline`` (returns as soon as some are there; at most ``n`` on
+        ports read by size)."""
         try:
-            if self._port_timeout != timeout:
-                self.port.timeout = timeout
-                self._port_timeout = timeout
+            if self._fd is not None:
+                self._set_timeout(0)
+                left = deadline - time.monotonic()
+                if left > 0:
+                    ready, _, _ = select.select([self._fd], [], [], left)
+                    if not ready:
+                        return b""
+                return self.port.read(max(1, self.port.in_waiting))
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return b""
+            self._set_timeout(QUANTUM)
+            return self.port.read(n)
+        except Exception as e:
+            if isinstance(e, (KeyboardInterrupt, PortError)):
+                raise
+            raise self._port_error(e) from None
+
+    def _drain(self, until=None, ids=None, token=None):
+        """Read what has arrived since the last transaction and account for it: late replies to
+        unanswered attempts are counted (and reported as events), the rest skipped as stale. A
+        packet caught half-way is read to its end. With ``until``/``ids``: also wait (at most
+        until ``until``) for the owed replies of those IDs. With ``token``: a late reply to an
+        earlier attempt of that request is returned (as its :class:`Reply`), not counted."""
+        framer = ZapFramer()
+        answer = None
+        while True:
+            now = time.monotonic()
+            while self._owed and self._owed[0].until < now:
+                self._owed.popleft()
+            try:
+                waiting = self.port.in_waiting
+            except Exception:  # noqa: BLE001 - a port without in_waiting (or a vanished one)
+                waiting = None
+            if waiting is None:
+                try:
+                    self.port.reset_input_buffer()
+                except Exception as e:
+                    if isinstance(e, KeyboardInterrupt):
+                        raise
+                    raise self._port_error(e) from None
+                return None
+            owed = ids is not None and any(o.token is not None and o.ids & ids for o in self._owed)
+            if waiting:
+                data = self._read(waiting, now) if self._fd is not None else self._read_waiting(waiting)
+            elif framer.pending or owed:
+                limit = now + wire_time(1, self.baud, self.stop_bits) + INTER_BYTE + self.margin
+                if owed and not framer.pending:
+                    limit = min(until, min(o.until for o in self._owed if o.token is not None and o.ids & ids))
+                if now >= limit:
+                    break
+                data = self._read(64, limit)
+                if not data and framer.pending and time.monotonic() >= limit:
+                    break
+            else:
+                break
+            for p in framer.feed(data) if data else ():
+                answer = self._stray(bytes(p), token) or answer
+        for p in framer.flush():
+            answer = self._stray(bytes(p), token) or answer
+        if framer.bad or framer.skipped:
+            self.events.append(("garbled", None, time.monotonic()))
+        return answer
+
+    def _read_waiting(self, n: int) -> bytes:
+        try:
+            self._set_timeout(0)
             return self.port.read(n)
         except Exception as e:
             if isinstance(e, (KeyboardInterrupt, OutputError)):
                 raise
             raise self._port_error(e) from None
 
+    def _stray(self, p: bytes, token=None):
+        """Account for a packet read between attempts: a late reply to an earlier attempt of
+        request ``token`` is returned as its Reply; other late replies are counted."""
+        if p in self._recent or zap.is_command(p[5]):
+            return None                    # our own echo, or another master's command
+        if token is not None:
+            owed = self._take_owed(p, token)
+            if owed is not None:
+                return self._reply(p, time.monotonic() - owed.t0)
+        owed = self._take_owed(p)
+        if owed is not None and owed.token is not None:
+            self.late += 1
+            self.events.append(("late", p[3], time.monotonic()))
+            return None
+        self.stale += 1
+        return None
+
+    def _take_owed(self, p, token=None):
+        now = time.monotonic()
+        for owed in self._owed:
+            if owed.until >= now and owed.matches(p) and (token is None or owed.token is token):
+                self._owed.remove(owed)
+                return owed
+        return None
+
+    def take_events(self) -> list:
+        """The late/garbled events seen since the last call (for scans)."""
+        out, self.events = self.events, []
+        return out
+
     def _settle(self) -> None:
         wait = self._quiet_until - time.monotonic()
         if wait > 0:
             time.sleep(wait)
 
+    def _learn(self, rtt: float, tx: int, rx: int) -> None:
+        self._turnarounds.append(max(0.0, rtt - wire_time(tx + rx, self.baud, self.stop_bits)))
+
     # -- one transaction ----------------------------------------------------------------------
 
     def transact(self, pkt: bytes, *, reply=None, data_len=None, extra=0.0, timeout=None, retries=None,
-                 accept_ids=None, check=True, optional=False):
+                 accept_ids=None, check=True, optional=False, quick=False):
         """Send ``pkt``; return its checked :class:`Reply`, or None when none is expected.
 
         ``reply``: whether a reply comes (default: from the instruction and ``return_mode``);
         ``data_len``: data bytes the reply must carry (None: any); ``extra``: seconds added to
         the derived timeout; ``accept_ids``: IDs a reply may carry (default: the packet's);
         ``check``: raise DeviceError for error bits; ``optional``: no reply is not an error
-        (returns None at once, without a retry: the command may have been carried out).
+        (returns None at once, without a retry: the command may have been carried out);
+        ``quick``: wait only the quick probe's time (:meth:`quick_timeout`) for a first byte.
         """
         pkt = bytes(pkt)
         ident = pkt[3]
@@ -236,27 +444,43 @@ class ZapBus:
         restart = pkt[5] in zap.RESTART_CODES
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
+        accept = set(accept_ids) if accept_ids else {ident}
         if not reply:
             self._settle()
             self._write(pkt)
             gap = wire_time(len(pkt), self.baud, self.stop_bits)
             gap += RESTART_PAUSE if restart else (NV_PAUSE if stored else 0.0)
             self._quiet_until = time.monotonic() + gap
+            if ident != zap.BROADCAST:
+                # an actuator in another return mode may acknowledge anyway: skip that ack later
+                now = time.monotonic()
+                self._owed.append(_Owed(None, accept, None, now, now + LATE_WINDOW))
             return None
         rx_len = 7 + (data_len or 0)
-        limit = timeout if timeout is not None else self.reply_timeout(len(pkt), rx_len, extra)
-        accept = set(accept_ids) if accept_ids else {ident}
+        if timeout is not None:
+            limit = timeout
+        elif quick:
+            limit = self.quick_timeout(len(pkt)) + extra
+        else:
+            limit = self.reply_timeout(len(pkt), rx_len, extra)
+        token = object()
         problems = []
+        if any(o.token is not None and o.ids & accept for o in self._owed):
+            # a reply to an earlier request to this actuator may still come: let it come (or its
+            # window pass) so that it cannot be taken for the answer to this one
+            self._drain(time.monotonic() + LATE_WINDOW, accept)
         for attempt in range(tries):
+            got = None
             if attempt:
                 self.retried += 1
-            self._settle()
-            self._write(pkt)
-            t0 = time.monotonic()
-            got = self._await(pkt, accept, data_len, rx_len, t0 + limit, restart)
+                got = self._drain(token=token)     # the last attempt's reply, come just too late?
+            if got is None:
+                self._settle()
+                t0 = self._write(pkt)
+                got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
             if isinstance(got, Reply):
-                got.rtt = time.monotonic() - t0
                 self.replies += 1
+                self._learn(got.rtt, len(pkt), rx_len)
                 if restart:
                     self._quiet_until = time.monotonic() + RESTART_PAUSE
                 elif stored:
@@ -265,73 +489,112 @@ class ZapBus:
                     raise device_error(got)
                 return got
             problems.append(got)
-            if optional and got[0] == "none":
-                return None                # silence is a legitimate answer: do not repeat the command
+            if got[0] == "none":
+                self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW))
+                if optional:
+                    return None            # silence is a legitimate answer: do not repeat the command
         return self._fail(pkt, problems, limit, tries, optional)
 
-    def _await(self, pkt, accept, data_len, rx_len, deadline, restart):
-        """Read until a valid reply or the deadline. Returns a Reply or a problem tuple
-        (kind, detail, received bytes)."""
+    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token=None):
+        """Read until a valid reply or the deadline. Returns a Reply (``rtt`` from the attempt
+        that was answered) or a problem tuple (kind, detail, received bytes)."""
         framer = ZapFramer()
         received = bytearray()
         echo_known = self.adapter_echo
-        state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0)}
+        state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
+                 "explained": 0}
         wrong = []
+        deadline = t0 + limit
+        physical = wire_time(len(pkt) + rx_len, self.baud, self.stop_bits)
 
         def examine(packets):
             for p in packets:
                 p = bytes(p)
+                state["explained"] += len(p)
                 if p == pkt:
                     state["copies"] += 1
                     self.adapter_echo = True
                     state["want"] = max(state["want"], len(received) + rx_len)
                     continue
-                if p in self._recent:
-                    continue                      # a late echo of an earlier packet
-                if zap.is_command(p[5]) and p[3] not in accept:
-                    continue                      # another master's command
+                if p in self._recent or zap.is_command(p[5]):
+                    continue                      # a late echo of an earlier packet, another master
+                now = time.monotonic()
+                owed = self._take_owed(p)
+                if owed is not None and owed.token is None and p[3] in accept and data_len is not None:
+                    self._owed.appendleft(owed)   # maybe an unasked ack; judged by its length below
+                elif owed is not None and owed.token is None:
+                    self.stale += 1               # an acknowledgement nobody waited for
+                    continue
+                elif owed is not None:
+                    if owed.token is token and token is not None:
+                        if now - t0 < physical:
+                            # too early for this attempt: an earlier attempt's reply answers it
+                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW))
+                            return self._reply(p, now - owed.t0)
+                        self._owed.appendleft(owed)      # this attempt's; the earlier one stays owed
+                    else:
+                        self.late += 1
+                        self.events.append(("late", p[3], now))
+                        state["want"] = len(received) + rx_len
+                        continue
                 if p[3] not in accept:
                     wrong.append(p)
                     state["want"] = len(received) + rx_len
                     continue
                 data = p[6:-1]
                 if data_len is not None and len(data) != data_len:
-                    return ("length", f"reply carries {len(data)} data bytes, expected {data_len}",
-                            bytes(received))
-                return Reply(p[3], p[5], data, p)
+                    self.stale += 1               # an ack nobody waited for; the reply may follow
+                    state["mismatch"] = (len(data), bytes(p))
+                    state["want"] = len(received) + rx_len
+                    continue
+                return self._reply(p, now - t0)
             return None
 
         while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                break
-            chunk = self._read(max(1, state["want"] - len(received)), left)
+            chunk = self._read(max(1, state["want"] - len(received)), deadline)
             if not chunk:
-                break
+                if time.monotonic() >= deadline:
+                    break
+                continue
             received += chunk
             got = examine(framer.feed(chunk))
             if got is not None:
                 return got
+            if framer.pending:
+                # bytes of an incomplete packet: give the rest time to trickle in
+                more = time.monotonic() + wire_time(1, self.baud, self.stop_bits) + INTER_BYTE + self.margin
+                deadline = max(deadline, more)
         pending, bad_before = framer.pending, framer.bad
         got = examine(framer.flush())               # a packet held back to rule out a rival
+        if framer.bad or len(received) > state["explained"]:
+            self.events.append(("garbled", None, time.monotonic()))   # a collision, for scans
         if got is not None:
             return got
         copies = state["copies"]
         # The documented Restart feedback is a copy of the command itself: accept a copy that
         # is more than the adapter's known echo.
         if restart and not wrong and copies >= (2 if echo_known else 1):
-            return Reply(pkt[3], 0, b"", pkt)
+            return self._reply(pkt, time.monotonic() - t0, copy=True)
         if wrong:
             ids = ", ".join(str(p[3]) for p in wrong)
             return ("wrong-id", f"reply from ID {ids}, expected ID {min(accept)}", bytes(received))
-        if pending and not bad_before and bytes(received).find(zap.HEADER) >= 0:
+        if state["mismatch"] is not None:
+            n = state["mismatch"][0]
+            return ("length", f"reply carries {n} data bytes, expected {data_len}", bytes(received))
+        if pending and not bad_before and bytes(received[-pending:]).startswith(b"\xff"):
             return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet)",
                     bytes(received))
         if framer.bad:
             return ("checksum", "corrupted reply (checksum mismatch)", bytes(received))
-        if len(received) > copies * len(pkt):
+        if len(received) > state["explained"]:
             return ("garbage", "unreadable bytes instead of a reply (wrong baud rate?)", bytes(received))
         return ("none", "echo only" if copies else "", bytes(received))
+
+    @staticmethod
+    def _reply(p, rtt, copy=False):
+        if copy:
+            return Reply(p[3], 0, b"", p, rtt)
+        return Reply(p[3], p[5], p[6:-1], p, rtt)
 
     def _fail(self, pkt, problems, limit, tries, optional):
         ident = pkt[3]
@@ -379,7 +642,8 @@ class ZapBus:
                 return self.transact(pkt, check=check, **kw)
             finally:
                 self.return_mode = new
-        if code not in zap.INSTRUCTION_BY_CODE and pkt[3] != zap.BROADCAST:
+        ins = zap.INSTRUCTION_BY_CODE.get(code)
+        if (ins is None or not ins.documented) and pkt[3] != zap.BROADCAST:
             kw["reply"] = True
             kw["optional"] = True
         if optional is not None:
@@ -424,26 +688,32 @@ class ZapBus:
         for pkt in zap.symmetric_store(reg, targets):
             self.command(pkt)
 
-    def ping(self, ident: int, *, timeout=None, retries=0):
+    def ping(self, ident: int, *, timeout=None, retries=0, quick=False):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
-        retried ``retries`` times and then raised as BadReply."""
-        pkt = zap.echo(ident)
-        tries = 1 + retries
-        limit = timeout if timeout is not None else self.reply_timeout(len(pkt), 7)
-        problems = []
+        retried ``retries`` times and then raised as BadReply. ``quick``: wait only the quick
+        probe's time (a slower reply is recognised as late later: see :attr:`events`)."""
+        return self.transact(zap.echo(ident), reply=True, timeout=timeout, retries=retries, optional=True,
+                             check=False, quick=quick)
+
+    def answers(self, ident: int, *, tries: int = 3) -> bool:
+        """Whether any actuator answers to ``ident``: Echo with the full allowance up to
+        ``tries`` times; a reply with error bits, a garbled reply or a late reply from
+        ``ident`` all count as an answer. Only ``tries`` silences in a row say it is free."""
+        self.take_events()
         for _ in range(tries):
-            self._settle()
-            self._write(pkt)
-            t0 = time.monotonic()
-            got = self._await(pkt, {ident}, None, 7, t0 + limit, False)
-            if isinstance(got, Reply):
-                got.rtt = time.monotonic() - t0
-                self.replies += 1
-                return got
-            problems.append(got)
-            if got[0] == "none":
-                return None
-        return self._fail(pkt, problems, limit, tries, True)
+            try:
+                if self.ping(ident) is not None:
+                    return True
+            except BadReply:
+                return True
+            if any(kind == "late" and who == ident for kind, who, _ in self.events):
+                return True
+        self._settle()
+        end = time.monotonic() + self.turnaround + self.margin
+        while time.monotonic() < end:               # a reply slower than every wait above
+            time.sleep(min(0.005, max(0.0, end - time.monotonic())))
+        self._drain()
+        return any(kind == "late" and who == ident for kind, who, _ in self.take_events())
 
     def detect_return_mode(self, ident: int) -> int:
         """Ask the actuator: Load feedback-return-mode (answered in modes 1 and 2); no answer

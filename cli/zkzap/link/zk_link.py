@@ -100,10 +100,13 @@ class ZkLink:
     """A port to a ZK ECU. :meth:`read` returns the bytes that arrived within a short slice
     (``b""`` if none) and appends them to the raw log; :meth:`write` sends a frame."""
 
-    def __init__(self, ser, url, raw_log=None):
+    def __init__(self, ser, url, raw_log=None, baud=None, slice_s=READ_SLICE_S, stop_bits=1):
         self.ser = ser
         self.url = url
         self.raw_log = raw_log
+        self.baud = baud if baud is not None else getattr(ser, "baudrate", None)
+        self.slice_s = slice_s
+        self.stop_bits = stop_bits
         self.bytes_in = 0
         self.frames_out = 0
 
@@ -116,7 +119,15 @@ class ZkLink:
         if lent is not None:        # a batch: the one open port, left open by close()
             return lent.borrow(raw_log, slice_s)
         ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
-        return cls(ser, url, raw_log)
+        return cls(ser, url, raw_log, baud, slice_s, stop_bits)
+
+    def reopen(self) -> None:
+        """Close the failed port and open the same device again (PortError while it is absent)."""
+        from .port import close_port, open_port
+
+        close_port(self.ser)
+        self.ser = open_port(self.url, self.baud, timeout=self.slice_s, write_timeout=1.0,
+                             stop_bits=self.stop_bits)
 
     def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
         """A link over this one's port for one command; its close() leaves the port open."""
@@ -168,30 +179,89 @@ def _reason(e) -> str:
 
 # --- frame sources -----------------------------------------------------------------------------
 
+#: Pause between two attempts to reopen a vanished port (seconds).
+REOPEN_INTERVAL = 0.25
+
+
 class LiveSource:
-    """Status frames from a :class:`ZkLink`, stamped with seconds since the source started."""
+    """Status frames from a :class:`ZkLink`, stamped with seconds since the source started.
+
+    With ``reconnect`` (seconds), a port that fails or vanishes is reopened (the same device
+    path or URL) every :data:`REOPEN_INTERVAL` for up to that long: meanwhile :meth:`poll`
+    returns no frames and :attr:`down` is the time it failed; once it is back, :attr:`gap` is
+    ``(t_down, t_up, reason)`` until :meth:`take_gap`. After ``reconnect`` seconds the port
+    failure is raised as it would have been without it.
+    """
 
     live = True
 
-    def __init__(self, link: ZkLink):
+    def __init__(self, link: ZkLink, reconnect=None):
         self.link = link
+        self.reconnect = reconnect
         self.framer = ZkFramer("status")
         self.t0 = time.monotonic()
         self.wall0 = time.time()
+        self.down = None                  # model time the port failed, while it is away
+        self.gap = None
+        self.reconnects = 0
+        self._error = None
+        self._next_try = 0.0
 
     def now(self) -> float:
         return time.monotonic() - self.t0
 
     def poll(self):
         """Frames read within one slice, as ``[(t, frame), ...]``."""
-        data = self.link.read()
+        if self.down is not None:
+            return self._retry()
+        try:
+            data = self.link.read()
+        except PortError as e:
+            if not self.reconnect:
+                raise
+            self._fail(e)
+            return []
         if not data:
             return []
         t = self.now()
         return [(t, f) for f in self.framer.feed(data)]
 
+    def _fail(self, e):
+        self.down = self.now()
+        self._error = e
+        self._next_try = 0.0
+        self.framer.flush()                # a frame cut by the drop-out is not glued to new bytes
+
+    def _retry(self):
+        now = self.now()
+        if now - self.down > self.reconnect:
+            raise PortError(f"{self._error}; not back within --reconnect {self.reconnect:g} s")
+        if now < self._next_try:
+            time.sleep(min(0.05, self._next_try - now))
+            return []
+        self._next_try = now + REOPEN_INTERVAL
+        try:
+            self.link.reopen()
+        except (PortError, UsageError):
+            return []
+        self.gap = (self.down, self.now(), str(self._error))
+        self.down = None
+        self.reconnects += 1
+        return []
+
+    def take_gap(self):
+        gap, self.gap = self.gap, None
+        return gap
+
     def write(self, frame):
-        self.link.write(frame)
+        if self.down is not None:
+            return                         # nothing to write to while the port is away
+        try:
+            self.link.write(frame)
+        except PortError as e:
+            if not self.reconnect:
+                raise
+            self._fail(e)
 
     def close(self):
         self.framer.flush()
@@ -421,6 +491,7 @@ class Telemetry:
         for k, v in rec.items():
             if k in latest:
                 latest[k] = v
+        latest[zk.OUT_OF_RANGE] = rec.get(zk.OUT_OF_RANGE)   # this frame's, never a stale one
         rpm = rec.get("rpm")
         if rpm is not None and (self.max_rpm is None or rpm > self.max_rpm):
             self.max_rpm = rpm
@@ -640,6 +711,8 @@ class Session:
         # the status IDs seen, until the ECU's cycle is known (an ID comes again): then --ids
         # that the ECU never sends are reported (all of them: the session ends)
         self._cycle = set() if telemetry.ids is not None else None
+        self._back_t = 0.0
+        self.interrupted = None           # PortError text when a reconnect cut engine control
 
     def _check_ids(self, sid):
         cycle = self._cycle
@@ -663,6 +736,31 @@ class Session:
         self.notify(f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
                     f"(its cycle is IDs {sends})")
         return None
+
+    def _reconnected(self, gap):
+        """The port is back after a drop-out: abort first (a session that controlled the engine
+        stops controlling it), then a gap record, then logging goes on."""
+        down, up, reason = gap
+        self._back_t = up
+        if self.controlling and self.abort != "none":
+            frames = abort_frames(self.abort, self.telemetry.decoder.known, pump=self.pump_on)
+            for f in frames:
+                self.source.write(f)
+            self.notify(f"port back after {up - down:.1f} s: sent {describe_abort(self.abort)}; "
+                        "no longer controlling the engine")
+            self.control = None
+            self.interrupted = (f"{reason}; the port came back after {up - down:.1f} s and the abort "
+                                f"({describe_abort(self.abort)}) was sent")
+        elif self.controlling:
+            self.notify(f"port back after {up - down:.1f} s (--abort none: nothing sent); "
+                        "no longer controlling the engine")
+            self.control = None
+            self.interrupted = f"{reason}; the port came back after {up - down:.1f} s"
+        else:
+            self.notify(f"port back after {up - down:.1f} s ({reason})")
+        rec = {"time": iso_utc(self.telemetry.wall0 + up), "t": round(up, 3), "kind": "gap",
+               "gap_s": round(up - down, 3), "since_t": round(down, 3), "reason": reason}
+        self.sink(rec)
 
     def _send(self, frame):
         self.source.write(frame)
@@ -709,6 +807,8 @@ class Session:
                     if got is None:
                         outcome = Outcome("end")
                         break
+                    if getattr(src, "gap", None) is not None:
+                        self._reconnected(src.take_gap())
                     for t, frame in got:
                         if self.duration is not None and t + 1e-9 >= self.duration:
                             outcome = Outcome("duration")     # a fast replay's batch reaches past it
@@ -745,8 +845,9 @@ class Session:
                     if self.on_update is not None and now >= next_update:
                         self.on_update(tel.snapshot(now), tel.health(now, src.framer))
                         next_update = now + self.update_interval
-                    if src.live and self.silence is not None:
+                    if src.live and self.silence is not None and getattr(src, "down", None) is None:
                         since = self.last_frame_t if self.last_frame_t is not None else 0.0
+                        since = max(since, self._back_t)
                         if now - since > self.silence:
                             where = getattr(getattr(src, "link", None), "url", "the port")
                             if self.last_frame_t is None:
@@ -775,6 +876,8 @@ class Session:
                 except BrokenPipeError:
                     outcome = Outcome("pipe")
             self._abort(outcome)
+        if self.interrupted is not None and outcome.ok:
+            outcome = Outcome("port", PortError(self.interrupted), aborted=self.abort)
         self.ended_t = now = src.now()
         if self.on_update is not None:
             self.on_update(tel.snapshot(now), tel.health(now, src.framer))

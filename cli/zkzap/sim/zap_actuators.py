@@ -14,9 +14,12 @@ memory, answers exactly as its feedback-return mode says (0: Echo only; 1: Load 
   takes effect);
 - a host at another baud rate than the actuator's is not heard (pty and ``sim://`` transports
   pass the host's baud; a TCP client has none and always matches);
-- replies leave :data:`TURNAROUND` after the command (plus :data:`NV_WRITE_TIME` after a write
-  to stored registers), take their real time on the wire, and never overlap; two actuators
-  answering at once collide (wired-AND of their bytes, like an open-drain line);
+- a command is heard once its last byte has crossed the line (the request's own time on the
+  wire at the host's baud rate); replies leave the actuator's turnaround after that
+  (:data:`TURNAROUND` by default, ``turnaround=MS``; plus :data:`NV_WRITE_TIME` after a write to
+  stored registers), take their real time on the wire (plus ``gap=MS`` between two bytes, like
+  a device or USB adapter that trickles its bytes), and never overlap; two actuators answering
+  at once collide (wired-AND of their bytes, like an open-drain line);
 - stored (NV) registers and the rod position are kept in a JSON state file (``state=FILE``)
   across restarts of the simulator.
 
@@ -39,6 +42,7 @@ echo           the adapter echoes the host's bytes back, like a half-duplex adap
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import os
@@ -227,6 +231,7 @@ class Actuator:
         self.deaf_until = 0.0
         self.faults = {}                  # kind -> Fault (reply faults)
         self.nv_dirty = False             # stored registers changed since the last save
+        self.turnaround = TURNAROUND      # processing time before a reply starts (model seconds)
         self.power_on(0.0)
 
     # -- registers ----------------------------------------------------------------------------
@@ -455,7 +460,7 @@ class Actuator:
             self.t = done
         if reply is None:
             return None
-        return done + TURNAROUND, reply, baud
+        return done + self.turnaround, reply, baud
 
     def apply_faults(self, t, reply):
         """Reply faults: returns (t, reply) or None (silent)."""
@@ -519,10 +524,13 @@ class ActuatorBus:
     packets the actuators heard).
     """
 
-    def __init__(self, actuators, *, state_path=None, echo=False):
+    def __init__(self, actuators, *, state_path=None, echo=False, turnaround=TURNAROUND, gap=0.0):
         self.actuators = list(actuators)
         self.state_path = state_path
         self.echo = echo
+        self.turnaround = turnaround      # every actuator's reply turnaround (model seconds)
+        self.gap = gap                    # pause between two reply bytes (model seconds)
+        self._rx_free = 0.0               # when the host's bytes written so far have crossed the line
         self.restored = False
         self.received = deque(maxlen=1000)
         self._framers = {}
@@ -589,14 +597,18 @@ class ActuatorBus:
     def receive(self, data: bytes, now: float, baud=None) -> None:
         if not data:
             return
+        # the host's bytes take their time on the line: a command is heard when its last byte is in
+        line = baud or (self.actuators[0].baud if self.actuators else 57600)
+        arrived = max(now, self._rx_free) + wire_time(len(data), line)
+        self._rx_free = arrived
         if self.echo:
-            self._emit(now, bytes(data))
+            self._emit(arrived, bytes(data))
         framer = self._framers.get(baud)
         if framer is None:
             framer = self._framers[baud] = ZapFramer()
         for pkt in framer.feed(data):
             self.received.append(bytes(pkt))
-            self._dispatch(bytes(pkt), now, baud)
+            self._dispatch(bytes(pkt), arrived, baud)
 
     def _dispatch(self, pkt: bytes, now: float, baud) -> None:
         ident, code = pkt[3], pkt[5]
@@ -610,6 +622,7 @@ class ActuatorBus:
         replies = []
         stored = False
         for a in targets:
+            a.turnaround = self.turnaround
             r = a.handle(pkt, now)
             if a.nv_dirty:
                 stored = True
@@ -635,14 +648,20 @@ class ActuatorBus:
                 merged.append((t, data, rbaud))
         for t, data, rbaud in merged:
             start = max(t, self._bus_free)
-            end = start + wire_time(len(data), rbaud)
+            if self.gap > 0:
+                byte = wire_time(1, rbaud)
+                end = start
+                for i in range(len(data)):
+                    end = start + (i + 1) * byte + i * self.gap
+                    self._emit(end, data[i:i + 1])
+            else:
+                end = start + wire_time(len(data), rbaud)
+                self._emit(end, data)
             self._bus_free = end
-            self._emit(end, data)
 
     def _emit(self, t: float, data: bytes) -> None:
         self._seq += 1
-        self._queue.append((t, self._seq, data))
-        self._queue.sort()
+        bisect.insort(self._queue, (t, self._seq, data))
 
     def poll(self, now: float) -> bytes:
         if not self._queue or self._queue[0][0] > now:
@@ -701,26 +720,41 @@ class ActuatorBus:
         return True
 
 
+def _millis(key, value, top=1000.0) -> float:
+    """A time option in milliseconds (a finite number 0..``top``) -> seconds."""
+    try:
+        ms = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{key}: {value!r} is not a number of milliseconds") from None
+    if not (math.isfinite(ms) and 0 <= ms <= top):
+        raise ValueError(f"{key}: {value!r} is out of range; allowed 0..{top:g} ms")
+    return ms / 1000.0
+
+
 def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_mode=None,
-                 voltage=None, **unknown) -> ActuatorBus:
+                 voltage=None, turnaround=None, gap=None, **unknown) -> ActuatorBus:
     """Build a bus from string options (a ``sim://zap?...`` query or ``zkzap sim zap``).
 
     ``ids``: ``1,2,5-8`` (``ID@BAUD`` for one actuator at another baud rate); ``baud``: the
     others' baud rate; ``return_mode``: every actuator's feedback-return-mode; ``echo=1``: the
     adapter echoes; ``faults``: comma-separated ``[ID:]KIND[=VALUE][/COUNT]``; ``voltage``: the
-    supply voltage; ``state``: a JSON file keeping stored registers across runs (when it exists
+    supply voltage; ``turnaround``: milliseconds from a command's last byte to the reply's first
+    (default 2); ``gap``: milliseconds between two reply bytes (default 0); ``state``: a JSON
+    file keeping stored registers across runs (when it exists
     it defines the bus and ``ids``/``baud``/``return_mode`` are not applied).
     """
     if unknown:
         raise ValueError(f"unknown option {', '.join(sorted(unknown))}; allowed ids, state, baud, echo, "
-                         "faults, return_mode, voltage, speed")
+                         "faults, return_mode, voltage, turnaround, gap, speed")
     try:
         line = int(baud)
     except ValueError:
         line = -1
     if line not in zap.BAUD_TO_CODE:
         raise ValueError(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
-    bus = ActuatorBus([], state_path=state or None, echo=parse_flag("echo", echo))
+    bus = ActuatorBus([], state_path=state or None, echo=parse_flag("echo", echo),
+                      turnaround=TURNAROUND if turnaround in (None, "") else _millis("turnaround", turnaround),
+                      gap=0.0 if gap in (None, "") else _millis("gap", gap, 100.0))
     if not (state and bus.load_state()):
         bus.actuators = [Actuator(i, ident, b or line) for i, (ident, b) in enumerate(parse_ids(ids))]
         if return_mode not in (None, ""):

@@ -116,6 +116,21 @@ def refuse_protocol_change(packets, force) -> None:
                          "longer reach it; pass --force to do it anyway")
 
 
+def refuse_id_write(packets, force) -> None:
+    """Writing the ID register directly skips set-id's checks: refused without --force."""
+    from ...link.zap_bus import writes_id
+
+    if force:
+        return
+    for p in packets:
+        if writes_id(p):
+            if p[3] == zap.BROADCAST:
+                raise UsageError("id: a broadcast ID write gives every actuator on the bus the same ID, and "
+                                 "their replies then collide; pass --force to do it anyway")
+            raise UsageError("id: writing the ID directly skips the checks of 'zap set-id NEW --id OLD' (that "
+                             "NEW is free, read back from NEW); use set-id, or pass --force")
+
+
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
               **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first."""
@@ -184,6 +199,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
         return
     require_port(port, sim)
     refuse_protocol_change(packets, force)
+    refuse_id_write(packets, force)
     ask_consent(packets, port=port, sim=sim, yes=yes)
     from ...link.zap_bus import device_error
 
@@ -393,7 +409,8 @@ def _write_command(name, builder, doc):
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
     @click.argument("value", metavar="VALUE", type=INT)
     @id_option()
-    @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
+    @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and direct ID "
+                                                "writes (which skip set-id's checks).")
     @wire_options
     def command(reg, value, ident, force, **common):
         pkt = builder(ident, reg, value)
@@ -412,7 +429,8 @@ register asks for consent (--yes); the simulator (--sim, sim://) and loop:// nev
 store = _write_command("store", zap.store, """Store Data (0xF3): write VALUE to REGISTER.
 
 VALUE is an integer in the register's units ('zap registers' lists ranges), written
-little-endian in the register's size. Read-only registers and values out of range are refused.
+little-endian in the register's size. Read-only registers and values out of range are refused. Writing the id register needs
+--force: 'zap set-id' checks first that the new ID is free and reads it back.
 """ + _WIRE_NOTE + """
 \b
 Examples:
@@ -496,7 +514,8 @@ def parse_targets(pairs):
 @click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
-@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol).")
+@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and ID writes "
+                                            "(which skip set-id's checks).")
 @wire_options
 def sync_move(targets, reg, force, **common):
     """Symmetric Store (0x73) to broadcast: write one register of several actuators at once.
@@ -518,13 +537,16 @@ def sync_move(targets, reg, force, **common):
 @click.argument("instruction", metavar="INSTRUCTION")
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()
-@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol).")
+@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol) and ID "
+                                            "writes (which skip set-id's checks).")
 @wire_options
 def raw(instruction, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
-    INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move)
-    or a code: 0xF2 (hex), 242 (decimal, as register addresses are read) or F2. PARAMs are hex bytes in any notation (8C 02, 0x8C,0x02). Sent to a
+    INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move;
+    the undocumented vendor codes system-write, status, sync-read, bulk-read, bulk-write) or a
+    code: 0xF2 (hex), 242 (decimal, as register addresses are read) or F2. PARAMs are hex bytes
+    in any notation (8C 02, 0x8C,0x02). Sent to a
     port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
     a reply but does not fail without one.
 
@@ -550,7 +572,7 @@ def _instruction_code(text: str) -> int:
         # as register addresses: 0xF2 is hex, 242 decimal; bare hex with a letter (F2) is hex
         code = int(key, 10) if key.isdigit() else int(key, 0) if key.startswith("0x") else int(key, 16)
     except ValueError:
-        names = ", ".join(i.cli for i in zap.INSTRUCTIONS)
+        names = ", ".join(i.cli for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS)
         raise UsageError(f"instruction: unknown {text!r}; allowed {names} or a code 0x00..0xFF") from None
     if not 0 <= code <= 0xFF:
         raise UsageError(f"instruction: code {text} is out of range; allowed 0x00..0xFF")

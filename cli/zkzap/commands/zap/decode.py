@@ -21,6 +21,8 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"),
 def _table_cells(rec):
     if rec["kind"] == "command":
         rec["_what"] = rec["instruction"]
+    elif rec["kind"] == "unknown":
+        rec["_what"] = f"unknown 0x{rec['code']:02X}"
     else:
         rec["_what"] = ",".join(rec["errors"]) or "ok"
     detail = []
@@ -42,7 +44,10 @@ def decode(inputs, binary, fmt, output, append):
     """Decode mightyZAP packets to a table, JSON, JSON Lines or CSV.
 
     Commands and feedback are told apart by the byte after SIZE (an instruction code, or error
-    bits). In a capture of both directions each feedback is paired with the Load Data it
+    bits). IR Robot's undocumented vendor instructions (0xF9 system-write, which their Python
+    library sends as factory reset; 0x55 status, 0x82 sync-read, 0x92 bulk-read, 0x93
+    bulk-write) decode as commands with "documented": false; a byte that is neither an
+    instruction nor documented error bits gives kind "unknown" with its code. In a capture of both directions each feedback is paired with the Load Data it
     answers, so its data is named by register. Bad packets in a stream are skipped and counted
     on stderr; a single packet given as arguments with a bad checksum is an error (exit 1).
 

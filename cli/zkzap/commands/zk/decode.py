@@ -26,7 +26,7 @@ def columns(accept="both", raw=False):
         keys += [k for k in zk.CONTROL_KEYS if k not in keys]
     for k in keys:
         cols.append(k)
-        if raw and not k.endswith("_name") and k not in ("state", "action"):
+        if raw and not k.endswith("_name") and k not in ("state", "action", zk.OUT_OF_RANGE):
             cols.append(k + "_raw")
     if accept != "status":
         cols.append("reserved")

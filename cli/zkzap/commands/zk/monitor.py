@@ -16,7 +16,7 @@ from .. import CONTEXT, Command
 from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
-                        resolve_port, zk_timeout_help)
+                        reconnect_option, resolve_port, zk_timeout_help)
 
 
 class Output:
@@ -134,7 +134,8 @@ def _dashboard(title):
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
-                  stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None):
+                  stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
+                  reconnect=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
@@ -180,7 +181,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
-            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits))
+            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
+                                  reconnect=reconnect)
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
                           wall_clock=getattr(source, "wall_clock", source.live))
         sink, on_update = out.write, out.update if out.dashboard is not None else None
@@ -244,6 +246,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                    "control signal when the host falls silent.")
 @rate_option(help="Keep-alive rate (default 20 Hz).")
 @protocol_version_option
+@reconnect_option
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 @limit_options
@@ -251,7 +254,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @summary_option
 def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after,
             raw_log, count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
-            logbook, summary_json):
+            logbook, summary_json, reconnect=None):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -308,7 +311,8 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
-        stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate, stand=stand)
+        stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate, stand=stand,
+        reconnect=reconnect)
     report(stand, command="zk monitor", port=url or replay, files=(output, raw_log), outcome=outcome, tel=tel,
            session=session, summary_json=summary_json)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:

@@ -12,7 +12,7 @@ from .. import CONTEXT, Command
 from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
-from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
+from .telemetry import EXIT_HELP, log_options, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
           "a prompt on a terminal; sim:// and --sim never ask. "
@@ -74,9 +74,10 @@ def _read(path) -> str:
 @log_options
 @limit_options
 @logbook_option
+@reconnect_option
 def profile(schedule, example, interpolate, rate, abort, summary_json, settle, average, steps_csv, fuel_density,
             dry_run, port, baud, stop_bits, timeout, sim, yes, protocol_version, fmt, output, append, snapshot, ids,
-            stale_after, raw_log, limit, limits_files, on_limit, logbook):
+            stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None):
     """Run a throttle or RPM schedule on the engine while its telemetry is logged.
 
     SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' or 'time_s,rpm=N[,state]' (an optional
@@ -170,7 +171,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
-            title=f"profile {name} on {url}", stand=stand,
+            title=f"profile {name} on {url}", stand=stand, reconnect=reconnect,
             inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure

@@ -16,7 +16,8 @@ from .. import CONTEXT, Command, Group
 from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
+from .telemetry import (EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port,
+                        zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,
@@ -43,7 +44,7 @@ EXAMPLES = {
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
              "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
-             "summary_json": "--summary-json"}
+             "summary_json": "--summary-json", "reconnect": "--reconnect"}
 
 
 def format_hex(frame) -> str:
@@ -72,6 +73,7 @@ def send_options(f):
         limit_options,
         logbook_option,
         summary_option,
+        reconnect_option,
     ]
     f = apply_options(f, opts)
     if isinstance(f, click.Command):
@@ -86,7 +88,7 @@ def send_options(f):
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, stop_bits=1, for_s=None,
             rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
             stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
-            summary_json=None):
+            summary_json=None, reconnect=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
@@ -94,7 +96,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
                                ("raw_log", raw_log), ("limit", limit or None),
                                ("limits_files", limits_files or None), ("on_limit", on_limit),
-                               ("logbook", logbook), ("summary_json", summary_json)) if v is not None}
+                               ("logbook", logbook), ("summary_json", summary_json),
+                               ("reconnect", reconnect)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -135,7 +138,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or zk_link.DEFAULT_ABORT, stop_on_error=controls, title=f"{format_hex(frame)} to {url}",
-        stand=stand)
+        stand=stand, reconnect=reconnect)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)
     outcome.raise_for_status()

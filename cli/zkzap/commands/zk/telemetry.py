@@ -13,7 +13,7 @@ import click
 from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
                        UsageError, exit_status_help)
 from ...io import LOG_FORMATS
-from ..options import FilePath, apply_options, format_option
+from ..options import FilePath, FiniteRange, apply_options, format_option
 from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
@@ -58,6 +58,18 @@ def log_options(f):
     ]
     return apply_options(f, opts)
 
+
+#: --reconnect without a value: keep trying this long (seconds).
+RECONNECT_DEFAULT = 30.0
+
+reconnect_option = click.option(
+    "--reconnect", type=FiniteRange(0.1, 86400), default=None, is_flag=False,
+    flag_value=RECONNECT_DEFAULT, metavar="[S]",
+    help="When the port fails or vanishes (a USB adapter dropping out), keep reopening the same "
+         f"device for up to S seconds (default {RECONNECT_DEFAULT:g} without a value; off without the "
+         "option), write a gap record and go on writing the same files. A session that controls the "
+         "engine sends the abort the moment the port is back, before anything else, and only logs "
+         "from then on (exit status 4 at the end).")
 
 TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
                 "longer means exit 3.")

@@ -1,0 +1,117 @@
+"""--reconnect: a port that vanishes mid-run (a USB adapter dropping out) and comes back.
+
+The ECU simulator serves a pty behind a symlink (--link); stopping it makes the device vanish,
+a second simulator on the same link brings it back. Readiness is the first record on stdout,
+never a fixed sleep.
+"""
+
+import json
+import os
+import selectors
+import subprocess
+import time
+
+import pytest
+
+from .conftest import clean_env, executable, stop_sim
+
+FAST = ["--speed", "10"]
+
+
+def _lines(proc, want, timeout=20.0):
+    """Read stdout lines until ``want(line)`` is true (returns the lines read)."""
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    out = []
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            if not sel.select(max(0.0, deadline - time.monotonic())):
+                break
+            line = proc.stdout.readline()
+            if not line:
+                break
+            out.append(line)
+            if want(line):
+                return out
+    finally:
+        sel.close()
+    pytest.fail(f"no such line within {timeout} s; got {out[-3:]}")
+
+
+def _until_absent(path, timeout=5.0):
+    end = time.monotonic() + timeout
+    while os.path.lexists(path) and time.monotonic() < end:
+        time.sleep(0.01)
+
+
+@pytest.mark.parametrize("command,controls", [
+    (["zk", "monitor", "--duration", "30"], False),
+    (["zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "--yes"], True),
+])
+def test_reconnect_after_the_port_vanished(start_sim, tmp_path, command, controls):
+    link = str(tmp_path / "ecu")
+    _, first = start_sim(["zk", "--pty", "--link", link, *FAST])
+    out = tmp_path / "log.csv"
+    tool = executable(command[0])
+    proc = subprocess.Popen([tool, *command[1:], "-p", link, "--reconnect", "20", "-f", "jsonl",
+                             "--protocol-version", "6", "--raw-log", str(tmp_path / "raw.bin")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
+    try:
+        _lines(proc, lambda line: '"kind":"status"' in line)             # logging has begun
+        stop_sim(first)                                                  # the adapter drops out
+        _until_absent(link)
+        start_sim(["zk", "--pty", "--link", link, *FAST])                # ... and comes back
+        after = _lines(proc, lambda line: '"kind":"gap"' in line)
+        gap = json.loads(after[-1])
+        assert gap["gap_s"] > 0 and "failed" in gap["reason"]
+        more = _lines(proc, lambda line: '"kind":"status"' in line)       # same stream goes on
+        assert more
+        if controls:
+            # the engine session aborted on reconnect: the ECU goes to standby
+            _lines(proc, lambda line: '"sw_state_name":"standby"' in line)
+        proc.terminate()
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert "port back after" in err
+    if controls:
+        assert "sent standby" in err and "no longer controlling" in err
+    assert proc.returncode == 143
+    assert os.path.getsize(tmp_path / "raw.bin") > 0
+    assert not out.exists()
+
+
+def test_without_reconnect_a_vanished_port_is_exit_4(start_sim, tmp_path):
+    link = str(tmp_path / "ecu")
+    _, first = start_sim(["zk", "--pty", "--link", link, *FAST])
+    proc = subprocess.Popen([executable("zk"), "monitor", "-p", link, "--duration", "30", "-f", "jsonl"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
+    try:
+        _lines(proc, lambda line: '"kind":"status"' in line)
+        stop_sim(first)
+        _, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 4 and "failed" in err
+
+
+def test_reconnect_gives_up_after_its_time(start_sim, tmp_path):
+    link = str(tmp_path / "ecu")
+    _, first = start_sim(["zk", "--pty", "--link", link, *FAST])
+    proc = subprocess.Popen([executable("zk"), "monitor", "-p", link, "--duration", "30", "-f", "jsonl",
+                             "--reconnect", "0.5"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
+    try:
+        _lines(proc, lambda line: '"kind":"status"' in line)
+        stop_sim(first)
+        _, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 4 and "not back within --reconnect 0.5 s" in err

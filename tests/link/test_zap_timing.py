@@ -1,0 +1,131 @@
+"""Attribution and timing of mightyZAP transactions against slow, late and trickling devices."""
+
+import time
+
+import pytest
+
+from zkzap.codec import zap
+from zkzap.errors import BadReply, NoReply
+from zkzap.link.port import open_port, sim_url
+from zkzap.link.zap_bus import MAX_TURNAROUND, TURNAROUND, ZapBus, wire_time
+from zkzap.link.zap_scan import scan
+
+
+def make(ids="1,2", return_mode=1, **opts):
+    return ZapBus(open_port(sim_url("zap", ids=ids, **opts), 57600, timeout=0.1), return_mode=return_mode)
+
+
+def test_a_late_reply_is_never_the_answer_to_the_next_request():
+    bus = make()
+    bus.port.device.actuator(2).set("goal-speed", 700)
+    bus.port.device.inject(2, "delay", 30, count=1)          # later than the whole first wait
+    assert bus.read(2, "present-position") == 0               # answered (by the retry or the late reply)
+    assert bus.read(2, "goal-speed") == 700                   # not the late present-position reply
+    assert bus.echo(1).ident == 1
+    bus.linger(0.05)
+    assert bus.late >= 1 and bus.retried >= 1
+
+
+def test_a_late_reply_is_not_a_wrong_id_for_another_actuator():
+    bus = make()
+    bus.port.device.inject(2, "delay", 30, count=1)
+    assert bus.echo(2).ident == 2
+    assert bus.ping(5) is None                                # the retry's reply is owed, not "wrong ID"
+    assert not bus.answers(5)
+    assert bus.answers(2)
+
+
+def test_round_trip_is_measured_from_the_answered_attempt():
+    bus = make(turnaround="5")
+    r = bus.echo(1)
+    assert r.rtt >= wire_time(14, 57600) + 0.005
+    assert r.rtt < 0.2
+
+
+@pytest.mark.parametrize("opts", [{"turnaround": "20"}, {"turnaround": "20", "gap": "1"},
+                                  {"turnaround": "20", "gap": "1", "echo": "1"}])
+def test_slow_and_trickling_devices_with_default_timing(opts):
+    bus = make(**opts)
+    assert bus.echo(1).ident == 1
+    reply, values = bus.read_registers(2, 0x00, 17)
+    assert len(reply.data) == 17 and values[0][1] == 0x0C4C
+
+
+def test_bytes_more_than_the_inter_byte_allowance_apart_are_a_truncated_reply():
+    bus = make(gap="30")
+    with pytest.raises(BadReply, match="truncated reply"):
+        bus.read(1, "present-position", retries=0)
+
+
+def test_quick_probe_learns_the_turnaround():
+    bus = make()
+    before = bus.quick_timeout(7)
+    assert before == pytest.approx(wire_time(8, 57600) + TURNAROUND + 0.0005)
+    for _ in range(3):
+        bus.echo(1)
+    assert bus.typical_turnaround < MAX_TURNAROUND
+    assert bus.quick_timeout(7) < bus.reply_timeout(7, 7)
+    slow = make(turnaround="15")
+    for _ in range(3):
+        slow.echo(1)
+    assert slow.quick_timeout(7) > 0.015                      # a slow bus gets waits to match
+
+
+def test_no_reply_waits_the_full_allowance():
+    bus = make()
+    t = time.monotonic()
+    with pytest.raises(NoReply, match="within"):
+        bus.echo(9, retries=0)
+    assert time.monotonic() - t >= MAX_TURNAROUND
+
+
+def records(bus, ids, bauds=(57600,)):
+    out, warnings = [], []
+    for event in scan(bus, ids, list(bauds)):
+        if event[0] == "record":
+            out.append(event[1])
+        elif event[0] == "warning":
+            warnings.append(event[1])
+    return out, warnings
+
+
+@pytest.mark.parametrize("opts", [{"faults": "2:delay=18,9:delay=20"}, {"turnaround": "20", "gap": "1"},
+                                  {"turnaround": "20", "echo": "1"}, {"faults": "all:delay=12"}])
+def test_scan_finds_every_slow_actuator(opts):
+    bus = make(ids="1,2,5,9,20", **opts)
+    found, warnings = records(bus, list(range(0, 24)))
+    assert sorted(r["id"] for r in found) == [1, 2, 5, 9, 20]
+    assert all(r["status"] == "ok" and r["model"] == 0x0C4C and r["return_mode"] == 1 for r in found)
+    assert warnings == []
+
+
+def test_scan_identify_failure_leaves_fields_null():
+    bus = make(ids="3")
+    bus.timeout = 0.003                                      # shorter than any reply can take
+    found, _ = records(bus, [2, 3, 4])
+    assert [(r["id"], r["status"], r["model"], r["return_mode"]) for r in found] == [(3, "unidentified", None, None)]
+    assert "late" in found[0]["errors"][0]
+
+
+def test_scan_return_mode_0_is_found_out_not_guessed():
+    bus = make(ids="3", return_mode=1)
+    bus.port.device.actuator(3).set("feedback-return-mode", 0)
+    found, _ = records(bus, [3])
+    assert (found[0]["status"], found[0]["return_mode"], found[0]["model"]) == ("ok", 0, None)
+
+
+def test_scan_warns_of_two_actuators_with_one_id():
+    bus = make(ids="1,4,4")
+    bus.port.device.actuators[2].set("present-position", 2000)   # two units: the live registers differ
+    found, warnings = records(bus, [1, 4])
+    by_id = {r["id"]: r for r in found}
+    assert by_id[1]["status"] == "ok"
+    assert by_id[4]["status"] == "duplicate"
+    assert len(warnings) == 1 and "ID 4" in warnings[0] and "two actuators" in warnings[0]
+
+
+def test_answers_counts_error_bits_and_garbled_replies():
+    bus = make(ids="1,2")
+    bus.port.device.inject(1, "overload")
+    bus.port.device.inject(2, "corrupt")
+    assert bus.answers(1) and bus.answers(2) and not bus.answers(3)
