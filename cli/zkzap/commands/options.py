@@ -212,7 +212,24 @@ def consent(action: str, yes: bool) -> None:
     from ..io.term import is_tty
 
     if is_tty(sys.stdin) and is_tty(sys.stderr):
-        if click.confirm(f"{action}. Continue?", default=False, err=True):
+        if _ask(f"{action}. Continue? [y/N]: "):
             return
         raise UsageError("not sent: consent refused")
     raise UsageError(f"not sent: {action}; pass --yes to confirm")
+
+
+def _ask(question: str) -> bool:
+    """A yes/no question on the terminal; the end of input (Ctrl-D) is a refusal (exit 2), Ctrl-C
+    an interruption (130), as everywhere."""
+    while True:
+        click.echo(question, nl=False, err=True)
+        line = sys.stdin.readline()
+        if not line:
+            click.echo("", err=True)
+            raise UsageError("not sent: no answer (end of input)")
+        answer = line.strip().lower()
+        if answer in ("y", "yes"):
+            return True
+        if answer in ("", "n", "no"):
+            return False
+        click.echo("Answer y or n.", err=True)

@@ -31,7 +31,7 @@ from collections import deque
 from ..codec import zk
 from ..codec.fields import FieldValueError
 from ..codec.framing import ZkFramer
-from ..errors import DeviceError, NoReply, PortError, UsageError, ZkzapError
+from ..errors import DeviceError, NoReply, PortError, UsageError
 from ..errors import TERMINATED
 
 #: Control frames per second while a session controls the engine (``--rate``).
@@ -134,7 +134,7 @@ class ZkLink:
         try:
             data = self.ser.read(READ_SIZE)
         except Exception as e:   # SerialException, OSError, and whatever a URL handler raises
-            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
+            raise port_failed(self.url, e) from None
         if data:
             self.bytes_in += len(data)
             if self.raw_log is not None:
@@ -147,7 +147,7 @@ class ZkLink:
             self.ser.write(frame)
             self.ser.flush()
         except Exception as e:
-            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
+            raise port_failed(self.url, e) from None
         self.frames_out += 1
 
     def close(self):
@@ -156,10 +156,10 @@ class ZkLink:
         close_port(self.ser)
 
 
-def _reason(e) -> str:
-    import re
+def port_failed(url, e):
+    from .port import port_failed as failed
 
-    return re.sub(r"\[Errno \d+\] ", "", str(e)) or type(e).__name__
+    return failed(url, e)
 
 
 # --- frame sources -----------------------------------------------------------------------------
@@ -507,17 +507,21 @@ class Telemetry:
 
 class SignalGuard:
     """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
-    records (files stay whole) and can send the abort command. A second signal while the first
-    is being handled raises KeyboardInterrupt at once."""
+    records (files stay whole) and can send the abort command. Only the first signal counts: a
+    repeat (``timeout`` signals twice; a second Ctrl-C) neither interrupts the abort nor changes
+    the exit status."""
 
     def __init__(self):
         self.signum = None
         self._old = {}
 
     def _handler(self, signum, frame):
+        from .. import signals
+
         if self.signum is not None:
-            raise KeyboardInterrupt
+            return
         self.signum = signum
+        signals.received(signum)
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -569,7 +573,9 @@ class Outcome:
         if r == "interrupted":
             raise KeyboardInterrupt
         if r == "terminated":
-            raise ZkzapError("terminated (SIGTERM)", TERMINATED)
+            from ..signals import Terminated
+
+            raise Terminated()
         if r == "pipe":
             raise BrokenPipeError
         if self.error is not None:

@@ -322,15 +322,20 @@ WATCH_LAST = zap.REGISTER_BY_NAME["moving"]
               metavar="SECONDS", help="With --wait: give up after this long (exit status 3).")
 @click.option("--poll", type=click.FloatRange(0.0, 10), default=0.01, show_default=True, metavar="SECONDS",
               help="With --wait: pause between position reads.")
+@click.option("--no-stop", is_flag=True,
+              help="With --wait: on Ctrl-C or SIGTERM leave the rod moving to its goal (default: stop it "
+                   "where it is).")
 @link_options
-def move(position, ident, speed, wait, wait_timeout, poll, **common):
+def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
     """Move to POSITION (0..4095), optionally waiting until the actuator stops there.
 
     Writes goal-speed (with --speed) and goal-position; a goal position turns the force back
     on. The actuator clamps the goal to its stroke limits: --wait reads the goal back and says
     so. With --wait the final position goes to stdout; exit status 3 when it is still moving
     at --wait-timeout, 1 when it stopped away from the goal (beyond end-compliance-margin),
-    5 when it reports an error (overload: force cut). Progress is shown on a terminal.
+    5 when it reports an error (overload: force cut). Progress is shown on a terminal. Ctrl-C
+    or SIGTERM while waiting stops the rod where it is (goal = present position; --no-stop
+    leaves it moving) and exits 130/143.
 
     \b
     Examples:
@@ -341,6 +346,8 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
     POSITION.check(position)
     if speed is not None:
         SPEED.check(speed)
+    if no_stop and not wait:
+        raise UsageError("no-stop: applies only with --wait")
     if wait and ident == zap.BROADCAST:
         raise UsageError("--wait: a broadcast is never answered; give one actuator's ID to wait for it")
     with open_link(ids=[ident], probe=ident if wait else None, **_link_args(common)) as bus:
@@ -353,7 +360,10 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
             return
         if bus.return_mode == 0:
             raise UsageError(f"--wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data")
-        final = _wait(bus, ident, position, wait_timeout, poll, common["verbose"])
+        from ...link.zap_safety import interrupted_move
+
+        with interrupted_move(bus, ident, stop=not no_stop, notify=note):
+            final = _wait(bus, ident, position, wait_timeout, poll, common["verbose"])
     click.echo(str(final))
 
 
@@ -373,6 +383,8 @@ def _wait(bus, ident, position, limit, poll, verbose):
             pos, moving = v["present-position"], v["moving"]
             if first is None:
                 first = pos
+                if verbose:
+                    note(f"ID {ident}: moving from {pos} to {goal}")
             if progress is not None:
                 total = max(1, abs(goal - first))
                 progress.update(0, total=total, completed=total - min(total, abs(goal - pos)),

@@ -284,7 +284,8 @@ def raw_command(cmd_id, assignments, **common):
 
     ID is the command ID 0..8. FIELD is a field key of that command ('zk fields' lists them;
     'sw', 'throttle_pct', 'param', 'rpm_value', ...) and VALUE its raw integer (0x.. accepted)
-    or, for enumerations, a name. reserved_b1=N and reserved_b2=N set reserved bits.
+    or, for enumerations, a name. reserved_b1=N and reserved_b2=N set reserved bits of bytes 1
+    and 2: only bits no field of the command uses (others are refused).
 
     \b
     Examples:
