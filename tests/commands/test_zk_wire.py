@@ -93,7 +93,7 @@ def test_monitor_fail_on_error(cli):
     assert r.exit_code == 5
     recs = jsonl(r.stdout)
     assert len(recs) == 15 and recs[-1]["error_name"] == "pump-failure"
-    assert "ECU reported error: 4 pump-failure" in r.stderr
+    assert "ECU error 4 (pump-failure: " in r.stderr
     r = cli("zk", "monitor", "-p", SIM, "--count", "12", "--fail-on-error")
     assert r.exit_code == 0
 

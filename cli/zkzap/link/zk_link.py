@@ -99,6 +99,20 @@ def describe_abort(kind: str) -> str:
     return "nothing (--abort none)" if kind == "none" else f"{kind}, throttle 0"
 
 
+#: What a session that controls the engine sends when it ends normally (``--end``): ``hold``
+#: sends nothing more and leaves the engine at the last command.
+ENDS = ("standby", "stop", "hold")
+DEFAULT_END = "standby"
+
+
+def describe_error(code, name=None, t=None) -> str:
+    """The one wording of an ECU error code, in every command: ``ECU error 3 (egt-high: ...) at
+    t=4.20 s``."""
+    name = name or zk.ERRORS.get(code, f"undocumented-{code}")
+    text = zk.ERROR_TEXT.get(code, "undocumented")
+    return f"ECU error {code} ({name}: {text})" + (f" at t={t:.2f} s" if t is not None else "")
+
+
 def iso_utc(ts: float) -> str:
     """``2024-05-01T12:00:00.123Z`` for a POSIX time."""
     sec, ms = divmod(int(round(ts * 1000)), 1000)
@@ -594,7 +608,8 @@ class Session:
 
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
-                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1):
+                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1, end=None,
+                 end_label="end of schedule"):
         self.source = source
         self.telemetry = telemetry
         self.sink = sink
@@ -606,6 +621,8 @@ class Session:
         self.silence = silence
         self.stop_on_error = stop_on_error
         self.abort_at_end = abort_at_end
+        self.end = end                  # sent at a normal end (ENDS); None: the abort if abort_at_end
+        self.end_label = end_label
         self.on_update = on_update
         self.notify = notify or (lambda message: None)
         self.update_interval = update_interval
@@ -678,9 +695,7 @@ class Session:
                             break
                         if tel.new_error is not None and self.stop_on_error:
                             code, name, et = tel.new_error
-                            text = zk.ERROR_TEXT.get(code, "undocumented")
-                            outcome = Outcome("ecu-error", DeviceError(
-                                f"ECU error {code} ({name}: {text}) at t={et:.2f} s"))
+                            outcome = Outcome("ecu-error", DeviceError(describe_error(code, name, et)))
                             break
                     if outcome is not None:
                         break
@@ -723,26 +738,34 @@ class Session:
         return outcome
 
     def _abort(self, outcome):
-        if outcome.aborted is not None or self.abort == "none" or not self.controlling:
+        if outcome.aborted is not None or not self.controlling:
             return
-        if outcome.ok and not self.abort_at_end:
+        kind = self.abort
+        if outcome.ok:
+            kind = self.end if self.end is not None else (self.abort if self.abort_at_end else None)
+            if kind == "hold":
+                outcome.aborted = "hold"
+                self.notify(f"{self.end_label}: --end hold: nothing more sent; the engine keeps the last "
+                            f"command")
+                return
+        if kind is None or kind == "none":
             return
         known = self.telemetry.decoder.known
-        frames = abort_frames(self.abort, known, pump=self.pump_on)
+        frames = abort_frames(kind, known, pump=self.pump_on)
         try:
             for f in frames:
                 self.source.write(f)
             time.sleep(0.02)
             self.source.write(frames[0])
         except PortError as e:
-            self.notify(f"could not send the abort command ({describe_abort(self.abort)}): {e}")
+            self.notify(f"could not send the abort command ({describe_abort(kind)}): {e}")
             outcome.aborted = "failed"
             return
-        outcome.aborted = self.abort
+        outcome.aborted = kind
         why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
                "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-               "error": "error"}.get(outcome.reason, "end of schedule")
-        self.notify(f"{why}: sent {describe_abort(self.abort)}")
+               "error": "error"}.get(outcome.reason, self.end_label)
+        self.notify(f"{why}: sent {describe_abort(kind)}")
 
 
 # --- throttle schedules ----------------------------------------------------------------------------

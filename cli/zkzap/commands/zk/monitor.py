@@ -104,7 +104,7 @@ def _dashboard(title):
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   count=None, duration=None, control=None, rate=None, abort="none", stop_on_error=False,
-                  abort_at_end=False, title=None):
+                  abort_at_end=False, title=None, end=None, end_label="end of schedule"):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
@@ -113,9 +113,17 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     from ...link import zk_link as L
 
     id_set = L.parse_ids(ids) if ids is not None else None
+    if raw_log == "-":
+        raise UsageError("raw-log: '-' is not a file here (stdout carries the records); give a file name")
     out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", L.record_columns)
     raw = None
     source = None
+    # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
+    # view would redraw over them. They go to stderr once it has closed, below the last view.
+    held = []
+    notify = note if out.dashboard is None else held.append
+    if out.dashboard is not None:
+        out.dashboard.duration = duration
     try:
         if raw_log:
             try:
@@ -132,8 +140,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
-                            stop_on_error=stop_on_error, abort_at_end=abort_at_end,
-                            on_update=out.update if out.dashboard is not None else None, notify=note)
+                            stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
+                            on_update=out.update if out.dashboard is not None else None, notify=notify)
         with out:
             outcome = session.run()
     finally:
@@ -142,6 +150,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         out.close()
         if raw is not None:
             raw.close()
+        for message in held:
+            note(message)
     if tel.version_note:
         note(tel.version_note)
     framer = source.framer
@@ -226,7 +236,7 @@ def monitor(port, baud, timeout, sim, replay, fast, fmt, output, append, snapsho
              "sending; --keepalive does")
     outcome.raise_for_status()
     if fail_on_error and tel.errors:
-        raise DeviceError(f"ECU reported error{'s' if len(tel.errors) > 1 else ''}: {errors_text(tel)}")
+        raise DeviceError(errors_text(tel))
 
 
 zk_timeout_help(monitor)

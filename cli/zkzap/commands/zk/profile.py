@@ -10,12 +10,11 @@ import click
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
 from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
-from .telemetry import EXIT_HELP, log_options, resolve_port, zk_timeout_help
+from .telemetry import exit_help, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
           "a prompt on a terminal; sim:// and --sim never ask. "
-          + EXIT_HELP.replace("with --fail-on-error, an ECU error code was seen",
-                              "a new ECU error code (the abort command was sent)"))
+          + exit_help("the schedule ran to its end", "a new ECU error code (the abort command was sent)"))
 
 
 def example_text() -> str:
@@ -139,6 +138,8 @@ _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated
 
 
 def _print_summary(s):
+    from ...link.zk_link import describe_error
+
     def v(x, unit=""):
         return "-" if x is None else f"{x:g}{unit}" if isinstance(x, float) else f"{x}{unit}"
 
@@ -151,7 +152,7 @@ def _print_summary(s):
         f"  max rpm {v(s['max_rpm'])}, max EGT {v(s['max_egt_c'], ' °C')}, fuel used {v(s['fuel_used_l'], ' L')}"
         f" (ECU total {v(s['fuel_total_l'], ' L')})",
         f"  states: {' > '.join(s['states']) or '-'}",
-        "  errors: " + (", ".join(f"{e['code']} {e['name']} at {e['t']:g} s" for e in s["errors"]) or "none"),
+        "  errors: " + ("; ".join(describe_error(e["code"], e["name"], e["t"]) for e in s["errors"]) or "none"),
     ]
     click.echo("\n".join(lines), err=True)
 

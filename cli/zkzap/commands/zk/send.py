@@ -11,11 +11,11 @@ from __future__ import annotations
 import click
 
 from ...codec import zk
-from ...errors import UsageError
+from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
                        protocol_version_option, warn, yes_option)
-from .telemetry import EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, resolve_port, zk_timeout_help
+from .telemetry import TIMEOUT_HELP, errors_text, exit_help, log_options, resolve_port, zk_timeout_help
 
 #: Defaults for fields that are options; arguments are always required.
 _OPTION_DEFAULTS = {("control", "sw"): None, ("control", "throttle_pct"): 0.0,
@@ -39,7 +39,7 @@ EXAMPLES = {
 
 
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
-_FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
+_FOR_ONLY = {"rate": "--rate", "abort": "--abort", "end": "--end", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log"}
 
 
@@ -65,6 +65,10 @@ def send_options(f):
                      help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
                           "an ECU error when the command controls the engine (default standby: throttle "
                           "0, a hot engine cools)."),
+        click.option("--end", type=click.Choice(["standby", "stop", "hold"]), default=None,
+                     help="With --for SECONDS: what to send when the time is up, if the command controls "
+                          "the engine (default standby: the abort sequence, throttle 0); hold sends nothing "
+                          "more and leaves the engine at the command."),
         click.option("--no-wait", is_flag=True,
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
@@ -80,23 +84,30 @@ def send_options(f):
 
 
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, for_s=None,
-            rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
+            rate=None, abort=None, end=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
             stale_after=3, raw_log=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
-    given = {k: v for k, v in (("rate", rate), ("abort", abort), ("fmt", fmt), ("output", output),
+    given = {k: v for k, v in (("rate", rate), ("abort", abort), ("end", end), ("fmt", fmt), ("output", output),
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
                                ("raw_log", raw_log)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
+        for name in given:
+            raise UsageError(f"{_FOR_ONLY[name].lstrip('-')}: not with -n/--dry-run (the frame is printed "
+                             f"on stdout; nothing is sent)")
+        if no_wait:
+            raise UsageError("no-wait: not with -n/--dry-run (nothing is sent)")
         click.echo(format_hex(frame))
         return
     if for_s is None and given:
         raise UsageError(f"{_FOR_ONLY[next(iter(given))].lstrip('-')}: applies only with --for")
     if for_s is not None and no_wait:
         raise UsageError("no-wait: not with --for")
+    if end is not None and not for_s:
+        raise UsageError("end: applies only with --for SECONDS (--for 0 runs until Ctrl-C; then --abort applies)")
     url = resolve_port(port, sim)
     from ...link import zk_link
 
@@ -111,14 +122,34 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     from .monitor import run_telemetry
 
     controls = zk_link.controls_engine(frame)
+    title = f"zk send {describe_frame(frame)} on {url}"
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
-        stop_on_error=controls, title=f"{format_hex(frame)} to {url}")
+        stop_on_error=controls, title=title, end=(end or zk_link.DEFAULT_END) if controls else None,
+        end_label="end of --for")
     outcome.raise_for_status()
-    if tel.errors and not controls:
-        note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")
+    if tel.errors:
+        # an error the ECU latched before (or one seen while nothing controlled the engine): the
+        # command did not do what it was asked, so the exit status says so
+        raise DeviceError(errors_text(tel))
+
+
+def describe_frame(frame) -> str:
+    """``control run 30 %`` for a dashboard title: the command and its fields, not raw hex."""
+    rec = zk.decode_control(frame)
+    parts = [rec.get("command") or f"id {rec['id']}"]
+    for key, value in rec.items():
+        if key in ("kind", "id", "command", "frame", "sw", "param", "reserved") or value is None:
+            continue
+        if key == "throttle_pct":
+            parts.append(f"{value:g} %")
+        elif isinstance(value, str):
+            parts.append(value)
+        else:
+            parts.append(f"{key}={value:g}" if isinstance(value, float) else f"{key}={value}")
+    return " ".join(parts)
 
 
 def _send_once(zk_link, url, baud, frame, timeout, no_wait):
@@ -147,10 +178,12 @@ def _send_once(zk_link, url, baud, frame, timeout, no_wait):
 
 SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 3 if none comes within "
                "--timeout, default 2 s). With --for it is sent at --rate and the status frames are written "
-               "as 'zk monitor' writes them. On a real port a frame that can start the engine or run ECU "
+               "as 'zk monitor' writes them; when SECONDS are up, a command that controls the engine ends "
+               "with --end (default standby). On a real port a frame that can start the engine or run ECU "
                "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask. "
-               + EXIT_HELP.replace("with --fail-on-error, an ECU error code was seen",
-                                   "a new ECU error while the command controls the engine (after the abort)"))
+               + exit_help("sent and a status frame came back, or --for ran its time",
+                           "an ECU error code was seen during --for (a new one while the command controls "
+                           "the engine ends it with the abort)"))
 
 
 def _check_version(cmd, raw_param, protocol_version):

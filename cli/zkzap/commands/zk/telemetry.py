@@ -17,11 +17,16 @@ from ..options import FilePath, apply_options
 #: Output format by the extension of -o FILE when --format is not given.
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
 
-EXIT_HELP = ("Exit status: 0 done (--count, --duration, end of replay); 2 bad usage; 3 no status frame "
-             "within --timeout (at the start or later); 4 port failed or vanished; 5 with "
-             "--fail-on-error, an ECU error code was seen; 7 the output could not be written (disk full); "
-             "130 Ctrl-C; 143 SIGTERM. Every record already "
-             "written stays whole.")
+def exit_help(done: str, device: str) -> str:
+    """The exit-status paragraph of a logging command: ``done`` is what 0 means for it, ``device``
+    when it exits 5; the other outcomes are the same for all."""
+    return (f"Exit status: 0 {done}; 2 bad usage (nothing sent); 3 no status frame within --timeout (at "
+            f"the start or later); 4 port failed or vanished; 5 {device}; 7 the output could not be "
+            f"written (disk full); 130 Ctrl-C; 143 SIGTERM. Every record already written stays whole.")
+
+
+EXIT_HELP = exit_help("done (--count, --duration, end of replay)",
+                      "with --fail-on-error, an ECU error code was seen")
 
 
 def log_options(f):
@@ -91,4 +96,7 @@ def check_log_options(ids, snapshot, fmt):
 
 
 def errors_text(tel) -> str:
-    return ", ".join(f"{e['code']} {e['name']} at t={e['t']:g} s" for e in tel.summary()["errors"])
+    """Every ECU error a session saw, worded as everywhere (``ECU error 3 (egt-high: ...) at t=...``)."""
+    from ...link.zk_link import describe_error
+
+    return "; ".join(describe_error(e["code"], e["name"], e["t"]) for e in tel.summary()["errors"])
