@@ -371,3 +371,20 @@ def test_from_options_strings_none_and_unknown():
         from_options(error="melted")
     with pytest.raises(ValueError, match="esr"):
         from_options(esr="maybe")
+
+
+@pytest.mark.parametrize("host_baud,heard", [(115200, False), (9600, True), (None, True)],
+                         ids=["other-baud", "same-baud", "socket"])
+def test_a_host_at_another_baud_hears_nothing(host_baud, heard):
+    ecu = from_options(baud="9600")
+    out = ecu.poll_line(1.0, host_baud)
+    assert bool(out) is heard
+    if not heard:
+        assert ecu.tx_wrong_baud > 0
+
+
+def test_zk_monitor_at_the_wrong_baud_hears_nothing(cli):
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&baud=9600", "-b", "115200", "--count", "3",
+            "--timeout", "0.3")
+    assert r.exit_code == 3 and r.stdout == ""
+    assert "no status frame" in r.stderr

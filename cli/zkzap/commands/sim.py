@@ -44,7 +44,8 @@ def serve_options(f):
     f = click.option("--link", "link", type=click.Path(dir_okay=False), default=None, metavar="PATH",
                      help="With --pty: also make the pty available as a symlink at PATH.")(f)
     f = click.option("--listen", callback=_listen, default=None, metavar="HOST:PORT",
-                     help="Serve on a TCP socket instead (one client at a time); port 0 picks a free "
+                     help="Serve on a TCP socket instead (one client at a time, like a serial line: a "
+                          "second is refused while the first is connected); port 0 picks a free "
                           "one. Connect with -p socket://HOST:PORT.")(f)
     f = click.option("--pty", "use_pty", is_flag=True,
                      help="Serve on a new pseudo-terminal (the default); connect with -p PATH.")(f)

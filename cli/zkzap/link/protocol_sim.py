@@ -52,7 +52,7 @@ class Serial(SerialBase):
             self._device.close()
 
     def _pump(self):
-        out = self._device.poll(self._clock.now())
+        out = self._device.poll_line(self._clock.now(), self._baudrate)
         if out:
             self._rx += out
 

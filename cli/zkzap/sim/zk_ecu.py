@@ -158,6 +158,7 @@ class ZkEcu(Device):
         self.received = deque(maxlen=1000)   # decoded control records, newest last
         self.rx_ignored = 0           # valid frames the ECU ignored (locked, too new, wrong state)
         self.rx_wrong_baud = 0        # bytes dropped because the host's baud differs
+        self.tx_wrong_baud = 0        # bytes sent that a host at another baud did not hear
         self._last_rx = None          # model time of the last valid control frame
         self._last_frame = None
         self._t = 0.0
@@ -190,6 +191,15 @@ class ZkEcu(Device):
 
     def next_wakeup(self, now):
         return self._next_tick
+
+    def poll_line(self, now, baud=None):
+        """Status frames as a host at ``baud`` hears them: nothing at another baud rate than the
+        ECU's own (``baud`` option), as on a real line."""
+        out = self.poll(now)
+        if out and self.baud is not None and baud is not None and baud != self.baud:
+            self.tx_wrong_baud += len(out)
+            return b""
+        return out
 
     # --- fault injection and inspection ----------------------------------------------------------
     def inject_error(self, code):
