@@ -108,6 +108,12 @@ class Serial(SerialBase):
         """The simulated device (for tests and fault injection)."""
         return self._device
 
+    @property
+    def clock(self):
+        """The simulation's model clock (``speed`` times real time): sessions on this port run
+        their schedules, durations and rates in model time, as the device does."""
+        return self._clock
+
     # modem lines: a simulator has none worth modelling
     def _update_rts_state(self):
         pass

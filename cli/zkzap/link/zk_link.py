@@ -186,11 +186,17 @@ class LiveSource:
     def __init__(self, link: ZkLink):
         self.link = link
         self.framer = ZkFramer("status")
-        self.t0 = time.monotonic()
+        # An in-process simulator (sim://...?speed=N) runs in model time: so does the session
+        # (durations, schedules, control rate, record times), or a schedule would run N times
+        # slower than the engine it drives. ``speed`` converts back to real time (silences).
+        clock = getattr(link.ser, "clock", None)
+        self._clock = clock.now if clock is not None and callable(getattr(clock, "now", None)) else time.monotonic
+        self.speed = float(getattr(clock, "speed", 1.0)) if clock is not None else 1.0
+        self.t0 = self._clock()
         self.wall0 = time.time()
 
     def now(self) -> float:
-        return time.monotonic() - self.t0
+        return self._clock() - self.t0
 
     def poll(self):
         """Frames read within one slice, as ``[(t, frame), ...]``."""
@@ -345,7 +351,7 @@ class Telemetry:
     """
 
     def __init__(self, protocol_version=None, ids=None, snapshot=False, stale_periods=STALE_PERIODS,
-                 wall0=None):
+                 wall0=None, speed=1.0):
         self.decoder = zk.ZkDecoder(protocol_version)
         self.holding = protocol_version is None
         self.held = []
@@ -353,6 +359,7 @@ class Telemetry:
         self.snapshot_rows = snapshot
         self.stale_periods = stale_periods
         self.wall0 = time.time() if wall0 is None else wall0
+        self.speed = speed            # model seconds per real second: ``time`` stays wall-clock time
         self.keys = status_keys(ids)
         self.latest = dict.fromkeys(zk.STATUS_KEYS)
         self.last_seen = {}
@@ -435,11 +442,11 @@ class Telemetry:
         stale = self.stale_ids(t)
         self.records += 1
         if self.snapshot_rows:
-            row = {"time": iso_utc(self.wall0 + t), "t": round(t, 3), "id": sid}
+            row = {"time": iso_utc(self.wall0 + t / self.speed), "t": round(t, 3), "id": sid}
             for k in self.keys:
                 row[k] = latest[k]
         else:
-            row = {"time": iso_utc(self.wall0 + t), "t": round(t, 3)}
+            row = {"time": iso_utc(self.wall0 + t / self.speed), "t": round(t, 3)}
             row.update(rec)
             row["frame"] = frame.hex(" ").upper()
         row["stale"] = bool(stale)
@@ -705,7 +712,8 @@ class Session:
                         next_update = now + self.update_interval
                     if src.live and self.silence is not None:
                         since = self.last_frame_t if self.last_frame_t is not None else 0.0
-                        if now - since > self.silence:
+                        # a silence is measured in real seconds, whatever the session's clock
+                        if (now - since) / getattr(src, "speed", 1.0) > self.silence:
                             where = getattr(getattr(src, "link", None), "url", "the port")
                             if self.last_frame_t is None:
                                 msg = (f"no status frame from the ECU on {where} within {self.silence:g} s "

@@ -136,7 +136,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s))
-        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0)
+        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
+                          speed=getattr(source, "speed", 1.0))
         session = L.Session(source, tel, out.write, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
