@@ -367,7 +367,7 @@ def test_from_options_strings_none_and_unknown():
         from_options(rate="30")
     with pytest.raises(ValueError, match="protocol_version: 'x' is not an integer"):
         from_options(protocol_version="x")
-    with pytest.raises(ValueError, match="error: unknown 'melted'"):
+    with pytest.raises(ValueError, match="error=melted: not an ECU error code or name"):
         from_options(error="melted")
     with pytest.raises(ValueError, match="esr"):
         from_options(esr="maybe")

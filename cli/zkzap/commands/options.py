@@ -133,10 +133,17 @@ def close_output(writer, stream) -> None:
             stream.close()
 
 
+def plural(n: int, word: str, words=None) -> str:
+    """``1 frame``, ``2 frames``, ``0 bytes``."""
+    return f"{n} {word if n == 1 else (words or word + 's')}"
+
+
 def note_skipped(framer, what: str, check: str) -> None:
-    """Say on stderr what a decoding stream skipped, when it skipped anything."""
+    """Say on stderr what a decoding stream skipped, when it skipped anything (``what``: the
+    singular noun, ``frame`` or ``packet``)."""
     if framer.bad or framer.skipped:
-        note(f"{framer.frames} {what} decoded; {framer.bad} bad ({check}), {framer.skipped} bytes skipped")
+        note(f"{plural(framer.frames, what)} decoded; {framer.bad} bad ({check}), "
+             f"{plural(framer.skipped, 'byte')} skipped")
 
 
 dry_run_option = click.option(
@@ -145,8 +152,14 @@ dry_run_option = click.option(
 
 yes_option = click.option(
     "-y", "--yes", is_flag=True,
-    help="Consent to a command that can start the engine, pump fuel or fire the igniter "
-         "(or write stored settings); without it a terminal prompts and a script is refused.")
+    help="Consent to a command that can start the engine, pump fuel or fire the igniter; without "
+         "it a terminal prompts and a script is refused (sim:// and --sim never ask).")
+
+zap_yes_option = click.option(
+    "-y", "--yes", is_flag=True,
+    help="Consent to writing stored settings (they survive power-off and wear the actuator's "
+         "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
+         "prompts and a script is refused (sim:// and --sim never ask).")
 
 protocol_version_option = click.option(
     "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
@@ -168,7 +181,7 @@ def port_options(group: str):
     env = ENV[group]
     options = [
         click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
-                     shell_complete=_complete_ports,
+                     shell_complete=lambda ctx, param, incomplete: _complete_ports(ctx, param, incomplete, group),
                      help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
                           f"loop://, spy://, hwgrep://) [env {env['port']}]."),
         click.option("-b", "--baud", type=click.IntRange(300, 4_000_000), envvar=env["baud"],
@@ -181,7 +194,8 @@ def port_options(group: str):
     return lambda f: apply_options(f, options)
 
 
-def _complete_ports(ctx, param, incomplete):
+def _complete_ports(ctx, param, incomplete, group=None):
+    """The serial ports present, the URL schemes, and the group's built-in simulator."""
     from click.shell_completion import CompletionItem
 
     try:
@@ -190,6 +204,8 @@ def _complete_ports(ctx, param, incomplete):
         return []
     items = [CompletionItem(p.device, help=p.description) for p in list_ports.comports()]
     items += [CompletionItem(u) for u in ("socket://", "rfc2217://", "loop://", "spy://", "hwgrep://")]
+    if group is not None:
+        items.append(CompletionItem(f"sim://{group}", help="the built-in simulator"))
     return [i for i in items if i.value.startswith(incomplete)]
 
 

@@ -14,6 +14,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Group
+from .complete import fault_kinds
 
 
 def _listen(ctx, param, value):
@@ -142,7 +143,7 @@ def zk(protocol_version, rate, extra, speed, use_pty, listen, link):
 @click.option("--voltage", type=click.FloatRange(0, 25.5), default=None, metavar="VOLTS",
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")
 @click.option("--echo", is_flag=True, help="Echo the host's bytes back, like a half-duplex adapter.")
-@click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]",
+@click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]", shell_complete=fault_kinds,
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")

@@ -32,7 +32,7 @@ class Serial(SerialBase):
             self._clock = Clock(speed)
             self._device = make_device(kind, **options)
         except (TypeError, ValueError) as e:
-            raise SerialException(f"sim://{kind}: {e}") from None
+            raise SerialException(str(e)) from None      # the caller names the port
         self._rx = bytearray()
         self.is_open = True
 

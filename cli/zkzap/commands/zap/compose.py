@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, dry_run_option, port_options, yes_option
+from ..options import SignedCommand, consent, dry_run_option, port_options, zap_yes_option as yes_option
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")

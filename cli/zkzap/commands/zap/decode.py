@@ -9,6 +9,7 @@ from ...codec import zap
 from ...codec.framing import ZapFramer
 from ...errors import UsageError
 from .. import CONTEXT, Command
+from ..complete import binary_inputs
 from ..options import checked, close_output, format_option, note_skipped, open_output, output_options, resolve_format
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
@@ -32,7 +33,7 @@ def _table_cells(rec):
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option()
 @output_options
@@ -71,7 +72,7 @@ def decode(inputs, binary, fmt, output, append):
         run_decode(chunks, framer, decode_one, writer)
     finally:
         close_output(writer, stream)
-    note_skipped(framer, "packets", "checksum")
+    note_skipped(framer, "packet", "checksum")
 
 
 def _explain_single(data: bytes):

@@ -15,7 +15,7 @@ import click
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, note, resolve_format, yes_option
+from ..options import SignedCommand, consent, note, resolve_format, zap_yes_option as yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
@@ -59,6 +59,11 @@ class BaudList(click.ParamType):
     """Baud rates from the actuator's table, or ``all``."""
 
     name = "bauds"
+
+    def shell_complete(self, ctx, param, incomplete):
+        from ..complete import bauds
+
+        return bauds(ALL_BAUDS)(ctx, param, incomplete)
 
     def convert(self, value, param, ctx):
         if isinstance(value, list):

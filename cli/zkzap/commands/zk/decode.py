@@ -9,6 +9,7 @@ from ...codec import zk
 from ...codec.framing import ZkFramer
 from ...errors import UsageError
 from .. import CONTEXT, Command
+from ..complete import binary_inputs
 from ..options import (checked, close_output, format_option, note, note_skipped, open_output, output_options,
                        protocol_version_option, resolve_format)
 
@@ -58,7 +59,7 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option()
 @output_options
@@ -128,7 +129,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
             run_text_decode(chunks, framer, lines, writer, check_assumed)
     finally:
         close_output(writer, stream)
-    note_skipped(framer, "frames", "CRC")
+    note_skipped(framer, "frame", "CRC")
 
 
 def _explain_single(data: bytes):

@@ -158,7 +158,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     framer = source.framer
     if framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
-             f"({framer.skipped} bytes)")
+             f"({framer.skipped} byte{'' if framer.skipped == 1 else 's'})")
     return outcome, tel, session
 
 

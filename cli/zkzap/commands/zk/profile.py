@@ -9,7 +9,7 @@ import click
 
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
+from ..options import FilePath, close_output, consent, dry_run_option, note, port_options, protocol_version_option, yes_option
 from .telemetry import exit_help, log_options, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -37,7 +37,7 @@ def _read(path) -> str:
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("schedule", required=False, metavar="SCHEDULE.csv")
+@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
 @click.option("--example", is_flag=True, help="Print the example schedule (a start, steps up to 100 %, "
                                               "cool-down) and exit.")
 @click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,

@@ -13,6 +13,7 @@ import click
 from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
+from ..complete import raw_fields
 from ..options import (SignedCommand, apply_options, consent, dry_run_option, note, port_options,
                        protocol_version_option, warn, yes_option)
 from .telemetry import TIMEOUT_HELP, errors_text, exit_help, log_options, resolve_port, zk_timeout_help
@@ -311,7 +312,7 @@ def _make_raw():
 
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
 @click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
-@click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...")
+@click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)
 def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.
 
