@@ -130,11 +130,36 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         duration=for_s or None, control=lambda t: frame, rate=rate, abort=abort or zk_link.DEFAULT_ABORT,
         stop_on_error=controls, title=title, end=(end or zk_link.DEFAULT_END) if controls else None,
         end_label="end of --for")
+    click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     outcome.raise_for_status()
     if tel.errors:
         # an error the ECU latched before (or one seen while nothing controlled the engine): the
         # command did not do what it was asked, so the exit status says so
         raise DeviceError(errors_text(tel))
+
+
+def summary_line(what, outcome, tel, session) -> str:
+    """One line a person reads at the end of ``--for``: how long, how many frames, the peaks, the
+    states passed through and the errors seen."""
+    from ...link.zk_link import describe_error
+
+    s = tel.summary()
+    why = {"duration": "done", "interrupted": "interrupted", "terminated": "terminated",
+           "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error",
+           "pipe": "output closed"}.get(outcome.reason, outcome.reason)
+    parts = [f"{what}: {session.ended_t or 0.0:.1f} s, {why}",
+             f"{s['frames']} status frame{'' if s['frames'] == 1 else 's'}"]
+    if s["max_rpm"] is not None:
+        parts.append(f"max {s['max_rpm']:,} rpm")
+    if s["max_egt_c"] is not None:
+        parts.append(f"max EGT {s['max_egt_c']} °C")
+    if s["fuel_used_l"] is not None:
+        parts.append(f"fuel {s['fuel_used_l']:g} L")
+    line = ", ".join(parts)
+    if s["states"]:
+        line += "; states " + " > ".join(s["states"])
+    errors = "; ".join(describe_error(e["code"], e["name"], e["t"]) for e in s["errors"]) or "none"
+    return line + f"; errors: {errors}"
 
 
 def describe_frame(frame) -> str:
