@@ -249,7 +249,7 @@ class _View:
 @pytest.mark.parametrize("args,title,duration", [
     (["send", "control", "--state", "run", "--throttle", "50", "--for", "1"], "zk send control run 50 %", 1.0),
     (["send", "action", "test-pump", "--for", "1"], "zk send action test-pump", 1.0),
-    (["profile", "-"], "profile stdin", 1.0),
+    (["profile", "-"], "zk profile stdin", 1.0),
     (["monitor", "--duration", "1"], "ZK ECU", 1.0),
 ], ids=["send-control", "send-action", "profile", "monitor"])
 def test_dashboard_title_names_the_command_and_knows_the_length(cli, monkeypatch, args, title, duration):
@@ -322,3 +322,11 @@ def test_verify_reads_the_written_values_back(cli, args, code, needle):
     r = cli("zap", *args, "-p", "sim://zap?ids=1,2", "--verify", "-v")
     assert r.exit_code == code, r
     assert needle in r.stderr
+
+
+def test_scan_warns_of_actuators_sharing_an_id(cli):
+    r = cli("zap", "scan", "-p", "sim://zap?ids=1,1,2", "--ids", "0-3", "-f", "jsonl")
+    assert r.exit_code == 0
+    recs = jsonl(r.stdout)
+    assert [(x["id"], x["status"]) for x in recs] == [(1, "garbled"), (2, "ok")]
+    assert "ID 1 at 57600 baud answers garbled: two actuators may share this ID" in r.stderr

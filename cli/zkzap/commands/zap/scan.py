@@ -15,7 +15,7 @@ import click
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import SignedCommand, consent, note, resolve_format, zap_yes_option as yes_option
+from ..options import SignedCommand, consent, note, resolve_format, warn, zap_yes_option as yes_option
 from .compose import _link_args, link_options, open_link, register_records
 from .params import INT, IdType
 
@@ -167,6 +167,8 @@ def scan(ids, fmt, **common):
                     except BadReply as e:
                         rec["status"] = "garbled"
                         rec["errors"] = [str(e)]
+                        warn(f"ID {ident} at {rec['baud']} baud answers garbled: two actuators may share "
+                             f"this ID (connect one at a time and give each its own with 'zap set-id')")
                         r = None
                         _emit(writer, rec, found, fmt)
                     if progress is not None:

@@ -114,7 +114,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, dry_run, 
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         duration=sched.length, control=sched.frame_at, rate=rate, abort=abort, stop_on_error=True,
-        abort_at_end=sched.final_state == "run", title=f"profile {name} on {url}")
+        abort_at_end=sched.final_state == "run", title=f"zk profile {name} on {url}")
     summary = _summary(name, url, sched, outcome, tel, session)
     _print_summary(summary)
     if summary_json:
