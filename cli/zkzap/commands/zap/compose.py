@@ -94,6 +94,24 @@ def require_port(port, sim, sim_ids=None) -> None:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
 
 
+#: Options that mean something only when packets are sent (how replies are read and shown).
+WIRE_ONLY = {"fmt": "format", "physical": "physical", "length": None, "count": "count", "interval": "interval",
+             "verify": "verify", "retries": "retries", "return_mode": "return-mode", "timeout": "timeout",
+             "verbose": "verbose"}
+
+
+def refuse_with_dry_run() -> None:
+    """With -n nothing is sent: an option about sending or replies, given on the command line,
+    would be ignored, so it is refused (exit 2)."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return
+    for p in ctx.command.params:
+        spelled = WIRE_ONLY.get(p.name, "")
+        if spelled and ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE:
+            raise UsageError(f"{spelled}: not with -n/--dry-run (nothing is sent; the packet is printed)")
+
+
 def check_sim_args(port, sim, sim_ids) -> None:
     """-p and --sim exclude each other (as in zk); --sim-ids means something only with --sim."""
     if sim and port and not _port_from_env():
@@ -195,8 +213,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
     reads every written value back (exit 3 when nothing answers: the write is unconfirmed)."""
     if dry_run:
         check_sim_args(port, sim, sim_ids)
-        if verify:
-            raise UsageError("verify: not with -n/--dry-run (nothing is sent)")
+        refuse_with_dry_run()
         for p in packets:
             click.echo(format_hex(p))
         return
@@ -270,11 +287,6 @@ def echo(ident, count, interval, fmt, **common):
     """
     pkt = zap.echo(ident)
     if common["dry_run"]:
-        ctx = click.get_current_context()
-        for name in ("count", "interval", "fmt"):
-            if ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE:
-                spelled = {"fmt": "format"}.get(name, name)
-                raise UsageError(f"{spelled}: not with -n/--dry-run (nothing is sent; the packet is printed once)")
         return deliver([pkt], **common)
     if ident == zap.BROADCAST:
         raise UsageError("id: a broadcast Echo is never answered; give one actuator's ID")
