@@ -65,8 +65,9 @@ def installed() -> bool:
 
 
 def received(signum) -> None:
-    """Record a signal handled elsewhere (a session's own handler), so repeats are ignored."""
-    if _state["first"] is None:
+    """Record a signal handled elsewhere (a session's own handler), so repeats are ignored
+    (only in a program: a library user's process keeps its own state)."""
+    if _state["phase"] is not None and _state["first"] is None:
         _state["first"] = signum
 
 
