@@ -111,6 +111,16 @@ def test_zap_echo_until_interrupted_ends_with_its_summary_and_the_signal_status(
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("sig", SIGS, ids=SIG_IDS)
+def test_zap_scan_interrupted_says_what_it_found(sig):
+    proc = spawn(["zap", "scan", "-p", "sim://zap?ids=0,200", "-b", "all", "--timeout", "0.05", "-f", "jsonl"])
+    wait_line(proc.stdout, lambda line: '"id":0' in line)
+    proc.send_signal(sig)
+    code, _, err = finish(proc)
+    assert code == EXIT[sig], err
+    assert "interrupted after " in err and " found so far" in err and "Traceback" not in err
+
+
 @pytest.mark.parametrize("no_stop", [False, True], ids=["stops", "no-stop"])
 @pytest.mark.parametrize("sig", SIGS, ids=SIG_IDS)
 def test_zap_move_wait_interrupted_stops_the_rod_where_it_is(tmp_path, sig, no_stop):

@@ -180,6 +180,13 @@ def scan(ids, fmt, **common):
                         rec["status"] = "error"
                     _identify(bus, ident, rec)
                     _emit(writer, rec, found, fmt)
+    except KeyboardInterrupt:             # Ctrl-C or SIGTERM: what was found so far, then 130/143
+        if progress is not None:
+            progress.stop()
+            progress = None
+        note(f"interrupted after {time.monotonic() - t0:.2f} s: "
+             f"{len(found)} actuator{'s' if len(found) != 1 else ''} found so far")
+        raise
     finally:
         if progress is not None:
             progress.stop()
