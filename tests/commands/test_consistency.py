@@ -74,6 +74,7 @@ def test_zk_refuses_sim_together_with_a_port(cli, group, args):
     (["zk", "send", "control", "--state", "run", "--sim", "--end", "hold"], "end: applies only with --for"),
     (["zk", "send", "control", "--state", "run", "--sim", "--for", "0", "--end", "hold"],
      "end: applies only with --for SECONDS"),
+    (["zk", "send", "keepalive", "--sim", "--for", "1", "--end", "stop"], "end: keepalive does not control the engine"),
     (["zap", "echo", "-n", "--count", "5"], "count: not with -n/--dry-run"),
     (["zap", "echo", "-n", "--interval", "1"], "interval: not with -n/--dry-run"),
     (["zap", "echo", "-n", "-f", "json"], "format: not with -n/--dry-run"),

@@ -112,6 +112,10 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     url = resolve_port(port, sim)
     from ...link import zk_link
 
+    if end is not None and not zk_link.controls_engine(frame):
+        raise UsageError(f"end: {zk.decode_control(frame)['command']} does not control the engine, so its "
+                         f"session ends without a command; --end applies to sessions that do")
+
     if ids is not None:
         zk_link.parse_ids(ids)
     hazard = zk.control_hazard(frame)
