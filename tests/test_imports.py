@@ -37,7 +37,8 @@ CLICK_LAZY = {"locale", "_locale", "difflib", "heapq", "_heapq", "textwrap", "cl
               "click.shell_completion", "shlex", "encodings.latin_1"}
 #: Built into the interpreter (nothing loaded from disk): the entry points freeze the objects
 #: imported before the command runs.
-BUILTIN = {"gc"}
+#: ``signal``: the programs handle SIGINT and SIGTERM from their first instant.
+BUILTIN = {"gc", "signal"}
 
 
 def modules(tmp_path, prog, *args, env=None):

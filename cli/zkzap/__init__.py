@@ -49,3 +49,16 @@ def __getattr__(name):
 
 def __dir__():
     return sorted(set(globals()) | set(_LAZY))
+
+def _program_start():
+    # Run as one of the programs (zk, zap, zkzap, python -m zkzap), SIGINT and SIGTERM are
+    # handled from here on, before click and the command modules load: a signal during
+    # start-up exits 130/143 quietly. Imported as a library, nothing changes.
+    from . import signals
+
+    if signals.is_program():
+        signals.install()
+
+
+_program_start()
+del _program_start

@@ -23,7 +23,7 @@ def test_status_records_version_aware(zk_sim):
 @pytest.mark.zk_sim(speed=60)
 def test_hold_runs_the_engine_and_close_aborts(zk_sim):
     with Ecu(zk_sim) as ecu:
-        states = [r.engine_state_name for r in ecu.hold("control", 1.5, state="run", throttle_pct=40) if r.id == 1]
+        states = [r.engine_state_name for r in ecu.hold("control", 4.0, state="run", throttle_pct=40) if r.id == 1]
         assert ecu.controlling
         assert states[0] == "stop" and states[-1] != "stop"          # the start sequence began
         h = ecu.health

@@ -97,7 +97,8 @@ ZK_SEND = [
     Bad("zk send raw 7 rpm_value=4096 -n", "rpm_value: raw value 4096 is out of range 0..4095"),
     Bad("zk send raw 6 rpm_factor=7 -n", "rpm_factor: raw value 7 is out of range 0..6"),
     Bad("zk send raw 8 pressure_hpa=1024 -n", "pressure_hpa: raw value 1024 is out of range 0..1023"),
-    Bad("zk send raw 0 reserved_b1=0x10 -n", "reserved_b1: 16 is out of range; allowed bits 0x0f"),
+    Bad("zk send raw 0 reserved_b1=0x10 -n", "reserved_b1: 0x10 sets bits 0x10 that are not reserved; allowed bits 0x0f"),
+    Bad("zk send raw 1 sw=1 reserved_b1=8 -n", "reserved_b1: 0x08 sets bits 0x08 that are not reserved; command 1 (control) has no reserved bits in that byte"),
     Bad("zk send raw 0 reserved_b2=256 -n", "reserved_b2: 256 is out of range; allowed bits 0xff"),
     Bad("zk send raw 1 sw -n", "field: 'sw' is not FIELD=VALUE"),
     # missing port

@@ -68,7 +68,7 @@ def test_monitor_limit_on_an_injected_error_exits_5_without_abort(cli, tmp_path)
 def test_on_limit_warn_keeps_going_and_the_summary_names_it(cli, tmp_path):
     summary = tmp_path / "s.json"
     sched = tmp_path / "p.csv"
-    sched.write_text("0,0,run\n0.8,60\n1.0,0,standby\n1.2,0,standby\n")
+    sched.write_text("0,0,run\n16,60\n20,0,standby\n24,0,standby\n")       # model seconds
     r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--ids", "1", "--limit", "egt_c<=550",
             "--limit", "prop_rpm<=10", "--on-limit", "warn", "--summary-json", str(summary))
     assert r.exit_code == 0, r
@@ -83,7 +83,7 @@ def test_limits_file_on_profile_aborts(cli, tmp_path):
     lim = tmp_path / "engine.limits"
     lim.write_text("# stand limits\nrpm<=60000\n")
     sched = tmp_path / "p.csv"
-    sched.write_text("0,0,run\n1.0,100\n3,0,standby\n")
+    sched.write_text("0,0,run\n20,100\n60,0,standby\n")
     r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--ids", "2", "--limits", str(lim))
     assert r.exit_code == 5 and "limit violated: sent standby" in r.stderr
     assert "rpm<=60000" in r.stderr
@@ -115,9 +115,9 @@ def test_check_pass_fail_and_silent(cli, pty_port):
 
 def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     sched = tmp_path / "rpm.csv"
-    sched.write_text("time_s,throttle_pct,rpm,state\n0,0,,run\n0.9,,100000,\n1.6,0,,standby\n1.8,0,,standby\n")
+    sched.write_text("time_s,throttle_pct,rpm,state\n0,0,,run\n18,,100000,\n32,0,,standby\n36,0,,standby\n")
     steps, summary, book = tmp_path / "steps.csv", tmp_path / "s.json", tmp_path / "engine.db"
-    r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--settle", "0.3", "--steps-csv", str(steps),
+    r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--settle", "6", "--steps-csv", str(steps),
             "--summary-json", str(summary), "--logbook", str(book), "--fuel-density", "0.84")
     assert r.exit_code == 0, r
     recs = jsonl(r.stdout)
@@ -145,7 +145,7 @@ def test_rpm_target_above_the_ecus_max_stops_before_sending_it(cli, tmp_path):
 def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
     book = str(tmp_path / "engine.db")
     cli("zk", "monitor", "-p", SIM, "--count", "5", "-f", "jsonl", "--logbook", book)
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "1", "-p", SIM, "-f", "jsonl",
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", SIM, "-f", "jsonl",
             "--logbook", book)
     assert r.exit_code == 0 and "run 2 recorded" in r.stderr
     r = cli("zk", "logbook", book, "-f", "csv")

@@ -100,7 +100,7 @@ def zk_captures(tmp_path_factory):
 
     out = []
     for name, url, args in [
-        ("run", "sim://zk?speed=20", ["send", "control", "--state", "run", "--throttle", "45", "--for", "1.5",
+        ("run", "sim://zk?speed=20", ["send", "control", "--state", "run", "--throttle", "45", "--for", "15",
                                       "--yes"]),
         ("v3", "sim://zk?speed=20&protocol_version=3", ["monitor", "--count", "30"]),
     ]:

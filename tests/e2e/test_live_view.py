@@ -199,3 +199,20 @@ def test_running_engine_under_zk_send_for_and_ctrl_c(sim, terminal):
     term.keys("C-c")
     screen = term.wait_for(lambda s: "EXIT=" in s, what="Ctrl-C to end the run")
     assert "EXIT=130" in screen and "Traceback" not in screen
+
+
+def test_after_ctrl_c_the_abort_notice_and_the_last_view_stay_on_screen(sim, terminal):
+    port, _ = sim("--speed", "20")
+    term = terminal(cmd("zk_main", "send", "control", "--state", "run", "--throttle", "40", "--for", "0",
+                        "-p", port, "--yes"))
+    term.wait_for(lambda s: "RUNNING" in s or "IGNITION" in s or "PREHEAT" in s, timeout=20,
+                  what="the engine starting")
+    term.keys("C-c")
+    screen = term.wait_for(lambda s: "EXIT=" in s, what="Ctrl-C to end the run")
+    assert "EXIT=130" in screen and "Traceback" not in screen
+    assert "note: interrupted: sent standby, throttle 0" in screen, screen
+    lines = [ln for ln in screen.splitlines() if ln.strip()]
+    assert len(lines) == len(set(lines)) or screen.count("╭") == 1, screen    # one view, not copies
+    assert screen.count("╭") == 1 and screen.count("╰") == 1, screen
+    assert screen.index("╰") < screen.index("note: interrupted"), screen       # the notice below it
+    assert "elapsed" in screen, screen

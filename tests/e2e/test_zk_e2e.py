@@ -207,4 +207,4 @@ def test_sim_options_and_version_4_loss_of_signal(start_sim):
     assert rows[-1]["engine_state_name"] == "running" and rows[-1]["protocol_version"] == "4"
     time.sleep(0.25)                                                  # > 1 s of model time in silence
     r = zk("monitor", "-p", url, "--count", "5", "--ids", "1", "--fail-on-error")
-    assert r.returncode == 5 and "13 loss-of-control-signal" in r.stderr
+    assert r.returncode == 5 and "ECU error 13 (loss-of-control-signal: " in r.stderr

@@ -241,3 +241,15 @@ def test_bridges_show_their_figures_under_the_link():
     assert "mqtt: 10 records, 8 published  dropped 2  broker away" in text
     d.update(running_snapshot(), health(frames=6))
     assert "Bridge" not in text_of(d)
+@pytest.mark.parametrize("duration,t,expected", [
+    (None, 12.34, "elapsed 12.3 s"),
+    (15.0, 12.34, "elapsed 12.3 s of 15 s, 2.7 s left"),
+    (15.0, 16.0, "elapsed 16.0 s of 15 s, 0.0 s left"),
+])
+def test_elapsed_and_remaining_time_of_a_timed_session(duration, t, expected):
+    d = Dashboard(None, "zk send control run 40 % on sim://zk", clock=FakeClock(), duration=duration)
+    d.update(running_snapshot(time_s=t), health(frames=10))
+    text = text_of(d)
+    assert expected in text
+    if duration is None:
+        assert "left" not in text

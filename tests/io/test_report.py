@@ -27,12 +27,12 @@ def run(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("run")
     sched = d / "stand.csv"
-    sched.write_text("0,0,run\n0.8,40\n1.2,80\n1.6,0,standby\n1.8,0,standby\n")
+    sched.write_text("0,0,run\n16,40\n24,80\n32,0,standby\n36,0,standby\n")    # model seconds
     files = {k: str(d / n) for k, n in (("tel", "tel.csv"), ("raw", "raw.bin"), ("steps", "steps.csv"),
                                         ("summary", "summary.json"))}
     with CliRunner().isolation():
         code = run_cli(root, "zkzap", ["zk", "profile", str(sched), "-p", SIM, "-o", files["tel"], "--raw-log",
-                                       files["raw"], "--settle", "0.2", "--steps-csv", files["steps"],
+                                       files["raw"], "--settle", "4", "--steps-csv", files["steps"],
                                        "--summary-json", files["summary"], "--limit", "egt_c<=600",
                                        "--on-limit", "warn"])
     assert code == 0

@@ -120,7 +120,9 @@ def test_scan_warns_of_two_actuators_with_one_id():
     found, warnings = records(bus, [1, 4])
     by_id = {r["id"]: r for r in found}
     assert by_id[1]["status"] == "ok"
-    assert by_id[4]["status"] == "duplicate"
+    # colliding replies: garbled at the Echo (the simulator models the wired-AND of two senders a
+    # byte apart), or readable Echoes whose live registers then disagree
+    assert by_id[4]["status"] in ("duplicate", "garbled")
     assert len(warnings) == 1 and "ID 4" in warnings[0] and "two actuators" in warnings[0]
 
 

@@ -42,15 +42,17 @@ def test_records_from_the_simulator():
 
 
 def test_control_frames_go_out_at_the_rate():
-    s, tel, out, link = session("sim://zk?speed=20", control=lambda t: RUN30, rate=50, duration=0.6)
+    # the session runs in the in-process simulator's model time: 1.2 s at 50 Hz (0.6 s of real time)
+    s, tel, out, link = session("sim://zk?speed=2", control=lambda t: RUN30, rate=50, duration=1.2)
     outcome = s.run()
     ecu = link.device
     link.close()
     assert outcome.reason == "duration"
     sent = [r for r in ecu.received if r["id"] == 1]
-    assert 20 <= len(sent) <= 32                                     # 50 Hz for 0.6 s
+    assert 50 <= len(sent) <= 64                                     # 50 Hz for 1.2 s of model time
     assert outcome.aborted is None                                   # a normal end sends no abort
     assert [r for r in out if r["id"] == 1][-1]["engine_state_name"] != "stop"
+    assert 1.1 <= out[-1]["t"] <= 1.3                                 # the last frame before the end (20 Hz)
 
 
 def test_sigint_stops_between_records_and_sends_the_abort():
@@ -93,7 +95,7 @@ def test_sigterm_is_terminated_with_stop_abort():
 
 def test_new_ecu_error_ends_the_session_with_the_abort():
     s, tel, out, link = session("sim://zk?speed=20&error=egt-high&error_after=14", control=lambda t: RUN30,
-                                stop_on_error=True, duration=5)
+                                stop_on_error=True, duration=20)
     outcome = s.run()
     ecu = link.device
     link.close()

@@ -359,14 +359,28 @@ def test_adapter_echo_comes_first(bus):
     assert bus.poll(1.0) == zap.packet(1, 0)
 
 
-def test_two_actuators_with_one_id_collide():
+@pytest.mark.parametrize("overload", [False, True], ids=["same-state", "one-overloaded"])
+def test_two_actuators_with_one_id_collide(overload):
+    """Duplicate IDs garble the reply even when both would say the same: two transmitters are
+    never in step (the second is modelled a byte behind; the line is the wired-AND)."""
     bus = from_options(ids="1,1")
-    bus.actuators[1].overload = True
+    bus.actuators[1].overload = overload
     bus.receive(zap.echo(1), 0.0, None)
     out = bus.poll(1.0)
-    a, b = zap.packet(1, 0), zap.packet(1, 0x20)
-    assert out == bytes(x & y for x, y in zip(a, b))             # wired-AND: a garbled reply
+    a, b = zap.packet(1, 0), b"\xff" + zap.packet(1, 0x20 if overload else 0)
+    assert out == bytes(x & y for x, y in zip(a + b"\xff", b))
     assert ZapFramer().feed(out) == []
+    one = from_options(ids="1,2")
+    one.receive(zap.echo(1), 0.0, None)
+    assert one.poll(1.0) == zap.packet(1, 0)          # one actuator per ID: a clean reply
+
+
+def test_a_reply_sent_at_another_baud_is_not_heard_clean():
+    bus = from_options(ids="1")
+    bus.receive(zap.echo(1), 0.0, 57600)
+    assert bus.poll_line(1.0, 115200) == b""          # the host switched baud before reading
+    bus.receive(zap.echo(1), 2.0, 57600)
+    assert bus.poll_line(3.0, 57600) == zap.packet(1, 0)
 
 
 def test_fault_text_and_options():

@@ -367,7 +367,29 @@ def test_from_options_strings_none_and_unknown():
         from_options(rate="30")
     with pytest.raises(ValueError, match="protocol_version: 'x' is not an integer"):
         from_options(protocol_version="x")
-    with pytest.raises(ValueError, match="error: unknown 'melted'"):
+    with pytest.raises(ValueError, match="error=melted: not an ECU error code or name"):
         from_options(error="melted")
     with pytest.raises(ValueError, match="esr"):
         from_options(esr="maybe")
+
+
+@pytest.mark.parametrize("host_baud,clean", [(115200, False), (19200, False), (9600, True), (None, True)],
+                         ids=["other-baud", "half-speed", "same-baud", "socket"])
+def test_a_host_at_another_baud_reads_garbage_never_a_frame(host_baud, clean):
+    from zkzap.codec.framing import ZkFramer
+
+    ecu = from_options(baud="9600")
+    sent = ecu.poll(1.0)
+    heard = ecu.line.to_host(sent, host_baud, 1)       # what the pty and sim:// transports deliver
+    frames = ZkFramer("status").feed(heard)
+    if clean:
+        assert heard == sent and len(frames) == len(sent) // 7
+    else:
+        assert heard != sent and frames == []
+
+
+def test_zk_monitor_at_the_wrong_baud_hears_nothing(cli):
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&baud=9600", "-b", "115200", "--count", "3",
+            "--timeout", "0.3")
+    assert r.exit_code == 3 and r.stdout == ""
+    assert "no status frame" in r.stderr

@@ -426,7 +426,11 @@ class Bus:
             return new
         from ..link.zap_scan import collides
 
-        self.link.echo(ident)
+        try:
+            self.link.echo(ident)
+        except BadReply:          # every reply garbled: two actuators answer at once
+            raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
+                              ident=ident, duplicate=True) from None
         if self.link.return_mode and collides(self.link, ident):
             raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
                               ident=ident, duplicate=True)

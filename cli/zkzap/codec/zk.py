@@ -313,7 +313,8 @@ def encode_control(name_or_id, **values):
 
 def encode_control_raw(cmd_id: int, **raws) -> bytes:
     """Encode a control frame from raw field values (``throttle_pct=500``). Reserved bits may be
-    set with ``b1_low`` / ``b2`` masks for one-off crafting; unknown keys are an error."""
+    set with ``reserved_b1`` / ``reserved_b2`` for one-off crafting (only bits no field of the
+    command uses: they never change a real field); unknown keys are an error."""
     cmd = control_command(cmd_id)
     frame = bytearray((CONTROL_HEAD, cmd.id << 4, 0, 0))
     fields = {f.key: f for f in cmd.fields}
@@ -321,11 +322,10 @@ def encode_control_raw(cmd_id: int, **raws) -> bytes:
     fields.update({f.name_key: f for f in cmd.fields if f.name_key})
     for key, raw in raws.items():
         key = key.replace("-", "_")
-        if key == "reserved_b1":
-            frame[1] |= _check_byte(key, raw, 0x0F)
-            continue
-        if key == "reserved_b2":
-            frame[2] |= _check_byte(key, raw, 0xFF)
+        if key in ("reserved_b1", "reserved_b2"):
+            byte = 1 if key == "reserved_b1" else 2
+            mask = cmd.layout.reserved[byte] & (0x0F if byte == 1 else 0xFF)
+            frame[byte] |= _check_byte(key, raw, mask, cmd)
             continue
         f = fields.get(key)
         if f is None:
@@ -339,9 +339,15 @@ def encode_control_raw(cmd_id: int, **raws) -> bytes:
     return bytes(frame)
 
 
-def _check_byte(key, value, mask):
-    if not isinstance(value, int) or value & ~mask:
+def _check_byte(key, value, mask, cmd):
+    """A reserved-bits value: only the bits no field of ``cmd`` uses (the ID nibble and the
+    fields' bits are never reachable this way)."""
+    if not isinstance(value, int) or value < 0 or value > 0xFF:
         raise FieldValueError(f"{key}: {value!r} is out of range; allowed bits {mask:#04x}")
+    if value & ~mask:
+        where = (f"allowed bits {mask:#04x}" if mask
+                 else f"command {cmd.id} ({cmd.name}) has no reserved bits in that byte")
+        raise FieldValueError(f"{key}: {value:#04x} sets bits {value & ~mask:#04x} that are not reserved; {where}")
     return value
 
 

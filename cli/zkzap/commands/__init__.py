@@ -13,7 +13,8 @@ import sys
 import click
 
 from .. import __version__
-from ..errors import INTERRUPTED, USAGE, ZkzapError, exit_status_help
+from .. import signals as _signals
+from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError, exit_status_help
 
 EXIT_EPILOG = exit_status_help()
 
@@ -135,6 +136,9 @@ class LazyGroup(Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
+        except KeyboardInterrupt as e:
+            # Ctrl-C or SIGTERM: past click, which would print a blank line and say "Aborted!"
+            raise Stopped(_signals.exit_status(e)) from None
         except BrokenPipeError:
             # Raised past click (which would exit 1): the reader of stdout went away.
             if _stdout_closed():
@@ -264,6 +268,14 @@ def _help_width(max_width):
     return max(min(columns, max_width) - 2, 50)
 
 
+class Stopped(Exception):
+    """Ctrl-C (code 130) or SIGTERM (143) ended the command."""
+
+    def __init__(self, code):
+        super().__init__(code)
+        self.code = code
+
+
 class PipeClosed(Exception):
     """stdout's reader went away (``zkzap ... | head``): end quietly."""
 
@@ -292,6 +304,7 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
     goes to the command's context (``default_map``)."""
     debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
     try:
+        _signals.running()
         rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False, **extra)
         return rv if isinstance(rv, int) else 0
     except click.exceptions.Exit as e:
@@ -307,13 +320,12 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
             message = message.rstrip(".") + f" (see '{ctx.command_path} --help')"
         _error(message, prog_name or "zkzap")
         return e.exit_code
-    except click.exceptions.Abort as e:
-        if not isinstance(e.__cause__, KeyboardInterrupt):   # click already ended the ^C line
-            click.echo("", err=True)
-        return INTERRUPTED
-    except KeyboardInterrupt:
-        click.echo("", err=True)
-        return INTERRUPTED
+    except Stopped as e:
+        return _interrupted(e.code)
+    except click.exceptions.Abort:
+        return INTERRUPTED                 # click already ended the ^C line
+    except KeyboardInterrupt as e:
+        return _interrupted(_signals.exit_status(e))
     except (BrokenPipeError, PipeClosed):
         _quiet_stdout()
         return 0
@@ -334,6 +346,16 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
             raise
         _error(str(e), prog_name or "zkzap")
         return USAGE
+
+
+def _interrupted(code) -> int:
+    """Ctrl-C (130) or SIGTERM (143): end quietly; after ^C, end the terminal's line."""
+    if code == INTERRUPTED:
+        try:
+            click.echo("", err=True)
+        except (OSError, ValueError):
+            pass
+    return code
 
 
 #: click >= 8.2 raises this for a bare group (it shows the group's help); 8.1 exits 0 instead.
@@ -400,6 +422,7 @@ def _start(cmd, prog):
     """
     import gc
 
+    _signals.running()
     gc.freeze()
     _exit(run(cmd, prog), prog)
 

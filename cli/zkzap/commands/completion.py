@@ -17,7 +17,9 @@ def completion(shell, prog):
     """Print the completion script of SHELL for zkzap (or zk, zap with --prog).
 
     Completion offers sub-commands, options, choices (formats, engine states, actions),
-    register names and, for --port, the serial ports present; it asks the installed program
+    register names, the field names of 'zk send raw', baud rates for 'zap scan -b', fault kinds
+    for --fault, file paths (schedules, --binary inputs, -o) and, for --port, the serial ports
+    present, the URL schemes and sim://zk or sim://zap; it asks the installed program
     at each Tab, so it never goes out of date. Install it once per command and shell; a
     wheel install already puts the scripts in share/ (bash-completion, zsh site-functions,
     fish vendor_completions.d).

@@ -221,22 +221,27 @@ def close_output(writer, stream) -> None:
             stream.close()
 
 
+def plural(n: int, word: str, words=None) -> str:
+    """``1 frame``, ``2 frames``, ``0 bytes``."""
+    return f"{n} {word if n == 1 else (words or word + 's')}"
+
+
 def note_skipped(framer, what: str, check: str) -> None:
-    """Say on stderr what a decoding stream skipped, when it skipped anything: frames of the
-    kind --accept leaves out and a frame cut short by the end are counted apart from the
-    frames that failed their check."""
+    """Say on stderr what a decoding stream skipped, when it skipped anything (``what``: the
+    singular noun, ``frame`` or ``packet``): frames of the kind --accept leaves out and a frame
+    cut short by the end are counted apart from the frames that failed their check."""
     if not (framer.bad or framer.skipped):
         return
     parts = []
     filtered = getattr(framer, "filtered", 0)
     if filtered:
         kind = "control" if framer.accept == "status" else "status"
-        parts.append(f"{filtered} {kind} frame{'s' if filtered != 1 else ''} left out (--accept {framer.accept})")
+        parts.append(f"{plural(filtered, kind + ' frame')} left out (--accept {framer.accept})")
     parts.append(f"{framer.bad} bad ({check})")
     truncated = getattr(framer, "truncated", 0)
     if truncated:
         parts.append(f"{truncated} cut short by the end of the input")
-    note(f"{framer.frames} {what} decoded; {', '.join(parts)}; {framer.skipped} bytes skipped")
+    note(f"{plural(framer.frames, what)} decoded; {', '.join(parts)}; {plural(framer.skipped, 'byte')} skipped")
 
 
 dry_run_option = click.option(
@@ -245,8 +250,14 @@ dry_run_option = click.option(
 
 yes_option = click.option(
     "-y", "--yes", is_flag=True,
-    help="Consent to a command that can start the engine, pump fuel or fire the igniter "
-         "(or write stored settings); without it a terminal prompts and a script is refused.")
+    help="Consent to a command that can start the engine, pump fuel or fire the igniter; without "
+         "it a terminal prompts and a script is refused (sim:// and --sim never ask).")
+
+zap_yes_option = click.option(
+    "-y", "--yes", is_flag=True,
+    help="Consent to writing stored settings (they survive power-off and wear the actuator's "
+         "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
+         "prompts and a script is refused (sim:// and --sim never ask).")
 
 protocol_version_option = click.option(
     "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
@@ -302,7 +313,7 @@ def port_options(group: str, *, baud_auto: bool = False):
     env = ENV[group]
     options = [
         click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
-                     shell_complete=_complete_ports,
+                     shell_complete=lambda ctx, param, incomplete: _complete_ports(ctx, param, incomplete, group),
                      help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
                           f"loop://, spy://, hwgrep://) [env {env['port']}]."),
         click.option("-b", "--baud", type=BaudType(baud_auto), envvar=env["baud"],
@@ -327,6 +338,8 @@ def warn_port(url) -> None:
     hint = outgoing_port_hint(url)
     if hint:
         warn(hint)
+
+
 def capture_option(protocol: str):
     """``--capture FILE``: record every chunk read from and written to the port, timestamped, in
     pcapng (the port's link type: 147 for ZK, 148 for mightyZAP). Not a parameter of the command:
@@ -349,7 +362,8 @@ def capture_option(protocol: str):
                              "FILE (pcapng; Wireshark opens it with zkzap's dissector).")
 
 
-def _complete_ports(ctx, param, incomplete):
+def _complete_ports(ctx, param, incomplete, group=None):
+    """The serial ports present, the URL schemes, and the group's built-in simulator."""
     from click.shell_completion import CompletionItem
 
     try:
@@ -358,6 +372,8 @@ def _complete_ports(ctx, param, incomplete):
         return []
     items = [CompletionItem(p.device, help=p.description) for p in list_ports.comports()]
     items += [CompletionItem(u) for u in ("socket://", "rfc2217://", "loop://", "spy://", "hwgrep://")]
+    if group is not None:
+        items.append(CompletionItem(f"sim://{group}", help="the built-in simulator"))
     return [i for i in items if i.value.startswith(incomplete)]
 
 
@@ -380,7 +396,24 @@ def consent(action: str, yes: bool) -> None:
     from ..io.term import is_tty
 
     if is_tty(sys.stdin) and is_tty(sys.stderr):
-        if click.confirm(f"{action}. Continue?", default=False, err=True):
+        if _ask(f"{action}. Continue? [y/N]: "):
             return
         raise UsageError("not sent: consent refused")
     raise UsageError(f"not sent: {action}; pass --yes to confirm")
+
+
+def _ask(question: str) -> bool:
+    """A yes/no question on the terminal; the end of input (Ctrl-D) is a refusal (exit 2), Ctrl-C
+    an interruption (130), as everywhere."""
+    while True:
+        click.echo(question, nl=False, err=True)
+        line = sys.stdin.readline()
+        if not line:
+            click.echo("", err=True)
+            raise UsageError("not sent: no answer (end of input)")
+        answer = line.strip().lower()
+        if answer in ("y", "yes"):
+            return True
+        if answer in ("", "n", "no"):
+            return False
+        click.echo("Answer y or n.", err=True)

@@ -204,7 +204,7 @@ Examples:
                                            "verbose")}
         ids = common["sim_ids"] or "0"
         args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "retries", "stop_bits")}
-        args["sim_ids"] = ids
+        args["sim_ids"] = ids if common["sim"] else None
         args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
         with open_link(ids=[0], **args) as bus, sharing("zap", bus):
             code = loop(group, "zap", defaults, interactive=_interactive())

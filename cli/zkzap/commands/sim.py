@@ -14,6 +14,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Group
+from .complete import fault_kinds
 from .options import FiniteRange
 
 
@@ -45,7 +46,8 @@ def serve_options(f):
     f = click.option("--link", "link", type=click.Path(dir_okay=False), default=None, metavar="PATH",
                      help="With --pty: also make the pty available as a symlink at PATH.")(f)
     f = click.option("--listen", callback=_listen, default=None, metavar="HOST:PORT",
-                     help="Serve on a TCP socket instead (one client at a time); port 0 picks a free "
+                     help="Serve on a TCP socket instead (one client at a time, like a serial line: a "
+                          "second is refused while the first is connected); port 0 picks a free "
                           "one. Connect with -p socket://HOST:PORT.")(f)
     f = click.option("--pty", "use_pty", is_flag=True,
                      help="Serve on a new pseudo-terminal (the default); connect with -p PATH.")(f)
@@ -222,7 +224,7 @@ def _host_log(output):
 @click.option("--gap", type=FiniteRange(0, 100), default=None, metavar="MS",
               help="Milliseconds between two reply bytes, like a device or USB adapter that "
                    "trickles its bytes (default 0).")
-@click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]",
+@click.option("--fault", "faults", multiple=True, metavar="[ID:]KIND[=VALUE][/COUNT]", shell_complete=fault_kinds,
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")

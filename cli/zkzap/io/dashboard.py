@@ -9,7 +9,7 @@ Usage::
 ``snapshot`` holds the latest value of every status key (:data:`zkzap.codec.zk.STATUS_KEYS`,
 None until seen) plus ``time_s`` (seconds since the start of monitoring); ``health`` holds
 ``frames``, ``frames_per_s``, ``crc_errors``, ``skipped``, ``stale``, ``protocol_version`` and
-``version_source``. :meth:`Dashboard.update` only records the values (cheap enough for every
+``version_source``. With ``duration`` (a session's planned length) the time left is shown too. :meth:`Dashboard.update` only records the values (cheap enough for every
 frame at 100 Hz); the screen is redrawn by rich's refresh thread a few times a second, so the
 "last frame ... ago" age keeps counting when frames stop arriving.
 
@@ -140,9 +140,12 @@ class Dashboard:
     """
 
     def __init__(self, stream=None, title="ZK ECU", *, console=None, history_points=40,
-                 history_interval=0.5, refresh_per_second=4.0, clock=time.monotonic):
+                 history_interval=0.5, refresh_per_second=4.0, clock=time.monotonic, duration=None):
         self.stream = stream
         self.title = title
+        #: The session's planned length in seconds (--for, a schedule, --duration): the view then
+        #: shows the time remaining besides the time elapsed.
+        self.duration = duration
         self.console = console
         self.refresh_per_second = refresh_per_second
         self.clock = clock
@@ -270,6 +273,13 @@ class Dashboard:
             if b.get("connected") is False:
                 line.append("  broker away", style="bold red")
             link.add_row("Bridge" if name == next(iter(h["bridges"])) else "", line)
+        elapsed = s.get("time_s")
+        if elapsed is not None:
+            when = Text(f"elapsed {elapsed:.1f} s", style="bold")
+            if self.duration:
+                left = max(self.duration - elapsed, 0.0)
+                when.append(f" of {self.duration:g} s, {left:.1f} s left", style="")
+            link.add_row("Time", when)
 
         subtitle = None
         if stale:

@@ -149,6 +149,15 @@ def sim_url(kind: str, **options) -> str:
     return f"sim://{kind}" + (f"?{query}" if query else "")
 
 
+def port_failed(url: str, e) -> PortError:
+    """The one wording of a port that failed or vanished in use, for every protocol:
+    ``port URL failed: REASON`` (the OS's reason without its ``[Errno N]`` prefix)."""
+    import re
+
+    text = re.sub(r"\[Errno \d+\] ", "", str(e)) or type(e).__name__
+    return PortError(f"port {url} failed: {text}")
+
+
 def _short(e) -> str:
     import re
 

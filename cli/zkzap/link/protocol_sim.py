@@ -63,7 +63,7 @@ class Serial(SerialBase):
                 self._device.close()
 
     def _pump(self):
-        out = self._device.poll(self._clock.now())
+        out = self._device.poll_line(self._clock.now(), self._baudrate)
         if out:
             line = getattr(self._device, "line", None)
             if line is not None:       # the device's UART settings against this port's
@@ -124,6 +124,12 @@ class Serial(SerialBase):
     def device(self):
         """The simulated device (for tests and fault injection)."""
         return self._device
+
+    @property
+    def clock(self):
+        """The simulation's model clock (``speed`` times real time): sessions on this port run
+        their schedules, durations and rates in model time, as the device does."""
+        return self._clock
 
     # modem lines: a simulator has none worth modelling
     def _update_rts_state(self):

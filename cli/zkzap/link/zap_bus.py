@@ -285,8 +285,9 @@ class ZapBus:
         return ins is not None and ins.answered(mode, pkt[3])
 
     def _port_error(self, e) -> PortError:
-        text = str(e) or e.__class__.__name__
-        return PortError(f"port {self.url}: failed: {text}")
+        from .port import port_failed
+
+        return port_failed(self.url, e)
 
     def _write(self, pkt: bytes) -> float:
         """Drain, then write ``pkt``; returns the time just before the write (round trips are

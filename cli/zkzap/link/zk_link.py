@@ -88,6 +88,20 @@ def describe_abort(kind: str) -> str:
     return "nothing (--abort none)" if kind == "none" else f"{kind}, throttle 0"
 
 
+#: What a session that controls the engine sends when it ends normally (``--end``): ``hold``
+#: sends nothing more and leaves the engine at the last command.
+ENDS = ("standby", "stop", "hold")
+DEFAULT_END = "standby"
+
+
+def describe_error(code, name=None, t=None) -> str:
+    """The one wording of an ECU error code, in every command: ``ECU error 3 (egt-high: ...) at
+    t=4.20 s``."""
+    name = name or zk.ERRORS.get(code, f"undocumented-{code}")
+    text = zk.ERROR_TEXT.get(code, "undocumented")
+    return f"ECU error {code} ({name}: {text})" + (f" at t={t:.2f} s" if t is not None else "")
+
+
 def iso_utc(ts: float) -> str:
     """``2024-05-01T12:00:00.123Z`` for a POSIX time."""
     sec, ms = divmod(int(round(ts * 1000)), 1000)
@@ -147,7 +161,7 @@ class ZkLink:
         except ZkzapError:       # a capture that cannot be written (exit 7)
             raise
         except Exception as e:   # SerialException, OSError, and whatever a URL handler raises
-            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
+            raise port_failed(self.url, e) from None
         if data:
             self.bytes_in += len(data)
             if self.raw_log is not None:
@@ -162,7 +176,7 @@ class ZkLink:
         except ZkzapError:
             raise
         except Exception as e:
-            raise PortError(f"port {self.url} failed: {_reason(e)}") from None
+            raise port_failed(self.url, e) from None
         self.frames_out += 1
 
     def close(self):
@@ -171,10 +185,10 @@ class ZkLink:
         close_port(self.ser)
 
 
-def _reason(e) -> str:
-    import re
+def port_failed(url, e):
+    from .port import port_failed as failed
 
-    return re.sub(r"\[Errno \d+\] ", "", str(e)) or type(e).__name__
+    return failed(url, e)
 
 
 # --- frame sources -----------------------------------------------------------------------------
@@ -199,7 +213,13 @@ class LiveSource:
         self.link = link
         self.reconnect = reconnect
         self.framer = ZkFramer("status")
-        self.t0 = time.monotonic()
+        # An in-process simulator (sim://...?speed=N) runs in model time: so does the session
+        # (durations, schedules, control rate, record times), or a schedule would run N times
+        # slower than the engine it drives. ``speed`` converts back to real time (silences).
+        clock = getattr(link.ser, "clock", None)
+        self._clock = clock.now if clock is not None and callable(getattr(clock, "now", None)) else time.monotonic
+        self.speed = float(getattr(clock, "speed", 1.0)) if clock is not None else 1.0
+        self.t0 = self._clock()
         self.wall0 = time.time()
         self.down = None                  # model time the port failed, while it is away
         self.gap = None
@@ -208,7 +228,7 @@ class LiveSource:
         self._next_try = 0.0
 
     def now(self) -> float:
-        return time.monotonic() - self.t0
+        return self._clock() - self.t0
 
     def poll(self):
         """Frames read within one slice, as ``[(t, frame), ...]``."""
@@ -411,7 +431,7 @@ class Telemetry:
     """
 
     def __init__(self, protocol_version=None, ids=None, snapshot=False, stale_periods=STALE_PERIODS,
-                 wall0=None, wall_clock=True):
+                 wall0=None, wall_clock=True, speed=1.0):
         self.decoder = zk.ZkDecoder(protocol_version)
         #: False for a replay: a raw log holds no times, so records carry ``time: null``
         self.wall_clock = wall_clock
@@ -421,6 +441,7 @@ class Telemetry:
         self.snapshot_rows = snapshot
         self.stale_periods = stale_periods
         self.wall0 = time.time() if wall0 is None else wall0
+        self.speed = speed            # model seconds per real second: ``time`` stays wall-clock time
         self.keys = status_keys(ids)
         self.latest = dict.fromkeys(zk.STATUS_KEYS)
         self.last_seen = {}
@@ -507,7 +528,7 @@ class Telemetry:
             return []
         stale = self.stale_ids(t)
         self.records += 1
-        when = iso_utc(self.wall0 + t) if self.wall_clock else None
+        when = iso_utc(self.wall0 + t / self.speed) if self.wall_clock else None
         if self.snapshot_rows:
             row = {"time": when, "t": round(t, 3), "id": sid}
             for k in self.keys:
@@ -603,17 +624,21 @@ INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if 
 
 class SignalGuard:
     """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
-    records (files stay whole) and can send the abort command. A second signal while the first
-    is being handled raises KeyboardInterrupt at once."""
+    records (files stay whole) and can send the abort command. Only the first signal counts: a
+    repeat (``timeout`` signals twice; a second Ctrl-C) neither interrupts the abort nor changes
+    the exit status."""
 
     def __init__(self):
         self.signum = None
         self._old = {}
 
     def _handler(self, signum, frame):
+        from .. import signals
+
         if self.signum is not None:
-            raise KeyboardInterrupt
+            return
         self.signum = signum
+        signals.received(signum)
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -666,7 +691,9 @@ class Outcome:
         if r == "interrupted":
             raise KeyboardInterrupt
         if r == "terminated":
-            raise ZkzapError("terminated (SIGTERM)", TERMINATED)
+            from ..signals import Terminated
+
+            raise Terminated()
         if r == "pipe":
             raise BrokenPipeError
         if self.error is not None:
@@ -685,7 +712,8 @@ class Session:
 
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
-                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None):
+                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
+                 end_label="end of schedule"):
         self.source = source
         self.telemetry = telemetry
         self.sink = sink
@@ -697,6 +725,8 @@ class Session:
         self.silence = silence
         self.stop_on_error = stop_on_error
         self.abort_at_end = abort_at_end
+        self.end = end                  # sent at a normal end (ENDS); None: the abort if abort_at_end
+        self.end_label = end_label
         self.on_update = on_update
         self.notify = notify or (lambda message: None)
         self.update_interval = update_interval
@@ -832,9 +862,7 @@ class Session:
                             break
                         if tel.new_error is not None and self.stop_on_error:
                             code, name, et = tel.new_error
-                            text = zk.ERROR_TEXT.get(code, "undocumented")
-                            outcome = Outcome("ecu-error", DeviceError(
-                                f"ECU error {code} ({name}: {text}) at t={et:.2f} s"))
+                            outcome = Outcome("ecu-error", DeviceError(describe_error(code, name, et)))
                             break
                         if self.limits is not None and self.limits.tripped is not None:
                             outcome = Outcome("limit", self.limits.tripped)
@@ -848,7 +876,8 @@ class Session:
                     if src.live and self.silence is not None and getattr(src, "down", None) is None:
                         since = self.last_frame_t if self.last_frame_t is not None else 0.0
                         since = max(since, self._back_t)
-                        if now - since > self.silence:
+                        # a silence is measured in real seconds, whatever the session's clock
+                        if (now - since) / getattr(src, "speed", 1.0) > self.silence:
                             where = getattr(getattr(src, "link", None), "url", "the port")
                             if self.last_frame_t is None:
                                 msg = (f"no status frame from the ECU on {where} within {self.silence:g} s "
@@ -885,29 +914,37 @@ class Session:
         return outcome
 
     def _abort(self, outcome):
-        if outcome.aborted is not None or self.abort == "none" or not self.controlling:
+        if outcome.aborted is not None or not self.controlling:
             return
-        if outcome.ok and not self.abort_at_end:
+        kind = self.abort
+        if outcome.ok:
+            kind = self.end if self.end is not None else (self.abort if self.abort_at_end else None)
+            if kind == "hold":
+                outcome.aborted = "hold"
+                self.notify(f"{self.end_label}: --end hold: nothing more sent; the engine keeps the last "
+                            f"command")
+                return
+        if kind is None or kind == "none":
             return
         if outcome.reason == "limit" and not self.limits.abort:
             return
         known = self.telemetry.decoder.known
-        frames = abort_frames(self.abort, known, pump=self.pump_on)
+        frames = abort_frames(kind, known, pump=self.pump_on)
         try:
             for f in frames:
                 self.source.write(f)
             time.sleep(0.02)
             self.source.write(frames[0])
         except PortError as e:
-            self.notify(f"could not send the abort command ({describe_abort(self.abort)}): {e}")
+            self.notify(f"could not send the abort command ({describe_abort(kind)}): {e}")
             outcome.aborted = "failed"
             return
-        outcome.aborted = self.abort
+        outcome.aborted = kind
         why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
                "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
                "output": "output failed", "error": "error", "limit": "limit violated"}.get(outcome.reason,
-                                                                                          "end of schedule")
-        self.notify(f"{why}: sent {describe_abort(self.abort)}")
+                                                                                          self.end_label)
+        self.notify(f"{why}: sent {describe_abort(kind)}")
 
 
 def _id_list(ids) -> str:

@@ -71,5 +71,11 @@ class Device:
     def next_wakeup(self, now: float):  # pragma: no cover - interface
         return None
 
+    def poll_line(self, now: float, baud=None) -> bytes:
+        """What a host listening at ``baud`` (None: unknown, as over TCP) hears by ``now``. A
+        device that sends at a fixed line speed returns nothing to a host at another speed:
+        transports that know the host's baud call this instead of :meth:`poll`."""
+        return self.poll(now)
+
     def close(self) -> None:
         """Called when the simulator stops (save state, ...)."""

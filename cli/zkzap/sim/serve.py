@@ -114,7 +114,8 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
                     data = b""
                 if data:
                     _deliver(device, data, clock.now(), host_settings(termios, slave, speeds))
-            reply = device.poll(clock.now())
+            settings = host_settings(termios, slave, speeds)
+            reply = device.poll_line(clock.now(), settings[0])
             if reply:
                 os.write(master, _outgoing(device, reply, host_settings(termios, slave, speeds)))
     except _Stop:
@@ -131,9 +132,24 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
                 pass
 
 
+def _refuse(conn, addr) -> None:
+    """A second host on a one-host line: closed at once, and said so on stderr."""
+    where = f"{addr[0]}:{addr[1]}" if isinstance(addr, tuple) and len(addr) >= 2 else str(addr)
+    try:
+        conn.close()
+    finally:
+        sys.stderr.write(f"note: refused a second client ({where}): one host at a time, like a serial line\n")
+        sys.stderr.flush()
+
+
 def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) -> None:
-    """Run ``device`` behind a TCP socket (one client at a time, like a serial line); the URL
-    ``socket://HOST:PORT`` is announced on ``out``. Port 0 picks a free port."""
+    """Run ``device`` behind a TCP socket; the URL ``socket://HOST:PORT`` is announced on ``out``.
+    Port 0 picks a free port.
+
+    One client at a time, like a serial line with one host: while a client is connected, a
+    second connection is accepted and closed at once (its reads see the end of the stream) and
+    a line on stderr says so; the first client keeps the device. Once it disconnects, the next
+    client gets it."""
     srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
     srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     srv.bind((host, port))
@@ -150,10 +166,10 @@ def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) ->
             for key, _ in sel.select(_timeout(device, clock)):
                 if key.data == "accept":
                     conn, _addr = srv.accept()
-                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                     if client is not None:
-                        sel.unregister(client)
-                        client.close()
+                        _refuse(conn, _addr)
+                        continue
+                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                     client = conn
                     sel.register(client, selectors.EVENT_READ, "client")
                 else:

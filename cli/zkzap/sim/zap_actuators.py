@@ -516,6 +516,18 @@ for _r in zap.REGISTERS:
         _REG_AT[_a] = _r
 
 
+def _collide(first, second):
+    """Two replies on the line at once (duplicate IDs): the wired-AND of their bits, the second
+    at least one byte behind the first (two transmitters are never in step), so even identical
+    replies come out garbled, as on a real bus."""
+    t, a, baud = first
+    offset = max(1, round((second[0] - t) / wire_time(1, baud)))
+    b = b"\xff" * offset + second[1]
+    n = max(len(a), len(b))
+    a, b = a.ljust(n, b"\xff"), b.ljust(n, b"\xff")
+    return (t, bytes(x & y for x, y in zip(a, b)), baud)
+
+
 class ActuatorBus:
     """The bus: actuators, the line between them and the host, fault injection, persistence.
 
@@ -636,14 +648,10 @@ class ActuatorBus:
         if not replies:
             return
         replies.sort(key=lambda r: r[0])
-        # replies starting together collide: the line carries the AND of their bits
         merged = []
         for t, data, rbaud in replies:
-            if merged and abs(merged[-1][0] - t) < 1e-9:
-                mt, md, mb = merged[-1]
-                n = max(len(md), len(data))
-                md, data = md.ljust(n, b"\xff"), data.ljust(n, b"\xff")
-                merged[-1] = (mt, bytes(x & y for x, y in zip(md, data)), mb)
+            if merged and t < merged[-1][0] + wire_time(len(merged[-1][1]), merged[-1][2]):
+                merged[-1] = _collide(merged[-1], (t, data, rbaud))
             else:
                 merged.append((t, data, rbaud))
         for t, data, rbaud in merged:
@@ -653,22 +661,29 @@ class ActuatorBus:
                 end = start
                 for i in range(len(data)):
                     end = start + (i + 1) * byte + i * self.gap
-                    self._emit(end, data[i:i + 1])
+                    self._emit(end, data[i:i + 1], rbaud)
             else:
                 end = start + wire_time(len(data), rbaud)
-                self._emit(end, data)
+                self._emit(end, data, rbaud)
             self._bus_free = end
 
-    def _emit(self, t: float, data: bytes) -> None:
+    def _emit(self, t: float, data: bytes, baud=None) -> None:
         self._seq += 1
-        bisect.insort(self._queue, (t, self._seq, data))
+        bisect.insort(self._queue, (t, self._seq, data, baud))
 
     def poll(self, now: float) -> bytes:
+        return self.poll_line(now, None)
+
+    def poll_line(self, now: float, baud=None) -> bytes:
+        """What a host listening at ``baud`` hears by ``now``: replies sent at another baud rate
+        (the host switched after asking) are lost on the line, not delivered late and clean."""
         if not self._queue or self._queue[0][0] > now:
             return b""
         out = bytearray()
         while self._queue and self._queue[0][0] <= now:
-            out += self._queue.pop(0)[2]
+            _, _, data, sent_at = self._queue.pop(0)
+            if baud is None or sent_at is None or sent_at == baud:
+                out += data
         return bytes(out)
 
     def next_wakeup(self, now: float):

@@ -547,10 +547,10 @@ def _error_code(value):
         try:
             value = int(text, 0)
         except ValueError:
-            raise ValueError(f"error: unknown {value!r}; allowed 1..18 or a name: "
+            raise ValueError(f"error={value}: not an ECU error code or name; allowed 1..18 or a name: "
                              f"{', '.join(n for c, n in zk.ERRORS.items() if c)}") from None
     if not isinstance(value, int) or not 1 <= value <= 31:
-        raise ValueError(f"error: {value!r} is out of range; allowed 1..31 (18 documented)")
+        raise ValueError(f"error={value!r} is out of range; allowed 1..31 (18 documented)")
     return value
 
 

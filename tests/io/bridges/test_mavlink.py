@@ -108,7 +108,7 @@ def test_every_numeric_status_field_has_a_place():
 def test_efi_status_carries_the_simulators_values_in_mavlink_units(cli, gcs, tmp_path):
     rx = gcs()
     out = tmp_path / "run.jsonl"
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "50", "--for", "2.5", "-p", "sim://zk?speed=10",
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "50", "--for", "25", "-p", "sim://zk?speed=10",
             "--mavlink", f"udpout:127.0.0.1:{rx.port}", "--mavlink-rate", "20", "--sysid", "7", "--compid", "200",
             "--ecu-index", "2", "-o", str(out))
     assert r.exit_code == 0, r
@@ -152,7 +152,7 @@ def test_efi_status_carries_the_simulators_values_in_mavlink_units(cli, gcs, tmp
 
 def test_an_ecu_error_is_a_critical_statustext_and_unhealthy(cli, gcs):
     rx = gcs()
-    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&error=egt-high&error_after=3", "--duration", "1.5",
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&error=egt-high&error_after=3", "--duration", "15",
             "--mavlink", f"udpout:127.0.0.1:{rx.port}", "-f", "jsonl")
     assert r.exit_code == 0, r
     time.sleep(0.2)
@@ -175,7 +175,7 @@ def test_udpin_answers_the_ground_station_that_calls(cli, gcs):
     result = {}
 
     def run():
-        result["r"] = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "2.5",
+        result["r"] = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "25",
                           "--mavlink", f"udpin:127.0.0.1:{port}", "-f", "jsonl")
 
     t = threading.Thread(target=run)
@@ -217,7 +217,7 @@ def test_an_unreachable_tcp_ground_station_is_exit_4_with_nothing_on_stdout(cli)
 def test_profile_sends_mavlink_and_reports_the_bridge_in_its_summary(cli, gcs, tmp_path):
     rx = gcs()
     sched = tmp_path / "s.csv"
-    sched.write_text("0,0,stop\n1,0,stop\n")
+    sched.write_text("0,0,stop\n10,0,stop\n")             # model seconds
     summary = tmp_path / "summary.json"
     r = cli("zk", "profile", str(sched), "-p", "sim://zk?speed=10", "--mavlink", f"udpout:127.0.0.1:{rx.port}",
             "-f", "jsonl", "-o", str(tmp_path / "t.jsonl"), "--summary-json", str(summary))
@@ -249,7 +249,7 @@ def test_a_serial_telemetry_radio_gets_the_same_messages(cli, tmp_path):
     t = threading.Thread(target=read, daemon=True)
     t.start()
     try:
-        r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "1.5", "--mavlink", f"{path},57600",
+        r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "15", "--mavlink", f"{path},57600",
                 "-f", "jsonl")
     finally:
         stop.set()

@@ -87,7 +87,7 @@ def stats_from(stderr):
 
 def test_every_record_arrives_in_order_on_its_topic(cli, broker, subscriber):
     sub = subscriber("stand1/#", clean=True)
-    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "1.5", "--mqtt", f"{broker.url}/stand1",
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10", "--duration", "15", "--mqtt", f"{broker.url}/stand1",
             "-f", "jsonl")
     assert r.exit_code == 0, r
     want = [json.loads(x) for x in r.stdout.splitlines()]
@@ -110,8 +110,8 @@ def test_every_record_arrives_in_order_on_its_topic(cli, broker, subscriber):
 
 def test_control_frames_a_session_sends_are_published_too(cli, broker, subscriber):
     sub = subscriber("st/control/#", clean=True)
-    r = cli("zk", "send", "control", "--state", "stop", "--for", "1", "--rate", "10", "-p", "sim://zk?speed=10",
-            "--mqtt", f"{broker.url}/st", "-f", "jsonl")
+    r = cli("zk", "send", "control", "--state", "stop", "--for", "10", "--rate", "10", "-p", "sim://zk?speed=10",
+            "--end", "hold", "--mqtt", f"{broker.url}/st", "-f", "jsonl")       # only the commanded frames
     assert r.exit_code == 0, r
     got = sub.wait_for(5)
     assert got and all(t == "st/control/1" and rec["state"] == "stop" and rec["command"] == "control"

@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, yes_option
+from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, zap_yes_option as yes_option
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -83,13 +83,50 @@ def targets_of(packets) -> list:
     return sorted(ids) or [0]
 
 
-def require_port(port, sim) -> None:
+def require_port(port, sim, sim_ids=None) -> None:
+    check_sim_args(port, sim, sim_ids)
     if not port and not sim:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
     if port and not sim:
         from ..options import warn_port
 
         warn_port(port)
+
+
+#: Options that mean something only when packets are sent (how replies are read and shown).
+WIRE_ONLY = {"fmt": "format", "physical": "physical", "length": None, "count": "count", "interval": "interval",
+             "verify": "verify", "retries": "retries", "return_mode": "return-mode", "timeout": "timeout",
+             "verbose": "verbose"}
+
+
+def refuse_with_dry_run() -> None:
+    """With -n nothing is sent: an option about sending or replies, given on the command line,
+    would be ignored, so it is refused (exit 2)."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None or ctx.get_parameter_source("dry_run") != click.core.ParameterSource.COMMANDLINE:
+        return                # -n not given by the user (a batch composes its lines this way first)
+    for p in ctx.command.params:
+        spelled = WIRE_ONLY.get(p.name, "")
+        if spelled and ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE:
+            raise UsageError(f"{spelled}: not with -n/--dry-run (nothing is sent; the packet is printed)")
+
+
+def check_sim_args(port, sim, sim_ids) -> None:
+    """-p and --sim exclude each other (as in zk); --sim-ids means something only with --sim."""
+    if sim and port and not _port_from_env():
+        raise UsageError("port: give -p PORT or --sim, not both")
+    if sim_ids is not None and not sim:
+        raise UsageError("sim-ids: applies only with --sim (a sim://zap?ids=... URL takes ids= itself)")
+
+
+def _port_from_env() -> bool:
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return False
+    try:
+        return ctx.get_parameter_source("port") == click.core.ParameterSource.ENVIRONMENT
+    except Exception:      # noqa: BLE001 - a context without that parameter
+        return False
 
 
 def ask_consent(packets, *, port, sim, yes) -> None:
@@ -137,6 +174,9 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     from ...link.shared import Borrowed, shared
     from ...link.zap_bus import RETRIES, open_bus
 
+    require_port(port, sim, sim_ids)
+    if sim and port:
+        port = None                      # an explicit --sim beats the environment's default port
     mode = 1 if return_mode == "auto" else int(return_mode)
     lent = shared("zap")
     if lent is not None:            # a batch: every command over the one open port
@@ -190,14 +230,21 @@ def acknowledgement(pkt: bytes, reply, bus) -> str:
 
 
 def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, sim_ids=None, return_mode="1",
-            retries=2, force=False, show_reply=False, **wire):
+            retries=2, force=False, show_reply=False, verify=False, **wire):
     """Print the packets (dry run) or send them, each waiting for the reply the return mode
-    gives. Error bits in a reply end with exit status 5 after every packet went out."""
+    gives. Error bits in a reply end with exit status 5 after every packet went out. ``verify``
+    reads every written value back (exit 3 when nothing answers: the write is unconfirmed)."""
     if dry_run:
+        check_sim_args(port, sim, sim_ids)
+        refuse_with_dry_run()
         for p in packets:
             click.echo(format_hex(p))
         return
-    require_port(port, sim)
+    require_port(port, sim, sim_ids)
+    if verify:
+        from ...link.zap_safety import check_verifiable
+
+        check_verifiable(packets)
     refuse_protocol_change(packets, force)
     refuse_id_write(packets, force)
     ask_consent(packets, port=port, sim=sim, yes=yes)
@@ -216,6 +263,12 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
                 _say(f"sent {describe(p)}: {acknowledgement(p, reply, bus)}")
             if reply is not None and reply.error and bad is None:
                 bad = reply
+        if verify and bad is None:
+            from ...link.zap_safety import verify_writes
+
+            for ident, name, value in verify_writes(bus, packets):
+                if verbose:
+                    _say(f"ID {ident}: {name} reads back {value}")
     if bad is not None:
         raise device_error(bad)
 
@@ -303,10 +356,7 @@ def echo(ident, count, interval, fmt, **common):
                     click.echo(f"reply from ID {r.ident}: seq={sent} {state} {rec['rtt_ms']:.1f} ms")
                 else:
                     writer.write(rec)
-    except KeyboardInterrupt:
-        if count != 0:
-            raise
-    finally:
+    finally:                   # Ctrl-C (130) and SIGTERM (143) too: the summary, then the status
         if writer is not None:
             writer.close()
         if count != 1 and sent:
@@ -402,6 +452,13 @@ def _mark_partial(records, address, length) -> list:
         note(f"--length {length} from 0x{address:02X} reads 1 of {name}'s {size} bytes (its low byte): "
              f"the value shown is not the register's value")
     return cut
+def _verify_option(name):
+    """``--verify`` for the commands whose writes can be read back (store, sync-move)."""
+    if name not in ("store", "sync-move"):
+        return lambda f: f
+    return click.option("--verify", is_flag=True,
+                        help="Read every written value back: exit 3 when nothing answers (the write is "
+                             "unconfirmed), 1 when it reads back different.")
 
 
 def _write_command(name, builder, doc):
@@ -411,18 +468,20 @@ def _write_command(name, builder, doc):
     @id_option()
     @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and direct ID "
                                                 "writes (which skip set-id's checks).")
+    @_verify_option(name)
     @wire_options
-    def command(reg, value, ident, force, **common):
+    def command(reg, value, ident, force, verify=False, **common):
         pkt = builder(ident, reg, value)
         refuse_protocol_change([pkt], force)
-        deliver([pkt], force=force, **common)
+        deliver([pkt], force=force, verify=verify, **common)
 
     return command
 
 
 _WIRE_NOTE = """
 Sent to a port, the write is acknowledged only in feedback-return-mode 2 (-v says how it went);
-error bits in an acknowledgement give exit status 5. On a real port, writing a stored (NV)
+otherwise nothing confirms it, even with nothing attached to the port: 'zap store --verify' reads
+the value back. Error bits in an acknowledgement give exit status 5. On a real port, writing a stored (NV)
 register asks for consent (--yes); the simulator (--sim, sim://) and loop:// never ask.
 """
 
@@ -516,8 +575,9 @@ def parse_targets(pairs):
               help="Register written on every actuator.")
 @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and ID writes "
                                             "(which skip set-id's checks).")
+@_verify_option("sync-move")
 @wire_options
-def sync_move(targets, reg, force, **common):
+def sync_move(targets, reg, force, verify, **common):
     """Symmetric Store (0x73) to broadcast: write one register of several actuators at once.
 
     One packet carries at most (255 - 4) / (1 + size) actuators (83 for a 2-byte register);
@@ -530,7 +590,7 @@ def sync_move(targets, reg, force, **common):
     """
     packets = zap.symmetric_store(reg, parse_targets(targets))
     refuse_protocol_change(packets, force)
-    deliver(packets, force=force, **common)
+    deliver(packets, force=force, verify=verify, **common)
 
 
 @click.command(cls=Command, context_settings=CONTEXT)

@@ -10,6 +10,7 @@ from ...codec.framing import ZapFramer
 from ...errors import UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
+from ..complete import binary_inputs
 from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
                        output_options)
 
@@ -36,7 +37,7 @@ def _table_cells(rec):
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]")
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options
@@ -98,7 +99,7 @@ def decode(inputs, binary, fmt, output, append):
             run_text_decode(chunks, framer, lines, writer)
     finally:
         close_output(writer, stream)
-    note_skipped(framer, "packets", "checksum")
+    note_skipped(framer, "packet", "checksum")
 
 
 def _explain_single(data: bytes):

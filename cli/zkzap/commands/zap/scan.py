@@ -16,7 +16,8 @@ from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, SignedCommand, consent, format_option, id_option, note, resolve_format, warn, yes_option
+from ..options import (FiniteRange, SignedCommand, consent, format_option, id_option, note, resolve_format, warn,
+                       zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
 
@@ -55,6 +56,11 @@ class BaudList(click.ParamType):
     """Baud rates from the actuator's table, or ``all``."""
 
     name = "bauds"
+
+    def shell_complete(self, ctx, param, incomplete):
+        from ..complete import bauds
+
+        return bauds(ALL_BAUDS)(ctx, param, incomplete)
 
     def convert(self, value, param, ctx):
         if isinstance(value, list):
@@ -157,6 +163,13 @@ def scan(ids, fmt, **common):
             for rec in Bus.over(link).scan(ids, bauds, retries=common["retries"],
                                            on_probe=probed if progress is not None else None, on_warning=warn):
                 _emit(writer, rec, found, fmt)
+    except KeyboardInterrupt:             # Ctrl-C or SIGTERM: what was found so far, then 130/143
+        if progress is not None:
+            progress.stop()
+            progress = None
+        note(f"interrupted after {time.monotonic() - t0:.2f} s: "
+             f"{len(found)} actuator{'s' if len(found) != 1 else ''} found so far")
+        raise
     finally:
         if progress is not None:
             progress.stop()
@@ -249,15 +262,20 @@ def dump(ident, fmt, **common):
               metavar="SECONDS", help="With --wait: give up after this long (exit status 3).")
 @click.option("--poll", type=FiniteRange(0.0, 10), default=0.01, show_default=True, metavar="SECONDS",
               help="With --wait: pause between position reads.")
+@click.option("--no-stop", is_flag=True,
+              help="With --wait: on Ctrl-C or SIGTERM leave the rod moving to its goal (default: stop it "
+                   "where it is).")
 @link_options
-def move(position, ident, speed, wait, wait_timeout, poll, **common):
+def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
     """Move to POSITION (0..4095), optionally waiting until the actuator stops there.
 
     Writes goal-speed (with --speed) and goal-position; a goal position turns the force back
     on. The actuator clamps the goal to its stroke limits: --wait reads the goal back and says
     so. With --wait the final position goes to stdout; exit status 3 when it is still moving
     at --wait-timeout, 1 when it stopped away from the goal (beyond end-compliance-margin),
-    5 when it reports an error (overload: force cut). Progress is shown on a terminal.
+    5 when it reports an error (overload: force cut). Progress is shown on a terminal. Ctrl-C
+    or SIGTERM while waiting stops the rod where it is (goal = present position; --no-stop
+    leaves it moving) and exits 130/143.
 
     \b
     Examples:
@@ -268,6 +286,8 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
     POSITION.check(position)
     if speed is not None:
         SPEED.check(speed)
+    if no_stop and not wait:
+        raise UsageError("no-stop: applies only with --wait")
     if wait and ident == zap.BROADCAST:
         raise UsageError("--wait: a broadcast is never answered; give one actuator's ID to wait for it")
     with open_link(ids=[ident], probe=ident if wait else None, **_link_args(common)) as link:
@@ -289,10 +309,22 @@ def move(position, ident, speed, wait, wait_timeout, poll, **common):
             progress.update(0, total=total, completed=total - min(total, abs(goal - pos)),
                             description=f"ID {ident}: {pos} -> {goal}")
 
+        told = []
+
+        def on_progress(pos, goal, first):
+            if common["verbose"] and not told:
+                told.append(True)
+                note(f"ID {ident}: moving from {first} to {goal}")
+            if progress is not None:
+                show(pos, goal, first)
+
+        from ...link.zap_safety import interrupted_move
+
         start = time.monotonic()
         try:
-            final = bus.wait_stopped(ident, position, timeout=wait_timeout, poll=poll,
-                                     on_progress=show if progress is not None else None, notify=note)
+            with interrupted_move(link, ident, stop=not no_stop, notify=note):
+                final = bus.wait_stopped(ident, position, timeout=wait_timeout, poll=poll,
+                                         on_progress=on_progress, notify=note)
         finally:
             if progress is not None:
                 progress.stop()

@@ -135,7 +135,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None):
+                  reconnect=None, end=None, end_label="end of schedule"):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
@@ -150,6 +150,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     from .bridging import make_bridges
 
     id_set = L.parse_ids(ids) if ids is not None else None
+    if raw_log == "-":
+        raise UsageError("raw-log: '-' is not a file here (stdout carries the records); give a file name")
     refuse_same_files({"--output": output, "--raw-log": raw_log, **(extra_outputs or {})},
                       {"--replay": replay, **(inputs or {})})
     if control is not None and url is not None:
@@ -173,6 +175,12 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
     source = None
+    # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
+    # view would redraw over them. They go to stderr once it has closed, below the last view.
+    held = []
+    notify = note if out.dashboard is None else held.append
+    if out.dashboard is not None:
+        out.dashboard.duration = duration
     try:
         if replay is not None:
             from ...api.capture import replay_source
@@ -184,7 +192,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
                                   reconnect=reconnect)
         tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                          wall_clock=getattr(source, "wall_clock", source.live))
+                          wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -195,8 +203,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         session = L.Session(source, tel, sink, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
                             count=count, duration=duration,
                             silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
-                            stop_on_error=stop_on_error, abort_at_end=abort_at_end,
-                            on_update=on_update, notify=note,
+                            stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
+                            on_update=on_update, notify=notify,
                             limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         with out:
@@ -215,6 +223,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             session_stats = bridges.stats()
             for line in bridges.lines():
                 note(line)
+        for message in held:
+            note(message)
     if bridges:
         session.bridges = session_stats
     if tel.version_note:
@@ -226,7 +236,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     framer = source.framer
     if framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
-             f"({framer.skipped} bytes)")
+             f"({framer.skipped} byte{'' if framer.skipped == 1 else 's'})")
     return outcome, tel, session
 
 
@@ -320,7 +330,7 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
              "sending; --keepalive does")
     outcome.raise_for_status()
     if fail_on_error and tel.errors:
-        raise DeviceError(f"ECU reported error{'s' if len(tel.errors) > 1 else ''}: {errors_text(tel)}")
+        raise DeviceError(errors_text(tel))
 
 
 zk_timeout_help(monitor)

@@ -12,12 +12,11 @@ from .. import CONTEXT, Command
 from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
-from .telemetry import EXIT_HELP, log_options, reconnect_option, resolve_port, zk_timeout_help
+from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
           "a prompt on a terminal; sim:// and --sim never ask. "
-          + EXIT_HELP.replace("with --fail-on-error, an ECU error code was seen",
-                              "a new ECU error code (the abort command was sent)"))
+          + exit_help("the schedule ran to its end", "a new ECU error code (the abort command was sent)"))
 
 
 #: The shipped examples (``--example [KIND]``).
@@ -44,7 +43,7 @@ def _read(path) -> str:
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("schedule", required=False, metavar="SCHEDULE.csv")
+@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
 @click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
@@ -171,7 +170,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
-            title=f"profile {name} on {url}", stand=stand, reconnect=reconnect,
+            title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
             inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
@@ -216,6 +215,8 @@ _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated
 
 
 def _print_summary(s):
+    from ...link.zk_link import describe_error
+
     def v(x, unit=""):
         return "-" if x is None else f"{x:g}{unit}" if isinstance(x, float) else f"{x}{unit}"
 
@@ -228,7 +229,7 @@ def _print_summary(s):
         f"  max rpm {v(s['max_rpm'])}, max EGT {v(s['max_egt_c'], ' °C')}, fuel used {v(s['fuel_used_l'], ' L')}"
         f" (ECU total {v(s['fuel_total_l'], ' L')})",
         f"  states: {' > '.join(s['states']) or '-'}",
-        "  errors: " + (", ".join(f"{e['code']} {e['name']} at {e['t']:g} s" for e in s["errors"]) or "none"),
+        "  errors: " + ("; ".join(describe_error(e["code"], e["name"], e["t"]) for e in s["errors"]) or "none"),
     ]
     for st in s.get("steps") or ():
         mean = st["rpm_mean"]

@@ -11,12 +11,13 @@ from __future__ import annotations
 import click
 
 from ...codec import zk
-from ...errors import UsageError
+from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
+from ..complete import raw_fields
 from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import (EXIT_HELP, TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port,
+from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
                         zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
@@ -41,7 +42,7 @@ EXAMPLES = {
 
 
 #: Options that only mean something with --for, by parameter name -> how the user spells it.
-_FOR_ONLY = {"rate": "--rate", "abort": "--abort", "fmt": "--format", "output": "--output",
+_FOR_ONLY = {"rate": "--rate", "abort": "--abort", "end": "--end", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
              "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
              "summary_json": "--summary-json", "reconnect": "--reconnect"}
@@ -67,6 +68,10 @@ def send_options(f):
         abort_option(help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
                           "an ECU error when the command controls the engine (default standby: throttle "
                           "0, a hot engine cools)."),
+        click.option("--end", type=click.Choice(["standby", "stop", "hold"]), default=None,
+                     help="With --for SECONDS: what to send when the time is up, if the command controls "
+                          "the engine (default standby: the abort sequence, throttle 0); hold sends nothing "
+                          "more and leaves the engine at the command."),
         click.option("--no-wait", is_flag=True,
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
@@ -86,13 +91,13 @@ def send_options(f):
 
 
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, stop_bits=1, for_s=None,
-            rate=None, abort=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None, ids=None,
-            stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
+            rate=None, abort=None, end=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None,
+            ids=None, stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
             summary_json=None, reconnect=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
-    given = {k: v for k, v in (("rate", rate), ("abort", abort), ("fmt", fmt), ("output", output),
+    given = {k: v for k, v in (("rate", rate), ("abort", abort), ("end", end), ("fmt", fmt), ("output", output),
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
                                ("raw_log", raw_log), ("limit", limit or None),
                                ("limits_files", limits_files or None), ("on_limit", on_limit),
@@ -101,6 +106,11 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
+        for name in given:
+            raise UsageError(f"{_FOR_ONLY[name].lstrip('-')}: not with -n/--dry-run (the frame is printed "
+                             f"on stdout; nothing is sent)")
+        if no_wait:
+            raise UsageError("no-wait: not with -n/--dry-run (nothing is sent)")
         from .bridging import refuse_without
 
         refuse_without("--for (not with -n/--dry-run)")
@@ -114,8 +124,14 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         refuse_without("--for")
     if for_s is not None and no_wait:
         raise UsageError("no-wait: not with --for")
+    if end is not None and not for_s:
+        raise UsageError("end: applies only with --for SECONDS (--for 0 runs until Ctrl-C; then --abort applies)")
     url = resolve_port(port, sim)
     from ...link import zk_link
+
+    if end is not None and not zk_link.controls_engine(frame):
+        raise UsageError(f"end: {zk.decode_control(frame)['command']} does not control the engine, so its "
+                         f"session ends without a command; --end applies to sessions that do")
 
     if ids is not None:
         zk_link.parse_ids(ids)
@@ -133,17 +149,62 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         return
     from .monitor import run_telemetry
 
+    title = f"zk send {describe_frame(frame)} on {url}"
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
-        abort=abort or zk_link.DEFAULT_ABORT, stop_on_error=controls, title=f"{format_hex(frame)} to {url}",
-        stand=stand, reconnect=reconnect)
+        abort=abort or zk_link.DEFAULT_ABORT, stop_on_error=controls, title=title,
+        end=(end or zk_link.DEFAULT_END) if controls else None, end_label="end of --for",
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json})
+    click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)
     outcome.raise_for_status()
-    if tel.errors and not controls:
-        note(f"ECU error{'s' if len(tel.errors) > 1 else ''} seen: {errors_text(tel)}")
+    if tel.errors:
+        # an error the ECU latched before (or one seen while nothing controlled the engine): the
+        # command did not do what it was asked, so the exit status says so
+        raise DeviceError(errors_text(tel))
+
+
+def summary_line(what, outcome, tel, session) -> str:
+    """One line a person reads at the end of ``--for``: how long, how many frames, the peaks, the
+    states passed through and the errors seen."""
+    from ...link.zk_link import describe_error
+
+    s = tel.summary()
+    why = {"duration": "done", "interrupted": "interrupted", "terminated": "terminated",
+           "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error",
+           "pipe": "output closed"}.get(outcome.reason, outcome.reason)
+    parts = [f"{what}: {session.ended_t or 0.0:.1f} s, {why}",
+             f"{s['frames']} status frame{'' if s['frames'] == 1 else 's'}"]
+    if s["max_rpm"] is not None:
+        parts.append(f"max {s['max_rpm']:,} rpm")
+    if s["max_egt_c"] is not None:
+        parts.append(f"max EGT {s['max_egt_c']} °C")
+    if s["fuel_used_l"] is not None:
+        parts.append(f"fuel {s['fuel_used_l']:g} L")
+    line = ", ".join(parts)
+    if s["states"]:
+        line += "; states " + " > ".join(s["states"])
+    errors = "; ".join(describe_error(e["code"], e["name"], e["t"]) for e in s["errors"]) or "none"
+    return line + f"; errors: {errors}"
+
+
+def describe_frame(frame) -> str:
+    """``control run 30 %`` for a dashboard title: the command and its fields, not raw hex."""
+    rec = zk.decode_control(frame)
+    parts = [rec.get("command") or f"id {rec['id']}"]
+    for key, value in rec.items():
+        if key in ("kind", "id", "command", "frame", "sw", "param", "reserved") or value is None:
+            continue
+        if key == "throttle_pct":
+            parts.append(f"{value:g} %")
+        elif isinstance(value, str):
+            parts.append(value)
+        else:
+            parts.append(f"{key}={value:g}" if isinstance(value, float) else f"{key}={value}")
+    return " ".join(parts)
 
 
 def _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits=1):
@@ -172,10 +233,12 @@ def _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits=1):
 
 SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 3 if none comes within "
                "--timeout, default 2 s). With --for it is sent at --rate and the status frames are written "
-               "as 'zk monitor' writes them. On a real port a frame that can start the engine or run ECU "
+               "as 'zk monitor' writes them; when SECONDS are up, a command that controls the engine ends "
+               "with --end (default standby). On a real port a frame that can start the engine or run ECU "
                "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask. "
-               + EXIT_HELP.replace("with --fail-on-error, an ECU error code was seen",
-                                   "a new ECU error while the command controls the engine (after the abort)"))
+               + exit_help("sent and a status frame came back, or --for ran its time",
+                           "an ECU error code was seen during --for (a new one while the command controls "
+                           "the engine ends it with the abort)"))
 
 
 def _check_version(cmd, raw_param, protocol_version):
@@ -304,13 +367,14 @@ def _make_raw():
 
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
 @click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
-@click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...")
+@click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)
 def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.
 
     ID is the command ID 0..8. FIELD is a field key of that command ('zk fields' lists them;
     'sw', 'throttle_pct', 'param', 'rpm_value', ...) and VALUE its raw integer (0x.. accepted)
-    or, for enumerations, a name. reserved_b1=N and reserved_b2=N set reserved bits.
+    or, for enumerations, a name. reserved_b1=N and reserved_b2=N set reserved bits of bytes 1
+    and 2: only bits no field of the command uses (others are refused).
 
     \b
     Examples:

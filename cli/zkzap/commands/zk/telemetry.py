@@ -20,16 +20,23 @@ from .bridging import bridge_options
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx",
                     ".mcap": "mcap"}
 
-EXIT_HELP = exit_status_help({
-    OK: "done (--count, --duration, end of replay)",
-    USAGE: "bad usage",
-    NO_REPLY: "no status frame within --timeout (at the start or later)",
-    PORT_ERROR: "port failed or vanished",
-    DEVICE_ERROR: "with --fail-on-error, an ECU error code was seen",
-    OUTPUT_ERROR: "the output could not be written (disk full)",
-    INTERRUPTED: "Ctrl-C",
-    TERMINATED: "SIGTERM",
-}, tail=" Every record already written stays whole.")
+def exit_help(done: str, device: str) -> str:
+    """The exit-status paragraph of a logging command, from the exit-code table: ``done`` is what
+    0 means for it, ``device`` when it exits 5; the other outcomes are the same for all."""
+    return exit_status_help({
+        OK: done,
+        USAGE: "bad usage (nothing sent)",
+        NO_REPLY: "no status frame within --timeout (at the start or later)",
+        PORT_ERROR: "port failed or vanished",
+        DEVICE_ERROR: device,
+        OUTPUT_ERROR: "the output could not be written (disk full)",
+        INTERRUPTED: "Ctrl-C",
+        TERMINATED: "SIGTERM",
+    }, tail=" Every record already written stays whole.")
+
+
+EXIT_HELP = exit_help("done (--count, --duration, end of replay)",
+                      "with --fail-on-error, an ECU error code was seen")
 
 
 def log_options(f):
@@ -117,4 +124,7 @@ def check_log_options(ids, snapshot, fmt):
 
 
 def errors_text(tel) -> str:
-    return ", ".join(f"{e['code']} {e['name']} at t={e['t']:g} s" for e in tel.summary()["errors"])
+    """Every ECU error a session saw, worded as everywhere (``ECU error 3 (egt-high: ...) at t=...``)."""
+    from ...link.zk_link import describe_error
+
+    return "; ".join(describe_error(e["code"], e["name"], e["t"]) for e in tel.summary()["errors"])

@@ -1,0 +1,98 @@
+"""SIGINT and SIGTERM for the command-line programs, from the first instant of the process.
+
+:func:`install` runs before click and the command modules are imported. Until :func:`running`
+is called (the command is about to parse its arguments), a signal ends the process at once,
+quietly, with 130 (SIGINT) or 143 (SIGTERM): nothing has been opened or written yet. From then
+on SIGINT raises :class:`KeyboardInterrupt` and SIGTERM :class:`Terminated` (a subclass, so
+every ``except KeyboardInterrupt`` that cleans up or prints a summary runs for both), and the
+program exits 130 or 143.
+
+Only the first signal counts: a repeat (``timeout`` signals the command and then its process
+group, so the command gets SIGTERM twice; an impatient second Ctrl-C) is recorded and
+otherwise ignored, so the clean-up it would interrupt (an engine abort, a summary) completes
+and the exit status stays that of the first signal. Stdlib only.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C's KeyboardInterrupt; exit status 143."""
+
+
+_state = {"phase": None, "first": None}
+
+
+def _handler(signum, frame):
+    if _state["phase"] == "starting":
+        os._exit(EXIT.get(signum, 128 + signum))
+    if _state["first"] is not None:
+        return                       # a repeat: the first signal is already being handled
+    _state["first"] = signum
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def install() -> None:
+    """Handle SIGINT and SIGTERM from now on (the start-up phase: exit at once)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    _state["phase"] = "starting"
+    _state["first"] = None
+    for s in SIGNALS:
+        try:
+            if signal.getsignal(s) is signal.SIG_IGN:   # nohup, a shell's background job
+                continue
+            signal.signal(s, _handler)
+        except (ValueError, OSError):   # pragma: no cover - embedded interpreters
+            pass
+
+
+def running() -> None:
+    """The command runs: signals become exceptions (KeyboardInterrupt, Terminated)."""
+    if _state["phase"] is not None:
+        _state["phase"] = "running"
+
+
+def installed() -> bool:
+    return _state["phase"] is not None
+
+
+def received(signum) -> None:
+    """Record a signal handled elsewhere (a session's own handler), so repeats are ignored
+    (only in a program: a library user's process keeps its own state)."""
+    if _state["phase"] is not None and _state["first"] is None:
+        _state["first"] = signum
+
+
+def first():
+    """The first signal received since :func:`install` (None: none)."""
+    return _state["first"]
+
+
+def exit_status(exc) -> int:
+    """130 for Ctrl-C, 143 for SIGTERM (``exc``: the KeyboardInterrupt raised)."""
+    if isinstance(exc, Terminated) or _state["first"] == signal.SIGTERM:
+        return EXIT[signal.SIGTERM]
+    return EXIT[signal.SIGINT]
+
+
+def is_program() -> bool:
+    """Whether this process is one of the zkzap programs (not a library user or a test run)."""
+    import sys
+
+    argv = getattr(sys, "orig_argv", None) or []
+    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] in ("zkzap", "zkzap.__main__"):
+        return True                  # python -m zkzap, while the package itself is imported
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    if spec is not None and spec.name in ("zkzap", "zkzap.__main__"):
+        return True
+    path = getattr(main, "__file__", None) or ""
+    return os.path.basename(path) in ("zk", "zap", "zkzap") and spec is None
