@@ -79,6 +79,19 @@ def test_svg_and_pdf_from_the_raw_log(cli, run, ext, magic):
     assert "skipped steady-state plots" in r.stderr and skipped[0].startswith("steady-state plots")
 
 
+def test_a_pcapng_capture_is_a_run_with_its_own_times(cli, run, tmp_path):
+    cap = tmp_path / "run.pcapng"
+    r = cli("zk", "monitor", "-p", SIM, "--duration", "20", "-f", "jsonl", "-o", str(tmp_path / "m.jsonl"),
+            "--capture", str(cap))
+    assert r.exit_code == 0, r
+    loaded = R.load_run(str(cap))
+    assert len(loaded.t) > 100 and loaded.t[0] == 0.0 and loaded.t[-1] > 0.5      # the capture's real times
+    out = tmp_path / "cap.png"
+    r = cli("zk", "report", str(cap), "-o", str(out))
+    assert r.exit_code == 0, r
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_missing_columns_say_which_plots_were_skipped(cli, run, tmp_path):
     tel = tmp_path / "ids1.jsonl"
     import csv

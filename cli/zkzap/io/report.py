@@ -123,7 +123,7 @@ def _is_binary(head: bytes) -> bool:
 
 
 def load_run(path) -> Run:
-    """Read a telemetry CSV / JSON Lines / JSON file or a raw log into a :class:`Run`."""
+    """Read a telemetry CSV / JSON Lines / JSON file, a raw log or a pcapng capture into a :class:`Run`."""
     try:
         with open(path, "rb") as f:
             head = f.read(4096)
@@ -167,10 +167,12 @@ def load_run(path) -> Run:
 
 
 def _load_raw(path, run):
+    """A raw log, or a pcapng capture (by its content: its own receive times become ``t``)."""
+    from ..api.capture import replay_source
     from ..link import zk_link as L
 
-    src = L.ReplaySource(path, fast=True)
-    tel = L.Telemetry(None, None, True)
+    src = replay_source(path, fast=True)
+    tel = L.Telemetry(None, None, True, wall0=src.wall0, wall_clock=getattr(src, "wall_clock", False))
     try:
         while True:
             got = src.poll()

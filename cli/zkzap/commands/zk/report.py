@@ -34,7 +34,8 @@ def report(run_file, steps_file, summary_file, output, fmt, title, meta, termina
     """Render a run's telemetry as a report with plots.
 
     RUN is what 'zk monitor', 'zk send --for' or 'zk profile' wrote (CSV snapshot rows, JSON
-    Lines or JSON), or a --raw-log capture (decoded on the fly). The report has time histories on
+    Lines or JSON), a --raw-log or a --capture pcapng file (decoded on the fly; a capture's own
+    receive times are its time axis). The report has time histories on
     a shared time axis — rpm (and the target), EGT, thrust, throttle (and the target), fuel flow,
     voltages — with the engine states shaded and limit violations marked in red; with --steps,
     thrust vs rpm, EGT vs rpm and TSFC vs thrust; and a header with --title, --meta and the
