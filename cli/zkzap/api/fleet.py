@@ -73,17 +73,7 @@ def unit_of(reg) -> str:
 
 # -- reading a bus ---------------------------------------------------------------------------
 
-def map_blocks(gap=8):
-    """Contiguous runs of the register map as (address, length), gaps of at most ``gap`` unmapped
-    bytes read through: the few Load Data reads that cover every register."""
-    blocks = []
-    for reg in sorted(zap.REGISTERS, key=lambda r: r.address):
-        end = reg.address + reg.size
-        if blocks and reg.address - (blocks[-1][0] + blocks[-1][1]) <= gap:
-            blocks[-1][1] = end - blocks[-1][0]
-        else:
-            blocks.append([reg.address, reg.size])
-    return [tuple(b) for b in blocks]
+from .zap import map_blocks  # noqa: E402 - one definition: the Load Data blocks that cover the map
 
 
 class Procedures:
@@ -790,20 +780,7 @@ def find_alone(bus, ids, bauds, *, prefer=(), procedures=PROCEDURES, on_progress
                    "check power and wiring")
 
 
-def _ranges(ids):
-    ids = sorted(ids)
-    out, start, prev = [], None, None
-    for i in ids:
-        if start is None:
-            start = prev = i
-        elif i == prev + 1:
-            prev = i
-        else:
-            out.append(f"{start}-{prev}" if prev != start else str(start))
-            start = prev = i
-    if start is not None:
-        out.append(f"{start}-{prev}" if prev != start else str(start))
-    return ",".join(out)
+_ranges = zap.id_ranges
 
 
 def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROCEDURES) -> dict:

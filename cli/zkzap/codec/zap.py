@@ -247,6 +247,22 @@ def register(spec) -> Register:
     return reg
 
 
+def id_ranges(ids) -> str:
+    """``[1, 2, 3, 7]`` -> ``"1-3,7"`` (sorted; for messages)."""
+    out, start, prev = [], None, None
+    for i in sorted(ids):
+        if start is None:
+            start = prev = i
+        elif i == prev + 1:
+            prev = i
+        else:
+            out.append(f"{start}-{prev}" if prev != start else str(start))
+            start = prev = i
+    if start is not None:
+        out.append(f"{start}-{prev}" if prev != start else str(start))
+    return ",".join(out)
+
+
 def check_id(value, *, allow_broadcast=True) -> int:
     if isinstance(value, str):
         v = value.strip().lower()

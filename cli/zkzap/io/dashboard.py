@@ -106,6 +106,32 @@ def fmt(value, unit="", thousands=False) -> str:
     return f"{text}{unit}" if unit == "%" else f"{text} {unit}"
 
 
+class LiveView:
+    """What a live view on a terminal shares: rich's Live around :meth:`render` (which the view
+    defines, with ``stream``, ``console`` and ``refresh_per_second``) while the view is entered."""
+
+    def __enter__(self):
+        import sys
+
+        from rich.live import Live
+
+        from .term import console_for
+
+        if self.console is None:
+            self.console = console_for(self.stream if self.stream is not None else sys.stdout)
+        self._live = Live(get_renderable=self.render, console=self.console,
+                          refresh_per_second=self.refresh_per_second, transient=False,
+                          redirect_stdout=self.console.file is sys.stdout, redirect_stderr=True)
+        self._live.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        live, self._live = self._live, None
+        if live is not None:
+            live.__exit__(*exc)
+        return False
+
+
 class History:
     """The last ``points`` samples of one value, one per ``interval`` seconds of ``time_s``:
     within an interval the latest value wins, so the line does not depend on the frame rate."""
@@ -130,7 +156,7 @@ class History:
         return self.values.maxlen * self.interval
 
 
-class Dashboard:
+class Dashboard(LiveView):
     """A rich Live view of the engine and the link; a context manager.
 
     ``stream`` is where the view is drawn (a terminal; anything else gets the final view once,
@@ -291,27 +317,6 @@ class Dashboard:
 
     __rich__ = render
 
-    # --- lifetime --------------------------------------------------------------------------
-    def __enter__(self):
-        import sys
-
-        from rich.live import Live
-
-        from .term import console_for
-
-        if self.console is None:
-            self.console = console_for(self.stream if self.stream is not None else sys.stdout)
-        self._live = Live(get_renderable=self.render, console=self.console,
-                          refresh_per_second=self.refresh_per_second, transient=False,
-                          redirect_stdout=self.console.file is sys.stdout, redirect_stderr=True)
-        self._live.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        live, self._live = self._live, None
-        if live is not None:
-            live.__exit__(*exc)
-        return False
 
     def refresh(self) -> None:
         """Redraw now (the refresh thread also redraws a few times a second)."""

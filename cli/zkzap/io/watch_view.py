@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 
-from .dashboard import sparkline
+from .dashboard import LiveView, sparkline
 
 #: A read older than this many poll periods (at least 0.5 s) is shown as stale.
 STALE_POLLS = 3
@@ -26,7 +26,7 @@ def value_text(reg, raw) -> str:
     return f"{raw} {reg.unit}".rstrip()
 
 
-class WatchView:
+class WatchView(LiveView):
     """A rich Live view of a :class:`zkzap.api.watch.Watcher`; a context manager."""
 
     refresh_per_second = 8
@@ -91,25 +91,5 @@ class WatchView:
 
     __rich__ = render
 
-    def __enter__(self):
-        import sys
-
-        from rich.live import Live
-
-        from .term import console_for
-
-        if self.console is None:
-            self.console = console_for(self.stream if self.stream is not None else sys.stdout)
-        self._live = Live(get_renderable=self.render, console=self.console,
-                          refresh_per_second=self.refresh_per_second, transient=False,
-                          redirect_stdout=self.console.file is sys.stdout, redirect_stderr=True)
-        self._live.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        live, self._live = self._live, None
-        if live is not None:
-            live.__exit__(*exc)
-        return False
 
 

@@ -190,19 +190,7 @@ def _emit(writer, rec, found, fmt):
     writer.write(rec)
 
 
-def _ranges(ids):
-    out = []
-    start = prev = None
-    for i in ids:
-        if start is None:
-            start = prev = i
-        elif i == prev + 1:
-            prev = i
-        else:
-            out.append(f"{start}-{prev}" if prev != start else str(start))
-            start = prev = i
-    out.append(f"{start}-{prev}" if prev != start else str(start))
-    return ",".join(out)
+_ranges = zap.id_ranges
 
 
 # -- dump ----------------------------------------------------------------------------------------
