@@ -42,6 +42,28 @@ def parse_bits(spec: str) -> tuple:
     return tuple(parts)
 
 
+def bits_text(field) -> str:
+    """A field's bits in the notation :func:`parse_bits` reads: ``b4[1:0] b3[7:5]``, ``b2``, ``b4[5]``."""
+    parts = []
+    for byte, hi, lo in field.bits:
+        if (hi, lo) == (7, 0):
+            parts.append(f"b{byte}")
+        elif hi == lo:
+            parts.append(f"b{byte}[{hi}]")
+        else:
+            parts.append(f"b{byte}[{hi}:{lo}]")
+    return " ".join(parts)
+
+
+def scale_text(field):
+    """A field's scale as a number, or its rule when it depends on the protocol version or a
+    parameter; None for enumerations."""
+    if field.names is not None or field.values is not None:
+        return None
+    s = field.scale
+    return s.describe() if hasattr(s, "describe") else s
+
+
 def _decimals(step: float) -> int:
     text = repr(float(step))
     if "e" in text:

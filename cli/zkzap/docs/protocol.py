@@ -10,25 +10,13 @@ import os
 import re
 
 from ..codec import zap, zk
+from ..codec.fields import bits_text, scale_text
 
 NOTATION = """\
 Bit notation: bytes are numbered from 0 (the head byte); `b2` is byte 2, `b3[4:0]` its bits 4
 down to 0, `b4[1:0] b3[7:5]` a value whose high bits are byte 4's bits 1..0 and whose low bits
 are byte 3's bits 7..5 (most significant part first). Multi-byte values in the mightyZAP
 protocol are little-endian."""
-
-
-def bits_text(field) -> str:
-    """A field's bits in this document's notation: ``b4[1:0] b3[7:5]``, ``b2``, ``b4[5]``."""
-    parts = []
-    for byte, hi, lo in field.bits:
-        if (hi, lo) == (7, 0):
-            parts.append(f"b{byte}")
-        elif hi == lo:
-            parts.append(f"b{byte}[{hi}]")
-        else:
-            parts.append(f"b{byte}[{hi}:{lo}]")
-    return " ".join(parts)
 
 
 def _cell(value) -> str:
@@ -43,10 +31,8 @@ def _table(head, rows) -> list:
 
 
 def _scale(field) -> str:
-    if field.names is not None or field.values is not None:
-        return ""
-    s = field.scale
-    return s.describe() if hasattr(s, "describe") else ("" if s == 1 else f"{s:g}")
+    s = scale_text(field)
+    return "" if s is None or s == 1 else s if isinstance(s, str) else f"{s:g}"
 
 
 def _range(field) -> str:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from ...codec import zk
+from ...codec.fields import bits_text, scale_text
 from ...errors import UsageError
 from .. import CONTEXT, Command
 from ..options import format_option, resolve_format, write_rows
@@ -102,27 +103,6 @@ FIELD_TABLE = [("kind", "kind"), ("id", "id"), ("frame", "frame"), ("key", "key"
 #: Long enumerations point to their own table in the terminal view (JSON and CSV list every name).
 _ENUM_TABLES = {id(zk.ENGINE_STATES): "zk states", id(zk.ERRORS): "zk errors",
                 id(zk.ACTIONS): "zk send action --help"}
-
-
-def bits_text(field) -> str:
-    """A field's bits in the notation of docs/protocol.md: ``b4[1:0] b3[7:5]``, ``b2``, ``b4[5]``."""
-    parts = []
-    for byte, hi, lo in field.bits:
-        if (hi, lo) == (7, 0):
-            parts.append(f"b{byte}")
-        elif hi == lo:
-            parts.append(f"b{byte}[{hi}]")
-        else:
-            parts.append(f"b{byte}[{hi}:{lo}]")
-    return " ".join(parts)
-
-
-def scale_text(field):
-    """The scale as a number, or its rule when it depends on the protocol version or a parameter."""
-    if field.names is not None or field.values is not None:
-        return None
-    s = field.scale
-    return s.describe() if hasattr(s, "describe") else s
 
 
 def _since_note(field) -> str:
