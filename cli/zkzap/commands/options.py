@@ -307,6 +307,49 @@ class BaudType(click.ParamType):
         return [CompletionItem(b) for b in bauds if b.startswith(incomplete)]
 
 
+class BaudList(click.ParamType):
+    """A list of baud rates from ``allowed`` (``57600,115200``), or ``all`` (``allowed`` in its
+    order). ``label`` names the option in messages, ``what`` says what a rate must be,
+    ``listed`` is the order the allowed rates are named in, ``example`` a valid list."""
+
+    name = "bauds"
+
+    def __init__(self, allowed, *, label, what, example, listed=None):
+        self.allowed = tuple(allowed)
+        self.label, self.what, self.example = label, what, example
+        self.listed = tuple(listed) if listed is not None else self.allowed
+
+    def shell_complete(self, ctx, param, incomplete):
+        from .complete import bauds
+
+        return bauds(self.allowed)(ctx, param, incomplete)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (list, tuple)):
+            return list(value)
+        if isinstance(value, int):
+            return [value]
+        text = str(value).strip().lower()
+        if text == "all":
+            return list(self.allowed)
+        out = []
+        for part in text.replace(" ", ",").split(","):
+            if not part:
+                continue
+            try:
+                b = int(part)
+            except ValueError:
+                b = None
+            if b not in self.allowed:
+                raise UsageError(f"{self.label}: {part!r} is not {self.what}; allowed "
+                                 f"{', '.join(str(v) for v in self.listed)} or all")
+            if b not in out:
+                out.append(b)
+        if not out:
+            raise UsageError(f"{self.label}: none given; allowed a list like {self.example} or all")
+        return out
+
+
 def port_options(group: str, *, baud_auto: bool = False):
     """``-p/--port``, ``-b/--baud``, ``--stop-bits``, ``--timeout`` and ``--sim`` for a protocol
     group; ``baud_auto``: ``-b auto`` detects the line settings first."""

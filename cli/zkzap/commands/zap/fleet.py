@@ -16,7 +16,7 @@ from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
 from ..options import FilePath, consent, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link
-from .scan import BaudList, IdList
+from .scan import IdList, actuator_bauds
 
 DOC_FORMATS = ("json", "toml", "yaml")
 ROW_FORMATS = ("table", "json", "jsonl", "csv")
@@ -406,7 +406,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
               help="Set these IDs up again although the state file has them done.")
 @click.option("--find-ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="The IDs to search for each new actuator.")
-@click.option("--find-baud", type=BaudList(), default="all", show_default=True, metavar="BAUDS",
+@click.option("--find-baud", type=actuator_bauds(), default="all", show_default=True, metavar="BAUDS",
               help="The baud rates to search: a list or 'all' (57600 first).")
 @click.option("--no-wait", is_flag=True,
               help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop.")

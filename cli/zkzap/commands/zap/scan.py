@@ -16,8 +16,8 @@ from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (FiniteRange, SignedCommand, consent, format_option, id_option, note, resolve_format, warn,
-                       zap_yes_option as yes_option)
+from ..options import (BaudList, FiniteRange, SignedCommand, consent, format_option, id_option, note,
+                       resolve_format, warn, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
 
@@ -52,40 +52,9 @@ class IdList(click.ParamType):
         return out
 
 
-class BaudList(click.ParamType):
-    """Baud rates from the actuator's table, or ``all``."""
-
-    name = "bauds"
-
-    def shell_complete(self, ctx, param, incomplete):
-        from ..complete import bauds
-
-        return bauds(ALL_BAUDS)(ctx, param, incomplete)
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, list):
-            return value
-        if isinstance(value, int):
-            return [value]
-        text = str(value).strip().lower()
-        if text == "all":
-            return list(ALL_BAUDS)
-        out = []
-        for part in text.replace(" ", ",").split(","):
-            if not part:
-                continue
-            try:
-                b = int(part)
-            except ValueError:
-                b = None
-            if b not in zap.BAUD_TO_CODE:
-                raise UsageError(f"--baud: {part!r} is not an actuator baud rate; allowed "
-                                 f"{', '.join(str(v) for v in ALL_BAUDS)} or all")
-            if b not in out:
-                out.append(b)
-        if not out:
-            raise UsageError("--baud: none given; allowed a list like 57600,115200 or all")
-        return out
+def actuator_bauds():
+    """The actuator baud rates ``zap scan -b`` takes, or ``all``."""
+    return BaudList(ALL_BAUDS, label="--baud", what="an actuator baud rate", example="57600,115200")
 
 
 def _progress(total, label):
@@ -118,7 +87,7 @@ def _consent_real(port, sim, yes, action):
 @click.option("--ids", "ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="IDs to probe, like 0-253 or 1,2,5-8.")
 @format_option()
-@link_options(baud_type=BaudList(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
+@link_options(baud_type=actuator_bauds(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
                                               "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
 def scan(ids, fmt, **common):
     """Find every actuator on the bus: Echo to each ID at each baud rate, then read the model,

@@ -9,48 +9,18 @@ import click
 
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, capture_option, format_option, resolve_format
+from ..options import BaudList, FiniteRange, capture_option, format_option, resolve_format
 
 DETECT_COLUMNS = ["port", "found", "baud", "stop_bits", "protocol_version", "status_rate_hz", "frames_per_s",
                   "elapsed_s", "budget_s", "tried"]
 
 
-class ZkBaudList(click.ParamType):
-    """Baud rates from the ZK document's list, or ``all``."""
+def zk_bauds():
+    """The baud rates of the ZK document (tried commonest first), or ``all``."""
+    from ...api.detect import BAUDS
 
-    name = "bauds"
-
-    def convert(self, value, param, ctx):
-        from ...api.detect import BAUDS
-
-        if isinstance(value, (list, tuple)):
-            return list(value)
-        text = str(value).strip().lower()
-        if text == "all":
-            return list(BAUDS)
-        out = []
-        for part in text.replace(" ", ",").split(","):
-            if not part:
-                continue
-            try:
-                b = int(part)
-            except ValueError:
-                b = None
-            if b not in BAUDS:
-                raise UsageError(f"baud: {part!r} is not a baud rate of the ZK document; allowed "
-                                 f"{', '.join(str(v) for v in sorted(BAUDS))} or all")
-            if b not in out:
-                out.append(b)
-        if not out:
-            raise UsageError("baud: none given; allowed a list like 115200,9600 or all")
-        return out
-
-    def shell_complete(self, ctx, param, incomplete):
-        from click.shell_completion import CompletionItem
-
-        from ...api.detect import BAUDS
-
-        return [CompletionItem(str(b)) for b in (*BAUDS, "all") if str(b).startswith(incomplete)]
+    return BaudList(BAUDS, label="baud", what="a baud rate of the ZK document", listed=sorted(BAUDS),
+                    example="115200,9600")
 
 
 def detect_options(f):
@@ -88,7 +58,7 @@ def run_detection(url, bauds, stop_bits, window, budget, probe):
 @click.option("-p", "--port", envvar="ZKZAP_ZK_PORT", metavar="PORT", default=None,
               help="Serial device or pyserial URL [env ZKZAP_ZK_PORT].")
 @click.option("--sim", is_flag=True, help="Listen to the built-in simulator instead of a port.")
-@click.option("-b", "--baud", "bauds", type=ZkBaudList(), default="all", show_default=True, metavar="LIST",
+@click.option("-b", "--baud", "bauds", type=zk_bauds(), default="all", show_default=True, metavar="LIST",
               help="Baud rates to try, like 115200,9600, or all (2400, 4800, 9600, 19200, 38400, 57600, "
                    "115200; tried commonest first).")
 @click.option("--stop-bits", type=click.Choice(["1", "2", "both"]), default="both", show_default=True,
