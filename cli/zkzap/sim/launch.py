@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import selectors
-import socket
 import threading
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
@@ -57,8 +55,7 @@ class Simulator:
         else:
             self._wake_r, self._wake_w = os.pipe()
             ready = threading.Event()
-            target = self._serve_pty if transport == "pty" else self._serve_tcp
-            self._thread = threading.Thread(target=target, args=(ready, host, port), daemon=True,
+            self._thread = threading.Thread(target=self._serve, args=(ready, host, port), daemon=True,
                                             name=f"zkzap-sim-{kind}-{transport}")
             self._error = None
             self._thread.start()
@@ -97,109 +94,26 @@ class Simulator:
 
     # -- servers --------------------------------------------------------------------------------
 
-    def _timeout(self):
-        wake = self.device.next_wakeup(self.clock.now())
-        if wake is None:
-            return 0.5
-        return min(0.5, self.clock.real_delay(wake - self.clock.now()))
+    def _serve(self, ready, host, port):
+        """The server thread: :func:`zkzap.sim.serve.run_pty` or ``run_tcp`` until :meth:`close`."""
+        from .serve import run_pty, run_tcp
 
-    def _serve_pty(self, ready, host, port):
-        from .serve import _BAUDS, _deliver, _outgoing, _termios, host_settings
-
-        termios, tty = _termios()
-        speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
-
-        try:
-            master, slave = os.openpty()
-            tty.setraw(slave)
-            self.url = os.ttyname(slave)
-        except OSError as e:
-            self._error = e
+        def announced(url):
+            self.url = url
             ready.set()
-            return
-        sel = selectors.DefaultSelector()
-        sel.register(master, selectors.EVENT_READ, "data")
-        sel.register(self._wake_r, selectors.EVENT_READ, "stop")
-        ready.set()
-        try:
-            while True:
-                for key, _ in sel.select(self._timeout()):
-                    if key.data == "stop":
-                        return
-                    try:
-                        data = os.read(master, 4096)
-                    except OSError:
-                        data = b""
-                    if data:
-                        with self.lock:
-                            _deliver(self.device, data, self.clock.now(), host_settings(termios, slave, speeds))
-                with self.lock:
-                    reply = self.device.poll(self.clock.now())
-                if reply:
-                    os.write(master, _outgoing(self.device, reply, host_settings(termios, slave, speeds)))
-        finally:
-            sel.close()
-            os.close(master)
-            os.close(slave)
-
-    def _serve_tcp(self, ready, host, port):
-        try:
-            srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
-            srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            srv.bind((host, port))
-            srv.listen(1)
-        except OSError as e:
-            self._error = e
-            ready.set()
-            return
-        shown = f"[{host}]" if ":" in host else host
-        self.url = f"socket://{shown}:{srv.getsockname()[1]}"
-        sel = selectors.DefaultSelector()
-        sel.register(srv, selectors.EVENT_READ, "accept")
-        sel.register(self._wake_r, selectors.EVENT_READ, "stop")
-        client = None
-        ready.set()
-
-        def drop():
-            nonlocal client
-            sel.unregister(client)
-            client.close()
-            client = None
 
         try:
-            while True:
-                for key, _ in sel.select(self._timeout()):
-                    if key.data == "stop":
-                        return
-                    if key.data == "accept":
-                        conn, _ = srv.accept()
-                        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                        if client is not None:
-                            drop()
-                        client = conn
-                        sel.register(client, selectors.EVENT_READ, "client")
-                        continue
-                    try:
-                        data = client.recv(4096)
-                    except OSError:
-                        data = b""
-                    if data:
-                        with self.lock:
-                            self.device.receive(data, self.clock.now(), None)
-                    else:
-                        drop()
-                with self.lock:
-                    reply = self.device.poll(self.clock.now())
-                if reply and client is not None:
-                    try:
-                        client.sendall(reply)
-                    except OSError:
-                        drop()
-        finally:
-            if client is not None:
-                client.close()
-            sel.close()
-            srv.close()
+            if self.transport == "pty":
+                run_pty(self.device, self.clock, announced, stop_fd=self._wake_r, lock=self.lock)
+            else:
+                run_tcp(self.device, self.clock, announced, host=host, port=port, stop_fd=self._wake_r,
+                        lock=self.lock)
+        except Exception as e:  # noqa: BLE001 - no pty, a port in use: raised by the starter
+            if not ready.is_set():
+                self._error = e
+                ready.set()
+            else:
+                raise
 
 
 def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, max_rpm: int = 160000,

@@ -87,42 +87,60 @@ def _timeout(device, clock):
     return min(0.5, clock.real_delay(wake - clock.now()))
 
 
-def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
-    """Run ``device`` on a new pseudo-terminal; its path is announced on ``out`` (and, with
-    ``link``, also made available as a symlink at that path)."""
+class _NoLock:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) -> None:
+    """Serve ``device`` on a new pseudo-terminal until ``stop_fd`` becomes readable (or a signal
+    handler raises). ``ready(path)`` is called once the pty exists (with ``link``, the path is
+    also a symlink there); ``lock`` (a context manager) is held around every use of the device,
+    for a caller that inspects it from another thread. The device is not closed here."""
     termios, tty = _termios()
     speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
+    lock = lock or _NoLock()
     master, slave = os.openpty()
-    tty.setraw(slave)
-    path = os.ttyname(slave)
-    if link:
-        try:
-            os.unlink(link)
-        except FileNotFoundError:
-            pass
-        os.symlink(path, link)
-    sel = selectors.DefaultSelector()
-    sel.register(master, selectors.EVENT_READ)
-    _install_signals()
     try:
-        _announce(link or path, out)       # inside the try: a signal right after the line is a stop
-        while True:
-            for _key, _ in sel.select(_timeout(device, clock)):
-                try:
-                    data = os.read(master, 4096)
-                except OSError:
-                    data = b""
-                if data:
-                    _deliver(device, data, clock.now(), host_settings(termios, slave, speeds))
-            settings = host_settings(termios, slave, speeds)
-            reply = device.poll_line(clock.now(), settings[0])
-            if reply:
-                os.write(master, _outgoing(device, reply, host_settings(termios, slave, speeds)))
-    except _Stop:
-        pass
+        tty.setraw(slave)
+        path = os.ttyname(slave)
+        if link:
+            try:
+                os.unlink(link)
+            except FileNotFoundError:
+                pass
+            os.symlink(path, link)
+        sel = selectors.DefaultSelector()
+        sel.register(master, selectors.EVENT_READ, "data")
+        if stop_fd is not None:
+            sel.register(stop_fd, selectors.EVENT_READ, "stop")
+        try:
+            ready(link or path)
+            while True:
+                with lock:
+                    wait = _timeout(device, clock)
+                events = sel.select(wait)
+                settings = host_settings(termios, slave, speeds)     # the host's, once a turn
+                for key, _ in events:
+                    if key.data == "stop":
+                        return
+                    try:
+                        data = os.read(master, 4096)
+                    except OSError:
+                        data = b""
+                    if data:
+                        with lock:
+                            _deliver(device, data, clock.now(), settings)
+                with lock:
+                    reply = device.poll_line(clock.now(), settings[0])
+                if reply:
+                    os.write(master, _outgoing(device, reply, settings))
+        finally:
+            sel.close()
     finally:
-        device.close()
-        sel.close()
         os.close(master)
         os.close(slave)
         if link:
@@ -130,6 +148,20 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
                 os.unlink(link)
             except OSError:
                 pass
+
+
+def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
+    """Run ``device`` on a new pseudo-terminal until SIGINT/SIGTERM; its path is announced on
+    ``out`` (and, with ``link``, also made available as a symlink at that path)."""
+    _termios()                             # a clear refusal on a system without ptys, first
+    _install_signals()
+    try:
+        # a signal right after the line is announced is a stop
+        run_pty(device, clock, lambda path: _announce(path, out), link=link)
+    except _Stop:
+        pass
+    finally:
+        device.close()
 
 
 def _refuse(conn, addr) -> None:
@@ -142,60 +174,81 @@ def _refuse(conn, addr) -> None:
         sys.stderr.flush()
 
 
-def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) -> None:
-    """Run ``device`` behind a TCP socket; the URL ``socket://HOST:PORT`` is announced on ``out``.
-    Port 0 picks a free port.
+def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=None, lock=None) -> None:
+    """Serve ``device`` behind a TCP socket until ``stop_fd`` becomes readable (or a signal
+    handler raises); ``ready(url)`` gets ``socket://HOST:PORT`` once it listens (port 0 picks a
+    free port); ``lock`` as for :func:`run_pty`. The device is not closed here.
 
     One client at a time, like a serial line with one host: while a client is connected, a
     second connection is accepted and closed at once (its reads see the end of the stream) and
     a line on stderr says so; the first client keeps the device. Once it disconnects, the next
     client gets it."""
+    lock = lock or _NoLock()
     srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
-    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    srv.bind((host, port))
-    srv.listen(1)
-    actual = srv.getsockname()[1]
-    sel = selectors.DefaultSelector()
-    sel.register(srv, selectors.EVENT_READ, "accept")
     client = None
-    _install_signals()
-    shown = f"[{host}]" if ":" in host else host
+    sel = selectors.DefaultSelector()
     try:
-        _announce(f"socket://{shown}:{actual}", out)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((host, port))
+        srv.listen(1)
+        actual = srv.getsockname()[1]
+        sel.register(srv, selectors.EVENT_READ, "accept")
+        if stop_fd is not None:
+            sel.register(stop_fd, selectors.EVENT_READ, "stop")
+        shown = f"[{host}]" if ":" in host else host
+        ready(f"socket://{shown}:{actual}")
+
+        def drop():
+            nonlocal client
+            sel.unregister(client)
+            client.close()
+            client = None
+
         while True:
-            for key, _ in sel.select(_timeout(device, clock)):
+            with lock:
+                wait = _timeout(device, clock)
+            for key, _ in sel.select(wait):
+                if key.data == "stop":
+                    return
                 if key.data == "accept":
-                    conn, _addr = srv.accept()
+                    conn, addr = srv.accept()
                     if client is not None:
-                        _refuse(conn, _addr)
+                        _refuse(conn, addr)
                         continue
                     conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                     client = conn
                     sel.register(client, selectors.EVENT_READ, "client")
-                else:
-                    try:
-                        data = client.recv(4096)
-                    except OSError:
-                        data = b""
-                    if data:
+                    continue
+                try:
+                    data = client.recv(4096)
+                except OSError:
+                    data = b""
+                if data:
+                    with lock:
                         _deliver(device, data, clock.now(), (None, None))
-                    else:
-                        sel.unregister(client)
-                        client.close()
-                        client = None
-            reply = device.poll(clock.now())
+                else:
+                    drop()
+            with lock:
+                reply = device.poll(clock.now())
             if reply and client is not None:
                 try:
                     client.sendall(reply)
                 except OSError:
-                    sel.unregister(client)
-                    client.close()
-                    client = None
-    except _Stop:
-        pass
+                    drop()
     finally:
-        device.close()
         if client is not None:
             client.close()
         sel.close()
         srv.close()
+
+
+def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) -> None:
+    """Run ``device`` behind a TCP socket until SIGINT/SIGTERM (see :func:`run_tcp`); the URL
+    ``socket://HOST:PORT`` is announced on ``out``."""
+    _install_signals()
+    try:
+        run_tcp(device, clock, lambda url: _announce(url, out), host=host, port=port)
+    except _Stop:
+        pass
+    finally:
+        device.close()
