@@ -389,7 +389,7 @@ class Layout:
         return self.decoder(ctx, known, raw)(frame)
 
     # --- text encoders ------------------------------------------------------------------
-    def items(self, ctx, known, raw=False):
+    def items(self, ctx, known, raw=False, tables=0):
         """The record this layout decodes to, as ``(code, items)`` for one fixed context.
 
         ``code`` is the lines that extract the raw values ``r0, r1...`` from a frame ``b``;
@@ -397,8 +397,30 @@ class Layout:
         ``"const"`` (what: the value), ``"int"``/``"float"`` (what: an expression) or
         ``"table"`` (what: ``(expression, values)``, the value for every raw value). With the
         context fixed, version gates and version-dependent scales are constants, so the
-        values are exactly those :meth:`decoder` gives for that context.
+        values are exactly those :meth:`decoder` gives for that context. ``tables`` (a bit
+        width) turns the ``"float"`` and ``"int"`` items of one field up to that width into
+        ``"table"`` items, evaluated from the same expression for every raw value, and the
+        ``"float"`` items of wider fields into ``"lazy"`` items (what: ``(variable, number of
+        raw values, expression)``) for a table filled as values occur.
         """
+        code, items = self._items(ctx, known, raw)
+        if tables:
+            widths = {f"r{i}": f.width for i, f in enumerate(self.fields)}
+            for n, (key, kind, what) in enumerate(items):
+                if kind not in ("float", "int"):
+                    continue
+                var = [v for v in widths if v in _names(what)]
+                if len(var) != 1:
+                    continue
+                if widths[var[0]] <= tables:
+                    fn = eval(f"lambda {var[0]}: {what}")  # noqa: S307 - generated from the static tables
+                    items[n] = (key, "table", (var[0], [fn(v) for v in range(1 << widths[var[0]])]))
+                elif kind == "float":
+                    # (an int is formatted about as fast as it is looked up)
+                    items[n] = (key, "lazy", (var[0], 1 << widths[var[0]], what))
+        return code, items
+
+    def _items(self, ctx, known, raw=False):
         code = []
         items = []
         for i, f in enumerate(self.fields):
@@ -428,31 +450,36 @@ class Layout:
                 elif isinstance(f.scale, float):
                     items.append((f.key, "float", f"round({r} * {f.scale!r} + {f.offset!r}, {f.decimals})"))
                 else:
-                    kind = "float" if isinstance(f.offset, float) else "int"
-                    items.append((f.key, kind, f"{r} * {f.scale!r} + {f.offset!r}"))
+                    if isinstance(f.offset, float):
+                        items.append((f.key, "float", f"{r} * {f.scale!r} + {f.offset!r}"))
+                    else:
+                        items.append((f.key, "int", _int_linear(r, f.scale, f.offset)))
             if raw:
                 items.append((f.key + "_raw", "int", r))
         return code, items
 
-    def text_encoder(self, dialect, ctx, known, raw=False, head=(), tail=()):
+    def text_encoder(self, dialect, ctx, known, raw=False, head=(), tail=(), guard=None):
         """A generated function ``frame -> text`` rendering the record of one frame straight to
         ``dialect``'s text (JSON object, CSV row) for one fixed context.
 
         ``head`` and ``tail`` are items around the layout's own (``("kind", "const",
         "status")``, ``("frame", "str", "b.hex(' ').upper()")``). Built from the same
-        declarations as :meth:`decoder`, value for value.
+        declarations as :meth:`decoder`, value for value. ``guard`` is ``(expression,
+        function)``: a frame for which the expression over ``b`` is true is handed to the
+        function instead (a frame this context does not cover). The function takes only
+        frames of the layout's size.
         """
-        code, items = self.items(ctx, known, raw)
+        code, items = self.items(ctx, known, raw, tables=TABLE_WIDTH)
         checks = self.range_checks(known)
         head, tail = list(head), list(tail)
         if not checks:
-            return compile_text(code, head + items + tail, dialect)
+            return compile_text(code, head + items + tail, dialect, size=self.size, guard=guard)
         # a frame with a value out of range (rare) gets the out_of_range cell before the tail,
         # looked up by the bit mask of the failed checks: one table look-up per checked field
         tables = {f"K{j}": bad for j, (_key, _r, bad) in enumerate(checks)}
         mask = " | ".join(f"(K{j}[{r}] << {j})" for j, (_key, r, _bad) in enumerate(checks))
         lists = [[key for j, (key, _r, _bad) in enumerate(checks) if m >> j & 1] for m in range(1 << len(checks))]
-        return compile_text(code, head + items + tail, dialect,
+        return compile_text(code, head + items + tail, dialect, size=self.size, guard=guard,
                             flagged=(len(head) + len(items), mask, lists, tables))
 
 
@@ -477,6 +504,19 @@ class Layout:
 
 #: The record key listing the fields whose decoded value is outside its documented range.
 OUT_OF_RANGE = "out_of_range"
+#: Text encoders render the values of fields up to this many bits from a table built when the
+#: encoder is (4,096 entries at most), instead of scaling and formatting them per frame.
+TABLE_WIDTH = 12
+#: A wider field's table is filled as its values occur, and whole once 1/LAZY_FILL of it was
+#: filled that way (values that keep changing: a whole table costs less than the misses).
+LAZY_FILL = 16
+
+
+def _names(expr):
+    """The identifiers of an expression."""
+    import re
+
+    return set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr))
 
 
 def _phys_item(r, sc, offset, decimals):
@@ -485,7 +525,15 @@ def _phys_item(r, sc, offset, decimals):
         if decimals == 0:
             return "int", f"int(round({r} * {sc!r} + {offset!r}, 0))"
         return "float", f"round({r} * {sc!r} + {offset!r}, {decimals})"
-    return "int", f"{r} * {sc!r} + {offset!r}"
+    return "int", _int_linear(r, sc, offset)
+
+
+def _int_linear(r, scale, offset):
+    """``r * scale + offset`` for integer scale and offset, without the no-op parts."""
+    expr = r if scale == 1 else f"{r} * {scale!r}"
+    if offset:
+        expr += f" - {-offset!r}" if offset < 0 else f" + {offset!r}"
+    return expr
 
 
 def compile_dict(code, items, checks=()):
@@ -528,7 +576,55 @@ def _check_vars(mask):
     return re.findall(r"K\d+\[(r\d+)\]", mask)
 
 
-def compile_text(code, items, dialect, flagged=None):
+def _fstring(template, args, ns=None):
+    """The %-template ``template`` (pieces ``%d`` for ints, ``%s`` for text, ``%r``, ``%%``)
+    filled with the expressions ``args``, as the source of one f-string expression.
+
+    With ``ns`` (the namespace the tables ``tN`` live in), two ``%s`` pieces that look up
+    tables of text with the same index and only literal text between them (a value and its
+    name: ``5,fuel-ramp``) become one look-up in a table of both, added to ``ns``."""
+    import re
+
+    seq = []                                  # ["text", ["expression", "!r" or ""], "text"...]
+    lit, n = "", 0
+    for k, part in enumerate(re.split(r"(%[dsr%])", template)):
+        if k % 2 == 0:
+            lit += part
+        elif part == "%%":
+            lit += "%"
+        else:
+            seq += [lit, [args[n], "!r" if part == "%r" else "", part]]
+            lit = ""
+            n += 1
+    seq.append(lit)
+    assert n == len(args), "one expression per piece"
+    if ns is not None:
+        k = 1
+        while k + 2 < len(seq):
+            a, b = seq[k], seq[k + 2]
+            ma, mb = re.fullmatch(r"(t\d+)\[(\w+)\]", a[0]), re.fullmatch(r"(t\d+)\[(\w+)\]", b[0])
+            if (a[2] == b[2] == "%s" and ma and mb and ma.group(2) == mb.group(2)
+                    and isinstance(ns.get(ma.group(1)), tuple) and isinstance(ns.get(mb.group(1)), tuple)):
+                sep = seq[k + 1]
+                merged = ns.setdefault("_merged", {})
+                name = merged.get((ma.group(1), sep, mb.group(1)))
+                if name is None:
+                    name = merged[ma.group(1), sep, mb.group(1)] = f"t{len(merged)}m"
+                    ns[name] = tuple(x + sep + y for x, y in zip(ns[ma.group(1)], ns[mb.group(1)]))
+                seq[k:k + 3] = [[f"{name}[{ma.group(2)}]", "", "%s"]]
+                continue
+            k += 2
+    out = []
+    for k, item in enumerate(seq):
+        if k % 2 == 0:
+            if item:
+                out.append(repr(item))
+        else:
+            out.append(f'f"{{{item[0]}{item[1]}}}"')
+    return "(" + " ".join(out or ["''"]) + ")"
+
+
+def compile_text(code, items, dialect, flagged=None, size=None, guard=None):
     """Compile ``code`` + ``items`` (see :meth:`Layout.items`; kind ``"str"`` is an expression
     giving text that needs no escaping) into ``frame -> text`` for ``dialect``.
 
@@ -536,7 +632,9 @@ def compile_text(code, items, dialect, flagged=None):
     string (``dialect.str_piece``) and arranges the ``(key, piece, arg)`` cells into one
     %-template (``dialect.template(cells) -> (template, args)``). ``flagged`` is
     ``(position, mask expression, lists by mask, tables)``: when the mask is non-zero a second
-    template renders the :data:`OUT_OF_RANGE` list at ``position``.
+    template renders the :data:`OUT_OF_RANGE` list at ``position``. With ``size`` (the frame
+    length: the function then takes only frames of that length) the frame's bytes are
+    unpacked into locals once. ``guard``: see :meth:`Layout.text_encoder`.
     """
     import re
 
@@ -563,6 +661,20 @@ def compile_text(code, items, dialect, flagged=None):
             expr, values = what
             ns[f"t{n}"] = tuple(dialect.value(v) for v in values)
             cells.append((key, "%s", f"t{n}[{expr}]"))
+        elif kind == "lazy":
+            # a table filled as raw values occur: a list index, and the work once per value;
+            # once values keep changing (LAZY_FILL of the table missed) it is filled whole
+            var, count, expr = what
+            ns[f"t{n}"] = [None] * count
+            ns[f"n{n}"] = [max(count // LAZY_FILL, 1)]
+            ns["VALUE"] = getattr(dialect, "number_value", dialect.value)
+            exec(f"def f{n}({var}, t=t{n}, left=n{n}):\n"  # noqa: S102
+                 f"    v = t[{var}] = VALUE({expr})\n"
+                 f"    left[0] -= 1\n"
+                 f"    if not left[0]:\n"
+                 f"        t[:] = [VALUE({expr}) for {var} in range({count})]\n"
+                 f"    return v", ns)
+            cells.append((key, "%s", f"(t{n}[{var}] or f{n}({var}))"))
         else:  # pragma: no cover - the kinds above are all Layout.items produces
             raise ValueError(f"item kind {kind!r}")
     template, args = dialect.template(cells)
@@ -575,16 +687,38 @@ def compile_text(code, items, dialect, flagged=None):
         ns["TEMPLATE2"] = template2
     used = set(re.findall(r"\br\d+\b", " ".join(args) + " " + mask))
     body = [line for line in code if line.split(" = ")[0] in used]
-    ns["TEMPLATE"] = template
+    # the template as an f-string (faster than %): an argument that cannot sit inside the
+    # f-string's quotes is computed into a local first
+    hoisted = {}
+    for a in args + (args2 if flagged is not None else []):
+        if a not in hoisted and re.search(r"['\"\\{}]", a):
+            hoisted[a] = f"a{len(hoisted)}"
+            body.append(f"{hoisted[a]} = {a}")
+    lines = []
     if flagged is not None:
-        # the check tables as default arguments: local look-ups on the fast path
-        names = [f"K{j}" for j in range(len(tables))]
-        src = [f"def encode(b, {', '.join(f'{k}={k}' for k in names)}):"] + [f"    {line}" for line in body]
-        src.append(f"    if {' or '.join(f'{k}[{r}]' for k, r in zip(names, _check_vars(mask)))}:")
-        src.append(f"        m = {mask}")
-        src.append(f"        return TEMPLATE2 % ({''.join(a + ', ' for a in args2)})")
-    else:
-        src = ["def encode(b):"] + [f"    {line}" for line in body]
-    src.append(f"    return TEMPLATE % ({''.join(a + ', ' for a in args)})")
+        lines.append(f"if {' or '.join(f'K{j}[{r}]' for j, r in enumerate(_check_vars(mask)))}:")
+        lines.append(f"    m = {mask}")
+        lines.append(f"    return {_fstring(template2, [hoisted.get(a, a) for a in args2], ns)}")
+    lines.append(f"return {_fstring(template, [hoisted.get(a, a) for a in args], ns)}")
+    body += lines
+    if guard is not None:
+        ns["GUARDED"] = guard[1]
+        body[:0] = [f"if {guard[0]}:", "    return GUARDED(b)"]
+    if size:
+        # b[3] -> b3, one unpacking of the frame instead of an index per use
+        text = "\n".join(body)
+        idx = {int(k) for k in re.findall(r"\bb\[(\d+)\]", text)}
+        body = [re.sub(r"\bb\[(\d+)\]", r"b\1", line) for line in body]
+        # a raw value that is a whole byte is that byte's local
+        alias = dict(m.groups() for m in (re.fullmatch(r"(r\d+) = (b\d+)", line) for line in body) if m)
+        if alias:
+            body = [re.sub(r"\br\d+\b", lambda m: alias.get(m.group(0), m.group(0)), line)
+                    for line in body if not re.fullmatch(r"r\d+ = b\d+", line)]
+        if idx:
+            body.insert(0, ", ".join(f"b{k}" if k in idx else "_" for k in range(size)) + " = b")
+    # the tables and templates as default arguments: local look-ups on the fast path
+    names = sorted(k for k in ns if k not in ("VALUE", "__builtins__", "_merged")
+                   and re.search(rf"\b{k}\b", "\n".join(body)))
+    src = [f"def encode(b{''.join(f', {k}={k}' for k in names)}):"] + [f"    {line}" for line in body]
     exec("\n".join(src), ns)  # noqa: S102 - generated from the static tables
     return ns["encode"]

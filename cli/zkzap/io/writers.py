@@ -62,6 +62,9 @@ class JsonDialect:
     str_piece = '"%s"'
     key = ("json",)
     value = staticmethod(_dumps)
+    #: The text of an int or a finite float: what ``value`` gives for one, without the
+    #: encoder's dispatch.
+    number_value = staticmethod(repr)
     record = staticmethod(_dumps)
 
     @staticmethod
@@ -74,6 +77,8 @@ class CsvDialect:
     """Records as rows of a fixed column set (the ``csv`` format), for text encoders."""
 
     str_piece = "%s"
+    #: The text of an int or a finite float: what ``value`` gives for one (needs no quoting).
+    number_value = staticmethod(repr)
 
     def __init__(self, columns):
         self.columns = list(columns)
