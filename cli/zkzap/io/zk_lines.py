@@ -8,8 +8,8 @@ codec stays free of formats.
 
 from __future__ import annotations
 
-from ..codec.zk import (CONTROL_BY_ID, STATUS_BY_ID, STATUS_LEN, VERSIONED_STATUS, ZkDecoder,
-                        protocol_version_of)
+from ..codec.zk import (CONTROL_BY_ID, STATUS_BY_ID, STATUS_LEN, VERSION_HEAD, VERSIONED_STATUS,
+                        ZkDecoder, protocol_version_of)
 
 __all__ = ["ZkLines", "LINE_CACHE"]
 
@@ -18,6 +18,19 @@ __all__ = ["ZkLines", "LINE_CACHE"]
 #: repeats frames heavily; the recently used ones survive a rotation).
 LINE_CACHE = 16384
 _MAX_CONTEXTS = 8
+#: The memo is worth its look-ups while at least one frame in this many of a block hits it.
+MEMO_WORTH = 4
+#: Frames rendered without the memo after a block that hardly used it, before trying again.
+COLD_SPAN = 1 << 16
+#: The last item of every line: the frame's hex.
+_TAIL = (("frame", "str", "b.hex(' ').upper()"),)
+
+
+def _status_head(sid):
+    """The first items of a status line."""
+    return (("kind", "const", "status"), ("id", "const", sid))
+
+
 #: Compiled text encoders, shared by every ZkLines: (dialect key, raw, ID, context) -> function.
 _ENCODERS = {}
 
@@ -38,6 +51,8 @@ class ZkLines:
         self.dialect = dialect
         self.cache = cache
         self._contexts = {}
+        self._cold = 0
+        self._encs = [None] * 256
         self._select()
 
     def _select(self):
@@ -47,10 +62,15 @@ class ZkLines:
         if c is None:
             if len(self._contexts) >= _MAX_CONTEXTS:
                 self._contexts.clear()
-            # [young memo, old memo, status encoders by head byte that keep this context]
-            c = self._contexts[key] = [{}, {}, {}]
+            # [young memo, old memo, status encoders by head byte that keep this context,
+            #  version frame encoders by the version they repeat, the encoder of every head
+            #  byte (the miss where there is none yet)]
+            c = self._contexts[key] = [{}, {}, {}, {}, [self._miss] * 256]
         self._key = key
-        self._memo, self._old, self._fast = c
+        self._memo, self._old, self._fast, self._six, encs = c
+        # one list object for the life of this ZkLines, refilled in place: a loop that holds
+        # it sees a change of context at the very next frame
+        self._encs[:] = encs
         self.memo = self._memo
         self._ctx = c
 
@@ -78,7 +98,14 @@ class ZkLines:
         return line
 
     def encode_all(self, frames) -> list:
-        """The lines of ``frames`` (bytes objects, as a framer returns them), in order."""
+        """The lines of ``frames`` (bytes objects, as a framer returns them), in order.
+
+        While frames hardly repeat (fewer than one in :data:`MEMO_WORTH` of a block found in
+        the memo) the memo is left alone for the next :data:`COLD_SPAN` frames: looking up and
+        storing lines that are never used again would cost more than the encoders."""
+        if self._cold > 0:
+            self._cold -= len(frames)
+            return self._encode_cold(frames)
         out = []
         append = out.append
         memo = self._memo
@@ -86,9 +113,11 @@ class ZkLines:
         old = self._old.get
         fast = self._fast.get
         cap = self.cache
+        misses = 0
         for f in frames:
             line = get(f)
             if line is None:
+                misses += 1
                 line = old(f)
                 if line is None:
                     enc = fast(f[0])
@@ -107,7 +136,20 @@ class ZkLines:
                     old = self._old.get
                 memo[f] = line
             append(line)
+        if len(out) >= 256 and (len(out) - misses) * MEMO_WORTH < len(out):
+            self._cold = COLD_SPAN
         return out
+
+    def _encode_cold(self, frames) -> list:
+        """:meth:`encode_all` without the memo: each frame's encoder by its head byte (the miss
+        changes the list in place when the context changes)."""
+        encs = self._encs
+        return [encs[f[0]](f) for f in frames]
+
+    def _serve(self, head, enc):
+        """``enc`` renders frames of ``head`` in the current context from now on."""
+        self._ctx[4][head] = enc
+        self._encs[head] = enc
 
     def encode(self, frame) -> str:
         return self.encode_all([bytes(frame)])[0]
@@ -116,8 +158,24 @@ class ZkLines:
         """A frame with no line in the memo and no fast encoder: render it the full way, then
         remember it (or its encoder) unless it changed the decoding context."""
         key = self._key
-        line, enc = self._render(f)
         d = self.decoder
+        if f[0] == VERSION_HEAD and len(f) == STATUS_LEN and d.version_source == "frame":
+            # a version frame that repeats the version already read from a frame changes no
+            # state: its encoder for this context serves it
+            enc = self._six.get(f[5] >> 2)
+            if enc is not None:
+                return enc(f)
+        line, enc = self._render(f)
+        if f[0] == VERSION_HEAD and len(f) == STATUS_LEN:
+            if (d.version, d.known, d.rpm_factor) == key and d.version_source == "frame":
+                v = d.version
+                self._six[v] = self._version_enc
+                # for the loop without the memo: this context's version frame encoder, which
+                # hands a frame of another version to the full way
+                st = STATUS_BY_ID[VERSION_HEAD & 0x0F]
+                self._serve(VERSION_HEAD, st.layout.text_encoder(
+                    self.dialect, {"version": v}, v, d.raw, guard=(f"b[5] >> 2 != {v}", self._miss),
+                    head=_status_head(VERSION_HEAD & 0x0F), tail=_TAIL))
         if (d.version, d.known, d.rpm_factor) == key:
             if self.cache:
                 if len(self._memo) >= self.cache:
@@ -125,6 +183,7 @@ class ZkLines:
                 self._memo[bytes(f)] = line
             if enc is not None:
                 self._fast[f[0]] = enc
+                self._serve(f[0], enc)
         else:
             self._select()
         return line
@@ -157,9 +216,11 @@ class ZkLines:
                     _ENCODERS.clear()
                 enc = _ENCODERS[k] = st.layout.text_encoder(
                     self.dialect, {"version": version}, known, raw,
-                    head=(("kind", "const", "status"), ("id", "const", sid)),
-                    tail=(("frame", "str", "b.hex(' ').upper()"),))
-            return enc(f), (None if sid == 6 else enc)
+                    head=_status_head(sid), tail=_TAIL)
+            if sid == 6:
+                self._version_enc = enc
+                return enc(f), None
+            return enc(f), enc
         cmd_id = f[1] >> 4
         cmd = CONTROL_BY_ID.get(cmd_id)
         if cmd is None or cmd_id == 6 or cmd.layout.reserved_bits(f):
@@ -172,5 +233,5 @@ class ZkLines:
             enc = _ENCODERS[k] = cmd.layout.text_encoder(
                 self.dialect, {"rpm_factor": d.rpm_factor}, None, raw,
                 head=(("kind", "const", "control"), ("id", "const", cmd_id), ("command", "const", cmd.name)),
-                tail=(("frame", "str", "b.hex(' ').upper()"),))
+                tail=_TAIL)
         return enc(f), None
