@@ -1,5 +1,5 @@
 """The ZK link through the in-process simulator (sim://): records, control rate, abort, faults,
-replay, telemetry rules and schedules."""
+replay and telemetry rules."""
 
 import os
 import signal
@@ -356,49 +356,6 @@ def test_parse_ids():
 def test_iso_utc():
     assert L.iso_utc(0.5) == "1970-01-01T00:00:00.500Z"
     assert L.iso_utc(1700000000.123) == "2023-11-14T22:13:20.123Z"
-
-
-# --- schedules -----------------------------------------------------------------------------------
-
-def test_schedule_steps_states_and_header():
-    text = "# test\ntime_s,state,throttle_pct\n\n0,run,0\n10,,30  # climb\n20,standby,0\n"
-    s = L.Schedule.parse(text, name="t.csv")
-    assert s.length == 20 and s.final_state == "standby"
-    assert s.frame_at(5) == zk.encode_control("control", sw="run", throttle_pct=0)[0]
-    assert s.frame_at(15) == RUN30
-    assert s.frame_at(25) == STANDBY0
-    assert [p[1:3] for p in s.plan(10)] == [("run", 0.0), ("run", 30.0), ("standby", 0.0)]
-
-
-def test_schedule_linear_and_late_start():
-    s = L.Schedule.parse("2,0\n12,100\n14,100,stop\n", interpolate="linear")
-    assert s.frame_at(1.0) is None                                     # nothing before the first row
-    assert zk.decode_control(s.frame_at(7.0))["throttle_pct"] == 50.0
-    assert zk.decode_control(s.frame_at(7.0))["state"] == "run"       # the default first state
-    assert zk.decode_control(s.frame_at(2.05))["throttle_pct"] == 0.5
-    assert zk.decode_control(s.frame_at(13.0))["throttle_pct"] == 100.0
-    assert s.final_state == "stop"
-
-
-@pytest.mark.parametrize("text,msg", [
-    ("", "no rows"),
-    ("0,120\n", "s.csv:1: throttle: 120 is out of range; allowed 0..100 %"),
-    ("0,10\n5,20,fly\n", "s.csv:2: state: unknown name 'fly'"),
-    ("0,10\n5,20\n3,10\n", "s.csv:3: time_s: 3 is before the previous row's 5"),
-    ("x,10\n", "s.csv:1: header 'x,10'"),
-    ("0\n", "s.csv:1: 1 cells"),
-    ("-1,0\n", "s.csv:1: time_s: -1 is out of range"),
-    ("abc,def\n0,x\n", "header"),
-    ("0,ten\n", "s.csv:1: throttle: not a number"),
-])
-def test_schedule_errors_name_the_line(text, msg):
-    with pytest.raises(UsageError, match=msg.replace("(", r"\(").replace(")", r"\)").replace(".", r"\.")):
-        L.Schedule.parse(text, name="s.csv")
-
-
-def test_schedule_rounding_note():
-    s = L.Schedule.parse("0,33.33\n", name="s.csv")
-    assert s.notes == ["s.csv:1: throttle: 33.33 % is not a multiple of 0.1 %; rounded to 33.3 %"]
 
 
 def test_replay_keeps_a_frame_held_for_look_ahead_at_the_end(tmp_path):

@@ -14,8 +14,8 @@ on the way out.
                          every ``1/rate`` s, stop on count/duration/end, Ctrl-C (SIGINT), SIGTERM,
                          a port failure, a silent ECU or a new ECU error, and send the abort
                          command on the way out when the session was controlling the engine.
-- :class:`Schedule`      a throttle schedule (``time_s,throttle_pct[,state]`` rows) as control
-                         frames over time.
+
+Throttle and RPM schedules are :class:`zkzap.api.schedule.Schedule`.
 
 Everything about frames comes from :mod:`zkzap.codec.zk`. Nothing here imports click or rich;
 pyserial is imported by :func:`zkzap.link.port.open_port`.
@@ -29,7 +29,6 @@ import time
 from collections import deque
 
 from ..codec import zk
-from ..codec.fields import FieldValueError
 from ..codec.framing import ZkFramer
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError, ZkzapError
 from ..errors import TERMINATED
@@ -956,148 +955,3 @@ def _id_list(ids) -> str:
         else:
             out.append([i, i])
     return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in out)
-
-
-# --- throttle schedules ----------------------------------------------------------------------------
-
-SCHEDULE_STATES = tuple(n for n in zk.CONTROL_SW.values())
-_THROTTLE = zk.CONTROL_BY_NAME["control"].layout.by_key["throttle_pct"]
-_SW = zk.CONTROL_BY_NAME["control"].layout.by_key["sw"]
-
-
-class ScheduleError(UsageError):
-    pass
-
-
-class Schedule:
-    """Rows of ``time_s,throttle_pct[,state]``: at ``time_s`` the throttle and state apply.
-
-    A header line naming the columns is optional (then ``state`` may be in any column order);
-    ``#`` starts a comment; blank lines are skipped. Times must not decrease. A row without a
-    state keeps the previous row's; the first row's default is ``default_state`` (run). Before the
-    first row's time nothing is sent. ``linear`` interpolates the throttle between rows (the state
-    changes at row times). The schedule ends at the last row's time.
-    """
-
-    def __init__(self, rows, interpolate="step", name="schedule"):
-        if not rows:
-            raise ScheduleError(f"{name}: no rows; expected time_s,throttle_pct[,state]")
-        self.rows = rows     # [(time_s, throttle_pct, state, line)]
-        self.interpolate = interpolate
-        self.name = name
-        self.notes = []
-        self._cache = {}
-        self._i = 0
-
-    @classmethod
-    def parse(cls, text, name="schedule", interpolate="step", default_state="run"):
-        rows = []
-        cols = None
-        state = default_state
-        notes = []
-        for lineno, line in enumerate(text.splitlines(), 1):
-            line = line.split("#", 1)[0].strip()
-            if not line:
-                continue
-            cells = [c.strip() for c in line.split(",")]
-            where = f"{name}:{lineno}"
-            if cols is None:
-                try:
-                    float(cells[0])
-                    cols = {"time_s": 0, "throttle_pct": 1, "state": 2}
-                except ValueError:
-                    cols = {c.lower(): i for i, c in enumerate(cells)}
-                    missing = [c for c in ("time_s", "throttle_pct") if c not in cols]
-                    unknown = [c for c in cols if c not in ("time_s", "throttle_pct", "state")]
-                    if missing or unknown:
-                        raise ScheduleError(f"{where}: header {line!r}: columns are time_s, throttle_pct "
-                                            f"and optionally state")
-                    continue
-            if len(cells) > 3 or len(cells) < 2:
-                raise ScheduleError(f"{where}: {len(cells)} cells; expected time_s,throttle_pct[,state]")
-            try:
-                t = float(cells[cols["time_s"]])
-            except (ValueError, IndexError):
-                raise ScheduleError(f"{where}: time_s: {cells[0]!r} is not a number of seconds") from None
-            if not t >= 0 or t != t or t == float("inf"):
-                raise ScheduleError(f"{where}: time_s: {cells[0]} is out of range; allowed 0 or more")
-            if rows and t < rows[-1][0]:
-                raise ScheduleError(f"{where}: time_s: {t:g} is before the previous row's {rows[-1][0]:g}; "
-                                    f"times must not decrease")
-            try:
-                throttle = float(cells[cols["throttle_pct"]])
-            except (ValueError, IndexError):
-                raise ScheduleError(f"{where}: throttle: not a number; allowed "
-                                    f"{_THROTTLE.describe_range()}") from None
-            si = cols.get("state")
-            if si is not None and si < len(cells) and cells[si]:
-                state = cells[si].lower()
-            try:
-                _, note = _THROTTLE.to_raw(throttle)
-                state = zk.CONTROL_SW[_SW.to_raw(state)[0]]
-            except FieldValueError as e:
-                raise ScheduleError(f"{where}: {e}") from None
-            if note:
-                notes.append(f"{where}: {note}")
-            rows.append((t, throttle, state, lineno))
-        sched = cls(rows, interpolate, name)
-        sched.notes = notes
-        return sched
-
-    @property
-    def length(self) -> float:
-        return self.rows[-1][0]
-
-    def command_at(self, t):
-        """(state, throttle_pct) in force at ``t``, or None before the first row."""
-        rows = self.rows
-        if t < rows[0][0]:
-            return None
-        i = self._i if self._i < len(rows) and rows[self._i][0] <= t else 0
-        while i + 1 < len(rows) and rows[i + 1][0] <= t:
-            i += 1
-        self._i = i
-        t0, thr, state, _ = rows[i]
-        if self.interpolate == "linear" and i + 1 < len(rows):
-            t1, thr1 = rows[i + 1][0], rows[i + 1][1]
-            if t1 > t0:
-                thr = thr + (thr1 - thr) * (t - t0) / (t1 - t0)
-        return state, thr
-
-    def frame_at(self, t):
-        cmd = self.command_at(t)
-        if cmd is None:
-            return None
-        state, thr = cmd
-        step = _THROTTLE.scale
-        key = (state, round(thr / step))
-        frame = self._cache.get(key)
-        if frame is None:
-            frame = self._cache[key] = zk.encode_control("control", sw=state, throttle_pct=key[1] * step)[0]
-        return frame
-
-    def frames(self):
-        """Every distinct frame the schedule can send (for consent and validation)."""
-        out = []
-        for _, thr, state, _ in self.rows:
-            f = zk.encode_control("control", sw=state, throttle_pct=round(thr / _THROTTLE.scale) * _THROTTLE.scale)[0]
-            out.append(f)
-        return out
-
-    def plan(self, rate):
-        """``[(t, state, throttle_pct, frame)]``: each change of the frame sent at ``rate`` Hz."""
-        out = []
-        last = None
-        n = int(self.length * rate + 1e-9)
-        for i in range(n + 1):
-            t = i / rate
-            frame = self.frame_at(t)
-            if frame is not None and frame != last:
-                rec = zk.decode_control(frame)
-                out.append((round(t, 3), rec["state"], rec["throttle_pct"], frame))
-                last = frame
-        return out
-
-    @property
-    def final_state(self) -> str:
-        return self.rows[-1][2]

@@ -29,19 +29,6 @@ def example_text(kind="throttle") -> str:
     return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
-def _read(path) -> str:
-    if path == "-":
-        return sys.stdin.read()
-    try:
-        with open(path, encoding="utf-8") as f:
-            return f.read()
-    except OSError as e:
-        raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"schedule: {path} is not UTF-8 text "
-                         "(expected CSV rows time_s,throttle_pct[,state] or time_s,rpm=N[,state])") from None
-
-
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
 @click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
@@ -118,7 +105,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if not schedule:
         raise UsageError("schedule: give SCHEDULE.csv ('-' for stdin), or --example to print one")
     name = "stdin" if schedule == "-" else schedule
-    sched = Schedule.parse(_read(schedule), name=name, interpolate=interpolate)
+    sched = Schedule.load(schedule, name=name, interpolate=interpolate)
     for n in sched.notes[:5]:
         note(n)
     if len(sched.notes) > 5:
@@ -137,9 +124,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         refuse_without("a run (not with -n/--dry-run)")
         _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append, schedule)
         return
-    if sched.length <= 0:
-        raise UsageError(f"schedule: {name}: the last row is at 0 s; the last row's time_s is the "
-                         f"schedule's length")
+    sched.check_length()
     url = resolve_port(port, sim)
     if ids is not None:
         zk_link.parse_ids(ids)
