@@ -23,8 +23,6 @@ pyserial is imported by :func:`zkzap.link.port.open_port`.
 
 from __future__ import annotations
 
-import signal
-import threading
 import time
 from collections import deque
 
@@ -32,6 +30,7 @@ from ..codec import zk
 from ..codec.framing import ZkFramer
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError, ZkzapError
 from ..errors import TERMINATED
+from ..signals import INTERRUPT_SIGNALS, SignalGuard
 
 #: Control frames per second while a session controls the engine (``--rate``).
 DEFAULT_RATE = 20.0
@@ -611,48 +610,6 @@ class Telemetry:
             "protocol_version": self.decoder.version,
             "version_source": self.decoder.version_source,
         }
-
-
-# --- signals ---------------------------------------------------------------------------------
-
-#: The signals that end a session: SIGINT (Ctrl-C), SIGTERM, and on Windows SIGBREAK (Ctrl-Break),
-#: which ends it like Ctrl-C.
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n))
-INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
-
-
-class SignalGuard:
-    """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
-    records (files stay whole) and can send the abort command. Only the first signal counts: a
-    repeat (``timeout`` signals twice; a second Ctrl-C) neither interrupts the abort nor changes
-    the exit status."""
-
-    def __init__(self):
-        self.signum = None
-        self._old = {}
-
-    def _handler(self, signum, frame):
-        from .. import signals
-
-        if self.signum is not None:
-            return
-        self.signum = signum
-        signals.received(signum)
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for s in STOP_SIGNALS:
-                try:
-                    self._old[s] = signal.signal(s, self._handler)
-                except (ValueError, OSError):   # pragma: no cover - embedded interpreters
-                    pass
-        return self
-
-    def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
-        self._old = {}
-        return False
 
 
 # --- the session loop ----------------------------------------------------------------------------
