@@ -10,7 +10,11 @@ program exits 130 or 143.
 Only the first signal counts: a repeat (``timeout`` signals the command and then its process
 group, so the command gets SIGTERM twice; an impatient second Ctrl-C) is recorded and
 otherwise ignored, so the clean-up it would interrupt (an engine abort, a summary) completes
-and the exit status stays that of the first signal. Stdlib only.
+and the exit status stays that of the first signal.
+
+:class:`SignalGuard` is the loop-level alternative for a session that must stop between two
+records and send an abort: while it is active, SIGINT and SIGTERM (and SIGBREAK on Windows) only
+set a flag the loop checks. Stdlib only.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ def running() -> None:
 
 
 def installed() -> bool:
+    """Whether :func:`install` ran (this process is one of the programs)."""
     return _state["phase"] is not None
 
 
@@ -96,3 +101,41 @@ def is_program() -> bool:
         return True
     path = getattr(main, "__file__", None) or ""
     return os.path.basename(path) in ("zk", "zap", "zkzap") and spec is None
+
+
+#: The signals that end a session: SIGINT (Ctrl-C), SIGTERM, and on Windows SIGBREAK (Ctrl-Break),
+#: which ends it like Ctrl-C.
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n))
+INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
+
+
+class SignalGuard:
+    """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
+    records (files stay whole) and can send the abort command. Only the first signal counts: a
+    repeat (``timeout`` signals twice; a second Ctrl-C) neither interrupts the abort nor changes
+    the exit status."""
+
+    def __init__(self):
+        self.signum = None
+        self._old = {}
+
+    def _handler(self, signum, frame):
+        if self.signum is not None:
+            return
+        self.signum = signum
+        received(signum)
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for s in STOP_SIGNALS:
+                try:
+                    self._old[s] = signal.signal(s, self._handler)
+                except (ValueError, OSError):   # pragma: no cover - embedded interpreters
+                    pass
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+        self._old = {}
+        return False

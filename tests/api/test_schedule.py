@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from zkzap.api.schedule import RPM_MAX, Schedule, ScheduleError, ScheduleTargetError
 from zkzap.codec import zk
+from zkzap.errors import UsageError
 
 
 def parse(text, **kw):
@@ -122,3 +123,58 @@ def test_plan_matches_stepping_every_period(spec, interpolate, rate):
         lines.append(f"{t:g},{v:g}" if kind == "thr" else f"{t:g},rpm={v:g}")
     s = parse("\n".join(lines) + "\n", interpolate=interpolate)
     assert [(t, f) for t, _, _, _, f in s.plan(rate)] == _brute(s, rate)
+
+
+RUN30 = zk.encode_control("control", sw="run", throttle_pct=30)[0]
+STANDBY0 = zk.encode_control("control", sw="standby", throttle_pct=0)[0]
+
+
+def test_header_in_any_order_comments_and_a_state_carried_over():
+    s = parse("# test\ntime_s,state,throttle_pct\n\n0,run,0\n10,,30  # climb\n20,standby,0\n")
+    assert s.length == 20 and s.final_state == "standby"
+    assert s.frame_at(5) == zk.encode_control("control", sw="run", throttle_pct=0)[0]
+    assert s.frame_at(15) == RUN30                                    # the empty state cell keeps run
+    assert s.frame_at(25) == STANDBY0
+    assert [p[2:4] for p in s.plan(10)] == [("run", 0.0), ("run", 30.0), ("standby", 0.0)]
+
+
+def test_linear_ramps_and_nothing_before_the_first_row():
+    s = parse("2,0\n12,100\n14,100,stop\n", interpolate="linear")
+    assert s.frame_at(1.0) is None
+    assert zk.decode_control(s.frame_at(7.0))["throttle_pct"] == 50.0
+    assert zk.decode_control(s.frame_at(7.0))["state"] == "run"       # the default first state
+    assert zk.decode_control(s.frame_at(2.05))["throttle_pct"] == 0.5
+    assert zk.decode_control(s.frame_at(13.0))["throttle_pct"] == 100.0
+    assert s.final_state == "stop"
+
+
+@pytest.mark.parametrize("text,msg", [
+    ("", "s.csv: no rows"),
+    ("0,10\n5,20,fly\n", "s.csv:2: state: unknown name 'fly'"),
+    ("x,10\n", "s.csv:1: header 'x,10'"),
+    ("0\n", "s.csv:1: 1 cells"),
+    ("-1,0\n", "s.csv:1: time_s: -1 is out of range"),
+    ("0,ten\n", "s.csv:1: throttle_pct: 'ten' is not a number"),
+])
+def test_more_bad_rows_name_file_and_line(text, msg):
+    with pytest.raises(ScheduleError) as e:
+        parse(text)
+    assert str(e.value).startswith(msg)
+
+
+def test_throttle_rounding_is_noted_and_a_zero_length_schedule_refused():
+    assert parse("0,33.33\n5,0\n").notes == ["s.csv:1: throttle: 33.33 % is not a multiple of 0.1 %; rounded to 33.3 %"]
+    with pytest.raises(UsageError, match="s.csv: the last row is at 0 s"):
+        parse("0,10\n").check_length()
+
+
+def test_load_reads_a_file_and_names_it(tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("0,10\n5,20\n", encoding="utf-8")
+    s = Schedule.load(str(path))
+    assert s.name == str(path) and s.length == 5
+    with pytest.raises(UsageError, match=r"schedule: cannot read .*none\.csv: No such file"):
+        Schedule.load(str(tmp_path / "none.csv"))
+    path.write_bytes(b"0,10\n\xff\xfe\n")
+    with pytest.raises(UsageError, match="is not UTF-8 text"):
+        Schedule.load(str(path))

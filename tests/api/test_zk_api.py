@@ -81,3 +81,24 @@ def test_run_profile(zk_sim):
 def test_bad_abort_kind(zk_sim):
     with pytest.raises(UsageError, match="abort"):
         Ecu(zk_sim, abort="explode")
+
+
+@pytest.mark.zk_sim(speed=20)
+def test_run_profile_reads_a_schedule_file_as_zk_profile_does(zk_sim, tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("time_s,throttle_pct,state\n0,20.04,run\n0.4,0,stop\n", encoding="utf-8")
+    for schedule in (path, str(path)):
+        with Ecu(zk_sim) as ecu:
+            result = ecu.run_profile(schedule)
+        assert result.ok and result.summary["schedule_s"] == 0.4 and result.outcome.aborted is None
+        assert result.notes == [f"{path}:2: throttle: 20.04 % is not a multiple of 0.1 %; rounded to 20 %"]
+    with Ecu(zk_sim) as ecu, pytest.raises(UsageError, match="schedule: cannot read .*none.csv"):
+        ecu.run_profile(str(tmp_path / "none.csv"))
+
+
+@pytest.mark.zk_sim(speed=20)
+def test_run_profile_ending_in_run_sends_the_abort(zk_sim):
+    with Ecu(zk_sim) as ecu:
+        result = ecu.run_profile("0,30\n0.3,30\n")
+    assert result.ok and result.outcome.aborted == "standby"
+    assert zk_sim.device.received[-1]["state"] == "standby"

@@ -179,7 +179,7 @@ def test_a_failed_port_is_worded_the_same_in_zk_and_zap():
     import serial
 
     from zkzap.link.zap_bus import ZapBus
-    from zkzap.link.zk_link import ZkLink
+    from zkzap.link.zk_port import ZkLink
 
     class Broken:
         timeout = 0.01

@@ -17,7 +17,7 @@ import subprocess
 
 import pytest
 
-from zkzap.link.zk_link import record_columns  # noqa: E402
+from zkzap.api.telemetry import record_columns  # noqa: E402
 
 OLD_CSV = ",".join(record_columns(True)) + "\n2024-05-01T12:00:00.000Z,0.1,1,5000\n"
 OLD_BIN = b"\xf1\x00\x00\x00\x00\x4c\xa0" * 3

@@ -135,7 +135,7 @@ def test_clock_and_number_parser():
 @pytest.mark.parametrize("text,ids", [("1 2", {1, 2}), ("1,2", {1, 2}), (" 1 , 6 ", {1, 6}), ("1 - 3", {1, 2, 3}),
                                       ("1-3 9", {1, 2, 3, 9}), ("12", {12})])
 def test_ids_lists_split_on_spaces_and_commas(text, ids):
-    from zkzap.link.zk_link import parse_ids
+    from zkzap.api.telemetry import parse_ids
 
     assert parse_ids(text) == ids
 

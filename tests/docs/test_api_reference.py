@@ -12,7 +12,9 @@ import pytest
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 API_MODULES = ("zkzap", "zkzap.api.zap", "zkzap.api.zk", "zkzap.errors", "zkzap.sim",
-               "zkzap.sim.launch", "zkzap.pytest_plugin", "zkzap.link.shared")
+               "zkzap.sim.launch", "zkzap.pytest_plugin", "zkzap.link.shared", "zkzap.link.zk_port",
+               "zkzap.link.zk_sources", "zkzap.api.telemetry", "zkzap.api.session", "zkzap.api.schedule",
+               "zkzap.signals")
 
 
 def test_pdoc_builds_without_warnings(tmp_path):

@@ -20,7 +20,7 @@ TIME_KEYS = ["time", "t", "dir"]
 
 
 def iso_utc(ts: float) -> str:
-    from ..link.zk_link import iso_utc as _iso
+    from .telemetry import iso_utc as _iso
 
     return _iso(ts)
 
@@ -236,7 +236,7 @@ class CaptureReplaySource:
     """``zk monitor --replay CAPTURE``: the status frames of a ZK capture at their recorded
     times (``t`` from the capture's first chunk, ``time`` the capture's own clock), paced in real
     time or, with ``fast``, as fast as they decode. The interface of
-    :class:`zkzap.link.zk_link.ReplaySource`."""
+    :class:`zkzap.link.zk_sources.ReplaySource`."""
 
     live = False
     #: a capture keeps the receive time of every chunk: records get real wall-clock times
@@ -313,7 +313,7 @@ class CaptureReplaySource:
 def replay_source(path, fast=False):
     """The source for ``zk monitor --replay FILE``: a capture by its content, else a raw log."""
     from ..io.pcapng import is_pcapng
-    from ..link.zk_link import ReplaySource
+    from ..link.zk_sources import ReplaySource
 
     if is_pcapng(path):
         return CaptureReplaySource(path, fast)

@@ -49,6 +49,9 @@ class ScheduleTargetError(DeviceError):
 
 
 class Row:
+    """One schedule row: ``t`` (s), ``throttle`` (%) or ``rpm`` (target), ``state``, and the
+    ``line`` it was read from."""
+
     __slots__ = ("t", "throttle", "rpm", "state", "line")
 
     def __init__(self, t, throttle, rpm, state, line):
@@ -56,9 +59,11 @@ class Row:
 
     @property
     def mode(self):
+        """``rpm`` for an RPM target, else ``throttle``."""
         return "rpm" if self.rpm is not None else "throttle"
 
     def target_text(self):
+        """The target in words: ``95000 rpm`` or ``40 %``."""
         return f"{self.rpm:g} rpm" if self.rpm is not None else f"{self.throttle:g} %"
 
 
@@ -151,6 +156,26 @@ class Schedule:
         sched._round_rpm_notes()
         return sched
 
+    @classmethod
+    def load(cls, path, name=None, interpolate="step", default_state="run"):
+        """Read and parse the schedule file ``path`` (``-``: stdin, UTF-8); messages call it
+        ``name`` (default: the path, or ``stdin``). A file that cannot be read is a
+        :class:`~zkzap.errors.UsageError`."""
+        if path == "-":
+            import sys
+
+            text = sys.stdin.read()
+        else:
+            try:
+                with open(path, encoding="utf-8") as f:
+                    text = f.read()
+            except OSError as e:
+                raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
+            except UnicodeDecodeError:
+                raise UsageError(f"schedule: {path} is not UTF-8 text (expected CSV rows {SHAPE})") from None
+        name = name or ("stdin" if path == "-" else str(path))
+        return cls.parse(text, name=name, interpolate=interpolate, default_state=default_state)
+
     @staticmethod
     def _row(cells, cols, where, lineno, comma, state, notes):
         if cols:
@@ -213,17 +238,27 @@ class Schedule:
     # --- in force at a time ------------------------------------------------------------------------
     @property
     def length(self) -> float:
+        """The schedule's length: the last row's time (s)."""
         return self.rows[-1].t
+
+    def check_length(self) -> None:
+        """Refuse (UsageError) a schedule that would end as it starts (its last row at 0 s)."""
+        if self.length <= 0:
+            raise UsageError(f"schedule: {self.name}: the last row is at 0 s; the last row's time_s is the "
+                             f"schedule's length")
 
     @property
     def final_state(self) -> str:
+        """The last row's state (the engine's state when the schedule ends)."""
         return self.rows[-1].state
 
     @property
     def ends_in_rpm_mode(self) -> bool:
+        """True when the last row is an RPM target (the end must leave RPM mode)."""
         return self.rows[-1].rpm is not None
 
     def row_index(self, t):
+        """The index of the row in force at ``t`` (None before the first row)."""
         rows = self.rows
         if t < rows[0].t:
             return None
@@ -268,7 +303,7 @@ class Schedule:
         return got
 
     def bind(self, ecu):
-        """Check RPM targets against a live ECU: ``ecu`` is a :class:`~zkzap.link.zk_link.Telemetry`
+        """Check RPM targets against a live ECU: ``ecu`` is a :class:`~zkzap.api.telemetry.Telemetry`
         (its latest ``max_rpm`` and protocol version)."""
         self._ecu = ecu
         return self
@@ -369,4 +404,5 @@ class Schedule:
 
 
 def frames_target(frame, factor):
+    """The target rpm of the control ID 7 ``frame`` sent with RPM factor ``factor``."""
     return zk.decode_control(frame)["rpm_value"] * 10 * factor

@@ -1,5 +1,5 @@
 """Test-stand hooks for a ZK logging session: limits, per-step averages and logbook statistics,
-fed every decoded status frame through :attr:`zkzap.link.zk_link.Telemetry.on_frame`.
+fed every decoded status frame through :attr:`zkzap.api.telemetry.Telemetry.on_frame`.
 
 One :class:`Stand` is built from the command's options before any port opens, handed to the
 session (``run_telemetry(stand=...)``) and asked afterwards for the summary entries and the

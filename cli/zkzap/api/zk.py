@@ -17,9 +17,10 @@ Safety: a session that sent a frame controlling the engine (see
 standby or stop with throttle 0; ``none`` sends nothing) when a :meth:`Ecu.hold` ends
 abnormally (an exception, Ctrl-C, the generator closed early) and when the Ecu closes.
 
-Built on :mod:`zkzap.link.zk_link` (:class:`~zkzap.link.zk_link.ZkLink`,
-:class:`~zkzap.link.zk_link.LiveSource`, :class:`~zkzap.link.zk_link.Telemetry`,
-:class:`~zkzap.link.zk_link.Session`, :class:`~zkzap.link.zk_link.Schedule`).
+Built on :class:`~zkzap.link.zk_port.ZkLink` (the port), :class:`~zkzap.link.zk_sources.LiveSource`
+(status frames), :class:`~zkzap.api.telemetry.Telemetry` (records), :class:`~zkzap.api.session.Session`
+(the control loop) and :class:`~zkzap.api.schedule.Schedule` (throttle and RPM schedules, as
+``zk profile`` runs them).
 """
 
 from __future__ import annotations
@@ -49,14 +50,16 @@ class Status(dict):
 
 
 class ProfileResult:
-    """How :meth:`Ecu.run_profile` ended: ``outcome`` (:class:`~zkzap.link.zk_link.Outcome`:
+    """How :meth:`Ecu.run_profile` ended: ``outcome`` (:class:`~zkzap.api.session.Outcome`:
     ``reason``, ``error``, ``aborted``, ``exit_code``), ``summary`` (max rpm, max EGT, fuel,
-    states, errors, as ``zk profile --summary-json`` writes it) and ``records`` written."""
+    states, errors, as ``zk profile --summary-json`` writes it), ``records`` written and
+    ``notes`` (values the schedule rounded, ``FILE:LINE: ...``)."""
 
-    def __init__(self, outcome, summary, records):
+    def __init__(self, outcome, summary, records, notes=()):
         self.outcome = outcome
         self.summary = summary
         self.records = records
+        self.notes = list(notes)
 
     @property
     def ok(self) -> bool:
@@ -79,14 +82,16 @@ class Ecu:
 
     def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
                  silence: float = 2.0, abort: str = "standby"):
-        from ..link import zk_link as L
+        from ..link.zk_port import ZkLink
+        from ..link.zk_sources import LiveSource
+        from .session import ABORTS
+        from .telemetry import Telemetry
 
-        if abort not in L.ABORTS:
-            raise UsageError(f"abort: {abort!r}; allowed {', '.join(L.ABORTS)}")
+        if abort not in ABORTS:
+            raise UsageError(f"abort: {abort!r}; allowed {', '.join(ABORTS)}")
         url = getattr(port, "url", port)
         if not url:
             raise UsageError("no port given", baud=baud)
-        self._L = L
         self.url = url
         """The port's device path or URL."""
         self.baud = baud
@@ -94,11 +99,11 @@ class Ecu:
         self.abort_kind = abort
         """The abort command sent on an abnormal end and at close (standby, stop, none)."""
         self.silence = silence
-        self.link = L.ZkLink.open(url, baud)
-        """The :class:`~zkzap.link.zk_link.ZkLink` (the port)."""
-        self.source = L.LiveSource(self.link)
-        self.telemetry = L.Telemetry(protocol_version, wall0=self.source.wall0)
-        """The :class:`~zkzap.link.zk_link.Telemetry`: snapshot, errors, summary."""
+        self.link = ZkLink.open(url, baud)
+        """The :class:`~zkzap.link.zk_port.ZkLink` (the port)."""
+        self.source = LiveSource(self.link)
+        self.telemetry = Telemetry(protocol_version, wall0=self.source.wall0)
+        """The :class:`~zkzap.api.telemetry.Telemetry`: snapshot, errors, summary."""
         self.controlling = False
         """True once a frame that controls the engine was sent."""
         self.pump_on = False
@@ -164,7 +169,9 @@ class Ecu:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
         on protocol version 4 or later also leaves RPM mode; pump-off after a pump-on).
         Returns the frames sent."""
-        frames = self._L.abort_frames(self.abort_kind, self.telemetry.decoder.known, pump=self.pump_on)
+        from .session import abort_frames
+
+        frames = abort_frames(self.abort_kind, self.telemetry.decoder.known, pump=self.pump_on)
         for f in frames:
             self.link.write(f)
         if frames:
@@ -259,36 +266,51 @@ class Ecu:
 
     def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
                     on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
-        """Run a throttle schedule: a :class:`~zkzap.link.zk_link.Schedule`, CSV text
-        (``time_s,throttle_pct[,state]`` rows) or a list of ``(time_s, throttle_pct[, state])``.
+        """Run a throttle or RPM schedule as ``zk profile`` does: a
+        :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or
+        ``time_s,rpm=N[,state]`` rows, optionally under a header), the path of a CSV file
+        (``os.PathLike``, or a one-line string that names a file or is no CSV row), or a list of
+        ``(time_s, throttle_pct[, state])``. ``interpolate`` (``step`` or ``linear``) applies
+        to what is parsed here.
 
-        Control ID 1 frames go out at ``rate`` Hz; every status record goes to ``on_record``.
-        Ends at the schedule's last row (the abort command follows when it ends in state run),
-        or on Ctrl-C/SIGTERM, a port failure, a silent ECU or a new ECU error (the abort command
-        is sent). With ``check`` a failure is raised (DeviceError, NoReply, PortError,
+        Control frames go out at ``rate`` Hz; every status record goes to ``on_record``.
+        Ends at the schedule's last row (the abort command follows when it ends in state run or
+        in RPM mode), or on Ctrl-C/SIGTERM, a port failure, a silent ECU or a new ECU error (the
+        abort command is sent). An RPM target above the ECU's max rpm (or an ECU too old for RPM
+        mode) raises :class:`~zkzap.api.schedule.ScheduleTargetError` before any RPM frame is
+        sent. With ``check`` a failure is raised (DeviceError, NoReply, PortError,
         KeyboardInterrupt) after the abort; otherwise the result says how it ended."""
-        L = self._L
+        import os
+
+        from ..link.zk_sources import LiveSource
+        from .schedule import Schedule
+        from .session import Session
+        from .telemetry import Telemetry
+
         sched = schedule
-        if isinstance(schedule, str):
-            sched = L.Schedule.parse(schedule, interpolate=interpolate)
-        elif not isinstance(schedule, L.Schedule):
+        if isinstance(schedule, os.PathLike) or (isinstance(schedule, str) and "\n" not in schedule and (
+                os.path.isfile(schedule) or not any(sep in schedule for sep in ",;\t"))):
+            sched = Schedule.load(os.fspath(schedule), interpolate=interpolate)
+        elif isinstance(schedule, str):
+            sched = Schedule.parse(schedule, interpolate=interpolate)
+        elif not isinstance(schedule, Schedule):
             text = "\n".join(",".join(str(c) for c in row) for row in schedule)
-            sched = L.Schedule.parse(text, interpolate=interpolate)
-        if sched.length <= 0:
-            raise UsageError("schedule: the last row is at 0 s; the last row's time_s is the schedule's length")
-        source = L.LiveSource(self.link)
+            sched = Schedule.parse(text, interpolate=interpolate)
+        sched.check_length()
+        source = LiveSource(self.link)
         source.framer = self.source.framer
-        tel = L.Telemetry(self.telemetry.decoder.known, wall0=source.wall0)
+        tel = Telemetry(self.telemetry.decoder.known, wall0=source.wall0)
+        sched.bind(tel)
         sink = (lambda rec: on_record(Status(rec))) if on_record is not None else (lambda rec: None)
-        session = L.Session(source, tel, sink, control=sched.frame_at, rate=rate, abort=self.abort_kind,
-                            duration=sched.length, silence=self.silence, stop_on_error=True,
-                            abort_at_end=sched.final_state == "run")
+        session = Session(source, tel, sink, control=sched.frame_at, rate=rate, abort=self.abort_kind,
+                        duration=sched.length, silence=self.silence, stop_on_error=True,
+                        abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode)
         outcome = session.run()
         summary = {"outcome": outcome.reason, "exit_status": outcome.exit_code, "aborted": outcome.aborted,
                    "duration_s": round(session.ended_t or 0.0, 3), "schedule_s": sched.length,
                    "crc_errors": source.framer.bad}
         summary.update(tel.summary())
-        result = ProfileResult(outcome, summary, session.written)
+        result = ProfileResult(outcome, summary, session.written, sched.notes)
         if check:
             outcome.raise_for_status()
         return result

@@ -223,7 +223,7 @@ Examples:
   zkzap shell zk -p 'sim://zk?speed=10'""")
     @port_options("zk")
     def zk_shell(port, baud, stop_bits, timeout, sim):
-        from ..link import zk_link
+        from ..link.zk_port import ZkLink
         from ..link.shared import sharing
         from .zk import zk as group
         from .zk.telemetry import resolve_port
@@ -232,7 +232,7 @@ Examples:
         defaults = {"port": url, "sim": False, "baud": baud}
         if timeout is not None:
             defaults["timeout"] = timeout
-        link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
+        link = ZkLink.open(url, baud, stop_bits=stop_bits)
         try:
             with sharing("zk", link):
                 code = loop(group, "zk", defaults, interactive=_interactive())

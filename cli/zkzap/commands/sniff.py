@@ -193,7 +193,7 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
 
     from ..io.term import is_tty
     from ..io.writers import make_writer
-    from ..link.zk_link import SignalGuard
+    from ..signals import SignalGuard
 
     if fmt is None and output and output != "-":
         fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(output)[1].lower(), "jsonl")

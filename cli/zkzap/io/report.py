@@ -169,10 +169,10 @@ def load_run(path) -> Run:
 def _load_raw(path, run):
     """A raw log, or a pcapng capture (by its content: its own receive times become ``t``)."""
     from ..api.capture import replay_source
-    from ..link import zk_link as L
+    from ..api.telemetry import Telemetry
 
     src = replay_source(path, fast=True)
-    tel = L.Telemetry(None, None, True, wall0=src.wall0, wall_clock=getattr(src, "wall_clock", False))
+    tel = Telemetry(None, None, True, wall0=src.wall0, wall_clock=getattr(src, "wall_clock", False))
     try:
         while True:
             got = src.poll()

@@ -1,7 +1,7 @@
 """One open port for many commands (``zap batch``, ``zk batch``, ``zkzap shell``).
 
 While :func:`sharing` is active, the commands' own port openings (:func:`zkzap.commands.zap.
-compose.open_link`, :meth:`zkzap.link.zk_link.ZkLink.open`) borrow the shared link instead of
+compose.open_link`, :meth:`zkzap.link.zk_port.ZkLink.open`) borrow the shared link instead of
 opening the port again: each command runs over the same open port, and its "close" leaves the
 port open. The line settings a command changes for itself (the return mode, retries and timeout
 of the bus; a scan's baud rate) are put back when it returns it.

@@ -48,7 +48,9 @@ class _Stop(Exception):
 
 def stop_signals():
     """The signals that stop a simulator: SIGINT, SIGTERM, and on Windows SIGBREAK (Ctrl-Break)."""
-    return [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n)]
+    from ..signals import STOP_SIGNALS
+
+    return list(STOP_SIGNALS)
 
 
 def _install_signals():

@@ -43,8 +43,9 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
       zk batch run.txt -p /dev/ttyUSB0 --yes
     """
     from ...codec import zk
-    from ...link import zk_link
+    from ...api.session import abort_frames, describe_abort
     from ...link.shared import sharing
+    from ...link.zk_port import ZkLink, is_simulator
     from ..batch import check_lines, read_lines, read_source, run_lines, zk_consent_items
     from . import zk as group
 
@@ -57,19 +58,19 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
     check_lines(group, lines, "zk", defaults)
     if not lines:
         return
-    if not zk_link.is_simulator(url):
+    if not is_simulator(url):
         items = zk_consent_items(lines)
         if items:
             consent(f"this batch on {url} can start the engine or run ECU hardware: " + "; ".join(items), yes)
     controls = any(zk.ControlFrame(f).controls_engine for line in lines for f in line.frames)
-    link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
+    link = ZkLink.open(url, baud, stop_bits=stop_bits)
     try:
         with sharing("zk", link):
             code = run_lines(group, "zk", lines, defaults, sys.stdout, keep_going=keep_going)
         if code and controls and abort != "none":
-            for f in zk_link.abort_frames(abort):
+            for f in abort_frames(abort):
                 link.write(f)
-            note(f"batch stopped early: sent {zk_link.describe_abort(abort)}")
+            note(f"batch stopped early: sent {describe_abort(abort)}")
     finally:
         link.close()
     if code:

@@ -144,18 +144,21 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
     an output.
     """
+    from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
+    from ...api.telemetry import Telemetry, parse_ids, record_columns
     from ...io.outfile import OutFile, refuse_same_files
-    from ...link import zk_link as L
     from ...link.port import fit_note
+    from ...link.zk_port import READ_SLICE_S, ZkLink
+    from ...link.zk_sources import LiveSource
     from .bridging import make_bridges
 
-    id_set = L.parse_ids(ids) if ids is not None else None
+    id_set = parse_ids(ids) if ids is not None else None
     if raw_log == "-":
         raise UsageError("raw-log: '-' is not a file here (stdout carries the records); give a file name")
     refuse_same_files({"--output": output, "--raw-log": raw_log, **(extra_outputs or {})},
                       {"--replay": replay, **(inputs or {})})
     if control is not None and url is not None:
-        told = fit_note("control rate", rate or L.DEFAULT_RATE, 4, baud, stop_bits)
+        told = fit_note("control rate", rate or DEFAULT_RATE, 4, baud, stop_bits)
         if told:
             note(told)
     bridges = make_bridges(notify=note)
@@ -165,7 +168,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         check_mcap(output, append, snapshot)
     if bridges:
         bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
-    columns = L.record_columns if stand is None else stand.columns(L.record_columns)
+    columns = record_columns if stand is None else stand.columns(record_columns)
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
@@ -188,11 +191,11 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source = replay_source(replay, fast=fast)
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
-            slice_s = min(L.READ_SLICE_S, 0.5 / (rate or L.DEFAULT_RATE)) if control else L.READ_SLICE_S
-            source = L.LiveSource(L.ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
-                                  reconnect=reconnect)
-        tel = L.Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                          wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
+            slice_s = min(READ_SLICE_S, 0.5 / (rate or DEFAULT_RATE)) if control else READ_SLICE_S
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
+                                reconnect=reconnect)
+        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
+                        wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -200,12 +203,12 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             from .taps import tap_session
 
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
-        session = L.Session(source, tel, sink, control=control, rate=rate or L.DEFAULT_RATE, abort=abort,
-                            count=count, duration=duration,
-                            silence=timeout if timeout is not None else L.DEFAULT_SILENCE_S,
-                            stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
-                            on_update=on_update, notify=notify,
-                            limits=stand.limits if stand is not None else None)
+        session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort,
+                          count=count, duration=duration,
+                          silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
+                          stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
+                          on_update=on_update, notify=notify,
+                          limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()

@@ -29,19 +29,6 @@ def example_text(kind="throttle") -> str:
     return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
-def _read(path) -> str:
-    if path == "-":
-        return sys.stdin.read()
-    try:
-        with open(path, encoding="utf-8") as f:
-            return f.read()
-    except OSError as e:
-        raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"schedule: {path} is not UTF-8 text "
-                         "(expected CSV rows time_s,throttle_pct[,state] or time_s,rpm=N[,state])") from None
-
-
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
 @click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
@@ -108,7 +95,9 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
       zk profile run.csv --sim --limit 'egt_c<=850,warn=800' --settle 5 --average 5 --steps-csv steps.csv
     """
     from ...api.schedule import Schedule
-    from ...link import zk_link
+    from ...api.session import DEFAULT_RATE
+    from ...api.telemetry import parse_ids
+    from ...link.zk_port import is_simulator
 
     if example:
         if schedule:
@@ -118,7 +107,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if not schedule:
         raise UsageError("schedule: give SCHEDULE.csv ('-' for stdin), or --example to print one")
     name = "stdin" if schedule == "-" else schedule
-    sched = Schedule.parse(_read(schedule), name=name, interpolate=interpolate)
+    sched = Schedule.load(schedule, name=name, interpolate=interpolate)
     for n in sched.notes[:5]:
         note(n)
     if len(sched.notes) > 5:
@@ -135,14 +124,12 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         from .bridging import refuse_without
 
         refuse_without("a run (not with -n/--dry-run)")
-        _print_plan(sched, rate or zk_link.DEFAULT_RATE, fmt, output, append, schedule)
+        _print_plan(sched, rate or DEFAULT_RATE, fmt, output, append, schedule)
         return
-    if sched.length <= 0:
-        raise UsageError(f"schedule: {name}: the last row is at 0 s; the last row's time_s is the "
-                         f"schedule's length")
+    sched.check_length()
     url = resolve_port(port, sim)
     if ids is not None:
-        zk_link.parse_ids(ids)
+        parse_ids(ids)
     averager = None
     if averaging:
         from ...api.steady import DEFAULT_DENSITY, StepAverager
@@ -156,7 +143,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True)
     stand.schedule = sched
-    if not zk_link.is_simulator(url):
+    if not is_simulator(url):
         from ...codec import zk
 
         hazard = next((h for h in map(zk.control_hazard, sched.frames()) if h), None)
@@ -215,7 +202,7 @@ _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated
 
 
 def _print_summary(s):
-    from ...link.zk_link import describe_error
+    from ...api.telemetry import describe_error
 
     def v(x, unit=""):
         return "-" if x is None else f"{x:g}{unit}" if isinstance(x, float) else f"{x}{unit}"

@@ -127,25 +127,27 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if end is not None and not for_s:
         raise UsageError("end: applies only with --for SECONDS (--for 0 runs until Ctrl-C; then --abort applies)")
     url = resolve_port(port, sim)
-    from ...link import zk_link
+    from ...api.session import DEFAULT_ABORT, DEFAULT_END, controls_engine
+    from ...api.telemetry import parse_ids
+    from ...link.zk_port import is_simulator
 
-    if end is not None and not zk_link.controls_engine(frame):
+    if end is not None and not controls_engine(frame):
         raise UsageError(f"end: {zk.decode_control(frame)['command']} does not control the engine, so its "
                          f"session ends without a command; --end applies to sessions that do")
 
     if ids is not None:
-        zk_link.parse_ids(ids)
-    controls = zk_link.controls_engine(frame)
+        parse_ids(ids)
+    controls = controls_engine(frame)
     stand = None
     if for_s is not None:
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
                             controls=controls)
         check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     hazard = zk.control_hazard(frame)
-    if hazard and not zk_link.is_simulator(url):
+    if hazard and not is_simulator(url):
         consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
     if for_s is None:
-        _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits)
+        _send_once(url, baud, frame, timeout, no_wait, stop_bits)
         return
     from .monitor import run_telemetry
 
@@ -154,8 +156,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
         stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
-        abort=abort or zk_link.DEFAULT_ABORT, stop_on_error=controls, title=title,
-        end=(end or zk_link.DEFAULT_END) if controls else None, end_label="end of --for",
+        abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
+        end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
         stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json})
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
@@ -170,7 +172,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
 def summary_line(what, outcome, tel, session) -> str:
     """One line a person reads at the end of ``--for``: how long, how many frames, the peaks, the
     states passed through and the errors seen."""
-    from ...link.zk_link import describe_error
+    from ...api.telemetry import describe_error
 
     s = tel.summary()
     why = {"duration": "done", "interrupted": "interrupted", "terminated": "terminated",
@@ -207,19 +209,21 @@ def describe_frame(frame) -> str:
     return " ".join(parts)
 
 
-def _send_once(zk_link, url, baud, frame, timeout, no_wait, stop_bits=1):
+def _send_once(url, baud, frame, timeout, no_wait, stop_bits=1):
     """Write one frame; unless ``no_wait``, wait for a status frame to show the ECU is there."""
     import time
 
+    from ...api.session import DEFAULT_SILENCE_S
     from ...codec.framing import ZkFramer
     from ...errors import NoReply
+    from ...link.zk_port import ZkLink
 
-    link = zk_link.ZkLink.open(url, baud, stop_bits=stop_bits)
+    link = ZkLink.open(url, baud, stop_bits=stop_bits)
     try:
         link.write(frame)
         if no_wait:
             return
-        limit = timeout if timeout is not None else zk_link.DEFAULT_SILENCE_S
+        limit = timeout if timeout is not None else DEFAULT_SILENCE_S
         framer = ZkFramer("status")
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:

@@ -21,9 +21,9 @@ class _TappedSource:
 
 
 def tap_session(source, tel, out, bridges, on_update):
-    """(source, sink, on_update) for :class:`~zkzap.link.zk_link.Session`."""
+    """(source, sink, on_update) for :class:`~zkzap.api.session.Session`."""
     from ...codec import zk
-    from ...link.zk_link import iso_utc
+    from ...api.telemetry import iso_utc
 
     decoder = zk.ZkDecoder()
     mcap = out.writer if out.fmt == "mcap" else None

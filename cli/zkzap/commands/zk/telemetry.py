@@ -118,13 +118,13 @@ def resolve_port(port, sim, **sim_options) -> str:
 
 def check_log_options(ids, snapshot, fmt):
     """Validate the log options before anything is opened; returns the parsed ID set."""
-    from ...link.zk_link import parse_ids
+    from ...api.telemetry import parse_ids
 
     return parse_ids(ids) if ids is not None else None
 
 
 def errors_text(tel) -> str:
     """Every ECU error a session saw, worded as everywhere (``ECU error 3 (egt-high: ...) at t=...``)."""
-    from ...link.zk_link import describe_error
+    from ...api.telemetry import describe_error
 
     return "; ".join(describe_error(e["code"], e["name"], e["t"]) for e in tel.summary()["errors"])

@@ -1,0 +1,369 @@
+"""The ZK session loop: :class:`Session` reads a source's status frames, decodes them
+(:class:`~zkzap.api.telemetry.Telemetry`), hands the records over, sends the current control
+frame every ``1/rate`` s, stops on count/duration/end, Ctrl-C (SIGINT), SIGTERM, a port failure,
+a silent ECU, a new ECU error or a violated limit, and sends the abort command on the way out
+when it was controlling the engine. :class:`Outcome` says how it ended, with its exit status.
+
+Sources are :class:`zkzap.link.zk_sources.LiveSource` and
+:class:`zkzap.link.zk_sources.ReplaySource`. Nothing here imports click, rich or pyserial.
+"""
+
+from __future__ import annotations
+
+import time
+
+from ..codec import zk
+from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
+from ..errors import TERMINATED
+from ..signals import INTERRUPT_SIGNALS, SignalGuard
+from .telemetry import describe_error, iso_utc
+
+#: Control frames per second while a session controls the engine (``--rate``).
+DEFAULT_RATE = 20.0
+#: Longest silence tolerated from the ECU, at the start and while running (``--timeout``).
+DEFAULT_SILENCE_S = 2.0
+#: Whole status cycles seen before ``--ids`` the ECU never sends are reported.
+ID_CHECK_LAPS = 3
+#: Abort commands (``--abort``): the control state sent with throttle 0 on an abnormal end.
+ABORTS = zk.ABORTS
+DEFAULT_ABORT = zk.DEFAULT_ABORT
+
+
+def controls_engine(frame) -> bool:
+    """True when sending ``frame`` controls the engine (see :attr:`zk.ControlFrame.controls_engine`)."""
+    return zk.ControlFrame(frame).controls_engine
+
+
+def abort_frames(kind: str, version=None, pump=False) -> list:
+    """The frames of the abort command ``kind`` (``standby``, ``stop`` or ``none``).
+
+    ``standby``/``stop``: control ID 1 with that state and throttle 0; for an ECU of protocol
+    version 4 or later (or of unknown version) also ID 6 with state none and RPM factor 0 (leaves
+    RPM mode and hands the state back to ID 1, whose SW an ID 6 state would override), then ID 1
+    again. With ``pump`` (a pump-on was sent) also the pump-off action.
+    """
+    if kind not in ABORTS:
+        raise UsageError(f"abort: {kind!r}; allowed {', '.join(ABORTS)}")
+    if kind == "none":
+        return []
+    id1 = zk.encode_control("control", sw=kind, throttle_pct=0)[0]
+    frames = [id1]
+    if version is None or version >= 4:
+        frames += [zk.encode_control("mode", sw="none", rpm_factor=0)[0], id1]
+    if pump:
+        frames.append(zk.encode_control("action", param="pump-off")[0])
+    return frames
+
+
+def describe_abort(kind: str) -> str:
+    """The abort command ``kind`` in words: ``standby, throttle 0``."""
+    return "nothing (--abort none)" if kind == "none" else f"{kind}, throttle 0"
+
+
+#: What a session that controls the engine sends when it ends normally (``--end``): ``hold``
+#: sends nothing more and leaves the engine at the last command.
+ENDS = ("standby", "stop", "hold")
+DEFAULT_END = "standby"
+
+
+class Outcome:
+    """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
+    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``limit``, ``pipe``,
+    ``output`` (an output file could not be written)."""
+
+    def __init__(self, reason, error=None, aborted=None):
+        self.reason = reason
+        self.error = error
+        self.aborted = aborted   # the abort kind sent, or None
+
+    @property
+    def ok(self):
+        """True for a normal end: ``count``, ``duration`` or ``end``."""
+        return self.reason in ("count", "duration", "end")
+
+    @property
+    def exit_code(self) -> int:
+        """The exit status that goes with this outcome."""
+        from ..errors import INTERRUPTED
+
+        if self.ok or self.reason == "pipe":
+            return 0
+        if self.reason == "interrupted":
+            return INTERRUPTED
+        if self.reason == "terminated":
+            return TERMINATED
+        return getattr(self.error, "code", 1)
+
+    def raise_for_status(self):
+        """Raise the exception (exit status) that goes with this outcome, if any."""
+        r = self.reason
+        if r == "interrupted":
+            raise KeyboardInterrupt
+        if r == "terminated":
+            from ..signals import Terminated
+
+            raise Terminated()
+        if r == "pipe":
+            raise BrokenPipeError
+        if self.error is not None:
+            raise self.error
+
+
+class Session:
+    """Run a source through telemetry into ``sink`` while sending control frames.
+
+    ``control(t)`` returns the frame to send at time ``t`` (None: nothing); it is called every
+    ``1/rate`` s. Ends on ``count`` records, ``duration`` seconds, the end of a replay, a signal,
+    a port failure, ``silence`` seconds without a status frame, or (``stop_on_error``) a new ECU
+    error. On an abnormal end — or at the end when ``abort_at_end`` — the abort command is sent if
+    the frames sent controlled the engine (see :func:`controls_engine`).
+    """
+
+    def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
+                 count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
+                 abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
+                 end_label="end of schedule"):
+        self.source = source
+        self.telemetry = telemetry
+        self.sink = sink
+        self.control = control
+        self.period = 1.0 / rate
+        self.abort = abort
+        self.count = count
+        self.duration = duration
+        self.silence = silence
+        self.stop_on_error = stop_on_error
+        self.abort_at_end = abort_at_end
+        self.end = end                  # sent at a normal end (ENDS); None: the abort if abort_at_end
+        self.end_label = end_label
+        self.on_update = on_update
+        self.notify = notify or (lambda message: None)
+        self.update_interval = update_interval
+        self.limits = limits     # an api.limits.LimitSet: its first violation ends the session
+        self.sent = 0
+        self.last_sent = None
+        self.ended_t = None
+        self.written = 0
+        self.controlling = False
+        self.pump_on = False
+        self.last_frame_t = None
+        # the status IDs seen, until the ECU's cycle is known (an ID comes again): then --ids
+        # that the ECU never sends are reported (all of them: the session ends)
+        self._cycle = set() if telemetry.ids is not None else None
+        self._back_t = 0.0
+        self.interrupted = None           # PortError text when a reconnect cut engine control
+
+    def _check_ids(self, sid):
+        cycle = self._cycle
+        if not cycle:
+            self._first, self._laps = sid, 0
+        cycle.add(sid)
+        if sid == self._first:
+            self._laps += 1
+        if self._laps <= ID_CHECK_LAPS:     # whole cycles, so a lost frame is not a missing ID
+            return None
+        self._cycle = None
+        wanted = self.telemetry.ids
+        never = sorted(wanted - cycle)
+        if not never:
+            return None
+        sends = _id_list(cycle)
+        if len(never) == len(wanted):
+            return Outcome("silence", NoReply(
+                f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+                f"(its cycle is IDs {sends}); nothing to log"))
+        self.notify(f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+                    f"(its cycle is IDs {sends})")
+        return None
+
+    def _reconnected(self, gap):
+        """The port is back after a drop-out: abort first (a session that controlled the engine
+        stops controlling it), then a gap record, then logging goes on."""
+        down, up, reason = gap
+        self._back_t = up
+        if self.controlling and self.abort != "none":
+            frames = abort_frames(self.abort, self.telemetry.decoder.known, pump=self.pump_on)
+            for f in frames:
+                self.source.write(f)
+            self.notify(f"port back after {up - down:.1f} s: sent {describe_abort(self.abort)}; "
+                        "no longer controlling the engine")
+            self.control = None
+            self.interrupted = (f"{reason}; the port came back after {up - down:.1f} s and the abort "
+                                f"({describe_abort(self.abort)}) was sent")
+        elif self.controlling:
+            self.notify(f"port back after {up - down:.1f} s (--abort none: nothing sent); "
+                        "no longer controlling the engine")
+            self.control = None
+            self.interrupted = f"{reason}; the port came back after {up - down:.1f} s"
+        else:
+            self.notify(f"port back after {up - down:.1f} s ({reason})")
+        rec = {"time": iso_utc(self.telemetry.wall0 + up), "t": round(up, 3), "kind": "gap",
+               "gap_s": round(up - down, 3), "since_t": round(down, 3), "reason": reason}
+        self.sink(rec)
+
+    def _send(self, frame):
+        self.source.write(frame)
+        self.sent += 1
+        self.last_sent = frame
+        if not self.controlling and controls_engine(frame):
+            self.controlling = True
+        if frame[1] >> 4 == 2:
+            action = zk.ACTIONS.get(frame[2])
+            if action == "pump-on":
+                self.pump_on = True
+            elif action == "pump-off":
+                self.pump_on = False
+
+    def run(self) -> Outcome:
+        """Run until an end (see the class); returns the :class:`Outcome` (the abort, if sent,
+        is in ``aborted``). ``written`` counts the records handed to the sink."""
+        src, tel = self.source, self.telemetry
+        written = 0
+        next_send = 0.0
+        next_update = 0.0
+        outcome = None
+        told = False
+        with SignalGuard() as guard:
+            try:
+                while outcome is None:
+                    if guard.signum is not None:
+                        outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
+                        break
+                    now = src.now()
+                    if self.duration is not None and now >= self.duration:
+                        if self.control is not None:     # the command in force at the end (a
+                            frame = self.control(self.duration)   # schedule's last row)
+                            if frame is not None and frame != self.last_sent:
+                                self._send(frame)
+                        outcome = Outcome("duration")
+                        break
+                    if self.control is not None and now >= next_send:
+                        frame = self.control(now)
+                        if frame is not None:
+                            self._send(frame)
+                        next_send += self.period
+                        if next_send <= now:
+                            next_send = now + self.period
+                    got = src.poll()
+                    if got is None:
+                        outcome = Outcome("end")
+                        break
+                    if getattr(src, "gap", None) is not None:
+                        self._reconnected(src.take_gap())
+                    for t, frame in got:
+                        if self.duration is not None and t + 1e-9 >= self.duration:
+                            outcome = Outcome("duration")     # a fast replay's batch reaches past it
+                            break
+                        self.last_frame_t = t
+                        if self._cycle is not None:
+                            outcome = self._check_ids(frame[0] & 0x0F)
+                            if outcome is not None:
+                                break
+                        if not told and tel.initial_error is not None and self.controlling:
+                            told = True
+                            self.notify(f"the ECU reports error {tel.initial_error[0]} ({tel.initial_error[1]}) "
+                                        f"from before; an ECU starts again only after stop or standby")
+                        for rec in tel.feed(t, frame):
+                            self.sink(rec)
+                            written += 1
+                            if self.count is not None and written >= self.count:
+                                outcome = Outcome("count")
+                                break
+                        if outcome is not None:
+                            break
+                        if tel.new_error is not None and self.stop_on_error:
+                            code, name, et = tel.new_error
+                            outcome = Outcome("ecu-error", DeviceError(describe_error(code, name, et)))
+                            break
+                        if self.limits is not None and self.limits.tripped is not None:
+                            outcome = Outcome("limit", self.limits.tripped)
+                            break
+                    if outcome is not None:
+                        break
+                    now = src.now()
+                    if self.on_update is not None and now >= next_update:
+                        self.on_update(tel.snapshot(now), tel.health(now, src.framer))
+                        next_update = now + self.update_interval
+                    if src.live and self.silence is not None and getattr(src, "down", None) is None:
+                        since = self.last_frame_t if self.last_frame_t is not None else 0.0
+                        since = max(since, self._back_t)
+                        # a silence is measured in real seconds, whatever the session's clock
+                        if (now - since) / getattr(src, "speed", 1.0) > self.silence:
+                            where = getattr(getattr(src, "link", None), "url", "the port")
+                            if self.last_frame_t is None:
+                                msg = (f"no status frame from the ECU on {where} within {self.silence:g} s "
+                                       f"(check the port, baud rate and wiring)")
+                            else:
+                                msg = f"the ECU on {where} fell silent: no status frame for {self.silence:g} s"
+                            outcome = Outcome("silence", NoReply(msg))
+                            break
+            except PortError as e:
+                outcome = Outcome("port", e)
+            except OutputError as e:           # a full disk under -o or --raw-log
+                outcome = Outcome("output", e)
+            except BrokenPipeError:
+                outcome = Outcome("pipe")
+            finally:
+                if outcome is None:            # an unexpected exception: still try to abort
+                    self._abort(Outcome("error"))
+            if outcome.reason != "count":
+                try:
+                    for rec in tel.flush():
+                        if self.count is not None and written >= self.count:
+                            break
+                        self.sink(rec)
+                        written += 1
+                except BrokenPipeError:
+                    outcome = Outcome("pipe")
+            self._abort(outcome)
+        if self.interrupted is not None and outcome.ok:
+            outcome = Outcome("port", PortError(self.interrupted), aborted=self.abort)
+        self.ended_t = now = src.now()
+        if self.on_update is not None:
+            self.on_update(tel.snapshot(now), tel.health(now, src.framer))
+        self.written = written
+        return outcome
+
+    def _abort(self, outcome):
+        if outcome.aborted is not None or not self.controlling:
+            return
+        kind = self.abort
+        if outcome.ok:
+            kind = self.end if self.end is not None else (self.abort if self.abort_at_end else None)
+            if kind == "hold":
+                outcome.aborted = "hold"
+                self.notify(f"{self.end_label}: --end hold: nothing more sent; the engine keeps the last "
+                            f"command")
+                return
+        if kind is None or kind == "none":
+            return
+        if outcome.reason == "limit" and not self.limits.abort:
+            return
+        known = self.telemetry.decoder.known
+        frames = abort_frames(kind, known, pump=self.pump_on)
+        try:
+            for f in frames:
+                self.source.write(f)
+            time.sleep(0.02)
+            self.source.write(frames[0])
+        except PortError as e:
+            self.notify(f"could not send the abort command ({describe_abort(kind)}): {e}")
+            outcome.aborted = "failed"
+            return
+        outcome.aborted = kind
+        why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
+               "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
+               "output": "output failed", "error": "error", "limit": "limit violated"}.get(outcome.reason,
+                                                                                          self.end_label)
+        self.notify(f"{why}: sent {describe_abort(kind)}")
+
+
+def _id_list(ids) -> str:
+    """``[1, 2, 3, 5]`` -> ``"1-3,5"``."""
+    out = []
+    for i in sorted(ids):
+        if out and out[-1][1] == i - 1:
+            out[-1][1] = i
+        else:
+            out.append([i, i])
+    return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in out)

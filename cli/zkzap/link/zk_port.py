@@ -1,0 +1,108 @@
+"""The port to a ZK ECU: :class:`ZkLink` reads whatever arrived within a short slice (kept
+byte for byte in a raw log when asked) and writes control frames; a port failure is
+:class:`~zkzap.errors.PortError`.
+
+Link-level I/O only: the frame sources are in :mod:`zkzap.link.zk_sources`, the decoding,
+telemetry and session loop in :mod:`zkzap.api.telemetry` and :mod:`zkzap.api.session`. Nothing
+here imports click or rich; pyserial is imported by :func:`zkzap.link.port.open_port`.
+"""
+
+from __future__ import annotations
+
+from ..errors import ZkzapError
+
+#: Longest a read blocks, so control frames go out on time and signals are seen promptly.
+READ_SLICE_S = 0.01
+#: Bytes asked for in one read (of a port or a raw log).
+READ_SIZE = 4096
+
+
+def is_simulator(url: str) -> bool:
+    """True for the in-process simulator (``sim://``): no consent needed there."""
+    return url.startswith("sim://")
+
+
+class ZkLink:
+    """A port to a ZK ECU. :meth:`read` returns the bytes that arrived within a short slice
+    (``b""`` if none) and appends them to the raw log; :meth:`write` sends a frame."""
+
+    def __init__(self, ser, url, raw_log=None, baud=None, slice_s=READ_SLICE_S, stop_bits=1):
+        self.ser = ser
+        self.url = url
+        self.raw_log = raw_log
+        self.baud = baud if baud is not None else getattr(ser, "baudrate", None)
+        self.slice_s = slice_s
+        self.stop_bits = stop_bits
+        self.bytes_in = 0
+        self.frames_out = 0
+
+    @classmethod
+    def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S, stop_bits=1):
+        """Open ``url`` at ``baud`` (inside a batch: borrow the batch's one open port)."""
+        from .port import open_port
+        from .shared import shared
+
+        lent = shared("zk")
+        if lent is not None:        # a batch: the one open port, left open by close()
+            return lent.borrow(raw_log, slice_s)
+        ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
+        return cls(ser, url, raw_log, baud, slice_s, stop_bits)
+
+    def reopen(self) -> None:
+        """Close the failed port and open the same device again (PortError while it is absent)."""
+        from .port import close_port, open_port
+
+        close_port(self.ser)
+        self.ser = open_port(self.url, self.baud, timeout=self.slice_s, write_timeout=1.0,
+                             stop_bits=self.stop_bits)
+
+    def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
+        """A link over this one's port for one command; its close() leaves the port open."""
+        self.ser.timeout = slice_s
+        link = ZkLink(self.ser, self.url, raw_log)
+        link.close = lambda: None
+        return link
+
+    @property
+    def device(self):
+        """The simulated device behind a ``sim://`` port (None otherwise)."""
+        return getattr(self.ser, "device", None)
+
+    def read(self) -> bytes:
+        """The bytes that arrived within one slice (``b""`` if none); a failure is PortError."""
+        try:
+            data = self.ser.read(READ_SIZE)
+        except ZkzapError:       # a capture that cannot be written (exit 7)
+            raise
+        except Exception as e:   # SerialException, OSError, and whatever a URL handler raises
+            raise port_failed(self.url, e) from None
+        if data:
+            self.bytes_in += len(data)
+            if self.raw_log is not None:
+                self.raw_log.write(data)
+                self.raw_log.flush()
+        return data
+
+    def write(self, frame: bytes) -> None:
+        """Send ``frame`` and wait until it is out; a failure is PortError."""
+        try:
+            self.ser.write(frame)
+            self.ser.flush()
+        except ZkzapError:
+            raise
+        except Exception as e:
+            raise port_failed(self.url, e) from None
+        self.frames_out += 1
+
+    def close(self):
+        """Close the port."""
+        from .port import close_port
+
+        close_port(self.ser)
+
+
+def port_failed(url, e):
+    """The :class:`~zkzap.errors.PortError` for a failure ``e`` of the port ``url``."""
+    from .port import port_failed as failed
+
+    return failed(url, e)

@@ -1,0 +1,196 @@
+"""Status frames from a ZK ECU, each with its time since the start: :class:`LiveSource` reads
+them from a :class:`~zkzap.link.zk_port.ZkLink` (and reopens a port that vanished, when asked),
+:class:`ReplaySource` from a raw log (paced in real time or as fast as possible).
+
+A source has ``now()``, ``poll()`` (``[(t, frame), ...]``; None at the end of a replay),
+``write(frame)``, ``close()``, its ``framer`` and ``wall0``; :class:`zkzap.api.session.Session`
+runs one.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+from ..codec import zk
+from ..codec.framing import ZkFramer
+from ..errors import PortError, UsageError
+from .zk_port import READ_SIZE, ZkLink
+
+#: Pause between two attempts to reopen a vanished port (seconds).
+REOPEN_INTERVAL = 0.25
+
+
+class LiveSource:
+    """Status frames from a :class:`ZkLink`, stamped with seconds since the source started.
+
+    With ``reconnect`` (seconds), a port that fails or vanishes is reopened (the same device
+    path or URL) every :data:`REOPEN_INTERVAL` for up to that long: meanwhile :meth:`poll`
+    returns no frames and :attr:`down` is the time it failed; once it is back, :attr:`gap` is
+    ``(t_down, t_up, reason)`` until :meth:`take_gap`. After ``reconnect`` seconds the port
+    failure is raised as it would have been without it.
+    """
+
+    live = True
+
+    def __init__(self, link: ZkLink, reconnect=None):
+        self.link = link
+        self.reconnect = reconnect
+        self.framer = ZkFramer("status")
+        # An in-process simulator (sim://...?speed=N) runs in model time: so does the session
+        # (durations, schedules, control rate, record times), or a schedule would run N times
+        # slower than the engine it drives. ``speed`` converts back to real time (silences).
+        clock = getattr(link.ser, "clock", None)
+        self._clock = clock.now if clock is not None and callable(getattr(clock, "now", None)) else time.monotonic
+        self.speed = float(getattr(clock, "speed", 1.0)) if clock is not None else 1.0
+        self.t0 = self._clock()
+        self.wall0 = time.time()
+        self.down = None                  # model time the port failed, while it is away
+        self.gap = None
+        self.reconnects = 0
+        self._error = None
+        self._next_try = 0.0
+
+    def now(self) -> float:
+        """Seconds since the source started (model seconds on a sped-up simulator)."""
+        return self._clock() - self.t0
+
+    def poll(self):
+        """Frames read within one slice, as ``[(t, frame), ...]``."""
+        if self.down is not None:
+            return self._retry()
+        try:
+            data = self.link.read()
+        except PortError as e:
+            if not self.reconnect:
+                raise
+            self._fail(e)
+            return []
+        if not data:
+            return []
+        t = self.now()
+        return [(t, f) for f in self.framer.feed(data)]
+
+    def _fail(self, e):
+        self.down = self.now()
+        self._error = e
+        self._next_try = 0.0
+        self.framer.flush()                # a frame cut by the drop-out is not glued to new bytes
+
+    def _retry(self):
+        now = self.now()
+        if now - self.down > self.reconnect:
+            raise PortError(f"{self._error}; not back within --reconnect {self.reconnect:g} s")
+        if now < self._next_try:
+            time.sleep(min(0.05, self._next_try - now))
+            return []
+        self._next_try = now + REOPEN_INTERVAL
+        try:
+            self.link.reopen()
+        except (PortError, UsageError):
+            return []
+        self.gap = (self.down, self.now(), str(self._error))
+        self.down = None
+        self.reconnects += 1
+        return []
+
+    def take_gap(self):
+        """The last drop-out ``(t_down, t_up, reason)`` once the port is back (then None)."""
+        gap, self.gap = self.gap, None
+        return gap
+
+    def write(self, frame):
+        """Send a control frame (nothing while the port is away)."""
+        if self.down is not None:
+            return                         # nothing to write to while the port is away
+        try:
+            self.link.write(frame)
+        except PortError as e:
+            if not self.reconnect:
+                raise
+            self._fail(e)
+
+    def close(self):
+        """Close the port."""
+        self.framer.flush()
+        self.link.close()
+
+
+class ReplaySource:
+    """Status frames from a raw log (the exact bytes a monitor received).
+
+    A raw log holds bytes, not times: frame times are rebuilt from the status rate the frames
+    themselves report (status ID 6; 20 Hz until one is seen), so frame *n* is at the sum of the
+    periods before it. ``fast`` returns frames as fast as they can be decoded; otherwise they
+    are paced in real time.
+    """
+
+    live = False
+
+    def __init__(self, path, fast=False):
+        try:
+            self.file = open(path, "rb")
+        except OSError as e:
+            raise UsageError(f"replay: cannot read {path}: {e.strerror}") from None
+        self.path = path
+        self.fast = fast
+        self.framer = ZkFramer("status")
+        self.queue = deque()
+        self.period = 1.0 / 20
+        self.next_t = 0.0
+        self.last_t = 0.0
+        self.eof = False
+        self.t0 = time.monotonic()
+        self.wall0 = time.time()
+
+    def _fill(self):
+        while not self.queue and not self.eof:
+            try:
+                block = self.file.read(READ_SIZE)
+            except OSError as e:
+                raise UsageError(f"replay: cannot read {self.path}: {e.strerror or e}") from None
+            if block:
+                frames = self.framer.feed(block)
+            else:
+                self.eof = True
+                frames = self.framer.flush()      # frames held for look-ahead come out here
+            for f in frames:
+                self.queue.append((self.next_t, f))
+                if f[0] == zk.VERSION_HEAD:
+                    rate = zk.decode_status(f).get("status_rate_hz")
+                    if rate:
+                        self.period = 1.0 / rate
+                self.next_t += self.period
+
+    def now(self) -> float:
+        """The replay's time: the last frame's with ``fast``, else seconds since the start."""
+        return self.last_t if self.fast else time.monotonic() - self.t0
+
+    def poll(self):
+        """Due frames as ``[(t, frame), ...]``; None at the end of the log."""
+        self._fill()
+        if not self.queue:
+            return None
+        if self.fast:
+            out = list(self.queue)
+            self.queue.clear()
+        else:
+            elapsed = time.monotonic() - self.t0
+            first = self.queue[0][0]
+            if first > elapsed:
+                time.sleep(min(first - elapsed, 0.05))
+                elapsed = time.monotonic() - self.t0
+            out = []
+            while self.queue and self.queue[0][0] <= elapsed:
+                out.append(self.queue.popleft())
+        if out:
+            self.last_t = out[-1][0]
+        return out
+
+    def write(self, frame):   # pragma: no cover - sessions never control a replay
+        """Refused: nothing can be sent to a replay."""
+        raise UsageError("replay: nothing can be sent to a replay")
+
+    def close(self):
+        """Close the log."""
+        self.file.close()
