@@ -33,6 +33,7 @@ from ..codec.fields import FieldValueError
 from ..codec.framing import ZkFramer
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError, ZkzapError
 from ..errors import TERMINATED
+from . import stop
 
 #: Control frames per second while a session controls the engine (``--rate``).
 DEFAULT_RATE = 20.0
@@ -170,6 +171,7 @@ class ZkLink:
         return data
 
     def write(self, frame: bytes) -> None:
+        stop.check()                 # a stop requested (a batch's Ctrl-C) ends the command here
         try:
             self.ser.write(frame)
             self.ser.flush()
@@ -639,8 +641,10 @@ class SignalGuard:
             return
         self.signum = signum
         signals.received(signum)
+        stop.note(signum)            # a batch's stop request, taken by this session
 
     def __enter__(self):
+        self.signum = stop.take()    # a stop requested before the session began ends it at once
         if threading.current_thread() is threading.main_thread():
             for s in STOP_SIGNALS:
                 try:
