@@ -71,6 +71,12 @@ def received(signum) -> None:
         _state["first"] = signum
 
 
+def forget() -> None:
+    """Forget the signals received so far (a shell back at its prompt): the next one counts as a
+    first one again."""
+    _state["first"] = None
+
+
 def first():
     """The first signal received since :func:`install` (None: none)."""
     return _state["first"]
