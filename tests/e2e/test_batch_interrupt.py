@@ -205,10 +205,12 @@ def _zk_frames(data: bytes):
     return frames
 
 
-@pytest.mark.parametrize("kind", ["send", "profile"])
+@pytest.mark.parametrize("kind", ["send", "profile", "send-sigterm"])
 def test_zk_batch_stops_the_session_and_aborts(relay, tmp_path, kind):
     r = relay(["zk", "--pty", "--speed", "10"], 115200)
-    if kind == "send":
+    sig, status, why = ((signal.SIGTERM, 143, "terminated") if kind.endswith("sigterm")
+                        else (signal.SIGINT, 130, "interrupted"))
+    if kind.startswith("send"):
         line = "send control --state run --throttle 30 --for 300 --ids 1"
     else:
         schedule = tmp_path / "run.csv"
@@ -216,12 +218,13 @@ def test_zk_batch_stops_the_session_and_aborts(relay, tmp_path, kind):
         line = f"profile {schedule} -f jsonl"
     text = f"send keepalive\n{line}\nsend keepalive\n"
     code, recs, err, at, took = interrupt_batch(
-        "zk", r, text, "--yes", evidence=lambda data: len(data) >= 4 * 10)    # the session's frames
-    assert code == 130, err
+        "zk", r, text, "--yes", sig=sig, evidence=lambda data: len(data) >= 4 * 10)   # the session's frames
+    assert code == status, err
     assert [x["line"] for x in recs] == [1, 2]
-    assert recs[0]["exit"] == 0 and recs[1]["exit"] == 130
+    assert recs[0]["exit"] == 0 and recs[1]["exit"] == status
     assert recs[1]["result"] and recs[1]["result"][-1]["kind"] in ("status", "snapshot")
-    assert "interrupted: sent standby, throttle 0" in err
+    assert f"{why}: sent standby, throttle 0" in err
+    assert f"{why}: the batch stopped after the current transaction of stdin:2" in err
     assert took < 15
     frames = _zk_frames(r.sent())
     standby = abort_frames("standby")
