@@ -76,6 +76,12 @@ def received(signum) -> None:
         _state["first"] = signum
 
 
+def forget() -> None:
+    """Forget the signals received so far (a shell back at its prompt): the next one counts as a
+    first one again."""
+    _state["first"] = None
+
+
 def first():
     """The first signal received since :func:`install` (None: none)."""
     return _state["first"]
@@ -124,8 +130,14 @@ class SignalGuard:
             return
         self.signum = signum
         received(signum)
+        from .link import stop
+
+        stop.note(signum)            # a batch's stop request, taken by this session
 
     def __enter__(self):
+        from .link import stop
+
+        self.signum = stop.take()    # a stop requested before the session began ends it at once
         if threading.current_thread() is threading.main_thread():
             for s in STOP_SIGNALS:
                 try:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -63,3 +64,54 @@ def test_plugin_is_registered_by_entry_point():
 
     names = {ep.value for ep in entry_points(group="pytest11")}
     assert "zkzap.pytest_plugin" in names
+
+
+def test_zk_stop_bits_typed_and_checked():
+    with pytest.raises(ValueError, match=r"stop_bits: 3; allowed 1, 2"):
+        start_zk(stop_bits=3)
+    with pytest.raises(ValueError, match=r"stop_bits: '2'; allowed 1, 2"):
+        start_zk(stop_bits="2")
+    with pytest.raises(ValueError, match=r"stop_bits: True"):
+        start_zk(stop_bits=True)
+    with start_zk(baud=9600, stop_bits=2) as sim:
+        assert sim.device.stop_bits == 2 and sim.device.baud == 9600
+    with start_zk() as sim:
+        assert sim.device.stop_bits == 1
+
+
+def test_zk_stop_bits_heard_only_at_the_ecus_setting():
+    """An ECU at 9600 8N2 over a pty: a host at 8N2 gets its status frames and is heard; the
+    frames of a host at 8N1 (one stop bit short) are misframed by the ECU's UART."""
+    with start_zk(baud=9600, stop_bits=2, speed=10, transport="pty") as sim:
+        def zk(bits, *args):
+            return subprocess.run([sys.executable, "-m", "zkzap", "zk", *args, "-p", sim.url, "-b", "9600",
+                                   "--stop-bits", bits], capture_output=True, text=True, timeout=60)
+        good = zk("2", "monitor", "--count", "3", "-f", "jsonl")
+        assert good.returncode == 0, good.stderr
+        assert len(good.stdout.splitlines()) == 3
+        assert zk("2", "send", "keepalive").returncode == 0
+        with sim.lock:
+            assert sim.device.rx_wrong_baud == 0
+        assert zk("1", "send", "keepalive").returncode == 0
+        deadline = time.monotonic() + 20                  # the server thread reads it when it can
+        while sim.device.rx_wrong_baud < 4 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with sim.lock:
+            assert sim.device.rx_wrong_baud == 4          # the 4-byte frame, misframed
+
+
+def test_zap_reply_timing_typed_and_checked():
+    with start_zap(ids=[1], turnaround=15, gap=1.5) as sim:
+        assert sim.device.turnaround == pytest.approx(0.015) and sim.device.gap == pytest.approx(0.0015)
+        with Bus(sim) as bus:
+            assert bus.ping(1) is not None
+            assert bus.load(1, "goal-speed") == 1023
+    with start_zap(ids=[1]) as sim:
+        assert sim.device.turnaround == pytest.approx(0.002) and sim.device.gap == 0.0
+    for bad, message in (({"turnaround": 1001}, r"turnaround: 1001 is out of range; allowed 0\.\.1000 ms"),
+                         ({"gap": -1}, r"gap: -1 is out of range; allowed 0\.\.100 ms"),
+                         ({"gap": float("nan")}, r"gap: nan is out of range"),
+                         ({"turnaround": "soon"}, r"turnaround: 'soon' is not a number"),
+                         ({"turnaround": True}, r"turnaround: True is not a number")):
+        with pytest.raises(ValueError, match=message):
+            start_zap(ids=[1], **bad)

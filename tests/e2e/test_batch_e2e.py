@@ -83,7 +83,7 @@ def test_zap_batch_ctrl_c_stops_after_the_current_command(start_sim, tmp_path):
     recs = jsonl((first + out).decode())
     assert proc.returncode == 130
     assert 1 <= len(recs) < 2000 and all(r["exit"] == 0 for r in recs)
-    assert b"stopped after the current command" in err
+    assert b"the batch stopped after the current transaction of " in err
 
 
 def test_zk_batch_over_a_pty(start_sim, sh):

@@ -91,3 +91,35 @@ def test_interactive_completion_and_history(start_sim, tmp_path):
     finally:
         term.close()
     assert "load present-voltage --physical --id 1" in history.read_text()
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (apt-get install tmux)")
+def test_interactive_ctrl_c_stops_the_command_and_keeps_the_shell(start_sim, tmp_path):
+    """Ctrl-C during a command stops it after its current transaction and returns to the
+    prompt, every time (not only the first); Ctrl-C at the prompt drops the half-typed line."""
+    url, _ = start_sim(["zap", "--ids", "1", "--pty"])
+    env = clean_env(ZKZAP_HISTORY=str(tmp_path / "history"), HOME=str(tmp_path))
+    term = Terminal([executable("zkzap"), "shell", "zap", "-p", url], env)
+    try:
+        term.wait_for("zap>")
+        for _ in range(2):
+            term.keys("C-l")                                      # a clear screen for each round
+            term.wait_for("zap>")
+            term.keys("echo --id 1 --count 0 --interval 0.2", "Enter")
+            term.wait_for("reply from ID 1: seq=3")               # it runs
+            term.keys("C-c")
+            term.wait_for("answered", timeout=30)                  # echo's own summary on Ctrl-C
+            term.wait_for("garbled; round trip", timeout=30)
+            wait = time.monotonic() + 30
+            while not term.screen().rstrip().endswith("zap>") and time.monotonic() < wait:
+                time.sleep(0.05)
+            assert term.screen().rstrip().endswith("zap>")          # back at the prompt
+        term.keys("load present-pos", "C-c")                       # at the prompt: a fresh line
+        term.keys("load present-voltage --physical --id 1", "Enter")
+        screen = term.wait_for("12.0")
+        assert "present-pos" not in screen.split("12.0")[-1]
+        term.keys("exit", "Enter")
+        term.wait_for("EXIT=")
+        assert "EXIT=0" in term.screen()                            # the last command succeeded
+    finally:
+        term.close()

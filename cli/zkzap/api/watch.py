@@ -26,6 +26,7 @@ from collections import deque
 from ..codec import zap
 from ..errors import BadReply, NoReply, UsageError
 from ..link.port import wire_time
+from ..link.stop import pause
 
 #: The actuator's processing time before it answers (seconds), as the link assumes it.
 TURNAROUND = 0.002
@@ -99,7 +100,7 @@ class Watcher:
     """
 
     def __init__(self, bus, ids, registers, *, rate=None, count=None, duration=None, until=(), retries=0,
-                 history=40, clock=time.monotonic, sleep=time.sleep):
+                 history=40, clock=time.monotonic, sleep=pause):
         self.bus = bus
         self.ids = list(ids)
         self.registers = list(dict.fromkeys(registers))

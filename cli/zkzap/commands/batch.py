@@ -19,11 +19,11 @@ import json
 import shlex
 import signal
 import sys
-import threading
 
 import click
 
-from ..errors import INTERRUPTED, USAGE, UsageError, ZkzapError
+from .. import signals
+from ..errors import INTERRUPTED, TERMINATED, USAGE, UsageError, ZkzapError
 from .options import consent, note
 
 #: Options a batch line may not carry: the port is the batch's.
@@ -271,31 +271,6 @@ def parse_result(text):
     return values
 
 
-class _Interrupt:
-    """SIGINT/SIGTERM while a batch runs: finish the current command, then stop. A second
-    signal interrupts at once."""
-
-    def __init__(self):
-        self.signum = None
-        self._old = {}
-
-    def _handler(self, signum, frame):
-        if self.signum is not None:
-            raise KeyboardInterrupt
-        self.signum = signum
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for s in (signal.SIGINT, signal.SIGTERM):
-                self._old[s] = signal.signal(s, self._handler)
-        return self
-
-    def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
-        return False
-
-
 def invoke(line, protocol) -> int:
     """Run a checked line's command with the parameters its check parsed (the same defaults,
     so the same values as parsing it again), with the command line's error conventions.
@@ -316,8 +291,10 @@ def invoke(line, protocol) -> int:
     except click.ClickException as e:
         _error(" ".join(e.format_message().split()), prog)
         return e.exit_code
-    except (click.exceptions.Abort, KeyboardInterrupt):
+    except click.exceptions.Abort:
         return INTERRUPTED
+    except KeyboardInterrupt as e:         # Ctrl-C, or Terminated (SIGTERM): 130 or 143
+        return signals.exit_status(e)
     except (BrokenPipeError, PipeClosed):
         raise
     except ZkzapError as e:
@@ -332,14 +309,22 @@ def invoke(line, protocol) -> int:
 
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
     """Run checked lines in order (the port already shared); write one record per line to
-    ``out``. Returns the batch's exit status: 0, or the first failure's code."""
+    ``out``. Returns the batch's exit status: 0, or the first failure's code.
+
+    The first SIGINT/SIGTERM stops the running line after its current transaction
+    (:mod:`zkzap.link.stop`): the line ends as the command does on Ctrl-C, its record says exit
+    130 (143 for SIGTERM) with what it gathered, and no further line starts. A second signal
+    interrupts at once."""
+    from ..link import stop
     from ..link.shared import Borrowed
 
     first = 0
-    with _Interrupt() as stop:
+    last = None
+    with stop.deferring():
         for line in lines:
-            if stop.signum is not None:
-                break
+            if stop.requested() is not None:
+                break                          # between two lines: the next one does not start
+            last = line
             buf, err = io.StringIO(), io.StringIO()
             Borrowed.keep_baud = line.path[0] in keep_baud_after
             try:
@@ -347,6 +332,9 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
                     code = invoke(line, protocol)
             finally:
                 Borrowed.keep_baud = False
+            signum = stop.requested()
+            if signum is not None and stop.pending() is None and not code:
+                code = signals.EXIT.get(signum, INTERRUPTED)   # stopped, though the command returned
             messages = err.getvalue()
             if messages:
                 sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
@@ -359,11 +347,13 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
             out.flush()
             if code and not first:
                 first = code
-            if code in (INTERRUPTED, 143) or (code and not keep_going):
+            if code in (INTERRUPTED, TERMINATED) or (code and not keep_going):
                 break
-        if stop.signum is not None:
-            note("interrupted: the batch stopped after the current command")
-            return INTERRUPTED if stop.signum == signal.SIGINT else 143
+        signum = stop.requested()
+    if signum is not None:
+        where = f"the current transaction of {last.where} ({last.text})" if last else "its start"
+        note(f"{'interrupted' if signum == signal.SIGINT else 'terminated'}: the batch stopped after {where}")
+        return signals.EXIT.get(signum, INTERRUPTED)
     return first
 
 

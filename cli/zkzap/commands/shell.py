@@ -111,9 +111,13 @@ def loop(group, protocol, defaults, *, interactive) -> int:
         readline.set_completer_delims(" \t\n")
         readline.set_completer(Completer(group, protocol))
         readline.parse_and_bind("tab: complete")
+    from .. import signals
+    from ..link import stop
+
     last = 0
     try:
         while True:
+            signals.forget()             # the last command's Ctrl-C is over: the next one counts
             try:
                 text = input(f"{protocol}> ") if interactive else sys.stdin.readline()
             except KeyboardInterrupt:
@@ -148,7 +152,8 @@ def loop(group, protocol, defaults, *, interactive) -> int:
                 click.echo(f"{protocol}: error: {what}", err=True)
                 last = 2
                 continue
-            last = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
+            with stop.deferring():       # Ctrl-C: the command stops after its current transaction
+                last = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
     finally:
         if interactive:
             import readline
@@ -179,8 +184,8 @@ def _description(protocol):
             f"options (as in '{protocol} batch'); its output is the command's own. TAB completes "
             "commands, options, register names and choices; the history is kept in "
             "$ZKZAP_HISTORY (default ~/.local/state/zkzap/history). 'help' lists the commands; "
-            "exit, quit or Ctrl-D leaves; Ctrl-C stops the running command (a ZK session sends "
-            "its abort as usual) and returns to the prompt. Consent is asked per command on a "
+            "exit, quit or Ctrl-D leaves; Ctrl-C stops the running command after its current "
+            "transaction (a ZK session sends its abort as usual) and returns to the prompt. Consent is asked per command on a "
             "real port (--yes on the line). Standard input that is not a terminal is run line "
             "by line without a prompt; the exit status is the last failed command's.")
 

@@ -49,6 +49,7 @@ from urllib.parse import urlsplit
 from ..codec import zap
 from ..codec.framing import ZapFramer
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
+from . import stop
 from .port import close_port, wire_time
 
 #: The typical actuator turnaround (a 12Lf answers in about 2 ms): the floor of the quick
@@ -437,6 +438,7 @@ class ZapBus:
         (returns None at once, without a retry: the command may have been carried out);
         ``quick``: wait only the quick probe's time (:meth:`quick_timeout`) for a first byte.
         """
+        stop.check()                       # a stop requested (a batch's Ctrl-C) ends the command here
         pkt = bytes(pkt)
         ident = pkt[3]
         if reply is None:

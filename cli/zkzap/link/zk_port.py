@@ -10,6 +10,7 @@ here imports click or rich; pyserial is imported by :func:`zkzap.link.port.open_
 from __future__ import annotations
 
 from ..errors import ZkzapError
+from . import stop
 
 #: Longest a read blocks, so control frames go out on time and signals are seen promptly.
 READ_SLICE_S = 0.01
@@ -85,6 +86,7 @@ class ZkLink:
 
     def write(self, frame: bytes) -> None:
         """Send ``frame`` and wait until it is out; a failure is PortError."""
+        stop.check()                 # a stop requested (a batch's Ctrl-C) ends the command here
         try:
             self.ser.write(frame)
             self.ser.flush()

@@ -119,34 +119,43 @@ class Simulator:
 def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, max_rpm: int = 160000,
              idle_rpm: int = 40000, max_thrust: float = 14.0, ambient: float = 20.0, battery: float = 12.0,
              max_pump_voltage: float = 10.0, esr: bool = False, baud: Optional[int] = None,
-             corrupt_every: int = 0, silent_after: Optional[float] = None, error: Union[int, str, None] = None,
+             stop_bits: int = 1, corrupt_every: int = 0, silent_after: Optional[float] = None, error: Union[int, str, None] = None,
              error_after: float = 0.0, transport: str = "inprocess", host: str = "127.0.0.1",
              port: int = 0) -> Simulator:
     """Start the ECU simulator (a :class:`~zkzap.sim.zk_ecu.ZkEcu`): ``protocol_version``,
     status ``rate`` (20/50/100 Hz), ``speed`` (model time runs this many times faster), engine
-    figures, and faults (``corrupt_every`` Nth frame, ``silent_after`` s, ``error`` code at
-    ``error_after`` s). ValueError names a bad argument."""
+    figures, the line settings of its UART (``baud``, ``stop_bits`` 1 or 2, 8 data bits, no
+    parity, as ``zkzap sim zk --baud --stop-bits``: a host at another setting reads garbage;
+    without ``baud`` the ECU follows the host's settings), and faults (``corrupt_every`` Nth
+    frame, ``silent_after`` s, ``error`` code at ``error_after`` s). ValueError names a bad
+    argument."""
     from .zk_ecu import ZkEcu
 
+    if isinstance(stop_bits, bool) or stop_bits not in (1, 2):
+        raise ValueError(f"stop_bits: {stop_bits!r}; allowed 1, 2")
     device = ZkEcu(protocol_version=protocol_version, rate=rate, max_rpm=max_rpm, idle_rpm=idle_rpm,
                    max_thrust=max_thrust, ambient=ambient, battery=battery, max_pump_voltage=max_pump_voltage,
-                   esr=esr, baud=baud, corrupt_every=corrupt_every, silent_after=silent_after,
+                   esr=esr, baud=baud, stop_bits=int(stop_bits), corrupt_every=corrupt_every, silent_after=silent_after,
                    error=error, error_after=error_after)
     return Simulator("zk", device, Clock(speed), transport, host, port)
 
 
 def start_zap(*, ids: Union[Iterable[int], str] = (0,), baud: int = 57600, return_mode: Optional[int] = None,
               echo: bool = False, voltage: Optional[float] = None, faults: Sequence = (),
-              state: Optional[str] = None, speed: float = 1.0, transport: str = "inprocess",
+              state: Optional[str] = None, turnaround: Optional[float] = None, gap: Optional[float] = None,
+              speed: float = 1.0, transport: str = "inprocess",
               host: str = "127.0.0.1", port: int = 0) -> Simulator:
     """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
     actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate) at
     ``baud``, every one in feedback-return-mode ``return_mode`` (None: the factory 1), an
     adapter that echoes (``echo``), a supply ``voltage``, ``faults`` as ``(id or None, kind,
-    value, count)`` tuples or ``[ID:]KIND[=VALUE][/COUNT]`` strings, and ``state`` (a JSON file
-    keeping stored registers across runs). ValueError names a bad argument."""
+    value, count)`` tuples or ``[ID:]KIND[=VALUE][/COUNT]`` strings, ``state`` (a JSON file
+    keeping stored registers across runs), the reply timing — ``turnaround`` (milliseconds from
+    a command's last byte to the reply's first, 0..1000, default 2) and ``gap`` (milliseconds
+    between two reply bytes, 0..100, default 0), as ``zkzap sim zap --turnaround --gap``.
+    ValueError names a bad argument."""
     from ..codec import zap
-    from .zap_actuators import Actuator, ActuatorBus, parse_ids
+    from .zap_actuators import TURNAROUND, Actuator, ActuatorBus, _millis, parse_ids
 
     if baud not in zap.BAUD_TO_CODE:
         raise ValueError(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
@@ -156,7 +165,12 @@ def start_zap(*, ids: Union[Iterable[int], str] = (0,), baud: int = 57600, retur
         pairs = [(i, None) if isinstance(i, int) else (int(i[0]), int(i[1])) for i in ids]
     for ident, _ in pairs:
         zap.check_id(ident, allow_broadcast=False)
-    bus = ActuatorBus([], state_path=state, echo=bool(echo))
+    timing = {}
+    for key, value, top, default in (("turnaround", turnaround, 1000.0, TURNAROUND), ("gap", gap, 100.0, 0.0)):
+        if isinstance(value, bool):
+            raise ValueError(f"{key}: {value!r} is not a number of milliseconds")
+        timing[key] = default if value is None else _millis(key, value, top)
+    bus = ActuatorBus([], state_path=state, echo=bool(echo), **timing)
     if not (state and bus.load_state()):
         bus.actuators = [Actuator(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
         if return_mode is not None:

@@ -30,9 +30,14 @@ def batch(file, keep_going, yes, **common):
     Each command gives one JSON Lines record on stdout: line, command, exit (the status the
     command would have exited with), result (what it printed: a value, a record or a list of
     records, else its text) and error (the message) when it failed. The batch stops at the
-    first failure unless --keep-going, and exits with the first failure's status. Ctrl-C stops
-    after the current command (exit 130). The link options (-b, --timeout, --return-mode,
-    --retries) are every line's defaults.
+    first failure unless --keep-going, and exits with the first failure's status. The link
+    options (-b, --timeout, --return-mode, --retries) are every line's defaults.
+
+    Ctrl-C (or SIGTERM) stops the running line after its current transaction (one request and
+    its reply or timeout; never half a packet): the line ends as the command does on Ctrl-C
+    (a scan keeps what it found, 'move --wait' stops the rod where it is), its record says exit
+    130 (143) with what it printed, no further line starts, and the batch exits 130 (143). A
+    second Ctrl-C interrupts at once.
 
     \b
     Examples:

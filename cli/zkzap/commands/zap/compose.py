@@ -317,10 +317,9 @@ def echo(ident, count, interval, fmt, **common):
         return deliver([pkt], **common)
     if ident == zap.BROADCAST:
         raise UsageError("id: a broadcast Echo is never answered; give one actuator's ID")
-    import time
-
     from ...errors import BadReply, NoReply
     from ...io.writers import make_writer
+    from ...link import stop
     from ...link.zap_bus import device_error
 
     writer = None if fmt == "text" else make_writer(fmt, sys.stdout, ECHO_COLUMNS)
@@ -331,7 +330,8 @@ def echo(ident, count, interval, fmt, **common):
         with open_link(ids=[ident], **_link_args(common)) as bus:
             while count == 0 or sent < count:
                 if sent and interval:
-                    time.sleep(interval)
+                    stop.pause(interval)       # a batch's stop request ends the wait early
+                stop.check()                   # ... or ends it before the next echo
                 sent += 1
                 try:
                     r = bus.echo(ident, check=False, retries=None if count == 1 else 0)

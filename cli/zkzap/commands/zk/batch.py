@@ -33,9 +33,11 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
     Each command gives one JSON Lines record on stdout: line, command, exit, result (what it
     printed) and error when it failed; the status records of a 'send --for' or 'monitor' line
     are its result. The batch stops at the first failure unless --keep-going and exits with
-    the first failure's status. Ctrl-C stops after the current command (a 'send --for' line
-    sends its abort command as usual); a batch that stops early after controlling the engine
-    sends --abort.
+    the first failure's status. Ctrl-C (or SIGTERM) stops the running line after its current
+    transaction (a frame is never cut in half; a 'send --for', 'profile' or 'monitor' session
+    stops between two records and sends its abort command as usual): its record says exit 130
+    (143) with the records gathered so far, no further line starts, and the batch exits 130
+    (143); a batch that stops early after controlling the engine also sends --abort.
 
     \b
     Examples:
