@@ -159,3 +159,20 @@ def test_the_text_path_gives_the_records_of_the_record_path(cli, tmp_path, fmt):
         cols = TIME_KEYS + columns()
         assert rows[0] == cols
         assert rows[1:] == [[csv_cell(r.get(c)) for c in cols] for r in expected]
+
+
+def test_a_batch_captures_every_line_over_its_one_port(sh, tmp_path):
+    """The lines of a batch have no --capture of their own: the batch's goes on through all."""
+    cap = tmp_path / "batch.pcapng"
+    r = sh("zap", "batch", "--sim", "--capture", str(cap), "-",
+           input="load present-position --id 1\necho --id 1\nload goal-position --id 1\n")
+    assert r.exit_code == 0, r.stderr
+    recs = jsonl(sh("zap", "decode", str(cap), "-f", "jsonl").stdout)
+    assert [(x["kind"], x.get("instruction"), x["dir"]) for x in recs] == [
+        ("command", "load", "h2d"), ("feedback", None, "d2h"), ("command", "echo", "h2d"),
+        ("feedback", None, "d2h"), ("command", "load", "h2d"), ("feedback", None, "d2h")]
+    cap = tmp_path / "zk.pcapng"
+    r = sh("zk", "batch", "--sim", "--capture", str(cap), "-", input="send control --state stop\nsend keepalive\n")
+    assert r.exit_code == 0, r.stderr
+    sent = [x for x in jsonl(sh("zk", "decode", str(cap), "-f", "jsonl").stdout) if x["kind"] == "control"]
+    assert [x["command"] for x in sent] == ["control", "keepalive"]

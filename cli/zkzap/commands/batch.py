@@ -113,9 +113,23 @@ def _refuse(line, e):
     raise UsageError(f"{line.where}: {' '.join(line.path)}: {text}") from None
 
 
+def _batch_capture():
+    """The lines of a batch leave the batch's ``--capture`` be (they have none of their own)."""
+    if "zkzap.link.capture" not in sys.modules:
+        return contextlib.nullcontext()     # no capture asked for: import nothing
+    from ..link import capture
+
+    return capture.keep()
+
+
 def check_lines(group, lines, protocol, defaults):
     """Parse every line as its command would (types, ranges) and compose its frames with
     ``-n`` where the command can; a bad line raises UsageError naming ``FILE:LINE``."""
+    with _batch_capture():
+        _check_lines(group, lines, protocol, defaults)
+
+
+def _check_lines(group, lines, protocol, defaults):
     from . import run
 
     seen = {}
@@ -315,6 +329,12 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
     (:mod:`zkzap.link.stop`): the line ends as the command does on Ctrl-C, its record says exit
     130 (143 for SIGTERM) with what it gathered, and no further line starts. A second signal
     interrupts at once."""
+    with _batch_capture():
+        return _run_lines(group, protocol, lines, defaults, out, keep_going=keep_going,
+                          keep_baud_after=keep_baud_after)
+
+
+def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
     from ..link import stop
     from ..link.shared import Borrowed
 

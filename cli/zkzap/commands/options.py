@@ -395,6 +395,8 @@ def capture_option(protocol: str):
             return                        # nothing asked, nothing to reset: import nothing
         from ..link import capture
 
+        if not value and capture.kept():
+            return                        # a batch's line: the batch's capture goes on
         capture.request(value, protocol)
         if value:
             ctx.call_on_close(lambda: capture.request(None, protocol))   # close it, ask for no more

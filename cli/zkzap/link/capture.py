@@ -19,6 +19,29 @@ _requested = None      # (path, protocol) named by the command being run
 _writer = None         # the Writer of that capture, opened with the first port
 
 
+_kept = 0              # >0: commands run inside another (a batch's lines) leave the capture be
+
+
+class keep:
+    """Within: a command run inside another one (a line of a batch, which has no ``--capture``
+    of its own) neither replaces nor ends the capture the outer command asked for."""
+
+    def __enter__(self):
+        global _kept
+        _kept += 1
+        return self
+
+    def __exit__(self, *exc):
+        global _kept
+        _kept -= 1
+        return False
+
+
+def kept() -> bool:
+    """Whether a :class:`keep` block runs."""
+    return _kept > 0
+
+
 def request(path, protocol: str) -> None:
     """Capture the ports this process opens from now on to ``path`` (None: stop asking);
     ``protocol`` ('zk'/'zap') selects the link type."""
