@@ -512,6 +512,35 @@ TABLE_WIDTH = 12
 LAZY_FILL = 16
 
 
+#: Lazily filled value tables, shared by every encoder: (text function, expression, size) ->
+#: (table, miss function).
+_LAZY = {}
+
+
+def _lazy_table(value, var, count, expr):
+    """``(table, miss)``: a list of the text of ``expr`` for each raw value ``var`` in
+    ``range(count)``, None until :func:`miss` (``miss(raw) -> text``) fills it for a value;
+    once values keep changing (1/LAZY_FILL of the table missed), it fills the table whole.
+    Encoders of the same field and context share one table."""
+    import re
+
+    norm = re.sub(rf"\b{var}\b", "x", expr)
+    key = (value, norm, count)
+    got = _LAZY.get(key)
+    if got is None:
+        if len(_LAZY) >= 64:
+            _LAZY.clear()
+        ns = {"VALUE": value, "t": [None] * count, "left": [max(count // LAZY_FILL, 1)]}
+        exec("def miss(x, t=t, left=left):\n"  # noqa: S102 - generated from the static tables
+             f"    v = t[x] = VALUE({norm})\n"
+             "    left[0] -= 1\n"
+             "    if not left[0]:\n"
+             f"        t[:] = [VALUE({norm}) for x in range({count})]\n"
+             "    return v", ns)
+        got = _LAZY[key] = (ns["t"], ns["miss"])
+    return got
+
+
 def _names(expr):
     """The identifiers of an expression."""
     import re
@@ -662,18 +691,10 @@ def compile_text(code, items, dialect, flagged=None, size=None, guard=None):
             ns[f"t{n}"] = tuple(dialect.value(v) for v in values)
             cells.append((key, "%s", f"t{n}[{expr}]"))
         elif kind == "lazy":
-            # a table filled as raw values occur: a list index, and the work once per value;
-            # once values keep changing (LAZY_FILL of the table missed) it is filled whole
+            # a table filled as raw values occur (see _lazy_table), shared by every encoder
             var, count, expr = what
-            ns[f"t{n}"] = [None] * count
-            ns[f"n{n}"] = [max(count // LAZY_FILL, 1)]
-            ns["VALUE"] = getattr(dialect, "number_value", dialect.value)
-            exec(f"def f{n}({var}, t=t{n}, left=n{n}):\n"  # noqa: S102
-                 f"    v = t[{var}] = VALUE({expr})\n"
-                 f"    left[0] -= 1\n"
-                 f"    if not left[0]:\n"
-                 f"        t[:] = [VALUE({expr}) for {var} in range({count})]\n"
-                 f"    return v", ns)
+            ns[f"t{n}"], ns[f"f{n}"] = _lazy_table(getattr(dialect, "number_value", dialect.value),
+                                                   var, count, expr)
             cells.append((key, "%s", f"(t{n}[{var}] or f{n}({var}))"))
         else:  # pragma: no cover - the kinds above are all Layout.items produces
             raise ValueError(f"item kind {kind!r}")
