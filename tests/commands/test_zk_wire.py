@@ -339,7 +339,9 @@ def test_terminal_gets_the_dashboard(cli, monkeypatch, tmp_path, extra, file_rec
 
 def test_send_for_output_file_format_by_extension(cli, tmp_path):
     out = tmp_path / "drive.jsonl"
-    r = cli("zk", "send", "mode", "--state", "run", "--rpm-factor", "2", "-p", SIM, "--for", "0.3", "-o", str(out))
+    # 2 s of model time (0.1 s of real time): 0.3 s were 15 ms, short enough for a busy machine to
+    # pass without one frame read
+    r = cli("zk", "send", "mode", "--state", "run", "--rpm-factor", "2", "-p", SIM, "--for", "2", "-o", str(out))
     assert r.exit_code == 0 and r.stdout == ""
     recs = jsonl(out.read_text())
     assert recs and all("frame" in x for x in recs)
