@@ -21,6 +21,9 @@ def test_a_hostile_environment_changes_nothing(tmp_path):
                ZKZAP_ZAP_PORT="/dev/nope", ZKZAP_ZAP_BAUD="9600", FORCE_COLOR="1", COLUMNS="37",
                ZKZAP_HERMETIC_INNER="1")
     mods = [os.path.join(HERE, "commands", m) for m in ("test_zap_wire.py", "test_zk_send.py", "test_crc_cmd.py")]
-    p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *mods],
+    # left out: the few tests there that mostly wait out reply timeouts (set-id's free-ID check,
+    # a baud scan); the other --sim, port and output tests of these modules meet every variable
+    slow = "not (test_set_id_verified or test_read_back_mismatch_exit_1 or test_scan_over_bauds_errors_and_formats)"
+    p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", slow, *mods],
                        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-2000:]

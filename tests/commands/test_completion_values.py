@@ -1,8 +1,10 @@
-"""Tab completion of values, through the installed programs' completion protocol: what a person
-gets after pressing Tab at each kind of value."""
+"""Tab completion of values, through the programs' completion protocol (the variables bash's
+completion script sets): what a person gets after pressing Tab at each kind of value. The table
+runs in-process; each installed program answers it once as a subprocess."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import subprocess
 import sys
@@ -51,5 +53,38 @@ def complete(words):
     ("zkzap sim zap --fault ov", [("plain", "overload")]),
     ("zkzap sim zap --fault 2:tr", [("plain", "2:truncate")]),
 ])
-def test_tab_completes_values(words, expected):
+def test_tab_completes_values(words, expected, monkeypatch):
+    assert complete_in_process(words, monkeypatch) == expected
+
+
+@pytest.mark.parametrize("words,expected", [
+    ("zk monitor -p sim", [("plain", "sim://zk")]),
+    ("zap scan -b 57600,9", [("plain", "57600,9600")]),
+    ("zkzap sim zap --fault 2:tr", [("plain", "2:truncate")]),
+])
+def test_the_installed_programs_complete_values(words, expected):
+    # the table above runs the same protocol in-process; here each program once as installed
     assert complete(words) == expected
+
+
+def complete_in_process(words, monkeypatch):
+    """:func:`complete` without the process: the program's command under the same variables."""
+    from click.testing import CliRunner
+
+    from zkzap import commands
+
+    prog = words.split()[0]
+    if prog == "zkzap":
+        cmd = commands.root
+    else:                                   # what zk_main / zap_main run
+        cmd = getattr(importlib.import_module(f"zkzap.commands.{prog}"), prog)
+    parts = words.split(" ")
+    monkeypatch.setenv(f"_{prog.upper()}_COMPLETE", "bash_complete")
+    monkeypatch.setenv("COMP_WORDS", words)
+    monkeypatch.setenv("COMP_CWORD", str(len(parts) - 1))
+    with CliRunner().isolation() as streams:
+        with pytest.raises(SystemExit) as e:
+            commands.run(cmd, prog, [])
+        assert e.value.code == 0, streams[1].getvalue()
+        text = streams[0].getvalue().decode()
+    return [tuple(line.split(",", 1)) for line in text.splitlines() if line]

@@ -39,15 +39,16 @@ def _schedule(tmp_path):
 
 
 FAILED_STARTS = [
-    # (command before the port, port, expected exit status)
+    # (command before the port, port, expected exit status); SILENT never sends a frame, so a
+    # short --timeout only ends the wait for one sooner
     ("zk monitor", "/dev/ttyNOPE", 4),
     ("zk monitor", "socket://127.0.0.1:1", 4),
-    ("zk monitor --timeout 0.2", SILENT, 3),
+    ("zk monitor --timeout 0.05", SILENT, 3),
     ("zk send control --state stop --for 1", "/dev/ttyNOPE", 4),
-    ("zk send control --state stop --for 1 --timeout 0.2", SILENT, 3),
-    ("zk send keepalive --for 0 --timeout 0.2", SILENT, 3),
+    ("zk send control --state stop --for 1 --timeout 0.05", SILENT, 3),
+    ("zk send keepalive --for 0 --timeout 0.05", SILENT, 3),
     ("zk profile {schedule}", "/dev/ttyNOPE", 4),
-    ("zk profile {schedule} --timeout 0.2", SILENT, 3),
+    ("zk profile {schedule} --timeout 0.05", SILENT, 3),
     ("zk monitor", "socket://127.0.0.1", 2),
 ]
 

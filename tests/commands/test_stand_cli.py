@@ -107,7 +107,7 @@ def test_check_pass_fail_and_silent(cli, pty_port):
     r = cli("zk", "check", "-p", SIM + "&protocol_version=4", "--count", "12", "--limit", "prop_rpm<=5")
     assert r.exit_code == 1 and json.loads(r.stdout)["verdict"] == "unchecked"
     path, _ = pty_port
-    r = cli("zk", "check", "-p", path, "--timeout", "0.3")
+    r = cli("zk", "check", "-p", path, "--timeout", "0.1")
     assert r.exit_code == 3 and r.stdout == ""
 
 

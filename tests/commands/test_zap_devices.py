@@ -28,7 +28,7 @@ COMMANDS = [
     ("move", ["move", "100", "--id", "1"]),
     ("move-wait", ["move", "100", "--id", "1", "--speed", "1023", "--wait"]),
     ("dump", ["dump", "--id", "1", "-f", "jsonl"]),
-    ("scan", ["scan", "--ids", "0-6", "-f", "jsonl"]),
+    ("scan", ["scan", "--ids", "0-3", "-f", "jsonl"]),          # an absent ID either side
     ("set-id", ["set-id", "5", "--id", "2"]),
     ("set-baud", ["set-baud", "115200", "--id", "1"]),
     ("restart", ["restart", "--id", "1"]),

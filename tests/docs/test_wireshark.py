@@ -31,8 +31,19 @@ def test_the_wheel_installs_it():
         assert '"share/wireshark" = "share/zkzap/wireshark"' in f.read()
 
 
+_DISSECTED = {}
+
+
 def tshark(path):
-    """Every dissected frame of the capture: (proto, {field: [shows]}) in order; bad ones too."""
+    """Every dissected frame of the capture: (proto, {field: [shows]}) in order; bad ones too.
+    Each capture is dissected once per session (tshark's start-up is most of its cost)."""
+    key = str(path)
+    if key not in _DISSECTED:
+        _DISSECTED[key] = _run_tshark(path)
+    return _DISSECTED[key]
+
+
+def _run_tshark(path):
     env = dict(os.environ, HOME=os.environ.get("HOME", "/tmp"))
     p = subprocess.run([TSHARK, "-n", "-X", f"lua_script:{LUA}", "-o", "gui.max_tree_depth:64", "-r", str(path),
                         "-T", "pdml"], capture_output=True, text=True, timeout=120, env=env)

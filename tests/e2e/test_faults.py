@@ -51,7 +51,9 @@ def whole_records(path, fmt):
 def captures(tmp_path_factory):
     d = tmp_path_factory.mktemp("cap")
     rng = random.Random(4)
-    (d / "zk.bin").write_bytes(b"".join(zk.status_frame(i % 10 + 1, rng.randbytes(5)) for i in range(20000)))
+    # 3000 zk frames decode to seven to ten times the "disk" (LIMIT) in every format: enough to
+    # fill it mid-run, little enough that the decode after the failure stays short
+    (d / "zk.bin").write_bytes(b"".join(zk.status_frame(i % 10 + 1, rng.randbytes(5)) for i in range(3000)))
     (d / "zap.bin").write_bytes(b"".join(zap.packet(i % 4 + 1, 0, rng.randbytes(2)) for i in range(5000)))
     return d
 
