@@ -72,7 +72,12 @@ def test_a_signal_during_start_up_exits_quietly(argv, sig, delay):
         time.sleep(delay)      # a point later in the start-up, not a wait for readiness
     proc.send_signal(sig)
     code, out, err = finish(proc)
-    assert code == EXIT[sig], err
+    if argv[0] == "zkzap" and out.strip():
+        # the simulator had announced its port (this test read the trace late, on a loaded
+        # machine): the signal came after start-up, and ends the simulator as it always does
+        assert code == 0, err
+    else:
+        assert code == EXIT[sig], err
     rest = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("import time:")]
     assert not any("Traceback" in ln or "KeyboardInterrupt" in ln or "error" in ln for ln in rest), rest
     assert len(out.splitlines()) <= 1         # a simulator may have printed its port line
