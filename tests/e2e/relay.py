@@ -1,6 +1,7 @@
-"""A tapped serial link for the sniffer tests: a relay copies bytes between a host pty and a
-simulator's pty, and feeds copies to the sniffer's ptys, as receive-only adapters on a real link
-would see them. Whatever the sniffer writes to its ptys is kept in ``sniffer_wrote``."""
+"""A tapped serial link: a relay copies bytes between a host pty and a simulator's pty, keeps
+what each side sent, and (for the sniffer tests) feeds copies to the sniffer's ptys, as
+receive-only adapters on a real link would see them. Whatever the sniffer writes to its ptys is
+kept in ``sniffer_wrote``."""
 
 from __future__ import annotations
 
@@ -26,8 +27,9 @@ def _speed(fd, baud):
 
 
 class Relay(threading.Thread):
-    """``host_path``: the pty the host opens. ``taps``: 1 (one sniffer pty seeing both
-    directions) or 2 (``tap_paths[0]`` sees the host's bytes, ``tap_paths[1]`` the device's)."""
+    """``host_path``: the pty the host opens. ``taps``: 0 (none), 1 (one sniffer pty seeing
+    both directions) or 2 (``tap_paths[0]`` sees the host's bytes, ``tap_paths[1]`` the
+    device's). :meth:`sent` is what the host wrote so far."""
 
     def __init__(self, device_path, baud, taps=1):
         super().__init__(daemon=True)
@@ -40,13 +42,14 @@ class Relay(threading.Thread):
         self.sniffer_wrote = bytearray()
         self.host_bytes = bytearray()
         self.device_bytes = bytearray()
+        self.lock = threading.Lock()
         self._halt = threading.Event()
         self._r, self._w = os.pipe()
 
     def run(self):
         taps = [m for m, _, _ in self.taps]
-        to_host_tap = taps[0]
-        to_dev_tap = taps[-1]
+        to_host_tap = taps[0] if taps else None
+        to_dev_tap = taps[-1] if taps else None
         watch = [self.host_m, self.dev, self._r] + taps
         while not self._halt.is_set():
             ready, _, _ = select.select(watch, [], [], 0.5)
@@ -58,15 +61,23 @@ class Relay(threading.Thread):
                 if not data:
                     continue
                 if fd == self.host_m:
-                    self.host_bytes += data
+                    with self.lock:
+                        self.host_bytes += data
                     os.write(self.dev, data)
-                    os.write(to_host_tap, data)
+                    if to_host_tap is not None:
+                        os.write(to_host_tap, data)
                 elif fd == self.dev:
                     self.device_bytes += data
                     os.write(self.host_m, data)
-                    os.write(to_dev_tap, data)
+                    if to_dev_tap is not None:
+                        os.write(to_dev_tap, data)
                 elif fd in taps:
                     self.sniffer_wrote += data
+
+    def sent(self) -> bytes:
+        """What the host wrote so far."""
+        with self.lock:
+            return bytes(self.host_bytes)
 
     def stop(self):
         self._halt.set()

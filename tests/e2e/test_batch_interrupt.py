@@ -10,14 +10,9 @@ for the ZK that the abort frames were the last ones sent.
 from __future__ import annotations
 
 import json
-import os
-import select
 import signal
 import subprocess
-import termios
-import threading
 import time
-import tty
 
 import pytest
 
@@ -26,57 +21,7 @@ from zkzap.codec.framing import ZapFramer
 from zkzap.api.session import abort_frames
 
 from .conftest import clean_env, executable
-
-
-class Relay(threading.Thread):
-    """A pty the batch opens (``path``), relayed both ways to a simulator's pty; ``host`` keeps
-    every byte the batch wrote."""
-
-    def __init__(self, device_path, baud):
-        super().__init__(daemon=True)
-        self.dev = os.open(device_path, os.O_RDWR | os.O_NOCTTY)
-        self.master, self.slave = os.openpty()
-        for fd in (self.dev, self.slave):
-            tty.setraw(fd)
-            attrs = termios.tcgetattr(fd)
-            attrs[4] = attrs[5] = getattr(termios, f"B{baud}")
-            termios.tcsetattr(fd, termios.TCSANOW, attrs)
-        self.path = os.ttyname(self.slave)
-        self.host = bytearray()
-        self.lock = threading.Lock()
-        self._halt = threading.Event()
-        self._r, self._w = os.pipe()
-
-    def run(self):
-        while not self._halt.is_set():
-            ready, _, _ = select.select([self.master, self.dev, self._r], [], [], 0.5)
-            for fd in ready:
-                try:
-                    data = os.read(fd, 4096)
-                except OSError:
-                    data = b""
-                if not data:
-                    continue
-                if fd == self.master:
-                    with self.lock:
-                        self.host += data
-                    os.write(self.dev, data)
-                elif fd == self.dev:
-                    os.write(self.master, data)
-
-    def sent(self) -> bytes:
-        with self.lock:
-            return bytes(self.host)
-
-    def stop(self):
-        self._halt.set()
-        os.write(self._w, b"x")
-        self.join(5)
-        for fd in (self.dev, self.master, self.slave, self._r, self._w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+from .relay import Relay
 
 
 @pytest.fixture
@@ -85,7 +30,7 @@ def relay(start_sim):
 
     def make(args, baud):
         url, _ = start_sim(args)
-        r = Relay(url, baud)
+        r = Relay(url, baud, taps=0)
         r.start()
         made.append(r)
         return r
@@ -113,7 +58,7 @@ def interrupt_batch(program, relay, text, *args, evidence, sig=signal.SIGINT):
     """Run ``program batch -`` over ``relay`` with ``text``; once ``evidence(bytes written)``
     holds, send ``sig``. Returns (exit status, records, stderr, bytes written when signalled,
     seconds from the signal to the end)."""
-    proc = subprocess.Popen([executable(program), "batch", "-", "-p", relay.path, *args],
+    proc = subprocess.Popen([executable(program), "batch", "-", "-p", relay.host_path, *args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             env=clean_env())
     proc.stdin.write(text.encode())
@@ -231,7 +176,7 @@ def test_zk_batch_stops_the_session_and_aborts(relay, tmp_path, kind):
     assert frames[-1] == standby[-1]                           # the abort was the last word
     assert set(frames[len(at) // 4:]) <= set(standby) | {frames[len(at) // 4 - 1]}
     # and the ECU is in the abort's safe state
-    p = subprocess.run([executable("zk"), "monitor", "-p", r.path, "--ids", "1", "--count", "3", "-f", "jsonl"],
+    p = subprocess.run([executable("zk"), "monitor", "-p", r.host_path, "--ids", "1", "--count", "3", "-f", "jsonl"],
                        capture_output=True, text=True, timeout=60, env=clean_env())
     assert p.returncode == 0, p.stderr
     assert all(json.loads(x)["sw_state_name"] == "standby" for x in p.stdout.splitlines())

@@ -10,20 +10,13 @@ from zkzap.link.zk_port import ZkLink
 from zkzap.link.zk_sources import LiveSource, ReplaySource
 
 
-def session(url, *, snapshot=False, protocol_version=None, ids=None, **kw):
-    link = ZkLink.open(url, 115200)
-    src = LiveSource(link)
-    tel = Telemetry(protocol_version, ids, snapshot, wall0=src.wall0)
-    out = []
-    sink = kw.pop("sink", None) or out.append
-    s = Session(src, tel, sink, **kw)
-    return s, tel, out, link
-
-
 def test_raw_log_and_replay_give_the_same_records(tmp_path):
     raw = tmp_path / "run.bin"
     with open(raw, "wb") as f:
-        s, tel, live, link = session("sim://zk?speed=20&corrupt_every=7", count=60)
+        link = ZkLink.open("sim://zk?speed=20&corrupt_every=7", 115200)
+        src = LiveSource(link)
+        live = []
+        s = Session(src, Telemetry(wall0=src.wall0), live.append, count=60)
         link.raw_log = f
         s.run()
         link.close()
