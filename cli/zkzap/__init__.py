@@ -54,9 +54,11 @@ def _program_start():
     # Run as one of the programs (zk, zap, zkzap, python -m zkzap), SIGINT and SIGTERM are
     # handled from here on, before click and the command modules load: a signal during
     # start-up exits 130/143 quietly. Imported as a library, nothing changes.
-    from . import signals
+    from ._program import is_program
 
-    if signals.is_program():
+    if is_program():
+        from . import signals
+
         signals.install()
 
 

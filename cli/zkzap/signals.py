@@ -94,19 +94,7 @@ def exit_status(exc) -> int:
     return EXIT[signal.SIGINT]
 
 
-def is_program() -> bool:
-    """Whether this process is one of the zkzap programs (not a library user or a test run)."""
-    import sys
-
-    argv = getattr(sys, "orig_argv", None) or []
-    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] in ("zkzap", "zkzap.__main__"):
-        return True                  # python -m zkzap, while the package itself is imported
-    main = sys.modules.get("__main__")
-    spec = getattr(main, "__spec__", None)
-    if spec is not None and spec.name in ("zkzap", "zkzap.__main__"):
-        return True
-    path = getattr(main, "__file__", None) or ""
-    return os.path.basename(path) in ("zk", "zap", "zkzap") and spec is None
+from ._program import is_program  # noqa: E402,F401 - part of this module's interface
 
 
 #: The signals that end a session: SIGINT (Ctrl-C), SIGTERM, and on Windows SIGBREAK (Ctrl-Break),
