@@ -398,10 +398,11 @@ class Layout:
         ``"table"`` (what: ``(expression, values)``, the value for every raw value). With the
         context fixed, version gates and version-dependent scales are constants, so the
         values are exactly those :meth:`decoder` gives for that context. ``tables`` (a bit
-        width) turns the ``"float"`` and ``"int"`` items of one field up to that width into
-        ``"table"`` items, evaluated from the same expression for every raw value, and the
-        ``"float"`` items of wider fields into ``"lazy"`` items (what: ``(variable, number of
-        raw values, expression)``) for a table filled as values occur.
+        width) turns the ``"float"`` items of one field up to that width (and ``"int"`` items
+        followed by the table of their names) into ``"table"`` items, evaluated from the same
+        expression for every raw value, and the ``"float"`` items of wider fields into
+        ``"lazy"`` items (what: ``(variable, number of raw values, expression)``) for a table
+        filled as values occur.
         """
         code, items = self._items(ctx, known, raw)
         if tables:
@@ -412,12 +413,17 @@ class Layout:
                 var = [v for v in widths if v in _names(what)]
                 if len(var) != 1:
                     continue
-                if widths[var[0]] <= tables:
-                    fn = eval(f"lambda {var[0]}: {what}")  # noqa: S307 - generated from the static tables
-                    items[n] = (key, "table", (var[0], [fn(v) for v in range(1 << widths[var[0]])]))
-                elif kind == "float":
-                    # (an int is formatted about as fast as it is looked up)
-                    items[n] = (key, "lazy", (var[0], 1 << widths[var[0]], what))
+                width = widths[var[0]]
+                if kind == "int":
+                    # an int is formatted about as fast as it is looked up: a table only where
+                    # the value's name follows it (one look-up then gives both)
+                    after = items[n + 1] if n + 1 < len(items) else None
+                    if not (after and after[1] == "table" and after[2][0] == var[0] and width <= tables):
+                        continue
+                if width <= tables:
+                    items[n] = (key, "table", (var[0], _values(var[0], what, width)))
+                else:
+                    items[n] = (key, "lazy", (var[0], 1 << width, what))
         return code, items
 
     def _items(self, ctx, known, raw=False):
@@ -505,8 +511,10 @@ class Layout:
 #: The record key listing the fields whose decoded value is outside its documented range.
 OUT_OF_RANGE = "out_of_range"
 #: Text encoders render the values of fields up to this many bits from a table built when the
-#: encoder is (4,096 entries at most), instead of scaling and formatting them per frame.
-TABLE_WIDTH = 12
+#: encoder is (256 entries at most: building an encoder stays cheap, as it must for a decode of
+#: a few frames), instead of scaling and formatting them per frame; wider float fields use a
+#: shared table filled as values occur.
+TABLE_WIDTH = 8
 #: A wider field's table is filled as its values occur, and whole once 1/LAZY_FILL of it was
 #: filled that way (values that keep changing: a whole table costs less than the misses).
 LAZY_FILL = 16
@@ -538,6 +546,25 @@ def _lazy_table(value, var, count, expr):
              f"        t[:] = [VALUE({norm}) for x in range({count})]\n"
              "    return v", ns)
         got = _LAZY[key] = (ns["t"], ns["miss"])
+    return got
+
+
+#: Value tables of field expressions: (expression in x, width) -> the value of every raw value.
+_VALUES = {}
+
+
+def _values(var, expr, width):
+    """The value of ``expr`` (in the variable ``var``) for every raw value of ``width`` bits,
+    computed once per expression and width."""
+    import re
+
+    norm = re.sub(rf"\b{var}\b", "x", expr)
+    got = _VALUES.get((norm, width))
+    if got is None:
+        if len(_VALUES) >= 256:
+            _VALUES.clear()
+        fn = eval(f"lambda x: {norm}")  # noqa: S307 - generated from the static tables
+        got = _VALUES[norm, width] = tuple(fn(v) for v in range(1 << width))
     return got
 
 
@@ -603,6 +630,30 @@ def _check_vars(mask):
     import re
 
     return re.findall(r"K\d+\[(r\d+)\]", mask)
+
+
+#: Text tables: (dialect key, values) -> the dialect's text of each value.
+_TEXTS = {}
+
+
+def _texts(dialect, values):
+    """The dialect's text of each value (numbers by ``number_value`` where the dialect has it:
+    the same text, without the general encoder's dispatch), made once per dialect and table."""
+    values = tuple(values)
+    # the types too: 1, 1.0 and True are equal keys but different texts
+    key = (getattr(dialect, "key", None) or id(dialect), values, tuple(map(type, values)))
+    got = _TEXTS.get(key)
+    if got is None:
+        value = dialect.value
+        number = getattr(dialect, "number_value", None)
+        if number is None:
+            got = tuple(value(v) for v in values)
+        else:
+            got = tuple(number(v) if type(v) in (int, float) else value(v) for v in values)
+        if len(_TEXTS) >= 512:
+            _TEXTS.clear()
+        _TEXTS[key] = got
+    return got
 
 
 def _fstring(template, args, ns=None):
@@ -688,7 +739,7 @@ def compile_text(code, items, dialect, flagged=None, size=None, guard=None):
             cells.append((key, dialect.str_piece, what))
         elif kind == "table":
             expr, values = what
-            ns[f"t{n}"] = tuple(dialect.value(v) for v in values)
+            ns[f"t{n}"] = _texts(dialect, values)
             cells.append((key, "%s", f"t{n}[{expr}]"))
         elif kind == "lazy":
             # a table filled as raw values occur (see _lazy_table), shared by every encoder

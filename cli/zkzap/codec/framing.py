@@ -47,6 +47,9 @@ MAX_DEPTH = 3
 RUN_MAX = 4096
 #: The first try at a run checks this many frames; each whole success doubles it.
 RUN_MIN = 16
+#: Byte -> 0 for a status head, else 1: for framers that return status frames, and those that
+#: do not (accept="control").
+_NOT_STATUS = (bytes(0 if 0xF1 <= h <= 0xFE else 1 for h in range(256)), b"\x01" * 256)
 #: A run's block is cut into frames with these (the 7-byte slices of RUN_MAX frames).
 _SLICES = [slice(p, p + 7) for p in range(0, 7 * RUN_MAX, 7)]
 
@@ -130,7 +133,7 @@ class ZkFramer(_Framer):
         self._len = lengths
         self._other = other
         # byte -> 0 for a status head this framer returns, else 1 (see _run)
-        self._not_status = bytes(0 if lengths[h] == 7 else 1 for h in range(256))
+        self._not_status = _NOT_STATUS[accept == "control"]
         self._run_size = RUN_MIN
         super().__init__()
 
