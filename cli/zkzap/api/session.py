@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 
 from ..codec import zk
+from ..codec.ids import id_ranges
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
 from ..errors import TERMINATED
 from ..signals import INTERRUPT_SIGNALS, SignalGuard
@@ -167,12 +168,12 @@ class Session:
         never = sorted(wanted - cycle)
         if not never:
             return None
-        sends = _id_list(cycle)
+        sends = id_ranges(cycle)
         if len(never) == len(wanted):
             return Outcome("silence", NoReply(
-                f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+                f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {id_ranges(never)} "
                 f"(its cycle is IDs {sends}); nothing to log"))
-        self.notify(f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {_id_list(never)} "
+        self.notify(f"ids: the ECU never sends status ID{'s' if len(never) > 1 else ''} {id_ranges(never)} "
                     f"(its cycle is IDs {sends})")
         return None
 
@@ -358,12 +359,3 @@ class Session:
         self.notify(f"{why}: sent {describe_abort(kind)}")
 
 
-def _id_list(ids) -> str:
-    """``[1, 2, 3, 5]`` -> ``"1-3,5"``."""
-    out = []
-    for i in sorted(ids):
-        if out and out[-1][1] == i - 1:
-            out[-1][1] = i
-        else:
-            out.append([i, i])
-    return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in out)

@@ -212,8 +212,9 @@ class Ecu:
             if tel.new_error is not None and control is not None and self.controlling:
                 code, name, et = tel.new_error
                 tel.new_error = None
-                raise DeviceError(f"ECU error {code} ({name}: {zk.ERROR_TEXT.get(code, 'undocumented')}) "
-                                  f"at t={et:.2f} s", ecu_error=code)
+                from .telemetry import describe_error
+
+                raise DeviceError(describe_error(code, name, et), ecu_error=code)
 
     def status(self, *, count: Optional[int] = None, duration: Optional[float] = None) -> Iterator[Status]:
         """Status records as they arrive (forever, or ``count`` records / ``duration`` s).

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from .crc import zap_checksum
 from .fields import FieldValueError
+from .ids import id_ranges  # noqa: F401 - part of this module's interface
 
 HEADER = b"\xff\xff\xff"
 BROADCAST = 0xFE
@@ -245,22 +246,6 @@ def register(spec) -> Register:
     if reg is None:
         reg = Register(addr, f"0x{addr:02x}", 1, "RW", help="not in the 12Lf map")
     return reg
-
-
-def id_ranges(ids) -> str:
-    """``[1, 2, 3, 7]`` -> ``"1-3,7"`` (sorted; for messages)."""
-    out, start, prev = [], None, None
-    for i in sorted(ids):
-        if start is None:
-            start = prev = i
-        elif i == prev + 1:
-            prev = i
-        else:
-            out.append(f"{start}-{prev}" if prev != start else str(start))
-            start = prev = i
-    if start is not None:
-        out.append(f"{start}-{prev}" if prev != start else str(start))
-    return ",".join(out)
 
 
 def check_id(value, *, allow_broadcast=True) -> int:

@@ -235,9 +235,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
                     reason = "duration"
                     break
                 if guard.signum is not None:
-                    import signal
+                    from ..signals import INTERRUPT_SIGNALS
 
-                    reason = "interrupted" if guard.signum == signal.SIGINT else "terminated"
+                    # Ctrl-C, or Ctrl-Break on Windows, as in every session
+                    reason = "interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated"
                     break
             rest = sniffer.drain()
             if rest and reason != "count":
