@@ -41,21 +41,11 @@ class LimitViolation(DeviceError):
 
 def read_limits(exprs=(), files=()) -> list:
     """Conditions from ``--limit EXPR`` options and ``--limits FILE`` files (``-`` is stdin)."""
-    import sys
+    from .textfile import read_text
 
     out = []
     for path in files:
-        if path == "-":
-            text, name = sys.stdin.read(), "stdin"
-        else:
-            name = path
-            try:
-                with open(path, encoding="utf-8-sig") as f:
-                    text = f.read()
-            except OSError as e:
-                raise UsageError(f"limits: cannot read {path}: {e.strerror}") from None
-            except UnicodeDecodeError:
-                raise UsageError(f"limits: {path} is not UTF-8 text (expected FIELD OP NUMBER lines)") from None
+        text, name = read_text(path, "limits", "FIELD OP NUMBER lines")
         out += parse_lines(text, FIELDS, name=name)
     for e in exprs:
         out.append(parse(e, FIELDS, where="limit"))

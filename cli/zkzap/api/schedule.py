@@ -161,20 +161,10 @@ class Schedule:
         """Read and parse the schedule file ``path`` (``-``: stdin, UTF-8); messages call it
         ``name`` (default: the path, or ``stdin``). A file that cannot be read is a
         :class:`~zkzap.errors.UsageError`."""
-        if path == "-":
-            import sys
+        from .textfile import read_text
 
-            text = sys.stdin.read()
-        else:
-            try:
-                with open(path, encoding="utf-8") as f:
-                    text = f.read()
-            except OSError as e:
-                raise UsageError(f"schedule: cannot read {path}: {e.strerror}") from None
-            except UnicodeDecodeError:
-                raise UsageError(f"schedule: {path} is not UTF-8 text (expected CSV rows {SHAPE})") from None
-        name = name or ("stdin" if path == "-" else str(path))
-        return cls.parse(text, name=name, interpolate=interpolate, default_state=default_state)
+        text, read_name = read_text(path, "schedule", f"CSV rows {SHAPE}")
+        return cls.parse(text, name=name or read_name, interpolate=interpolate, default_state=default_state)
 
     @staticmethod
     def _row(cells, cols, where, lineno, comma, state, notes):

@@ -379,17 +379,10 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
 
 def read_source(path):
     """(lines of text, the name for messages) of FILE or '-' (stdin)."""
-    if path in (None, "-"):
-        if sys.stdin is None:
-            raise UsageError("batch: no standard input")
-        return sys.stdin.read().splitlines(), "stdin"
-    try:
-        with open(path, encoding="utf-8") as f:
-            return f.read().splitlines(), path
-    except OSError as e:
-        raise UsageError(f"batch: cannot read {path}: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"batch: {path} is not UTF-8 text") from None
+    from ..api.textfile import read_text
+
+    text, name = read_text("-" if path is None else path, "batch", "one command per line")
+    return text.splitlines(), name
 
 
 def batch_exit(code):
