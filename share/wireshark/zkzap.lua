@@ -188,6 +188,13 @@ local function frame_bytes(buf, p, n)   -- 0-based copy of buf[p .. p+n-1]
   return b
 end
 
+local function item_range(tvb, item, label)   -- the frame in this packet, or reassembled
+  if item.offset ~= nil then return tvb(item.offset, item.len) end
+  local hexs = {}
+  for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
+  return ByteArray.new(table.concat(hexs, " ")):tvb(label)()
+end
+
 -- ZK ------------------------------------------------------------------------------------------
 
 local function zk_decode_fields(fields, b, ctx, known, out)
@@ -349,14 +356,7 @@ function zk_proto.dissector(tvb, pinfo, tree)
   end
   local info = {}
   for _, item in ipairs(res) do
-    local range
-    if item.offset ~= nil then
-      range = tvb(item.offset, item.len)
-    else
-      local hexs = {}
-      for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
-      range = ByteArray.new(table.concat(hexs, " ")):tvb("reassembled ZK frame")()
-    end
+    local range = item_range(tvb, item, "reassembled ZK frame")
     if item.ok then
       local t = tree:add(zk_proto, range, "ZK " .. zk_summary(item.values))
       t:add(ZK_F.frame, range)
@@ -578,14 +578,7 @@ function zap_proto.dissector(tvb, pinfo, tree)
   end
   local info = {}
   for _, item in ipairs(res) do
-    local range
-    if item.offset ~= nil then
-      range = tvb(item.offset, item.len)
-    else
-      local hexs = {}
-      for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
-      range = ByteArray.new(table.concat(hexs, " ")):tvb("reassembled mightyZAP packet")()
-    end
+    local range = item_range(tvb, item, "reassembled mightyZAP packet")
     if item.ok then
       local summary
       local v = {}
