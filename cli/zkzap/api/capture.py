@@ -14,6 +14,7 @@ from __future__ import annotations
 from ..codec import zap, zk
 from ..codec.framing import ZapFramer, ZkFramer
 from ..io.pcapng import INBOUND, OUTBOUND, Reader
+from ..link.zk_sources import PacedReplay
 
 #: Keys captures add in front of a record (and ``latency_ms`` after a mightyZAP one).
 TIME_KEYS = ["time", "t", "dir"]
@@ -232,13 +233,12 @@ def first_time(path: str, protocol: str):
     return None
 
 
-class CaptureReplaySource:
+class CaptureReplaySource(PacedReplay):
     """``zk monitor --replay CAPTURE``: the status frames of a ZK capture at their recorded
     times (``t`` from the capture's first chunk, ``time`` the capture's own clock), paced in real
     time or, with ``fast``, as fast as they decode. The interface of
     :class:`zkzap.link.zk_sources.ReplaySource`."""
 
-    live = False
     #: a capture keeps the receive time of every chunk: records get real wall-clock times
     wall_clock = True
 
@@ -265,41 +265,8 @@ class CaptureReplaySource:
             self._next = (ts - self.wall0, frame)
         return self._next
 
-    def now(self) -> float:
-        import time
-
-        return self.last_t if self.fast else time.monotonic() - self.t0
-
-    def poll(self):
-        """Due frames as ``[(t, frame), ...]``; None at the end of the capture."""
-        import time
-
-        head = self._peek()
-        if head is None:
-            return None
-        out = []
-        if self.fast:
-            while head is not None and len(out) < 256:
-                out.append(head)
-                self._next = None
-                head = self._peek()
-        else:
-            elapsed = time.monotonic() - self.t0
-            if head[0] > elapsed:
-                time.sleep(min(head[0] - elapsed, 0.05))
-                elapsed = time.monotonic() - self.t0
-            while head is not None and head[0] <= elapsed:
-                out.append(head)
-                self._next = None
-                head = self._peek()
-        if out:
-            self.last_t = out[-1][0]
-        return out
-
-    def write(self, frame):   # pragma: no cover - sessions never control a replay
-        from ..errors import UsageError
-
-        raise UsageError("replay: nothing can be sent to a replay")
+    def _pop(self):
+        self._next = None
 
     def close(self):
         self.frames.reader.close()

@@ -116,7 +116,50 @@ class LiveSource:
         self.link.close()
 
 
-class ReplaySource:
+class PacedReplay:
+    """What the replays share: recorded frames handed out at their times, paced in real time
+    or, with ``fast``, as fast as they decode (at most :attr:`FAST_BATCH` a poll, so a
+    session looks at its signals between them). A subclass gives ``_peek()`` (the next
+    ``(t, frame)``, None at the end) and ``_pop()`` (that frame is taken), and sets ``fast``
+    and ``t0`` (the monotonic start)."""
+
+    live = False
+    FAST_BATCH = 256
+
+    def now(self) -> float:
+        """The replay's time: the last frame's with ``fast``, else seconds since the start."""
+        return self.last_t if self.fast else time.monotonic() - self.t0
+
+    def poll(self):
+        """Due frames as ``[(t, frame), ...]``; None at the end of the recording."""
+        head = self._peek()
+        if head is None:
+            return None
+        out = []
+        if self.fast:
+            while head is not None and len(out) < self.FAST_BATCH:
+                out.append(head)
+                self._pop()
+                head = self._peek()
+        else:
+            elapsed = time.monotonic() - self.t0
+            if head[0] > elapsed:
+                time.sleep(min(head[0] - elapsed, 0.05))
+                elapsed = time.monotonic() - self.t0
+            while head is not None and head[0] <= elapsed:
+                out.append(head)
+                self._pop()
+                head = self._peek()
+        if out:
+            self.last_t = out[-1][0]
+        return out
+
+    def write(self, frame):   # pragma: no cover - sessions never control a replay
+        """Refused: nothing can be sent to a replay."""
+        raise UsageError("replay: nothing can be sent to a replay")
+
+
+class ReplaySource(PacedReplay):
     """Status frames from a raw log (the exact bytes a monitor received).
 
     A raw log holds bytes, not times: frame times are rebuilt from the status rate the frames
@@ -124,8 +167,6 @@ class ReplaySource:
     periods before it. ``fast`` returns frames as fast as they can be decoded; otherwise they
     are paced in real time.
     """
-
-    live = False
 
     def __init__(self, path, fast=False):
         try:
@@ -162,34 +203,12 @@ class ReplaySource:
                         self.period = 1.0 / rate
                 self.next_t += self.period
 
-    def now(self) -> float:
-        """The replay's time: the last frame's with ``fast``, else seconds since the start."""
-        return self.last_t if self.fast else time.monotonic() - self.t0
-
-    def poll(self):
-        """Due frames as ``[(t, frame), ...]``; None at the end of the log."""
+    def _peek(self):
         self._fill()
-        if not self.queue:
-            return None
-        if self.fast:
-            out = list(self.queue)
-            self.queue.clear()
-        else:
-            elapsed = time.monotonic() - self.t0
-            first = self.queue[0][0]
-            if first > elapsed:
-                time.sleep(min(first - elapsed, 0.05))
-                elapsed = time.monotonic() - self.t0
-            out = []
-            while self.queue and self.queue[0][0] <= elapsed:
-                out.append(self.queue.popleft())
-        if out:
-            self.last_t = out[-1][0]
-        return out
+        return self.queue[0] if self.queue else None
 
-    def write(self, frame):   # pragma: no cover - sessions never control a replay
-        """Refused: nothing can be sent to a replay."""
-        raise UsageError("replay: nothing can be sent to a replay")
+    def _pop(self):
+        self.queue.popleft()
 
     def close(self):
         """Close the log."""
