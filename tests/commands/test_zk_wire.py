@@ -3,8 +3,6 @@
 import csv
 import io
 import json
-import os
-import select
 
 import pytest
 
@@ -15,25 +13,6 @@ SIM = "sim://zk?speed=20"
 
 def jsonl(text):
     return [json.loads(line) for line in text.splitlines()]
-
-
-@pytest.fixture
-def pty_port():
-    """A pty whose other end nobody answers: (slave path, function returning what was written)."""
-    import tty
-
-    master, slave = os.openpty()
-    tty.setraw(slave)
-
-    def written():
-        data = b""
-        while select.select([master], [], [], 0.05)[0]:
-            data += os.read(master, 4096)
-        return data
-
-    yield os.ttyname(slave), written
-    os.close(master)
-    os.close(slave)
 
 
 # --- zk monitor ----------------------------------------------------------------------------------
