@@ -103,6 +103,25 @@ STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK
 INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
 
 
+def handle(sigs, handler) -> dict:
+    """Install ``handler`` for each of ``sigs`` (only the main thread may; elsewhere nothing
+    changes); returns the handlers replaced, for :func:`restore`."""
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in sigs:
+            try:
+                old[s] = signal.signal(s, handler)
+            except (ValueError, OSError):   # pragma: no cover - embedded interpreters, other platforms
+                pass
+    return old
+
+
+def restore(old) -> None:
+    """Put back the handlers :func:`handle` replaced."""
+    for s, h in old.items():
+        signal.signal(s, h)
+
+
 class SignalGuard:
     """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
     records (files stay whole) and can send the abort command. Only the first signal counts: a
@@ -126,16 +145,10 @@ class SignalGuard:
         from .link import stop
 
         self.signum = stop.take()    # a stop requested before the session began ends it at once
-        if threading.current_thread() is threading.main_thread():
-            for s in STOP_SIGNALS:
-                try:
-                    self._old[s] = signal.signal(s, self._handler)
-                except (ValueError, OSError):   # pragma: no cover - embedded interpreters
-                    pass
+        self._old = handle(STOP_SIGNALS, self._handler)
         return self
 
     def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
+        restore(self._old)
         self._old = {}
         return False

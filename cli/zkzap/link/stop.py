@@ -17,7 +17,6 @@ Outside :class:`deferring` every function here is a no-op. Stdlib only.
 from __future__ import annotations
 
 import signal
-import threading
 import time
 
 #: The signals a deferred stop is requested by.
@@ -116,19 +115,17 @@ class deferring:
         signals.received(signum)     # the program's own handler, back after the block, ignores repeats
 
     def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for s in SIGNALS:
-                try:
-                    self._old[s] = signal.signal(s, self._handler)
-                except (ValueError, OSError):   # pragma: no cover - embedded interpreters
-                    pass
+        from .. import signals
+
+        self._old = signals.handle(SIGNALS, self._handler)
         if self._old:
             _state.update(active=_state["active"] + 1, signum=None, taken=False)
         return self
 
     def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
+        from .. import signals
+
+        signals.restore(self._old)
         if self._old:
             _state.update(active=_state["active"] - 1, signum=None, taken=False)
         self._old = {}

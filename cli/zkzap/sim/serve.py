@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import selectors
-import signal
 import socket
 import sys
 
@@ -57,11 +56,9 @@ def _install_signals():
     def handler(signum, frame):
         raise _Stop()
 
-    for s in stop_signals():
-        try:
-            signal.signal(s, handler)
-        except (ValueError, OSError):   # pragma: no cover - not deliverable on this platform
-            pass
+    from ..signals import handle
+
+    handle(stop_signals(), handler)
 
 
 def _deliver(device, data, now, settings):
