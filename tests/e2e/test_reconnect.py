@@ -84,10 +84,14 @@ def test_reconnect_after_the_port_vanished(start_sim, tmp_path, command, control
     assert not out.exists()
 
 
-def test_without_reconnect_a_vanished_port_is_exit_4(start_sim, tmp_path):
+@pytest.mark.parametrize("extra,message", [
+    ([], "failed"),                                                    # no --reconnect: at once
+    (["--reconnect", "0.5"], "not back within --reconnect 0.5 s"),     # gives up after its time
+], ids=["without-reconnect", "reconnect-gives-up"])
+def test_a_vanished_port_is_exit_4(start_sim, tmp_path, extra, message):
     link = str(tmp_path / "ecu")
     _, first = start_sim(["zk", "--pty", "--link", link, *FAST])
-    proc = subprocess.Popen([executable("zk"), "monitor", "-p", link, "--duration", "30", "-f", "jsonl"],
+    proc = subprocess.Popen([executable("zk"), "monitor", "-p", link, "--duration", "30", "-f", "jsonl", *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
     try:
         _lines(proc, lambda line: '"kind":"status"' in line)
@@ -97,21 +101,4 @@ def test_without_reconnect_a_vanished_port_is_exit_4(start_sim, tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert proc.returncode == 4 and "failed" in err
-
-
-def test_reconnect_gives_up_after_its_time(start_sim, tmp_path):
-    link = str(tmp_path / "ecu")
-    _, first = start_sim(["zk", "--pty", "--link", link, *FAST])
-    proc = subprocess.Popen([executable("zk"), "monitor", "-p", link, "--duration", "30", "-f", "jsonl",
-                             "--reconnect", "0.5"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
-    try:
-        _lines(proc, lambda line: '"kind":"status"' in line)
-        stop_sim(first)
-        _, err = proc.communicate(timeout=15)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 4 and "not back within --reconnect 0.5 s" in err
+    assert proc.returncode == 4 and message in err, err
