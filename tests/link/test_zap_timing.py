@@ -131,3 +131,73 @@ def test_answers_counts_error_bits_and_garbled_replies():
     bus.port.device.inject(1, "overload")
     bus.port.device.inject(2, "corrupt")
     assert bus.answers(1) and bus.answers(2) and not bus.answers(3)
+
+
+class Scripted:
+    """A port on which the bytes scripted for a written packet are there the moment it is
+    written: what a host finds that was held up (a loaded machine) while they arrived."""
+
+    baudrate = 57600
+    port = "scripted"
+    timeout = 0.1
+
+    def __init__(self, answers):
+        self.answers = answers
+        self.rx = bytearray()
+
+    @property
+    def in_waiting(self):
+        return len(self.rx)
+
+    def write(self, data):
+        self.rx += self.answers.get(bytes(data), b"")
+        return len(data)
+
+    def read(self, n=1):
+        out = bytes(self.rx[:n])
+        del self.rx[:n]
+        return out
+
+    def reset_input_buffer(self):
+        self.rx.clear()
+
+    def close(self):
+        pass
+
+
+# the wired-AND of two Echo replies from ID 1 a byte apart, as a collision leaves it
+COLLIDED = bytes.fromhex("ffffff01000000fc")
+
+
+def test_a_reply_waiting_past_the_deadline_is_read_not_taken_for_silence():
+    bus = ZapBus(Scripted({zap.echo(3): zap.packet(3, 0)}), return_mode=1)
+    bus.timeout = 1e-9                                        # the deadline has passed before the first read
+    assert bus.ping(3).ident == 3
+
+
+def test_collision_bytes_before_a_reply_are_reported_to_scans():
+    # ID 1's quick probe gave up before its colliding replies came; they arrive ahead of ID 2's reply
+    bus = ZapBus(Scripted({zap.echo(2): COLLIDED + zap.packet(2, 0)}), return_mode=1)
+    assert bus.ping(1, quick=True) is None
+    assert bus.ping(2, quick=True).ident == 2
+    assert [kind for kind, _, _ in bus.take_events()] == ["garbled"]
+
+
+def test_scan_finds_the_shared_id_whose_collision_came_during_the_next_probe():
+    answers = {zap.echo(2): COLLIDED + zap.packet(2, 0),     # the first, quick probe of ID 1
+               zap.echo(1): COLLIDED}                         # ... and every later one
+    port = Scripted(answers)
+    first = True
+
+    def write(data):
+        nonlocal first
+        if bytes(data) == zap.echo(1) and first:
+            first = False
+            return len(data)                                  # its collision comes later, see echo(2)
+        return Scripted.write(port, data)
+
+    port.write = write
+    bus = ZapBus(port, return_mode=1)
+    found, warnings = records(bus, [0, 1, 2, 3])
+    assert [(r["id"], r["status"]) for r in found][:1] == [(1, "garbled")]
+    assert any("ID 1" in w and "garbled" in w for w in warnings)

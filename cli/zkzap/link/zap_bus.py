@@ -312,7 +312,8 @@ class ZapBus:
 
     def _read(self, n: int, deadline: float) -> bytes:
         """Bytes received by ``deadline`` (returns as soon as some are there; at most ``n`` on
-        ports read by size)."""
+        ports read by size). Past the deadline it still returns what is already waiting: a host
+        held up (a loaded machine) must not take a reply that arrived meanwhile for silence."""
         try:
             if self._fd is not None:
                 self._set_timeout(0)
@@ -323,9 +324,8 @@ class ZapBus:
                         return b""
                 return self.port.read(max(1, self.port.in_waiting))
             left = deadline - time.monotonic()
-            if left <= 0:
-                return b""
-            self._set_timeout(QUANTUM)
+            # past the deadline (the host was held up): still take what has arrived meanwhile
+            self._set_timeout(QUANTUM if left > 0 else 0)
             return self.port.read(n)
         except Exception as e:
             if isinstance(e, (KeyboardInterrupt, PortError)):
@@ -550,6 +550,10 @@ class ZapBus:
                     state["mismatch"] = (len(data), bytes(p))
                     state["want"] = len(received) + rx_len
                     continue
+                if framer.bad or framer.skipped:
+                    # bytes that made no packet came first: a collision (two actuators with one
+                    # ID answering a probe that already gave up), for scans
+                    self.events.append(("garbled", None, now))
                 return self._reply(p, now - t0)
             return None
 
