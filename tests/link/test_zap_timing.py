@@ -7,7 +7,7 @@ import pytest
 from zkzap.codec import zap
 from zkzap.errors import BadReply, NoReply
 from zkzap.link.port import open_port, sim_url
-from zkzap.link.zap_bus import MAX_TURNAROUND, TURNAROUND, ZapBus, wire_time
+from zkzap.link.zap_bus import LATE_WINDOW, MAX_TURNAROUND, TURNAROUND, ZapBus, wire_time
 from zkzap.link.zap_scan import scan
 
 
@@ -201,3 +201,23 @@ def test_scan_finds_the_shared_id_whose_collision_came_during_the_next_probe():
     found, warnings = records(bus, [0, 1, 2, 3])
     assert [(r["id"], r["status"]) for r in found][:1] == [(1, "garbled")]
     assert any("ID 1" in w and "garbled" in w for w in warnings)
+
+
+@pytest.mark.parametrize("turnaround,late", [("10", False), ("40", True)])
+def test_lateness_is_measured_against_the_full_allowance(turnaround, late):
+    bus = make(ids="1", turnaround=turnaround)
+    assert bus.ping(1, quick=True) is None                    # the quick wait is far shorter than either
+    bus.linger(0.1)
+    assert [kind for kind, _, _ in bus.take_events()] == ["late"]
+    # a reply within the full allowance says nothing of the actuator being slow
+    assert (bus.lateness > 0.01) is late and (bus.patience() > 0) is late
+    assert bus.patience() <= LATE_WINDOW
+
+
+@pytest.mark.parametrize("turnaround", ["30", "60"])
+def test_scan_identifies_actuators_slower_than_the_allowance(turnaround):
+    bus = make(ids="1,2,5", turnaround=turnaround)
+    found, warnings = records(bus, list(range(10)))
+    assert [(r["id"], r["status"], r["model"], r["return_mode"]) for r in found] == \
+        [(i, "ok", 0x0C4C, 1) for i in (1, 2, 5)]
+    assert warnings == []

@@ -165,10 +165,11 @@ def writes_id(pkt: bytes) -> bool:
 class _Owed:
     """An attempt that went unanswered: its reply may still come (late)."""
 
-    __slots__ = ("token", "ids", "data_len", "t0", "until")
+    __slots__ = ("token", "ids", "data_len", "t0", "until", "due")
 
-    def __init__(self, token, ids, data_len, t0, until):
+    def __init__(self, token, ids, data_len, t0, until, due=None):
         self.token, self.ids, self.data_len, self.t0, self.until = token, ids, data_len, t0, until
+        self.due = t0 if due is None else due     # by when the full allowance expected the reply
 
     def matches(self, p) -> bool:
         return p[3] in self.ids and (self.data_len is None or len(p) - 7 == self.data_len)
@@ -193,6 +194,7 @@ class ZapBus:
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
         self._owed = deque()               # unanswered attempts whose reply may still come
         self._turnarounds = deque(maxlen=32)   # turnaround estimates of answered attempts
+        self.lateness = 0.0                # how far past the full allowance the slowest late reply came (s)
         self._quiet_until = 0.0
         self._port_timeout = object()
         fd = getattr(port, "fd", None)
@@ -398,11 +400,21 @@ class ZapBus:
                 return self._reply(p, time.monotonic() - owed.t0)
         owed = self._take_owed(p)
         if owed is not None and owed.token is not None:
-            self.late += 1
-            self.events.append(("late", p[3], time.monotonic()))
+            self._late(p, owed, time.monotonic())
             return None
         self.stale += 1
         return None
+
+    def _late(self, p, owed, now) -> None:
+        """Account for ``p``, the late reply to the unanswered attempt ``owed``: counted, reported
+        to scans, and how far past its wait it came kept (:attr:`lateness`). Its round trip is
+        not learned as a turnaround: quick probes stay quick, and a scan asks again around it."""
+        self.late += 1
+        self.events.append(("late", p[3], now))
+        # how far past the full allowance its first byte came (a quick probe's shorter wait
+        # says nothing of the actuator's speed)
+        past = now - wire_time(len(p), self.baud, self.stop_bits) - owed.due
+        self.lateness = min(LATE_WINDOW, max(self.lateness, past))
 
     def _take_owed(self, p, token=None):
         now = time.monotonic()
@@ -466,6 +478,7 @@ class ZapBus:
             limit = self.quick_timeout(len(pkt)) + extra
         else:
             limit = self.reply_timeout(len(pkt), rx_len, extra)
+        full = self.reply_timeout(len(pkt), rx_len, extra) if quick else limit
         token = object()
         problems = []
         if any(o.token is not None and o.ids & accept for o in self._owed):
@@ -493,7 +506,7 @@ class ZapBus:
                 return got
             problems.append(got)
             if got[0] == "none":
-                self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW))
+                self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, t0 + full))
                 if optional:
                     return None            # silence is a legitimate answer: do not repeat the command
         return self._fail(pkt, problems, limit, tries, optional)
@@ -532,12 +545,12 @@ class ZapBus:
                     if owed.token is token and token is not None:
                         if now - t0 < physical:
                             # too early for this attempt: an earlier attempt's reply answers it
-                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW))
+                            due = t0 + max(limit, self.reply_timeout(len(pkt), rx_len))
+                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, due))
                             return self._reply(p, now - owed.t0)
                         self._owed.appendleft(owed)      # this attempt's; the earlier one stays owed
                     else:
-                        self.late += 1
-                        self.events.append(("late", p[3], now))
+                        self._late(p, owed, now)
                         state["want"] = len(received) + rx_len
                         continue
                 if p[3] not in accept:
@@ -695,12 +708,21 @@ class ZapBus:
         for pkt in zap.symmetric_store(reg, targets):
             self.command(pkt)
 
-    def ping(self, ident: int, *, timeout=None, retries=0, quick=False):
+    def ping(self, ident: int, *, timeout=None, retries=0, quick=False, extra=0.0):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
         retried ``retries`` times and then raised as BadReply. ``quick``: wait only the quick
-        probe's time (a slower reply is recognised as late later: see :attr:`events`)."""
+        probe's time (a slower reply is recognised as late later: see :attr:`events`);
+        ``extra``: seconds added to the wait (see :meth:`patience`)."""
         return self.transact(zap.echo(ident), reply=True, timeout=timeout, retries=retries, optional=True,
-                             check=False, quick=quick)
+                             check=False, quick=quick, extra=extra)
+
+    def patience(self) -> float:
+        """What to add to the wait when asking again where replies came late: 1.5x how far past
+        the full allowance the slowest late reply came (:attr:`lateness`), at most :data:`LATE_WINDOW`;
+        0.0 when every reply so far came in time. An actuator slower than the allowance (or one
+        held up, like a simulator on a loaded machine) is then heard instead of colliding with
+        the next request. An explicit ``timeout`` is never widened."""
+        return min(LATE_WINDOW, 1.5 * self.lateness)
 
     def answers(self, ident: int, *, tries: int = 3) -> bool:
         """Whether any actuator answers to ``ident``: Echo with the full allowance up to
@@ -716,7 +738,7 @@ class ZapBus:
             if any(kind == "late" and who == ident for kind, who, _ in self.events):
                 return True
         self._settle()
-        end = time.monotonic() + self.turnaround + self.margin
+        end = time.monotonic() + self.turnaround + self.margin + self.patience()
         while time.monotonic() < end:               # a reply slower than every wait above
             time.sleep(min(0.005, max(0.0, end - time.monotonic())))
         self._drain()

@@ -12,6 +12,8 @@ command renders it):
    half-duplex line their probes may have collided with it). Bytes that make no packet
    (a collision) put every ID probed within one full allowance (plus :data:`GARBLED_WINDOW`)
    before them up for another probe. After the last ID the scan waits one full allowance for stragglers.
+   Where replies came late, the second probes (and what follows them) wait that much longer
+   (:meth:`ZapBus.patience`): a bus slower than the allowance is heard, not collided with.
    Records come out in ID order: one is held while a lower ID may still turn out to be there.
 3. **Identify.** Each actuator found is asked for model number .. feedback-return-mode in one
    Load Data (full allowance, retries). No reply at all, with the full derived wait, and an
@@ -122,7 +124,7 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                 account(bus.take_events())
             yield from release()
         # stragglers: a reply to one of the last probes may still be on its way
-        bus.linger(bus.turnaround + bus.margin)
+        bus.linger(bus.turnaround + bus.margin + bus.patience())
         account(bus.take_events())
         rounds = 0
         while recheck - done and rounds < 3:
@@ -137,13 +139,13 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                     done.add(ident)
                     found += 1
                     held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
-            bus.linger(bus.turnaround + bus.margin)
+            bus.linger(bus.turnaround + bus.margin + bus.patience())
             account(bus.take_events())
         for ident in sorted(late_seen - done):
             # it answers, but never within the wait (a --timeout shorter than its turnaround)
             rec = _record(ident, baud)
             rec["status"] = "unidentified"
-            wait = bus.reply_timeout(7, 7) * 1000
+            wait = (bus.reply_timeout(7, 7, bus.patience())) * 1000
             rec["errors"] = [f"ID {ident} answers only after the wait ({wait:.1f} ms): its replies came late; "
                              "give a longer --timeout"]
             found += 1
@@ -160,7 +162,8 @@ def _probe(bus, ident, baud, retries, quick):
     """An Echo probe: a record when something answered (garbled included), else None."""
     rec = _record(ident, baud)
     try:
-        r = bus.ping(ident, retries=retries, quick=quick)
+        # asked again: as long as the replies seen late need
+        r = bus.ping(ident, retries=retries, quick=quick, extra=0.0 if quick else bus.patience())
     except BadReply as e:
         rec["status"] = "garbled"
         rec["errors"] = [str(e)]
@@ -185,7 +188,7 @@ def _finish(bus, rec, retries):
         length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
         try:
             bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
-                         retries=retries, check=False)
+                         retries=retries, check=False, extra=bus.patience())
         except BadReply as e:
             rec["status"] = "duplicate"
             rec["errors"] = rec["errors"] + [str(e)]
@@ -202,7 +205,7 @@ def collides(bus, ident: int, retries: int = 2) -> bool:
     length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
     try:
         bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
-                     retries=retries, check=False)
+                     retries=retries, check=False, extra=bus.patience())
     except BadReply:
         return True
     except NoReply:
@@ -218,7 +221,7 @@ def identify(bus, rec, retries=2) -> None:
     length = INFO_LAST.address + INFO_LAST.size - INFO_FIRST.address
     pkt = zap.load(ident, INFO_FIRST.address, length)
     try:
-        r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False)
+        r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, extra=bus.patience())
     except BadReply as e:
         rec["status"] = "duplicate"
         rec["errors"] = rec["errors"] + [str(e)]
@@ -239,6 +242,6 @@ def identify(bus, rec, retries=2) -> None:
 
 def _echo_answers(bus, ident, retries) -> bool:
     try:
-        return bus.ping(ident, retries=retries) is not None
+        return bus.ping(ident, retries=retries, extra=bus.patience()) is not None
     except BadReply:
         return False
