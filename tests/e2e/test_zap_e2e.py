@@ -157,13 +157,12 @@ def test_simulator_refuses_bad_options(sh, args, needle):
     assert r.exit_code == 2 and needle in r.stderr and r.stdout == ""
 
 
-def test_full_scan_takes_about_two_seconds(start_sim, sh):
+def test_full_scan_over_a_pty_finds_the_one_actuator(start_sim, sh):
+    # how long it takes is measured by benchmarks/transactions.py, not here
     url, _ = start_sim(["zap", "--ids", "3", "--pty", *FAST])
-    t = time.monotonic()
     r = sh("zap", "scan", "-p", url)
-    took = time.monotonic() - t
-    assert [x["id"] for x in jsonl(r.stdout)] == [3]
-    assert took < 3.0, f"a full 254-ID scan at 57600 baud took {took:.2f} s"
+    assert r.exit_code == 0, r.stderr
+    assert [(x["id"], x["status"]) for x in jsonl(r.stdout)] == [(3, "ok")]
 
 
 @pytest.mark.parametrize("sim_args", [
