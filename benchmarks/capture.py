@@ -38,7 +38,7 @@ def make(d, frames):
     import random
 
     from zkzap.codec import zk
-    from zkzap.io.pcapng import INBOUND, Writer
+    from zkzap.link.pcapng import INBOUND, Writer
 
     rng = random.Random(1)
     data = b"".join(zk.encode_status(i % 10 + 1, 6, rpm=rng.randrange(0, 160000, 10)) for i in range(frames))

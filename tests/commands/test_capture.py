@@ -8,7 +8,7 @@ import json
 import pytest
 
 from zkzap.codec import zap, zk
-from zkzap.io.pcapng import INBOUND, OUTBOUND, Reader, Writer
+from zkzap.link.pcapng import INBOUND, OUTBOUND, Reader, Writer
 
 
 def jsonl(text):

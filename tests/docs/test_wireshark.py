@@ -13,7 +13,7 @@ import pytest
 
 from zkzap.codec import zap, zk
 from zkzap.docs import wireshark
-from zkzap.io.pcapng import INBOUND, OUTBOUND, UNKNOWN, Writer
+from zkzap.link.pcapng import INBOUND, OUTBOUND, UNKNOWN, Writer
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 LUA = os.path.join(REPO, wireshark.PATH)

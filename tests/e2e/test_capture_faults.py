@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from zkzap.io.pcapng import INBOUND, OUTBOUND, Reader
+from zkzap.link.pcapng import INBOUND, OUTBOUND, Reader
 
 from .conftest import clean_env, executable
 from .test_faults import LIMIT, small_disk

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from zkzap.codec import zap
-from zkzap.io.pcapng import INBOUND, OUTBOUND, Reader
+from zkzap.link.pcapng import INBOUND, OUTBOUND, Reader
 
 from .conftest import clean_env, executable
 from .relay import Relay

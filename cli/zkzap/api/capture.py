@@ -12,8 +12,8 @@ capture could not tell: a sniffer on a half-duplex line) and, for mightyZAP feed
 from __future__ import annotations
 
 from ..codec import zap, zk
-from ..codec.framing import ZapFramer, ZkFramer
-from ..io.pcapng import INBOUND, OUTBOUND, Reader
+from ..link.capture import CaptureFrames
+from ..link.pcapng import INBOUND, OUTBOUND, Reader
 from ..link.zk_sources import PacedReplay
 
 #: Keys captures add in front of a record (and ``latency_ms`` after a mightyZAP one).
@@ -26,111 +26,9 @@ def iso_utc(ts: float) -> str:
     return _iso(ts)
 
 
-class CaptureFrames:
-    """``(ts, direction, frame)`` for every whole frame of the capture at ``path``, in order.
-
-    ``accept`` (ZK only): ``both``, ``status`` or ``control``; a ZK stream of known direction
-    takes only its own kind (host -> ECU: control frames, ECU -> host: status frames).
-    Afterwards: :attr:`truncated`, :attr:`frames`, :attr:`bad`, :attr:`skipped`, :attr:`t0`.
-    """
-
-    def __init__(self, path: str, protocol: str, accept: str = "both"):
-        self.path = path
-        self.protocol = protocol
-        self.accept = accept
-        self.reader = Reader(path, protocol)
-        self.framers = {}
-        self.t0 = None
-        self.truncated = False
-
-    def _framer(self, key, direction):
-        f = self.framers.get(key)
-        if f is None:
-            if self.protocol == "zap":
-                f = ZapFramer()
-            elif direction == OUTBOUND:
-                f = ZkFramer("control") if self.accept != "status" else None
-            elif direction == INBOUND:
-                f = ZkFramer("status") if self.accept != "control" else None
-            else:
-                f = ZkFramer(self.accept)
-            self.framers[key] = f
-        return f
-
-    def __iter__(self):
-        for ts, direction, frames in self.chunks():
-            for frame in frames:
-                yield ts, direction, frame
-
-    def chunks(self):
-        """``(ts, direction, [frames])`` per chunk that completed any frame (then the frames
-        the framers still held at the end)."""
-        last = {}
-        try:
-            for pkt in self.reader:
-                if self.t0 is None:
-                    self.t0 = pkt.ts
-                key = (pkt.interface, pkt.direction)
-                framer = self._framer(key, pkt.direction)
-                last[key] = pkt.ts
-                if framer is None:
-                    continue
-                frames = framer.feed(pkt.data)
-                if frames:
-                    yield pkt.ts, pkt.direction, frames
-            self.truncated = self.reader.truncated
-            for key, framer in self.framers.items():
-                if framer is not None:
-                    frames = framer.flush()
-                    if frames:
-                        yield last[key], key[1], frames
-        finally:
-            self.reader.close()
-
-    def _sum(self, attr):
-        return sum(getattr(f, attr) for f in self.framers.values() if f is not None)
-
-    @property
-    def frames(self):
-        return self._sum("frames")
-
-    @property
-    def bad(self):
-        return self._sum("bad")
-
-    @property
-    def skipped(self):
-        return self._sum("skipped")
-
-    def truncation_note(self) -> str | None:
-        if not self.truncated:
-            return None
-        return (f"{self.path}: the capture is truncated: decoded up to its last whole block "
-                f"({self.reader.packets} chunks)")
-
-
-def _dir(direction):
+def direction_label(direction):
+    """``h2d``, ``d2h`` or None (a capture that could not tell) for a captured chunk's direction."""
     return {INBOUND: "d2h", OUTBOUND: "h2d"}.get(direction)
-
-
-def zk_lines(frames: CaptureFrames, lines, csv: bool):
-    """Blocks of text lines (JSON objects or CSV rows of ``TIME_KEYS`` + the decode columns) of
-    a ZK capture, rendered by ``lines`` (a :class:`zkzap.codec.zk.ZkLines`): the same records as
-    :func:`zk_records`, through the table-generated text encoders, one block per chunk."""
-    from ..io.writers import _dumps
-
-    t0 = None
-    for ts, direction, block in frames.chunks():
-        if t0 is None:
-            t0 = frames.t0
-        t = round(ts - t0, 6)
-        d = _dir(direction)
-        if csv:
-            head = f"{iso_utc(ts)},{t!r},{d or ''},"
-            yield [head + line for line in lines.encode_all(block)]
-        else:
-            head = '{"time":"%s","t":%s,"dir":%s,' % (iso_utc(ts), _dumps(t), _dumps(d))
-            yield [head + line[1:] for line in lines.encode_all(block)]
 
 
 def zk_records(frames: CaptureFrames, decoder: zk.ZkDecoder, decode=None):
@@ -138,7 +36,7 @@ def zk_records(frames: CaptureFrames, decoder: zk.ZkDecoder, decode=None):
     a function of the frame, default ``decoder.decode``) and its ``frame`` hex."""
     decode = decode or decoder.decode
     for ts, direction, frame in frames:
-        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": _dir(direction)}
+        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": direction_label(direction)}
         rec.update(decode(frame))
         rec["frame"] = frame.hex(" ").upper()
         yield rec
@@ -168,7 +66,7 @@ def zap_records(frames: CaptureFrames, decoder: zap.ZapDecoder | None = None, de
     decode = decode or decoder.decode
     pairing = ZapPairing()
     for ts, direction, pkt in frames:
-        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": _dir(direction)}
+        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": direction_label(direction)}
         rec.update(decode(pkt))
         rec["frame"] = pkt.hex(" ").upper()
         if rec["kind"] == "command":
@@ -185,7 +83,7 @@ def capture_inputs(inputs, binary: bool):
     """The decode inputs as captures: a list of paths when every input is a pcapng file (with or
     without ``--binary``), else None (hex or raw bytes, as before). A file named like a capture
     that is not one, or not a zkzap link type, is refused here (exit 2) before any output."""
-    from ..io.pcapng import CaptureError, describe_start, is_pcapng
+    from ..link.pcapng import CaptureError, describe_start, is_pcapng
     from ..errors import UsageError
 
     paths = [p for p in inputs if p != "-"]
@@ -219,7 +117,7 @@ def _missing(path):
 
 def check_captures(paths, protocol: str) -> None:
     """Refuse any of ``paths`` that is not a zkzap capture of ``protocol`` (exit 2)."""
-    from ..io.pcapng import check_capture
+    from ..link.pcapng import check_capture
 
     for p in paths:
         check_capture(p, protocol)
@@ -279,13 +177,13 @@ class CaptureReplaySource(PacedReplay):
 
 def replay_source(path, fast=False):
     """The source for ``zk monitor --replay FILE``: a capture by its content, else a raw log."""
-    from ..io.pcapng import is_pcapng
+    from ..link.pcapng import is_pcapng
     from ..link.zk_sources import ReplaySource
 
     if is_pcapng(path):
         return CaptureReplaySource(path, fast)
     if path.lower().endswith(CAPTURE_SUFFIXES):
-        from ..io.pcapng import CaptureError, describe_start
+        from ..link.pcapng import CaptureError, describe_start
 
         with open(path, "rb") as f:
             raise CaptureError(f"{path}: not a pcapng capture: {describe_start(f.read(64))}")

@@ -27,7 +27,7 @@ from collections import Counter, deque
 from ..codec import zap, zk
 from ..codec.framing import ZapFramer, ZkFramer
 from ..errors import PortError, UsageError
-from ..io.pcapng import INBOUND, OUTBOUND, UNKNOWN
+from ..link.pcapng import INBOUND, OUTBOUND, UNKNOWN
 from .capture import iso_utc
 
 #: How long chunks from two ports are held back so they can be merged in time order.

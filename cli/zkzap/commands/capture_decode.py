@@ -47,13 +47,12 @@ def zk_decode_captures(paths, *, fmt, output, append, protocol_version, accept, 
                 _run(zk_records(frames, decoder, decode), writer, done)
             else:
                 # straight to text: the table-generated encoders and their memo, as for raw bytes
-                from ..api.capture import zk_lines
                 from ..io.writers import csv_dialect, json_dialect
-                from ..io.zk_lines import ZkLines
+                from ..io.zk_lines import ZkLines, capture_lines
 
                 lines = ZkLines(decoder, csv_dialect(columns(accept, raw)) if fmt == "csv" else json_dialect())
                 pending = []
-                for block in zk_lines(frames, lines, fmt == "csv"):
+                for block in capture_lines(frames, lines, fmt == "csv"):
                     pending += block
                     if len(pending) >= BLOCK:
                         writer.write_lines(pending)

@@ -178,7 +178,7 @@ def zk(protocol_version, rate, baud, stop_bits, extra, replay, loop, output, spe
 
 
 def _check_capture(path, protocol):
-    from ..io.pcapng import check_capture
+    from ..link.pcapng import check_capture
 
     check_capture(path, protocol)
 

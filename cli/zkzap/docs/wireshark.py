@@ -16,7 +16,7 @@ import os
 
 from ..codec import zap, zk
 from ..codec.fields import ContextScale, VersionScale
-from ..io.pcapng import LINKTYPE_ZAP, LINKTYPE_ZK
+from ..link.pcapng import LINKTYPE_ZAP, LINKTYPE_ZK
 
 PATH = os.path.join("share", "wireshark", "zkzap.lua")
 

@@ -235,3 +235,25 @@ class ZkLines:
                 head=(("kind", "const", "control"), ("id", "const", cmd_id), ("command", "const", cmd.name)),
                 tail=_TAIL)
         return enc(f), None
+
+
+def capture_lines(frames, lines: ZkLines, csv: bool):
+    """Blocks of text lines (JSON objects or CSV rows of ``TIME_KEYS`` + the decode columns) of
+    a ZK capture (a :class:`zkzap.link.capture.CaptureFrames`), rendered by ``lines``: the
+    same records as :func:`zkzap.api.capture.zk_records`, through the table-generated text
+    encoders, one block per chunk."""
+    from ..api.capture import direction_label, iso_utc
+    from .writers import _dumps
+
+    t0 = None
+    for ts, direction, block in frames.chunks():
+        if t0 is None:
+            t0 = frames.t0
+        t = round(ts - t0, 6)
+        d = direction_label(direction)
+        if csv:
+            head = f"{iso_utc(ts)},{t!r},{d or ''},"
+            yield [head + line for line in lines.encode_all(block)]
+        else:
+            head = '{"time":"%s","t":%s,"dir":%s,' % (iso_utc(ts), _dumps(t), _dumps(d))
+            yield [head + line[1:] for line in lines.encode_all(block)]

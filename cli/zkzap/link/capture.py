@@ -1,5 +1,6 @@
 """``--capture FILE.pcapng``: a tap on the port object, so every command that opens a port
-records what crossed it (see :mod:`zkzap.io.pcapng` for the format).
+records what crossed it (see :mod:`zkzap.link.pcapng` for the format); :class:`CaptureFrames`
+reads a capture back as frames.
 
 :func:`request` names the capture a command asked for (the shared port options call it);
 :func:`zkzap.link.port.open_port` then wraps the port it opens in a :class:`TappedPort`, which
@@ -13,7 +14,8 @@ from __future__ import annotations
 
 import time
 
-from ..io.pcapng import INBOUND, OUTBOUND, UNKNOWN, Writer
+from ..codec.framing import ZapFramer, ZkFramer
+from .pcapng import INBOUND, OUTBOUND, UNKNOWN, Reader, Writer
 
 _requested = None      # (path, protocol) named by the command being run
 _writer = None         # the Writer of that capture, opened with the first port
@@ -124,3 +126,86 @@ class TappedPort:
 
 
 __all__ = ["request", "requested", "finish", "tap", "TappedPort", "INBOUND", "OUTBOUND", "UNKNOWN"]
+
+
+class CaptureFrames:
+    """``(ts, direction, frame)`` for every whole frame of the capture at ``path``, in order.
+
+    ``accept`` (ZK only): ``both``, ``status`` or ``control``; a ZK stream of known direction
+    takes only its own kind (host -> ECU: control frames, ECU -> host: status frames).
+    Afterwards: :attr:`truncated`, :attr:`frames`, :attr:`bad`, :attr:`skipped`, :attr:`t0`.
+    """
+
+    def __init__(self, path: str, protocol: str, accept: str = "both"):
+        self.path = path
+        self.protocol = protocol
+        self.accept = accept
+        self.reader = Reader(path, protocol)
+        self.framers = {}
+        self.t0 = None
+        self.truncated = False
+
+    def _framer(self, key, direction):
+        f = self.framers.get(key)
+        if f is None:
+            if self.protocol == "zap":
+                f = ZapFramer()
+            elif direction == OUTBOUND:
+                f = ZkFramer("control") if self.accept != "status" else None
+            elif direction == INBOUND:
+                f = ZkFramer("status") if self.accept != "control" else None
+            else:
+                f = ZkFramer(self.accept)
+            self.framers[key] = f
+        return f
+
+    def __iter__(self):
+        for ts, direction, frames in self.chunks():
+            for frame in frames:
+                yield ts, direction, frame
+
+    def chunks(self):
+        """``(ts, direction, [frames])`` per chunk that completed any frame (then the frames
+        the framers still held at the end)."""
+        last = {}
+        try:
+            for pkt in self.reader:
+                if self.t0 is None:
+                    self.t0 = pkt.ts
+                key = (pkt.interface, pkt.direction)
+                framer = self._framer(key, pkt.direction)
+                last[key] = pkt.ts
+                if framer is None:
+                    continue
+                frames = framer.feed(pkt.data)
+                if frames:
+                    yield pkt.ts, pkt.direction, frames
+            self.truncated = self.reader.truncated
+            for key, framer in self.framers.items():
+                if framer is not None:
+                    frames = framer.flush()
+                    if frames:
+                        yield last[key], key[1], frames
+        finally:
+            self.reader.close()
+
+    def _sum(self, attr):
+        return sum(getattr(f, attr) for f in self.framers.values() if f is not None)
+
+    @property
+    def frames(self):
+        return self._sum("frames")
+
+    @property
+    def bad(self):
+        return self._sum("bad")
+
+    @property
+    def skipped(self):
+        return self._sum("skipped")
+
+    def truncation_note(self) -> str | None:
+        if not self.truncated:
+            return None
+        return (f"{self.path}: the capture is truncated: decoded up to its last whole block "
+                f"({self.reader.packets} chunks)")

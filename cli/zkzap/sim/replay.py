@@ -12,10 +12,10 @@
 
 from __future__ import annotations
 
-from ..api.capture import CaptureFrames, ZapPairing  # noqa: F401 - ZapPairing documents the pairing rule
 from ..codec import zap, zk
 from ..codec.framing import ZapFramer, ZkFramer
-from ..io.pcapng import INBOUND, OUTBOUND
+from ..link.capture import CaptureFrames
+from ..link.pcapng import INBOUND, OUTBOUND
 from .base import Device
 
 

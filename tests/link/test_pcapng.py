@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from zkzap.errors import OutputError
-from zkzap.io import pcapng
-from zkzap.io.pcapng import INBOUND, OUTBOUND, UNKNOWN, CaptureError, Reader, Writer
+from zkzap.link import pcapng
+from zkzap.link.pcapng import INBOUND, OUTBOUND, UNKNOWN, CaptureError, Reader, Writer
 
 
 def write(path, chunks, protocol="zk"):
