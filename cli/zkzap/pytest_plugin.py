@@ -15,7 +15,11 @@ Installed with zkzap (a ``pytest11`` entry point), so in any project's tests:
     @pytest.mark.zk_sim(protocol_version=4, speed=20)
     def test_ecu(zk_sim): ...
 
-``zap_sim`` is :func:`zkzap.sim.start_zap` (default: actuator ID 1, in-process), ``zk_sim``
+    @pytest.mark.zap_sim(replay="tests/data/field.pcapng")   # a field problem, on the desk
+    def test_the_field_problem(zap_sim): ...
+
+``zap_sim`` is :func:`zkzap.sim.start_zap` (default: actuator ID 1, or with ``replay`` the
+IDs that answered in the recording; in-process), ``zk_sim``
 :func:`zkzap.sim.start_zk` (default: ten times real time, in-process); the marker's keyword
 arguments are passed on. Each test gets a fresh simulator, stopped afterwards.
 """
@@ -28,17 +32,17 @@ import pytest
 def pytest_configure(config):
     """Register the ``zap_sim`` and ``zk_sim`` markers."""
     config.addinivalue_line("markers", "zap_sim(**options): options for the zap_sim fixture "
-                                       "(zkzap.sim.start_zap: ids, baud, return_mode, faults, transport, ...)")
+                                       "(zkzap.sim.start_zap: ids, baud, return_mode, faults, transport, replay, ...)")
     config.addinivalue_line("markers", "zk_sim(**options): options for the zk_sim fixture "
-                                       "(zkzap.sim.start_zk: protocol_version, speed, error, transport, ...)")
+                                       "(zkzap.sim.start_zk: protocol_version, speed, error, transport, replay, ...)")
 
 
 def _options(request, name, defaults):
-    options = dict(defaults)
     marker = request.node.get_closest_marker(name)
-    if marker is not None:
-        options.update(marker.kwargs)
-    return options
+    given = dict(marker.kwargs) if marker is not None else {}
+    if given.get("replay") is not None:        # a recording brings its own actuators
+        defaults = {k: v for k, v in defaults.items() if k != "ids"}
+    return {**defaults, **given}
 
 
 @pytest.fixture

@@ -9,6 +9,7 @@ import time
 import pytest
 
 from zkzap import Bus, Ecu
+from zkzap.errors import NoReply
 from zkzap.sim import INSTANCES, start, start_zap, start_zk
 
 
@@ -115,3 +116,74 @@ def test_zap_reply_timing_typed_and_checked():
                          ({"turnaround": True}, r"turnaround: True is not a number")):
         with pytest.raises(ValueError, match=message):
             start_zap(ids=[1], **bad)
+
+
+def write_capture(path, protocol, chunks):
+    from zkzap.link.pcapng import Writer
+
+    w = Writer(str(path))
+    i = w.interface(protocol, "/dev/ttyUSB0", 57600 if protocol == "zap" else 115200)
+    for ts, data, direction in chunks:
+        w.packet(i, ts, data, direction)
+    w.close()
+
+
+def test_zap_replay_answers_as_recorded(tmp_path):
+    from zkzap.codec import zap
+    from zkzap.link.pcapng import INBOUND, OUTBOUND
+
+    cap = tmp_path / "field.pcapng"
+    volts = zap.load(3, "present-voltage")
+    write_capture(cap, "zap", [
+        (10.0, volts, OUTBOUND), (10.004, zap.packet(3, 0, bytes([87])), INBOUND),     # 8.7 V in the field
+        (10.1, zap.load(3, "present-position"), OUTBOUND),                               # ... and then silence
+    ])
+    with start_zap(replay=cap) as sim, Bus(sim, retries=0) as bus:
+        assert [a.ident for a in sim.device.model.actuators] == [3]   # the IDs that answered
+        assert bus[3].present_voltage == 8.7                          # the recorded reply, not the model's
+        with pytest.raises(NoReply):
+            bus.load(3, "present-position")                           # the recorded silence
+        assert bus[3].goal_speed == sim.device.model.actuator(3).get("goal-speed")   # the rest: the model
+
+
+def test_zk_replay_plays_the_recorded_status_frames(tmp_path):
+    from zkzap.codec import zk
+    from zkzap.link.pcapng import INBOUND
+
+    cap = tmp_path / "flight.pcapng"
+    rpm = [zk.encode_status(1, rpm=r, egt_c=500) for r in (90000, 95000, 100000)]
+    write_capture(cap, "zk", [(1.0 + 0.05 * n, f, INBOUND) for n, f in enumerate(rpm)])
+    seen = []
+    with start_zk(replay=cap, loop=True, speed=10, on_control=seen.append) as sim, Ecu(sim) as ecu:
+        got = [rec["rpm"] for rec, _ in zip(ecu.status(), range(6))]
+        ecu.send("keepalive")
+        for _ in zip(ecu.status(), range(3)):
+            pass
+    assert got[:3] in ([90000, 95000, 100000], [95000, 100000, 90000], [100000, 90000, 95000])
+    assert set(got) == {90000, 95000, 100000}                         # looped
+    assert seen and seen[0]["command"] == "keepalive"
+
+
+def test_replay_arguments_are_checked(tmp_path):
+    from zkzap.errors import UsageError
+
+    not_a_capture = tmp_path / "x.pcapng"
+    not_a_capture.write_bytes(b"hello")
+    with pytest.raises(UsageError):
+        start_zap(replay=not_a_capture)
+    with pytest.raises(UsageError):
+        start_zk(replay=not_a_capture)
+    with pytest.raises(ValueError, match="only with replay"):
+        start_zk(loop=True)
+
+
+def test_the_plugin_fixture_replays_a_recording(request, tmp_path):
+    from zkzap.codec import zap
+    from zkzap.link.pcapng import INBOUND, OUTBOUND
+
+    cap = tmp_path / "field.pcapng"
+    write_capture(cap, "zap", [(1.0, zap.echo(7), OUTBOUND), (1.003, zap.packet(7, 0), INBOUND)])
+    request.node.add_marker(pytest.mark.zap_sim(replay=str(cap)))
+    sim = request.getfixturevalue("zap_sim")
+    with Bus(sim) as bus:
+        assert bus.ping(7) is not None and bus.ping(1, retries=0) is None   # the recording's ID, not the default 1

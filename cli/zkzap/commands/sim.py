@@ -285,7 +285,7 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
     if replay is not None:
         from ..sim.replay import ZapReplay
 
-        device = ZapReplay(replay, device)
+        device = ZapReplay(replay, device, recorded)
     if state and getattr(device, "restored", False):
         shown = ", ".join(str(a.ident) for a in device.actuators)
         click.echo(f"note: {state}: {len(device.actuators)} actuator(s) restored (IDs {shown}); "

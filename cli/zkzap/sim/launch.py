@@ -21,7 +21,7 @@ import os
 import threading
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Iterable, Optional, Sequence, Union
+    from typing import Callable, Iterable, Optional, Sequence, Union
 
 from . import INSTANCES
 from .base import Clock
@@ -121,14 +121,32 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
              max_pump_voltage: float = 10.0, esr: bool = False, baud: Optional[int] = None,
              stop_bits: int = 1, corrupt_every: int = 0, silent_after: Optional[float] = None, error: Union[int, str, None] = None,
              error_after: float = 0.0, transport: str = "inprocess", host: str = "127.0.0.1",
-             port: int = 0) -> Simulator:
+             port: int = 0, replay=None, loop: bool = False,
+             on_control: Optional[Callable[[dict], None]] = None) -> Simulator:
     """Start the ECU simulator (a :class:`~zkzap.sim.zk_ecu.ZkEcu`): ``protocol_version``,
     status ``rate`` (20/50/100 Hz), ``speed`` (model time runs this many times faster), engine
     figures, the line settings of its UART (``baud``, ``stop_bits`` 1 or 2, 8 data bits, no
     parity, as ``zkzap sim zk --baud --stop-bits``: a host at another setting reads garbage;
     without ``baud`` the ECU follows the host's settings), and faults (``corrupt_every`` Nth
     frame, ``silent_after`` s, ``error`` code at ``error_after`` s). ValueError names a bad
-    argument."""
+    argument.
+
+    ``replay`` (the path of a zkzap ZK capture) plays a recorded session instead, as ``zkzap sim
+    zk --replay``: the ECU's status frames at their recorded times (``speed`` scales them),
+    once or, with ``loop``, again and again; the engine, line and fault arguments do not apply.
+    The control frames the host sends meanwhile go to ``on_control`` as decoded records.
+    :class:`~zkzap.link.pcapng.CaptureError` (a :class:`~zkzap.errors.UsageError`) for a
+    file that is not such a capture; ValueError for one without a status frame."""
+    if replay is not None:
+        from ..link.pcapng import check_capture
+        from .replay import ZkReplay
+
+        path = os.fspath(replay)
+        check_capture(path, "zk")
+        return Simulator("zk", ZkReplay(path, loop=bool(loop), log=on_control), Clock(speed), transport,
+                         host, port)
+    if loop or on_control is not None:
+        raise ValueError("loop, on_control: only with replay")
     from .zk_ecu import ZkEcu
 
     if isinstance(stop_bits, bool) or stop_bits not in (1, 2):
@@ -140,23 +158,44 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
     return Simulator("zk", device, Clock(speed), transport, host, port)
 
 
-def start_zap(*, ids: Union[Iterable[int], str] = (0,), baud: int = 57600, return_mode: Optional[int] = None,
+def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600, return_mode: Optional[int] = None,
               echo: bool = False, voltage: Optional[float] = None, faults: Sequence = (),
               state: Optional[str] = None, turnaround: Optional[float] = None, gap: Optional[float] = None,
               speed: float = 1.0, transport: str = "inprocess",
-              host: str = "127.0.0.1", port: int = 0) -> Simulator:
+              host: str = "127.0.0.1", port: int = 0, replay=None) -> Simulator:
     """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
-    actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate) at
+    actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate; default
+    ID 0, or with ``replay`` the IDs that answered in the capture) at
     ``baud``, every one in feedback-return-mode ``return_mode`` (None: the factory 1), an
     adapter that echoes (``echo``), a supply ``voltage``, ``faults`` as ``(id or None, kind,
     value, count)`` tuples or ``[ID:]KIND[=VALUE][/COUNT]`` strings, ``state`` (a JSON file
     keeping stored registers across runs), the reply timing — ``turnaround`` (milliseconds from
     a command's last byte to the reply's first, 0..1000, default 2) and ``gap`` (milliseconds
     between two reply bytes, 0..100, default 0), as ``zkzap sim zap --turnaround --gap``.
-    ValueError names a bad argument."""
+    ValueError names a bad argument.
+
+    ``replay`` (the path of a zkzap mightyZAP capture) answers as recorded, as ``zkzap sim zap
+    --replay``: a request recorded in the capture (the same bytes) gets the reply recorded for
+    it after the recorded latency (several in turn, then the last again; none when none was
+    recorded: a silent actuator is reproduced); other requests go to the simulated bus, whose
+    actuators are then the IDs that answered in the capture unless ``ids`` are given.
+    :class:`~zkzap.link.pcapng.CaptureError` (a :class:`~zkzap.errors.UsageError`) for a
+    file that is not such a capture."""
     from ..codec import zap
     from .zap_actuators import TURNAROUND, Actuator, ActuatorBus, _millis, parse_ids
 
+    recorded = None
+    if replay is not None:
+        from ..link.pcapng import check_capture
+        from .replay import recorded_replies
+
+        replay = os.fspath(replay)
+        check_capture(replay, "zap")
+        recorded = recorded_replies(replay)
+        if ids is None and recorded[1]:
+            ids = sorted(recorded[1])
+    if ids is None:
+        ids = (0,)
     if baud not in zap.BAUD_TO_CODE:
         raise ValueError(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
     if isinstance(ids, str):
@@ -187,6 +226,10 @@ def start_zap(*, ids: Union[Iterable[int], str] = (0,), baud: int = 57600, retur
             bus.inject_text(fault)
         else:
             bus.inject(*fault)
+    if recorded is not None:
+        from .replay import ZapReplay
+
+        return Simulator("zap", ZapReplay(replay, bus, recorded), Clock(speed), transport, host, port)
     return Simulator("zap", bus, Clock(speed), transport, host, port)
 
 

@@ -118,8 +118,8 @@ def recorded_replies(path):
 
 
 class ZapReplay(Device):
-    def __init__(self, path, model):
-        self.table, self.ids = recorded_replies(path)
+    def __init__(self, path, model, recorded=None):
+        self.table, self.ids = recorded if recorded is not None else recorded_replies(path)
         self.model = model
         self.framer = ZapFramer()
         self._used = {}
