@@ -61,6 +61,25 @@ def test_move_clamped_goal_is_noted(zap_sim):
     assert abs(final - 3686) <= 5
 
 
+@pytest.mark.parametrize("stop", [True, False])
+def test_move_interrupted_stops_the_rod_where_it_is(zap_sim, stop):
+    notes = []
+
+    def ctrl_c(pos, goal, first):
+        if pos > first + 50:
+            raise KeyboardInterrupt
+
+    with Bus(zap_sim) as bus:
+        with pytest.raises(KeyboardInterrupt):
+            bus.move(1, 3000, speed=100, on_progress=ctrl_c, notify=notes.append, stop=stop)
+        goal = bus[1].goal_position
+        if stop:
+            assert goal < 3000 and abs(goal - bus[1].present_position) <= 5
+            assert notes == [f"interrupted: ID 1 stopped at {goal} (goal-position set to the present position)"]
+        else:
+            assert goal == 3000 and notes == ["interrupted: ID 1 keeps moving to its goal"]
+
+
 @pytest.mark.zap_sim(ids=[1, 2, 5])
 def test_scan_streams_records(zap_sim):
     probes = []

@@ -128,6 +128,8 @@ def test_zap_batch_stops_after_the_current_transaction(relay, name):
     assert after <= 50, after
     if name == "move":
         assert packets[-1][5] == 0xF3 and packets[-1][6] == 134   # Send Data goal-position: stopped
+        stopped = int.from_bytes(packets[-1][7:9], "little")
+        assert recs[1]["result"] == stopped and f"stopped at {stopped}" in err   # where, in the record too
     if name == "scan" and "1 actuator found so far" in err:
         assert recs[1]["result"]["id"] == 1                   # what it found so far
 

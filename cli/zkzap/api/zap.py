@@ -347,7 +347,7 @@ class Bus:
     def move(self, ident: int, position: int, *, wait: bool = True, speed: Optional[int] = None,
              timeout: float = 10.0, poll: float = 0.01,
              on_progress: Optional[Callable[[int, int, int], None]] = None,
-             notify: Optional[Callable[[str], None]] = None):
+             notify: Optional[Callable[[str], None]] = None, stop: bool = True):
         """Move to ``position`` (0..4095), writing goal-speed first when ``speed`` is given.
 
         With ``wait`` (the default) it reads the goal back (the actuator clamps it to its stroke
@@ -355,8 +355,10 @@ class Bus:
         until the actuator stops, and returns the final position. Raises NoReply when it is
         still moving after ``timeout`` s, CheckFailed when it stopped away from the goal (beyond
         end-compliance-margin), DeviceError on error bits (overload cuts the force).
-        ``on_progress(position, goal, first_position)`` is called on every read. Without
-        ``wait`` it returns None at once."""
+        ``on_progress(position, goal, first_position)`` is called on every read. A
+        KeyboardInterrupt while waiting (Ctrl-C, or SIGTERM in the CLI) first stops the rod where
+        it is (goal-position = present position; not with ``stop=False``; ``notify`` is told
+        where), then goes on. Without ``wait`` it returns None at once."""
         POSITION.check(position)
         if speed is not None:
             SPEED.check(speed)
@@ -373,8 +375,11 @@ class Bus:
         if self.link.return_mode == 0:
             raise UsageError(f"wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data",
                              ident=ident)
-        return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
-                                 notify=notify)
+        from ..link.zap_safety import interrupted_move
+
+        with interrupted_move(self.link, ident, stop=stop, notify=notify):
+            return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
+                                     notify=notify)
 
     def wait_stopped(self, ident: int, position: int, *, timeout: float = 10.0, poll: float = 0.01,
                      on_progress=None, notify=None) -> int:

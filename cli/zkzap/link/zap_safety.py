@@ -82,11 +82,14 @@ def verify_writes(bus, packets) -> list:
 class interrupted_move:
     """``with interrupted_move(bus, ident):`` around a wait for a move: on Ctrl-C or SIGTERM
     (KeyboardInterrupt) the rod is stopped where it is (``stop``), ``notify`` says what
-    happened, and the interruption goes on (exit 130/143)."""
+    happened (``why_not``: what to add when it was told not to stop), :attr:`stopped_at` keeps
+    that position, and the interruption goes on (exit 130/143)."""
 
-    def __init__(self, bus, ident, *, stop=True, notify=None):
-        self.bus, self.ident, self.stop = bus, ident, stop
+    def __init__(self, bus, ident, *, stop=True, notify=None, why_not=""):
+        self.bus, self.ident, self.stop, self.why_not = bus, ident, stop, why_not
         self.notify = notify or (lambda message: None)
+        self.stopped_at = None
+        """The position the rod was stopped at (None unless it was)."""
 
     def __enter__(self):
         return self
@@ -95,7 +98,7 @@ class interrupted_move:
         if kind is None or not issubclass(kind, KeyboardInterrupt):
             return False
         if not self.stop:
-            self.notify(f"interrupted: ID {self.ident} keeps moving to its goal (--no-stop)")
+            self.notify(f"interrupted: ID {self.ident} keeps moving to its goal{self.why_not}")
             return False
         from ..errors import ZkzapError
 
@@ -104,5 +107,6 @@ class interrupted_move:
         except ZkzapError as e:
             self.notify(f"interrupted: could not stop ID {self.ident}: {e}")
             return False
+        self.stopped_at = pos
         self.notify(f"interrupted: ID {self.ident} stopped at {pos} (goal-position set to the present position)")
         return False

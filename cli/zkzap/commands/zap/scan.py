@@ -232,7 +232,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
     at --wait-timeout, 1 when it stopped away from the goal (beyond end-compliance-margin),
     5 when it reports an error (overload: force cut). Progress is shown on a terminal. Ctrl-C
     or SIGTERM while waiting stops the rod where it is (goal = present position; --no-stop
-    leaves it moving) and exits 130/143.
+    leaves it moving), prints the position it stopped at and exits 130/143.
 
     \b
     Examples:
@@ -278,10 +278,18 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
         from ...link.zap_safety import interrupted_move
 
         start = time.monotonic()
+        guard = interrupted_move(link, ident, stop=not no_stop, notify=note, why_not=" (--no-stop)")
         try:
-            with interrupted_move(link, ident, stop=not no_stop, notify=note):
+            with guard:
                 final = bus.wait_stopped(ident, position, timeout=wait_timeout, poll=poll,
                                          on_progress=on_progress, notify=note)
+        except KeyboardInterrupt:
+            if progress is not None:
+                progress.stop()
+                progress = None
+            if guard.stopped_at is not None:
+                click.echo(str(guard.stopped_at))    # where it stopped: the position, as ever
+            raise
         finally:
             if progress is not None:
                 progress.stop()
