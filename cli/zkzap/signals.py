@@ -122,6 +122,25 @@ def restore(old) -> None:
         signal.signal(s, h)
 
 
+class held:
+    """``with held():`` SIGINT and SIGTERM wait until the block ends (in the main thread, where
+    handlers run; elsewhere, and where the platform cannot mask signals, nothing changes): a
+    write of a whole block or line is never cut short by a handler raising in the middle."""
+
+    __slots__ = ("_old",)
+
+    def __enter__(self):
+        self._old = None
+        if threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask"):
+            self._old = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+        return self
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, self._old)
+        return False
+
+
 class SignalGuard:
     """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
     records (files stay whole) and can send the abort command. Only the first signal counts: a

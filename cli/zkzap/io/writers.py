@@ -24,11 +24,10 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import stat
-import threading
 
 from ..errors import OutputError
+from ..signals import held
 from . import FORMATS  # noqa: F401 - re-exported
 
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
@@ -111,9 +110,6 @@ def csv_dialect(columns):
     return CsvDialect(columns)
 
 
-_HELD = {signal.SIGINT, signal.SIGTERM}
-
-
 def _raw_fd(stream):
     """The file descriptor under a UTF-8 text stream, or None (then blocks go through it)."""
     try:
@@ -193,11 +189,10 @@ class Writer:
             self._fail(e)
         raw = text.encode("utf-8")
         data = memoryview(raw)
-        hold = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else None
         try:
-            while data:
-                data = data[os.write(fd, data):]
+            with held():
+                while data:
+                    data = data[os.write(fd, data):]
         except BrokenPipeError:
             raise
         except OSError as e:
@@ -206,9 +201,6 @@ class Writer:
                 done = len(raw) - len(data)
                 self._good += raw.rfind(b"\n", 0, done) + 1
             self._fail(e)
-        finally:
-            if hold:
-                signal.pthread_sigmask(signal.SIG_SETMASK, old)
         if self._good is not None:
             self._good += len(raw)
 

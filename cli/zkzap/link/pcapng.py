@@ -21,12 +21,12 @@ reader stops at the last whole block of a truncated file and says so (:attr:`Rea
 from __future__ import annotations
 
 import os
-import signal
 import stat
 import struct
 import threading
 
 from ..errors import OutputError, UsageError
+from ..signals import held
 
 MAGIC = b"\x0a\x0d\x0d\x0a"
 _BOM = 0x1A2B3C4D
@@ -46,7 +46,6 @@ _OPT_END, _OPT_COMMENT = 0, 1
 _IF_NAME, _IF_DESCRIPTION, _IF_TSRESOL = 2, 3, 9
 _SHB_USERAPPL = 4
 _EPB_FLAGS = 2
-_HELD = {signal.SIGINT, signal.SIGTERM}
 
 #: A few link types by name, for the message refusing a capture of something else.
 _KNOWN_LINKTYPES = {0: "NULL", 1: "ETHERNET", 101: "RAW", 113: "LINUX_SLL", 127: "IEEE802_11_RADIOTAP",
@@ -155,11 +154,10 @@ class Writer:
             raise self.failed
         fd = self._fd
         data = memoryview(block)
-        hold = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else None
         try:
-            while data:
-                data = data[os.write(fd, data):]
+            with held():
+                while data:
+                    data = data[os.write(fd, data):]
         except OSError as e:
             if self._regular:
                 try:
@@ -168,9 +166,6 @@ class Writer:
                     pass
             self.failed = OutputError(f"capture: cannot write {self.path}: {e.strerror or e}")
             raise self.failed from None
-        finally:
-            if hold:
-                signal.pthread_sigmask(signal.SIG_SETMASK, old)
         self._good += len(block)
 
     def close(self) -> None:
