@@ -478,7 +478,8 @@ class ZapBus:
             limit = self.quick_timeout(len(pkt)) + extra
         else:
             limit = self.reply_timeout(len(pkt), rx_len, extra)
-        full = self.reply_timeout(len(pkt), rx_len, extra) if quick else limit
+        # by when the full allowance expects a reply (a quick probe's own wait is shorter)
+        full = self.reply_timeout(len(pkt), rx_len, extra) if quick and timeout is None else limit
         token = object()
         problems = []
         if any(o.token is not None and o.ids & accept for o in self._owed):
@@ -493,7 +494,7 @@ class ZapBus:
             if got is None:
                 self._settle()
                 t0 = self._write(pkt)
-                got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
+                got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token, full)
             if isinstance(got, Reply):
                 self.replies += 1
                 self._learn(got.rtt, len(pkt), rx_len)
@@ -511,9 +512,10 @@ class ZapBus:
                     return None            # silence is a legitimate answer: do not repeat the command
         return self._fail(pkt, problems, limit, tries, optional)
 
-    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token=None):
-        """Read until a valid reply or the deadline. Returns a Reply (``rtt`` from the attempt
-        that was answered) or a problem tuple (kind, detail, received bytes)."""
+    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token, full):
+        """Read until a valid reply or the deadline (``limit`` after ``t0``; ``full`` is the
+        full allowance, which a quick probe's ``limit`` is shorter than). Returns a Reply (``rtt``
+        from the attempt that was answered) or a problem tuple (kind, detail, received bytes)."""
         framer = ZapFramer()
         received = bytearray()
         echo_known = self.adapter_echo
@@ -545,8 +547,7 @@ class ZapBus:
                     if owed.token is token and token is not None:
                         if now - t0 < physical:
                             # too early for this attempt: an earlier attempt's reply answers it
-                            due = t0 + max(limit, self.reply_timeout(len(pkt), rx_len))
-                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, due))
+                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, t0 + full))
                             return self._reply(p, now - owed.t0)
                         self._owed.appendleft(owed)      # this attempt's; the earlier one stays owed
                     else:
