@@ -112,20 +112,29 @@ def scan(bus, ids, bauds, *, retries: int = 2):
                 held.pop(0)
                 yield from events
 
-        for ident in ids:
-            yield ("probe", baud, ident, found, True)
-            sent_at.append((time.monotonic(), ident))
-            rec = _probe(bus, ident, baud, retries, quick=True)
+        def ask(ident, first):
+            # one probe (quick on the first pass); what answers is identified and held
+            nonlocal found
+            if first:
+                sent_at.append((time.monotonic(), ident))
+            rec = _probe(bus, ident, baud, retries, quick=first)
             account(bus.take_events())
             if rec is not None:
                 done.add(ident)
                 found += 1
                 held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
                 account(bus.take_events())
+
+        def stragglers():
+            # a reply to one of the last probes may still be on its way
+            bus.linger(bus.turnaround + bus.margin + bus.patience())
+            account(bus.take_events())
+
+        for ident in ids:
+            yield ("probe", baud, ident, found, True)
+            ask(ident, True)
             yield from release()
-        # stragglers: a reply to one of the last probes may still be on its way
-        bus.linger(bus.turnaround + bus.margin + bus.patience())
-        account(bus.take_events())
+        stragglers()
         rounds = 0
         while recheck - done and rounds < 3:
             rounds += 1
@@ -133,19 +142,13 @@ def scan(bus, ids, bauds, *, retries: int = 2):
             recheck.clear()
             for ident in todo:
                 yield ("probe", baud, ident, found, False)
-                rec = _probe(bus, ident, baud, retries, quick=False)
-                account(bus.take_events())
-                if rec is not None:
-                    done.add(ident)
-                    found += 1
-                    held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
-            bus.linger(bus.turnaround + bus.margin + bus.patience())
-            account(bus.take_events())
+                ask(ident, False)
+            stragglers()
         for ident in sorted(late_seen - done):
             # it answers, but never within the wait (a --timeout shorter than its turnaround)
             rec = _record(ident, baud)
             rec["status"] = "unidentified"
-            wait = (bus.reply_timeout(7, 7, bus.patience())) * 1000
+            wait = bus.reply_timeout(7, 7, bus.patience()) * 1000
             rec["errors"] = [f"ID {ident} answers only after the wait ({wait:.1f} ms): its replies came late; "
                              "give a longer --timeout"]
             found += 1
