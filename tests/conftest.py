@@ -12,6 +12,8 @@ from click.testing import CliRunner
 
 # Run the source tree's package even when the tests are run without an install.
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli"))
+# Helpers shared by the test modules (``from cmdtree import commands``).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from zkzap.commands import root, run  # noqa: E402
 

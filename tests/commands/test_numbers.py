@@ -14,20 +14,13 @@ import pytest
 from zkzap.commands import root
 from zkzap.commands.options import FiniteFloat, FiniteRange
 
-
-def _walk(cmd, path, ctx):
-    if isinstance(cmd, click.Group):
-        for name in cmd.list_commands(ctx):
-            sub = cmd.get_command(ctx, name)
-            yield from _walk(sub, path + [name], click.Context(sub, parent=ctx, info_name=name))
-    else:
-        yield path, cmd
+from cmdtree import commands
 
 
 def _float_params():
     rows = []
-    ctx = click.Context(root, info_name="zkzap")
-    for path, cmd in _walk(root, [], ctx):
+    for path, cmd in commands():
+        path = list(path)
         positional = [p for p in cmd.params if isinstance(p, click.Argument)]
         for p in cmd.params:
             if not isinstance(p.type, (click.types.FloatParamType, click.FloatRange)):

@@ -60,23 +60,11 @@ def test_committed_completions_are_current(tmp_path):
 
 
 def test_a_page_per_command_and_the_entry_points(pages):
-    from zkzap.commands import root
+    from cmdtree import commands, groups
 
     expected = {"zkzap.1", "zk.1", "zap.1"}
-
-    def walk(cmd, path, ctx):
-        import click
-
-        expected.add("-".join(path) + ".1")
-        if isinstance(cmd, click.Group):
-            for name in cmd.list_commands(ctx):
-                sub = cmd.get_command(ctx, name)
-                if not sub.hidden:
-                    walk(sub, path + [name], click.Context(sub, info_name=name, parent=ctx))
-
-    import click
-
-    walk(root, ["zkzap"], click.Context(root, info_name="zkzap"))
+    expected |= {"-".join(("zkzap", *path)) + ".1" for path, _ in groups(hidden=False)}
+    expected |= {"-".join(("zkzap", *path)) + ".1" for path, _ in commands(hidden=False)}
     assert set(pages) == expected
     for name in ("zkzap-zk-send-control.1", "zkzap-zap-load.1", "zkzap-zk-decode.1", "zkzap-crc-zk.1",
                  "zkzap-ports.1", "zkzap-completion.1", "zkzap-zk-fields.1", "zkzap-zap-registers.1"):
