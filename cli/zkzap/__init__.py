@@ -12,7 +12,9 @@ The public API (imported lazily: ``from zkzap import Bus`` loads neither click n
 - :mod:`zkzap.sim`: the simulators, started from Python (:func:`zkzap.sim.start_zk`,
   :func:`zkzap.sim.start_zap`), and the pytest fixtures ``zk_sim``/``zap_sim``;
 - :mod:`zkzap.errors`: one exception hierarchy with exit codes (:class:`ZkzapError`,
-  :class:`NoReply`, ...).
+  :class:`NoReply`, :class:`PermissionNeeded`, ...);
+- :class:`Permission` (:mod:`zkzap.codec.permissions`): what a frame needs from its sender
+  (engine start, stored write, identity change, ...), given with ``allow=``.
 """
 
 __version__ = "0.1.0"
@@ -31,6 +33,8 @@ _LAZY = {
     "DeviceError": "zkzap.errors",
     "BadReply": "zkzap.errors",
     "OutputError": "zkzap.errors",
+    "PermissionNeeded": "zkzap.errors",
+    "Permission": "zkzap.codec.permissions",
 }
 
 __all__ = ["__version__", *_LAZY]

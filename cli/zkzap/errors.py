@@ -17,6 +17,9 @@ DEVICE_ERROR = 5
 BAD_REPLY = 6
 #: The output could not be written (disk full, file system gone); records before it are whole.
 OUTPUT_ERROR = 7
+#: More to do: the command did the part it was asked to and stopped; running it again goes on
+#: (``zap setup --no-wait`` set up one actuator and others are pending).
+MORE_TO_DO = 8
 #: Interrupted by Ctrl-C (SIGINT); 143 for SIGTERM.
 INTERRUPTED = 130
 TERMINATED = 143
@@ -30,6 +33,7 @@ EXIT_CODES = (
     (DEVICE_ERROR, "the device reported an error (actuator error bits, ECU error code)"),
     (BAD_REPLY, "corrupted or unexpected reply (bad checksum, wrong ID) after retries"),
     (OUTPUT_ERROR, "the output could not be written (disk full); the records before are whole"),
+    (MORE_TO_DO, "more to do: the part asked for is done and the command stopped; run it again for the rest"),
     (INTERRUPTED, "interrupted (Ctrl-C); 143 when terminated (SIGTERM)"),
 )
 
@@ -63,6 +67,14 @@ class UsageError(ZkzapError):
     """Bad usage or input (a value out of range, an unknown name): nothing was sent."""
 
     code = USAGE
+
+
+class PermissionNeeded(UsageError):
+    """A frame needs a permission it was not given: nothing was sent (exit 2).
+
+    Facts: ``missing`` and ``needed`` (:class:`zkzap.codec.permissions.Permission` flags),
+    ``reasons`` ({Permission: why}, the missing ones), ``frame`` (the bytes not sent) and
+    ``simulated`` (whether the port was a simulator, which grants the consent permissions)."""
 
 
 class CheckFailed(ZkzapError):
@@ -100,6 +112,13 @@ class OutputError(ZkzapError):
     before the failure are whole."""
 
     code = OUTPUT_ERROR
+
+
+class MoreToDo(ZkzapError):
+    """The command did what it was asked to and stopped with more to do (exit 8): running it
+    again goes on. Facts: ``pending`` (what is left)."""
+
+    code = MORE_TO_DO
 
 
 class Interrupted(ZkzapError):

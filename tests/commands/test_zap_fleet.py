@@ -227,10 +227,10 @@ def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, tmp_path):
     second = make_bus(tmp_path / "n2.json", ids="0")
     args = ("zap", "setup", "--ids", "4-5", "--state", state, "--find-ids", "0-7", "--find-baud", "57600",
             "--config", str(cfg))
-    r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends
-    assert r.exit_code == 1 and r.stdout == ""
+    r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends: more to do (8)
+    assert r.exit_code == 8 and r.stdout == ""
     assert "ID 4 done: found at ID 0, 57600 baud; 1 settings from" in r.stderr
-    assert "stopped before ID 5" in r.stderr and "ID 5 not set up" in r.stderr
+    assert "stopped before ID 5" in r.stderr and "more to do: ID 5 not set up yet" in r.stderr
     assert state_of(tmp_path / "n1.json")[4]["speed-limit"] == 700
     # the same actuator again is refused: it was set up already
     r = cli(*args, "-p", f"sim://zap?state={tmp_path / 'n1.json'}", input="\n")
@@ -256,6 +256,9 @@ def test_setup_skip_redo_and_two_actuators(cli, tmp_path):
     r = cli(*base, "-p", one, input="s\n\n")
     assert r.exit_code == 1 and "ID 1 skipped" in r.stderr and "ID 2 done" in r.stderr
     assert "skipped 1" in r.stderr
+    r = cli(*base, "-p", one, input="")             # nothing pending, but ID 1 is not done: not "every ID"
+    assert r.exit_code == 1 and "every ID" not in r.stderr
+    assert "setup not complete: ID 1 skipped (--redo 1 sets it up)" in r.stderr
     r = cli(*base, "--redo", "2", "-p", f"sim://zap?state={tmp_path / 'one.json'}", "--no-wait")
     assert r.exit_code == 1 and "ID 2 done: found at ID 2" in r.stderr      # ID 1 is still skipped
     r = cli(*base, "--redo", "7", "-p", one)

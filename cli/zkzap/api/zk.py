@@ -25,6 +25,7 @@ Built on :class:`~zkzap.link.zk_port.ZkLink` (the port), :class:`~zkzap.link.zk_
 
 from __future__ import annotations
 
+import contextlib
 import time
 TYPE_CHECKING = False
 
@@ -77,11 +78,16 @@ class Ecu:
     ``port`` is a device path, any pyserial URL, ``sim://zk?speed=10`` or a simulator started
     with :func:`zkzap.sim.start`; ``baud`` the line speed; ``protocol_version`` the ECU's (None:
     read from status ID 6); ``silence`` the longest wait for a status frame before NoReply;
-    ``abort`` the abort command (``standby``, ``stop`` or ``none``).
+    ``abort`` the abort command (``standby``, ``stop`` or ``none``); ``allow`` the permissions
+    its frames are given: a frame that can start the engine or run ECU hardware (state run, the
+    drain, test and pump-on actions) needs :attr:`Permission.ENGINE
+    <zkzap.codec.permissions.Permission>` on a real port (the simulator waives it), else
+    :class:`~zkzap.errors.PermissionNeeded` and nothing is sent. ``send``, ``hold`` and
+    ``run_profile`` take ``allow=`` for one call too.
     """
 
     def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
-                 silence: float = 2.0, abort: str = "standby"):
+                 silence: float = 2.0, abort: str = "standby", allow=None):
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -99,7 +105,7 @@ class Ecu:
         self.abort_kind = abort
         """The abort command sent on an abnormal end and at close (standby, stop, none)."""
         self.silence = silence
-        self.link = ZkLink.open(url, baud)
+        self.link = ZkLink.open(url, baud, allow=allow)
         """The :class:`~zkzap.link.zk_port.ZkLink` (the port)."""
         self.source = LiveSource(self.link)
         self.telemetry = Telemetry(protocol_version, wall0=self.source.wall0)
@@ -159,11 +165,28 @@ class Ecu:
         elif cf.action == "pump-off":
             self.pump_on = False
 
-    def send(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
-        """Send one control frame (see :meth:`frame`); returns it."""
+    def send(self, kind: Union[str, int], *, allow=None, **fields) -> zk.ControlFrame:
+        """Send one control frame (see :meth:`frame`); returns it. ``allow``: permissions for
+        this frame besides the session's."""
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
-        self._write(cf)
+        with self._allowing(allow):
+            self._write(cf)
         return cf
+
+    @contextlib.contextmanager
+    def _allowing(self, allow):
+        """The session's permissions, with ``allow`` added while the block runs."""
+        if allow is None:
+            yield
+            return
+        from ..codec.permissions import as_permission
+
+        saved = self.link.allow
+        self.link.allow = saved | as_permission(allow)
+        try:
+            yield
+        finally:
+            self.link.allow = saved
 
     def abort(self) -> list:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
@@ -221,16 +244,20 @@ class Ecu:
         Raises NoReply when the ECU is silent for ``silence`` s."""
         return self._records(count=count, duration=duration)
 
-    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, **fields) -> Iterator[Status]:
+    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, allow=None,
+             **fields) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
         raises DeviceError; any abnormal end sends the abort command."""
         if not 1 <= rate <= 200:
             raise UsageError(f"rate: {rate:g} is out of range; allowed 1..200 Hz")
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        with self._allowing(allow):
+            self.link.authorize(cf.frame)          # refused before anything is sent
         done = False
         try:
-            yield from self._records(cf, 1.0 / rate, duration=seconds)
+            with self._allowing(allow):
+                yield from self._records(cf, 1.0 / rate, duration=seconds)
             done = True
         finally:
             if not done and self.controlling and self.abort_kind != "none":
@@ -266,7 +293,8 @@ class Ecu:
     # -- schedules -----------------------------------------------------------------------------
 
     def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
-                    on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
+                    on_record: Optional[Callable[[Status], None]] = None, check: bool = True,
+                    allow=None) -> ProfileResult:
         """Run a throttle or RPM schedule as ``zk profile`` does: a
         :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or
         ``time_s,rpm=N[,state]`` rows, optionally under a header), the path of a CSV file
@@ -280,7 +308,9 @@ class Ecu:
         abort command is sent). An RPM target above the ECU's max rpm (or an ECU too old for RPM
         mode) raises :class:`~zkzap.api.schedule.ScheduleTargetError` before any RPM frame is
         sent. With ``check`` a failure is raised (DeviceError, NoReply, PortError,
-        KeyboardInterrupt) after the abort; otherwise the result says how it ended."""
+        KeyboardInterrupt) after the abort; otherwise the result says how it ended. A schedule
+        that can start the engine needs the ENGINE permission on a real port (``allow``),
+        checked on every frame it can send before the first goes out."""
         import os
 
         from ..link.zk_sources import LiveSource
@@ -298,6 +328,9 @@ class Ecu:
             text = "\n".join(",".join(str(c) for c in row) for row in schedule)
             sched = Schedule.parse(text, interpolate=interpolate)
         sched.check_length()
+        with self._allowing(allow):
+            for frame in sched.frames():            # every frame it can send, before the first
+                self.link.authorize(frame)
         source = LiveSource(self.link)
         source.framer = self.source.framer
         tel = Telemetry(self.telemetry.decoder.known, wall0=source.wall0)
@@ -306,7 +339,8 @@ class Ecu:
         session = Session(source, tel, sink, control=sched.frame_at, rate=rate, abort=self.abort_kind,
                         duration=sched.length, silence=self.silence, stop_on_error=True,
                         abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode)
-        outcome = session.run()
+        with self._allowing(allow):
+            outcome = session.run()
         summary = {"outcome": outcome.reason, "exit_status": outcome.exit_code, "aborted": outcome.aborted,
                    "duration_s": round(session.ended_t or 0.0, 3), "schedule_s": sched.length,
                    "crc_errors": source.framer.bad}

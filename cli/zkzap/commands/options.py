@@ -257,7 +257,17 @@ zap_yes_option = click.option(
     "-y", "--yes", is_flag=True,
     help="Consent to writing stored settings (they survive power-off and wear the actuator's "
          "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
-         "prompts and a script is refused (sim:// and --sim never ask).")
+         "prompts and a script is refused (sim://, loop:// and --sim never ask).")
+
+#: ``--force`` on the mightyZAP commands that compose packets: the FORCE permissions of
+#: :mod:`zkzap.codec.permissions` (``--yes`` is the consent on a real port; this is needed on
+#: the simulator too).
+FORCE_HELP = ("Allow deliberate writes that --yes does not cover, simulator included: the id, baud-rate "
+              "or protocol-type register (set-id and set-baud check and verify instead), addresses and "
+              "values the 12Lf map does not document, a write to part of a multi-byte register, and "
+              "such writes to every actuator (broadcast).")
+
+force_option = click.option("--force", is_flag=True, help=FORCE_HELP)
 
 protocol_version_option = click.option(
     "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
@@ -433,10 +443,14 @@ def read_hex_input(args, *, what="hex input") -> bytes:
     return parse_hex(" ".join(a for a in args), what=what)
 
 
-def consent(action: str, yes: bool) -> None:
+def consent(action: str, yes: bool, brief=None) -> None:
     """Ask before something hazardous. ``--yes`` consents; a terminal prompts; anything else
-    (a script, CI, no stdin) is refused with exit status 2 and nothing is sent."""
-    if yes:
+    (a script, CI, no stdin) is refused with exit status 2 and nothing is sent. While a batch
+    checks its lines (:mod:`zkzap.checking`) the consent is recorded (``brief``, else
+    ``action``) for the batch's one prompt."""
+    from .. import checking
+
+    if checking.consent(brief or action) or yes:
         return
     from ..io.term import is_tty
 
@@ -462,3 +476,35 @@ def _ask(question: str) -> bool:
         if answer in ("", "n", "no"):
             return False
         click.echo("Answer y or n.", err=True)
+
+
+def authorize(needs, *, what: str, yes: bool, force: bool, simulated: bool, consent_text=None, brief=None):
+    """The command line's side of the permission policy (:mod:`zkzap.codec.permissions`): the
+    permissions to give a command whose frames need ``needs`` — typed frames
+    (:class:`zkzap.codec.zap.Command`, :class:`zkzap.codec.zk.ControlFrame`), or a
+    ``{Permission: reason}`` of a procedure.
+
+    The FORCE permissions need ``--force`` (without it: PermissionNeeded naming the frame, exit
+    2, nothing sent); the CONSENT ones, on a real port, ``--yes`` or a yes at a prompt
+    (:func:`consent`, with ``consent_text`` or ``what`` and the reasons). Everything is decided
+    here, before the port opens; the bus or link then enforces the same rules on every frame."""
+    from ..codec.permissions import CONSENT, FORCE, Permission, require
+
+    granted = FORCE if force else Permission.NONE
+    if isinstance(needs, dict):
+        require({p: why for p, why in needs.items() if p & FORCE}, granted, what=what)
+    else:
+        frames, needs = list(needs), {}
+        for f in frames:
+            own = f.needs()
+            require({p: why for p, why in own.items() if p & FORCE}, granted,
+                    what=f.describe() if hasattr(f, "describe") else what, frame=getattr(f, "packet", None) or f.frame)
+            for p, why in own.items():
+                needs.setdefault(p, why)
+    wanted = {p: why for p, why in needs.items() if p & CONSENT}
+    if wanted and not simulated:
+        reasons = "; ".join(dict.fromkeys(wanted.values()))
+        consent(consent_text or f"{what}: {reasons}", yes, brief=brief or reasons)
+    for p in wanted:
+        granted |= p
+    return granted

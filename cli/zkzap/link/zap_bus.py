@@ -36,6 +36,12 @@ and the copy skipped. A failed attempt is retried ``retries`` times; then the fa
 as :class:`~zkzap.errors.NoReply` (exit 3), :class:`~zkzap.errors.BadReply` (exit 6); error bits
 in a reply as :class:`~zkzap.errors.DeviceError` (exit 5, the reply attached as ``.reply``); a
 port that fails or vanishes as :class:`~zkzap.errors.PortError` (exit 4).
+
+Permissions: every command packet goes through :meth:`ZapBus.command`, which sends it only when
+the permissions it needs (:meth:`zkzap.codec.zap.Command.needs`) are given: the bus's
+:attr:`ZapBus.allow` or the call's ``allow=``; a simulated port (:func:`is_simulated`) gives the
+consent permissions by itself. Otherwise :class:`~zkzap.errors.PermissionNeeded` (exit 2), and
+nothing is sent.
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ from urllib.parse import urlsplit
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
+from ..codec.permissions import Permission, as_permission, require
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from . import stop
 from .port import close_port, wire_time
@@ -77,6 +84,10 @@ RESTART_PAUSE = 0.1
 RETRIES = 2
 
 _LOOPBACK = ("localhost", "127.0.0.1", "::1", "")
+
+
+#: Instructions that never need a permission (they write nothing by themselves).
+_FREE = frozenset((zap.ECHO, zap.LOAD_DATA, zap.EXECUTION, zap.RESTART))
 
 
 def is_simulated(url) -> bool:
@@ -185,6 +196,8 @@ class ZapBus:
                  url=None, turnaround=None):
         self.port = port
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
+        self.allow = Permission.NONE       # the permissions given to every command (see command())
+        self.simulated = is_simulated(self.url)
         self.return_mode = return_mode
         self.timeout = timeout
         self.retries = retries
@@ -641,11 +654,23 @@ class ZapBus:
 
     # -- instructions -------------------------------------------------------------------------
 
-    def command(self, pkt: bytes, *, check=True, optional=None):
+    def authorize(self, pkt: bytes, allow=None) -> None:
+        """Raise :class:`~zkzap.errors.PermissionNeeded` unless ``pkt`` may be sent: the
+        permissions it needs are :attr:`allow`'s, ``allow``'s, or waived by a simulated port."""
+        if pkt[5] in _FREE:
+            return                                  # Echo, Load Data, Execution, Restart
+        cmd = zap.Command(pkt)
+        needs = cmd.needs()
+        if needs:
+            require(needs, self.allow | as_permission(allow), simulated=self.simulated, what=cmd.describe(),
+                    frame=pkt)
+
+    def command(self, pkt: bytes, *, check=True, optional=None, allow=None):
         """Send any command packet and wait for what it gets (inferred from the packet): Load
         Data's data length, an ID change answered by the new ID, an unknown instruction's
-        optional reply."""
+        optional reply. ``allow``: permissions for this packet besides :attr:`allow`."""
         pkt = bytes(pkt)
+        self.authorize(pkt, allow)
         code, params = pkt[5], pkt[6:-1]
         kw = {}
         if code == zap.LOAD_DATA and len(params) == 2:
@@ -705,9 +730,12 @@ class ZapBus:
     def factory_reset(self, ident: int, reset_id=False, reset_baud=False, **kw):
         return self.command(zap.factory_reset(ident, reset_id, reset_baud), **kw)
 
-    def symmetric_store(self, reg, targets) -> None:
-        for pkt in zap.symmetric_store(reg, targets):
-            self.command(pkt)
+    def symmetric_store(self, reg, targets, **kw) -> None:
+        packets = zap.symmetric_store(reg, targets)
+        for pkt in packets:
+            self.authorize(pkt, kw.get("allow"))    # every packet before the first goes out
+        for pkt in packets:
+            self.command(pkt, **kw)
 
     def ping(self, ident: int, *, timeout=None, retries=0, quick=False, extra=0.0):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
@@ -775,7 +803,7 @@ class ZapBus:
 
 
 def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, return_mode=1,
-             retries=RETRIES, sim_options=None, stop_bits=1) -> ZapBus:
+             retries=RETRIES, sim_options=None, stop_bits=1, allow=None) -> ZapBus:
     """Open ``port`` (any pyserial URL or device, or the in-process simulator with ``sim``;
     ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`."""
     from .port import open_port, sim_url
@@ -791,4 +819,6 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
             raise UsageError("no port", no_port="zap")
         url = port
     p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
-    return ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)
+    bus = ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)
+    bus.allow = as_permission(allow)
+    return bus

@@ -295,13 +295,17 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
     targets = [t for _, t in pairs]
+    from ...codec.permissions import FORCE, Permission
     from ...io.term import is_tty
     from ...link.zap_bus import device_error
 
-    if _real(common) and not yes and not plan_only and not (is_tty(sys.stdin) and is_tty(sys.stderr)):
+    interactive = is_tty(sys.stdin) and is_tty(sys.stderr)
+    if _real(common) and not plan_only and (yes or not interactive):
+        # a script gets its answer before the port opens; a terminal sees the plan first (below)
         consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
+    allow = (FORCE if force else Permission.NONE) | (Permission.STORED if yes else Permission.NONE)
 
-    with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
+    with open_link(ids=targets, probe=targets[0], allow=allow, **_link_args(common)) as bus:
         current = {}
         writes = []
         unchanged = 0
@@ -321,14 +325,17 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         n_act = len({w.target for w in writes})
         summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
                    f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")
+        left_out = fleet.left_out(entries, pairs, current, only=only_regs, skip=skip_regs)
+        if left_out:
+            summary += "; " + fleet.describe_left_out(left_out)
         if plan_only:
             _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                         title=f"plan: {file}")
             note(f"plan: {summary}; nothing written")
             return
         if not writes:
-            note(f"nothing to write: the bus matches {file} ({unchanged} setting{'s' if unchanged != 1 else ''} "
-                 "already equal)")
+            note(f"nothing to write: every setting apply writes matches {file} ({unchanged} already equal)"
+                 + (f"; {fleet.describe_left_out(left_out)}" if left_out else ""))
             return
         if _real(common) and not yes:
             if is_tty(sys.stderr):
@@ -337,6 +344,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             stored = sum(1 for w in writes if w.register.stored)
             consent(f"apply {file} to {common['port']}: {summary}, {stored} of them stored settings that "
                     "survive power-off", yes)
+            bus.allow |= Permission.STORED
         elif common["verbose"] or sys.stderr.isatty():
             note(f"applying {file}: {summary}")
         done: list = []
@@ -362,7 +370,8 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         w = errs[0]
         err = sum(1 << b for b, n in zap.ERROR_BITS.items() if n in w.errors)
         raise device_error(Reply(w.target, err, b"", b""))
-    note(f"{len(writes)} write{'s' if len(writes) != 1 else ''} made and verified ({unchanged} already equal)")
+    note(f"{len(writes)} write{'s' if len(writes) != 1 else ''} made and verified ({unchanged} already equal"
+         + (f"; {fleet.describe_left_out(left_out)}" if left_out else "") + ")")
 
 
 def _report_interrupted(writes, done, fmt, file, exc):
@@ -409,7 +418,8 @@ def _report_interrupted(writes, done, fmt, file, exc):
 @click.option("--find-baud", type=actuator_bauds(), default="all", show_default=True, metavar="BAUDS",
               help="The baud rates to search: a list or 'all' (57600 first).")
 @click.option("--no-wait", is_flag=True,
-              help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop.")
+              help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop; "
+                   "exit status 8 when IDs remain pending.")
 @yes_option
 @link_options
 def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, no_wait, yes, **common):
@@ -421,9 +431,11 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
     when two actuators answer (or one that was set up already), gives it the ID, applies
     --config's stored settings, and verifies by reading back. The state file records each ID
     done, so a second run (after a crash, a Ctrl-C, or another day) resumes with the next one.
-    The actuator keeps the baud rate it was found at. Exit status 0 when every ID is done, 1
-    when some remain (stopped, skipped, or a refusal), 2 for bad options; on a real port the
-    ID changes need consent (--yes).
+    The actuator keeps the baud rate it was found at. Exit status 0 when every ID is done; 8
+    (more to do) when the run stopped as asked with IDs still pending (--no-wait after its one
+    ID, or q), so a script can loop on it; 1 when IDs were skipped or one could not be set up
+    (two answer, none found, a read-back differs); 2 for bad options. On a real port the ID
+    changes need consent (--yes).
 
     \b
     Examples:
@@ -453,19 +465,26 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
     state = fleet.SetupState.load(state_path, ids)
     state.ids = ids
     for i in redo or ():
-        state.redo(i)
+        state.redo(i, save=False)
     for i in skip or ():
-        state.mark_skipped(i)
+        state.mark_skipped(i, save=False)
     if not state.pending():
-        note(f"every ID of {fleet._ranges(ids)} is done ({state_path}); --redo ID sets one up again")
+        if redo or skip:
+            state.save()
         _setup_summary(state)
+        _setup_end(state, state_path, stopped=False)
         return
-    if _real(common):
-        consent(f"setup gives actuators on {common['port']} new IDs (a stored setting)"
-                + (f" and {config}'s stored settings" if config else ""), yes)
+    from .scan import stored_consent
+
+    allow = stored_consent(common, yes, "setup gives actuators new IDs" + (f" and {config}'s stored settings"
+                                                                              if config else ""),
+                           "id" + (f" and {config}'s stored settings" if config else ""))
+    if redo or skip:
+        state.save()
     args = _link_args(common)
     args["baud"] = find_baud[0]
-    with open_link(ids=[0], **args) as bus:
+    stopped = refused = False
+    with open_link(ids=[0], allow=allow, **args) as bus:
         while state.pending():
             target = state.pending()[0]
             if not no_wait:
@@ -473,6 +492,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                               f"(s: skip ID {target}, q: quit) ")
                 if answer is None or answer == "q":
                     note(f"stopped before ID {target}; run the same command again to resume ({state_path})")
+                    stopped = True
                     break
                 if answer == "s":
                     state.mark_skipped(target)
@@ -495,18 +515,41 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 if no_wait:
                     raise
                 warn(f"ID {target}: {e}")
+                refused = True
                 continue
             state.mark_done(target, record)
             note(f"ID {target} done: found at ID {found[0]}, {found[1]} baud"
                  + (f"; {record.get('config', 0)} settings from {config}" if entry is not None else "")
                  + " (verified)")
             if no_wait:
+                stopped = True
                 break
     _setup_summary(state)
-    left = state.pending() + [i for i in state.skipped if i in ids]
-    if left:
-        raise CheckFailed(f"setup not complete: ID{'s' if len(left) != 1 else ''} "
-                          f"{fleet._ranges(left)} not set up ({state_path})")
+    _setup_end(state, state_path, stopped=stopped and not refused)
+
+
+def _setup_end(state, state_path, *, stopped):
+    """The end of a setup, and its exit status: 0 when every ID is done; 8 (more to do) when
+    the run stopped as asked (--no-wait after its one ID, q) with IDs pending; 1 when IDs were
+    skipped or could not be set up."""
+    from ...errors import MoreToDo
+
+    ids = state.ids
+    pending = state.pending()
+    skipped = [i for i in ids if i in state.skipped and i not in state.done]
+    if not pending and not skipped:
+        note(f"every ID of {fleet._ranges(ids)} is done ({state_path}); --redo ID sets one up again")
+        return
+    if pending and stopped and not skipped:
+        raise MoreToDo(f"more to do: ID{'s' if len(pending) != 1 else ''} {fleet._ranges(pending)} not set up yet; "
+                       f"run the same command again ({state_path})", pending=pending)
+    parts = []
+    if pending:
+        parts.append(f"ID{'s' if len(pending) != 1 else ''} {fleet._ranges(pending)} not set up")
+    if skipped:
+        parts.append(f"ID{'s' if len(skipped) != 1 else ''} {fleet._ranges(skipped)} skipped "
+                     f"(--redo {fleet._ranges(skipped)} sets {'them' if len(skipped) != 1 else 'it'} up)")
+    raise CheckFailed(f"setup not complete: {'; '.join(parts)} ({state_path})", pending=pending, skipped=skipped)
 
 
 def _ask(prompt):

@@ -135,12 +135,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule"):
+                  reconnect=None, end=None, end_label="end of schedule", allow=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
+    ``allow``: the permissions the control frames were given (see :func:`..options.authorize`).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
     an output.
     """
@@ -192,8 +193,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         else:
             # reads block at most half a control period, so frames go out on time up to 200 Hz
             slice_s = min(READ_SLICE_S, 0.5 / (rate or DEFAULT_RATE)) if control else READ_SLICE_S
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
-                                reconnect=reconnect)
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits,
+                                            allow=allow), reconnect=reconnect)
         tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
                         wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
         sink, on_update = out.write, out.update if out.dashboard is not None else None

@@ -9,7 +9,7 @@ import click
 
 from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
+from ..options import (FilePath, FiniteRange, abort_option, authorize, close_output, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
@@ -143,12 +143,10 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True)
     stand.schedule = sched
-    if not is_simulator(url):
-        from ...codec import zk
+    from ...codec import zk
 
-        hazard = next((h for h in map(zk.control_hazard, sched.frames()) if h), None)
-        if hazard:
-            consent(f"schedule {name} on {url}: {hazard}", yes)
+    allow = authorize([zk.ControlFrame(f) for f in sched.frames()], what=f"schedule {name} on {url}",
+                      yes=yes, force=False, simulated=is_simulator(url))
     from .monitor import run_telemetry
 
     try:
@@ -158,7 +156,8 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
             title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
-            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
+            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv},
+            allow=allow)
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
         if summary_file and e.code != USAGE:

@@ -14,7 +14,7 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
+from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, authorize, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
@@ -143,11 +143,10 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
                             controls=controls)
         check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
-    hazard = zk.control_hazard(frame)
-    if hazard and not is_simulator(url):
-        consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
+    allow = authorize([zk.ControlFrame(frame)], what=f"{format_hex(frame)} to {url}", yes=yes, force=False,
+                      simulated=is_simulator(url))
     if for_s is None:
-        _send_once(url, baud, frame, timeout, no_wait, stop_bits)
+        _send_once(url, baud, frame, timeout, no_wait, stop_bits, allow)
         return
     from .monitor import run_telemetry
 
@@ -158,7 +157,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
         end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
-        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json})
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json}, allow=allow)
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)
@@ -209,7 +208,7 @@ def describe_frame(frame) -> str:
     return " ".join(parts)
 
 
-def _send_once(url, baud, frame, timeout, no_wait, stop_bits=1):
+def _send_once(url, baud, frame, timeout, no_wait, stop_bits=1, allow=None):
     """Write one frame; unless ``no_wait``, wait for a status frame to show the ECU is there."""
     import time
 
@@ -218,7 +217,7 @@ def _send_once(url, baud, frame, timeout, no_wait, stop_bits=1):
     from ...errors import NoReply
     from ...link.zk_port import ZkLink
 
-    link = ZkLink.open(url, baud, stop_bits=stop_bits)
+    link = ZkLink.open(url, baud, stop_bits=stop_bits, allow=allow)
     try:
         link.write(frame)
         if no_wait:
