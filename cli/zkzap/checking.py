@@ -9,7 +9,7 @@ checked everything:
 
 - opening or borrowing a port (:func:`zkzap.link.port.open_port`, the batch's shared port),
 - starting a telemetry bridge (it connects to a broker or a ground station),
-- creating, truncating or replacing a file (:mod:`zkzap.io.outfile`, the logbook).
+- creating, truncating or replacing a file (:mod:`zkzap.outfile`, the logbook).
 
 A consent asked on the way (the command line's ``--yes`` prompt) is recorded instead of asked
 (:attr:`Check.consents`), so a batch can ask once for all its lines. Outside check mode

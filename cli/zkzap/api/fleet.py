@@ -261,22 +261,12 @@ def dumps(doc: dict, fmt: str) -> str:
 
 
 def dump_document(doc: dict, path: str) -> None:
-    """Write ``doc`` to ``path`` in the format its suffix names, atomically (a failed or
-    interrupted write leaves any existing file as it was)."""
-    text = dumps(doc, format_of(path))
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        from ..errors import OutputError
+    """Write ``doc`` to ``path`` in the format its suffix names, whole
+    (:func:`zkzap.outfile.write_whole`: atomically onto a regular file, keeping its mode; a
+    failed or interrupted write leaves any existing file as it was)."""
+    from ..outfile import write_whole
 
-        raise OutputError(f"output: cannot write {path}: {e.strerror or e}") from None
+    write_whole(path, dumps(doc, format_of(path)), what="output")
 
 
 def loads(text: str, fmt: str, name: str):
@@ -782,11 +772,9 @@ class SetupState:
             return
         doc = {"format": SETUP_FORMAT, "ids": self.ids, "done": {str(k): v for k, v in sorted(self.done.items())},
                "skipped": sorted(set(self.skipped))}
-        tmp = f"{self.path}.tmp{os.getpid()}"
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, self.path)
+        from ..outfile import write_whole
+
+        write_whole(self.path, json.dumps(doc, indent=1) + "\n", what="state")
 
     def pending(self) -> list:
         return [i for i in self.ids if i not in self.done and i not in self.skipped]

@@ -76,6 +76,10 @@ def connect(path, *, create=True):
 
     if not create and not os.path.exists(path):
         raise UsageError(f"logbook: {path}: no such file")
+    if create:
+        from .. import checking
+
+        checking.effect("file", path=path)
     try:
         db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         db.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
@@ -91,8 +95,28 @@ def connect(path, *, create=True):
 
 
 def check_writable(path):
-    """Open (and create) the logbook before a run, so an unusable path is found first."""
-    connect(path).close()
+    """Refuse, before a run, a logbook path that cannot take the run (exit 2): a device, a
+    FIFO or a directory (a logbook is an SQLite database file), a missing directory, no
+    permission, or a file that is not a zkzap logbook. Nothing is created: the first run it
+    records creates the database."""
+    from ..outfile import check_path
+
+    kind = check_path(path, "logbook")
+    if kind == "stream":
+        raise UsageError(f"logbook: {path} is not a regular file; a logbook is an SQLite database file")
+    if kind == "regular" and os.path.getsize(path) > 0:
+        import sqlite3
+
+        try:
+            uri = "file:" + os.path.abspath(path).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
+            db = sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_S)
+            try:
+                db.execute("SELECT 1 FROM runs LIMIT 1")
+            finally:
+                db.close()
+        except sqlite3.DatabaseError as e:
+            what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
+            raise UsageError(f"logbook: {path}: {what}") from None
 
 
 def record(path, run: dict) -> int:

@@ -78,6 +78,21 @@ class Command(QuickHelp, click.Command):
             args = head + ["--"] + tail if tail else head
         return super().parse_args(ctx, args)
 
+    def invoke(self, ctx):
+        if _has_files(self):
+            from .options import check_files
+
+            check_files(ctx)      # an output that is an input, two outputs in one file: exit 2
+        return super().invoke(ctx)
+
+
+def _has_files(cmd) -> bool:
+    """Whether ``cmd`` declares file options (cached on the command: a dry run pays one look-up)."""
+    has = cmd.__dict__.get("_zkzap_files")
+    if has is None:
+        has = cmd._zkzap_files = any(getattr(p.type, "name", None) == "file" for p in cmd.params)
+    return has
+
 
 def _long(option):
     return next((o for o in option.opts if o.startswith("--")), None)

@@ -153,18 +153,59 @@ class FilePath(click.ParamType):
         return [CompletionItem(incomplete, type="file")]
 
 
+class InputPath(FilePath):
+    """A file a command reads (``-``: stdin). Declared as such so that the one same-file check
+    (:func:`check_files`, run before every command) knows what no output may be; ``label``
+    names it in messages (default: the option, or the argument's name in capitals)."""
+
+    def __init__(self, label=None):
+        self.label = label
+
+
+class OutputPath(FilePath):
+    """A file a command writes, through :mod:`zkzap.outfile` (``-``: stdout where the command
+    allows it). ``kind`` says how: ``records`` (streamed, opened by the first record),
+    ``bytes`` (a raw log, opened by the first byte), ``capture`` (pcapng), ``document``
+    (written whole, atomically), ``database`` (the SQLite logbook), ``state`` (read and
+    rewritten whole: it is its own input). Outputs are checked against the command's inputs
+    and each other before it runs (:func:`check_files`)."""
+
+    def __init__(self, kind="records"):
+        self.kind = kind
+
+
+def check_files(ctx) -> None:
+    """Refuse (exit 2) a command whose output is one of its inputs, or two outputs that are
+    one file: files are compared, not names (:func:`zkzap.outfile.refuse_same_files`). Runs
+    for every command before its callback, from the types its options declare."""
+    outputs, inputs = {}, {}
+    for p in ctx.command.params:
+        value = ctx.params.get(p.name) if p.expose_value else ctx.meta.get(f"zkzap.{p.name}")
+        if not value or not isinstance(p.type, FilePath):
+            continue
+        label = getattr(p.type, "label", None) or (p.opts[-1] if isinstance(p, click.Option) else p.name.upper())
+        if isinstance(p.type, OutputPath):
+            outputs[label] = value
+        elif isinstance(p.type, InputPath):
+            inputs[label] = value
+    if outputs and (inputs or len(outputs) > 1):
+        from ..outfile import refuse_same_files
+
+        refuse_same_files(outputs, inputs)
+
+
 def output_options(f):
     f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
-    f = click.option("-o", "--output", type=FilePath(),
-                     help="Write records to FILE instead of stdout.")(f)
+    f = click.option("-o", "--output", type=OutputPath("records"),
+                     help="Write records to FILE instead of stdout (created by the first record).")(f)
     return f
 
 
 def output_file(path, append=False, *, fmt=None, columns=None, inputs=None):
-    """The checked :class:`~zkzap.io.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
+    """The checked :class:`~zkzap.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
     (exit 2) when it is one of ``inputs`` (option -> paths), cannot be written, or cannot be
     appended to in ``fmt`` with ``columns``. Nothing is truncated until it is opened."""
-    from ..io.outfile import OutFile, refuse_same_files
+    from ..outfile import OutFile, refuse_same_files
 
     if not path or path == "-":
         return None
@@ -190,11 +231,14 @@ def output_format(fmt, path):
 def open_output(path, append=False, *, fmt=None, columns=None, inputs=None):
     """(stream, had_content) for ``path`` ('-' or None: stdout), checked as :func:`output_file`
     checks it; ``had_content``: appending to existing records (no second header; a JSON array
-    continued)."""
+    continued). A file is opened by the first record written to the stream
+    (:class:`zkzap.outfile.LazyOutput`): a run that writes none leaves it as it was."""
     out = output_file(path, append, fmt=fmt, columns=columns, inputs=inputs)
     if out is None:
         return sys.stdout, False
-    return out.open(), out.had
+    from ..outfile import LazyOutput
+
+    return LazyOutput(out), out.had
 
 
 def checked(check, frame, hint=""):
@@ -401,6 +445,7 @@ def capture_option(protocol: str):
     def callback(ctx, param, value):
         if ctx.resilient_parsing:
             return
+        ctx.meta["zkzap.capture"] = value             # for check_files: an output like the others
         if not value and "zkzap.link.capture" not in sys.modules:
             return                        # nothing asked, nothing to reset: import nothing
         from ..link import capture
@@ -411,7 +456,7 @@ def capture_option(protocol: str):
         if value:
             ctx.call_on_close(lambda: capture.request(None, protocol))   # close it, ask for no more
 
-    return click.option("--capture", type=FilePath(), default=None, metavar="FILE", expose_value=False,
+    return click.option("--capture", type=OutputPath("capture"), default=None, metavar="FILE", expose_value=False,
                         callback=callback,
                         help="Record every byte read and written, timestamped with its direction, in "
                              "FILE (pcapng; Wireshark opens it with zkzap's dissector).")

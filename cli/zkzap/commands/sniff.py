@@ -9,7 +9,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, capture_option,
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FiniteRange, OutputPath, capture_option,
                       close_output, open_output)
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
@@ -54,7 +54,7 @@ def _common(protocol):
             click.option("-f", "--format", "fmt", type=click.Choice(["table", "jsonl", "json", "csv"]), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
-            click.option("-o", "--output", type=FilePath(), default=None, help="Write records to FILE."),
+            click.option("-o", "--output", type=OutputPath("records"), default=None, help="Write records to FILE."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
             click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
                          help="Stop after N records."),
@@ -63,7 +63,7 @@ def _common(protocol):
             click.option("--stats", "show_stats", is_flag=True,
                          help="Print the summary (frames/s per direction and ID, CRC errors, gaps, "
                               "slowest replies) on stderr at the end."),
-            click.option("--stats-json", type=FilePath(), default=None, metavar="FILE",
+            click.option("--stats-json", type=OutputPath("document"), default=None, metavar="FILE",
                          help="Write the summary as JSON to FILE at the end."),
         ]
         for o in reversed(opts):
@@ -198,10 +198,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     if fmt is None and output and output != "-":
         fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(output)[1].lower(), "jsonl")
     if stats_json:
-        try:
-            open(stats_json, "a").close()
-        except OSError as e:
-            raise UsageError(f"stats-json: cannot open {stats_json}: {e.strerror}") from None
+        from ..outfile import check_path
+
+        check_path(stats_json, "stats-json")
     stream, had = open_output(output, append)
     if fmt is None:
         fmt = "table" if is_tty(stream) else "jsonl"
@@ -254,9 +253,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     if stats_json:
         import json
 
-        with open(stats_json, "w", encoding="utf-8") as f:
-            json.dump(summary, f, indent=2)
-            f.write("\n")
+        from ..outfile import write_whole
+
+        write_whole(stats_json, json.dumps(summary, indent=2) + "\n", what="stats-json")
     if reason == "interrupted":
         raise KeyboardInterrupt
     if reason == "terminated":

@@ -103,11 +103,11 @@ class McapWriter:
             compression = kind
             break
         self.stream = stream
-        self._w = Writer(stream, chunk_size=CHUNK_SIZE, compression=compression, index_types=IndexType.ALL,
-                         use_chunking=True, use_statistics=True, use_summary_offsets=True)
-        from .. import __version__
-
-        self._w.start(profile="", library=f"{library} {__version__}")
+        self._make = lambda: Writer(stream, chunk_size=CHUNK_SIZE, compression=compression,
+                                    index_types=IndexType.ALL, use_chunking=True, use_statistics=True,
+                                    use_summary_offsets=True)
+        self._library = library
+        self._w = None                     # started by the first record (a header is not a record)
         self._channels = {}
         self._seq = {}
         self._last_ns = 0
@@ -115,7 +115,18 @@ class McapWriter:
         self._closed = False
         self._ns = IsoNs()
 
+    def _start(self):
+        from .. import __version__
+
+        self._w = self._make()
+        try:
+            self._w.start(profile="", library=f"{self._library} {__version__}")
+        except OSError as e:
+            self._fail(e)
+
     def _channel(self, rec):
+        if self._w is None:
+            self._start()
         kind = rec.get("kind") or "status"
         if kind == "control":
             key = ("control", rec.get("command") or f"id-{rec.get('id')}")
@@ -173,6 +184,11 @@ class McapWriter:
     def close(self):
         if self._closed:
             return
+        if self._w is None:
+            if getattr(self.stream, "lazy", False):
+                self._closed = True
+                return                     # a file no record opened: left as it was
+            self._start()                  # stdout: an empty, valid MCAP stream
         try:
             self._w.finish()
             self.stream.flush()

@@ -8,12 +8,12 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..options import consent, yes_option
+from ..options import InputPath, consent, yes_option
 from .compose import link_options, open_link
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath())
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @yes_option

@@ -11,8 +11,8 @@ from ...errors import UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
-                       output_options)
+from ..options import (InputPath, checked, close_output, decode_inputs, format_option, note_skipped, open_output,
+                       output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -37,7 +37,7 @@ def _table_cells(rec):
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", type=InputPath("FILE"), shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options

@@ -14,7 +14,7 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, consent, note, resolve_format, warn, yes_option
+from ..options import InputPath, OutputPath, consent, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -111,7 +111,7 @@ def _read_entries(bus, ids, *, required=True):
 @click.option("--scan", "scan_", is_flag=True,
               help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud). The default "
                    "without --ids.")
-@click.option("-o", "--output", type=FilePath(), default=None,
+@click.option("-o", "--output", type=OutputPath("document"), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
 @click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
@@ -178,8 +178,8 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("a", metavar="A")
-@click.argument("b", metavar="B")
+@click.argument("a", metavar="A", type=InputPath())
+@click.argument("b", metavar="B", type=InputPath())
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
@@ -239,7 +239,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", metavar="FILE", type=FilePath())
+@click.argument("file", metavar="FILE", type=InputPath())
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Apply only these actuators of FILE (default: all of them).")
 @click.option("--map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
@@ -403,12 +403,12 @@ def _report_interrupted(writes, done, fmt, file, exc):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")
-@click.option("--config", "config", type=FilePath(), default=None,
+@click.option("--config", "config", type=InputPath(), default=None,
               help="A backup file whose stored settings each actuator gets (id, baud-rate, protocol-type "
                    "and feedback-return-mode excepted).")
 @click.option("--config-id", type=IdList(), default=None, metavar="ID",
               help="Which actuator of --config to copy (default: its only one).")
-@click.option("--state", "state_path", type=FilePath(), default="zap-setup.json", show_default=True,
+@click.option("--state", "state_path", type=OutputPath("state"), default="zap-setup.json", show_default=True,
               help="The state file: a second run resumes where the first stopped.")
 @click.option("--skip", "skip", type=IdList(), default=None, metavar="LIST", help="IDs of --ids to leave out.")
 @click.option("--redo", "redo", type=IdList(), default=None, metavar="LIST",

@@ -7,12 +7,12 @@ import sys
 import click
 
 from .. import CONTEXT, Command
-from ..options import abort_option, consent, note, port_options, yes_option
+from ..options import InputPath, abort_option, consent, note, port_options, yes_option
 from .telemetry import resolve_port
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath())
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @abort_option(default="standby",

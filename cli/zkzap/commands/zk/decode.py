@@ -11,7 +11,7 @@ from ...errors import UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
+from ..options import (InputPath, checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
                        output_format, output_options, protocol_version_option)
 
 
@@ -60,7 +60,7 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", type=InputPath("FILE"), shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options

@@ -13,7 +13,7 @@ import click
 from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
+from ..options import FiniteRange, InputPath, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         reconnect_option, resolve_port, zk_timeout_help)
@@ -22,9 +22,9 @@ from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_t
 class Output:
     """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    ``-o FILE`` is checked here (before any port opens) and opened by the first record (or by
-    :meth:`finish` after a run that ended well without one), so a run that fails to start —
-    no port, a silent ECU — leaves an existing file as it was."""
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record
+    (:class:`zkzap.outfile.LazyOutput`), so a run that writes no record — no port, a silent
+    ECU, a run cut short — leaves an existing file exactly as it was (a header is not a record)."""
 
     def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
@@ -32,11 +32,12 @@ class Output:
         path = output if output and output != "-" else None
         if fmt is None and path:
             fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+        self.file = None
         if fmt == "mcap":
             from .mcap_output import open_mcap
 
-            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot)
-            self.fmt, self._table, self.file = fmt, False, None
+            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot, inputs=inputs)
+            self.fmt, self._table = fmt, False
             self.dashboard = _dashboard(title) if path and is_tty(sys.stdout) else None
             return
         if fmt is None:
@@ -45,7 +46,6 @@ class Output:
         self.stream = None if path else sys.stdout
         self.dashboard = None
         self.writer = None
-        self.file = None
         stdout_tty = is_tty(sys.stdout)
         if fmt == "table" and not path and stdout_tty:
             self.dashboard = _dashboard(title)
@@ -60,30 +60,22 @@ class Output:
         if self._table:
             self.snapshot = False
         self._columns = [] if self._table else columns_for(self.snapshot, ids)
+        had = False
         if path:
-            self.file = output_file(path, append, fmt=fmt, columns=self._columns, inputs=inputs)
-        elif self.dashboard is None:
-            self._open()
+            from ...outfile import LazyOutput
 
-    def _open(self):
+            self.file = output_file(path, append, fmt=fmt, columns=self._columns, inputs=inputs)
+            self.stream, had = LazyOutput(self.file), self.file.had
+        elif self.dashboard is not None:
+            return                     # the dashboard shows the records; stdout is its screen
         from ...io.writers import make_writer
 
-        had = False
-        if self.file is not None:
-            self.stream, had = self.file.open(), self.file.had
         if self._table:
             self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
-    def finish(self, ok):
-        """The run ended: a file no record opened is created only when the run went well."""
-        if ok and self.file is not None and self.writer is None:
-            self._open()
-
     def write(self, rec):
-        if self.writer is None and self.file is not None:
-            self._open()
         if self.writer is not None:
             if self._table:
                 from .decode import summary
@@ -147,7 +139,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
-    from ...io.outfile import OutFile, refuse_same_files
+    from ...outfile import OutFile, refuse_same_files
     from ...link.port import fit_note
     from ...link.zk_port import READ_SLICE_S, ZkLink
     from ...link.zk_sources import LiveSource
@@ -167,17 +159,16 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         from .mcap_output import check_mcap
 
         check_mcap(output, append, snapshot)
-    if bridges:
-        bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
     columns = record_columns if stand is None else stand.columns(record_columns)
-    try:
-        out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
-    except BaseException:
-        if bridges:
-            bridges.close()
-        raise
+    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
+    if bridges:
+        try:
+            bridges.start()          # an unreachable peer is exit 4 before the port opens
+        except BaseException:
+            out.close()
+            raise
     source = None
     # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
     # view would redraw over them. They go to stderr once it has closed, below the last view.
@@ -213,9 +204,6 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
-            out.finish(outcome.ok)
-            if outcome.ok and raw is not None and raw.stream is None:
-                raw.open()
     finally:
         if source is not None:
             source.close()
@@ -246,7 +234,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @port_options("zk", baud_auto=True)
-@click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
+@click.option("--replay", type=InputPath(), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")

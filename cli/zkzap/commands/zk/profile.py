@@ -7,10 +7,10 @@ import sys
 
 import click
 
-from ...errors import USAGE, OutputError, UsageError, ZkzapError
+from ...errors import USAGE, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, FiniteRange, abort_option, authorize, close_output, dry_run_option, note,
-                       port_options, protocol_version_option, rate_option, yes_option)
+from ..options import (FiniteRange, InputPath, OutputPath, abort_option, authorize, close_output, dry_run_option,
+                       note, port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
 from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
 
@@ -30,7 +30,7 @@ def example_text(kind="throttle") -> str:
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
+@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=InputPath())
 @click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
@@ -41,14 +41,14 @@ def example_text(kind="throttle") -> str:
               help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
                    "schedule that ends in state run: that state with throttle 0 (standby lets a hot "
                    "engine cool); none sends nothing.")
-@click.option("--summary-json", type=click.Path(dir_okay=False, writable=True, allow_dash=True), default=None,
+@click.option("--summary-json", type=OutputPath("document"), default=None,
               metavar="FILE", help="Also write the summary as JSON to FILE ('-': stdout).")
 @click.option("--settle", type=Finite(0, 86400), default=None, metavar="SECONDS",
               help="Per-step averages: let each step settle SECONDS before averaging (default 3 with "
                    "--average or --steps-csv).")
 @click.option("--average", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
               help="Per-step averages over the SECONDS after --settle (default: up to the step's end).")
-@click.option("--steps-csv", type=FilePath(), default=None, metavar="FILE",
+@click.option("--steps-csv", type=OutputPath("document"), default=None, metavar="FILE",
               help="Write one row per step to FILE: window, mean/min/max of rpm, egt_c, thrust_kg, "
                    "fuel_flow_l_min, pump_voltage_v, throttle_pct, TSFC, and whether it settled.")
 @click.option("--fuel-density", type=Finite(0.5, 1.2), default=None, metavar="KG_PER_L",
@@ -234,24 +234,24 @@ def _r(x, digits):
 
 def _check_summary(path, schedule, output, raw_log):
     """--summary-json FILE, checked before anything starts (None for '-' or none)."""
-    from ...io.outfile import OutFile, refuse_same_files
+    from ...outfile import check_path, refuse_same_files
 
     if not path or path == "-":
         return None
     refuse_same_files({"--summary-json": path, "--output": output, "--raw-log": raw_log}, {"SCHEDULE": schedule})
-    OutFile(path, what="summary-json").check()
+    check_path(path, "summary-json")
     return path
 
 
 def _write_json(path, summary):
-    """The summary as JSON: to stdout for '-', else whole (a temporary file renamed over FILE)."""
-    from ...io.outfile import write_atomic
+    """The summary as JSON: to stdout for '-', else whole (:func:`zkzap.outfile.write_whole`)."""
+    from ...outfile import write_whole
 
     text = json.dumps(summary, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return
-    write_atomic(path, text, what="summary-json")
+    write_whole(path, text, what="summary-json")
 
 
 def _check_dir(path, what):
@@ -259,21 +259,21 @@ def _check_dir(path, what):
 
 
 def _write_steps(path, rows):
+    """One row per step: to stdout for '-', else whole (one row per step: small)."""
+    import io
+
     from ...api.steady import columns
     from ...io.writers import make_writer
 
-    stream = sys.stdout if path == "-" else None
-    try:
-        if stream is None:
-            stream = open(path, "w", encoding="utf-8", newline="")
-    except OSError as e:
-        raise OutputError(f"steps-csv: cannot write {path}: {e.strerror}") from None
+    stream = sys.stdout if path == "-" else io.StringIO()
     writer = make_writer("csv", stream, columns())
-    try:
-        for r in rows:
-            writer.write(r)
-    finally:
-        close_output(writer, stream)
+    for r in rows:
+        writer.write(r)
+    writer.close()
+    if path != "-":
+        from ...outfile import write_whole
+
+        write_whole(path, stream.getvalue(), what="steps-csv")
 
 
 def _print_plan(sched, rate, fmt, output, append, path):

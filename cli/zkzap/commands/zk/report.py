@@ -6,22 +6,22 @@ import os
 
 import click
 
-from ...errors import OutputError, UsageError
+from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, note
+from ..options import InputPath, OutputPath, note
 
 EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotlib missing (pip install "
           "'zkzap[plot]'); 7 the report could not be written.")
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("run_file", metavar="RUN", type=FilePath())
-@click.option("--steps", "steps_file", type=FilePath(), default=None, metavar="STEPS.csv",
+@click.argument("run_file", metavar="RUN", type=InputPath())
+@click.option("--steps", "steps_file", type=InputPath(), default=None, metavar="STEPS.csv",
               help="The per-step averages of 'zk profile --steps-csv': target lines, thrust and EGT vs rpm, "
                    "TSFC vs thrust.")
-@click.option("--summary", "summary_file", type=FilePath(), default=None, metavar="SUMMARY.json",
+@click.option("--summary", "summary_file", type=InputPath(), default=None, metavar="SUMMARY.json",
               help="The summary of 'zk profile --summary-json': the header table and limit events.")
-@click.option("-o", "--output", type=FilePath(), default=None, metavar="REPORT",
+@click.option("-o", "--output", type=OutputPath("document"), default=None, metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
 @click.option("--format", "fmt", type=click.Choice(["png", "svg", "pdf", "html"]), default=None,
               help="The report's format (default: from the -o name).")
@@ -67,13 +67,9 @@ def report(run_file, steps_file, summary_file, output, fmt, title, meta, termina
         if output == "-":
             raise UsageError("output: a file name is needed (its extension names the format)")
         fmt = R.output_format(output, fmt)
-        d = os.path.dirname(os.path.abspath(output))
-        if not os.path.isdir(d):
-            raise UsageError(f"output: cannot write {output}: no such directory")
-        if os.path.exists(output):
-            for path in (run_file, steps_file, summary_file):
-                if path and os.path.exists(path) and os.path.samefile(path, output):
-                    raise UsageError(f"output: {output} is also an input")
+        from ...outfile import check_path
+
+        check_path(output, "output")                  # its inputs: the options' own check
         R._mpl()                                      # refuse early (exit 2) without matplotlib
     steps = R.load_steps(steps_file) if steps_file else None
     summary = R.load_summary(summary_file) if summary_file else None
@@ -86,15 +82,9 @@ def report(run_file, steps_file, summary_file, output, fmt, title, meta, termina
 
         skipped = R.terminal(run, console_for(sys.stdout), steps)
     else:
-        tmp = output + ".tmp"
-        try:
+        from ...outfile import replacing
+
+        with replacing(output, suffix=os.path.splitext(output)[1]) as tmp:
             skipped = R.render(tmp, fmt, run, steps, summary, title, pairs)
-            os.replace(tmp, output)
-        except OSError as e:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise OutputError(f"output: cannot write {output}: {e.strerror or e}") from None
     for s in skipped:
         note(f"skipped {s}")

@@ -13,7 +13,7 @@ import click
 from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
                        UsageError, exit_status_help)
 from ...io import LOG_FORMATS
-from ..options import FilePath, FiniteRange, apply_options, format_option
+from ..options import FiniteRange, OutputPath, apply_options, format_option
 from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
@@ -47,7 +47,7 @@ def log_options(f):
                            "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
                            "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
                            "-o (.csv, .json, .jsonl, .lp, .mcap)."),
-        click.option("-o", "--output", type=FilePath(),
+        click.option("-o", "--output", type=OutputPath("records"),
                      help="Write records to FILE (the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
                      help="Append to --output and --raw-log (a CSV gets no second header)."),
@@ -58,7 +58,7 @@ def log_options(f):
                      help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
         click.option("--stale-after", type=click.IntRange(1, 1000), default=3, show_default=True,
                      metavar="N", help="An ID is stale after N of its periods without a frame."),
-        click.option("--raw-log", type=FilePath(), default=None,
+        click.option("--raw-log", type=OutputPath("bytes"), default=None,
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
                                           "or 'zk decode --binary')."),
         bridge_options,
