@@ -227,7 +227,8 @@ def diff(a, b, ids, everything, compare, fmt, **common):
     _write_rows(rows, fleet.DIFF_COLUMNS, fmt, table_columns=table, title=title)
     different = sum(1 for r in rows if not r["equal"])
     if different:
-        raise CheckFailed(f"{different} difference{'s' if different != 1 else ''} between {a} and {b}")
+        note(f"{different} difference{'s' if different != 1 else ''} between {a} and {b} ({compare} registers)")
+        raise click.exceptions.Exit(1)        # a result, like diff(1), not an error: exit 1 and a note
     if sys.stderr.isatty() or common["verbose"]:
         note(f"{a} and {b} are equal ({compare} registers)")
 
