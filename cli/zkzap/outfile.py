@@ -105,6 +105,15 @@ def check_path(path, what="output") -> str:
     return kind
 
 
+def check_state(path, what="state") -> str:
+    """A state file is read and rewritten whole: refuse (exit 2) what cannot be (a device, a
+    FIFO, a directory, a path it cannot write); returns its kind (``new`` or ``regular``)."""
+    kind = check_path(path, what)
+    if kind == "stream":
+        raise UsageError(f"{what}: {path} is not a regular file; a state file is read and rewritten whole")
+    return kind
+
+
 class OutFile:
     """An output file written as the run goes, checked early and opened late. ``fmt`` (csv,
     json, jsonl, table, or None) and ``columns`` (the CSV header) decide what ``--append`` may

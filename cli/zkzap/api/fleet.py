@@ -260,13 +260,13 @@ def dumps(doc: dict, fmt: str) -> str:
     raise ValueError(fmt)
 
 
-def dump_document(doc: dict, path: str) -> None:
-    """Write ``doc`` to ``path`` in the format its suffix names, whole
+def dump_document(doc: dict, path: str, fmt=None) -> None:
+    """Write ``doc`` to ``path`` in ``fmt`` (default: the one its suffix names), whole
     (:func:`zkzap.outfile.write_whole`: atomically onto a regular file, keeping its mode; a
     failed or interrupted write leaves any existing file as it was)."""
     from ..outfile import write_whole
 
-    write_whole(path, dumps(doc, format_of(path)), what="output")
+    write_whole(path, dumps(doc, fmt or format_of(path)), what="output")
 
 
 def loads(text: str, fmt: str, name: str):

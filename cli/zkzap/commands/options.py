@@ -155,10 +155,14 @@ class FilePath(click.ParamType):
 
 class InputPath(FilePath):
     """A file a command reads (``-``: stdin). Declared as such so that the one same-file check
-    (:func:`check_files`, run before every command) knows what no output may be; ``label``
-    names it in messages (default: the option, or the argument's name in capitals)."""
+    (:func:`check_files`, run before every command) knows what no output may be; ``holds``
+    says what it holds (``schedule``, ``fleet``, ``zk capture``, ``zap capture``, ``limits``,
+    ``run``, ``steps``, ``summary``, ``logbook``, ``zk batch``, ``zap batch``, ``frames``: hex,
+    raw bytes or a capture); ``label`` names it in messages (default: the option, or the
+    argument's name in capitals)."""
 
-    def __init__(self, label=None):
+    def __init__(self, holds, label=None):
+        self.holds = holds
         self.label = label
 
 
@@ -167,11 +171,13 @@ class OutputPath(FilePath):
     allows it). ``kind`` says how: ``records`` (streamed, opened by the first record),
     ``bytes`` (a raw log, opened by the first byte), ``capture`` (pcapng), ``document``
     (written whole, atomically), ``database`` (the SQLite logbook), ``state`` (read and
-    rewritten whole: it is its own input). Outputs are checked against the command's inputs
-    and each other before it runs (:func:`check_files`)."""
+    rewritten whole: it is its own input), ``link`` (a symlink); ``suffixes`` the file name
+    endings it takes where the name decides the format. Outputs are checked against the
+    command's inputs and each other before it runs (:func:`check_files`)."""
 
-    def __init__(self, kind="records"):
+    def __init__(self, kind="records", suffixes=None):
         self.kind = kind
+        self.suffixes = tuple(suffixes) if suffixes else None     # the names it takes, when it decides the format
 
 
 def check_files(ctx) -> None:

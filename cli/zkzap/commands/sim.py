@@ -64,7 +64,10 @@ def serve_options(f):
 
 
 def _serve(device, speed, use_pty, listen, link):
+    from .. import checking
     from ..sim.base import Clock
+
+    checking.effect("serve")
     from ..sim.serve import PtyUnsupported, serve_pty, serve_tcp
 
     if use_pty and listen:
@@ -134,7 +137,7 @@ def _parse_set(ctx, param, values):
                    "setting reads garbage (the host's receiver is modelled strictly).")
 @click.option("--set", "extra", multiple=True, callback=_parse_set, metavar="KEY=VALUE",
               help="Any other ECU simulator option (max_rpm, idle_rpm, battery, faults, ...); repeatable.")
-@click.option("--replay", type=InputPath(), default=None, metavar="CAPTURE",
+@click.option("--replay", type=InputPath("zk capture"), default=None, metavar="CAPTURE",
               help="Play the ECU's status frames of a pcapng capture (--capture) at their recorded "
                    "times instead of the engine model.")
 @click.option("--loop", is_flag=True, help="With --replay: start again at the end.")
@@ -237,7 +240,7 @@ def _host_log(output):
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")
-@click.option("--replay", type=InputPath(), default=None, metavar="CAPTURE",
+@click.option("--replay", type=InputPath("zap capture"), default=None, metavar="CAPTURE",
               help="Answer every request recorded in a pcapng capture (--capture) with its recorded "
                    "reply, after its recorded latency; other requests go to the model.")
 @serve_options

@@ -709,6 +709,8 @@ class ActuatorBus:
     def load_state(self) -> bool:
         """Restore actuators from the state file; False when the file does not exist."""
         path = self.state_path
+        if os.path.exists(path) and not os.path.isfile(path):
+            raise ValueError(f"state {path}: not a regular file; a state file is read and rewritten whole")
         try:
             with open(path, encoding="utf-8") as f:
                 doc = json.load(f)

@@ -13,7 +13,7 @@ from .compose import link_options, open_link
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath())
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath("zap batch"))
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @yes_option

@@ -18,7 +18,7 @@ from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
 from ..options import FiniteRange, SignedCommand, dry_run_option, force_option, port_options, zap_yes_option as yes_option
-from .params import INT, REGISTER, id_option
+from .params import INSTRUCTION, INT, REGISTER, TARGET, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
 
@@ -525,23 +525,8 @@ def restart(ident, **common):
     deliver([zap.restart(ident)], **common)
 
 
-def parse_targets(pairs):
-    """``["1:1023", "2:2047"]`` -> ``[(1, 1023), (2, 2047)]``."""
-    out = []
-    for item in pairs:
-        ident, sep, value = item.partition(":")
-        if not sep:
-            raise UsageError(f"target: {item!r} is not ID:VALUE (for example 1:2047)")
-        try:
-            v = int(value, 0)
-        except ValueError:
-            raise UsageError(f"target: value {value!r} of {item!r} is not an integer") from None
-        out.append((zap.check_id(ident, allow_broadcast=False), v))
-    return out
-
-
 @click.command("sync-move", cls=Command, context_settings=CONTEXT)
-@click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
+@click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...", type=TARGET)
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
 @force_option
@@ -558,16 +543,16 @@ def sync_move(targets, reg, force, verify, **common):
       zap sync-move 1:1023 2:2047 -n    # FF FF FF FE 0A 73 86 02 01 FF 03 02 FF 07 F1
       zap sync-move 1:300 2:300 3:300 --register goal-speed -p /dev/ttyUSB0
     """
-    deliver(zap.symmetric_store(reg, parse_targets(targets)), force=force, verify=verify, **common)
+    deliver(zap.symmetric_store(reg, list(targets)), force=force, verify=verify, **common)
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("instruction", metavar="INSTRUCTION")
+@click.argument("code", metavar="INSTRUCTION", type=INSTRUCTION)
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()
 @force_option
 @wire_options
-def raw(instruction, params, ident, force, **common):
+def raw(code, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
     INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move;
@@ -575,7 +560,11 @@ def raw(instruction, params, ident, force, **common):
     code: 0xF2 (hex), 242 (decimal, as register addresses are read) or F2. PARAMs are hex bytes
     in any notation (8C 02, 0x8C,0x02). Sent to a
     port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
-    a reply but does not fail without one.
+    a reply but does not fail without one. The packet needs what it writes needs (see
+    'zap store'): --yes on a real port for stored settings and for system-write (IR Robot's
+    factory reset); --force for the id, baud-rate and protocol-type registers, addresses and
+    values the map does not document, part of a multi-byte register, and any undocumented
+    instruction but system-write.
 
     \b
     Examples:
@@ -583,22 +572,5 @@ def raw(instruction, params, ident, force, **common):
       zap raw 0xF3 03 01 -n          # FF FF FF 00 04 F3 03 01 04
       zap raw load 00 03 --id 1 -p /dev/ttyUSB0 | zap decode
     """
-    code = _instruction_code(instruction)
     data = parse_hex(" ".join(params), what="params") if params else b""
     deliver([zap.packet(ident, code, data)], force=force, show_reply=True, **common)
-
-
-def _instruction_code(text: str) -> int:
-    key = text.strip().lower()
-    ins = zap.INSTRUCTION_BY_NAME.get(key)
-    if ins is not None:
-        return ins.code
-    try:
-        # as register addresses: 0xF2 is hex, 242 decimal; bare hex with a letter (F2) is hex
-        code = int(key, 10) if key.isdigit() else int(key, 0) if key.startswith("0x") else int(key, 16)
-    except ValueError:
-        names = ", ".join(i.cli for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS)
-        raise UsageError(f"instruction: unknown {text!r}; allowed {names} or a code 0x00..0xFF") from None
-    if not 0 <= code <= 0xFF:
-        raise UsageError(f"instruction: code {text} is out of range; allowed 0x00..0xFF")
-    return code

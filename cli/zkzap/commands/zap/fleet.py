@@ -111,7 +111,7 @@ def _read_entries(bus, ids, *, required=True):
 @click.option("--scan", "scan_", is_flag=True,
               help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud). The default "
                    "without --ids.")
-@click.option("-o", "--output", type=OutputPath("document"), default=None,
+@click.option("-o", "--output", type=OutputPath("document", fleet.SUFFIXES), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
 @click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
@@ -134,6 +134,9 @@ def backup(ids, scan_, output, fmt, **common):
     """
     if output and output != "-":
         doc_fmt = fmt or fleet.format_of(output)
+        from ...outfile import check_path
+
+        check_path(output, "output")          # before the bus is read: the file is written at the end
     else:
         doc_fmt = fmt or "json"
     if common["return_mode"] == "0":
@@ -159,7 +162,7 @@ def backup(ids, scan_, output, fmt, **common):
         doc = fleet.read_bus(bus, targets, on_actuator=said)
     doc["port"] = "sim" if common["sim"] else common["port"]
     if output and output != "-":
-        fleet.dump_document(doc, output)
+        fleet.dump_document(doc, output, doc_fmt)
         note(f"{len(targets)} actuator{'s' if len(targets) != 1 else ''} ({fleet._ranges(targets)}) "
              f"backed up to {output}")
     else:
@@ -178,8 +181,8 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("a", metavar="A", type=InputPath())
-@click.argument("b", metavar="B", type=InputPath())
+@click.argument("a", metavar="A", type=InputPath("fleet"))
+@click.argument("b", metavar="B", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
@@ -240,7 +243,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", metavar="FILE", type=InputPath())
+@click.argument("file", metavar="FILE", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Apply only these actuators of FILE (default: all of them).")
 @click.option("--map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
@@ -404,7 +407,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")
-@click.option("--config", "config", type=InputPath(), default=None,
+@click.option("--config", "config", type=InputPath("fleet"), default=None,
               help="A backup file whose stored settings each actuator gets (id, baud-rate, protocol-type "
                    "and feedback-return-mode excepted).")
 @click.option("--config-id", type=IdList(), default=None, metavar="ID",
@@ -463,6 +466,9 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 raise UsageError(f"{opt}: ID {i} is not in --ids")
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be verified")
+    from ...outfile import check_state
+
+    check_state(state_path)                   # read now and saved after each ID: a file it can rewrite
     state = fleet.SetupState.load(state_path, ids)
     state.ids = ids
     for i in redo or ():

@@ -12,7 +12,7 @@ from .telemetry import resolve_port
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath())
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath("zk batch"))
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @abort_option(default="standby",

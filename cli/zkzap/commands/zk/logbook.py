@@ -14,7 +14,7 @@ TABLE = [("id", "run"), ("started", "started UTC"), ("duration_s", "s"), ("runni
 
 @click.command(cls=Command, context_settings=CONTEXT,
                epilog="Exit status: 0 listed; 2 FILE is missing or not a logbook.")
-@click.argument("logbook_file", metavar="FILE", type=InputPath())
+@click.argument("logbook_file", metavar="FILE", type=InputPath("logbook"))
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")
 @click.option("--last", type=click.IntRange(1), default=None, metavar="N", help="Only the last N runs.")

@@ -234,7 +234,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @port_options("zk", baud_auto=True)
-@click.option("--replay", type=InputPath(), metavar="FILE",
+@click.option("--replay", type=InputPath("zk capture"), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")

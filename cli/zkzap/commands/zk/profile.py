@@ -30,7 +30,7 @@ def example_text(kind="throttle") -> str:
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=InputPath())
+@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=InputPath("schedule"))
 @click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")

@@ -10,20 +10,22 @@ from ...errors import UsageError
 from .. import CONTEXT, Command
 from ..options import InputPath, OutputPath, note
 
+#: The report formats, named by -o's suffix or --format (those of :mod:`zkzap.io.report`).
+FORMATS = ("png", "svg", "pdf", "html")
 EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotlib missing (pip install "
           "'zkzap[plot]'); 7 the report could not be written.")
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("run_file", metavar="RUN", type=InputPath())
-@click.option("--steps", "steps_file", type=InputPath(), default=None, metavar="STEPS.csv",
+@click.argument("run_file", metavar="RUN", type=InputPath("run"))
+@click.option("--steps", "steps_file", type=InputPath("steps"), default=None, metavar="STEPS.csv",
               help="The per-step averages of 'zk profile --steps-csv': target lines, thrust and EGT vs rpm, "
                    "TSFC vs thrust.")
-@click.option("--summary", "summary_file", type=InputPath(), default=None, metavar="SUMMARY.json",
+@click.option("--summary", "summary_file", type=InputPath("summary"), default=None, metavar="SUMMARY.json",
               help="The summary of 'zk profile --summary-json': the header table and limit events.")
-@click.option("-o", "--output", type=OutputPath("document"), default=None, metavar="REPORT",
+@click.option("-o", "--output", type=OutputPath("document", (f".{f}" for f in FORMATS)), default=None, metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
-@click.option("--format", "fmt", type=click.Choice(["png", "svg", "pdf", "html"]), default=None,
+@click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
               help="The report's format (default: from the -o name).")
 @click.option("--title", default=None, help="Heading of the report (default: 'Run report: RUN').")
 @click.option("--meta", multiple=True, metavar="KEY=VALUE",

@@ -14,7 +14,7 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, authorize, dry_run_option,
+from ..options import (FiniteFloat, FiniteRange, SignedCommand, abort_option, apply_options, authorize, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
@@ -254,6 +254,26 @@ def _check_version(cmd, raw_param, protocol_version):
         warn(f"{cmd.name} needs protocol version {need} or later; the ECU was given as {protocol_version}")
 
 
+class FieldFloat(FiniteFloat):
+    """A number for a control field with a scale (``throttle``, ``ignition-voltage``): finite;
+    the field (``field``, its range and steps) is checked by the codec, which names it."""
+
+    def __init__(self, field):
+        self.field = field
+
+
+class FieldInt(click.types.IntParamType):
+    """An integer for a control field (``accel-curve``, ``pressure``); the codec checks it
+    against ``field``'s range and names it."""
+
+    def __init__(self, field):
+        self.field = field
+
+
+def _field_type(f):
+    return FieldFloat(f) if f.decimals or callable(f.scale) or f.scale != 1 else FieldInt(f)
+
+
 def _make(cmd):
     fields = [f for f in cmd.fields if f.cli]
 
@@ -283,7 +303,7 @@ def _make(cmd):
                 ptype = click.Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = FINITE if f.decimals else click.INT
+                ptype = FieldFloat(f) if f.decimals else FieldInt(f)
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
@@ -292,7 +312,7 @@ def _make(cmd):
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
                 ptype = click.Choice(choices, case_sensitive=False)
             else:
-                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
+                ptype = _field_type(f)
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
         params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,

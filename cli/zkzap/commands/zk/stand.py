@@ -25,7 +25,7 @@ Finite = FiniteRange
 def limit_options(f):
     opts = [
         click.option("--limit", "limit", multiple=True, metavar="EXPR", help=LIMIT_HELP),
-        click.option("--limits", "limits_files", multiple=True, type=InputPath(), metavar="FILE",
+        click.option("--limits", "limits_files", multiple=True, type=InputPath("limits"), metavar="FILE",
                      help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable."),
         click.option("--on-limit", type=click.Choice(["abort", "exit", "warn"]), default=None,
                      help="On a violated limit: abort (the abort command, then exit 5; default when the "
