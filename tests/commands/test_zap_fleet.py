@@ -353,3 +353,38 @@ def test_apply_through_line_faults(cli, buses):
     # a reply that stays corrupted after the retries: exit 6 before any write
     r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
     assert (r.exit_code, r.stdout) == (6, "") and "ID 3: corrupted reply" in r.stderr
+
+
+# -- summaries that say what they left out ------------------------------------------------------
+
+def test_a_plan_names_the_differences_it_does_not_write(cli, tmp_path):
+    dst = make_bus(tmp_path / "dst.json", ids="1")
+    fleet_file = tmp_path / "fleet.json"
+    assert cli("zap", "backup", "--ids", "1", "-p", dst, "-o", str(fleet_file)).exit_code == 0
+    doc = json.loads(fleet_file.read_text())
+    doc["actuators"]["1"]["stored"].update({"baud-rate": 16, "feedback-return-mode": 2})
+    fleet_file.write_text(json.dumps(doc))
+    fleet_file = str(fleet_file)
+    r = cli("zap", "apply", fleet_file, "-p", dst, "--plan")
+    assert r.exit_code == 0 and jsonl(r.stdout) == []
+    assert "0 writes" in r.stderr and "2 differences not written" in r.stderr, r
+    assert "ID 1 baud-rate (32 on the bus, 16 in the file)" in r.stderr
+    assert "ID 1 feedback-return-mode (1 on the bus, 2 in the file)" in r.stderr
+    assert "--only NAME --force writes them" in r.stderr
+    r = cli("zap", "apply", fleet_file, "-p", dst, "--skip", "speed-limit")
+    assert r.exit_code == 0 and "nothing to write" in r.stderr and "2 differences not written" in r.stderr
+
+
+def test_setup_no_wait_has_its_own_status_for_more_to_do(cli, tmp_path):
+    state = str(tmp_path / "setup.json")
+    args = ("zap", "setup", "--ids", "1-3", "--state", state, "--find-ids", "0-3", "--find-baud", "57600",
+            "--no-wait")
+    codes = []
+    for n in range(3):
+        new = make_bus(tmp_path / f"new{n}.json", ids="0")          # the next factory-fresh actuator
+        codes.append(cli(*args, "-p", new).exit_code)
+    assert codes == [8, 8, 0]                                      # more to do, more to do, done
+    r = cli(*args, "-p", make_bus(tmp_path / "none.json", ids="0"))
+    assert r.exit_code == 0 and "every ID of 1-3 is done" in r.stderr
+    r = cli(*args, "-p", make_bus(tmp_path / "empty.json", ids="9"), "--redo", "2", "--find-ids", "0")
+    assert r.exit_code == 1 and "no actuator answers" in r.stderr  # a failure is not "more to do"
