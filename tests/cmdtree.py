@@ -56,6 +56,13 @@ def declared(p):
     return p.type, type(p.type).__name__
 
 
+#: For zkzap's own parameter types: (a value it takes, a value it refuses).
+EXAMPLES = {"IdType": ("1", "255"), "IntValue": ("100", "abc"), "RegisterType": ("goal-position", "no-such-register"),
+            "IdList": ("1", "300"), "BaudType": ("57600", "12"), "BaudList": ("57600", "12"), "MapType": ("1:2", "1"),
+            "RegisterList": ("goal-speed", "no-such-register"), "InstructionType": ("echo", "jump"),
+            "TargetType": ("1:100", "1-2"), "FiniteFloat": ("1.0", "nan")}
+
+
 def bad_value(p):
     """A value the parameter's declared type, choices or range refuses, or None when its type
     declares no domain to leave (free text, flags)."""
@@ -68,11 +75,8 @@ def bad_value(p):
         return "/nonexistent-zkzap/input"
     if name == "OutputPath":
         return "/nonexistent-zkzap/dir/output" + ((t.suffixes or ("",))[0])
-    table = {"IdType": "255", "IntValue": "abc", "RegisterType": "no-such-register", "IdList": "300",
-             "BaudType": "12", "BaudList": "12", "MapType": "1", "RegisterList": "no-such-register",
-             "InstructionType": "jump", "TargetType": "1-2", "FiniteFloat": "nan"}
-    if name in table:
-        return table[name]
+    if name in EXAMPLES:
+        return EXAMPLES[name][1]
     if name in ("FieldFloat", "FieldInt"):
         r = t.field.physical_range()
         return None if r is None else str(r[1] + 1)
@@ -96,11 +100,8 @@ def valid_value(p, files):
         return files["output"](t)
     if isinstance(t, click.Choice):
         return t.choices[0]
-    table = {"IdType": "1", "IntValue": "100", "RegisterType": "goal-position", "IdList": "1",
-             "BaudType": "57600", "BaudList": "57600", "MapType": "1:2", "RegisterList": "goal-speed",
-             "InstructionType": "echo", "TargetType": "1:100", "FiniteFloat": "1.0"}
-    if name in table:
-        return table[name]
+    if name in EXAMPLES:
+        return EXAMPLES[name][0]
     if name in ("FieldFloat", "FieldInt"):
         r = t.field.physical_range()
         return str(r[0] if r is not None else 0)

@@ -62,6 +62,27 @@ NAMES = {
 }
 
 
+#: What needs each permission (the policy of :meth:`zkzap.codec.zap.Command.needs` and
+#: :meth:`zkzap.codec.zk.ControlFrame.needs`, in words, for the reference documentation).
+WHAT = {
+    Permission.ENGINE: "a ZK control frame that can start the engine or run ECU hardware: ID 1 or 6 with state "
+                       "run, an action that drains fuel, tests hardware or turns the pump on",
+    Permission.STORED: "a mightyZAP write to stored (NV) memory: a stored register, or an address the map "
+                       "does not name below 0x80 (where every stored register lies)",
+    Permission.FACTORY: "Factory Reset (0xF6), and IR Robot's system write (0xF9), which their Python "
+                        "library sends as its factory reset",
+    Permission.IDENTITY: "a direct write of id, baud-rate or protocol-type: it changes where or how the "
+                         "actuator answers (set-id and set-baud are the checked ways)",
+    Permission.UNDOCUMENTED: "an address the 12Lf map does not give (0x05, IR Robot's lock 0x97), a read-only "
+                             "register, a value outside a register's documented range, bits or choices, an "
+                             "instruction the 12Lf does not document (but 0xF9)",
+    Permission.PARTIAL: "a write that starts or ends inside a multi-byte register (0x87: goal-position's "
+                        "high byte)",
+    Permission.BROADCAST: "any of the above to every actuator at once (ID 254; a Symmetric Store names its "
+                          "targets)",
+}
+
+
 def members(perm: Permission) -> list:
     """The single permissions in ``perm``, in declaration order (a Flag is not iterable on
     every Python this runs on)."""

@@ -162,17 +162,6 @@ def leaves_protocol(pkt: bytes) -> bool:
     return zap.Command(pkt).leaves_protocol
 
 
-def writes_id(pkt: bytes) -> bool:
-    """True when the packet writes the ID register (Store/Send Data, Symmetric Store)."""
-    code, params = pkt[5], bytes(pkt[6:-1])
-    addr = zap.REGISTER_BY_NAME["id"].address
-    if code in (0xF3, 0xF4) and len(params) >= 2:
-        return params[0] <= addr < params[0] + len(params) - 1
-    if code == 0x73 and len(params) >= 2:
-        return params[1] > 0 and params[0] <= addr < params[0] + params[1]
-    return False
-
-
 class _Owed:
     """An attempt that went unanswered: its reply may still come (late)."""
 

@@ -8,7 +8,7 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..options import InputPath, consent, yes_option
+from ..options import InputPath, consent, zap_yes_option as yes_option
 from .compose import link_options, open_link
 
 

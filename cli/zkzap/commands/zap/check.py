@@ -8,7 +8,7 @@ import click
 
 from ...errors import CheckFailed, DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, consent, resolve_format, yes_option
+from ..options import FiniteRange, consent, resolve_format
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -24,7 +24,9 @@ TABLE = [("id", "id"), ("check", "check"), ("verdict", "verdict"), ("value", "va
               metavar="SECONDS", help="The longest a stroke may take.")
 @click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
-@yes_option
+@click.option("-y", "--yes", is_flag=True,
+              help="Consent to the full-stroke moves on a real port; without it a terminal prompts and a script "
+                   "is refused (sim://, loop:// and --sim never ask).")
 @link_options
 def check(ids, no_move, move_timeout, fmt, yes, **common):
     """Self-check actuators: echo, model and firmware, supply voltage within the actuator's

@@ -104,7 +104,7 @@ def refuse_with_dry_run() -> None:
     would be ignored, so it is refused (exit 2)."""
     ctx = click.get_current_context(silent=True)
     if ctx is None or ctx.get_parameter_source("dry_run") != click.core.ParameterSource.COMMANDLINE:
-        return                # -n not given by the user (a batch composes its lines this way first)
+        return                # -n not given on the command line (a default_map, a program)
     for p in ctx.command.params:
         spelled = WIRE_ONLY.get(p.name, "")
         if spelled and ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE:

@@ -14,7 +14,7 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import InputPath, OutputPath, consent, note, resolve_format, warn, yes_option
+from ..options import InputPath, OutputPath, consent, note, resolve_format, warn, zap_yes_option as yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
