@@ -271,8 +271,9 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     a real port (--yes), writes, reads each back, and prints one row per write: id, register,
     old (the bus's value), new (FILE's), status (verified, mismatch; planned with --plan),
     read_back. Volatile settings are written only when named in --only; id, baud-rate,
-    protocol-type and feedback-return-mode only with --only and --force. A file from another
-    model or firmware is refused unless --force.
+    protocol-type and feedback-return-mode only with --only and --force: the plan and the
+    summary name every difference left out and why, so "0 writes" never hides one. A file from
+    another model or firmware is refused unless --force.
 
     An interrupted apply (Ctrl-C, a vanished port, a silent actuator) prints the writes that
     were made and says which; running the same command again makes the rest. Exit status 0

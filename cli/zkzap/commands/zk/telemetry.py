@@ -48,7 +48,8 @@ def log_options(f):
                            "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
                            "-o (.csv, .json, .jsonl, .lp, .mcap)."),
         click.option("-o", "--output", type=OutputPath("records"),
-                     help="Write records to FILE (the dashboard stays on a terminal)."),
+                     help="Write records to FILE (created or replaced by the first record: a run that "
+                          "writes none leaves it as it was; the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
                      help="Append to --output and --raw-log (a CSV gets no second header)."),
         click.option("--snapshot/--frames", "snapshot", default=None,
