@@ -179,3 +179,25 @@ def test_the_frame_says_what_it_needs():
     cmd = zap.Command(zap.store(1, "goal-position", 2000))
     assert cmd.needs() == {} and cmd.permissions == Permission.NONE
     assert set(zap.Command(zap.store(1, 0x87, 1)).needs()) == {Permission.PARTIAL}
+
+
+@settings(max_examples=150, deadline=None)
+@given(cmd=st.integers(0, 8), low=st.integers(0, 15), b2=st.integers(0, 255), allow=st.booleans())
+def test_any_control_frame_is_sent_exactly_when_its_needs_are_given(cmd, low, b2, allow):
+    from zkzap.link.port import open_port
+    from zkzap.link.zk_port import ZkLink
+
+    frame = zk.control_frame(cmd, low, b2)
+    needs = zk.ControlFrame(frame).permissions
+    link = ZkLink(open_port("loop://", 115200, timeout=0.01), "/dev/ttyFAKE",
+                  allow=Permission.ENGINE if allow else None)
+    try:
+        if needs and not allow:
+            with pytest.raises(PermissionNeeded):
+                link.write(frame)
+            assert link.frames_out == 0 and link.read() == b""
+        else:
+            link.write(frame)
+            assert link.frames_out == 1 and link.controlled == zk.ControlFrame(frame).controls_engine
+    finally:
+        link.close()
