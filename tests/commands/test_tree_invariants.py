@@ -282,7 +282,8 @@ def _runnable(path, cmd, name, files, port):
     out = by[name]
     probe = (out, files["output"](out.type))
     bounds = [("count", "3"), ("for_s", "0.5"), ("duration", "0.5"), ("no_move", True), ("no_wait", True)]
-    bounds += [(p.name, "1") for p in cmd.params if type(p.type).__name__ == "IdList" and p.default]  # not 254 IDs
+    bounds += [(p.name, "1") for p in cmd.params if type(p.type).__name__ == "IdList"
+               and (p.default or p.name == "ids")]          # the actuators a command addresses: not all 254
     for pname, value in bounds:
         if pname in by and pname not in line.opts:      # a bound the line takes (--no-wait: not with --for)
             line.opts[pname] = (by[pname], value)
