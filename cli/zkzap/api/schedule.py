@@ -12,10 +12,11 @@ Throttle rows send control ID 1 (state, throttle). RPM rows put the ECU in RPM m
 the row's state and the RPM factor ``RPM_X`` (the smallest factor whose range, 40 950 x RPM_X
 rpm, holds the schedule's highest target: the finest resolution, 10 x RPM_X rpm), alternating
 with ID 7 targets. In a schedule with RPM rows the throttle rows alternate ID 1 with ID 6
-``none`` (factor 0), which leaves RPM mode and hands the state back to ID 1. RPM frames wait
-for the ECU's status ID 6; a target above the max rpm it reports, or an ECU older than protocol
-version 4, stops the run (:class:`ScheduleTargetError`, exit status 5) before any RPM frame is
-sent.
+``none`` (factor 0), which leaves RPM mode and hands the state back to ID 1. :meth:`Schedule.plan_check`
+is the schedule's :class:`~zkzap.api.prestart.Plan`: a session running it listens for the ECU's
+status ID 6 first and refuses the schedule before its first frame when a target is above the max
+rpm the ECU reports or the ECU is older than protocol version 4 (:class:`ScheduleTargetError`,
+exit status 2, nothing sent).
 
 :meth:`Schedule.plan` lists the commands and when they change without stepping through every
 control period, so its cost grows with the number of rows, not with the schedule's duration.
@@ -28,7 +29,8 @@ import math
 
 from ..codec import zk
 from ..codec.fields import FieldValueError
-from ..errors import DeviceError, UsageError
+from ..errors import UsageError
+from .prestart import EcuLimitError, Plan
 
 _THROTTLE = zk.CONTROL_BY_NAME["control"].layout.by_key["throttle_pct"]
 _SW = zk.CONTROL_BY_NAME["control"].layout.by_key["sw"]
@@ -44,8 +46,9 @@ class ScheduleError(UsageError):
     """A schedule that cannot be read; the message names ``FILE:LINE``."""
 
 
-class ScheduleTargetError(DeviceError):
-    """An RPM target the connected ECU cannot follow (above its max rpm, or too old for RPM mode)."""
+#: A schedule the connected ECU cannot follow (an RPM target above its max rpm, an ECU too old for
+#: RPM mode): refused before the first frame (exit 2).
+ScheduleTargetError = EcuLimitError
 
 
 class Row:
@@ -109,8 +112,6 @@ class Schedule:
         self._i = 0
         self._cache = {}
         self._toggle = 0
-        self._ecu = None
-        self._checked = False
 
     # --- reading ---------------------------------------------------------------------------------
     @classmethod
@@ -292,37 +293,16 @@ class Schedule:
             self._cache[key] = got
         return got
 
-    def bind(self, ecu):
-        """Check RPM targets against a live ECU: ``ecu`` is a :class:`~zkzap.api.telemetry.Telemetry`
-        (its latest ``max_rpm`` and protocol version)."""
-        self._ecu = ecu
-        return self
-
-    def _ecu_ready(self):
-        """For RPM rows: whether the ECU's limits are known (and the targets within them)."""
-        if self._checked or self._ecu is None:
-            return True
-        latest = self._ecu.latest
-        max_rpm = latest.get("max_rpm")
-        version = self._ecu.decoder.known
-        if max_rpm is None:
-            return False
-        if version is not None and version < 4:
-            raise ScheduleTargetError(f"schedule {self.name}: RPM targets need an ECU of protocol version 4 "
-                                      f"or later; this one reports {version}")
-        over = next((r for r in self.rows if r.rpm is not None and r.rpm > max_rpm), None)
-        if over is not None:
-            raise ScheduleTargetError(f"schedule {self.name}:{over.line}: rpm {over.rpm:g} is above the ECU's "
-                                      f"max rpm {max_rpm:g}")
-        self._checked = True
-        return True
+    def plan_check(self) -> Plan:
+        """The schedule as a :class:`~zkzap.api.prestart.Plan`: every frame it sends and each
+        RPM target with its ``FILE:LINE``, checked against the ECU before the first frame."""
+        targets = [(r.rpm, f"schedule {self.name}:{r.line}") for r in self.rows if r.rpm is not None]
+        return Plan(self.frames(), targets=targets, what=f"schedule {self.name}")
 
     def frame_at(self, t):
         """The frame to send at ``t`` (the session calls this every control period)."""
         cmd = self.command_at(t)
         if cmd is None:
-            return None
-        if cmd[0] == "rpm" and not self._ecu_ready():
             return None
         frames = self._frames(*cmd)
         self._toggle = (self._toggle + 1) % len(frames)

@@ -9,8 +9,6 @@ and pass it to the session that step runs.
 
 from __future__ import annotations
 
-import time
-
 from . import logbook as _logbook
 
 
@@ -20,8 +18,7 @@ class Stand:
         self.averager = averager                           # api.steady.StepAverager
         self.logbook = logbook                             # path of the logbook file
         self.stats = _logbook.RunStats()
-        self.schedule = None                               # api.schedule.Schedule: bound to the ECU
-        self.wall0 = None
+        self.clock = None                                  # the session's (link.clock)
 
     def columns(self, record_columns):
         """Wrap the record column function: limit entries become CSV columns."""
@@ -36,9 +33,7 @@ class Stand:
     def attach(self, telemetry, source, on_update):
         """Hook into ``telemetry``; returns the live-view callback (limit lines added)."""
         telemetry.on_frame = self.on_frame
-        if self.schedule is not None:
-            self.schedule.bind(telemetry)
-        self.wall0 = getattr(source, "wall0", None) or time.time()
+        self.clock = source.clock
         if on_update is None or self.limits is None:
             return on_update
         limits = self.limits
@@ -69,9 +64,15 @@ class Stand:
             return None
         s = tel.summary()
         duration = (session.ended_t or 0.0) if session is not None else 0.0
-        wall0 = self.wall0 or time.time()
+        clock = self.clock
+        if clock is None or clock.wall(0.0) is None:      # never attached, or a replay of a raw log
+            from ..link.clock import SessionClock
+
+            clock = SessionClock()
+            clock.wall0 -= clock.real(duration)
+        # the real moments the session's start and end correspond to (its one clock)
         run = {
-            "started": _logbook.iso(wall0), "ended": _logbook.iso(wall0 + duration),
+            "started": _logbook.iso(clock.wall(0.0)), "ended": _logbook.iso(clock.wall(duration)),
             "duration_s": round(duration, 3), "running_s": round(self.stats.running_s, 3),
             "starts": self.stats.starts, "max_rpm": s["max_rpm"], "max_egt_c": s["max_egt_c"],
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],
