@@ -12,9 +12,10 @@ from . import CONTEXT, Command, Group
 from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, capture_option,
                       close_output, open_output)
 
-EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
-             "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
-             "Every record already written stays whole.")
+EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 3 no frame at all by the end (a silent "
+             "line), or bytes that are noise, not frames, for 2 s (a wrong baud rate or stop bits); 4 a port "
+             "cannot be opened or vanished; 7 the output or the capture could not be written; 130 Ctrl-C; "
+             "143 SIGTERM. Every record already written stays whole.")
 
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
 
@@ -211,7 +212,7 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
         writer = make_writer(fmt, stream, cols, header=not had)
     live = _live(sniffer) if is_tty(sys.stderr) else None
     written = 0
-    reason = None
+    reason = failure = None
     try:
         with sniffer, SignalGuard() as guard:
             end = None if duration is None else time.monotonic() + duration
@@ -233,6 +234,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
                     break
                 if end is not None and time.monotonic() >= end:
                     reason = "duration"
+                    break
+                failure = sniffer.noise()
+                if failure is not None:
+                    reason = "noise"
                     break
                 if guard.signum is not None:
                     from ..signals import INTERRUPT_SIGNALS
@@ -259,6 +264,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
             f.write("\n")
     if reason == "interrupted":
         raise KeyboardInterrupt
+    if reason == "noise":
+        raise failure
+    if not sniffer.frames_trusted and reason != "terminated":
+        raise sniffer.silent()         # a silent line never passes
     if reason == "terminated":
         from ..errors import TERMINATED, ZkzapError
 

@@ -14,9 +14,11 @@ from ..options import port_options, protocol_version_option
 from .stand import Finite, limit_options
 from .telemetry import resolve_port, zk_timeout_help
 
-EPILOG = ("Exit status: 0 every limit held and the ECU reported no error code; 1 a limit's field never "
-          "arrived (nothing to check it on); 2 bad usage; 3 no status frame within --timeout; 4 port failed; "
-          "5 a limit was violated or the ECU reported an error code; 130 Ctrl-C; 143 SIGTERM.")
+EPILOG = ("Exit status: 0 every limit held and the ECU reported no error code; 1 a check's field never "
+          "arrived (nothing to check it on: a limit's, or the error code's when no status ID 1 came); 2 bad "
+          "usage; 3 no status frame within --timeout, or none at all (a silent ECU never passes); 4 port "
+          "failed; 5 a limit was violated or the ECU reported an error code; 130 Ctrl-C; 143 SIGTERM. "
+          "Each check's 'checked' counts the frames that carried its field.")
 
 COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first_warning_t", "violations",
            "warnings"]
@@ -90,10 +92,12 @@ def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_fi
                      "violations": s["violations"], "warnings": s["warnings"]})
     errs = tel.summary()["errors"]
     first = min((e["t"] for e in errs), default=None)
-    rows.append({"check": "ECU error code", "verdict": ("violated" if errs and not allow_ecu_error
-                                                        else "warn" if errs else "ok"),
-                 "checked": tel.frames, "extreme": ", ".join(f"{e['code']} {e['name']}"
-                                                                                  for e in errs) or 0,
+    carried = tel.frames_with("error_code")       # the frames that carry the code: ID 1's only
+    rows.append({"check": "ECU error code",
+                 "verdict": ("violated" if errs and not allow_ecu_error else "warn" if errs
+                             else "ok" if carried else "unchecked"),
+                 "checked": carried, "extreme": ", ".join(f"{e['code']} {e['name']}" for e in errs) or
+                 (0 if carried else None),
                  "first_violation_t": first, "first_warning_t": None, "violations": len(errs), "warnings": 0})
     failed = [r for r in rows if r["verdict"] == "violated"]
     unchecked = [r for r in rows if r["verdict"] == "unchecked"]

@@ -22,9 +22,9 @@ from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_t
 class Output:
     """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    ``-o FILE`` is checked here (before any port opens) and opened by the first record (or by
-    :meth:`finish` after a run that ended well without one), so a run that fails to start —
-    no port, a silent ECU — leaves an existing file as it was."""
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record, never
+    before: a run that fails to start — no port, a silent ECU — or that writes no record
+    leaves an existing file as it was."""
 
     def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
@@ -75,11 +75,6 @@ class Output:
             self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
-
-    def finish(self, ok):
-        """The run ended: a file no record opened is created only when the run went well."""
-        if ok and self.file is not None and self.writer is None:
-            self._open()
 
     def write(self, rec):
         if self.writer is None and self.file is not None:
@@ -135,20 +130,21 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule"):
+                  reconnect=None, end=None, end_label="end of schedule", plan=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
-    an output.
+    an output. ``plan``: the :class:`~zkzap.api.prestart.Plan` of the frames ``control`` sends
+    (checked against the ECU's reported limits before the first).
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
     from ...io.outfile import OutFile, refuse_same_files
     from ...link.port import fit_note
-    from ...link.zk_port import READ_SLICE_S, ZkLink
+    from ...link.zk_port import ZkLink
     from ...link.zk_sources import LiveSource
     from .bridging import make_bridges
 
@@ -190,12 +186,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
             source = replay_source(replay, fast=fast)
         else:
-            # reads block at most half a control period, so frames go out on time up to 200 Hz
-            slice_s = min(READ_SLICE_S, 0.5 / (rate or DEFAULT_RATE)) if control else READ_SLICE_S
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
-                                reconnect=reconnect)
-        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                        wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits), reconnect=reconnect)
+        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -207,14 +199,11 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
                           stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
-                          on_update=on_update, notify=notify,
+                          on_update=on_update, notify=notify, plan=plan,
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
-            out.finish(outcome.ok)
-            if outcome.ok and raw is not None and raw.stream is None:
-                raw.open()
     finally:
         if source is not None:
             source.close()
@@ -228,6 +217,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                 note(line)
         for message in held:
             note(message)
+    if outcome.reason == "refused":
+        raise outcome.error          # the ECU's limits refuse the plan: nothing was sent or written
     if bridges:
         session.bridges = session_stats
     if tel.version_note:
@@ -237,7 +228,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         if told:
             note(told + "; expect fewer status frames")
     framer = source.framer
-    if framer.bad:
+    if framer.bad and getattr(source, "signal", None) is not None and not source.signal.accepted:
+        pass                         # noise, not an ECU's frames: the error says what came
+    elif framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
              f"({framer.skipped} byte{'' if framer.skipped == 1 else 's'})")
     return outcome, tel, session

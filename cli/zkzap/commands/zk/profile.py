@@ -38,9 +38,10 @@ def example_text(kind="throttle") -> str:
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
 @rate_option()
 @abort_option(default="standby",
-              help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
-                   "schedule that ends in state run: that state with throttle 0 (standby lets a hot "
-                   "engine cool); none sends nothing.")
+              help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, a violated limit, "
+                   "and at the end of a schedule that ends in state run: that state with throttle 0 "
+                   "(standby lets a hot engine cool); none sends nothing and says on stderr that the "
+                   "engine is left running.")
 @click.option("--summary-json", type=click.Path(dir_okay=False, writable=True, allow_dash=True), default=None,
               metavar="FILE", help="Also write the summary as JSON to FILE ('-': stdout).")
 @click.option("--settle", type=Finite(0, 86400), default=None, metavar="SECONDS",
@@ -72,9 +73,10 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     that throttle (0..100 %) and state (pwm, stop, standby, run; a row without one keeps the
     previous, the first defaults to run) are sent at --rate Hz as control ID 1 frames. An rpm
     target puts the ECU in RPM mode (ID 6 with the RPM factor that fits the highest target, and
-    ID 7 targets); a target above the ECU's reported max rpm stops the run (exit 5) before it is
-    sent, and the end and the abort leave RPM mode. Nothing is sent before the first row's time;
-    the schedule ends at the last row's time.
+    ID 7 targets); zk profile listens for the ECU's status ID 6 first and refuses a schedule
+    with a target above the max rpm it reports, or RPM rows for an ECU older than protocol
+    version 4, before its first frame (exit 2, nothing sent); the end and the abort leave RPM
+    mode. Nothing is sent before the first row's time; the schedule ends at the last row's time.
 
     --settle/--average/--steps-csv reduce each step to averages (and TSFC); --limit stops the run
     (the abort) when a field leaves its limit; --logbook records the run.
@@ -142,7 +144,6 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True)
-    stand.schedule = sched
     if not is_simulator(url):
         from ...codec import zk
 
@@ -157,7 +158,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
-            title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
+            title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect, plan=sched.plan_check(),
             inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
@@ -198,7 +199,7 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
 
 _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated": "terminated",
         "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-        "limit": "limit violated", "output": "output failed"}
+        "limit": "limit violated", "output": "output failed", "refused": "refused by the ECU's limits"}
 
 
 def _print_summary(s):

@@ -28,9 +28,9 @@ def limit_options(f):
         click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
                      help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable."),
         click.option("--on-limit", type=click.Choice(["abort", "exit", "warn"]), default=None,
-                     help="On a violated limit: abort (the abort command, then exit 5; default when the "
-                          "session controls the engine), exit (exit 5; the default otherwise) or warn "
-                          "(go on; the summary names it)."),
+                     help="On a violated limit: abort or exit end the session with exit 5 (one that "
+                          "controls the engine ends with the --abort command either way, as every end "
+                          "does; abort is for such sessions only), warn goes on (the summary names it)."),
     ]
     return apply_options(f, opts)
 

@@ -26,7 +26,9 @@ def exit_help(done: str, device: str) -> str:
     return exit_status_help({
         OK: done,
         USAGE: "bad usage (nothing sent)",
-        NO_REPLY: "no status frame within --timeout (at the start or later)",
+        NO_REPLY: "no status frame within --timeout (at the start or later), or none at all however short "
+                  "the run (a silent ECU never passes; bytes that are no ECU's frames, line noise or a "
+                  "wrong baud rate, count as none)",
         PORT_ERROR: "port failed or vanished",
         DEVICE_ERROR: device,
         OUTPUT_ERROR: "the output could not be written (disk full)",
@@ -76,10 +78,10 @@ reconnect_option = click.option(
          f"device for up to S seconds (default {RECONNECT_DEFAULT:g} without a value; off without the "
          "option), write a gap record and go on writing the same files. A session that controls the "
          "engine sends the abort the moment the port is back, before anything else, and only logs "
-         "from then on (exit status 4 at the end).")
+         "from then on: it ends with exit status 4 however it ends (its time, Ctrl-C, SIGTERM).")
 
-TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
-                "longer means exit 3.")
+TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s, on the "
+                "session's clock: model seconds on sim://zk?speed=N, as every duration); longer means exit 3.")
 
 
 def zk_timeout_help(cmd):
