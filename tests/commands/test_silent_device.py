@@ -28,14 +28,22 @@ SILENT_ZAP = "sim://zap?ids=1&faults=1:silent"
 DEVICE_COMMANDS = [(path, cmd) for path, cmd in commands() if protocol(cmd)]
 
 
-def _values(tmp_path, cli):
+@pytest.fixture(scope="module")
+def values(tmp_path_factory):
+    """Required parameters' values, by protocol and parameter name (files made once)."""
+    from click.testing import CliRunner
+
+    from zkzap.commands import root, run
+
+    tmp_path = tmp_path_factory.mktemp("inputs")
     schedule = tmp_path / "stand.csv"
     schedule.write_text("0,0,stop\n1,0,stop\n")
     zk_batch, zap_batch = tmp_path / "zk.txt", tmp_path / "zap.txt"
     zk_batch.write_text("send keepalive\n")
     zap_batch.write_text("echo --id 1\n")
     fleet = tmp_path / "fleet.json"
-    assert cli("zap", "backup", "--sim", "--ids", "1", "-o", str(fleet)).exit_code == 0
+    with CliRunner().isolation():
+        assert run(root, "zkzap", ["zap", "backup", "--sim", "--ids", "1", "-o", str(fleet)]) == 0
     return {
         "zk": {"sw": "stop", "param": "rate-20hz", "accel_curve": "40", "ignition_voltage_v": "3.2",
                "pressure_hpa": "1013", "target_rpm": "60000", "rpm_factor": "2", "cmd_id": "0",
@@ -66,9 +74,9 @@ def test_the_walk_finds_the_device_commands():
 
 
 @pytest.mark.parametrize("path,cmd", DEVICE_COMMANDS, ids=[" ".join(p) for p, _ in DEVICE_COMMANDS])
-def test_a_silent_device_never_gives_exit_0(cli, tmp_path, path, cmd):
+def test_a_silent_device_never_gives_exit_0(cli, values, tmp_path, path, cmd):
     proto = protocol(cmd)
-    args = invocation(cmd, _values(tmp_path, cli)[proto], dict(BOUNDS[proto], state_path=tmp_path / "setup.json"))
+    args = invocation(cmd, values[proto], dict(BOUNDS[proto], state_path=tmp_path / "setup.json"))
     capture = tmp_path / "wire.pcapng"
     r = cli(*path, *args, "-p", SILENT_ZK if proto == "zk" else SILENT_ZAP, "--capture", str(capture),
             input=STDIN[proto])

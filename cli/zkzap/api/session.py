@@ -303,7 +303,10 @@ class Session:
                         self._reconnected(src.take_gap())
                     for t, frame in got:
                         if self.duration is not None and t + 1e-9 >= self.duration:
-                            outcome = Outcome("duration")     # a fast replay's batch reaches past it
+                            # read after the end (a fast replay's batch; a live read after a stall):
+                            # no record, but the ECU was heard
+                            self.last_frame_t = t
+                            outcome = Outcome("duration")
                             break
                         self.last_frame_t = t
                         if self._cycle is not None:

@@ -92,8 +92,8 @@ class LiveSource:
         """What the line carried when no status frame came: ``bytes`` received and
         ``chance_frames`` (CRC-valid frames taken for chance), when it was noise."""
         sig = self.signal
-        if not sig.bytes or sig.accepted:
-            return {}
+        if not sig.noise or sig.accepted:
+            return {}                      # nothing came, a frame's worth at most, or an ECU
         return {"bytes": sig.bytes, "chance_frames": sig.rejected + len(sig.held)}
 
     def _fail(self, e):
