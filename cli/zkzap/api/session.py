@@ -160,6 +160,7 @@ class Session:
         self.written = 0
         self.controlling = False
         self.pump_on = False
+        self.rpm_factor = None           # the RPM_X of the last ID 6 sent
         self.last_frame_t = None
         # the status IDs seen, until the ECU's cycle is known (an ID comes again): then --ids
         # that the ECU never sends are reported (all of them: the session ends)
@@ -222,6 +223,8 @@ class Session:
         self.last_sent = frame
         if not self.controlling and controls_engine(frame):
             self.controlling = True
+        if frame[1] >> 4 == 6:
+            self.rpm_factor = zk.ControlFrame(frame).rpm_factor
         if frame[1] >> 4 == 2:
             action = zk.ACTIONS.get(frame[2])
             if action == "pump-on":
@@ -386,7 +389,7 @@ class Session:
         """What the engine keeps doing after the last frame sent, in words."""
         if self.last_sent is None:
             return "the last command"
-        left = zk.ControlFrame(self.last_sent).leaves(self.telemetry.decoder.rpm_factor)
+        left = zk.ControlFrame(self.last_sent).leaves(self.rpm_factor)
         return f"the engine is left {left}" if left else "the engine keeps the last command"
 
     def _abort(self, outcome):

@@ -167,8 +167,6 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
                                        "error": str(e), "aborted": None, "duration_s": 0.0,
                                        "schedule_s": sched.length})
         raise
-    if sched.ends_in_rpm_mode and abort == "none":
-        note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
     summary = _summary(name, url, sched, outcome, tel, session)
     summary.update(stand.summary())
     if averager is not None:
