@@ -165,9 +165,21 @@ def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
     (["logbook", "{nodb}"], "not a zkzap logbook"),
     (["logbook", "missing.db"], "no such file"),
     (["report", "{s}"], "give -o REPORT"),
-    (["report", "{s}", "-o", "r.txt"], "cannot tell the format"),
+    (["report", "{s}", "-o", "r.txt"], "the suffix '.txt' is not a format this command writes"),
     (["report", "{s}", "--terminal", "-o", "r.png"], "not with --terminal"),
     (["report", "{s}", "-o", "r.png", "--meta", "novalue"], "meta: 'novalue' is not KEY=VALUE"),
+    (["profile", "{dup}", "-n"], "dup.csv:3: time_s: 20 is also the time of dup.csv:2"),
+    (["profile", "{big}", "-n"], "big.csv:1: time_s: '1e400' is not a finite number"),
+    (["profile", "{s}", "--sim", "--steps-csv", "x.csv", "--fuel-density", "800"],
+     "allowed 0.5..1.2 kg/L (800 kg/m³ would be 0.8 kg/L)"),
+    (["monitor", "--sim", "--limits", "{empty}"], "limits: empty.limits has no limit"),
+    (["monitor", "--sim", "--logbook", "/nonexistent/x.db"], "logbook: cannot create /nonexistent/x.db: no such "
+                                                             "directory /nonexistent"),
+    (["monitor", "--sim", "--mqtt", "mqtt://localhost/x/#"], "a topic prefix has no wildcards"),
+    (["monitor", "--sim", "-o", "run.xyz"], "run.xyz: the suffix '.xyz' is not a format this command writes"),
+    (["monitor", "--sim", "-o", "run.png"], "the suffix '.png' (png) is not a format this command writes"),
+    (["monitor", "--sim", "-o", "run.xlsx", "--append"], "a workbook cannot be appended to"),
+    (["monitor", "--sim", "-f", "xlsx"], "a workbook needs a file"),
     (["report", "{s}", "-o", "{s}.png", "--steps", "{nodb}"], "expected the CSV"),
     (["report", "{nodb}", "-o", "r.png"], "expected the CSV"),
 ])
@@ -176,8 +188,12 @@ def test_bad_input_exit_2(cli, tmp_path, monkeypatch, args, msg):
     (tmp_path / "s.csv").write_text("0,0,run\n1,0,standby\n")
     (tmp_path / "bad.csv").write_text("0,0,run\n1,nan\n")
     (tmp_path / "nodb").write_text("hello\n")
+    (tmp_path / "dup.csv").write_text("0,0,run\n20,30\n20,60\n30,0,standby\n")
+    (tmp_path / "big.csv").write_text("1e400,0,run\n")
+    (tmp_path / "empty.limits").write_text("# nothing yet\n\n")
     before = sorted(p.name for p in tmp_path.iterdir())
-    subst = {"{s}": "s.csv", "{bad}": "bad.csv", "{nodb}": "nodb", "{s}.png": "s.png"}
+    subst = {"{s}": "s.csv", "{bad}": "bad.csv", "{nodb}": "nodb", "{s}.png": "s.png", "{dup}": "dup.csv",
+             "{big}": "big.csv", "{empty}": "empty.limits"}
     r = cli("zk", *[subst.get(a, a) for a in args])
     assert r.exit_code == 2 and msg in r.stderr and r.stdout == "", r
     assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -91,7 +91,17 @@ def connect(path, *, create=True):
 
 
 def check_writable(path):
-    """Open (and create) the logbook before a run, so an unusable path is found first."""
+    """Open (and create) the logbook before a run, so an unusable path is found first: a missing
+    directory, a directory or a file that cannot be written is a UsageError (exit 2) naming it."""
+    parent = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise UsageError(f"logbook: {path} is a directory; give a file")
+    if not os.path.isdir(parent):
+        raise UsageError(f"logbook: cannot create {path}: no such directory {parent}")
+    if os.path.exists(path) and not os.access(path, os.R_OK | os.W_OK):
+        raise UsageError(f"logbook: cannot write {path}: permission denied")
+    if not os.path.exists(path) and not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"logbook: cannot create {path}: permission denied in {parent}")
     connect(path).close()
 
 

@@ -115,6 +115,10 @@ class StepAverager:
         if seen:
             self.frames[i] += 1
 
+    def columns(self) -> list:
+        """The columns of :meth:`rows` (the steps CSV's header)."""
+        return columns()
+
     def rows(self) -> list:
         out = []
         for i, (n, row, a, b) in enumerate(self.steps):

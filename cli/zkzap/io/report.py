@@ -545,12 +545,10 @@ def terminal(run, console, steps=None, width=None, height=6):
 
 
 def output_format(path, fmt=None):
+    """The report's format: ``fmt``, else what the suffix of ``path`` names (.png, .svg, .pdf,
+    .html); anything else is refused."""
     if fmt:
         return fmt
-    ext = os.path.splitext(path)[1].lower().lstrip(".")
-    if ext == "htm":
-        ext = "html"
-    if ext not in FORMATS:
-        raise UsageError(f"output: {path}: cannot tell the format from the name; use .png, .svg, .pdf or .html "
-                         f"(or --format)")
-    return ext
+    from . import format_for_path
+
+    return format_for_path(path, FORMATS, default=None)

@@ -51,8 +51,11 @@ def example_text(kind="throttle") -> str:
 @click.option("--steps-csv", type=FilePath(), default=None, metavar="FILE",
               help="Write one row per step to FILE: window, mean/min/max of rpm, egt_c, thrust_kg, "
                    "fuel_flow_l_min, pump_voltage_v, throttle_pct, TSFC, and whether it settled.")
-@click.option("--fuel-density", type=Finite(0.5, 1.2), default=None, metavar="KG_PER_L",
-              help="Fuel density for TSFC (default 0.8: Jet A-1; kerosene 0.80, diesel 0.84).")
+@click.option("--fuel-density", type=Finite(0.5, 1.2, unit="kg/L", hint=lambda v: (
+                  f"{v:g} kg/m³ would be {v / 1000:g} kg/L" if 500 <= v <= 1200 else None)),
+              default=None, metavar="KG_PER_L",
+              help="Fuel density for TSFC, in kg/L (default 0.8: Jet A-1; kerosene 0.80, diesel 0.84; "
+                   "800 kg/m³ is 0.8 kg/L).")
 @dry_run_option
 @port_options("zk")
 @yes_option
@@ -151,6 +154,15 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             consent(f"schedule {name} on {url}: {hazard}", yes)
     from .monitor import run_telemetry
 
+    def summarize(outcome, tel, session):
+        summary = _summary(name, url, sched, outcome, tel, session)
+        summary.update(stand.summary())
+        if averager is not None:
+            summary["steps"] = averager.rows()
+            summary["fuel_density_kg_l"] = averager.density
+        steps = (averager.columns(), summary["steps"]) if averager is not None else None
+        return steps, summary
+
     try:
         outcome, tel, session = run_telemetry(
             url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
@@ -158,7 +170,8 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
             title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
-            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
+            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv},
+            summarize=summarize)
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
         if summary_file and e.code != USAGE:
@@ -168,16 +181,12 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         raise
     if sched.ends_in_rpm_mode and abort == "none":
         note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
-    summary = _summary(name, url, sched, outcome, tel, session)
-    summary.update(stand.summary())
-    if averager is not None:
-        summary["steps"] = averager.rows()
-        summary["fuel_density_kg_l"] = averager.density
+    steps, summary = summarize(outcome, tel, session)
     _print_summary(summary)
     report(stand, command="zk profile", port=url, schedule=name, files=(output, raw_log, steps_csv, summary_json),
            outcome=outcome, tel=tel, session=session)
     if steps_csv:
-        _write_steps(steps_csv, summary["steps"])
+        _write_steps(steps_csv, *steps)
     if summary_json:
         _write_json(summary_file or summary_json, summary)
     outcome.raise_for_status()
@@ -259,8 +268,7 @@ def _check_dir(path, what):
     check_output_dir(path, what)
 
 
-def _write_steps(path, rows):
-    from ...api.steady import columns
+def _write_steps(path, columns, rows):
     from ...io.writers import make_writer
 
     stream = sys.stdout if path == "-" else None
@@ -269,7 +277,7 @@ def _write_steps(path, rows):
             stream = open(path, "w", encoding="utf-8", newline="")
     except OSError as e:
         raise OutputError(f"steps-csv: cannot write {path}: {e.strerror}") from None
-    writer = make_writer("csv", stream, columns())
+    writer = make_writer("csv", stream, columns)
     try:
         for r in rows:
             writer.write(r)

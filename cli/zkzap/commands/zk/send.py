@@ -16,7 +16,8 @@ from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
 from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
-from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, summarizer,
+                    summary_option)
 from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
                         zk_timeout_help)
 
@@ -158,7 +159,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
         end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
-        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json})
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json},
+        summarize=summarizer(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url))
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)

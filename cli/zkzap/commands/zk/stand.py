@@ -63,18 +63,31 @@ def check_output_dir(path, what, records_to_stdout=False):
         raise UsageError(f"{what}: cannot write {path}: permission denied")
 
 
-def write_summary(path, *, command, port, outcome, tel, session, stand):
-    """The run summary as JSON (``-``: stdout)."""
-    import json
-
-    from ...errors import OutputError
-
+def session_summary(*, command, port, outcome, tel, session, stand) -> dict:
+    """The run summary of ``zk monitor`` and ``zk send --for`` (``--summary-json``, a workbook's
+    summary sheet)."""
     out = {"command": command, "port": port, "outcome": outcome.reason, "exit_status": outcome.exit_code,
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
     if stand is not None:
         out.update(stand.summary())
+    return out
+
+
+def summarizer(stand, *, command, port):
+    """``summarize`` for :func:`.monitor.run_telemetry`: no steps, the session's summary."""
+    return lambda outcome, tel, session: (None, session_summary(command=command, port=port, outcome=outcome,
+                                                                tel=tel, session=session, stand=stand))
+
+
+def write_summary(path, *, command, port, outcome, tel, session, stand):
+    """The run summary as JSON (``-``: stdout)."""
+    import json
+
+    from ...errors import OutputError
+
+    out = session_summary(command=command, port=port, outcome=outcome, tel=tel, session=session, stand=stand)
     text = json.dumps(out, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
