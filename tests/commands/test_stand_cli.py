@@ -103,10 +103,11 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     scl = [(rec["t"], rec["scl"]) for rec in recs if rec["id"] == 8]
     assert any(v == 1 for _, v in scl) and scl[-1][1] == 0          # RPM mode on, then off again
     rows = list(csv.DictReader(io.StringIO(steps.read_text())))
-    assert [row["target"] for row in rows] == ["0 %", "100000 rpm", "0 %"]
-    assert abs(float(rows[1]["rpm_mean"]) - 100000) < 3000 and float(rows[1]["tsfc_kg_kgf_h"]) > 0
+    assert [row["target"] for row in rows] == ["100000 rpm"]          # the start-up and standby rows are no steps
+    assert abs(float(rows[0]["rpm_mean"]) - 100000) < 3000 and float(rows[0]["tsfc_kg_kgf_h"]) > 0
     s = json.loads(summary.read_text())
-    assert s["fuel_density_kg_l"] == 0.84 and s["steps"][1]["mode"] == "rpm" and s["starts"] == 1
+    assert s["fuel_density_kg_l"] == 0.84 and s["steps"][0]["mode"] == "rpm" and s["starts"] == 1
+    assert [(r["line"], r["why"]) for r in s["rows_not_steps"]] == [(2, "start-up")]
     r = cli("zk", "logbook", str(book), "-f", "json")
     doc = json.loads(r.stdout)
     run = doc["runs"][0]

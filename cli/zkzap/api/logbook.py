@@ -21,6 +21,10 @@ from ..errors import OutputError, UsageError
 
 BUSY_TIMEOUT_S = 30.0
 RUNNING_STATES = frozenset({"running", "running-min-throttle", "running-pump-limit"})
+#: Engine states of a start (and the cooling that precedes a restart): a schedule row during
+#: which the engine passes through one is its start-up, not a steady-state step.
+STARTING_STATES = frozenset({"ignition-min-throttle", "ignition", "preheat", "fuel-ramp", "learn-max-throttle",
+                             "learn-min-throttle", "learn-idle", "restart"})
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS runs (

@@ -401,11 +401,12 @@ class Schedule:
 
     # --- steps for steady-state reduction ------------------------------------------------------------
     def steps(self):
-        """``[(number, row, t_start, t_end)]``: each row that holds for some time."""
+        """``[(number, row, t_start, t_end)]``: each row in state ``run`` that holds for some time
+        (a standby, stop or pwm row is no steady state of the engine)."""
         out = []
         for i, r in enumerate(self.rows[:-1]):
             end = self.rows[i + 1].t
-            if end > r.t:
+            if end > r.t and r.state == "run":
                 out.append((len(out) + 1, r, r.t, end))
         return out
 

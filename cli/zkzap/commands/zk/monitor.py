@@ -14,8 +14,8 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
-from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, summarizer,
-                    summary_option)
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors, summarizer, summary_option)
 from ...io import SESSION_FORMATS, format_for_path
 from .telemetry import (EXIT_HELP, check_log_options, errors_text, log_options, port_from_env,
                         reconnect_option, resolve_port, zk_timeout_help)
@@ -184,12 +184,22 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         check_mcap(output, append, snapshot)
     if bridges:
         bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
+    if stand is not None:
+        try:
+            # external sensors first: a silent load cell is found before the ECU is sent anything
+            stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
+        except BaseException:
+            if bridges:
+                bridges.close()
+            raise
     columns = record_columns if stand is None else stand.columns(record_columns)
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
         if bridges:
             bridges.close()
+        if stand is not None:
+            stand.close()
         raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
@@ -219,6 +229,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             from .taps import tap_session
 
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+            if stand is not None:
+                stand.write = source.write       # ESR answers are recorded like every control frame
         session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort,
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
@@ -232,6 +244,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             if outcome.ok and raw is not None and raw.stream is None:
                 raw.open()
     finally:
+        if stand is not None:
+            stand.close()
         if source is not None:
             source.close()
         out.close()
@@ -279,11 +293,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 @limit_options
+@sensor_options
 @logbook_option
 @summary_option
 def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after,
             raw_log, count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
-            logbook, summary_json, reconnect=None):
+            logbook, summary_json, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
+            ambient_pressure=None, air_pressure=None, engine=None):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -326,7 +342,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     if rate is not None and not keepalive:
         raise UsageError("rate: applies only with --keepalive")
     check_log_options(ids, snapshot, fmt)
-    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook)
+    sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
+    if replay is not None and (sensors.specs or sensors.air):
+        raise UsageError(f"{'aux' if sensors.specs else 'air-pressure'}: not with --replay (a recording has no "
+                         f"sensors beside it and cannot be answered)")
+    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, sensors=sensors,
+                        engine=engine)
     check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     control = None
     if keepalive:

@@ -11,7 +11,8 @@ from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
 from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
-from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
+from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors)
 from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -62,11 +63,13 @@ def example_text(kind="throttle") -> str:
 @protocol_version_option
 @log_options
 @limit_options
+@sensor_options
 @logbook_option
 @reconnect_option
 def profile(schedule, example, interpolate, rate, abort, summary_json, settle, average, steps_csv, fuel_density,
             dry_run, port, baud, stop_bits, timeout, sim, yes, protocol_version, fmt, output, append, snapshot, ids,
-            stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None):
+            stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None, aux=(), thrust_from=None,
+            fuel_flow_from=None, ambient_temp=None, ambient_pressure=None, air_pressure=None, engine=None):
     """Run a throttle or RPM schedule on the engine while its telemetry is logged.
 
     SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' or 'time_s,rpm=N[,state]' (an optional
@@ -116,12 +119,15 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if len(sched.notes) > 5:
         note(f"... and {len(sched.notes) - 5} more rounded values")
     averaging = settle is not None or average is not None or steps_csv is not None
-    if fuel_density is not None and not averaging:
-        raise UsageError("fuel-density: applies with --settle, --average or --steps-csv")
+    sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure,
+                              averaging=averaging, steps=True)
+    if fuel_density is not None and not averaging and sensors.ambient is None:
+        raise UsageError("fuel-density: applies with --settle, --average or --steps-csv (or --ambient-temp)")
     if dry_run:
         extra = [n for n, v in (("limit", limit), ("limits", limits_files), ("on-limit", on_limit),
                                 ("logbook", logbook), ("steps-csv", steps_csv), ("settle", settle),
-                                ("average", average), ("fuel-density", fuel_density)) if v]
+                                ("average", average), ("fuel-density", fuel_density), ("engine", engine))
+                 if v] + list(sensors.given())
         if extra:
             raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
         from .bridging import refuse_without
@@ -141,10 +147,11 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             raise UsageError("steps-csv: '-' needs -o FILE for the telemetry (both would go to stdout)")
         _check_dir(steps_csv, "steps-csv")
         averager = StepAverager(sched.steps(), 3.0 if settle is None else settle, average,
-                                fuel_density or DEFAULT_DENSITY)
+                                fuel_density or DEFAULT_DENSITY, thrust=sensors.thrust, flow=sensors.flow,
+                                ambient=sensors.ambient)
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
-                        averager=averager, force=True)
+                        averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density)
     stand.schedule = sched
     if not is_simulator(url):
         from ...codec import zk
@@ -159,6 +166,8 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         summary.update(stand.summary())
         if averager is not None:
             summary["steps"] = averager.rows()
+            summary["rows_not_steps"] = [{"line": row.line, "target": row.target_text(), "from_s": a, "to_s": b,
+                                          "why": why} for row, a, b, why in averager.skipped]
             summary["fuel_density_kg_l"] = averager.density
         steps = (averager.columns(), summary["steps"]) if averager is not None else None
         return steps, summary
@@ -233,8 +242,16 @@ def _print_summary(s):
                      + ("no frames" if mean is None else
                         f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, "
                         f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
-                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else ""))
+                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else "")
+                        + (f"; corrected rpm {st['rpm_corrected']:.0f}, thrust {st['thrust_corrected_kg']:g} kg"
+                           if st.get("thrust_corrected_kg") is not None and st.get("rpm_corrected") is not None
+                           else "")
+                        + (f", TSFC {st['tsfc_corrected_g_kn_s']:g}" if st.get("tsfc_corrected_g_kn_s") is not None
+                           else ""))
                      + (f" [{st['note']}]" if st["note"] else ""))
+    for row in s.get("rows_not_steps") or ():
+        lines.append(f"  line {row['line']} ({row['target']}, {row['from_s']:g}..{row['to_s']:g} s): "
+                     f"{row['why']}, not a step")
     click.echo("\n".join(lines), err=True)
 
 
