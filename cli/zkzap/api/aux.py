@@ -38,7 +38,8 @@ from ..errors import NoReply, PortError, UsageError
 
 #: Baud rate of a serial aux source without ``@BAUD``.
 DEFAULT_BAUD = 9600
-#: A field older than this (session seconds, real seconds on a live port) is no longer merged.
+#: A field older than this (real seconds; on a sped-up simulator that many of its seconds times
+#: its speed) is no longer merged.
 STALE_S = 2.0
 #: Longest line read (a sensor that never sends a newline is not held in memory).
 MAX_LINE = 4096

@@ -175,12 +175,13 @@ class StepAverager:
     def columns(self) -> list:
         """The columns of :meth:`rows` (the steps CSV's header)."""
         cols = columns()
-        head, tail = cols[:-2], cols[-2:]
+        head, tsfc_cols, tail = cols[:-4], cols[-4:-2], cols[-2:]
         if self.thrust is not None:
             head += ["thrust_from", "thrust_from_kg_mean", "thrust_from_kg_min", "thrust_from_kg_max"]
         if self.flow is not None:
             head += ["fuel_flow_from", "fuel_flow_from_l_min_mean", "fuel_flow_from_l_min_min",
                      "fuel_flow_from_l_min_max"]
+        head += tsfc_cols
         if self.ambient is not None:
             head += CORRECTED_COLUMNS
         return head + tail
