@@ -198,3 +198,37 @@ def test_bad_input_exit_2(cli, tmp_path, monkeypatch, args, msg):
     r = cli("zk", *[subst.get(a, a) for a in args])
     assert r.exit_code == 2 and msg in r.stderr and r.stdout == "", r
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_path):
+    import sqlite3
+
+    book = str(tmp_path / "engines.db")
+    old = sqlite3.connect(book)                         # a logbook from before engines were named
+    from zkzap.api.logbook import SCHEMA
+
+    old.execute(SCHEMA.replace(",\n    engine TEXT,\n    throttle_s TEXT", ""))
+    old.close()
+    for throttle, engine in ((90, "K100-1"), (50, "K100-2")):
+        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "25", "-p", SIM,
+                "-f", "jsonl", "--logbook", book, "--engine", engine)
+        assert r.exit_code == 0, r
+    r = cli("zk", "logbook", book, "--service", "K100-1", "--note", "25 h inspection")
+    assert r.exit_code == 0 and "service 1 of K100-1 recorded" in r.stderr
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "25", "-p", SIM, "-f", "jsonl",
+            "--logbook", book, "--engine", "K100-1")
+    assert r.exit_code == 0, r
+    doc = json.loads(cli("zk", "logbook", book, "--engine", "K100-1", "--above", "80", "--above", "55",
+                         "-f", "json").stdout)
+    tot, since = doc["totals"], doc["since_service"]
+    assert [run["engine"] for run in doc["runs"]] == ["K100-1", "K100-1"] and tot["starts"] == 2
+    first, second = doc["runs"]
+    assert set(first["throttle_s"]) == {"90"} and set(second["throttle_s"]) == {"60"}
+    assert tot["hours_above"]["80"] == round(first["throttle_s"]["90"] / 3600, 4) > 0
+    assert tot["hours_above"]["55"] == round((first["throttle_s"]["90"] + second["throttle_s"]["60"]) / 3600, 4)
+    assert since["runs"] == 1 and since["hours_above"]["80"] == 0 and doc["last_service"]["note"] == "25 h inspection"
+    assert since["fuel_used_l"] == second["fuel_used_l"] and tot["run_hours"] > tot["running_hours"] > 0
+    rows = list(csv.DictReader(io.StringIO(cli("zk", "logbook", book, "--engine", "K100-1", "-f", "csv").stdout)))
+    assert [row["period"] for row in rows] == ["all runs", f"since the service of {doc['last_service']['at']}"]
+    r = cli("zk", "logbook", book, "--engine", "K100-9")
+    assert r.exit_code == 2 and "engines there: K100-1, K100-2" in r.stderr

@@ -151,6 +151,7 @@ class Stand:
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],
             "limits_violated": self.limits.violated() if self.limits is not None else [],
             "command": command, "port": port, "schedule": schedule, "files": [f for f in files if f],
-            "outcome": outcome.reason, "exit_status": outcome.exit_code,
+            "outcome": outcome.reason, "exit_status": outcome.exit_code, "engine": self.engine,
+            "throttle_s": self.stats.throttle_s,
         }
         return _logbook.record(self.logbook, run)
