@@ -8,7 +8,7 @@ import click
 
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, format_option
+from ..options import FilePath, FiniteRange, format_option
 
 TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "s"),
          ("running_s", "run s"), ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"),
@@ -27,7 +27,7 @@ DEFAULT_ABOVE = (80.0,)
 @click.option("--engine", default=None, metavar="NAME",
               help="One engine's book: its runs (recorded with --engine NAME), run and running hours, starts, "
                    "fuel, hours above --above, and the totals since its last service.")
-@click.option("--above", "above", multiple=True, type=click.FloatRange(0, 101), metavar="PCT",
+@click.option("--above", "above", multiple=True, type=FiniteRange(0, 101), metavar="PCT",
               help="With --engine: running hours at or above this throttle, % (default 80; 1 % resolution). "
                    "Repeatable.")
 @click.option("--service", default=None, metavar="NAME",
