@@ -133,3 +133,21 @@ def test_check_counts_the_frames_that_carried_each_field(cli):
 def test_check_never_passes_with_no_frame(cli):
     r = cli("zk", "check", "-p", "sim://zk?silent_after=0&speed=10", "--duration", "1", "-f", "json")
     assert r.exit_code == 3 and r.stdout == "" and "in the 1.0 s the session ran" in r.stderr, r
+
+
+# --- one clock -----------------------------------------------------------------------------------
+
+def test_the_logbook_dates_a_fast_run_by_the_real_clock(cli, tmp_path):
+    import calendar
+    import time
+
+    book = tmp_path / "engine.db"
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", "sim://zk?speed=10",
+            "-f", "jsonl", "--logbook", str(book))
+    done = time.time()
+    assert r.exit_code == 0, r
+    run = json.loads(cli("zk", "logbook", str(book), "-f", "json").stdout)["runs"][0]
+    started, ended = (calendar.timegm(time.strptime(run[k], "%Y-%m-%dT%H:%M:%SZ")) for k in ("started", "ended"))
+    assert run["duration_s"] >= 20                           # session (model) seconds...
+    assert ended - started <= 2 + run["duration_s"] / 10     # ...that took a tenth of it in real time
+    assert ended <= done + 1                                 # never in the future
