@@ -48,6 +48,22 @@ class ScheduleTargetError(DeviceError):
     """An RPM target the connected ECU cannot follow (above its max rpm, or too old for RPM mode)."""
 
 
+def rpm_factor_for(top) -> int:
+    """The RPM_X that expresses targets up to ``top`` rpm with the finest steps (10 x RPM_X rpm)."""
+    return max(1, math.ceil(top / (_RPM_VALUE_MAX * 10)))
+
+
+def check_rpm_target(rpm, max_rpm, version, where="rpm") -> None:
+    """Raise :class:`ScheduleTargetError` when an ECU reporting ``max_rpm`` and protocol
+    ``version`` (None: not known yet) cannot follow the RPM target ``rpm``; ``where`` starts the
+    message (``schedule run.csv:4``)."""
+    if version is not None and version < 4:
+        raise ScheduleTargetError(f"{where}: RPM targets need an ECU of protocol version 4 or later; this one "
+                                  f"reports {version}")
+    if max_rpm is not None and rpm > max_rpm:
+        raise ScheduleTargetError(f"{where}: rpm {rpm:g} is above the ECU's max rpm {max_rpm:g}")
+
+
 class Row:
     """One schedule row: ``t`` (s), ``throttle`` (%) or ``rpm`` (target), ``state``, and the
     ``line`` it was read from."""
@@ -105,7 +121,7 @@ class Schedule:
         self.has_rpm = any(r.rpm is not None for r in rows)
         top = max((r.rpm for r in rows if r.rpm is not None), default=0)
         self.max_target = top
-        self.rpm_factor = max(1, math.ceil(top / (_RPM_VALUE_MAX * 10))) if self.has_rpm else 0
+        self.rpm_factor = rpm_factor_for(top) if self.has_rpm else 0
         self._i = 0
         self._cache = {}
         self._toggle = 0
@@ -307,13 +323,10 @@ class Schedule:
         version = self._ecu.decoder.known
         if max_rpm is None:
             return False
-        if version is not None and version < 4:
-            raise ScheduleTargetError(f"schedule {self.name}: RPM targets need an ECU of protocol version 4 "
-                                      f"or later; this one reports {version}")
-        over = next((r for r in self.rows if r.rpm is not None and r.rpm > max_rpm), None)
-        if over is not None:
-            raise ScheduleTargetError(f"schedule {self.name}:{over.line}: rpm {over.rpm:g} is above the ECU's "
-                                      f"max rpm {max_rpm:g}")
+        check_rpm_target(0, max_rpm, version, f"schedule {self.name}")
+        for r in self.rows:
+            if r.rpm is not None:
+                check_rpm_target(r.rpm, max_rpm, version, f"schedule {self.name}:{r.line}")
         self._checked = True
         return True
 

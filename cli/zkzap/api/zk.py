@@ -77,11 +77,12 @@ class Ecu:
     ``port`` is a device path, any pyserial URL, ``sim://zk?speed=10`` or a simulator started
     with :func:`zkzap.sim.start`; ``baud`` the line speed; ``protocol_version`` the ECU's (None:
     read from status ID 6); ``silence`` the longest wait for a status frame before NoReply;
-    ``abort`` the abort command (``standby``, ``stop`` or ``none``).
+    ``abort`` the abort command (``standby``, ``stop`` or ``none``); ``stop_bits`` those of the
+    ECU's UART (1 or 2).
     """
 
     def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
-                 silence: float = 2.0, abort: str = "standby"):
+                 silence: float = 2.0, abort: str = "standby", stop_bits: int = 1):
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -99,7 +100,7 @@ class Ecu:
         self.abort_kind = abort
         """The abort command sent on an abnormal end and at close (standby, stop, none)."""
         self.silence = silence
-        self.link = ZkLink.open(url, baud)
+        self.link = ZkLink.open(url, baud, stop_bits=stop_bits)
         """The :class:`~zkzap.link.zk_port.ZkLink` (the port)."""
         self.source = LiveSource(self.link)
         self.telemetry = Telemetry(protocol_version, wall0=self.source.wall0)
