@@ -1,0 +1,153 @@
+"""The mightyZAP console in a real browser: scan, live table, moves, the register table's consent,
+fleet backup/diff/apply, the self-check, a second page that watches, and a clean browser console.
+
+The bus is the simulator served over TCP from this process: ``socket://`` is a real port for the
+consent rules, so stored writes ask for confirmation as they would on hardware.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from zkzap.sim import start_zap
+
+from webpage import WebConsole, click, console_errors, consent_dialog, css, js, set_value, text_of, until
+
+pytestmark = pytest.mark.xdist_group("web-zap")
+
+
+@pytest.fixture(scope="module")
+def bus():
+    with start_zap(ids=[1, 2, 3], transport="tcp") as sim:
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def console(bus):
+    c = WebConsole("zap", "-p", bus.url, "--scan-ids", "0-10")
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def page(browser, console):
+    browser.get(console.url)
+    until(lambda: len(css(browser, "#actuators tbody tr")) == 3, "the first scan's three actuators")
+    return browser
+
+
+def register(bus, ident, name):
+    with bus.lock:
+        return bus.device.actuator(ident).get(name)
+
+
+def test_the_first_scan_lists_the_actuators_and_a_new_scan_shows_progress(page, console):
+    assert [r.get_attribute("id") for r in css(page, "#actuators tbody tr")] == ["act-1", "act-2", "act-3"]
+    assert "0x0C4C" in text_of(page, "#act-1") and "You control" in text_of(page, "#control")
+    set_value(page, "#scan-ids", "0-20")
+    click(page, "#scan")
+    until(lambda: "probes" in text_of(page, "#scan-note"), "the scan's progress")
+    until(lambda: "21 of 21 probes" in text_of(page, "#scan-note") and not css(page, "#busy.show"), "the scan to end")
+    until(lambda: "3 found" in text_of(page, "#act-note"), "the table after the scan")
+    assert "scan: 3 actuators found (IDs 1-3)" in console.stderr()
+
+
+def test_the_live_view_follows_a_move_of_one_actuator(page, bus):
+    set_value(page, "#act-2 td.goal input[type=range]", 3000, "input")
+    until(lambda: abs(register(bus, 2, "present-position") - 3000) <= 5, "the simulated actuator to reach 3000")
+    until(lambda: text_of(page, "#act-2 td.pos .big").replace(",", "").isdigit()
+          and abs(int(text_of(page, "#act-2 td.pos .big").replace(",", "")) - 3000) <= 5, "the page to show it")
+    assert register(bus, 1, "present-position") == 0
+
+
+def test_sync_move_moves_the_ticked_actuators_together(page, bus):
+    for ident in (1, 3):
+        click(page, f"#act-{ident} input.sync")
+    set_value(page, "#sync-pos", 1200)
+    click(page, "#sync")
+    until(lambda: all(abs(register(bus, i, "present-position") - 1200) <= 5 for i in (1, 3)), "both at 1200")
+    assert abs(register(bus, 2, "present-position") - 3000) <= 5
+
+
+def _write(page, name, value):
+    set_value(page, f"#registers input[data-register={name}]", value)
+    click(page, f"#registers button[data-register={name}]")
+
+
+def test_a_stored_write_asks_for_confirmation_and_a_refusal_writes_nothing(page, bus):
+    click(page, "#act-1 button")                          # Registers
+    until(lambda: css(page, "#registers input[data-register=long-stroke-limit]"), "the register table")
+    _write(page, "long-stroke-limit", 3500)
+    assert "stored settings" in consent_dialog(page) and "long-stroke-limit" in text_of(page, "#modal-text")
+    click(page, "#modal-cancel")
+    until(lambda: "confirmation refused" in text_of(page, "#log"), "the refusal in the log")
+    assert register(bus, 1, "long-stroke-limit") == 3686
+    _write(page, "long-stroke-limit", 3500)
+    consent_dialog(page)
+    click(page, "#modal-ok")
+    until(lambda: register(bus, 1, "long-stroke-limit") == 3500, "the stored write")
+
+
+def test_a_setting_that_changes_how_it_answers_needs_force_then_consent(page, bus):
+    until(lambda: css(page, "#registers input[data-register=feedback-return-mode]"), "the register table")
+    _write(page, "feedback-return-mode", 1)
+    assert "changes how the actuator is reached" in consent_dialog(page)
+    assert not css(page, "#modal-ok")[0].is_enabled()      # not before 'force' is ticked
+    click(page, "#modal-force")
+    click(page, "#modal-ok")
+    until(lambda: "stored" in text_of(page, "#modal.show #modal-text"), "the stored-write confirmation next")
+    click(page, "#modal-ok")
+    until(lambda: "feedback-return-mode = 1" in text_of(page, "#log"), "the write in the log")
+
+
+def test_backup_diff_and_apply_of_a_fleet_file(page, bus, tmp_path):
+    doc = json.loads(js(page, "return (await Z.request('backup', {format: 'json'})).text;"))
+    assert sorted(doc["actuators"]) == ["1", "2", "3"]
+    assert doc["actuators"]["1"]["stored"]["long-stroke-limit"] == 3500
+    doc["actuators"]["2"]["stored"]["acceleration"] = 33
+    path = tmp_path / "fleet.json"
+    path.write_text(json.dumps(doc))
+    css(page, "#fleet-file")[0].send_keys(str(path))
+    click(page, "#diff")
+    until(lambda: "acceleration" in text_of(page, "#fleet-out"), "the diff table")
+    assert register(bus, 2, "acceleration") != 33
+    click(page, "#apply")
+    assert "survive power-off" in consent_dialog(page)
+    click(page, "#modal-ok")
+    until(lambda: register(bus, 2, "acceleration") == 33, "the apply's write")
+    until(lambda: "1 writes made, 0 not verified" in text_of(page, "#fleet-out"), "the apply's result")
+
+
+def test_the_self_check_moves_after_consent_and_shows_its_verdicts(page, bus):
+    click(page, "#act-3 .btn:nth-child(2)")             # Check
+    assert "full stroke" in consent_dialog(page)
+    click(page, "#modal-ok")
+    until(lambda: "verdict" in text_of(page, "#check-out"), "the check's verdicts", timeout=60)
+    assert "ID 3: pass" in text_of(page, "#check-note")
+
+
+def test_a_second_page_watches_and_cannot_move(page, bus, console):
+    first = page.current_window_handle
+    page.switch_to.new_window("tab")
+    try:
+        page.get(console.base + "/")                        # the cookie carries the token
+        until(lambda: "View only" in text_of(page, "#control"), "the second page's view-only banner")
+        assert "page 1" in text_of(page, "#control")
+        until(lambda: css(page, "#act-1"), "its table")
+        assert not css(page, "#act-1 td.goal input[type=range]")[0].is_enabled()
+        err = js(page, "try { await Z.request('move', {id: 1, position: 100}); return null; }"
+                       " catch (e) { return e.message; }")
+        assert err.startswith("view only: page 1")
+        assert console_errors(page) == []
+    finally:
+        page.close()
+        page.switch_to.window(first)
+    assert abs(register(bus, 1, "present-position") - 100) > 50
+
+
+def test_no_errors_in_the_browser_console(page):
+    assert console_errors(page) == []
+    assert js(page, "return window.zkzapStats.errors") == 0
+    assert js(page, "return window.zkzapStats.samples") > 0

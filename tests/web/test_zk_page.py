@@ -1,0 +1,116 @@
+"""The ZK console in a real browser: the live view, a start under consent with rpm rising, the
+abort, a second page that watches (and may abort), the dead-man rule when the controlling tab
+closes, and a clean browser console.
+
+The ECU is the simulator (ten times faster than real time) served over TCP from this process:
+``socket://`` is a real port for the consent rules, so a start asks for confirmation.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from zkzap.sim import start_zk
+
+from webpage import WebConsole, click, console_errors, consent_dialog, css, js, set_value, text_of, until
+
+pytestmark = pytest.mark.xdist_group("web-zk")
+
+
+@pytest.fixture(scope="module")
+def ecu():
+    with start_zk(speed=10, transport="tcp") as sim:
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def console(ecu):
+    c = WebConsole("zk", "-p", ecu.url, "--limit", "egt_c<=950,warn=900")
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def page(browser, console):
+    browser.get(console.url)
+    until(lambda: "frames/s" in text_of(browser, "#link"), "the status stream")
+    return browser
+
+
+def sw(ecu):
+    with ecu.lock:
+        return ecu.device.effective_sw()
+
+
+def rpm_shown(page):
+    text = text_of(page, "#g-rpm .v").replace(",", "")
+    return int(text) if text.isdigit() else None
+
+
+def start(page, throttle=30):
+    set_value(page, "#throttle", throttle)
+    click(page, "#start")
+    assert "can start the engine" in consent_dialog(page)
+    click(page, "#modal-ok")
+
+
+def test_the_page_shows_the_status_stream_and_the_limits(page):
+    until(lambda: text_of(page, "#state") not in ("", "–"), "the engine state")
+    assert text_of(page, "#state") == "stop"
+    assert "egt_c<=950,warn=900" in text_of(page, "#limits")
+    assert "You control" in text_of(page, "#control")
+
+
+def test_a_start_asks_for_consent_and_the_rpm_rises(page, ecu, console):
+    start(page, 30)
+    until(lambda: "Running under this console" in text_of(page, "#command"), "the page to show the run")
+    assert sw(ecu) == "run"
+    until(lambda: (rpm_shown(page) or 0) > 45000, "the rpm to rise above idle", timeout=60)
+    until(lambda: text_of(page, "#state") == "running", "the running state")
+    assert "starts the engine: state run, throttle 30 %" in console.stderr()
+
+
+def test_the_throttle_follows_the_slider_while_running(page, ecu):
+    set_value(page, "#throttle", 60)
+    def sent():
+        with ecu.lock:
+            return any(r.get("throttle_pct") == 60 for r in list(ecu.device.received)[-5:])
+
+    until(sent, "throttle 60 % sent")
+
+
+def test_abort_sends_standby(page, ecu):
+    click(page, "#abort")
+    until(lambda: sw(ecu) == "standby", "standby at the ECU")
+    until(lambda: "Monitoring" in text_of(page, "#command"), "the page to show the end")
+    assert "abort from page 1" in text_of(page, "#ended") and "standby, throttle 0" in text_of(page, "#ended")
+
+
+def test_a_second_page_watches_and_closing_the_controlling_tab_sends_standby(page, ecu, console):
+    until(lambda: text_of(page, "#state") != "running", "the engine out of running")
+    start(page, 25)
+    until(lambda: sw(ecu) == "run", "the engine running again")
+    first = page.current_window_handle
+    page.switch_to.new_window("tab")
+    watcher = page.current_window_handle
+    page.get(console.base + "/")
+    until(lambda: "View only" in text_of(page, "#control"), "the second page's view-only banner")
+    assert "page" in text_of(page, "#control") and "controls" in text_of(page, "#control")
+    assert not css(page, "#start")[0].is_enabled() and css(page, "#abort")[0].is_enabled()
+    err = js(page, "try { await Z.request('set', {mode: 'throttle', throttle: 90}); return null; }"
+                   " catch (e) { return e.message; }")
+    assert err.startswith("view only")
+    page.switch_to.window(first)
+    page.close()                                          # the controlling tab goes away
+    page.switch_to.window(watcher)
+    until(lambda: sw(ecu) == "standby", "the dead-man's standby")
+    until(lambda: "Nobody controls" in text_of(page, "#control"), "the watcher to see nobody controls")
+    until(lambda: "dead-man" in text_of(page, "#ended"), "the reason on the page")
+    assert "the page closed" in console.stderr()
+    assert console_errors(page) == []
+
+
+def test_no_errors_in_the_browser_console(page):
+    assert console_errors(page) == []
+    assert js(page, "return window.zkzapStats.errors") == 0
+    assert js(page, "return window.zkzapStats.samples") > 0
