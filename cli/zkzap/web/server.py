@@ -406,7 +406,7 @@ class Server:
                     c.pinged = now
                     c.ping_n += 1
                     hub._put(c, dumps({"type": "ping", "n": c.ping_n, "t": round(time.time() * 1000, 1),
-                                       "dropped": c.dropped}), False, 0)
+                                       "dropped": c.dropped, "produced": hub.produced}), False, 0)
 
 
 _FORBIDDEN = """<!doctype html><meta charset="utf-8"><title>zkzap web</title>

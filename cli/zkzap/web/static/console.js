@@ -18,10 +18,12 @@ const Z = (() => {
   };
   const fmt = (v, digits = 0) => (v === null || v === undefined || Number.isNaN(v)) ? "–"
     : Number(v).toLocaleString("en-US", { minimumFractionDigits: digits, maximumFractionDigits: digits });
+  const setText = (e, text) => { if (e.textContent !== text) e.textContent = text; };
+  const setClass = (e, cls) => { if (e.className !== cls) e.className = cls; };
   const clock = (t) => new Date(t * 1000).toLocaleTimeString("en-GB", { hour12: false });
 
   // -- figures for benchmarks and tests ------------------------------------------------------
-  const stats = { samples: 0, batches: 0, latencies: [], renderLatencies: [], dropped: 0, errors: 0, connected: false };
+  const stats = { produced: 0, samples: 0, batches: 0, latencies: [], renderLatencies: [], serverLatencies: [], pageLatencies: [], dropped: 0, errors: 0, connected: false };
   window.zkzapStats = stats;
   const keep = (arr, v) => { arr.push(v); if (arr.length > 20000) arr.splice(0, arr.length - 20000); };
 
@@ -52,6 +54,7 @@ const Z = (() => {
         const now = Date.now();
         stats.batches++;
         for (const it of msg.items) { stats.samples++; if (it.w) keep(stats.latencies, now - it.w); }
+        if (msg.items.length && msg.items[0].w) { keep(stats.serverLatencies, msg.s - msg.items[0].w); keep(stats.pageLatencies, now - msg.s); }
       }
       dispatch(msg);
     };
@@ -60,6 +63,8 @@ const Z = (() => {
     switch (msg.type) {
       case "ping":
         stats.dropped = msg.dropped || 0;
+        stats.produced = msg.produced || 0;
+        stats.producedAt = msg.t;         // the console's clock when it counted them
         ws.send(JSON.stringify({ op: "pong", n: msg.n, t: msg.t }));
         return;
       case "hello": me = msg.you; hello = msg; $("#port").textContent = msg.port + (msg.simulated ? " (simulated)" : "");
@@ -180,10 +185,21 @@ const Z = (() => {
   }
 
   // -- plots ---------------------------------------------------------------------------------
+  const PLOT_FPS = 5;
+  const allPlots = [];
+  let nextPlot = 0;
+  // at most one plot repaints per animation frame, in turn: the work is spread over the frames
+  function drawOnePlot(now) {
+    for (let k = 0; k < allPlots.length; k++) {
+      const p = allPlots[(nextPlot + k) % allPlots.length];
+      if (p.u.root.isConnected && p.due(now)) { p.draw(now); nextPlot = (nextPlot + k + 1) % allPlots.length; return; }
+    }
+  }
   // one uPlot over a rolling time window; push() adds a point, draw() (once per frame) repaints
   class Plot {
     constructor(box, title, series, opts = {}) {
       this.window = opts.window || 60;
+      this.res = opts.res ?? 0.04;
       this.max = opts.max || 12000;
       this.n = series.length;
       this.data = [[], ...series.map(() => [])];
@@ -210,19 +226,30 @@ const Z = (() => {
       }, this.data, area);
       this.area = area;
       this.dirty = false;
+      this.drawn = 0;
+      allPlots.push(this);
       new ResizeObserver(() => {
         const w = area.clientWidth;
         if (w > 0 && Math.abs(w - this.u.width) > 2) this.u.setSize({ width: w, height: this.u.height });
       }).observe(area);
     }
+    // points closer than `res` seconds share one (the newer values win): a 100 Hz stream is
+    // drawn at 25 points a second, as much as a plot's width shows
     push(t, values) {
-      const d = this.data;
-      d[0].push(t);
-      for (let i = 0; i < this.n; i++) d[i + 1].push(values[i] ?? null);
+      const d = this.data, last = d[0].length - 1;
+      if (last >= 0 && t - d[0][last] < this.res) {
+        for (let i = 0; i < this.n; i++) if (values[i] !== null && values[i] !== undefined) d[i + 1][last] = values[i];
+      } else {
+        d[0].push(t);
+        for (let i = 0; i < this.n; i++) d[i + 1].push(values[i] ?? null);
+      }
       this.dirty = true;
     }
+    // a plot repaints at most PLOT_FPS times a second: live enough, and the page stays free to
+    // take the next updates at once (software rendering on a small machine)
+    due(now) { return this.dirty && now - this.drawn >= 1 / PLOT_FPS; }
     draw(now) {
-      if (!this.dirty) return;
+      this.drawn = now;
       const d = this.data, cut = now - this.window;
       let k = 0;
       while (k < d[0].length && d[0][k] < cut) k++;
@@ -236,12 +263,15 @@ const Z = (() => {
 
   // repaint at most once per frame; record how late the newest sample is drawn
   const painters = [];
+  const PAINT_FPS = 15;           // figures and tables repaint at most this often
+  let painted = 0;
   let newest = 0;
   function onFrame(fn) { painters.push(fn); }
   function sawSample(w) { if (w > newest) newest = w; }
   function frame() {
     const now = Date.now();
-    for (const fn of painters) fn(now / 1000);
+    drawOnePlot(now / 1000);
+    if (now - painted >= 1000 / PAINT_FPS) { painted = now; for (const fn of painters) fn(now / 1000); }
     if (newest) { keep(stats.renderLatencies, Date.now() - newest); newest = 0; }
     requestAnimationFrame(frame);
   }
@@ -269,6 +299,6 @@ const Z = (() => {
   const nm = $("#name");
   if (nm) nm.addEventListener("click", name);
 
-  return { $, el, fmt, clock, connect, request, send, toast, banner, controlling, Plot, onFrame, sawSample,
+  return { $, el, fmt, clock, setText, setClass, connect, request, send, toast, banner, controlling, Plot, onFrame, sawSample,
            throttle, stats, get hello() { return hello; }, renderControl };
 })();

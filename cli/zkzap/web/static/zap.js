@@ -1,7 +1,7 @@
 /* zkzap web: the mightyZAP console page. */
 "use strict";
 (() => {
-  const { $, el, fmt } = Z;
+  const { $, el, fmt, setText } = Z;
   let actuators = [];             // the scan's records
   let busBaud = null;
   const live = {};                // id -> latest sample
@@ -62,14 +62,15 @@
       const r = rows[id], s = live[id];
       if (!s || !s.fresh) continue;
       s.fresh = false;
-      r.pos.textContent = fmt(s.pos);
-      r.cur.textContent = fmt(s.cur);
-      r.volt.textContent = fmt(s.volt, 1);
+      setText(r.pos, fmt(s.pos));
+      setText(r.cur, fmt(s.cur));
+      setText(r.volt, fmt(s.volt, 1));
       r.moving.className = "moving" + (s.moving ? " on" : "");
       if (s.pos !== null) r.bar.lastChild.style.left = `calc(${(s.pos / 4095 * 100).toFixed(2)}% - 1px)`;
       if (s.goal !== null) r.bar.firstChild.style.left = `${(s.goal / 4095 * 100).toFixed(2)}%`;
       if (!r.seeded && s.goal !== null && !r.touched()) { r.range.value = s.goal; r.num.value = s.goal; r.seeded = true; }
-      r.status.replaceChildren(statusTag(r.a, s));
+      const sig = `${r.a.baud}|${busBaud}|${r.a.polled}|${s.status}|${(s.errors || []).join()}`;
+      if (r.sig !== sig) { r.sig = sig; r.status.replaceChildren(statusTag(r.a, s)); }
     }
   }
 
@@ -96,7 +97,7 @@
     plots.cur.push(t, at(s.cur));
     plots.volt.push(t, at(s.volt));
   }
-  Z.onFrame((now) => { if (plots) { plots.pos.draw(now); plots.cur.draw(now); plots.volt.draw(now); } paintRows(); });
+  Z.onFrame(() => paintRows());
 
   // -- registers -----------------------------------------------------------------------------
   async function readRegisters(id) {

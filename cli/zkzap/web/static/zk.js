@@ -1,7 +1,7 @@
 /* zkzap web: the ZK console page. */
 "use strict";
 (() => {
-  const { $, el, fmt, clock } = Z;
+  const { $, el, fmt, clock, setText, setClass } = Z;
   const latest = {};              // every status field's latest value
   let engine = { controlling: false };
   let mode = "throttle";
@@ -71,19 +71,21 @@
   function paintGauges() {
     for (const key in gauges) {
       const { g, cell, val, mark, v } = gauges[key];
-      const x = latest[key], max = g.max();
+      const x = latest[key], max = g.max(), lvl = levels[key] || "";
+      const sig = `${x}|${max}|${lvl}`;
+      if (gauges[key].sig === sig) continue;
+      gauges[key].sig = sig;
       const f = x === undefined || x === null ? 0 : Math.max(0, Math.min(1, x / max));
       val.setAttribute("d", arc(A0, A0 + Math.max(0.1, SWEEP * f)));
-      const lvl = levels[key] || "";
       val.setAttribute("stroke", lvl === "bad" ? "#ff5d5d" : lvl === "warn" ? "#f2b134" : "#4aa3ff");
       mark.setAttribute("d", limitMark(key, max));
-      v.textContent = fmt(x, g.digits);
-      cell.className = "gauge " + lvl;
+      setText(v, fmt(x, g.digits));
+      setClass(cell, "gauge " + lvl);
     }
     for (const key in tiles) {
       const { d, cell, v } = tiles[key];
-      v.textContent = fmt(latest[key], d.digits);
-      cell.className = "tile " + (levels[key] || "");
+      setText(v, fmt(latest[key], d.digits));
+      setClass(cell, "tile " + (levels[key] || ""));
     }
   }
 
@@ -92,12 +94,12 @@
   function paintState() {
     const s = latest.engine_state;
     const st = $("#state");
-    st.textContent = latest.engine_state_name ?? "–";
-    st.className = "state " + (s === undefined ? "" : RUN.has(s) ? "run" : START.has(s) ? "start" : s === 12 ? "cool" : TEST.has(s) ? "test" : "off");
+    setText(st, latest.engine_state_name ?? "–");
+    setClass(st, "state " + (s === undefined ? "" : RUN.has(s) ? "run" : START.has(s) ? "start" : s === 12 ? "cool" : TEST.has(s) ? "test" : "off"));
     const e = $("#error");
-    if (latest.error_code) { e.textContent = `ECU error ${latest.error_code}: ${latest.error_name}`; e.className = "error bad"; }
-    else { e.textContent = "no ECU error"; e.className = "error"; }
-    $("#swst").textContent = latest.sw_state_name ? `switch: ${latest.sw_state_name}` : "";
+    if (latest.error_code) { setText(e, `ECU error ${latest.error_code}: ${latest.error_name}`); setClass(e, "error bad"); }
+    else { setText(e, "no ECU error"); setClass(e, "error"); }
+    setText($("#swst"), latest.sw_state_name ? `switch: ${latest.sw_state_name}` : "");
   }
   function paintEngine() {
     const c = $("#command");
@@ -157,7 +159,7 @@
     plots.volts = new Z.Plot(box, "Voltages", [{ label: "power V", color: "#f2b134", digits: 1 },
       { label: "pump V", color: "#3fcf7a", digits: 1 }, { label: "radio V", color: "#8b9bab", digits: 1 }], { digits: 1 });
     plots.current = new Z.Plot(box, "Current", [{ label: "A", color: "#ff5d5d", digits: 1 }], { digits: 1 });
-    Z.onFrame((now) => { for (const k in plots) plots[k].draw(now); paintGauges(); });
+    Z.onFrame(() => { paintGauges(); paintState(); });
   }
   function plotSample(it) {
     const t = it.w / 1000;
@@ -210,8 +212,8 @@
       $("#safety").textContent = `Abort: ${m.abort_text}, out of RPM mode — from every page. The engine also goes to standby when the controlling page closes or is silent for ${m.deadman_s} s, the ECU falls silent for ${m.silence_s} s or reports a new error, or a limit is violated.` + (m.simulated ? "" : " A start asks for confirmation.");
       paintLimits(null);
     },
-    history(m) { for (const it of m.items) take(it, false); paintState(); },
-    samples(m) { for (const it of m.items) take(it, true); paintState(); },
+    history(m) { for (const it of m.items) take(it, false); },
+    samples(m) { for (const it of m.items) take(it, true); },
     engine(m) { engine = m; paintEngine(); },
     health(m) {
       const l = $("#link");
