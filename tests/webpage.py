@@ -26,14 +26,15 @@ CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 
 
 def until(condition, what, timeout=PATIENCE, interval=0.05):
-    """Poll ``condition()`` until it returns something true (returned); fail naming ``what``."""
+    """Poll ``condition()`` until it returns something true (returned); fail naming ``what`` (a text,
+    or a function giving it at the time)."""
     deadline = time.monotonic() + timeout
     while True:
         got = condition()
         if got:
             return got
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out waiting for {what}")
+            pytest.fail(f"timed out waiting for {what() if callable(what) else what}")
         time.sleep(interval)
 
 

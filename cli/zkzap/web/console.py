@@ -125,6 +125,10 @@ class Console:
         """Messages that bring a page that just connected up to date."""
         return [{"type": "logs", "items": list(self.logs)}]
 
+    def deadman(self) -> bool:
+        """Whether a controlling page that falls silent must lose control now (any thread)."""
+        return False
+
     def control_lost(self, label: str, reason: str) -> None:
         """The controlling page lost control (closed, released, silent)."""
         self.log(f"{label} no longer controls: {reason}")

@@ -10,9 +10,11 @@ a message on such an authenticated socket.
 
 Who controls: the first page that connects controls; every other page watches (it sees
 everything, can take control once nobody has it, and may press the ZK abort). The server pings
-every page every :data:`PING_S`; a page answers at once. When the controlling page closes, or
-sends nothing for :data:`DEADMAN_S` (a frozen tab, a dead network), it loses control and the
-console is told (:meth:`Console.control_lost`: a ZK console sends the engine to standby).
+every page every :data:`PING_S`; a page answers at once. When the controlling page closes, it
+loses control; when it sends nothing for :data:`DEADMAN_S` (a frozen tab, a dead network) while
+the console runs something that needs a live hand (:meth:`Console.deadman`: a ZK console running
+the engine), it loses control too. Either way the console is told
+(:meth:`Console.control_lost`: a ZK console sends the engine to standby).
 
 Live data goes out in batches at most :data:`BATCH_S` apart, the same encoded message to every
 page; a page that cannot keep up loses its oldest batches first (counted), never the others'.
@@ -220,6 +222,7 @@ class Server:
         self._ids = 0
         self._tasks = []
         self.cookie = None
+        self.stopping = False
 
     # -- start and stop -------------------------------------------------------------------------
 
@@ -246,14 +249,17 @@ class Server:
         return self.url
 
     async def stop(self):
+        """End the console first (a ZK console ends its engine run: 'the console is shutting
+        down'), then tell the pages."""
         for t in self._tasks:
             t.cancel()
+        self.stopping = True
+        await self.loop.run_in_executor(None, self.console.close)
         for c in list(self.hub.clients.values()):
             try:
                 await c.ws.close(code=1001, message=b"the console is shutting down")
             except Exception:  # noqa: BLE001 - a page already gone
                 pass
-        await self.loop.run_in_executor(None, self.console.close)
         if self.runner is not None:
             await self.runner.cleanup()
 
@@ -341,7 +347,8 @@ class Server:
             c.task.cancel()
             if hub.controller == c.id:
                 hub.controller = None
-                self.console.control_lost(c.label, "the page closed")
+                if not self.stopping:
+                    self.console.control_lost(c.label, "the page closed")
             hub._broadcast(dumps(hub.control_message()))
         return ws
 
@@ -395,7 +402,7 @@ class Server:
             await asyncio.sleep(PING_S / 2)
             now = self.loop.time()
             ctl = hub.clients.get(hub.controller)
-            if ctl is not None and now - ctl.last_seen > DEADMAN_S:
+            if ctl is not None and now - ctl.last_seen > DEADMAN_S and self.console.deadman():
                 hub.controller = None
                 self.console.control_lost(ctl.label, f"no heartbeat for {DEADMAN_S:g} s")
                 hub._send(ctl.id, dumps({"type": "error", "text": f"you lost control: the server heard nothing "

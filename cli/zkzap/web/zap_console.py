@@ -409,7 +409,7 @@ class ZapConsole(Console):
 
 
 #: Requests that take the bus for a while (the pages show them as busy).
-JOBS = ("scan", "backup", "diff", "apply", "check", "registers")
+JOBS = ("scan", "backup", "diff", "apply", "check")
 
 
 def _register_info(reg) -> dict:

@@ -110,6 +110,7 @@ class ZkConsole(Console):
         self._next = None             # ("control", LiveCommand, label) to run after the session ends
         self._oneshot = None          # ("abort"|"stop", label): frames to send between sessions
         self._last_frame = None       # real time of the last status frame
+        self._last_t = None           # its time on the source's clock
         self._last_health = 0.0
         self.ended = None             # how the last control session ended (for the pages)
 
@@ -132,6 +133,9 @@ class ZkConsole(Console):
         self._source = _Cuttable(self.ecu.source)
         s = Session(self._source, self.tel, self._sink, control=control, rate=self.rate, abort=self.abort_kind,
                     on_update=self._update, notify=self._note, update_interval=0.02, **kw)
+        # the source goes on from session to session: a session's silence counts from the last
+        # frame any of them saw, not from the source's start
+        s.last_frame_t = self._last_t
         self._session = s
         return s
 
@@ -205,6 +209,7 @@ class ZkConsole(Console):
     def _sink(self, rec):
         now = time.time()
         self._last_frame = now
+        self._last_t = rec["t"]
         item = {k: v for k, v in rec.items() if k not in UNSENT}
         item["w"] = round(now * 1000, 1)
         self.history.append(item)
@@ -268,6 +273,9 @@ class ZkConsole(Console):
         cutoff = time.time() * 1000 - HISTORY_S * 1000
         items = [r for r in list(self.history) if r["w"] >= cutoff]
         return super().snapshot() + [self._engine(), {"type": "history", "items": items}, self._health()]
+
+    def deadman(self):
+        return self.command is not None
 
     def control_lost(self, label, reason):
         super().control_lost(label, reason)
