@@ -5,6 +5,8 @@ holds, with a generous limit for a loaded machine, never a fixed time), and a pa
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
 import shutil
 import signal
@@ -110,3 +112,51 @@ def click(driver, selector):
 def consent_dialog(driver):
     """The confirmation dialog's text once it is shown."""
     return until(lambda: text_of(driver, "#modal.show #modal-text"), "the confirmation dialog")
+
+
+class Page:
+    """A page without a browser, on a WebSocket of an aiohttp session: it answers the console's
+    pings while ``alive``, keeps every message (:meth:`seen`) and sends requests
+    (:meth:`request`: the reply)."""
+
+    def __init__(self, ws):
+        self.ws = ws
+        self.alive = True
+        self.messages = []
+        self.n = 0
+        self.task = asyncio.get_running_loop().create_task(self._read())
+
+    async def _read(self):
+        async for m in self.ws:
+            msg = json.loads(m.data)
+            self.messages.append(msg)
+            if msg["type"] == "ping" and self.alive:
+                await self.ws.send_str(json.dumps({"op": "pong", "n": msg["n"], "t": msg["t"]}))
+
+    async def request(self, op, **fields):
+        self.n += 1
+        n = self.n
+        await self.ws.send_str(json.dumps({"op": op, "req": n, **fields}))
+        for _ in range(1200):
+            for msg in self.messages:
+                if msg.get("req") == n and msg["type"] in ("done", "error", "consent"):
+                    return msg
+            await asyncio.sleep(0.05)
+        raise AssertionError(f"no reply to {op}")
+
+    def seen(self, kind):
+        return [m for m in self.messages if m["type"] == kind]
+
+
+async def open_page(session, console):
+    ws = await session.ws_connect(console.base + "/ws", params={"token": console.token},
+                                  headers={"Origin": console.base})
+    return Page(ws)
+
+
+async def wait(cond, what, timeout=PATIENCE):
+    for _ in range(int(timeout / 0.05)):
+        if cond():
+            return
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")

@@ -13,7 +13,7 @@ import pytest
 
 from zkzap.sim import start_zk
 
-from webpage import WebConsole, until
+from webpage import Page, WebConsole, open_page, until, wait
 
 aiohttp = pytest.importorskip("aiohttp")
 pytestmark = pytest.mark.xdist_group("web-access")
@@ -96,10 +96,6 @@ def test_the_page_needs_the_token_which_is_traded_for_a_cookie(console):
     assert run(_get(console, "/", headers={"Host": "evil.example"}))[0] == 403     # DNS rebinding
 
 
-def _origin(console):
-    return console.base
-
-
 async def _socket_status(console, **kw):
     async with aiohttp.ClientSession() as s:
         try:
@@ -113,80 +109,34 @@ async def _socket_status(console, **kw):
 def test_a_socket_needs_the_consoles_origin_and_token(console, case):
     params = {} if case == "no token" else {"token": "x" * 24 if case == "wrong token" else console.token}
     headers = {} if case == "no origin" else {"Origin": "http://evil.example" if case == "another origin"
-                                              else _origin(console)}
+                                              else console.base}
     assert run(_socket_status(console, params=params, headers=headers)) == 403
-    assert run(_socket_status(console, params={"token": console.token}, headers={"Origin": _origin(console)})) == 101
-
-
-class Page:
-    """A page without a browser: it answers pings while ``alive``; ``replies`` by request."""
-
-    def __init__(self, ws):
-        self.ws = ws
-        self.alive = True
-        self.messages = []
-        self.n = 0
-        self.task = asyncio.get_running_loop().create_task(self._read())
-
-    async def _read(self):
-        async for m in self.ws:
-            msg = json.loads(m.data)
-            self.messages.append(msg)
-            if msg["type"] == "ping" and self.alive:
-                await self.ws.send_str(json.dumps({"op": "pong", "n": msg["n"], "t": msg["t"]}))
-
-    async def request(self, op, **fields):
-        self.n += 1
-        n = self.n
-        await self.ws.send_str(json.dumps({"op": op, "req": n, **fields}))
-        for _ in range(1200):
-            for msg in self.messages:
-                if msg.get("req") == n and msg["type"] in ("done", "error", "consent"):
-                    return msg
-            await asyncio.sleep(0.05)
-        raise AssertionError(f"no reply to {op}")
-
-    def seen(self, kind):
-        return [m for m in self.messages if m["type"] == kind]
-
-
-async def _open(session, console):
-    ws = await session.ws_connect(console.base + "/ws", params={"token": console.token},
-                                  headers={"Origin": _origin(console)})
-    return Page(ws)
-
-
-async def _wait(cond, what, timeout=30.0):
-    for _ in range(int(timeout / 0.05)):
-        if cond():
-            return
-        await asyncio.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+    assert run(_socket_status(console, params={"token": console.token}, headers={"Origin": console.base})) == 101
 
 
 def test_one_page_controls_and_a_silent_controller_sends_the_engine_to_standby(console, ecu):
     async def scenario():
         async with aiohttp.ClientSession() as s:
-            a = await _open(s, console)
-            await _wait(lambda: a.seen("hello"), "hello")
-            b = await _open(s, console)
-            await _wait(lambda: b.seen("control") and b.seen("control")[-1]["controller"], "the control message")
+            a = await open_page(s, console)
+            await wait(lambda: a.seen("hello"), "hello")
+            b = await open_page(s, console)
+            await wait(lambda: b.seen("control") and b.seen("control")[-1]["controller"], "the control message")
             me = a.seen("hello")[0]["you"]
             assert b.seen("control")[-1]["controller"]["id"] == me
             refused = await b.request("start", mode="throttle", throttle=20)
             assert refused["type"] == "error" and refused["text"].startswith("view only")
-            await _wait(lambda: a.seen("samples"), "status frames")
+            await wait(lambda: a.seen("samples"), "status frames")
             asked = await a.request("start", mode="throttle", throttle=20)
             assert asked["type"] == "consent" and asked["permission"] == "engine"      # socket://: a real port
             started = await a.request("start", mode="throttle", throttle=20, grant=["engine"])
             assert started["type"] == "done"
-            await _wait(lambda: sw(ecu) == "run", "the engine running")
+            await wait(lambda: sw(ecu) == "run", "the engine running")
             await asyncio.sleep(2.0)                       # answering its pings, the page keeps control
             assert sw(ecu) == "run"
             a.alive = False                                # the page freezes: no more answers
-            await _wait(lambda: sw(ecu) == "standby", "the dead-man's standby")
-            await _wait(lambda: any("lost control" in m.get("text", "") for m in a.seen("error")), "a's notice")
-            await _wait(lambda: b.seen("control")[-1]["controller"] is None, "control released")
+            await wait(lambda: sw(ecu) == "standby", "the dead-man's standby")
+            await wait(lambda: any("lost control" in m.get("text", "") for m in a.seen("error")), "a's notice")
+            await wait(lambda: b.seen("control")[-1]["controller"] is None, "control released")
             taken = await b.request("take")
             assert taken["type"] == "done"
             engine = [m for m in b.seen("engine")][-1]
@@ -208,12 +158,12 @@ def _end_while_running(ecu):
 
     async def scenario():
         async with aiohttp.ClientSession() as s:
-            a = await _open(s, c)
-            await _wait(lambda: a.seen("samples"), "status frames")
-            await _wait(lambda: (a.seen("health") and a.seen("health")[-1].get("silent_s") is not None), "health")
+            a = await open_page(s, c)
+            await wait(lambda: a.seen("samples"), "status frames")
+            await wait(lambda: (a.seen("health") and a.seen("health")[-1].get("silent_s") is not None), "health")
             r = await a.request("start", mode="throttle", throttle=15, grant=["engine"])
             assert r["type"] == "done", r
-            await _wait(lambda: sw(ecu) == "run", "the engine running")
+            await wait(lambda: sw(ecu) == "run", "the engine running")
             assert c.stop(signal.SIGTERM) == 143
 
     try:
