@@ -94,7 +94,7 @@ def _registers(page, ident):
 
 
 def _write(page, name, value):
-    set_value(page, f"#registers input[data-register={name}]", value)
+    set_value(page, f"#registers [data-register={name}]:not(button)", value)
     click(page, f"#registers button[data-register={name}]")
 
 

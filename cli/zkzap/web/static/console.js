@@ -155,7 +155,7 @@ const Z = (() => {
     }
     document.body.classList.toggle("viewonly", !controlling());
     document.querySelectorAll(".ctl").forEach(e => { if ("disabled" in e) e.disabled = !controlling() || e.dataset.off === "1"; });
-    if (handlers.control) handlers.control({ controlling: controlling(), controller });
+    if (handlers.controlchange) handlers.controlchange({ controlling: controlling(), controller });
   }
   function release() {
     const warn = hello && hello.kind === "zk" ? "Releasing control sends the engine to standby if this page runs it. " : "";
@@ -211,7 +211,8 @@ const Z = (() => {
       const axis = { stroke: "#8b9bab", grid: { stroke: "#2c3a48", width: 1 }, ticks: { stroke: "#2c3a48" } };
       const scales = { x: { time: true } };
       const hhmmss = (u, v) => v.map(x => new Date(x * 1000).toLocaleTimeString("en-GB", { hour12: false }));
-      const axes = [{ ...axis, values: hhmmss, space: 70 }, { ...axis, size: 60, values: (u, v) => v.map(x => fmt(x, opts.digits ?? 0)) }];
+      const short = (x) => Math.abs(x) >= 10000 ? `${fmt(x / 1000)}k` : fmt(x, opts.digits ?? 0);
+      const axes = [{ ...axis, values: hhmmss, space: 70 }, { ...axis, size: 56, values: (u, v) => v.map(short) }];
       if (opts.right) {
         scales.r = { range: opts.rightRange || undefined };
         axes.push({ ...axis, scale: "r", side: 1, grid: { show: false }, size: 50 });

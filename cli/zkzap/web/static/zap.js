@@ -115,8 +115,11 @@
         : rec.memory === "V" ? el("span", { class: "tag v", text: "volatile" }) : el("span", { class: "tag", text: "read-only" });
       let edit = el("span", { class: "dim", text: "" });
       if (rec.access === "RW") {
-        const input = el("input", { type: "number", class: "ctl", value: rec.value, min: info.lo, max: info.hi, "aria-label": rec.register,
-                                    "data-register": rec.register });
+        const input = info.choices
+          ? el("select", { class: "ctl", "aria-label": rec.register, "data-register": rec.register },
+               Object.entries(info.choices).map(([k, v]) => el("option", { value: k, selected: Number(k) === rec.value }, `${k} ${v}`)))
+          : el("input", { type: "number", class: "ctl", value: rec.value, min: info.lo, max: info.hi, "aria-label": rec.register,
+                          "data-register": rec.register });
         const btn = el("button", { class: "btn small ctl" + (info.protected ? " danger" : ""), "data-register": rec.register,
           onclick: async () => {
             const d = await Z.send("write", { id, register: rec.register, value: Number(input.value) });
@@ -129,7 +132,8 @@
       tb.append(el("tr", {}, el("td", { class: "mono dim", text: "0x" + rec.address.toString(16).toUpperCase().padStart(2, "0") }),
         el("td", { class: "name", text: rec.register, title: info.help || "" }), el("td", {}, mem),
         el("td", { class: "num", text: rec.value }), el("td", { class: "dim", text: phys }),
-        el("td", { class: "dim small", text: info.range || "" }), el("td", {}, edit)));
+        el("td", { class: "dim small", text: info.choices ? `${Object.keys(info.choices).length} choices` : info.range || "" }),
+        el("td", {}, edit)));
     }
     $("#registers").hidden = false;
     $("#reg-empty").hidden = true;
@@ -217,7 +221,7 @@
       $("#busy-text").textContent = `${m.job}: ${m.text}`;
       if (m.job === "scan") $("#scan-note").textContent = `${m.done} of ${m.total} probes`;
     },
-    control(c) { $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls"; },
+    controlchange(c) { $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls"; },
   };
   setInterval(() => {
     const dt = (Date.now() - pollT) / 1000, n = actuators.filter(a => a.polled && a.baud === busBaud).length;

@@ -27,26 +27,30 @@
     { key: "idle_rpm", name: "Idle rpm", unit: "", digits: 0 },
   ];
   const maxSeen = {};
-  const A0 = 150, SWEEP = 240, R = 78, CX = 100, CY = 92;
-  const pt = (deg) => [CX + R * Math.cos(deg * Math.PI / 180), CY + R * Math.sin(deg * Math.PI / 180)];
+  const A0 = 150, SWEEP = 240, R = 80, CX = 100, CY = 100;
+  const pt = (deg, r = R) => [CX + r * Math.cos(deg * Math.PI / 180), CY + r * Math.sin(deg * Math.PI / 180)];
   const arc = (a, b) => { const [x0, y0] = pt(a), [x1, y1] = pt(b);
     return `M${x0.toFixed(1)} ${y0.toFixed(1)} A${R} ${R} 0 ${b - a > 180 ? 1 : 0} 1 ${x1.toFixed(1)} ${y1.toFixed(1)}`; };
   const SVG = "http://www.w3.org/2000/svg";
-  const svg = (tag, attrs) => { const e = document.createElementNS(SVG, tag); for (const k in attrs) e.setAttribute(k, attrs[k]); return e; };
+  const svg = (tag, attrs, text) => { const e = document.createElementNS(SVG, tag); for (const k in attrs) e.setAttribute(k, attrs[k]);
+    if (text !== undefined) e.textContent = text; return e; };
 
   const gauges = {}, tiles = {};
   function buildGauges() {
     const box = $("#gauges");
     for (const g of GAUGES) {
-      const s = svg("svg", { viewBox: "0 0 200 150", role: "img", "aria-label": g.name });
+      const s = svg("svg", { viewBox: "0 0 200 166", role: "img", "aria-label": g.name });
       s.append(svg("path", { d: arc(A0, A0 + SWEEP), stroke: "#2c3a48", "stroke-width": 14, fill: "none", "stroke-linecap": "round" }));
       const val = svg("path", { d: arc(A0, A0 + 0.1), stroke: "#4aa3ff", "stroke-width": 14, fill: "none", "stroke-linecap": "round" });
       const mark = svg("path", { d: "", stroke: "#ff5d5d", "stroke-width": 4, fill: "none" });
-      s.append(val, mark);
-      const v = el("div", { class: "v num", text: "–" });
-      const cell = el("div", { class: "gauge", id: "g-" + g.key }, s, v, el("div", { class: "u", text: g.unit }), el("div", { class: "n", text: g.name }));
+      const v = svg("text", { x: CX, y: CY + 8, "text-anchor": "middle", class: "gv" }, "–");
+      const u = svg("text", { x: CX, y: CY + 32, "text-anchor": "middle", class: "gu" }, g.unit);
+      const lo = svg("text", { x: pt(A0)[0], y: CY + 62, "text-anchor": "middle", class: "gs" }, "0");
+      const hi = svg("text", { x: pt(A0 + SWEEP)[0], y: CY + 62, "text-anchor": "middle", class: "gs" }, "");
+      s.append(val, mark, v, u, lo, hi);
+      const cell = el("div", { class: "gauge", id: "g-" + g.key }, s, el("div", { class: "n", text: g.name }));
       box.append(cell);
-      gauges[g.key] = { g, cell, val, mark, v };
+      gauges[g.key] = { g, cell, val, mark, v, hi };
     }
     const t = el("div", { class: "tiles" });
     for (const d of TILES) {
@@ -70,7 +74,7 @@
   const levels = {};              // field -> "", "warn", "bad" from the limits
   function paintGauges() {
     for (const key in gauges) {
-      const { g, cell, val, mark, v } = gauges[key];
+      const { g, cell, val, mark, v, hi } = gauges[key];
       const x = latest[key], max = g.max(), lvl = levels[key] || "";
       const sig = `${x}|${max}|${lvl}`;
       if (gauges[key].sig === sig) continue;
@@ -79,7 +83,10 @@
       val.setAttribute("d", arc(A0, A0 + Math.max(0.1, SWEEP * f)));
       val.setAttribute("stroke", lvl === "bad" ? "#ff5d5d" : lvl === "warn" ? "#f2b134" : "#4aa3ff");
       mark.setAttribute("d", limitMark(key, max));
-      setText(v, fmt(x, g.digits));
+      const text = fmt(x, g.digits);
+      setText(v, text);
+      v.style.fontSize = text.length > 6 ? "28px" : "";
+      setText(hi, max >= 10000 ? `${fmt(max / 1000)}k` : fmt(max));
       setClass(cell, "gauge " + lvl);
     }
     for (const key in tiles) {
@@ -231,7 +238,7 @@
       if (mx) { $("#rpm-range").max = mx; $("#rpm").max = mx; $("#rpm-limits").textContent = `(${fmt(idle)} – ${fmt(mx)})`; }
       if (idle) $("#rpm-range").min = 0;
     },
-    control(c) {
+    controlchange(c) {
       $("#ctlnote").textContent = c.controlling ? "" : "view only";
       $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls";
     },
