@@ -16,7 +16,6 @@ from zkzap.sim import start_zk
 from webpage import Page, WebConsole, open_page, until, wait
 
 aiohttp = pytest.importorskip("aiohttp")
-pytestmark = pytest.mark.xdist_group("web-access")
 
 
 # -- before anything opens -------------------------------------------------------------------
@@ -51,13 +50,13 @@ def test_without_the_extra_it_names_the_extra(cli, monkeypatch):
 
 # -- a running console -----------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def ecu():
     with start_zk(speed=10, transport="tcp") as sim:
         yield sim
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def console(ecu):
     c = WebConsole("zk", "-p", ecu.url)
     yield c

@@ -16,25 +16,27 @@ from zkzap.sim import start_zap
 
 from webpage import WebConsole, click, console_errors, consent_dialog, css, js, set_value, text_of, until
 
-pytestmark = pytest.mark.xdist_group("web-zap")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def bus():
     with start_zap(ids=[1, 2, 3], transport="tcp") as sim:
         yield sim
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def console(bus):
-    c = WebConsole("zap", "-p", bus.url, "--scan-ids", "0-10")
+    # a reply timeout for a loaded test machine (the simulator runs in this process, beside the browser)
+    c = WebConsole("zap", "-p", bus.url, "--scan-ids", "0-10", "--timeout", "0.3")
     yield c
     c.close()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def opened(browser, console):
-    browser.get(console.url)
+    """The browser on this module's console (opened with its token when it is elsewhere)."""
+    if not browser.current_url.startswith(console.base):
+        browser.get(console.url)
     until(lambda: len(css(browser, "#actuators tbody tr")) == 3, "the first scan's three actuators")
     return browser
 
@@ -47,6 +49,12 @@ def page(opened):
           lambda: f"the page in control with the bus free (control: {text_of(opened, '#control')!r}, busy: "
                   f"{text_of(opened, '#busy')!r}, dialog: {text_of(opened, '#modal.show')!r})")
     return opened
+
+
+def shown(page, ident) -> int:
+    """The present position the page shows for ``ident`` (-1 while it shows none)."""
+    text = text_of(page, f"#act-{ident} td.pos .big").replace(",", "")
+    return int(text) if text.isdigit() else -1
 
 
 def register(bus, ident, name):
@@ -69,8 +77,7 @@ def test_the_live_view_follows_a_move_of_one_actuator(page, bus):
     set_value(page, "#act-2 td.goal input[type=range]", 3000, "input")
     others = register(bus, 1, "present-position")
     until(lambda: abs(register(bus, 2, "present-position") - 3000) <= 5, "the simulated actuator to reach 3000")
-    until(lambda: text_of(page, "#act-2 td.pos .big").replace(",", "").isdigit()
-          and abs(int(text_of(page, "#act-2 td.pos .big").replace(",", "")) - 3000) <= 5, "the page to show it")
+    until(lambda: abs(shown(page, 2) - 3000) <= 5, "the page to show it")
     assert register(bus, 1, "present-position") == others
 
 
@@ -87,6 +94,7 @@ def test_sync_move_moves_the_ticked_actuators_together(page, bus):
 
 
 def _registers(page, ident):
+    js(page, "document.querySelector('#registers tbody').replaceChildren()")   # wait for the new table
     click(page, f"#act-{ident} button")                   # Registers
     until(lambda: f"of id {ident}" in text_of(page, "#reg-id").lower() and css(page, "#registers input[data-register=id]")
           and css(page, "#registers input[data-register=id]")[0].get_attribute("value") == str(ident),

@@ -13,16 +13,15 @@ from zkzap.sim import start_zk
 from webpage import WebConsole, open_page, wait
 
 aiohttp = pytest.importorskip("aiohttp")
-pytestmark = pytest.mark.xdist_group("web-zk-control")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def ecu():
     with start_zk(speed=10, transport="tcp") as sim:
         yield sim
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def console(ecu):
     c = WebConsole("zk", "-p", ecu.url, "--limit", "rpm<=120000")
     yield c

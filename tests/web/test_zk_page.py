@@ -15,33 +15,35 @@ from zkzap.sim import start_zk
 
 from webpage import WebConsole, click, console_errors, consent_dialog, css, js, set_value, text_of, until
 
-pytestmark = pytest.mark.xdist_group("web-zk")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def ecu():
     with start_zk(speed=10, transport="tcp") as sim:
         yield sim
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def console(ecu):
     c = WebConsole("zk", "-p", ecu.url, "--limit", "egt_c<=950,warn=900")
     yield c
     import sys
-    print(c.stderr(), file=sys.stderr)
+    print(f"console pid {c.proc.pid}:", c.stderr(), file=sys.stderr)
     c.close()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def opened(browser, console):
-    browser.get(console.url)
+    """The browser on this module's console (opened with its token when it is elsewhere)."""
+    if not browser.current_url.startswith(console.base):
+        browser.get(console.url)
     return browser
 
 
 @pytest.fixture
 def page(opened, console, ecu):
     """The page, in control, with the engine not running."""
+    until(lambda: text_of(opened, "#control") not in ("", "not connected"), "the page's control banner")
     if "You control" not in text_of(opened, "#control"):
         opened.get(console.base + "/")
         until(lambda: "Take control" in text_of(opened, "#control") or "You control" in text_of(opened, "#control"),
@@ -63,7 +65,7 @@ def sw(ecu):
 
 
 def rpm_shown(page):
-    text = text_of(page, "#g-rpm .v").replace(",", "")
+    text = text_of(page, "#g-rpm .gv").replace(",", "")
     return int(text) if text.isdigit() else None
 
 
@@ -88,7 +90,9 @@ def test_a_start_asks_for_consent_the_rpm_rises_and_abort_sends_standby(page, ec
     start(page, 30)
     until(lambda: "Running under this console" in text_of(page, "#command"), "the page to show the run")
     assert sw(ecu) == "run"
-    until(lambda: (rpm_shown(page) or 0) > 45000, "the rpm to rise above idle", timeout=60)
+    until(lambda: (rpm_shown(page) or 0) > 45000, lambda: "the rpm to rise above idle (page: " + str(js(page,
+          "return [window.zkzapStats.longest, window.zkzapStats.pingGap, window.zkzapStats.samples, location.href]"))
+          + f", ecu rpm {ecu.device.rpm}, console pid {console.proc.pid}: {console.stderr()[-600:]})", timeout=60)
     until(lambda: text_of(page, "#state") == "running", "the running state")
     assert "starts the engine: state run, throttle 30 %" in console.stderr()
 

@@ -216,6 +216,7 @@ class ZapConsole(Console):
                 found[rec["id"]] = rec
         finally:
             self._progress("scan", total, total, "done")
+        self._second_look(found)
         # poll at the baud rate most actuators answered at (the first scanned when tied)
         bauds_found = [r["baud"] for r in found.values()]
         best = max(bauds, key=lambda b: (bauds_found.count(b), -bauds.index(b))) if bauds_found else was
@@ -230,6 +231,20 @@ class ZapConsole(Console):
                    else ""))
         self.log(text, "info" if found else "warn")
         self.reply(ctx, found=sorted(found))
+
+    def _second_look(self, found):
+        """Actuators that answered Echo but gave no identity (Load Data unanswered: return mode
+        0, or a reply too late on a busy line) are asked once more at their baud rate, so a late
+        reply does not leave an actuator unpolled."""
+        for ident, rec in found.items():
+            if rec["model"] is not None or rec["status"] in ("garbled", "duplicate"):
+                continue
+            if self.bus.baud != rec["baud"]:
+                self.bus.baud = rec["baud"]
+            again = self.bus.identify(ident)
+            if again["model"] is not None:
+                rec.update(again, polled=True)
+                self.log(f"scan: ID {ident} identified on a second look (model 0x{again['model']:04X})")
 
     # moves ------------------------------------------------------------------------------------
 

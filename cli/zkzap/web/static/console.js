@@ -23,8 +23,13 @@ const Z = (() => {
   const clock = (t) => new Date(t * 1000).toLocaleTimeString("en-GB", { hour12: false });
 
   // -- figures for benchmarks and tests ------------------------------------------------------
-  const stats = { produced: 0, samples: 0, batches: 0, latencies: [], renderLatencies: [], serverLatencies: [], pageLatencies: [], dropped: 0, errors: 0, connected: false };
+  const stats = { produced: 0, samples: 0, batches: 0, latencies: [], renderLatencies: [], serverLatencies: [], pageLatencies: [], dropped: 0, errors: 0, failures: 0, connected: false };
   window.zkzapStats = stats;
+  stats.longest = 0;               // the longest main-thread task seen (ms)
+  try {
+    new PerformanceObserver((list) => { for (const e of list.getEntries()) stats.longest = Math.max(stats.longest, e.duration); })
+      .observe({ type: "longtask", buffered: true });
+  } catch (e) { /* not every browser has long-task timing */ }
   const keep = (arr, v) => { arr.push(v); if (arr.length > 20000) arr.splice(0, arr.length - 20000); };
 
   // -- the socket ----------------------------------------------------------------------------
@@ -62,6 +67,8 @@ const Z = (() => {
   function dispatch(msg) {
     switch (msg.type) {
       case "ping":
+        if (stats.lastPing) stats.pingGap = Math.max(stats.pingGap || 0, Date.now() - stats.lastPing);
+        stats.lastPing = Date.now();
         stats.dropped = msg.dropped || 0;
         stats.produced = msg.produced || 0;
         stats.producedAt = msg.t;         // the console's clock when it counted them
@@ -172,7 +179,8 @@ const Z = (() => {
     while (box.childElementCount > 300) box.lastChild.remove();
   }
   function toast(text, kind = "") {
-    stats.errors += kind ? 0 : 1;
+    if (!kind) addLog({ t: Date.now() / 1000, level: "error", text });   // errors stay in the log
+    stats.failures += kind ? 0 : 1;
     const t = el("div", { class: "toast " + kind, role: "alert", text });
     $("#toasts").append(t);
     setTimeout(() => t.remove(), 6000);
