@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from e2e.conftest import _first_line, clean_env, executable
+from e2e.conftest import clean_env, executable
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -24,7 +24,10 @@ CHROMEDRIVER = "/usr/bin/chromedriver"
 PATIENCE = 30.0
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--disable-dev-shm-usage", "--window-size=1400,1000")
+                 "--disable-dev-shm-usage", "--window-size=1400,1000",
+                 # every page a test opens is one a person looks at: none is slowed as a background page
+                 "--disable-renderer-backgrounding", "--disable-background-timer-throttling",
+                 "--disable-backgrounding-occluded-windows")
 
 
 def until(condition, what, timeout=PATIENCE, interval=0.05):
@@ -44,16 +47,37 @@ class WebConsole:
     """``zkzap web ARGS...`` on a free loopback port: ``url`` (with its token), ``base``,
     ``token``, ``stderr()`` (what it said so far) and :meth:`stop` (its exit status)."""
 
-    def __init__(self, *args, timeout=20.0):
+    def __init__(self, *args, timeout=PATIENCE * 2):
         self.log = tempfile.NamedTemporaryFile(prefix="zkzap-web-", suffix=".log", delete=False)
         cmd = [executable("zkzap"), "web", *args]
         if "--listen" not in args:
             cmd += ["--listen", "127.0.0.1:0"]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self.log,
                                      env=clean_env())
-        self.url = _first_line(self.proc, timeout)
+        self.url = self._first_line(timeout)
         self.base, _, query = self.url.partition("/?")
         self.token = query.partition("token=")[2]
+
+    def _first_line(self, timeout) -> str:
+        import selectors
+
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        line = b""
+        deadline = time.monotonic() + timeout
+        try:
+            while not line.endswith(b"\n") and sel.select(max(0.0, deadline - time.monotonic())):
+                ch = os.read(self.proc.stdout.fileno(), 1)
+                if not ch:
+                    break
+                line += ch
+        finally:
+            sel.close()
+        if not line.endswith(b"\n"):
+            self.stop()
+            pytest.fail(f"zkzap web printed no URL within {timeout:g} s (exit {self.proc.returncode}): "
+                        f"{self.stderr().strip()[-500:]}")
+        return line.decode().strip()
 
     def stderr(self) -> str:
         with open(self.log.name, encoding="utf-8", errors="replace") as f:

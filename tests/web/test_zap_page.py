@@ -160,7 +160,7 @@ def test_the_self_check_moves_after_consent_and_shows_its_verdicts(page, bus):
 
 def test_a_second_page_watches_and_cannot_move(page, bus, console):
     first = page.current_window_handle
-    page.switch_to.new_window("tab")
+    page.switch_to.new_window("window")
     try:
         page.get(console.base + "/")                        # the cookie carries the token
         until(lambda: "View only" in text_of(page, "#control"), "the second page's view-only banner")

@@ -113,7 +113,7 @@ def test_a_second_page_watches_and_closing_the_controlling_tab_sends_standby(pag
     start(page, 25)
     until(lambda: sw(ecu) == "run", "the engine running again")
     first = page.current_window_handle
-    page.switch_to.new_window("tab")
+    page.switch_to.new_window("window")
     watcher = page.current_window_handle
     page.get(console.base + "/")
     until(lambda: "View only" in text_of(page, "#control"), "the second page's view-only banner")

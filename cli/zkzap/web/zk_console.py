@@ -29,6 +29,8 @@ from .console import Console, number
 HISTORY_S = 60.0
 #: Status records kept for that (100 Hz x 60 s).
 HISTORY_MAX = 6000
+#: A page that connects gets at most one record per status ID this often (seconds).
+HISTORY_STEP_S = 0.25
 #: How often health and limits go to the pages (real seconds).
 HEALTH_S = 0.25
 #: Keys of a status record that stay on the server.
@@ -270,9 +272,22 @@ class ZkConsole(Console):
         return out
 
     def snapshot(self) -> list:
+        return super().snapshot() + [self._engine(), {"type": "history", "items": self._history()}, self._health()]
+
+    def _history(self) -> list:
+        """The last :data:`HISTORY_S` of records for a page's plots, at most one per status ID
+        every :data:`HISTORY_STEP_S` (a plot shows no more; a page that connects has little to
+        take in)."""
         cutoff = time.time() * 1000 - HISTORY_S * 1000
-        items = [r for r in list(self.history) if r["w"] >= cutoff]
-        return super().snapshot() + [self._engine(), {"type": "history", "items": items}, self._health()]
+        last = {}
+        out = []
+        for r in list(self.history):
+            w = r["w"]
+            if w < cutoff or w - last.get(r["id"], -1e18) < HISTORY_STEP_S * 1000:
+                continue
+            last[r["id"]] = w
+            out.append(r)
+        return out
 
     def deadman(self):
         return self.command is not None
