@@ -226,6 +226,10 @@ def _make_zk():
         console = ZkConsole(ecu, conditions=conditions, on_limit=on_limit or "abort", rate=rate, silence=silence)
         _serve(console, listen, token, "zk", "sim" if sim else url)
 
+    for p in zk_web.params:
+        if p.name == "timeout":
+            p.help = ("Longest silence tolerated from the ECU while the console runs the engine (default 2 s); "
+                      "longer ends the run with standby.")
     return zk_web
 
 

@@ -24,6 +24,7 @@ from ..api.session import DEFAULT_SILENCE_S, Session, describe_abort
 from ..codec import zk
 from ..errors import UsageError
 from .console import Console, number
+from .server import DEADMAN_S
 
 #: Seconds of status records a page that connects gets for its plots.
 HISTORY_S = 60.0
@@ -263,7 +264,7 @@ class ZkConsole(Console):
         out = super().hello()
         out.update({
             "rate": self.rate, "abort": self.abort_kind, "abort_text": describe_abort(self.abort_kind),
-            "deadman_s": 1.0, "silence_s": self.silence, "rpm_max": RPM_MAX,
+            "deadman_s": DEADMAN_S, "silence_s": self.silence, "rpm_max": RPM_MAX,
             "limits": [{"text": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn}
                        for c in (self.limits.conditions if self.limits else ())],
             "on_limit": self.limits.on_limit if self.limits else None,
