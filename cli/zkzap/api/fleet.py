@@ -625,6 +625,45 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
     return writes, unchanged
 
 
+def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
+    """{ID: Entry} read from the bus (every register of each actuator). ``required``: every ID
+    must answer (else NoReply); otherwise IDs that do not answer an Echo are left out."""
+    entries = {}
+    for ident in ids:
+        if not required and bus.ping(ident, retries=1) is None:
+            continue
+        values, error = procedures.read_map(bus, ident)
+        entry = entry_from_values(values, baud=bus.baud, error=error)
+        doc = {"format": FORMAT, "actuators": {str(ident): entry}}
+        entries[ident] = check_document(doc, f"bus ID {ident}")[ident]
+    return entries
+
+
+def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), force=False, on_mismatch=None,
+             procedures=PROCEDURES) -> tuple:
+    """(writes, unchanged, current) that make the bus match ``entries`` for each (document ID,
+    bus ID) of ``pairs`` (see :func:`assignments`): every target is read
+    (``current``: {bus ID: {register name: raw}}) and planned (:func:`plan`). A target of another
+    model or firmware than its entry raises UsageError unless ``force`` (then
+    ``on_mismatch(text)`` is told); ``name`` names the document in messages."""
+    current, writes, unchanged = {}, [], 0
+    for source, target in pairs:
+        values, _ = procedures.read_map(bus, target)
+        current[target] = values
+        entry = entries[source]
+        mismatch = identity_mismatch(entry, values)
+        if mismatch:
+            text = f"ID {target} is {mismatch} (ID {source} in {name})"
+            if not force:
+                raise UsageError(f"{text}; pass --force to apply it anyway")
+            if on_mismatch is not None:
+                on_mismatch(text)
+        w, u = plan(entry, target, values, only=only, skip=skip, force=force)
+        writes += w
+        unchanged += u
+    return writes, unchanged, current
+
+
 def identity_mismatch(entry: Entry, current: dict):
     """A sentence when the bus actuator's model or firmware differs from the entry's, else None."""
     problems = []

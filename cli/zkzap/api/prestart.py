@@ -47,6 +47,16 @@ class EcuLimits:
         else:
             self.version, self.version_source = zk.DEFAULT_PROTOCOL_VERSION, "default"
 
+    @classmethod
+    def reported(cls, max_rpm, protocol_version) -> "EcuLimits":
+        """The limits of an ECU whose status ID 6 values are already known (a live view that
+        decodes every frame): ``max_rpm`` and ``protocol_version`` (None: not reported yet)."""
+        limits = cls(None, protocol_version)
+        limits.max_rpm = max_rpm
+        if protocol_version is not None:
+            limits.protocol_version, limits.version_source = protocol_version, "frame"
+        return limits
+
     def __repr__(self):
         return f"EcuLimits(max_rpm={self.max_rpm}, version={self.version} ({self.version_source}))"
 

@@ -52,6 +52,11 @@ class ScheduleError(UsageError):
 ScheduleTargetError = EcuLimitError
 
 
+def rpm_factor_for(top) -> int:
+    """The RPM_X that expresses targets up to ``top`` rpm with the finest steps (10 x RPM_X rpm)."""
+    return max(1, math.ceil(top / (_RPM_VALUE_MAX * 10)))
+
+
 class Row:
     """One schedule row: ``t`` (s), ``throttle`` (%) or ``rpm`` (target), ``state``, and the
     ``line`` it was read from."""
@@ -122,7 +127,7 @@ class Schedule:
         self.has_rpm = any(r.rpm is not None for r in rows)
         top = max((r.rpm for r in rows if r.rpm is not None), default=0)
         self.max_target = top
-        self.rpm_factor = max(1, math.ceil(top / (_RPM_VALUE_MAX * 10))) if self.has_rpm else 0
+        self.rpm_factor = rpm_factor_for(top) if self.has_rpm else 0
         self._i = 0
         self._cache = {}
         self._toggle = 0

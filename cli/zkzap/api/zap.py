@@ -381,6 +381,13 @@ class Bus:
             return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
                                      notify=notify)
 
+    def stop(self, ident: int) -> int:
+        """Stop actuator ``ident`` where it is: its present position becomes its goal position.
+        Returns that position."""
+        from ..link.zap_safety import stop_where_it_is
+
+        return stop_where_it_is(self.link, zap.check_id(ident, allow_broadcast=False))
+
     def wait_stopped(self, ident: int, position: int, *, timeout: float = 10.0, poll: float = 0.01,
                      on_progress=None, notify=None) -> int:
         """Wait until actuator ``ident``, sent to ``position``, stops; its final position (see

@@ -633,3 +633,24 @@ class ZapDecoder:
 
 ZAP_KEYS = ("kind", "id", "instruction", "code", "documented", "error", "errors", "register", "address",
             "length", "value", "physical", "unit", "values", "targets", "reset_id", "reset_baud", "params")
+
+
+def parse_id_list(text, what="--ids") -> list:
+    """Actuator IDs like ``0-253`` or ``1,2,5-8`` (no broadcast), in the order given, each once.
+    FieldValueError names ``what`` and the part that is wrong."""
+    out = []
+    for part in str(text).replace(" ", ",").split(","):
+        if not part:
+            continue
+        lo, dash, hi = part.partition("-")
+        try:
+            first = check_id(lo, allow_broadcast=False)
+            last = check_id(hi, allow_broadcast=False) if dash else first
+        except FieldValueError as e:
+            raise FieldValueError(f"{what}: {part!r}: {e}") from None
+        if last < first:
+            raise FieldValueError(f"{what}: {part!r} runs backwards; write {last}-{first}")
+        out.extend(i for i in range(first, last + 1) if i not in out)
+    if not out:
+        raise FieldValueError(f"{what}: none given; expected a list like 0-253 or 1,2,5-8")
+    return out

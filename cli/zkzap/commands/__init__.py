@@ -241,6 +241,7 @@ ROOT_COMMANDS = {
     "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
     "sniff": (".sniff", "sniff", "Watch a live ZK or mightyZAP link passively (never transmits)."),
     "shell": (".shell", "shell", "An interactive zap or zk session over one open port."),
+    "web": (".web", "web", "A browser console for the actuator bus or the engine (extra 'web')."),
     "ports": (".ports", "ports", "List serial ports, with adapter hints."),
     "completion": (".completion", "completion", "Print the shell completion script."),
 }

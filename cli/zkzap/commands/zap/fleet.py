@@ -90,19 +90,6 @@ class RegisterList(click.ParamType):
                 if r.writable and r.name.startswith(last)]
 
 
-def _read_entries(bus, ids, *, required=True):
-    """{ID: Entry} read from the bus. ``required``: every ID must answer (else NoReply)."""
-    entries = {}
-    for ident in ids:
-        if not required and bus.ping(ident, retries=1) is None:
-            continue
-        values, error = fleet.PROCEDURES.read_map(bus, ident)
-        entry = fleet.entry_from_values(values, baud=bus.baud, error=error)
-        doc = {"format": fleet.FORMAT, "actuators": {str(ident): entry}}
-        entries[ident] = fleet.check_document(doc, f"bus ID {ident}")[ident]
-    return entries
-
-
 # -- backup --------------------------------------------------------------------------------------
 
 @click.command(cls=Command, context_settings=CONTEXT)
@@ -215,7 +202,7 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         other = next(iter(sides.values()))
         wanted = ids if ids is not None else sorted(other)
         with open_link(ids=wanted, probe=wanted[0], **_link_args(common)) as bus:
-            live = _read_entries(bus, wanted, required=False)
+            live = fleet.read_entries(bus, wanted, required=False)
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:
@@ -302,22 +289,8 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
 
     with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
-        current = {}
-        writes = []
-        unchanged = 0
-        for source, target in pairs:
-            values, error = fleet.PROCEDURES.read_map(bus, target)
-            current[target] = values
-            entry = entries[source]
-            mismatch = fleet.identity_mismatch(entry, values)
-            if mismatch:
-                text = f"ID {target} is {mismatch} (ID {source} in {file})"
-                if not force:
-                    raise UsageError(f"{text}; pass --force to apply it anyway")
-                warn(text)
-            w, u = fleet.plan(entry, target, values, only=only_regs, skip=skip_regs, force=force)
-            writes += w
-            unchanged += u
+        writes, unchanged, _ = fleet.plan_bus(bus, entries, pairs, name=file, only=only_regs, skip=skip_regs,
+                                              force=force, on_mismatch=warn)
         n_act = len({w.target for w in writes})
         summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
                    f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")

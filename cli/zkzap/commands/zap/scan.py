@@ -34,22 +34,10 @@ class IdList(click.ParamType):
     def convert(self, value, param, ctx):
         if isinstance(value, list):
             return value
-        out = []
-        for part in str(value).replace(" ", ",").split(","):
-            if not part:
-                continue
-            lo, dash, hi = part.partition("-")
-            try:
-                first = zap.check_id(lo, allow_broadcast=False)
-                last = zap.check_id(hi, allow_broadcast=False) if dash else first
-            except Exception as e:  # FieldValueError: name the option
-                raise UsageError(f"--ids: {part!r}: {e}") from None
-            if last < first:
-                raise UsageError(f"--ids: {part!r} runs backwards; write {last}-{first}")
-            out.extend(i for i in range(first, last + 1) if i not in out)
-        if not out:
-            raise UsageError("--ids: none given; expected a list like 0-253 or 1,2,5-8")
-        return out
+        try:
+            return zap.parse_id_list(value)
+        except zap.FieldValueError as e:
+            raise UsageError(str(e)) from None
 
 
 def actuator_bauds():
