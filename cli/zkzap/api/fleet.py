@@ -39,7 +39,7 @@ import time
 
 from ..codec import zap
 from ..codec.fields import FieldValueError
-from ..errors import CheckFailed, UsageError
+from ..errors import CheckFailed, UsageError, did_you_mean
 
 FORMAT = "zkzap-fleet/1"
 SETUP_FORMAT = "zkzap-setup/1"
@@ -215,11 +215,7 @@ def check_document(doc, name="document") -> dict:
                 rkey = f"{where}.{section}.{rname}"
                 reg = REG.get(str(rname))
                 if reg is None:
-                    import difflib
-
-                    close = difflib.get_close_matches(str(rname).lower(), list(REG), n=3, cutoff=0.75)
-                    fail(rkey, "unknown register" + (f"; did you mean {', '.join(close)}?" if close
-                                                     else "; see 'zap registers'"))
+                    fail(rkey, "unknown register" + did_you_mean(rname, REG, otherwise="; see 'zap registers'"))
                 if section_of(reg) != section:
                     fail(rkey, f"{reg.name} is a {section_of(reg)} register, not {section}")
                 if not _is_int(value):

@@ -23,8 +23,9 @@ from .expr import parse, parse_lines
 
 #: What a violation does: abort (the abort command, then exit 5), exit (exit 5), warn (go on).
 ON_LIMIT = ("abort", "exit", "warn")
-#: Status keys a limit may name.
-FIELDS = frozenset(zk.STATUS_KEYS)
+#: Status keys a limit may name: the numeric ones (an engine state or error code by its number;
+#: the name keys, ``out_of_range`` and the frame's own keys hold no number to compare).
+FIELDS = frozenset(f.key for s in zk.STATUS for f in s.fields)
 #: Status keys each status frame ID carries.
 KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in zk.STATUS}
 

@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from typing import Callable, Iterable, Iterator, Mapping, Optional, Union
 
 from ..codec import zap
-from ..errors import BadReply, CheckFailed, NoReply, UsageError
+from ..errors import BadReply, CheckFailed, NoReply, UsageError, did_you_mean
 
 __all__ = ["Bus", "Actuator", "Reading", "ALL_BAUDS", "register_records", "map_blocks"]
 
@@ -483,7 +483,8 @@ def _attr_register(name: str) -> zap.Register:
     key = name.replace("_", "-")
     reg = zap.REGISTER_BY_NAME.get(key)
     if reg is None:
-        raise AttributeError(f"no register {key!r}; see 'zap registers'")
+        names = [r.name.replace("-", "_") for r in zap.REGISTERS]
+        raise AttributeError(f"no register {name!r}" + did_you_mean(name, names), name=name)
     return reg
 
 

@@ -32,7 +32,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from typing import Callable, Iterator, Optional, Union
 
 from ..codec import zk
-from ..errors import DeviceError, NoReply, UsageError
+from ..errors import DeviceError, NoReply, UsageError, did_you_mean
 
 __all__ = ["Ecu", "Status", "ProfileResult"]
 
@@ -46,7 +46,8 @@ class Status(dict):
         try:
             return self[name]
         except KeyError:
-            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}") from None
+            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}" + did_you_mean(name, self),
+                                 name=name) from None
 
 
 class ProfileResult:

@@ -11,10 +11,12 @@ with no per-field interpretation.
 
 from __future__ import annotations
 
+from ..errors import InvalidValue, unknown_name
 
 
-class FieldValueError(ValueError):
-    """A value outside a field's range or grid, or an unknown name. The message names the field."""
+class FieldValueError(InvalidValue):
+    """A value outside a field's range or grid, or an unknown name. The message names the field.
+    A :class:`zkzap.errors.InvalidValue` (exit 2), so also a ``ValueError``."""
 
 
 def parse_bits(spec: str) -> tuple:
@@ -245,8 +247,9 @@ class Field:
                 try:
                     value = int(lowered, 0)
                 except ValueError:
-                    raise FieldValueError(
-                        f"{self.label}: unknown name {value!r}; allowed {self.describe_range(ctx)}") from None
+                    raise unknown_name(self.label, value, [n for r, n in self.names.items() if self.lo <= r <= self.hi],
+                                       otherwise=f"; allowed {self.describe_range(ctx)}",
+                                       cls=FieldValueError) from None
             if not isinstance(value, int) or not self.lo <= value <= self.hi:
                 raise self._range_error(value, ctx)
             return value, None

@@ -34,6 +34,7 @@ not part of a good frame, including those of truncated and filtered frames).
 from __future__ import annotations
 
 from .crc import CRC8_TABLE
+from ..errors import InvalidValue
 
 _T = CRC8_TABLE
 _HDR = b"\xff\xff\xff"
@@ -123,7 +124,7 @@ class ZkFramer(_Framer):
 
     def __init__(self, accept: str = "both"):
         if accept not in ("both", "status", "control"):
-            raise ValueError(f"accept: {accept!r}; allowed both, status, control")
+            raise InvalidValue(f"accept: {accept!r}; allowed both, status, control")
         self.accept = accept
         lengths = [0] * 256
         other = [0] * 256               # the kind left out: recognised, counted, not returned

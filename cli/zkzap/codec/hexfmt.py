@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import re
 
+from ..errors import InvalidValue
+
 _HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
 _PATTERNS = {
     "colon_offset": r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)",
@@ -52,8 +54,8 @@ class _Patterns:
 _rx = _Patterns()
 
 
-class HexError(ValueError):
-    """Malformed hex text."""
+class HexError(InvalidValue):
+    """Malformed hex text (a :class:`zkzap.errors.InvalidValue`, so also a ``ValueError``)."""
 
 
 def format_hex(data) -> str:

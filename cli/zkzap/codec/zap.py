@@ -10,6 +10,7 @@ the ``zap registers`` table come from it.
 
 from __future__ import annotations
 
+from ..errors import CHECK_FAILED, USAGE, CheckFailed, ZkzapError, unknown_name
 from .crc import zap_checksum
 from .fields import FieldValueError
 from .ids import id_ranges  # noqa: F401 - part of this module's interface
@@ -235,9 +236,8 @@ def register(spec) -> Register:
         try:
             addr = int(key, 0)
         except ValueError:
-            close = [n for n in REGISTER_BY_NAME if key in n]
-            hint = f"; did you mean {', '.join(close[:4])}?" if close else "; see 'zap registers'"
-            raise FieldValueError(f"register: unknown name {spec!r}{hint}") from None
+            raise unknown_name("register", spec, [*REGISTER_BY_NAME, *UNDOCUMENTED_BY_NAME], otherwise="",
+                               cls=FieldValueError, field="register") from None
     else:
         addr = spec
     if not 0 <= addr <= 0xFF:
@@ -474,15 +474,20 @@ class Command:
 
 # --- decoding ----------------------------------------------------------------------------------
 
-class PacketError(ValueError):
-    """A malformed packet."""
+class PacketError(ZkzapError, ValueError):
+    """A malformed packet: bad input (exit 2), also a ``ValueError``."""
+
+    code = USAGE
 
 
-class ChecksumError(PacketError):
-    def __init__(self, message, expected, found):
-        super().__init__(message)
-        self.expected = expected
-        self.found = found
+class ChecksumError(PacketError, CheckFailed):
+    """A packet whose checksum does not match: a failed check (exit 1), with the ``expected``
+    and ``found`` checksum bytes."""
+
+    code = CHECK_FAILED
+
+    def __init__(self, message: str, expected: int, found: int) -> None:
+        super().__init__(message, expected=expected, found=found)
 
 
 def check_packet(pkt) -> None:

@@ -11,6 +11,7 @@ bytes 0..5. ``bN`` below is byte N of the frame.
 
 from __future__ import annotations
 
+from ..errors import CHECK_FAILED, USAGE, CheckFailed, ZkzapError, close_names, did_you_mean, unknown_name
 from .crc import crc8_maxim
 from .fields import OUT_OF_RANGE, ContextScale, Field, FieldValueError, Layout, VersionScale
 
@@ -253,17 +254,20 @@ for _keys in (STATUS_KEYS, CONTROL_KEYS):
 del _s, _c, _k, _keys
 
 
-class FrameError(ValueError):
-    """A frame of the wrong length, head or ID."""
+class FrameError(ZkzapError, ValueError):
+    """A frame of the wrong length, head or ID: bad input (exit 2), also a ``ValueError``."""
+
+    code = USAGE
 
 
-class CrcError(FrameError):
-    """A frame whose CRC does not match."""
+class CrcError(FrameError, CheckFailed):
+    """A frame whose CRC does not match: a failed check (exit 1), with the ``expected`` and
+    ``found`` CRC bytes."""
 
-    def __init__(self, message, expected, found):
-        super().__init__(message)
-        self.expected = expected
-        self.found = found
+    code = CHECK_FAILED
+
+    def __init__(self, message: str, expected: int, found: int) -> None:
+        super().__init__(message, expected=expected, found=found)
 
 
 # --- control frames ----------------------------------------------------------------------------
@@ -278,7 +282,8 @@ def control_command(name_or_id):
     cmd = CONTROL_BY_NAME.get(name_or_id) if isinstance(name_or_id, str) else CONTROL_BY_ID.get(name_or_id)
     if cmd is None:
         names = ", ".join(c.name for c in CONTROL)
-        raise FieldValueError(f"command: unknown {name_or_id!r}; allowed {names} (or IDs 0..8)")
+        raise unknown_name("command", name_or_id, CONTROL_BY_NAME, noun="kind",
+                           otherwise=f"; allowed {names} (or IDs 0..8)", cls=FieldValueError)
     return cmd
 
 
@@ -300,7 +305,9 @@ def encode_control(name_or_id, **values):
     known = {f.key for f in cmd.fields} | {f.name_key for f in cmd.fields if f.name_key}
     for key in values:
         if key not in known:
-            raise FieldValueError(f"{key}: not a field of {cmd.name}; fields: {', '.join(sorted(known)) or 'none'}")
+            raise FieldValueError(f"{key}: not a field of {cmd.name}"
+                                  + did_you_mean(key, known, otherwise=f"; fields: {', '.join(sorted(known)) or 'none'}"),
+                                  suggestions=close_names(key, known))
     for f in cmd.fields:
         v = values.get(f.key, values.get(f.name_key, 0) if f.name_key else 0)
         raw, note = f.to_raw(v, ctx)
@@ -330,8 +337,10 @@ def encode_control_raw(cmd_id: int, **raws) -> bytes:
         f = fields.get(key)
         if f is None:
             allowed = ", ".join(sorted(fields)) or "none"
-            raise FieldValueError(f"{key}: not a field of command {cmd.id} ({cmd.name}); fields: {allowed}"
-                                  f"; reserved bits: reserved_b1, reserved_b2")
+            raise FieldValueError(f"{key}: not a field of command {cmd.id} ({cmd.name})"
+                                  + did_you_mean(key, [*fields, "reserved_b1", "reserved_b2"],
+                                                 otherwise=f"; fields: {allowed}; reserved bits: reserved_b1, reserved_b2"),
+                                  suggestions=close_names(key, [*fields, "reserved_b1", "reserved_b2"]))
         if f.names is not None and isinstance(raw, str):
             raw, _ = f.to_raw(raw)
         f.insert(frame, f.check_raw(raw, key))
@@ -398,7 +407,9 @@ def encode_status(status_id: int, version=DEFAULT_PROTOCOL_VERSION, **values) ->
     keys = {f.key: f for f in st.fields}
     for key in values:
         if key not in keys:
-            raise FieldValueError(f"{key}: not a field of status {status_id}; fields: {', '.join(keys)}")
+            raise FieldValueError(f"{key}: not a field of status {status_id}"
+                                  + did_you_mean(key, keys, otherwise=f"; fields: {', '.join(keys)}"),
+                                  suggestions=close_names(key, keys))
     for f in st.fields:
         v = values.get(f.key)
         if v is None:

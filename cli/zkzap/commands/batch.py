@@ -289,7 +289,7 @@ def invoke(line, protocol) -> int:
     """Run a checked line's command with the parameters its check parsed (the same defaults,
     so the same values as parsing it again), with the command line's error conventions.
     Returns its exit status."""
-    from . import PipeClosed, _bad_input, _error
+    from . import PipeClosed, _error
     from .hints import with_hint
 
     leaf, parent = line.leaf
@@ -314,11 +314,6 @@ def invoke(line, protocol) -> int:
     except ZkzapError as e:
         _error(with_hint(e), prog)
         return e.code
-    except Exception as e:
-        if not _bad_input(e):
-            raise
-        _error(str(e), prog)
-        return USAGE
 
 
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):

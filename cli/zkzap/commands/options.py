@@ -41,34 +41,104 @@ class SignedCommand(Command):
     negative_numbers = True
 
 
+def _number(value, kind, allowed, param, ctx, fail):
+    """``value`` as a finite ``kind`` (int or float), or ``fail`` with zkzap's wording: "'abc' is
+    not a number; allowed 1..200" (never click's "is not a valid float range")."""
+    if isinstance(value, bool):
+        value = str(value)
+    if isinstance(value, (int, float)) and not (kind is int and isinstance(value, float)):
+        number = value
+    else:
+        text = str(value).strip()
+        try:
+            number = int(text, 0) if kind is int else float(text)
+        except ValueError:
+            what = "an integer" if kind is int else "a number"
+            fail(f"{value!r} is not {what}{allowed}", param, ctx)
+    if not math.isfinite(number):
+        fail(f"{value!r} is not a finite number{allowed}", param, ctx)
+    return kind(number)
+
+
+def range_text(lo, hi, lo_open=False, hi_open=False) -> str:
+    """A range as messages and help say it: ``1..200``, ``1 or more``, ``more than 0``."""
+    if lo is not None and hi is not None and not lo_open and not hi_open:
+        return f"{lo:g}..{hi:g}"
+    parts = []
+    if lo is not None:
+        parts.append(f"more than {lo:g}" if lo_open else f"{lo:g} or more")
+    if hi is not None:
+        parts.append(f"less than {hi:g}" if hi_open else f"at most {hi:g}")
+    return " and ".join(parts) or "any number"
+
+
+class _NumberRange:
+    """zkzap's wording for click's numeric range types: "'x' is not a number; allowed 1..200",
+    "500 is out of range; allowed 1..200"."""
+
+    kind = float
+
+    def allowed(self) -> str:
+        return range_text(self.min, self.max, self.min_open, self.max_open)
+
+    def convert(self, value, param, ctx):
+        number = _number(value, self.kind, f"; allowed {self.allowed()}", param, ctx, self.fail)
+        lo_bad = self.min is not None and (number <= self.min if self.min_open else number < self.min)
+        hi_bad = self.max is not None and (number >= self.max if self.max_open else number > self.max)
+        if lo_bad or hi_bad:
+            self.fail(f"{number:g} is out of range; allowed {self.allowed()}", param, ctx)
+        return number
+
+
 class FiniteFloat(click.types.FloatParamType):
     """A float that must be a finite number: ``nan``, ``inf`` and ``-inf`` are refused (exit 2,
     naming the option), where click's FLOAT takes them and a timeout or duration never ends."""
 
     def convert(self, value, param, ctx):
-        rv = super().convert(value, param, ctx)
-        if not math.isfinite(rv):
-            self.fail(f"{value!r} is not a finite number.", param, ctx)
-        return rv
+        return _number(value, float, "", param, ctx, self.fail)
 
 
-class FiniteRange(click.FloatRange):
-    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
-    and ``inf`` wherever there is no upper bound). Every float option of zkzap is one of these
-    or a :class:`FiniteFloat`."""
+class Integer(click.types.IntParamType):
+    """An integer (decimal or ``0x..``) in zkzap's words, for values whose range the codec
+    checks itself."""
 
     def convert(self, value, param, ctx):
-        if not isinstance(value, float) or not math.isfinite(value):
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                number = 0.0        # not a number at all: click's own message below
-            if not math.isfinite(number):
-                self.fail(f"{value!r} is not a finite number.", param, ctx)
-        return super().convert(value, param, ctx)
+        return _number(value, int, "", param, ctx, self.fail)
+
+
+class FiniteRange(_NumberRange, click.FloatRange):
+    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
+    and ``inf`` wherever there is no upper bound), in zkzap's words. Every float option of
+    zkzap is one of these or a :class:`FiniteFloat`."""
+
+    kind = float
+
+
+class IntRange(_NumberRange, click.IntRange):
+    """``click.IntRange`` in zkzap's words (decimal or ``0x..``). Every integer option of zkzap
+    is one of these."""
+
+    kind = int
+
+
+class Choice(click.Choice):
+    """``click.Choice`` that names the closest choices of a misspelt value ("'rn' is not
+    allowed; allowed pwm, stop, standby, run; did you mean run?"). Every choice option of zkzap
+    is one of these."""
+
+    def convert(self, value, param, ctx):
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter:
+            from ..errors import did_you_mean
+
+            choices = [str(c) for c in self.choices]
+            self.fail(f"{value!r} is not allowed; allowed {', '.join(choices)}{did_you_mean(value, choices)}",
+                      param, ctx)
 
 
 FINITE = FiniteFloat()
+INTEGER = Integer()
 
 
 def note(message: str) -> None:
@@ -87,7 +157,7 @@ def format_option(*, choices=FORMATS, help_extra="", default=None, help=None):
     """``-f/--format``, the one definition: by default a table on a terminal, JSON Lines
     otherwise; a command with its own ``default`` (``value``, ``text``) or ``help`` says so."""
     return click.option(
-        "-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=default is not None,
+        "-f", "--format", "fmt", type=Choice(choices), default=default, show_default=default is not None,
         help=(help if help is not None else "Output format (default: table on a terminal, jsonl otherwise).")
         + help_extra)
 
@@ -102,7 +172,7 @@ def abort_option(help, default=None):
     choices are :data:`zkzap.codec.zk.ABORTS`)."""
     from ..codec.zk import ABORTS
 
-    return click.option("--abort", type=click.Choice(list(ABORTS)), default=default,
+    return click.option("--abort", type=Choice(list(ABORTS)), default=default,
                         show_default=default is not None, help=help)
 
 
@@ -260,7 +330,7 @@ zap_yes_option = click.option(
          "prompts and a script is refused (sim:// and --sim never ask).")
 
 protocol_version_option = click.option(
-    "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+    "--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
     help="ECU protocol version assumed until a status ID 6 frame reveals it "
          "(sets the voltage unit: 0.1 V up to 3, 0.2 V from 4; default 4).")
 
@@ -363,7 +433,7 @@ def port_options(group: str, *, baud_auto: bool = False):
                      default=DEFAULT_BAUD[group], show_default=True,
                      help=(f"Baud rate, or auto to detect it (and the stop bits) first [env {env['baud']}]."
                            if baud_auto else f"Baud rate [env {env['baud']}].")),
-        click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+        click.option("--stop-bits", "stop_bits", type=Choice(["1", "2"]), envvar=env["stop_bits"],
                      default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                      help=f"{STOP_BITS_HELP[group]} [env {env['stop_bits']}]."),
         click.option("--timeout", type=FiniteRange(0.001, 3600), default=None, metavar="SECONDS",

@@ -9,8 +9,8 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, capture_option,
-                      close_output, open_output)
+from .options import (BaudType, Choice, DEFAULT_BAUD, ENV, FilePath, FiniteRange, IntRange, STOP_BITS_HELP,
+                      capture_option, close_output, open_output)
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
              "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
@@ -47,16 +47,16 @@ def _common(protocol):
                                "directions).") + f" [env {env['port']}]"),
             click.option("-b", "--baud", type=BaudType(), envvar=env["baud"],
                          default=DEFAULT_BAUD[protocol], show_default=True, help=f"Baud rate [env {env['baud']}]."),
-            click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+            click.option("--stop-bits", "stop_bits", type=Choice(["1", "2"]), envvar=env["stop_bits"],
                          default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                          help=f"{STOP_BITS_HELP[protocol]} [env {env['stop_bits']}]."),
             capture_option(protocol),
-            click.option("-f", "--format", "fmt", type=click.Choice(["table", "jsonl", "json", "csv"]), default=None,
+            click.option("-f", "--format", "fmt", type=Choice(["table", "jsonl", "json", "csv"]), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
             click.option("-o", "--output", type=FilePath(), default=None, help="Write records to FILE."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
-            click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+            click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
                          help="Stop after N records."),
             click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
                          help="Stop after SECONDS."),
@@ -75,7 +75,7 @@ def _common(protocol):
 
 @sniff.command("zk", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
 @_common("zk")
-@click.option("--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+@click.option("--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
               help="ECU protocol version assumed until a status ID 6 frame reveals it (default 4).")
 def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, protocol_version):
     """Sniff a ZK flight-controller <-> ECU link.

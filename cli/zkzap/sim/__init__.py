@@ -38,6 +38,8 @@ def make_device(kind: str, **options):
 
     spec = DEVICES.get(kind)
     if spec is None:
-        raise ValueError(f"simulator: unknown kind {kind!r}; allowed {', '.join(DEVICES)}")
+        from ..errors import unknown_name
+
+        raise unknown_name("simulator", kind, DEVICES)
     module, _, attr = spec.partition(":")
     return getattr(importlib.import_module(module), attr)(**options)

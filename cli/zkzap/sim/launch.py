@@ -24,6 +24,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from typing import Callable, Iterable, Optional, Sequence, Union
 
 from . import INSTANCES
+from ..errors import InvalidValue
 from .base import Clock
 
 __all__ = ["Simulator", "start", "start_zk", "start_zap"]
@@ -39,7 +40,7 @@ class Simulator:
     def __init__(self, kind: str, device, clock: Clock, transport: str = "inprocess",
                  host: str = "127.0.0.1", port: int = 0):
         if transport not in TRANSPORTS:
-            raise ValueError(f"transport: {transport!r}; allowed {', '.join(TRANSPORTS)}")
+            raise InvalidValue(f"transport: {transport!r}; allowed {', '.join(TRANSPORTS)}")
         self.kind = kind
         self.device = device
         self.clock = clock
@@ -146,11 +147,11 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
         return Simulator("zk", ZkReplay(path, loop=bool(loop), log=on_control), Clock(speed), transport,
                          host, port)
     if loop or on_control is not None:
-        raise ValueError("loop, on_control: only with replay")
+        raise InvalidValue("loop, on_control: only with replay")
     from .zk_ecu import ZkEcu
 
     if isinstance(stop_bits, bool) or stop_bits not in (1, 2):
-        raise ValueError(f"stop_bits: {stop_bits!r}; allowed 1, 2")
+        raise InvalidValue(f"stop_bits: {stop_bits!r}; allowed 1, 2")
     device = ZkEcu(protocol_version=protocol_version, rate=rate, max_rpm=max_rpm, idle_rpm=idle_rpm,
                    max_thrust=max_thrust, ambient=ambient, battery=battery, max_pump_voltage=max_pump_voltage,
                    esr=esr, baud=baud, stop_bits=int(stop_bits), corrupt_every=corrupt_every, silent_after=silent_after,
@@ -197,7 +198,7 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     if ids is None:
         ids = (0,)
     if baud not in zap.BAUD_TO_CODE:
-        raise ValueError(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+        raise InvalidValue(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
     if isinstance(ids, str):
         pairs = parse_ids(ids)
     else:
@@ -207,14 +208,14 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     timing = {}
     for key, value, top, default in (("turnaround", turnaround, 1000.0, TURNAROUND), ("gap", gap, 100.0, 0.0)):
         if isinstance(value, bool):
-            raise ValueError(f"{key}: {value!r} is not a number of milliseconds")
+            raise InvalidValue(f"{key}: {value!r} is not a number of milliseconds")
         timing[key] = default if value is None else _millis(key, value, top)
     bus = ActuatorBus([], state_path=state, echo=bool(echo), **timing)
     if not (state and bus.load_state()):
         bus.actuators = [Actuator(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
         if return_mode is not None:
             if return_mode not in (0, 1, 2):
-                raise ValueError(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
+                raise InvalidValue(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
             for a in bus.actuators:
                 a.set("feedback-return-mode", return_mode)
         if state:
@@ -239,4 +240,4 @@ def start(kind: str, **options) -> Simulator:
         return start_zk(**options)
     if kind == "zap":
         return start_zap(**options)
-    raise ValueError(f"simulator: unknown kind {kind!r}; allowed zk, zap")
+    raise InvalidValue(f"simulator: unknown kind {kind!r}; allowed zk, zap")

@@ -8,7 +8,7 @@ import click
 
 from ...errors import CheckFailed, DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, consent, resolve_format, yes_option
+from ..options import Choice, FiniteRange, consent, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -22,7 +22,7 @@ TABLE = [("id", "id"), ("check", "check"), ("verdict", "verdict"), ("value", "va
 @click.option("--no-move", is_flag=True, help="Check without moving: echo, identity, voltage and error bits only.")
 @click.option("--move-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True,
               metavar="SECONDS", help="The longest a stroke may take.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(("table", "json", "jsonl", "csv")), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options

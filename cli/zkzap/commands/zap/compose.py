@@ -17,7 +17,8 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, zap_yes_option as yes_option
+from ..options import (Choice, FiniteRange, IntRange, SignedCommand, consent, dry_run_option, port_options,
+                       zap_yes_option as yes_option)
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -46,9 +47,9 @@ def link_options(f=None, *, baud_type=None, baud_help=None):
     f = click.option("--sim-ids", metavar="LIST", default=None, callback=_check_sim_ids,
                      help="With --sim: the IDs on the in-process simulated bus, like 1,2,5-8 "
                           "(default: the IDs the command addresses).")(f)
-    f = click.option("--retries", type=click.IntRange(0, 20), default=2, show_default=True,
+    f = click.option("--retries", type=IntRange(0, 20), default=2, show_default=True,
                      help="Retries after no reply or a corrupted reply.")(f)
-    f = click.option("--return-mode", type=click.Choice(RETURN_MODES), default="1", show_default=True,
+    f = click.option("--return-mode", type=Choice(RETURN_MODES), default="1", show_default=True,
                      envvar="ZKZAP_ZAP_RETURN_MODE",
                      help="The actuators' feedback-return-mode: 0 answers Echo only, 1 Load Data and "
                           "Echo, 2 every command; 'auto' asks the actuator first "
@@ -291,7 +292,7 @@ def _link_args(common):
 
 @click.command(cls=Command, context_settings=CONTEXT)
 @id_option()
-@click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
+@click.option("-c", "--count", type=IntRange(0, None), default=1, show_default=True,
               help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
 @click.option("--interval", type=FiniteRange(0, 3600), default=0.0, metavar="SECONDS",
               help="Pause between echoes with --count.")
@@ -378,7 +379,7 @@ LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meani
 
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("reg", metavar="REGISTER", type=REGISTER)
-@click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
+@click.option("-l", "--length", type=IntRange(1, 253), default=None,
               help="Bytes to read (default: the register's size); more bytes read the registers that follow.")
 @click.option("--physical", is_flag=True, help="Print scaled registers in their unit (present-voltage 12.0, not 120).")
 @_format("value", ("value", "table", "json", "jsonl", "csv"),

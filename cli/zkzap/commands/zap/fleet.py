@@ -14,7 +14,7 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, consent, note, resolve_format, warn, yes_option
+from ..options import Choice, FilePath, consent, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -113,7 +113,7 @@ def _read_entries(bus, ids, *, required=True):
                    "without --ids.")
 @click.option("-o", "--output", type=FilePath(), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
-@click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
 @link_options
 def backup(ids, scan_, output, fmt, **common):
@@ -183,10 +183,10 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
-@click.option("--compare", type=click.Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
+@click.option("--compare", type=Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
               help="stored: the settings that survive power-off; settings: stored and volatile; all: "
                    "read-only values too.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @link_options
 def diff(a, b, ids, everything, compare, fmt, **common):
@@ -255,7 +255,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.option("--force", is_flag=True,
               help="Write id, baud-rate, protocol-type or feedback-return-mode named in --only; apply a file "
                    "from another model or firmware.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options

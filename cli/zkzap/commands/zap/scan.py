@@ -16,7 +16,7 @@ from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (BaudList, FiniteRange, SignedCommand, consent, format_option, id_option, note,
+from ..options import (BaudList, Choice, FiniteRange, SignedCommand, consent, format_option, id_option, note,
                        resolve_format, warn, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
@@ -334,7 +334,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
 
 
 @click.command("set-baud", cls=Command, context_settings=CONTEXT)
-@click.argument("new_baud", type=click.Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
+@click.argument("new_baud", type=Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
 @id_option(allow_broadcast=False)
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")

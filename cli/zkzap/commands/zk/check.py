@@ -10,7 +10,7 @@ import click
 
 from ...errors import DeviceError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import port_options, protocol_version_option
+from ..options import Choice, IntRange, port_options, protocol_version_option
 from .stand import Finite, limit_options
 from .telemetry import resolve_port, zk_timeout_help
 
@@ -24,7 +24,7 @@ COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @port_options("zk")
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Check N status frames (default 50 unless --duration is given).")
 @click.option("--duration", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
               help="Check for SECONDS.")
@@ -33,7 +33,7 @@ COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first
                                                  "version 5.")
 @click.option("--allow-ecu-error", is_flag=True, help="Do not fail on an ECU error code (limits only).")
 @protocol_version_option
-@click.option("-f", "--format", "fmt", type=click.Choice(["table", "json", "jsonl", "csv"]), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(["table", "json", "jsonl", "csv"]), default=None,
               help="The verdict: a table on a terminal, one JSON document in a pipe; jsonl/csv give a row "
                    "per check.")
 def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_files, on_limit, keepalive, allow_ecu_error,

@@ -11,7 +11,7 @@ from ...errors import UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
+from ..options import (Choice, checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
                        output_format, output_options, protocol_version_option)
 
 
@@ -65,7 +65,7 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options
 @protocol_version_option
-@click.option("--accept", type=click.Choice(["both", "status", "control"]), default="both", show_default=True,
+@click.option("--accept", type=Choice(["both", "status", "control"]), default="both", show_default=True,
               help="Which frame kinds to look for (a one-direction capture: status or control).")
 @click.option("--raw", "raw", is_flag=True, help="Add <key>_raw entries with the undecoded field values.")
 def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):

@@ -9,7 +9,7 @@ import click
 
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import BaudList, FiniteRange, capture_option, format_option, resolve_format
+from ..options import BaudList, Choice, FiniteRange, capture_option, format_option, resolve_format
 
 DETECT_COLUMNS = ["port", "found", "baud", "stop_bits", "protocol_version", "status_rate_hz", "frames_per_s",
                   "elapsed_s", "budget_s", "tried"]
@@ -61,7 +61,7 @@ def run_detection(url, bauds, stop_bits, window, budget, probe):
 @click.option("-b", "--baud", "bauds", type=zk_bauds(), default="all", show_default=True, metavar="LIST",
               help="Baud rates to try, like 115200,9600, or all (2400, 4800, 9600, 19200, 38400, 57600, "
                    "115200; tried commonest first).")
-@click.option("--stop-bits", type=click.Choice(["1", "2", "both"]), default="both", show_default=True,
+@click.option("--stop-bits", type=Choice(["1", "2", "both"]), default="both", show_default=True,
               help="Stop-bit settings to consider.")
 @detect_options
 @capture_option("zk")

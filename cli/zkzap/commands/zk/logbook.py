@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from .. import CONTEXT, Command
-from ..options import FilePath, format_option
+from ..options import FilePath, IntRange, format_option
 
 TABLE = [("id", "run"), ("started", "started UTC"), ("duration_s", "s"), ("running_s", "run s"),
          ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"), ("fuel_used_l", "fuel L"),
@@ -17,7 +17,7 @@ TABLE = [("id", "run"), ("started", "started UTC"), ("duration_s", "s"), ("runni
 @click.argument("logbook_file", metavar="FILE", type=FilePath())
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")
-@click.option("--last", type=click.IntRange(1), default=None, metavar="N", help="Only the last N runs.")
+@click.option("--last", type=IntRange(1), default=None, metavar="N", help="Only the last N runs.")
 def logbook(logbook_file, fmt, only_totals, last):
     """List the runs in an engine logbook, with totals.
 

@@ -13,7 +13,7 @@ import click
 from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
+from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
                         reconnect_option, resolve_port, zk_timeout_help)
@@ -250,7 +250,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Stop after N records.")
 @click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
               help="Stop after SECONDS.")

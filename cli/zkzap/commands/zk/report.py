@@ -8,7 +8,7 @@ import click
 
 from ...errors import OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, note
+from ..options import Choice, FilePath, note
 
 EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotlib missing (pip install "
           "'zkzap[plot]'); 7 the report could not be written.")
@@ -23,7 +23,7 @@ EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotl
               help="The summary of 'zk profile --summary-json': the header table and limit events.")
 @click.option("-o", "--output", type=FilePath(), default=None, metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
-@click.option("--format", "fmt", type=click.Choice(["png", "svg", "pdf", "html"]), default=None,
+@click.option("--format", "fmt", type=Choice(["png", "svg", "pdf", "html"]), default=None,
               help="The report's format (default: from the -o name).")
 @click.option("--title", default=None, help="Heading of the report (default: 'Run report: RUN').")
 @click.option("--meta", multiple=True, metavar="KEY=VALUE",

@@ -14,8 +14,9 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
-                       note, port_options, protocol_version_option, rate_option, warn, yes_option)
+from ..options import (Choice, FINITE, FiniteRange, INTEGER, IntRange, SignedCommand, abort_option, apply_options,
+                       consent, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
+                       yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
 from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
                         zk_timeout_help)
@@ -68,7 +69,7 @@ def send_options(f):
         abort_option(help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
                           "an ECU error when the command controls the engine (default standby: throttle "
                           "0, a hot engine cools)."),
-        click.option("--end", type=click.Choice(["standby", "stop", "hold"]), default=None,
+        click.option("--end", type=Choice(["standby", "stop", "hold"]), default=None,
                      help="With --for SECONDS: what to send when the time is up, if the command controls "
                           "the engine (default standby: the abort sequence, throttle 0); hold sends nothing "
                           "more and leaves the engine at the command."),
@@ -281,22 +282,22 @@ def _make(cmd):
             default = _OPTION_DEFAULTS.get((cmd.name, f.key))
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = FINITE if f.decimals else click.INT
+                ptype = FINITE if f.decimals else INTEGER
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
         else:
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
             else:
-                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
+                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else INTEGER
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
-        params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,
+        params.append(click.Option([p.cli, p.key], type=IntRange(p.lo, p.hi), required=True,
                                    help=p.help))
     doc = _doc(cmd, fields)
     command = SignedCommand(cmd.name, callback=callback, params=params, help=doc,
@@ -370,7 +371,7 @@ def _make_raw():
 
 
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
-@click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
+@click.argument("cmd_id", metavar="ID", type=IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)
 def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.

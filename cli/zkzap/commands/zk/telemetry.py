@@ -13,7 +13,7 @@ import click
 from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
                        UsageError, exit_status_help)
 from ...io import LOG_FORMATS
-from ..options import FilePath, FiniteRange, apply_options, format_option
+from ..options import FilePath, FiniteRange, IntRange, apply_options, format_option
 from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
@@ -56,7 +56,7 @@ def log_options(f):
                           "frame. Default: snapshot for csv, frames for jsonl/json."),
         click.option("--ids", metavar="LIST", default=None,
                      help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
-        click.option("--stale-after", type=click.IntRange(1, 1000), default=3, show_default=True,
+        click.option("--stale-after", type=IntRange(1, 1000), default=3, show_default=True,
                      metavar="N", help="An ID is stale after N of its periods without a frame."),
         click.option("--raw-log", type=FilePath(), default=None,
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
