@@ -65,7 +65,9 @@ class ZkzapError(Exception):
     """
 
     #: The exit status the command line exits with for this error.
-    code = USAGE
+    code: int = USAGE
+    #: The facts given as keyword arguments (each also an attribute).
+    facts: dict[str, Any]
 
     def __init__(self, message: object, code: Optional[int] = None, **facts: Any) -> None:
         super().__init__(message)
@@ -74,6 +76,9 @@ class ZkzapError(Exception):
         self.facts = facts
         for key, value in facts.items():
             setattr(self, key, value)
+
+    if TYPE_CHECKING:  # the facts are attributes too (which ones depends on where it was raised)
+        def __getattr__(self, name: str) -> Any: ...
 
     @property
     def message(self) -> str:
@@ -136,7 +141,7 @@ class Interrupted(ZkzapError):
     code = INTERRUPTED
 
 
-def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list:
+def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list[str]:
     """The names of ``choices`` closest to ``word``, best first (at most ``n``; none when nothing
     is close). Case, ``-``/``_`` and surrounding blanks do not count; a name that contains the
     word (``voltage`` -> ``present-voltage``) counts as close, in the order of ``choices``, those
@@ -217,5 +222,5 @@ def exit_status_help(meanings: Optional[Mapping[int, str]] = None, tail: str = "
     order.insert(order.index(INTERRUPTED) + 1, TERMINATED)
     unknown = sorted(set(meanings) - set(order))
     if unknown:
-        raise ValueError(f"exit codes {unknown} are not in the exit-code table")
+        raise InvalidValue(f"exit codes {unknown} are not in the exit-code table")
     return "Exit status: " + "; ".join(f"{c} {meanings[c]}" for c in order if c in meanings) + "." + tail

@@ -253,7 +253,7 @@ def dumps(doc: dict, fmt: str) -> str:
         return _toml(doc)
     if fmt == "yaml":
         return _yaml(doc)
-    raise ValueError(fmt)
+    raise UsageError(f"format: {fmt!r}; allowed json, toml, yaml")
 
 
 def dump_document(doc: dict, path: str) -> None:

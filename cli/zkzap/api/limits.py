@@ -21,6 +21,12 @@ from ..codec import zk
 from ..errors import DeviceError, UsageError
 from .expr import parse, parse_lines
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Optional
+
+    from .expr import Condition
+
 #: What a violation does: abort (the abort command, then exit 5), exit (exit 5), warn (go on).
 ON_LIMIT = ("abort", "exit", "warn")
 #: Status keys a limit may name: the numeric ones (an engine state or error code by its number;
@@ -33,7 +39,8 @@ KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in zk.STATUS}
 class LimitViolation(DeviceError):
     """A limit violated (exit status 5); carries the condition, time and value."""
 
-    def __init__(self, message, condition=None, t=None, value=None):
+    def __init__(self, message: str, condition: Optional[Condition] = None, t: Optional[float] = None,
+                 value: Optional[float] = None) -> None:
         super().__init__(message)
         self.condition = condition
         self.t = t

@@ -29,7 +29,20 @@ import time
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Callable, Iterator, Optional, Union
+    import os
+    from typing import Any, Callable, Iterable, Iterator, Literal, Optional, Sequence, Union
+
+    from typing_extensions import Self, TypeAlias
+
+    from ..sim.launch import Simulator
+    from .schedule import Schedule
+    from .session import Outcome
+
+    _StatusBase: TypeAlias = dict[str, Any]
+    #: What :meth:`Ecu.run_profile` runs: a Schedule, CSV text, a CSV file's path or rows.
+    ScheduleSpec: TypeAlias = Union[Schedule, str, os.PathLike[str], Iterable[Sequence[Union[float, str]]]]
+else:
+    _StatusBase = dict
 
 from ..codec import zk
 from ..errors import DeviceError, NoReply, UsageError, did_you_mean
@@ -37,12 +50,12 @@ from ..errors import DeviceError, NoReply, UsageError, did_you_mean
 __all__ = ["Ecu", "Status", "ProfileResult"]
 
 
-class Status(dict):
+class Status(_StatusBase):
     """One status record: a dict whose keys also read as attributes (``rec.rpm``, ``rec.egt_c``)."""
 
     __slots__ = ()
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         try:
             return self[name]
         except KeyError:
@@ -56,7 +69,7 @@ class ProfileResult:
     states, errors, as ``zk profile --summary-json`` writes it), ``records`` written and
     ``notes`` (values the schedule rounded, ``FILE:LINE: ...``)."""
 
-    def __init__(self, outcome, summary, records, notes=()):
+    def __init__(self, outcome: Outcome, summary: dict[str, Any], records: int, notes: Iterable[str] = ()) -> None:
         self.outcome = outcome
         self.summary = summary
         self.records = records
@@ -67,7 +80,7 @@ class ProfileResult:
         """True when the schedule ran to its end."""
         return self.outcome.ok
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"ProfileResult(reason={self.outcome.reason!r}, records={self.records})"
 
 
@@ -81,8 +94,8 @@ class Ecu:
     ``abort`` the abort command (``standby``, ``stop`` or ``none``).
     """
 
-    def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
-                 silence: float = 2.0, abort: str = "standby"):
+    def __init__(self, port: Union[str, Simulator], *, baud: int = 115200, protocol_version: Optional[int] = None,
+                 silence: float = 2.0, abort: Literal["standby", "stop", "none"] = "standby") -> None:
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -114,10 +127,10 @@ class Ecu:
 
     # -- context -------------------------------------------------------------------------------
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         self.close()
         return False
 
@@ -139,7 +152,7 @@ class Ecu:
         """The ECU's protocol version (from status ID 6, given, or the default 4)."""
         return self.telemetry.decoder.version
 
-    def frame(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+    def frame(self, kind: Union[str, int], **fields: Any) -> zk.ControlFrame:
         """The control frame ``kind`` (a ``zk send`` name or ID) with physical ``fields``
         (``state="run", throttle_pct=40``), checked; nothing is sent."""
         values = dict(fields)
@@ -160,13 +173,13 @@ class Ecu:
         elif cf.action == "pump-off":
             self.pump_on = False
 
-    def send(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+    def send(self, kind: Union[str, int, zk.ControlFrame], **fields: Any) -> zk.ControlFrame:
         """Send one control frame (see :meth:`frame`); returns it."""
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
         self._write(cf)
         return cf
 
-    def abort(self) -> list:
+    def abort(self) -> list[bytes]:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
         on protocol version 4 or later also leaves RPM mode; pump-off after a pump-on).
         Returns the frames sent."""
@@ -184,7 +197,8 @@ class Ecu:
 
     # -- status in -----------------------------------------------------------------------------
 
-    def _records(self, control=None, period=None, duration=None, count=None) -> Iterator[Status]:
+    def _records(self, control: Optional[zk.ControlFrame] = None, period: Optional[float] = None,
+                 duration: Optional[float] = None, count: Optional[int] = None) -> Iterator[Status]:
         src, tel = self.source, self.telemetry
         start = src.now()
         if self._last_frame_t is None:
@@ -222,7 +236,8 @@ class Ecu:
         Raises NoReply when the ECU is silent for ``silence`` s."""
         return self._records(count=count, duration=duration)
 
-    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, **fields) -> Iterator[Status]:
+    def hold(self, kind: Union[str, int, zk.ControlFrame], seconds: float, *, rate: float = 20.0,
+             **fields: Any) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
         raises DeviceError; any abnormal end sends the abort command."""
@@ -246,7 +261,7 @@ class Ecu:
         return self.hold("keepalive", seconds, rate=rate)
 
     @property
-    def health(self) -> dict:
+    def health(self) -> dict[str, Any]:
         """Link health: ``frames``, ``frames_per_s`` (over the last second), ``crc_errors``,
         ``skipped`` bytes, ``stale`` (and :meth:`stale_ids`), ``protocol_version`` and
         ``version_source``."""
@@ -255,18 +270,19 @@ class Ecu:
         h["stale_ids"] = self.telemetry.stale_ids(now)
         return h
 
-    def stale_ids(self) -> list:
+    def stale_ids(self) -> list[int]:
         """Status IDs not seen for more than three of their periods."""
         return self.telemetry.stale_ids(self.source.now())
 
     @property
-    def snapshot(self) -> dict:
+    def snapshot(self) -> dict[str, Any]:
         """Every status field's latest value."""
         return self.telemetry.snapshot(self.source.now())
 
     # -- schedules -----------------------------------------------------------------------------
 
-    def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
+    def run_profile(self, schedule: ScheduleSpec, *, rate: float = 20.0,
+                    interpolate: Literal["step", "linear"] = "step",
                     on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
         """Run a throttle or RPM schedule as ``zk profile`` does: a
         :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or

@@ -23,6 +23,10 @@ import re
 
 from ..errors import InvalidValue
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Iterable, Iterator, Optional, TextIO, Union
+
 _HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
 _PATTERNS = {
     "colon_offset": r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)",
@@ -58,7 +62,7 @@ class HexError(InvalidValue):
     """Malformed hex text (a :class:`zkzap.errors.InvalidValue`, so also a ``ValueError``)."""
 
 
-def format_hex(data) -> str:
+def format_hex(data: Union[bytes, bytearray, memoryview, Iterable[int]]) -> str:
     """``b"\\xff\\x1d"`` -> ``"FF 1D"``."""
     return bytes(data).hex(" ").upper()
 
@@ -95,7 +99,8 @@ def _binary(what, lineno):
     return HexError(f"{what}: binary input{where}: use --binary for raw bytes")
 
 
-def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state=None) -> bytes:
+def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0,
+                   state: Optional[dict[str, Any]] = None) -> bytes:
     """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`.
 
     ``state`` (a dict kept across the lines of one input) lets the lone final-offset line that
@@ -263,7 +268,7 @@ def parse_hex(text: str, *, what: str = "hex input") -> bytes:
 PIECE = 1 << 16
 
 
-def iter_hex_stream(stream, *, what: str = "stdin"):
+def iter_hex_stream(stream: TextIO, *, what: str = "stdin") -> Iterator[bytes]:
     """Yield the bytes of a text stream's lines as they are read, in constant memory: a line
     longer than :data:`PIECE` characters (one long hex string, as some tools write) is taken
     in pieces cut at a separator or between two hex digits."""

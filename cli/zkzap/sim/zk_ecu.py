@@ -580,7 +580,7 @@ PASSED_THROUGH = {"speed"}
 
 def from_options(**options) -> ZkEcu:
     """A :class:`ZkEcu` from string (or typed) options, as ``sim://zk?...`` and ``zkzap sim zk``
-    give them. None values are ignored; unknown names raise ValueError naming them.
+    give them. None values are ignored; unknown names raise InvalidValue (a ValueError) naming them.
 
     ``protocol_version`` (default 6), ``rate`` (20/50/100 Hz, default 20), ``max_rpm`` (160000),
     ``idle_rpm`` (40000), ``max_thrust`` (kg at max rpm, 14), ``ambient`` (degC, 20), ``battery``
