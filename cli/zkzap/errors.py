@@ -159,8 +159,7 @@ def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list[
         return [folded[key]]
     import difflib
 
-    contains = [name for f, name in folded.items()
-                if len(key) >= 3 and (key in f or (len(f) >= 3 and f in key))]
+    contains = [name for f, name in folded.items() if len(key) >= 3 and key in f]
     if contains:         # in the order given (a table's), those that start like the word first
         return sorted(contains, key=lambda name: not _fold(name).startswith(key))[:n]
     scored = sorted(((difflib.SequenceMatcher(None, key, f).ratio(), f) for f in folded), reverse=True)

@@ -67,6 +67,8 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
                                      exclusive=True, stopbits=stop_bits)
         _no_delay(port)
         return _tap(port, url, baud, capture)
+    except InvalidValue:
+        raise                        # a sim:// URL's option, named by the simulator
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:
