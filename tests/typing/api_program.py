@@ -78,7 +78,7 @@ def actuators() -> list[int]:
 
 
 def engine() -> ProfileResult:
-    with start_zk(speed=50, protocol_version=6) as sim, Ecu(sim.url, baud=115200, abort="standby") as ecu:
+    with start_zk(speed=10, protocol_version=6) as sim, Ecu(sim.url, baud=115200, abort="standby") as ecu:
         assert_type(ecu, Ecu)
         first = next(ecu.status())
         assert_type(first, Status)
@@ -97,7 +97,7 @@ def engine() -> ProfileResult:
             pass
         sent: list[bytes] = ecu.abort()
         assert sent
-        result = ecu.run_profile([(0, 20, "run"), (0.5, 40), (1.0, 0, "standby")])
+        result = ecu.run_profile([(0, 20, "run"), (1, 40), (2, 0, "standby")])
         assert_type(result, ProfileResult)
         assert result.ok and result.summary["frames"] > 0 and result.outcome.exit_code == 0
         return result

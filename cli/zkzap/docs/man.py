@@ -186,6 +186,13 @@ def tree(cmd=None, name="zkzap"):
 
 # --- one page ----------------------------------------------------------------------------------
 
+def exit_statuses(cmd) -> list:
+    """``[(code, meaning), ...]`` of ``cmd``: the statuses it declares (see
+    :func:`zkzap.commands.options.exits`), else the table of every exit code."""
+    own = getattr(cmd, "exit_statuses", None)
+    return list(own) if own else list(EXIT_CODES)
+
+
 def _env_help(page):
     """{variable: roff text} for the variables of ``page``'s options: which option of which
     commands each one gives the default of."""
@@ -320,7 +327,7 @@ def render(page, entry=None) -> str:
         out += [".TP", line(bold(var))] + text_lines(esc(text))
 
     out.append(".SH EXIT STATUS")
-    for code, text in EXIT_CODES:
+    for code, text in exit_statuses(page.cmd):
         out += [".TP", line(bold(str(code)))] + text_lines(esc(text[:1].upper() + text[1:] + "."))
 
     examples = page.examples()
