@@ -136,3 +136,19 @@ def test_console_example_prints_what_the_page_says(page, argv, expected, monkeyp
         f"{page}: {' '.join(argv)}\n{printed}"
     for want, got in zip(shown, printed):
         assert _matches(want, got), f"{page}: {' '.join(argv)}\nexpected {want!r}\nprinted  {got!r}"
+
+
+def test_the_status_keys_table_is_the_codec_table():
+    from zkzap.codec import zk
+
+    text = open(os.path.join(REPO, "docs", "reference", "records.md"), encoding="utf-8").read()
+    table = text.split("<!-- zk-status-keys -->", 1)[1].strip().split("\n\n", 1)[0].splitlines()[2:]
+    rows = {}
+    for row in table:
+        ident, keys = [c.strip() for c in row.strip("|").split("|")]
+        rows[ident] = re.findall(r"`(\w+)`", keys)
+    assert rows.pop("all") == ["rpm"]
+    for st in zk.STATUS:
+        expected = [k for f in st.fields if f.key != "rpm" for k in (f.key, f.name_key) if k]
+        assert rows.pop(str(st.id)) == expected, st.id
+    assert rows == {}
