@@ -79,6 +79,18 @@ class Command(QuickHelp, click.Command):
         return super().parse_args(ctx, args)
 
 
+    def format_epilog(self, ctx, formatter):
+        """The epilog, then the command's exit statuses (:func:`zkzap.commands.options.exit_help`)."""
+        import inspect
+
+        from .options import exit_help
+
+        text = " ".join(p for p in (inspect.cleandoc(self.epilog or ""), exit_help(self)) if p)
+        formatter.write_paragraph()
+        with formatter.indentation():
+            formatter.write_text(text)
+
+
 def _long(option):
     return next((o for o in option.opts if o.startswith("--")), None)
 

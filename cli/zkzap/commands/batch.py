@@ -23,8 +23,8 @@ import sys
 import click
 
 from .. import signals
-from ..errors import INTERRUPTED, TERMINATED, USAGE, UsageError, ZkzapError
-from .options import consent, note
+from ..errors import INTERRUPTED, OK, TERMINATED, USAGE, UsageError, ZkzapError
+from .options import consent, exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
 PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture")
@@ -314,6 +314,11 @@ def invoke(line, protocol) -> int:
     except ZkzapError as e:
         _error(with_hint(e), prog)
         return e.code
+
+
+#: The exit statuses of 'zap batch' and 'zk batch': a failed line's, the first one's.
+BATCH_EXITS = exits({OK: "every line succeeded", USAGE: "a bad line (FILE:LINE) or usage: nothing was sent"},
+                    tail=" Any other status is the first failed line's (its record says it too).")
 
 
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):

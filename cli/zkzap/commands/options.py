@@ -141,6 +141,63 @@ FINITE = FiniteFloat()
 INTEGER = Integer()
 
 
+# --- exit statuses ---------------------------------------------------------------------------------
+
+def exits(meanings=None, tail=""):
+    """Declare a command's own exit statuses: ``{code: what it means for this command}`` over
+    the defaults :func:`exit_statuses` derives from its parameters (a meaning of None drops a
+    default); ``tail`` follows the list in ``--help``. Decorates a click command (put it above
+    ``@click.command``) or applies to one: ``exits({...})(command)``."""
+    def apply(cmd):
+        if not isinstance(cmd, click.Command):
+            raise TypeError("exits(): put it above @click.command (it decorates a command)")
+        cmd.exit_meanings = dict(meanings or {})
+        cmd.exit_tail = tail
+        return cmd
+
+    return apply
+
+
+def exit_statuses(cmd) -> list:
+    """``[(code, meaning), ...]`` of a leaf command, in the order of the exit-code table (143
+    after 130): what every command can exit with (0, 2, 7, 130, 143), what a command that opens
+    a port can (3 and 4; 5 and 6 on a mightyZAP bus, whose replies carry error bits and
+    checksums), what ``--verify`` adds (1 and 3: the read-back), ``--limit`` (5), and what the
+    command declares with :func:`exits`."""
+    from ..errors import (BAD_REPLY, CHECK_FAILED, DEVICE_ERROR, EXIT_CODES, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR,
+                          PORT_ERROR, TERMINATED, USAGE)
+
+    meanings = {OK: "success", USAGE: "bad usage or input (nothing was sent)",
+                OUTPUT_ERROR: "the output could not be written (disk full)", INTERRUPTED: "Ctrl-C",
+                TERMINATED: "SIGTERM"}
+    port = next((p for p in cmd.params if p.name == "port" and isinstance(p, click.Option)), None)
+    if port is not None:
+        envvar = port.envvar if isinstance(port.envvar, str) else " ".join(port.envvar or ())
+        meanings[PORT_ERROR] = "the port cannot be opened, or failed or vanished"
+        if ENV["zap"]["port"] in envvar:
+            meanings[NO_REPLY] = "no reply within the timeout, after the retries"
+            meanings[DEVICE_ERROR] = "a reply carried error bits"
+            meanings[BAD_REPLY] = "a corrupted or unexpected reply, after the retries"
+        else:
+            meanings[NO_REPLY] = "no status frame within --timeout"
+    if any(p.name == "verify" for p in cmd.params):          # writes read back (store, sync-move)
+        meanings[CHECK_FAILED] = "with --verify, a value reads back different"
+        meanings[NO_REPLY] = "no reply; with --verify, nothing answers the read-back (the write is unconfirmed)"
+    meanings.update(getattr(cmd, "exit_meanings", {}))
+    if any(p.name == "limit" for p in cmd.params) and "limit" not in (meanings.get(DEVICE_ERROR) or ""):
+        meanings[DEVICE_ERROR] = ", or ".join(m for m in (meanings.get(DEVICE_ERROR), "a --limit was violated") if m)
+    order = [c for c, _ in EXIT_CODES]
+    order.insert(order.index(INTERRUPTED) + 1, TERMINATED)
+    return [(code, meanings[code]) for code in order if meanings.get(code) is not None]
+
+
+def exit_help(cmd) -> str:
+    """The ``Exit status: ...`` paragraph of a command's ``--help``."""
+    from ..errors import exit_status_help
+
+    return exit_status_help(dict(exit_statuses(cmd)), tail=getattr(cmd, "exit_tail", ""))
+
+
 def note(message: str) -> None:
     """A message for the person (stderr), never mixed with data."""
     click.echo(f"note: {message}", err=True)

@@ -12,10 +12,10 @@ import sys
 
 import click
 
-from ..errors import UsageError
+from ..errors import INTERRUPTED, OK, OUTPUT_ERROR, TERMINATED, UsageError
 from . import CONTEXT, Group
 from .complete import fault_kinds
-from .options import Choice, FiniteRange, IntRange
+from .options import Choice, FiniteRange, IntRange, exits
 
 
 def _listen(ctx, param, value):
@@ -111,6 +111,12 @@ def _parse_set(ctx, param, values):
     return out
 
 
+#: A simulator serves until it is stopped: that is its normal end.
+SIM_EXITS = exits({OK: "stopped by Ctrl-C or SIGTERM", INTERRUPTED: None, TERMINATED: None,
+                   OUTPUT_ERROR: "the log (-o) could not be written"})
+
+
+@SIM_EXITS
 @sim.command("zk", context_settings=CONTEXT)
 @click.option("--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
               help="The protocol version the ECU reports (status ID 6).")
@@ -204,6 +210,7 @@ def _host_log(output):
     return writer.write, close
 
 
+@SIM_EXITS
 @sim.command("zap", context_settings=CONTEXT)
 @click.option("--ids", default="0", show_default=True, metavar="LIST",
               help="Actuator IDs on the bus, like 1,2,5-8; ID@BAUD puts one at another baud rate; "

@@ -7,14 +7,15 @@ import sys
 
 import click
 
-from ..errors import UsageError
+from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, UsageError
 from . import CONTEXT, Command, Group
 from .options import (BaudType, Choice, DEFAULT_BAUD, ENV, FilePath, FiniteRange, IntRange, STOP_BITS_HELP,
-                      capture_option, close_output, open_output)
+                      capture_option, close_output, exits, open_output)
 
-EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
-             "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
-             "Every record already written stays whole.")
+#: A sniffer only listens: it never waits for a reply (no 3), and decodes what it hears (no 5, 6).
+SNIFF_EXITS = exits({OK: "done (--count, --duration)", NO_REPLY: None, DEVICE_ERROR: None, BAD_REPLY: None,
+                     OUTPUT_ERROR: "the output or the capture could not be written"},
+                    tail=" Every record already written stays whole.")
 
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
 
@@ -73,7 +74,8 @@ def _common(protocol):
     return deco
 
 
-@sniff.command("zk", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@SNIFF_EXITS
+@sniff.command("zk", cls=Command, context_settings=CONTEXT)
 @_common("zk")
 @click.option("--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
               help="ECU protocol version assumed until a status ID 6 frame reveals it (default 4).")
@@ -101,7 +103,8 @@ def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats,
          table=lambda r: summary(r))
 
 
-@sniff.command("zap", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@SNIFF_EXITS
+@sniff.command("zap", cls=Command, context_settings=CONTEXT)
 @_common("zap")
 @click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.1, show_default=True,
               metavar="SECONDS", help="A request that expects an answer and gets none for this long is a "

@@ -187,10 +187,13 @@ def tree(cmd=None, name="zkzap"):
 # --- one page ----------------------------------------------------------------------------------
 
 def exit_statuses(cmd) -> list:
-    """``[(code, meaning), ...]`` of ``cmd``: the statuses it declares (see
-    :func:`zkzap.commands.options.exits`), else the table of every exit code."""
-    own = getattr(cmd, "exit_statuses", None)
-    return list(own) if own else list(EXIT_CODES)
+    """``[(code, meaning), ...]`` of ``cmd``: a command's own (see
+    :func:`zkzap.commands.options.exit_statuses`); for a group, the table of every exit code."""
+    if isinstance(cmd, click.Group):
+        return list(EXIT_CODES)
+    from ..commands.options import exit_statuses as own
+
+    return own(cmd)
 
 
 def _env_help(page):
@@ -329,6 +332,8 @@ def render(page, entry=None) -> str:
     out.append(".SH EXIT STATUS")
     for code, text in exit_statuses(page.cmd):
         out += [".TP", line(bold(str(code)))] + text_lines(esc(text[:1].upper() + text[1:] + "."))
+    if getattr(page.cmd, "exit_tail", ""):
+        out += [".PP"] + text_lines(esc(page.cmd.exit_tail.strip()))
 
     examples = page.examples()
     if examples:

@@ -92,6 +92,8 @@ def _command_section(page, level: int) -> list:
         out.append("")
     if not page.is_group:
         out += ["Exit status:", "", "| status | meaning |", "| --- | --- |", *_exit_rows(cmd), ""]
+        if getattr(cmd, "exit_tail", ""):
+            out += [_md(cmd.exit_tail.strip()), ""]
     return out
 
 

@@ -6,9 +6,9 @@ import sys
 
 import click
 
-from ...errors import CheckFailed, DeviceError, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, DeviceError, OK, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FiniteRange, consent, resolve_format, yes_option
+from ..options import Choice, FiniteRange, consent, exits, resolve_format, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -16,6 +16,8 @@ TABLE = [("id", "id"), ("check", "check"), ("verdict", "verdict"), ("value", "va
          ("detail", "detail")]
 
 
+@exits({OK: "every check passes", CHECK_FAILED: "a check fails",
+        DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0", show_default=True, metavar="LIST",
               help="Actuators to check, one after the other, like 1-4.")

@@ -12,9 +12,9 @@ import click
 
 from ...api import fleet
 from ...codec import zap
-from ...errors import CheckFailed, NoReply, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FilePath, consent, note, resolve_format, warn, yes_option
+from ..options import Choice, FilePath, consent, exits, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -105,6 +105,8 @@ def _read_entries(bus, ids, *, required=True):
 
 # -- backup --------------------------------------------------------------------------------------
 
+@exits({NO_REPLY: "a listed ID does not answer (nothing written)",
+        DEVICE_ERROR: "an actuator reports error bits (the backup is written first)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Actuators to back up, like 1,2,5-8 (each must answer); with --scan: the IDs to search.")
@@ -177,6 +179,7 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               ("unit", "unit")]
 
 
+@exits({OK: "equal", CHECK_FAILED: "they differ (like diff)", USAGE: "a bad file or option"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("a", metavar="A")
 @click.argument("b", metavar="B")
@@ -238,6 +241,10 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
               ("unit", "unit"), ("status", "status"), ("read_back", "read back"), ("errors", "errors")]
 
 
+@exits({OK: "every write reads back (or, with --plan, the plan was printed)",
+        CHECK_FAILED: "a write reads back another value",
+        USAGE: "a bad FILE or option (nothing written)", NO_REPLY: "an actuator does not answer",
+        DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", metavar="FILE", type=FilePath())
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
@@ -391,6 +398,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
 
 # -- setup ---------------------------------------------------------------------------------------
 
+@exits({OK: "every ID is done", CHECK_FAILED: "some IDs remain (stopped, skipped, or a refusal)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")

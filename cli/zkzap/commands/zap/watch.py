@@ -8,9 +8,9 @@ import sys
 import click
 
 from ...codec import zap
-from ...errors import NoReply, UsageError
+from ...errors import NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FiniteRange, IntRange, close_output, note, open_output, output_options
+from ..options import Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options
 from .compose import _link_args, link_options, open_link
 from .params import REGISTER
 from .scan import IdList
@@ -18,6 +18,7 @@ from .scan import IdList
 FORMATS = ("table", "jsonl", "json", "csv")
 
 
+@exits({NO_REPLY: "an actuator never answered"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("registers", nargs=-1, required=True, type=REGISTER, metavar="REGISTER...")
 @click.option("--ids", "ids", type=IdList(), default="0", show_default=True, metavar="LIST",

@@ -8,21 +8,21 @@ import sys
 
 import click
 
-from ...errors import DeviceError, UsageError, ZkzapError
+from ...errors import CHECK_FAILED, DEVICE_ERROR, OK, DeviceError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import Choice, IntRange, port_options, protocol_version_option
+from ..options import Choice, IntRange, exits, port_options, protocol_version_option
 from .stand import Finite, limit_options
 from .telemetry import resolve_port, zk_timeout_help
 
-EPILOG = ("Exit status: 0 every limit held and the ECU reported no error code; 1 a limit's field never "
-          "arrived (nothing to check it on); 2 bad usage; 3 no status frame within --timeout; 4 port failed; "
-          "5 a limit was violated or the ECU reported an error code; 130 Ctrl-C; 143 SIGTERM.")
 
 COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first_warning_t", "violations",
            "warnings"]
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
+@exits({OK: "every limit held and the ECU reported no error code",
+        CHECK_FAILED: "a limit no frame carried: its field never arrived (nothing to check it on)",
+        DEVICE_ERROR: "a limit was violated or the ECU reported an error code"})
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk")
 @click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Check N status frames (default 50 unless --duration is given).")

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import click
 
+from ...errors import OK, USAGE
 from .. import CONTEXT, Command
-from ..options import FilePath, IntRange, format_option
+from ..options import FilePath, IntRange, exits, format_option
 
 TABLE = [("id", "run"), ("started", "started UTC"), ("duration_s", "s"), ("running_s", "run s"),
          ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"), ("fuel_used_l", "fuel L"),
          ("command", "command"), ("outcome", "outcome")]
 
 
-@click.command(cls=Command, context_settings=CONTEXT,
-               epilog="Exit status: 0 listed; 2 FILE is missing or not a logbook.")
+@exits({OK: "listed", USAGE: "FILE is missing or not a logbook"})
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("logbook_file", metavar="FILE", type=FilePath())
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")

@@ -15,8 +15,8 @@ from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
-                        reconnect_option, resolve_port, zk_timeout_help)
+from .telemetry import (FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env, reconnect_option,
+                        resolve_port, session_exits, zk_timeout_help)
 
 
 class Output:
@@ -243,7 +243,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     return outcome, tel, session
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@session_exits("done (--count, --duration, end of replay)", "with --fail-on-error, an ECU error code was seen")
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "

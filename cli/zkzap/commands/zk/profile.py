@@ -12,11 +12,10 @@ from .. import CONTEXT, Command
 from ..options import (Choice, FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
-from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
+from .telemetry import log_options, session_exits, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
-          "a prompt on a terminal; sim:// and --sim never ask. "
-          + exit_help("the schedule ran to its end", "a new ECU error code (the abort command was sent)"))
+          "a prompt on a terminal; sim:// and --sim never ask.")
 
 
 #: The shipped examples (``--example [KIND]``).
@@ -29,6 +28,7 @@ def example_text(kind="throttle") -> str:
     return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
+@session_exits("the schedule ran to its end", "a new ECU error code (the abort command was sent)")
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
 @click.option("--example", type=Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,

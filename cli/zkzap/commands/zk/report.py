@@ -6,15 +6,13 @@ import os
 
 import click
 
-from ...errors import OutputError, UsageError
+from ...errors import OK, OUTPUT_ERROR, USAGE, OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FilePath, note
+from ..options import Choice, FilePath, exits, note
 
-EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotlib missing (pip install "
-          "'zkzap[plot]'); 7 the report could not be written.")
-
-
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
+@exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]')",
+        OUTPUT_ERROR: "the report could not be written"})
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("run_file", metavar="RUN", type=FilePath())
 @click.option("--steps", "steps_file", type=FilePath(), default=None, metavar="STEPS.csv",
               help="The per-step averages of 'zk profile --steps-csv': target lines, thrust and EGT vs rpm, "

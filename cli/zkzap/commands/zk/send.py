@@ -18,7 +18,7 @@ from ..options import (Choice, FINITE, FiniteRange, INTEGER, IntRange, SignedCom
                        consent, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
                        yes_option)
 from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
+from .telemetry import (TIMEOUT_HELP, errors_text, log_options, session_exits, reconnect_option, resolve_port,
                         zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
@@ -240,10 +240,11 @@ SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 
                "--timeout, default 2 s). With --for it is sent at --rate and the status frames are written "
                "as 'zk monitor' writes them; when SECONDS are up, a command that controls the engine ends "
                "with --end (default standby). On a real port a frame that can start the engine or run ECU "
-               "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask. "
-               + exit_help("sent and a status frame came back, or --for ran its time",
-                           "an ECU error code was seen during --for (a new one while the command controls "
-                           "the engine ends it with the abort)"))
+               "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask.")
+#: The exit statuses of every 'zk send' command.
+SEND_EXITS = session_exits("sent and a status frame came back, or --for ran its time",
+                           "an ECU error code was seen during --for (a new one while the command controls the "
+                           "engine ends it with the abort)")
 
 
 def _check_version(cmd, raw_param, protocol_version):
@@ -303,7 +304,7 @@ def _make(cmd):
     command = SignedCommand(cmd.name, callback=callback, params=params, help=doc,
                             short_help=cmd.help.split(" (")[0].rstrip("."), context_settings=CONTEXT,
                             no_args_is_help=False, epilog=SEND_EPILOG)
-    return send_options(command)
+    return SEND_EXITS(send_options(command))
 
 
 def _doc(cmd, fields):
@@ -370,6 +371,7 @@ def _make_raw():
     return send_options(raw_command)
 
 
+@SEND_EXITS
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
 @click.argument("cmd_id", metavar="ID", type=IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)

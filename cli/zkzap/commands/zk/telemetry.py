@@ -10,33 +10,21 @@ from __future__ import annotations
 
 import click
 
-from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
-                       UsageError, exit_status_help)
+from ...errors import DEVICE_ERROR, NO_REPLY, OK, PORT_ERROR, UsageError
 from ...io import LOG_FORMATS
-from ..options import FilePath, FiniteRange, IntRange, apply_options, format_option
+from ..options import FilePath, FiniteRange, IntRange, apply_options, exits, format_option
 from .bridging import bridge_options
 
 #: Output format by the extension of -o FILE when --format is not given.
 FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx",
                     ".mcap": "mcap"}
 
-def exit_help(done: str, device: str) -> str:
-    """The exit-status paragraph of a logging command, from the exit-code table: ``done`` is what
-    0 means for it, ``device`` when it exits 5; the other outcomes are the same for all."""
-    return exit_status_help({
-        OK: done,
-        USAGE: "bad usage (nothing sent)",
-        NO_REPLY: "no status frame within --timeout (at the start or later)",
-        PORT_ERROR: "port failed or vanished",
-        DEVICE_ERROR: device,
-        OUTPUT_ERROR: "the output could not be written (disk full)",
-        INTERRUPTED: "Ctrl-C",
-        TERMINATED: "SIGTERM",
-    }, tail=" Every record already written stays whole.")
-
-
-EXIT_HELP = exit_help("done (--count, --duration, end of replay)",
-                      "with --fail-on-error, an ECU error code was seen")
+def session_exits(done: str, device: str):
+    """The exit statuses of a logging command (:func:`zkzap.commands.options.exits`): ``done`` is
+    what 0 means for it, ``device`` when it exits 5; the other outcomes are the same for all."""
+    return exits({OK: done, NO_REPLY: "no status frame within --timeout (at the start or later)",
+                  PORT_ERROR: "the port failed or vanished", DEVICE_ERROR: device},
+                 tail=" Every record already written stays whole.")
 
 
 def log_options(f):
