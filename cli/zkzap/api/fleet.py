@@ -581,7 +581,15 @@ def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
     targets = [t for _, t in pairs]
     dup = sorted({t for t in targets if targets.count(t) > 1})
     if dup:
-        raise UsageError(f"--map: bus ID {dup[0]} would get the settings of two actuators of the file")
+        t = dup[0]
+        sources = [f"ID {i} ({'--map ' + str(i) + ':' + str(t) if i in mapping else 'kept as it is'})"
+                   for i, target in pairs if target == t]
+        unmapped = [i for i in chosen if i not in mapping]
+        hint = (f"; an ID of the file that --map does not name keeps its own, and without --ids every ID "
+                f"of the file ({_ranges(sorted(entries))}) is applied: add --ids {','.join(map(str, mapping))} "
+                f"to apply only the mapped ones" if unmapped and ids is None else "")
+        raise UsageError(f"--map: bus ID {t} would get the settings of two actuators of the file: "
+                         f"{' and '.join(sources)}{hint}", bus_id=t)
     return pairs
 
 

@@ -303,7 +303,9 @@ def decode_inputs(inputs, binary, explicit):
     """The files a decoder reads, for ``inputs=`` of :func:`output_file` (hex arguments: none)."""
     if explicit:
         return None
-    return {"--binary" if binary else "stdin": list(inputs) or ["-"]}
+    if binary:
+        return {"--binary": list(inputs) or ["-"]}
+    return {"FILE" if inputs and list(inputs) != ["-"] else "stdin": list(inputs) or ["-"]}
 
 
 def output_format(fmt, path):
@@ -385,6 +387,12 @@ zap_yes_option = click.option(
     help="Consent to writing stored settings (they survive power-off and wear the actuator's "
          "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
          "prompts and a script is refused (sim:// and --sim never ask).")
+
+zap_move_yes_option = click.option(
+    "-y", "--yes", is_flag=True,
+    help="Consent to moving the rods (a full stroke each, then back to where they were) on a real "
+         "port; without it a terminal prompts and a script is refused (--no-move checks without "
+         "moving; sim:// and --sim never ask).")
 
 protocol_version_option = click.option(
     "--protocol-version", type=IntRange(1, 63), default=None, metavar="N",

@@ -9,7 +9,7 @@ import click
 from ...codec import zap
 from .. import CONTEXT, Command
 from ..batch import BATCH_EXITS
-from ..options import consent, yes_option
+from ..options import consent, zap_yes_option as yes_option
 from .compose import link_options, open_link
 
 

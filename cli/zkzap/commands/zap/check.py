@@ -8,7 +8,7 @@ import click
 
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, DeviceError, OK, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FiniteRange, consent, exits, resolve_format, yes_option
+from ..options import Choice, FiniteRange, consent, exits, resolve_format, zap_move_yes_option as yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 

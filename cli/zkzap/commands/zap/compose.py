@@ -378,36 +378,44 @@ LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meani
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("reg", metavar="REGISTER", type=REGISTER)
+@click.argument("regs", nargs=-1, required=True, metavar="REGISTER...", type=REGISTER)
 @click.option("-l", "--length", type=IntRange(1, 253), default=None,
-              help="Bytes to read (default: the register's size); more bytes read the registers that follow.")
+              help="Bytes to read from one REGISTER (default: its size); more bytes read the registers that "
+                   "follow.")
 @click.option("--physical", is_flag=True, help="Print scaled registers in their unit (present-voltage 12.0, not 120).")
 @_format("value", ("value", "table", "json", "jsonl", "csv"),
          "'value' prints the bare value (for pos=$(zap load ...)); the others give records")
 @id_option(allow_broadcast=True)
 @wire_options
-def load(reg, length, physical, fmt, ident, **common):
-    """Load Data (0xF2): read REGISTER.
+def load(regs, length, physical, fmt, ident, **common):
+    """Load Data (0xF2): read REGISTER (one Load Data each, when several are given).
 
-    Prints the bare value (one register), or one NAME=VALUE line per register when --length
-    spans several; --format json|jsonl|csv|table gives records with id, register, address,
-    value (and physical/unit for scaled registers, meaning for coded ones). Error bits in the
-    reply are reported on stderr and give exit status 5 after the value is printed.
+    Prints the bare value of one register, or one NAME=VALUE line per register when several
+    are given or --length spans several; --format json|jsonl|csv|table gives records with id,
+    register, address, value (and physical/unit for scaled registers, meaning for coded ones).
+    Error bits in a reply are reported on stderr and give exit status 5 after the values are
+    printed.
 
     \b
     Examples:
       zap load present-position -n        # FF FF FF 00 04 F2 8C 02 7B
       zap load present-voltage --id 1 -p /dev/ttyUSB0 --physical
       pos=$(zap load present-position --id 1 -p /dev/ttyUSB0)
+      zap load present-position present-current moving --id 1 --sim
       zap load model-number --length 17 --id 1 --sim -f json
     """
-    length = reg.size if length is None else length
-    if reg.address + length > 0x100:
-        raise UsageError(f"--length: {length} bytes from 0x{reg.address:02X} run past address 0xFF; "
-                         f"allowed 1..{0x100 - reg.address}")
-    pkt = zap.load(ident, reg, length)
+    if length is not None and len(regs) > 1:
+        raise UsageError(f"--length: reads from one REGISTER; {len(regs)} are given (each is read whole)")
+    reads = []
+    for reg in regs:
+        size = reg.size if length is None else length
+        if reg.address + size > 0x100:
+            raise UsageError(f"--length: {size} bytes from 0x{reg.address:02X} run past address 0xFF; "
+                             f"allowed 1..{0x100 - reg.address}")
+        reads.append((reg, size))
+    pkts = [zap.load(ident, reg, size) for reg, size in reads]
     if common["dry_run"]:
-        return deliver([pkt], **common)
+        return deliver(pkts, **common)
     if ident == zap.BROADCAST:
         raise UsageError("id: a broadcast Load Data is never answered; give one actuator's ID")
     if common["return_mode"] == "0":
@@ -417,11 +425,14 @@ def load(reg, length, physical, fmt, ident, **common):
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
-        reply, values = bus.read_registers(ident, reg.address, length, check=False)
+        replies = [(reg, size, *bus.read_registers(ident, reg.address, size, check=False)) for reg, size in reads]
     from ...api.zap import register_records
 
-    records = register_records(reply.ident, values, reply.errors)
-    partial = _mark_partial(records, reg.address, length)
+    records, partial = [], []
+    for reg, size, reply, values in replies:
+        got = register_records(reply.ident, values, reply.errors)
+        partial += _mark_partial(got, reg.address, size)
+        records += got
     if fmt == "value":
         for rec in records:
             v = rec["physical"] if physical and "physical" in rec else rec["value"]
@@ -435,9 +446,11 @@ def load(reg, length, physical, fmt, ident, **common):
             writer.write(rec)
         writer.close()
     if common["verbose"]:
-        _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
-    if reply.error:
-        raise device_error(reply)
+        for pkt, (_, _, reply, _) in zip(pkts, replies):
+            _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
+    for _, _, reply, _ in replies:
+        if reply.error:
+            raise device_error(reply)
 
 
 def _mark_partial(records, address, length) -> list:

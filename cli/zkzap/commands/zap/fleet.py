@@ -14,7 +14,8 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FilePath, consent, exits, note, resolve_format, warn, yes_option
+from ..options import (Choice, FilePath, consent, exits, note, plural, resolve_format, warn,
+                       zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -326,8 +327,15 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             writes += w
             unchanged += u
         n_act = len({w.target for w in writes})
-        summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
-                   f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")
+        stored = sum(1 for w in writes if w.register.stored)
+        equal = plural(unchanged, "setting") + " already equal"
+        if stored and stored == len(writes):
+            kept = " (to a stored setting, which survives power-off)" if stored == 1 else \
+                " (all to stored settings, which survive power-off)"
+        else:
+            kept = f" ({stored} of them to stored settings, which survive power-off)" if stored else ""
+        to_write = f"{plural(len(writes), 'write')} on {plural(n_act, 'actuator')}{kept}"
+        summary = f"{to_write}; {equal}" if writes else f"nothing to write; {equal}"
         if plan_only:
             _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                         title=f"plan: {file}")
@@ -341,9 +349,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             if is_tty(sys.stderr):
                 _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
                             title=f"plan: {file}", stream=sys.stderr)
-            stored = sum(1 for w in writes if w.register.stored)
-            consent(f"apply {file} to {common['port']}: {summary}, {stored} of them stored settings that "
-                    "survive power-off", yes)
+            consent(f"apply {file} to {common['port']}: {summary}", yes)
         elif common["verbose"] or sys.stderr.isatty():
             note(f"applying {file}: {summary}")
         done: list = []

@@ -39,6 +39,10 @@ class IdList(click.ParamType):
             if not part:
                 continue
             lo, dash, hi = part.partition("-")
+            if not lo and hi.isdigit():
+                raise UsageError(f"--ids: {part} is out of range; allowed 0..253 (a range is written like 1-4)")
+            if dash and not (lo and hi):
+                raise UsageError(f"--ids: {part!r}: a range needs both ends, like 1-4")
             try:
                 first = zap.check_id(lo, allow_broadcast=False)
                 last = zap.check_id(hi, allow_broadcast=False) if dash else first
