@@ -26,6 +26,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from quick import add_quick  # noqa: E402 - beside this script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
@@ -46,6 +47,7 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of API loop and batch (medians)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-fail", action="store_true")
+    add_quick(ap, count=20, commands=2, rounds=1, no_fail=True)
     args = ap.parse_args(argv)
 
     from zkzap import Bus

@@ -23,6 +23,7 @@ import re
 import subprocess
 import sys
 import time
+from quick import add_quick  # noqa: E402 - beside this script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
@@ -56,6 +57,7 @@ def main(argv=None):
     ap.add_argument("--baud", type=int, default=57600)
     ap.add_argument("--ids", default="1-4")
     ap.add_argument("--seconds", type=float, default=3.0)
+    add_quick(ap, seconds=0.3)
     args = ap.parse_args(argv)
 
     from zkzap.codec import zap
@@ -100,7 +102,7 @@ def main(argv=None):
     finally:
         sim.terminate()
         sim.wait(5)
-    return 0 if worst is not None and worst >= TARGET else 1
+    return 0 if worst is not None and (worst >= TARGET or args.quick) else 1
 
 
 if __name__ == "__main__":
