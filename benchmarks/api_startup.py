@@ -15,7 +15,8 @@ import statistics
 import subprocess
 import sys
 import time
-from quick import add_quick  # noqa: E402 - beside this script
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
+from quick import add_quick  # noqa: E402
 
 TARGET = 1.2
 

@@ -141,7 +141,7 @@ ZAP_COMPOSE = [
     Bad("zap store 0x100 1 -n", "register: address 256 is out of range; allowed 0x00..0xFF"),
     Bad("zap store protocol-type 0 -n", "protocol-type: 0 switches the actuator to Modbus RTU"),
     Bad("zap store goal-position -n", "Missing argument 'VALUE'"),
-    Bad("zap load -n", "Missing argument 'REGISTER'"),
+    Bad("zap load -n", "Missing argument 'REGISTER...'"),
     Bad("zap load goal-position --length 0 -n", "'-l' / '--length': 0 is out of range; allowed 1.."),
     Bad("zap load goal-position --length 256 -n", "'-l' / '--length'"),
     Bad("zap echo --id 255 -n", "id: 255 is out of range; allowed 0..253, 254 or broadcast"),
