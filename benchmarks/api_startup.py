@@ -15,8 +15,8 @@ import statistics
 import subprocess
 import sys
 import time
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
-from quick import add_quick  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 TARGET = 1.2
 

@@ -31,8 +31,8 @@ import sys
 import tempfile
 import threading
 import time
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
-from quick import add_quick  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))

@@ -41,8 +41,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
 from zkzap.codec import zap, zk  # noqa: E402
 from zkzap.codec.framing import ZapFramer, ZkFramer  # noqa: E402
 from zkzap.io.zk_lines import ZkLines  # noqa: E402
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
-from quick import add_quick  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 ZK_HEADS = bytes(range(0xF1, 0x100))
 

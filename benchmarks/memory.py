@@ -21,7 +21,7 @@ sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
 from zk_decode import zk_command  # noqa: E402
-from quick import add_quick  # noqa: E402
+from common import add_quick  # noqa: E402
 
 PROBE = r"""
 import resource, subprocess, sys

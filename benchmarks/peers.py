@@ -32,7 +32,7 @@ sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
 from zk_decode import timed, zk_command  # noqa: E402
-from quick import add_quick  # noqa: E402
+from common import add_quick  # noqa: E402
 
 def mavlogdump():
     exe = os.path.join(os.path.dirname(sys.executable), "mavlogdump.py")

@@ -22,8 +22,8 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli"))
 
 from zkzap.api.schedule import Schedule  # noqa: E402
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
-from quick import add_quick  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 TARGET = 2.0
 

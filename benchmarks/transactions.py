@@ -22,8 +22,8 @@ import os
 import subprocess
 import sys
 import time
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # quick.py, beside this script
-from quick import add_quick  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick, until_ready  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
@@ -52,7 +52,9 @@ def main(argv=None):
     ap.add_argument("--commands", type=int, default=20, help="zap load processes")
     ap.add_argument("--scans", type=int, default=3, help="scans per bus (best kept)")
     ap.add_argument("--scan-ids", default="0-253", help="the IDs a scan probes (the targets are for 0-253)")
-    add_quick(ap, count=20, commands=2, scans=1, scan_ids="0-10")
+    ap.add_argument("--timeout", type=float, default=None,
+                    help="reply timeout of the round trips in seconds (default: derived from the baud rate)")
+    add_quick(ap, count=20, commands=2, scans=1, scan_ids="0-10", timeout=1.0)
     args = ap.parse_args(argv)
 
     from zkzap.codec import zap
@@ -62,8 +64,8 @@ def main(argv=None):
     sim, port = start_sim("1,2,3", args.baud)
     try:
         pkt = zap.load(1, "present-position")
-        with ZapBus(open_port(port, args.baud, timeout=0)) as bus:
-            bus.transact(pkt)                                   # warm up
+        with ZapBus(open_port(port, args.baud, timeout=0), timeout=args.timeout) as bus:
+            until_ready(lambda: bus.transact(pkt))              # warm up, once it answers
             t0 = time.perf_counter()
             for _ in range(args.count):
                 bus.transact(pkt)
@@ -74,6 +76,8 @@ def main(argv=None):
 
         env = dict(os.environ, NO_COLOR="1")
         cmd = tool("zap") + ["load", "present-position", "--id", "1", "-p", port, "-b", str(args.baud)]
+        if args.timeout is not None:
+            cmd += ["--timeout", str(args.timeout)]
         t0 = time.perf_counter()
         for _ in range(args.commands):
             subprocess.run(cmd, check=True, capture_output=True, env=env)

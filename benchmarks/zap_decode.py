@@ -22,7 +22,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
-from quick import add_quick  # noqa: E402
+from common import add_quick  # noqa: E402
 
 TARGETS = {"jsonl": 1.0, "csv": 1.5}
 

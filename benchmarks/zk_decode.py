@@ -29,7 +29,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
-from quick import add_quick  # noqa: E402
+from common import add_quick  # noqa: E402
 
 def zk_command():
     exe = os.path.join(os.path.dirname(sys.executable), "zk")

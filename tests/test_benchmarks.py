@@ -30,7 +30,7 @@ def test_every_benchmark_has_a_quick_size():
     assert len(scripts()) >= 13
     for name in scripts():
         with open(os.path.join(BENCH, name), encoding="utf-8") as f:
-            assert "add_quick(" in f.read(), f"{name}: no --quick (benchmarks/quick.py)"
+            assert "add_quick(" in f.read(), f"{name}: no --quick (benchmarks/common.py)"
 
 
 @pytest.mark.parametrize("name", scripts())
