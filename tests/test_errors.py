@@ -157,7 +157,7 @@ def test_a_misspelt_marker_option_names_the_closest(pytester):
         def test_it(zap_sim):
             pass
     """)
-    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "-p", "no:xdist")
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     result.assert_outcomes(errors=1)
     result.stdout.fnmatch_lines(["*@pytest.mark.zap_sim: unknown option 'idz'; did you mean ids?*"])
 
