@@ -81,6 +81,10 @@ class _NumberRange:
     def allowed(self) -> str:
         return range_text(self.min, self.max, self.min_open, self.max_open)
 
+    def _describe_range(self) -> str:
+        """The range as ``--help`` shows it after an option's text (``[1..200]``)."""
+        return self.allowed()
+
     def convert(self, value, param, ctx):
         number = _number(value, self.kind, f"; allowed {self.allowed()}", param, ctx, self.fail)
         lo_bad = self.min is not None and (number <= self.min if self.min_open else number < self.min)
@@ -111,6 +115,7 @@ class FiniteRange(_NumberRange, click.FloatRange):
     and ``inf`` wherever there is no upper bound), in zkzap's words. Every float option of
     zkzap is one of these or a :class:`FiniteFloat`."""
 
+    name = "number"
     kind = float
 
 
@@ -118,6 +123,7 @@ class IntRange(_NumberRange, click.IntRange):
     """``click.IntRange`` in zkzap's words (decimal or ``0x..``). Every integer option of zkzap
     is one of these."""
 
+    name = "integer"
     kind = int
 
 
