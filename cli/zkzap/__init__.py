@@ -45,6 +45,7 @@ _LAZY = {
     "ChecksumError": "zkzap.codec.zap",
     "ExpressionError": "zkzap.api.expr",
     "LimitViolation": "zkzap.api.limits",
+    "EcuLimitError": "zkzap.api.prestart",
     "ScheduleError": "zkzap.api.schedule",
     "ScheduleTargetError": "zkzap.api.schedule",
     "DocumentError": "zkzap.api.fleet",
@@ -62,6 +63,7 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .api.expr import ExpressionError as ExpressionError
     from .api.fleet import DocumentError as DocumentError, NotFound as NotFound, TwoAnswer as TwoAnswer
     from .api.limits import LimitViolation as LimitViolation
+    from .api.prestart import EcuLimitError as EcuLimitError
     from .api.schedule import ScheduleError as ScheduleError, ScheduleTargetError as ScheduleTargetError
     from .api.zap import Actuator as Actuator, Bus as Bus, Reading as Reading
     from .api.zk import Ecu as Ecu, ProfileResult as ProfileResult, Status as Status

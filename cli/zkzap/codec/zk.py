@@ -250,6 +250,8 @@ STATUS = (
     ), since=1, help="added by the V1.4 edition"),
 )
 STATUS_BY_ID = {s.id: s for s in STATUS}
+#: The keys each status frame ID carries (``rpm`` in every one, ``error_code`` in ID 1's).
+STATUS_KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in STATUS}
 
 #: Every status key in table order (CSV columns, snapshot rows).
 STATUS_KEYS = []
@@ -624,6 +626,48 @@ class ControlFrame:
         if self.id == 2:
             return self.hazardous
         return False
+
+    @property
+    def since(self) -> int:
+        """The protocol version an ECU needs for this frame: the command's, or the action's
+        (``reset-fuel`` needs 2, ``pump-on``/``pump-off`` 5); 1 for an undefined ID."""
+        if self.command is None:
+            return 1
+        if self.id == 2:
+            return max(self.command.since, ACTION_SINCE.get(self.frame[2], 1))
+        return self.command.since
+
+    @property
+    def rpm_factor(self) -> Optional[int]:
+        """ID 6's RPM factor RPM_X (0: throttle mode); None for other IDs."""
+        return (self.frame[2] >> 2) & 7 if self.id == 6 else None
+
+    @property
+    def rpm_value(self) -> Optional[int]:
+        """ID 7's 12-bit RPM value (target rpm = value x 10 x RPM_X); None for other IDs."""
+        return ((self.frame[1] & 0x0F) << 8) | self.frame[2] if self.id == 7 else None
+
+    def leaves(self, rpm_factor: Optional[int] = None) -> Optional[str]:
+        """What the engine is left doing once this frame was the last one it got, in words, when
+        that is more than standing safe (None: stop, standby, pwm and harmless commands).
+        ``rpm_factor``: the RPM_X in force, for an ID 7 target."""
+        if self.id == 1 and self.sw == 3:
+            throttle = (((self.frame[1] & 3) << 8) | self.frame[2]) / 10
+            return f"running at {throttle:g} % throttle (state run)"
+        if self.id == 6 and self.frame[2] & 0x1F:
+            what = []
+            if self.sw == 3:
+                what.append("in state run")
+            if self.rpm_factor:
+                what.append(f"in RPM mode (RPM_X {self.rpm_factor})")
+            return " and ".join(what) if what else None
+        if self.id == 7:
+            target = (f"{self.rpm_value * 10 * rpm_factor:,} rpm" if rpm_factor
+                      else f"RPM value {self.rpm_value} (x 10 x RPM_X rpm)")
+            return f"holding a target of {target} (RPM mode)"
+        if self.id == 2 and self.frame[2] == 12:
+            return "with the fuel pump on (until pump-off)"
+        return None
 
     def decode(self, ctx: Optional[Mapping[str, Any]] = None) -> Record:
         """The frame's record (as ``zk decode`` gives it)."""

@@ -9,15 +9,21 @@ import click
 
 from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, UsageError
 from . import CONTEXT, Command, Group
-from .options import (BaudType, Choice, DEFAULT_BAUD, ENV, FilePath, FiniteRange, IntRange, STOP_BITS_HELP,
-                      capture_option, close_output, exits, open_output)
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FilePath, FiniteRange, IntRange,
+                      OutputPath, capture_option, close_output, exits, open_output)
 
-#: A sniffer only listens: it never waits for a reply (no 3), and decodes what it hears (no 5, 6).
-SNIFF_EXITS = exits({OK: "done (--count, --duration)", NO_REPLY: None, DEVICE_ERROR: None, BAD_REPLY: None,
+
+#: A sniffer only listens: it never waits for a reply, and decodes what it hears (no 5, 6); it
+#: ends with 3 when what it heard is no device's.
+SNIFF_EXITS = exits({OK: "done (--count, --duration)",
+                     NO_REPLY: "no frame at all by the end (a silent line), or bytes that are noise, not frames, "
+                               "for 2 s (a wrong baud rate or stop bits)",
+                     DEVICE_ERROR: None, BAD_REPLY: None,
                      OUTPUT_ERROR: "the output or the capture could not be written"},
                     tail=" Every record already written stays whole.")
 
-FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+#: What sniff writes (``-f``, or named by the suffix of ``-o``).
+SNIFF_FORMATS = ("table", "jsonl", "json", "csv")
 
 
 @click.group(cls=Group, context_settings=CONTEXT)
@@ -52,10 +58,11 @@ def _common(protocol):
                          default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                          help=f"{STOP_BITS_HELP[protocol]} [env {env['stop_bits']}]."),
             capture_option(protocol),
-            click.option("-f", "--format", "fmt", type=Choice(["table", "jsonl", "json", "csv"]), default=None,
+            click.option("-f", "--format", "fmt", type=Choice(SNIFF_FORMATS), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
-            click.option("-o", "--output", type=FilePath(), default=None, help="Write records to FILE."),
+            click.option("-o", "--output", type=OutputPath(SNIFF_FORMATS), default=None,
+                         help="Write records to FILE (.csv, .json, .jsonl by its suffix; JSON Lines without one)."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
             click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
                          help="Stop after N records."),
@@ -199,7 +206,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     from ..signals import SignalGuard
 
     if fmt is None and output and output != "-":
-        fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(output)[1].lower(), "jsonl")
+        from ..io import format_for_path
+
+        fmt = format_for_path(output, SNIFF_FORMATS)
     if stats_json:
         try:
             open(stats_json, "a").close()
@@ -214,7 +223,7 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
         writer = make_writer(fmt, stream, cols, header=not had)
     live = _live(sniffer) if is_tty(sys.stderr) else None
     written = 0
-    reason = None
+    reason = failure = None
     try:
         with sniffer, SignalGuard() as guard:
             end = None if duration is None else time.monotonic() + duration
@@ -236,6 +245,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
                     break
                 if end is not None and time.monotonic() >= end:
                     reason = "duration"
+                    break
+                failure = sniffer.noise()
+                if failure is not None:
+                    reason = "noise"
                     break
                 if guard.signum is not None:
                     from ..signals import INTERRUPT_SIGNALS
@@ -262,6 +275,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
             f.write("\n")
     if reason == "interrupted":
         raise KeyboardInterrupt
+    if reason == "noise":
+        raise failure
+    if not sniffer.frames_trusted and reason != "terminated":
+        raise sniffer.silent()         # a silent line never passes
     if reason == "terminated":
         from ..errors import TERMINATED, ZkzapError
 
