@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, UsageError
+from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, UsageError
 from . import CONTEXT, Command, Group
 from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FilePath, FiniteRange, IntRange,
                       OutputPath, capture_option, close_output, exits, open_output)
@@ -18,6 +18,7 @@ from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FileP
 SNIFF_EXITS = exits({OK: "done (--count, --duration)",
                      NO_REPLY: "no frame at all by the end (a silent line), or bytes that are noise, not frames, "
                                "for 2 s (a wrong baud rate or stop bits)",
+                     PORT_ERROR: "a port cannot be opened, or failed or vanished",
                      DEVICE_ERROR: None, BAD_REPLY: None,
                      OUTPUT_ERROR: "the output or the capture could not be written"},
                     tail=" Every record already written stays whole.")
