@@ -9,9 +9,10 @@ from typing import TYPE_CHECKING, Any, Iterator, Optional, Union
 
 import zkzap
 from zkzap import (Actuator, BadReply, Bus, CaptureError, CheckFailed, ChecksumError, CrcError, DeviceError, Ecu,
-                   ExpressionError, FieldValueError, FrameError, HexError, InvalidValue, LimitViolation, NoReply,
-                   OutputError, PacketError, PortError, ProfileResult, Reading, ScheduleError, Status, UsageError,
-                   ZkzapError)
+                   EcuLimitError, ExpressionError, FieldValueError, FrameError, HexError, InvalidValue, LimitViolation,
+                   NoReply, OutputError, PacketError, PortError, ProfileResult, Reading, ScheduleError, Status,
+                   UsageError, ZkzapError)
+from zkzap.api.prestart import EcuLimits, Plan
 from zkzap.codec import ZapFramer, ZkFramer, crc8_maxim, format_hex, parse_hex, zap, zap_checksum, zk
 from zkzap.errors import close_names, did_you_mean, exit_code
 from zkzap.link.zap_bus import Reply
@@ -103,6 +104,27 @@ def engine() -> ProfileResult:
         return result
 
 
+def limits() -> None:
+    """The pre-start check: a target above the max rpm the ECU reports is refused, nothing sent."""
+    with start_zk(speed=10, max_rpm=120000) as sim, Ecu(sim.url, stop_bits=1) as ecu:
+        target = ecu.frame("rpm", target_rpm=150000, rpm_factor=4)
+        assert_type(target.since, int)
+        assert target.rpm_value == 3750 and target.leaves(4) == "holding a target of 150,000 rpm (RPM mode)"
+        plan = Plan([target], rpm_factor=4, what="rpm")
+        assert plan.needs_ecu
+        try:
+            ecu.check(plan)
+        except EcuLimitError as e:                    # a usage error: exit status 2
+            assert e.code == 2 and e.max_rpm == 120000
+        known: Optional[EcuLimits] = ecu.limits
+        assert known is not None and known.max_rpm == 120000 and known.version == 6
+        try:
+            ecu.send("rpm", target_rpm=150000, rpm_factor=4)
+        except UsageError:
+            pass
+        assert ecu.sent == 0
+
+
 def codec() -> None:
     cf = zk.ControlFrame.build("control", sw="run", throttle_pct=50)
     assert_type(cf, zk.ControlFrame)
@@ -150,7 +172,7 @@ def errors() -> None:
     assert close_names("goal-sped", ["goal-speed", "goal-position"]) == ["goal-speed"]
     assert did_you_mean("stnadby", ["stop", "standby"]) == "; did you mean standby?"
     for cls in (UsageError, CheckFailed, PortError, DeviceError, BadReply, OutputError, FrameError, PacketError,
-                ExpressionError, LimitViolation, ScheduleError, CaptureError):
+                ExpressionError, LimitViolation, ScheduleError, EcuLimitError, CaptureError):
         assert issubclass(cls, ZkzapError)
 
 
@@ -165,6 +187,7 @@ def main() -> int:
     assert zkzap.__version__
     assert actuators() == [1, 2]
     assert engine().records > 0
+    limits()
     codec()
     errors()
     simulators()

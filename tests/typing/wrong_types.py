@@ -23,10 +23,13 @@ def wrong(url: str) -> None:
     Bus(url, timeout="1")                              # refused: seconds are a float
     Ecu(url, baud=None)                                # refused: baud is an int
     Ecu(url, abort="later")                            # refused: standby, stop or none
+    Ecu(url, stop_bits=3)                              # refused: 1 or 2
     ecu = Ecu(url)
     ecu.hold("control", "30")                          # refused: seconds are a float
     ecu.run_profile(42)                                # refused: a schedule, text, a path or rows
     frame: str = ecu.frame("keepalive")                # refused: a ControlFrame
+    ecu.send("keepalive", listen="no")                 # refused: listen is a bool
+    ecu.check([ecu.frame("keepalive")])                # refused: a Plan, not frames
     start_zap(ids="1,2", turnaround="2")               # refused: milliseconds are a float
     start_zap(transport="serial")                      # refused: inprocess, pty or tcp
     start_zk(speed="10")                               # refused: speed is a float
