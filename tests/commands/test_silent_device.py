@@ -48,8 +48,9 @@ def values(tmp_path_factory):
         "zk": {"sw": "stop", "param": "rate-20hz", "accel_curve": "40", "ignition_voltage_v": "3.2",
                "pressure_hpa": "1013", "target_rpm": "60000", "rpm_factor": "2", "cmd_id": "0",
                "schedule": str(schedule), "file": str(zk_batch)},
-        "zap": {"reg": "goal-position", "value": "100", "position": "100", "new": "5", "new_baud": "115200",
-                "ids": "1", "targets": "1:100", "registers": "present-position", "instruction": "echo",
+        "zap": {"reg": "goal-position", "regs": "present-position", "value": "100", "position": "100", "new": "5",
+                "new_baud": "115200", "ids": "1", "targets": "1:100", "registers": "present-position",
+                "instruction": "echo",
                 "file": lambda cmd: str(zap_batch if cmd.name == "batch" else fleet),
                 "a": str(fleet), "b": "bus"},
     }

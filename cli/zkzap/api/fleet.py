@@ -39,7 +39,7 @@ import time
 
 from ..codec import zap
 from ..codec.fields import FieldValueError
-from ..errors import CheckFailed, UsageError
+from ..errors import CheckFailed, UsageError, did_you_mean
 
 FORMAT = "zkzap-fleet/1"
 SETUP_FORMAT = "zkzap-setup/1"
@@ -215,11 +215,7 @@ def check_document(doc, name="document") -> dict:
                 rkey = f"{where}.{section}.{rname}"
                 reg = REG.get(str(rname))
                 if reg is None:
-                    import difflib
-
-                    close = difflib.get_close_matches(str(rname).lower(), list(REG), n=3, cutoff=0.75)
-                    fail(rkey, "unknown register" + (f"; did you mean {', '.join(close)}?" if close
-                                                     else "; see 'zap registers'"))
+                    fail(rkey, "unknown register" + did_you_mean(rname, REG, otherwise="; see 'zap registers'"))
                 if section_of(reg) != section:
                     fail(rkey, f"{reg.name} is a {section_of(reg)} register, not {section}")
                 if not _is_int(value):
@@ -257,7 +253,7 @@ def dumps(doc: dict, fmt: str) -> str:
         return _toml(doc)
     if fmt == "yaml":
         return _yaml(doc)
-    raise ValueError(fmt)
+    raise UsageError(f"format: {fmt!r}; allowed json, toml, yaml")
 
 
 def dump_document(doc: dict, path: str) -> None:
@@ -585,7 +581,15 @@ def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
     targets = [t for _, t in pairs]
     dup = sorted({t for t in targets if targets.count(t) > 1})
     if dup:
-        raise UsageError(f"--map: bus ID {dup[0]} would get the settings of two actuators of the file")
+        t = dup[0]
+        sources = [f"ID {i} ({'--map ' + str(i) + ':' + str(t) if i in mapping else 'kept as it is'})"
+                   for i, target in pairs if target == t]
+        unmapped = [i for i in chosen if i not in mapping]
+        hint = (f"; an ID of the file that --map does not name keeps its own, and without --ids every ID "
+                f"of the file ({_ranges(sorted(entries))}) is applied: add --ids {','.join(map(str, mapping))} "
+                f"to apply only the mapped ones" if unmapped and ids is None else "")
+        raise UsageError(f"--map: bus ID {t} would get the settings of two actuators of the file: "
+                         f"{' and '.join(sources)}{hint}", bus_id=t)
     return pairs
 
 

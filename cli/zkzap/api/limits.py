@@ -22,11 +22,18 @@ from ..codec import zk
 from ..errors import DeviceError, UsageError
 from .expr import parse, parse_lines
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Optional
+
+    from .expr import Condition
+
 #: What a violation does: abort or exit (end the session, exit 5; one that controls the engine
 #: sends its abort either way), warn (go on).
 ON_LIMIT = ("abort", "exit", "warn")
-#: Status keys a limit may name.
-FIELDS = frozenset(zk.STATUS_KEYS)
+#: Status keys a limit may name: the numeric ones (an engine state or error code by its number;
+#: the name keys, ``out_of_range`` and the frame's own keys hold no number to compare).
+FIELDS = frozenset(f.key for s in zk.STATUS for f in s.fields)
 #: Status keys each status frame ID carries.
 KEYS_BY_ID = zk.STATUS_KEYS_BY_ID
 
@@ -34,7 +41,8 @@ KEYS_BY_ID = zk.STATUS_KEYS_BY_ID
 class LimitViolation(DeviceError):
     """A limit violated (exit status 5); carries the condition, time and value."""
 
-    def __init__(self, message, condition=None, t=None, value=None):
+    def __init__(self, message: str, condition: Optional[Condition] = None, t: Optional[float] = None,
+                 value: Optional[float] = None) -> None:
         super().__init__(message)
         self.condition = condition
         self.t = t

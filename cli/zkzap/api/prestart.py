@@ -19,6 +19,12 @@ from __future__ import annotations
 from ..codec import zk
 from ..errors import NoReply, UsageError
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Callable, Iterable, Optional, Union
+
+    from ..link.zk_sources import LiveSource
+
 #: Status frames listened to at most for status ID 6 (more than one cycle of IDs 1..10).
 LISTEN_FRAMES = 12
 
@@ -34,12 +40,14 @@ class EcuLimits:
     (None when no ID 6 came), ``version`` the one in force (reported, given or the default) and
     ``version_source`` (``frame``, ``given`` or ``default``)."""
 
-    def __init__(self, frame=None, given=None, read=True):
+    def __init__(self, frame: Optional[bytes] = None, given: Optional[int] = None, read: bool = True) -> None:
         self.frame = frame
         self.read = read              # False: nothing was read from the ECU (transmit only)
         rec = zk.decode_status(frame) if frame is not None else {}
-        self.max_rpm = rec.get("max_rpm")
-        self.protocol_version = rec.get("protocol_version")
+        self.max_rpm: Optional[float] = rec.get("max_rpm")
+        self.protocol_version: Optional[int] = rec.get("protocol_version")
+        self.version: int
+        self.version_source: str
         if self.protocol_version is not None:
             self.version, self.version_source = self.protocol_version, "frame"
         elif given is not None:
@@ -48,7 +56,7 @@ class EcuLimits:
             self.version, self.version_source = zk.DEFAULT_PROTOCOL_VERSION, "default"
 
     @classmethod
-    def reported(cls, max_rpm, protocol_version) -> "EcuLimits":
+    def reported(cls, max_rpm: Optional[float], protocol_version: Optional[int]) -> "EcuLimits":
         """The limits of an ECU whose status ID 6 values are already known (a live view that
         decodes every frame): ``max_rpm`` and ``protocol_version`` (None: not reported yet)."""
         limits = cls(None, protocol_version)
@@ -57,7 +65,7 @@ class EcuLimits:
             limits.protocol_version, limits.version_source = protocol_version, "frame"
         return limits
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"EcuLimits(max_rpm={self.max_rpm}, version={self.version} ({self.version_source}))"
 
 
@@ -71,7 +79,9 @@ class Plan:
     checked. ``what`` names the plan in messages.
     """
 
-    def __init__(self, frames, *, targets=None, rpm_factor=None, what="command"):
+    def __init__(self, frames: Iterable[Union[bytes, zk.ControlFrame]], *,
+                 targets: Optional[Iterable[tuple[float, str]]] = None, rpm_factor: Optional[int] = None,
+                 what: str = "command") -> None:
         self.frames = [f if isinstance(f, zk.ControlFrame) else zk.ControlFrame(f) for f in frames]
         self.what = what
         if targets is None:
@@ -79,7 +89,7 @@ class Plan:
             factor = rpm_factor or (max(factors) if factors else None)
             targets = [(cf.rpm_value * 10 * factor, what) for cf in self.frames
                        if cf.id == 7 and factor]
-        self.targets = list(targets)
+        self.targets: list[tuple[float, str]] = list(targets)
         self.needs = max((cf.since for cf in self.frames), default=1)
 
     @property
@@ -118,7 +128,8 @@ class Plan:
                 target=top)
 
 
-def listen(source, silence, *, given=None, on_frame=None, where=None) -> EcuLimits:
+def listen(source: LiveSource, silence: Optional[float], *, given: Optional[int] = None,
+           on_frame: Optional[Callable[[float, bytes], Any]] = None, where: Optional[str] = None) -> EcuLimits:
     """Read ``source`` (a live source: ``poll()``, ``now()``) until a status ID 6 frame, or
     :data:`LISTEN_FRAMES` status frames without one; returns the :class:`EcuLimits`.
     ``on_frame(t, frame)`` sees every frame read. Raises :class:`~zkzap.errors.NoReply` when no
@@ -143,7 +154,8 @@ def listen(source, silence, *, given=None, on_frame=None, where=None) -> EcuLimi
             raise silence_error(source, silence, heard=n > 0, where=where)
 
 
-def silence_error(source, seconds, *, heard, where=None, ran=False) -> NoReply:
+def silence_error(source: Any, seconds: float, *, heard: bool, where: Optional[str] = None,
+                  ran: bool = False) -> NoReply:
     """The :class:`~zkzap.errors.NoReply` for ``seconds`` session seconds without a status frame
     from ``source`` (``ran``: the whole session, which ended by its time, ran that long). Facts:
     ``port``, ``timeout``, ``protocol`` and ``noise``: True when the line carried bytes that

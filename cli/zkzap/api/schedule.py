@@ -33,6 +33,12 @@ from ..codec.fields import FieldValueError
 from ..errors import UsageError
 from .prestart import EcuLimitError, Plan
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Literal, Optional
+
+    from typing_extensions import Self
+
 _THROTTLE = zk.CONTROL_BY_NAME["control"].layout.by_key["throttle_pct"]
 _SW = zk.CONTROL_BY_NAME["control"].layout.by_key["sw"]
 _RPM_VALUE_MAX = zk.CONTROL_BY_NAME["rpm"].layout.by_key["target_rpm"].hi       # 4095
@@ -117,7 +123,8 @@ def _cells(line, sep):
 class Schedule:
     """Rows of throttle or RPM targets; see the module documentation."""
 
-    def __init__(self, rows, interpolate="step", name="schedule", notes=()):
+    def __init__(self, rows: Iterable[Row], interpolate: Literal["step", "linear"] = "step", name: str = "schedule",
+                 notes: Iterable[str] = ()) -> None:
         if not rows:
             raise ScheduleError(f"{name}: no rows; expected {SHAPE}")
         self.rows = rows
@@ -134,7 +141,10 @@ class Schedule:
 
     # --- reading ---------------------------------------------------------------------------------
     @classmethod
-    def parse(cls, text, name="schedule", interpolate="step", default_state="run"):
+    def parse(cls, text: str, name: str = "schedule", interpolate: Literal["step", "linear"] = "step",
+              default_state: str = "run") -> Self:
+        """Parse schedule text (``time_s,throttle_pct[,state]`` or ``time_s,rpm=N[,state]`` rows,
+        optionally under a header; ``#`` comments); errors name ``NAME:LINE``."""
         rows, notes = [], []
         cols = None
         sep = None
@@ -180,7 +190,8 @@ class Schedule:
         return sched
 
     @classmethod
-    def load(cls, path, name=None, interpolate="step", default_state="run"):
+    def load(cls, path: str, name: Optional[str] = None, interpolate: Literal["step", "linear"] = "step",
+             default_state: str = "run") -> Self:
         """Read and parse the schedule file ``path`` (``-``: stdin, UTF-8); messages call it
         ``name`` (default: the path, or ``stdin``). A file that cannot be read is a
         :class:`~zkzap.errors.UsageError`."""
@@ -338,7 +349,7 @@ class Schedule:
         return out
 
     # --- the plan ------------------------------------------------------------------------------------
-    def plan(self, rate):
+    def plan(self, rate: float) -> list[tuple[float, str, str, Optional[float], tuple[bytes, ...]]]:
         """``[(t, mode, state, value, frames)]``: each change of the command sent at ``rate`` Hz.
 
         Changes happen at row times and, with linear ramps, where the rounded value steps; only
@@ -385,7 +396,7 @@ class Schedule:
         return out
 
     # --- steps for steady-state reduction ------------------------------------------------------------
-    def steps(self):
+    def steps(self) -> list[tuple[int, Row, float, float]]:
         """``[(number, row, t_start, t_end)]``: each row in state ``run`` that holds for some time
         (a standby, stop or pwm row is no steady state of the engine)."""
         out = []

@@ -10,6 +10,10 @@ Sources are :class:`zkzap.link.zk_sources.LiveSource` and
 
 from __future__ import annotations
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Optional
+
 from ..codec import zk
 from ..codec.ids import id_ranges
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
@@ -73,13 +77,13 @@ class Outcome:
     ``pipe``, ``output`` (an output file could not be written), ``refused`` (the ECU's reported
     limits refuse the plan: nothing was sent)."""
 
-    def __init__(self, reason, error=None, aborted=None):
+    def __init__(self, reason: str, error: Optional[BaseException] = None, aborted: Optional[str] = None) -> None:
         self.reason = reason
         self.error = error
         self.aborted = aborted   # the abort kind sent, or None
 
     @property
-    def ok(self):
+    def ok(self) -> bool:
         """True for a normal end: ``count``, ``duration`` or ``end``."""
         return self.reason in ("count", "duration", "end")
 
@@ -96,7 +100,7 @@ class Outcome:
             return TERMINATED
         return getattr(self.error, "code", 1)
 
-    def raise_for_status(self):
+    def raise_for_status(self) -> None:
         """Raise the exception (exit status) that goes with this outcome, if any."""
         r = self.reason
         if r == "interrupted":

@@ -42,7 +42,7 @@ class Stand:
             self._check_fields()
 
     def _check_fields(self):
-        from ..errors import UsageError
+        from ..errors import unknown_name
 
         quantities = []
         if self.averager is not None:
@@ -55,8 +55,8 @@ class Stand:
         for q in quantities:
             if q is not None and q.field is not None and q.field not in self.aux.fields:
                 self.close()
-                raise UsageError(f"{q.option}: no field {q.field!r} among the --aux sensors' fields "
-                                 f"({', '.join(self.aux.fields) or 'none'})")
+                raise unknown_name(q.option, q.field, self.aux.fields, noun="sensor field",
+                                   otherwise=f"; the --aux sensors give {', '.join(self.aux.fields) or 'no field'}")
 
     def close(self) -> None:
         if self.aux is not None:

@@ -37,24 +37,39 @@ from __future__ import annotations
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Callable, Iterator, Optional, Union
+    import os
+    from typing import Any, Callable, Iterable, Iterator, Literal, Optional, Sequence, Union
+
+    from typing_extensions import Self, TypeAlias
+
+    from ..sim.launch import Simulator
+    from .prestart import EcuLimits, Plan
+    from .schedule import Schedule
+    from .session import Outcome
+
+    _StatusBase: TypeAlias = dict[str, Any]
+    #: What :meth:`Ecu.run_profile` runs: a Schedule, CSV text, a CSV file's path or rows.
+    ScheduleSpec: TypeAlias = Union[Schedule, str, os.PathLike[str], Iterable[Sequence[Union[float, str]]]]
+else:
+    _StatusBase = dict
 
 from ..codec import zk
-from ..errors import DeviceError, UsageError
+from ..errors import DeviceError, UsageError, did_you_mean
 
 __all__ = ["Ecu", "Status", "ProfileResult"]
 
 
-class Status(dict):
+class Status(_StatusBase):
     """One status record: a dict whose keys also read as attributes (``rec.rpm``, ``rec.egt_c``)."""
 
     __slots__ = ()
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         try:
             return self[name]
         except KeyError:
-            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}") from None
+            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}" + did_you_mean(name, self),
+                                 name=name) from None
 
 
 class ProfileResult:
@@ -63,7 +78,7 @@ class ProfileResult:
     states, errors, as ``zk profile --summary-json`` writes it), ``records`` written and
     ``notes`` (values the schedule rounded, ``FILE:LINE: ...``)."""
 
-    def __init__(self, outcome, summary, records, notes=()):
+    def __init__(self, outcome: Outcome, summary: dict[str, Any], records: int, notes: Iterable[str] = ()) -> None:
         self.outcome = outcome
         self.summary = summary
         self.records = records
@@ -74,7 +89,7 @@ class ProfileResult:
         """True when the schedule ran to its end."""
         return self.outcome.ok
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"ProfileResult(reason={self.outcome.reason!r}, records={self.records})"
 
 
@@ -89,8 +104,9 @@ class Ecu:
     command (``standby``, ``stop`` or ``none``).
     """
 
-    def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
-                 silence: Optional[float] = 2.0, abort: str = "standby", stop_bits: int = 1):
+    def __init__(self, port: Union[str, Simulator], *, baud: int = 115200, protocol_version: Optional[int] = None,
+                 silence: Optional[float] = 2.0, abort: Literal["standby", "stop", "none"] = "standby",
+                 stop_bits: Literal[1, 2] = 1) -> None:
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -117,7 +133,7 @@ class Ecu:
         """True once a frame that controls the engine was sent."""
         self.pump_on = False
         self.sent = 0
-        self.limits = None
+        self.limits: Optional[EcuLimits] = None
         """What the ECU reported about itself (:class:`~zkzap.api.prestart.EcuLimits`: max rpm,
         protocol version), once a frame needed it."""
         self._rpm_factor = None
@@ -126,10 +142,10 @@ class Ecu:
 
     # -- context -------------------------------------------------------------------------------
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         self.close()
         return False
 
@@ -151,7 +167,7 @@ class Ecu:
         """The ECU's protocol version (from status ID 6, given, or the default 4)."""
         return self.telemetry.decoder.version
 
-    def frame(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+    def frame(self, kind: Union[str, int], **fields: Any) -> zk.ControlFrame:
         """The control frame ``kind`` (a ``zk send`` name or ID) with physical ``fields``
         (``state="run", throttle_pct=40``), checked; nothing is sent."""
         values = dict(fields)
@@ -174,7 +190,7 @@ class Ecu:
         if cf.id == 6:
             self._rpm_factor = cf.rpm_factor
 
-    def check(self, plan, *, listen: bool = True) -> None:
+    def check(self, plan: Plan, *, listen: bool = True) -> None:
         """Check a :class:`~zkzap.api.prestart.Plan` against the ECU's reported limits, reading
         its status ID 6 first when the plan needs it and they are not known yet (``listen``
         False: against what is known, nothing read). Raises EcuLimitError (nothing sent) or
@@ -201,7 +217,7 @@ class Ecu:
         return Plan([cf], rpm_factor=rpm_factor or self._rpm_factor,
                     what=cf.command.name if cf.command is not None else f"ID {cf.id}")
 
-    def send(self, kind: Union[str, int], *, listen: bool = True, **fields) -> zk.ControlFrame:
+    def send(self, kind: Union[str, int, zk.ControlFrame], *, listen: bool = True, **fields: Any) -> zk.ControlFrame:
         """Send one control frame (see :meth:`frame`); returns it. A frame that needs the ECU's
         limits (an ID 7 target, a command newer than protocol version 1) is checked against them
         first (see :meth:`check`; ``listen`` False: nothing is read, the frame is checked
@@ -211,7 +227,7 @@ class Ecu:
         self._write(cf)
         return cf
 
-    def abort(self) -> list:
+    def abort(self) -> list[bytes]:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
         on protocol version 4 or later also leaves RPM mode; pump-off after a pump-on).
         Returns the frames sent."""
@@ -229,7 +245,8 @@ class Ecu:
 
     # -- status in -----------------------------------------------------------------------------
 
-    def _records(self, control=None, period=None, duration=None, count=None) -> Iterator[Status]:
+    def _records(self, control: Optional[zk.ControlFrame] = None, period: Optional[float] = None,
+                 duration: Optional[float] = None, count: Optional[int] = None) -> Iterator[Status]:
         from .prestart import silence_error
 
         src, tel = self.source, self.telemetry
@@ -283,7 +300,8 @@ class Ecu:
         Raises NoReply when the ECU is silent for ``silence`` s."""
         return self._records(count=count, duration=duration)
 
-    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, **fields) -> Iterator[Status]:
+    def hold(self, kind: Union[str, int, zk.ControlFrame], seconds: float, *, rate: float = 20.0,
+             **fields: Any) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
         raises DeviceError; any abnormal end sends the abort command — Ctrl-C, and SIGTERM too:
@@ -328,7 +346,7 @@ class Ecu:
         return self.hold("keepalive", seconds, rate=rate)
 
     @property
-    def health(self) -> dict:
+    def health(self) -> dict[str, Any]:
         """Link health: ``frames``, ``frames_per_s`` (over the last second), ``crc_errors``,
         ``skipped`` bytes, ``stale`` (and :meth:`stale_ids`), ``protocol_version`` and
         ``version_source``."""
@@ -337,18 +355,19 @@ class Ecu:
         h["stale_ids"] = self.telemetry.stale_ids(now)
         return h
 
-    def stale_ids(self) -> list:
+    def stale_ids(self) -> list[int]:
         """Status IDs not seen for more than three of their periods."""
         return self.telemetry.stale_ids(self.source.now())
 
     @property
-    def snapshot(self) -> dict:
+    def snapshot(self) -> dict[str, Any]:
         """Every status field's latest value."""
         return self.telemetry.snapshot(self.source.now())
 
     # -- schedules -----------------------------------------------------------------------------
 
-    def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
+    def run_profile(self, schedule: ScheduleSpec, *, rate: float = 20.0,
+                    interpolate: Literal["step", "linear"] = "step",
                     on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
         """Run a throttle or RPM schedule as ``zk profile`` does: a
         :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or

@@ -33,7 +33,16 @@ not part of a good frame, including those of truncated and filtered frames).
 
 from __future__ import annotations
 
+from ..errors import InvalidValue
 from .crc import CRC8_TABLE
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Literal, Optional, Sequence, Union
+
+    from typing_extensions import TypeAlias
+
+    Bytes: TypeAlias = Union[bytes, bytearray, memoryview]
 
 _T = CRC8_TABLE
 _HDR = b"\xff\xff\xff"
@@ -58,7 +67,18 @@ class _Framer:
     """What both framers share: counters, the bytes held between calls, the end of a scan, and
     the choice between overlapping valid candidates after damage."""
 
-    def __init__(self):
+    #: Frames returned so far.
+    frames: int
+    #: Frames that failed their check (CRC or checksum) at a frame boundary.
+    bad: int
+    #: Frames cut short by the end of the input.
+    truncated: int
+    #: Frames of the kind ``accept`` leaves out (ZK).
+    filtered: int
+    #: Bytes skipped (garbage, bad frames, a truncated end).
+    skipped: int
+
+    def __init__(self) -> None:
         self._buf = b""
         self._bad_until = 0
         self._synced = True
@@ -121,9 +141,9 @@ class ZkFramer(_Framer):
     frame's does not.
     """
 
-    def __init__(self, accept: str = "both"):
+    def __init__(self, accept: Literal["both", "status", "control"] = "both") -> None:
         if accept not in ("both", "status", "control"):
-            raise ValueError(f"accept: {accept!r}; allowed both, status, control")
+            raise InvalidValue(f"accept: {accept!r}; allowed both, status, control")
         self.accept = accept
         lengths = [0] * 256
         other = [0] * 256               # the kind left out: recognised, counted, not returned
@@ -183,25 +203,25 @@ class ZkFramer(_Framer):
             return None
         return lo if wins else 0
 
-    def feed(self, data) -> list:
+    def feed(self, data: Bytes) -> list[bytes]:
         """Frames completed by ``data`` (a frame right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
         return self._scan(buf, False)
 
-    def flush(self) -> list:
+    def flush(self) -> list[bytes]:
         """End of stream: decide about held frames with the bytes there are and return them;
         bytes still held after that are a truncated frame (counted as skipped)."""
         return self.flush_lines(None)
 
-    def feed_lines(self, data, lines) -> list:
+    def feed_lines(self, data: Bytes, lines: Any) -> list[Any]:
         """:meth:`feed`, returning ``lines.line(frame)`` for each frame instead of the frame,
         where ``lines`` is a :class:`~zkzap.io.zk_lines.ZkLines`. A frame in step whose line is
         in ``lines.memo`` (where only checked frames go) costs one look-up."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
         return self._scan(buf, False, lines)
 
-    def flush_lines(self, lines) -> list:
+    def flush_lines(self, lines: Optional[Any]) -> list[Any]:
         """:meth:`flush`, returning lines as :meth:`feed_lines` does (frames when None)."""
         out = self._scan(self._buf, True, lines) if self._buf else []
         self._reset()
@@ -346,7 +366,7 @@ class ZapFramer(_Framer):
     The header is the last three of a run of FF bytes (ID is never FF). SIZE must be at least 2.
     """
 
-    def feed(self, data) -> list:
+    def feed(self, data: Bytes) -> list[bytes]:
         """Packets completed by ``data`` (a packet right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
         if self._buf:
@@ -365,7 +385,7 @@ class ZapFramer(_Framer):
                 return [data]
         return self._scan(data, False)
 
-    def flush(self) -> list:
+    def flush(self) -> list[bytes]:
         """End of stream: decide about held packets and return them; bytes still held after
         that are a truncated packet (counted as skipped, and as bad when they began with a
         header)."""
@@ -545,14 +565,14 @@ class SignalLock:
     ``rejected`` (valid frames taken for chance: never handed on).
     """
 
-    def __init__(self, framer, confirm=LOCK_FRAMES):
+    def __init__(self, framer: Union[ZkFramer, ZapFramer], confirm: int = LOCK_FRAMES) -> None:
         self.framer = framer
         self.confirm = confirm
         accept = getattr(framer, "accept", "both")
         self._other_len = 4 if accept == "status" else 7 if accept == "control" else 0
         self._filtered = framer.filtered
         self.locked = False
-        self.held = []
+        self.held: list[Any] = []
         self.bytes = 0
         self.accepted = 0
         self.rejected = 0
@@ -569,7 +589,7 @@ class SignalLock:
         """True when bytes come but not as frames: not (or no longer) a device's stream."""
         return not self.locked and self._seen >= NOISE_BYTES and self.share < LOCK_SHARE
 
-    def admit(self, nbytes: int, frames, items=None) -> list:
+    def admit(self, nbytes: int, frames: Sequence[Bytes], items: Optional[Sequence[Any]] = None) -> list[Any]:
         """The items (default: the frames) to hand on for a chunk of ``nbytes`` bytes whose
         framer returned ``frames``."""
         items = list(frames) if items is None else list(items)

@@ -12,13 +12,13 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
+from ...io import SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
+from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
-from ...io import SESSION_FORMATS, format_for_path
-from .telemetry import (EXIT_HELP, check_log_options, errors_text, log_options, port_from_env,
-                        reconnect_option, resolve_port, zk_timeout_help)
+from .telemetry import (check_log_options, errors_text, log_options, port_from_env, reconnect_option,
+                        resolve_port, session_exits, zk_timeout_help)
 
 
 class Output:
@@ -272,14 +272,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     return outcome, tel, session
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@session_exits("done (--count, --duration, end of replay)", "with --fail-on-error, an ECU error code was seen")
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Stop after N records.")
 @click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
               help="Stop after SECONDS.")

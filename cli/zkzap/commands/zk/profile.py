@@ -9,15 +9,14 @@ import click
 
 from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
+from ..options import (Choice, FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors)
-from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
+from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
-          "a prompt on a terminal; sim:// and --sim never ask. "
-          + exit_help("the schedule ran to its end", "a new ECU error code (the abort command was sent)"))
+          "a prompt on a terminal; sim:// and --sim never ask.")
 
 
 #: The shipped examples (``--example [KIND]``).
@@ -30,12 +29,15 @@ def example_text(kind="throttle") -> str:
     return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
+@session_exits("the schedule ran to its end", "a new ECU error code (the abort command was sent)",
+               "bad usage or input, or a schedule the ECU's reported limits refuse (an RPM target above its max "
+               "rpm, a command newer than its protocol version): nothing was sent")
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
-@click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
+@click.option("--example", type=Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
-@click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
+@click.option("--interpolate", type=Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
 @rate_option()
 @abort_option(default="standby",

@@ -14,11 +14,12 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
-                       note, port_options, protocol_version_option, rate_option, warn, yes_option)
+from ..options import (Choice, FINITE, FiniteRange, INTEGER, IntRange, SignedCommand, abort_option, apply_options,
+                       consent, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
+                       yes_option)
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
-from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
+from .telemetry import (TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port, session_exits,
                         zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
@@ -72,7 +73,7 @@ def send_options(f):
                           "ECU error or a violated limit when the command controls the engine (default "
                           "standby: throttle 0, a hot engine cools); none sends nothing and says on stderr "
                           "that the engine is left running."),
-        click.option("--end", type=click.Choice(["standby", "stop", "hold"]), default=None,
+        click.option("--end", type=Choice(["standby", "stop", "hold"]), default=None,
                      help="With --for SECONDS: what to send when the time is up, if the command controls "
                           "the engine (default standby: the abort sequence, throttle 0); hold sends nothing "
                           "more and leaves the engine at the command."),
@@ -261,10 +262,13 @@ SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 
                "cannot follow (an RPM target above the max rpm it reports in status ID 6, a command newer "
                "than its protocol version) is refused before it is sent (exit 2): zk listens for status "
                "ID 6 first. On a real port a frame that can start the engine or run ECU hardware needs "
-               "--yes (or a prompt on a terminal); sim:// and --sim never ask. "
-               + exit_help("sent and a status frame came back, or --for ran its time",
-                           "an ECU error code was seen during --for (a new one while the command controls "
-                           "the engine ends it with the abort)"))
+               "--yes (or a prompt on a terminal); sim:// and --sim never ask.")
+#: The exit statuses of every 'zk send' command.
+SEND_EXITS = session_exits("sent and a status frame came back, or --for ran its time",
+                           "an ECU error code was seen during --for (a new one while the command controls the "
+                           "engine ends it with the abort)",
+                           "bad usage or input, or a frame the ECU's reported limits refuse (an RPM target above "
+                           "its max rpm, a command newer than its protocol version): nothing was sent")
 
 
 def _check_version(cmd, raw_param, protocol_version):
@@ -303,28 +307,28 @@ def _make(cmd):
             default = _OPTION_DEFAULTS.get((cmd.name, f.key))
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = FINITE if f.decimals else click.INT
+                ptype = FINITE if f.decimals else INTEGER
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
         else:
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
             else:
-                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
+                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else INTEGER
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
-        params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,
+        params.append(click.Option([p.cli, p.key], type=IntRange(p.lo, p.hi), required=True,
                                    help=p.help))
     doc = _doc(cmd, fields)
     command = SignedCommand(cmd.name, callback=callback, params=params, help=doc,
                             short_help=cmd.help.split(" (")[0].rstrip("."), context_settings=CONTEXT,
                             no_args_is_help=False, epilog=SEND_EPILOG)
-    return send_options(command)
+    return SEND_EXITS(send_options(command))
 
 
 def _doc(cmd, fields):
@@ -391,8 +395,9 @@ def _make_raw():
     return send_options(raw_command)
 
 
+@SEND_EXITS
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
-@click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
+@click.argument("cmd_id", metavar="ID", type=IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)
 def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.
