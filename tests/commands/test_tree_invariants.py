@@ -376,16 +376,19 @@ def test_an_output_option_survives_devices_fifos_and_symlinks(path, name, where,
             drain.close()
     # a database, a state file and a symlink need a file of their own: a device or FIFO is refused
     needs_file = param.type.kind in ("database", "state", "link")
+    # a command that only listens (taps, no port of its own) hears nothing on a simulated bus
+    # nobody talks on, and ends as a silent line ends (exit 3): its files must be intact all the same
+    ran = (0, 3) if "ports" in {p.name for p in cmd.params} and "zap" in path else (0,)
     if where.startswith("/dev/"):
         assert stat.S_ISCHR(os.stat(target).st_mode), f"{' '.join(argv)} replaced {target}"
-        allowed = (2,) if needs_file else {"/dev/null": (0,), "/dev/full": (0, 7)}[where]
+        allowed = (2,) if needs_file else {"/dev/null": ran, "/dev/full": (*ran, 7)}[where]
         assert code in allowed, f"{' '.join(argv)}: exit {code}"
     elif where == "fifo":
         assert stat.S_ISFIFO(os.stat(target).st_mode), f"{' '.join(argv)} replaced the FIFO"
-        assert code == (2 if needs_file else 0), f"{' '.join(argv)}: exit {code}"
+        assert code in ((2,) if needs_file else ran), f"{' '.join(argv)}: exit {code}"
     else:
         assert os.path.islink(target), f"{' '.join(argv)} replaced the symlink"
-        assert code == (2 if param.type.kind == "link" else 0), f"{' '.join(argv)}: exit {code}"
+        assert code in ((2,) if param.type.kind == "link" else ran), f"{' '.join(argv)}: exit {code}"
         if before is not None and real.read_bytes() != before:   # written through the link (if a record came)
             assert stat.S_IMODE(os.stat(real).st_mode) == 0o600, f"{' '.join(argv)}: the mode changed"
 
@@ -404,7 +407,8 @@ def _serve_briefly(argv):
     if first:
         p.send_signal(signal.SIGTERM)
     p.communicate(timeout=30)
-    return p.returncode
+    # stopped as asked: a simulator exits 0 on SIGTERM, another server with its SIGTERM status
+    return 0 if p.returncode == 143 and first else p.returncode
 
 
 line_base = _valid_line

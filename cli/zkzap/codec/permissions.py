@@ -21,6 +21,12 @@ import enum
 
 from .fields import FieldValueError
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Mapping, Union
+
+    from typing_extensions import TypeAlias
+
 
 class Permission(enum.Flag):
     """Permissions a frame may need (combine with ``|``)."""
@@ -42,6 +48,13 @@ class Permission(enum.Flag):
     #: Any of the above sent to every actuator at once (ID 254).
     BROADCAST = enum.auto()
 
+
+if TYPE_CHECKING:
+    #: What ``allow=`` takes: a :class:`Permission`, True (every one), False or None (none), or
+    #: permissions and their names (``["stored", "identity"]``).
+    AllowSpec: TypeAlias = Union[Permission, bool, None, str, Iterable[Union[Permission, str]]]
+else:
+    AllowSpec = "Permission | bool | None | str | Iterable[Permission | str]"
 
 #: What ``--yes`` grants: hazards to real hardware, never needed on a simulator.
 CONSENT = Permission.ENGINE | Permission.STORED | Permission.FACTORY
@@ -83,7 +96,7 @@ WHAT = {
 }
 
 
-def members(perm: Permission) -> list:
+def members(perm: Permission) -> list[Permission]:
     """The single permissions in ``perm``, in declaration order (a Flag is not iterable on
     every Python this runs on)."""
     return [p for p in NAMES if p & perm]
@@ -99,14 +112,15 @@ def waived(simulated: bool) -> Permission:
     return CONSENT if simulated else Permission.NONE
 
 
-def missing(needs: dict, allowed: Permission, simulated: bool = False) -> dict:
+def missing(needs: Mapping[Permission, str], allowed: Permission,
+            simulated: bool = False) -> dict[Permission, str]:
     """The entries of ``needs`` ({Permission: reason}) that ``allowed`` (and a simulator's
     waiver) does not cover."""
     have = allowed | waived(simulated)
     return {p: why for p, why in needs.items() if not p & have}
 
 
-def as_permission(value) -> Permission:
+def as_permission(value: AllowSpec) -> Permission:
     """``allow=`` as given: a :class:`Permission`, ``True`` (everything), ``False``/``None``
     (nothing), or an iterable of permissions or their names (``["stored", "identity"]``)."""
     if value is None or value is False:
@@ -126,13 +140,15 @@ def as_permission(value) -> Permission:
         try:
             out |= Permission[key]
         except KeyError:
-            allowed = ", ".join(p.name.lower() for p in members(ALL))
-            raise FieldValueError(f"allow: unknown permission {v!r}; allowed {allowed}") from None
+            from ..errors import unknown_name
+
+            raise unknown_name("allow", v, [p.name.lower() for p in members(ALL)], noun="permission",
+                               cls=FieldValueError) from None
     return out
 
 
-def require(needs: dict, allowed: Permission, *, simulated: bool = False, what: str = "the frame",
-            frame: bytes = b"") -> None:
+def require(needs: Mapping[Permission, str], allowed: Permission, *, simulated: bool = False,
+            what: str = "the frame", frame: bytes = b"") -> None:
     """Raise :class:`zkzap.errors.PermissionNeeded` (nothing may be sent) when ``needs``
     ({Permission: reason}) holds a permission that ``allowed`` does not give and the port does
     not waive (a simulator waives :data:`CONSENT`)."""

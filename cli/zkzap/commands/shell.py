@@ -14,9 +14,10 @@ import sys
 
 import click
 
+from ..errors import MORE_TO_DO, OK
 from . import CONTEXT, Command, Group
 from .batch import EXCLUDED, PORT_TOKENS, port_tokens
-from .options import port_options
+from .options import exits, port_options
 
 BUILTINS = ("help", "exit", "quit")
 
@@ -222,9 +223,20 @@ def _description(protocol):
             "the shell with 143.")
 
 
+#: A shell at a terminal ends well however its commands ended; piped, it reports the last failure.
+_SHELL_MEANINGS = {OK: "exit, quit or Ctrl-D (piped: every command succeeded)"}
+_SHELL_TAIL = " Piped, any other status is the last failed command's; exit N gives N."
+SHELL_EXITS = exits(_SHELL_MEANINGS, tail=_SHELL_TAIL)
+#: The mightyZAP shell: piped, a 'setup --no-wait' that stopped with IDs pending is "more to do" (8).
+ZAP_SHELL_EXITS = exits({**_SHELL_MEANINGS,
+                         MORE_TO_DO: "piped, the last failed command was a setup that stopped with IDs pending"},
+                        tail=_SHELL_TAIL)
+
+
 def _make_zap():
     from .zap.compose import link_options
 
+    @ZAP_SHELL_EXITS
     @click.command("zap", cls=Command, context_settings=CONTEXT, help=_description("zap") + """
 
 \b
@@ -252,6 +264,7 @@ Examples:
 
 
 def _make_zk():
+    @SHELL_EXITS
     @click.command("zk", cls=Command, context_settings=CONTEXT, help=_description("zk") + """
 
 \b

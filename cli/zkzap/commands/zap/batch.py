@@ -8,10 +8,12 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
+from ..batch import ZAP_BATCH_EXITS
 from ..options import InputPath, consent, zap_yes_option as yes_option
 from .compose import link_options, open_link
 
 
+@ZAP_BATCH_EXITS
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath("zap batch"))
 @click.option("-k", "--keep-going", is_flag=True,
