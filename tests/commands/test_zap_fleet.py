@@ -165,11 +165,11 @@ def test_another_model_is_refused_unless_forced(cli, buses):
     f = tmp / "fleet.json"
     cli("zap", "backup", "--ids", "1", "-p", a, "-o", str(f))
     doc = json.loads(f.read_text())
-    doc["actuators"]["1"]["model"] = 0xA112
+    doc["actuators"]["1"]["model"] = 0x0C4C
     f.write_text(json.dumps(doc))
     before = (tmp / "b.json").read_bytes()
     r = cli("zap", "apply", str(f), "-p", b)
-    assert (r.exit_code, r.stdout) == (2, "") and "model 0x0C4C, the file's 0xA112" in r.stderr
+    assert (r.exit_code, r.stdout) == (2, "") and "model 0xA112, the file's 0x0C4C" in r.stderr
     assert (tmp / "b.json").read_bytes() == before
     r = cli("zap", "apply", str(f), "--force", "-p", b)
     assert r.exit_code == 0 and "warning:" in r.stderr and len(jsonl(r.stdout)) == 2

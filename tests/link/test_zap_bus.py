@@ -50,7 +50,7 @@ def test_echo_load_and_blocks(bus):
     assert 0 < r.rtt < 0.05
     assert bus.read(2, "present-voltage") == 120
     reply, values = bus.read_registers(1, 0x00, 5)
-    assert [(reg.name, v) for reg, v in values][:4] == [("model-number", 0x0C4C), ("firmware-version", 20),
+    assert [(reg.name, v) for reg, v in values][:4] == [("model-number", 0xA112), ("firmware-version", 21),
                                                        ("id", 1), ("baud-rate", 32)]
 
 

@@ -9,6 +9,7 @@ from zkzap.errors import BadReply, NoReply
 from zkzap.link.port import open_port, sim_url
 from zkzap.link.zap_bus import LATE_WINDOW, MAX_TURNAROUND, TURNAROUND, ZapBus, wire_time
 from zkzap.link.zap_scan import scan
+from zkzap.sim.zap_actuators import MODEL_NUMBER
 
 
 def make(ids="1,2", return_mode=1, **opts):
@@ -48,7 +49,7 @@ def test_slow_and_trickling_devices_with_default_timing(opts):
     bus = make(**opts)
     assert bus.echo(1).ident == 1
     reply, values = bus.read_registers(2, 0x00, 17)
-    assert len(reply.data) == 17 and values[0][1] == 0x0C4C
+    assert len(reply.data) == 17 and values[0][1] == MODEL_NUMBER
 
 
 def test_bytes_more_than_the_inter_byte_allowance_apart_are_a_truncated_reply():
@@ -95,7 +96,7 @@ def test_scan_finds_every_slow_actuator(opts):
     bus = make(ids="1,2,5,9,20", **opts)
     found, warnings = records(bus, list(range(0, 24)))
     assert sorted(r["id"] for r in found) == [1, 2, 5, 9, 20]
-    assert all(r["status"] == "ok" and r["model"] == 0x0C4C and r["return_mode"] == 1 for r in found)
+    assert all(r["status"] == "ok" and r["model"] == MODEL_NUMBER and r["return_mode"] == 1 for r in found)
     assert warnings == []
 
 
@@ -219,5 +220,5 @@ def test_scan_identifies_actuators_slower_than_the_allowance(turnaround):
     bus = make(ids="1,2,5", turnaround=turnaround)
     found, warnings = records(bus, list(range(10)))
     assert [(r["id"], r["status"], r["model"], r["return_mode"]) for r in found] == \
-        [(i, "ok", 0x0C4C, 1) for i in (1, 2, 5)]
+        [(i, "ok", MODEL_NUMBER, 1) for i in (1, 2, 5)]
     assert warnings == []

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from zkzap.codec import zap
 from zkzap.codec.framing import ZapFramer
 from zkzap.sim import make_device
-from zkzap.sim.zap_actuators import (BOOT_TIME, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
+from zkzap.sim.zap_actuators import (BOOT_TIME, FIRMWARE_VERSION, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
                                from_options, parse_fault, parse_ids)
 
 
@@ -110,7 +110,7 @@ def test_defaults_follow_the_register_map(host):
 
 def test_load_reads_a_block_as_consecutive_registers(host):
     (reply,) = host.ask(zap.load(1, 0x00, 5))
-    assert reply[6:-1] == bytes([MODEL_NUMBER & 0xFF, MODEL_NUMBER >> 8, 20, 1, 32])
+    assert reply[6:-1] == bytes([MODEL_NUMBER & 0xFF, MODEL_NUMBER >> 8, FIRMWARE_VERSION, 1, 32])
 
 
 @pytest.mark.parametrize("mode,answered", [

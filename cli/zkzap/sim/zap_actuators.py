@@ -61,12 +61,16 @@ NV_WRITE_TIME = 0.005
 BOOT_TIME = 0.02
 #: Rod speed at goal-speed 1023, in position units per model second (full stroke in ~0.4 s).
 FULL_SPEED = 10000.0
-#: The simulator's identity (the e-manual gives no model number; this one is the simulator's).
-MODEL_NUMBER = 0x0C4C
-FIRMWARE_VERSION = 20
+#: A real 12Lf's identity, as logged from one by a community control app (the e-manual gives no
+#: model number): model 41234 (0xA112), firmware-version 21 (which IR Robot's Arduino examples
+#: print as raw x 0.1, "2.10"), present-temperature (undocumented, 0x93) 245.
+MODEL_NUMBER = 0xA112
+FIRMWARE_VERSION = 21
+PRESENT_TEMPERATURE = 245
 SUPPLY_VOLTAGE = 12.0
 
-#: Values for registers the data map gives no default (simulator choices, plausible for a 12Lf).
+#: Values for registers the data map gives no default: a real 12Lf's where known (acceleration
+#: 20, deceleration 64), else simulator choices, plausible for a 12Lf.
 SIM_DEFAULTS = {
     "model-number": MODEL_NUMBER,
     "firmware-version": FIRMWARE_VERSION,
@@ -77,7 +81,7 @@ SIM_DEFAULTS = {
     "calibration-short-stroke": 0,
     "calibration-long-stroke": 4095,
     "acceleration": 20,
-    "deceleration": 20,
+    "deceleration": 64,
     "current-i-gain": 20,
     "current-p-gain": 30,
     "speed-d-gain": 0,
@@ -220,6 +224,7 @@ class Actuator:
             self._poke(reg, default or 0)
         self._poke(R["id"], ident)
         self._poke(R["baud-rate"], zap.BAUD_TO_CODE[baud])
+        self.mem[zap.UNDOCUMENTED_BY_NAME["present-temperature"].address] = PRESENT_TEMPERATURE
         self.baud = baud                  # the line speed in effect (baud-rate applies at restart)
         self.pos = 0.0                    # rod position (float, position units)
         self.t = 0.0                      # model time of the last update
