@@ -348,4 +348,4 @@ def test_apply_through_line_faults(cli, buses):
     assert [x["status"] for x in jsonl(r.stdout)] == ["verified"] * 5
     # a reply that stays corrupted after the retries: exit 6 before any write
     r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
-    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: corrupted reply" in r.stderr
+    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: garbled reply" in r.stderr

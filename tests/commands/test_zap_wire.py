@@ -90,7 +90,7 @@ def test_overload_exit_5_after_the_value(cli):
 def test_corrupted_reply_exit_6(cli):
     r = cli("zap", "echo", "--id", "2", "-p", url(faults="2:corrupt"))
     assert r.exit_code == 6
-    assert "corrupted reply (checksum mismatch) after 3 tries" in r.stderr
+    assert "garbled reply (checksum mismatch: a collision, two actuators answering at once, or a line fault) after 3 tries" in r.stderr
     r = cli("zap", "echo", "--id", "2", "--retries", "0", "-p", url(faults="2:corrupt/1"))
     assert r.exit_code == 6 and "after 1 try" in r.stderr
     r = cli("zap", "echo", "--id", "2", "-p", url(faults="2:corrupt/1"))
