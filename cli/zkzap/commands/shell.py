@@ -205,10 +205,12 @@ Examples:
         from .zap import zap as group
         from .zap.compose import open_link
 
+        from .zap.compose import _link_args
+
         defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                           "verbose")}
+                                           "verbose", "latency")}
         ids = common["sim_ids"] or "0"
-        args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "retries", "stop_bits")}
+        args = _link_args(common)
         args["sim_ids"] = ids if common["sim"] else None
         args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
         with open_link(ids=[0], **args) as bus, sharing("zap", bus):
