@@ -442,7 +442,8 @@ class ZapSniffer(Sniffer):
     def tick(self, now):
         if self._held:
             return []
-        return self._missing(self.pairing.expired(now), now)
+        busy = any(f.pending for f in self.framers)          # a reply is arriving: not missing yet
+        return self._missing(self.pairing.expired(now, busy), now)
 
     def finish(self, now):
         return self._missing(self.pairing.expired(now), now)

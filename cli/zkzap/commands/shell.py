@@ -15,7 +15,7 @@ import sys
 import click
 
 from . import CONTEXT, Command, Group
-from .batch import EXCLUDED, PORT_TOKENS, port_tokens
+from .batch import EXCLUDED, PORT_TOKENS, _batch_capture, port_tokens
 from .options import port_options
 
 BUILTINS = ("help", "exit", "quit")
@@ -213,7 +213,7 @@ Examples:
         args = _link_args(common)
         args["sim_ids"] = ids if common["sim"] else None
         args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
-        with open_link(ids=[0], **args) as bus, sharing("zap", bus):
+        with open_link(ids=[0], **args) as bus, sharing("zap", bus), _batch_capture():
             code = loop(group, "zap", defaults, interactive=_interactive())
         if code:
             raise click.exceptions.Exit(code)
@@ -241,7 +241,7 @@ Examples:
             defaults["timeout"] = timeout
         link = ZkLink.open(url, baud, stop_bits=stop_bits)
         try:
-            with sharing("zk", link):
+            with sharing("zk", link), _batch_capture():
                 code = loop(group, "zk", defaults, interactive=_interactive())
         finally:
             link.close()

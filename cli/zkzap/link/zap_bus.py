@@ -16,7 +16,8 @@ Every transaction follows the bus's one timing policy (:mod:`zkzap.link.zap_timi
   (:data:`~zkzap.link.zap_timing.LATE_WINDOW`, 150 ms; ``timeout`` replaces it) has closed
   after the request's last byte, plus the reply's time on the wire and the host margin. A
   reply that comes ends the wait at once: the window costs time only when nothing comes. Once
-  reply bytes arrive the wait extends to :data:`~zkzap.link.zap_timing.INTER_BYTE` after the
+  reply bytes arrive the wait extends to :data:`~zkzap.link.zap_timing.INTER_BYTE` (or 4x the
+  variation learned of the actuator's latency, when larger: a jittery adapter) after the
   latest one while a packet is incomplete (devices and adapters that trickle their bytes). A
   retry goes out only after the window of the attempt before it has closed, so a late reply is
   always the answer to the attempt it answers, and its round trip (:attr:`Reply.rtt`) is true.
@@ -598,6 +599,7 @@ class ZapBus:
         wrong = []
         deadline = base = t0 + limit
         tx = self.wire(len(pkt))
+        gap = self.policy.inter_byte(pkt[3], self.window)
         physical = self.wire(len(pkt) + rx_len)
 
         def examine(packets, lo, hi):
@@ -630,7 +632,7 @@ class ZapBus:
                         span = deadline - t0
                         self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
                                                 deadline + span * MEMORY))
-                        return self._reply(p, now - owed.t0, None)
+                        return self._reply(p, hi - owed.t0, None)
                     else:
                         self.late += 1
                         self._event("late", p[3], lo, hi, owed.t0, p)
@@ -656,8 +658,8 @@ class ZapBus:
                     # this attempt's may still come; the line stays quiet for its window
                     self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
                                             deadline + (deadline - t0) * MEMORY))
-                    return self._reply(p, now - t0, None)
-                return self._reply(p, now - t0, first - t0 - tx - self.wire(1))
+                    return self._reply(p, hi - t0, None)
+                return self._reply(p, hi - t0, first - t0 - tx - self.wire(1))
             return None
 
         while True:
@@ -677,8 +679,7 @@ class ZapBus:
             if got is not None:
                 return got
             # bytes of an incomplete packet: give the rest time to trickle in (only while they do)
-            deadline = max(base, time.monotonic() + self.wire(1) + INTER_BYTE + self.margin) \
-                if framer.pending else base
+            deadline = max(base, time.monotonic() + self.wire(1) + gap + self.margin) if framer.pending else base
         pending, bad_before = framer.pending, framer.bad
         now = time.monotonic()
         got = examine(framer.flush(), self._seen_empty, now)   # a packet held back to rule out a rival

@@ -204,6 +204,8 @@ class _Scan:
         garbled_before = bus.garbled
         events = list(_finish(bus, rec, self.retries, early=early))
         self._judge()
+        if rec["status"] == "unidentified" and ident in self.late_seen:
+            rec["errors"] = [_late_text(bus, ident)]
         if early and (rec["status"] in ("unidentified", "duplicate") or bus.garbled != garbled_before):
             # identified while other windows were open: say nothing yet, ask again on a quiet line
             fresh = _record(ident, self.baud)

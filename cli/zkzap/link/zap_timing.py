@@ -164,6 +164,15 @@ class Policy:
             return max(FLOOR, min(window, hint * QUICK_FACTOR + MARGIN))
         return window
 
+    def inter_byte(self, ident, window=LATE_WINDOW) -> float:
+        """How long a reply's bytes may pause before the rest counts as missing (a truncated
+        reply): :data:`INTER_BYTE`, or 4x the variation of ``ident``'s latency when larger (an
+        adapter or host that delivers in irregular bursts), at most the window."""
+        est = self.estimators.get(ident)
+        if est is None or not est.samples:
+            return INTER_BYTE
+        return min(window, max(INTER_BYTE, K * est.rttvar))
+
     def quick(self, hint=None, window=LATE_WINDOW) -> float:
         """The latency a scan's first pass allows an unknown ID: the bus-typical latency (or the
         hint, or :data:`FLOOR` plus the adapter's timer) stretched by :data:`QUICK_FACTOR`, within
@@ -256,11 +265,13 @@ def policy_for(url, margin=None) -> Policy:
 class Pairing:
     """Pairs mightyZAP feedback with the request it answers, for observers that never send (the
     sniffer, capture decoding), under the same rule as the host: a reply answers the latest
-    request to its ID whose late window (``window`` after the request, plus ``margin``) is still
-    open. :meth:`command` opens a request (its ``info`` is returned with the feedback),
-    :meth:`feedback` closes it, :meth:`expired` gives the requests whose window closed
-    unanswered. A request sent while another's reply was still due is counted in
-    :attr:`overlaps` (on a half-duplex line it may have collided with that reply)."""
+    request to its ID that is still open, whatever was sent since; a request closes unanswered
+    when its late window (``window`` after the request, plus ``margin``) has passed with the
+    line idle (a reply that began in time may trickle in after it). :meth:`command` opens a
+    request (its ``info`` is returned with the feedback), :meth:`feedback` closes it,
+    :meth:`expired` gives the requests whose window closed unanswered. A request sent while
+    another's reply was still due is counted in :attr:`overlaps` (on a half-duplex line it may
+    have collided with that reply)."""
 
     def __init__(self, window=LATE_WINDOW, margin=MARGIN):
         self.window = window
@@ -287,14 +298,16 @@ class Pairing:
     def feedback(self, ident, ts):
         """``(request ts, info, latency seconds)`` of the request a feedback from ``ident`` at
         ``ts`` answers, or None (no request to that ID is open)."""
-        p = self.pending.get(ident)
-        if p is None or ts - p[0] > self.window + self.margin:
+        p = self.pending.pop(ident, None)
+        if p is None:
             return None
-        del self.pending[ident]
         return p[0], p[1], ts - p[0]
 
-    def expired(self, now) -> list:
-        """``[(ident, ts, info)]`` of the requests whose window closed by ``now``, unanswered."""
+    def expired(self, now, busy=False) -> list:
+        """``[(ident, ts, info)]`` of the requests whose window closed by ``now``, unanswered
+        (none while ``busy``: bytes of a packet are arriving)."""
+        if busy:
+            return []
         out = [(i, ts, info) for i, (ts, info) in self.pending.items() if now - ts > self.window + self.margin]
         for i, _, _ in out:
             del self.pending[i]

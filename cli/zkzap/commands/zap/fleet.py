@@ -224,9 +224,9 @@ def diff(a, b, ids, everything, compare, fmt, **common):
     One row per actuator and register that differs: id, register, address, memory, a, b,
     unit ('0.1 V' for raw values in tenths); an actuator on one side only is one row with
     register '(actuator)'. Exit status 0 when equal, 1 when they differ (like diff), 2 for a
-    bad file. The bus's actuators are found as 'zap scan' finds them (at each baud rate of -b,
-    a list or all; --ids limits the search); a bus where two actuators answer to one ID is
-    refused (exit 1, naming it).
+    bad file. On the bus, --ids are asked for one by one; without it (or with several baud
+    rates in -b, a list or all) the actuators are found as 'zap scan' finds them, and a bus
+    where two actuators answer to one ID is refused (exit 1, naming it).
 
     \b
     Examples:
@@ -248,7 +248,11 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         bauds = common["baud"]
         args = dict(_link_args(common), baud=bauds[0])
         with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
-            found = _discover(bus, wanted, bauds, common["retries"])
+            if ids is not None and len(bauds) == 1:
+                # the IDs asked for, each with an ordinary Echo: one that does not answer is absent
+                found = [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=common["retries"])]
+            else:
+                found = _discover(bus, wanted, bauds, common["retries"])
             if common["return_mode"] == "auto" and found:
                 bus.detect_return_mode(found[0]["id"])
             live = _read_entries(bus, found)
