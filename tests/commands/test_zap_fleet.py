@@ -349,3 +349,33 @@ def test_apply_through_line_faults(cli, buses):
     # a reply that stays corrupted after the retries: exit 6 before any write
     r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
     assert (r.exit_code, r.stdout) == (6, "") and "ID 3: garbled reply" in r.stderr
+
+
+def test_backup_and_diff_find_what_scan_finds_at_every_baud(cli, tmp_path):
+    bus = "sim://zap?ids=1,2@115200"
+    out = tmp_path / "fleet.json"
+    r = cli("zap", "backup", "-b", "all", "-p", bus, "-o", str(out))
+    assert r.exit_code == 0, r
+    doc = json.loads(out.read_text())
+    assert {k: v["baud"] for k, v in doc["actuators"].items()} == {"1": 57600, "2": 115200}
+    r = cli("zap", "backup", "-p", bus)                              # 57600 only, as scan
+    assert r.exit_code == 0 and sorted(json.loads(r.stdout)["actuators"]) == ["1"]
+    r = cli("zap", "diff", str(out), "bus", "-b", "all", "-p", bus)
+    assert (r.exit_code, r.stdout) == (0, ""), r
+
+
+@pytest.mark.parametrize("args", [["backup", "-o", "{tmp}/x.json"], ["diff", "{tmp}/f.json", "bus"]],
+                         ids=["backup", "diff"])
+def test_a_bus_where_two_actuators_share_an_id_is_refused(cli, tmp_path, args):
+    (tmp_path / "f.json").write_text(cli("zap", "backup", "--ids", "1", "--sim").stdout)
+    r = cli("zap", *[a.format(tmp=tmp_path) for a in args], "-p", "sim://zap?ids=1,4,4")
+    assert (r.exit_code, r.stdout) == (1, "")
+    assert "ID 4 at 57600 baud: two actuators answer to this ID" in r.stderr and "set-id" in r.stderr
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_watch_names_the_collision_of_two_actuators_with_one_id(cli):
+    r = cli("zap", "watch", "present-position", "--ids", "1,4", "--count", "1", "-p", "sim://zap?ids=1,4,4")
+    assert r.exit_code == 6 and "every reply was garbled" in r.stderr and "collision" in r.stderr
+    rows = jsonl(r.stdout)
+    assert [(x["id"], x["status"]) for x in rows] == [(1, "ok"), (4, "bad-reply")]
