@@ -65,6 +65,8 @@ QUANTUM = 0.001
 MEMORY = 2.0
 #: Garbled bytes and collisions kept for scans (events), at most.
 MAX_EVENTS = 4096
+#: Instructions that write nothing.
+_READS = (zap.ECHO, zap.LOAD_DATA)
 
 
 def is_simulated(url) -> bool:
@@ -186,6 +188,7 @@ class ZapBus:
         self._quiet_until = 0.0
         self._seen_empty = time.monotonic()
         self._port_timeout = object()
+        self._line = (None, 0.0)           # (baud, one byte's time on the line)
         fd = getattr(port, "fd", None)
         self._fd = fd if isinstance(fd, int) and hasattr(port, "in_waiting") else None
         self.events = []                   # Event: late, stray and garbled, for scans
@@ -219,7 +222,11 @@ class ZapBus:
         return window_for(self.timeout, self.latency)
 
     def wire(self, nbytes: int) -> float:
-        return wire_time(nbytes, self.baud, self.stop_bits)
+        """Seconds ``nbytes`` take on the line at the port's baud rate and stop bits."""
+        baud = self.port.baudrate
+        if baud != self._line[0]:
+            self._line = (baud, wire_time(1, baud, self.stop_bits))
+        return nbytes * self._line[1]
 
     def set_baud(self, baud: int) -> None:
         """Switch the port's line speed, once nothing said at the old one may still be answered
@@ -522,7 +529,7 @@ class ZapBus:
         ident = pkt[3]
         if reply is None:
             reply = self.expects_reply(pkt)
-        stored = bool(stored_writes(pkt))
+        stored = pkt[5] not in _READS and bool(stored_writes(pkt))
         restart = pkt[5] in zap.RESTART_CODES
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
@@ -621,7 +628,7 @@ class ZapBus:
                 # (a reply that cannot be this one's answer is any recognised earlier attempt's)
                 ours = p[3] in accept and (data_len is None or len(p) - 7 == data_len)
                 owed = next((o for o in self._owed if o.matches(p) and o.keep >= now
-                             and (not ours or o.until > t0 or now - t0 < physical)), None)
+                             and (not ours or o.until > t0 or now - t0 < physical)), None) if self._owed else None
                 if owed is not None:
                     self._owed.remove(owed)
                     if owed.kind == "ack":
