@@ -17,6 +17,26 @@ from zkzap.link.pcapng import INBOUND
 from zkzap.link.zap_timing import LATE_WINDOW, MARGIN
 
 
+#: The zap commands on a bus of actuators 1 and 2, as batch or shell lines ({tmp}: a directory
+#: of the run's), and whether return mode 0 (Echo only) can run them.
+LINES = {
+    "echo": ("echo --id 1 --count 3 -f jsonl", True),
+    "load": ("load present-position --id 2 -f jsonl", False),
+    "store": ("store goal-speed 600 --id 1", True),
+    "dump": ("dump --id 2 -f jsonl", False),
+    "backup": ("backup --ids 1,2 -o {tmp}/fleet.json", False),
+    "apply": ("apply {tmp}/fleet.json --yes", False),
+    "diff": ("diff {tmp}/fleet.json bus --ids 1,2 -f jsonl", False),
+    "watch": ("watch present-position moving --ids 1,2 --count 2", False),
+    "move": ("move 600 --id 2 --speed 1023 --wait", False),
+    "move-nowait": ("move 500 --id 1", True),
+    "sync-move": ("sync-move 1:300 2:400 --verify", False),
+    "sync-nowait": ("sync-move 1:300 2:400", True),
+    "check": ("check --ids 1 --yes", False),
+    "check-still": ("check --ids 2 --no-move", False),
+}
+
+
 class Pair:
     """A request that expected a reply: ``sent``, ``answered`` (capture times), ``reply`` and
     ``next`` (when the next request went out: a round trip measured by the host cannot be

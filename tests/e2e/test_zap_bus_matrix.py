@@ -30,26 +30,9 @@ import pytest
 
 from zkzap.api.sniff import ZapSniffer
 
-from .buscheck import check_capture, check_rtts, frames
+from .buscheck import LINES, check_capture, check_rtts, frames
 from .conftest import _first_line, clean_env, executable
 
-#: The command lines, as a batch or a shell takes them ({tmp}: the test's directory).
-LINES = {
-    "echo": "echo --id 1 --count 3 -f jsonl",
-    "load": "load present-position --id 2 -f jsonl",
-    "store": "store goal-speed 600 --id 1",
-    "dump": "dump --id 2 -f jsonl",
-    "backup": "backup --ids 1,2 -o {tmp}/fleet.json",
-    "apply": "apply {tmp}/fleet.json --yes",
-    "diff": "diff {tmp}/fleet.json bus --ids 1,2 -f jsonl",
-    "watch": "watch present-position moving --ids 1,2 --count 2",
-    "move": "move 600 --id 2 --speed 1023 --wait",
-    "sync-move": "sync-move 1:300 2:400 --verify",
-    "check": "check --ids 1 --yes",
-    "check-still": "check --ids 2 --no-move",
-    "move-nowait": "move 500 --id 1",
-    "sync-nowait": "sync-move 1:300 2:400",
-}
 #: (latency ms, gap ms, echo, mode, runner, lines, search): gap x echo x mode pairs all appear.
 BUSES = [
     (2, 0, False, 1, "batch", ["echo", "load", "store", "dump", "backup", "apply", "diff", "watch", "move",
@@ -104,7 +87,7 @@ def test_commands_keep_the_half_duplex_discipline(tmp_path, latency, gap, echo, 
     window = 0.5
     link = ["-p", sim.url, "--return-mode", str(mode)]
     try:
-        text = "".join(LINES[name].format(tmp=tmp_path) + "\n" for name in lines)
+        text = "".join(LINES[name][0].format(tmp=tmp_path) + "\n" for name in lines)
         cap = tmp_path / "run.pcapng"
         if runner == "batch":
             (tmp_path / "lines.txt").write_text(text)
