@@ -354,13 +354,15 @@ def test_apply_through_line_faults(cli, buses):
 def test_backup_and_diff_find_what_scan_finds_at_every_baud(cli, tmp_path):
     bus = "sim://zap?ids=1,2@115200"
     out = tmp_path / "fleet.json"
-    r = cli("zap", "backup", "-b", "all", "-p", bus, "-o", str(out))
+    r = cli("zap", "backup", "--scan", "--ids", "0-9", "-b", "57600,115200", "-p", bus, "-o", str(out))
     assert r.exit_code == 0, r
     doc = json.loads(out.read_text())
     assert {k: v["baud"] for k, v in doc["actuators"].items()} == {"1": 57600, "2": 115200}
     r = cli("zap", "backup", "-p", bus)                              # 57600 only, as scan
     assert r.exit_code == 0 and sorted(json.loads(r.stdout)["actuators"]) == ["1"]
-    r = cli("zap", "diff", str(out), "bus", "-b", "all", "-p", bus)
+    r = cli("zap", "backup", "--scan", "--ids", "0-3", "-b", "all", "-p", bus)      # -b all, as scan
+    assert r.exit_code == 0 and sorted(json.loads(r.stdout)["actuators"]) == ["1", "2"]
+    r = cli("zap", "diff", str(out), "bus", "--ids", "1,2", "-b", "57600,115200", "-p", bus)
     assert (r.exit_code, r.stdout) == (0, ""), r
 
 

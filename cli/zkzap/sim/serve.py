@@ -215,7 +215,8 @@ def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=No
         while True:
             with lock:
                 wait = _timeout(device, clock)
-            for key, _ in sel.select(wait):
+            # a client's bytes (or its going) first: one that leaves frees the line for the next
+            for key, _ in sorted(sel.select(wait), key=lambda e: e[0].data != "client"):
                 if key.data == "stop":
                     return
                 if key.data == "accept":
