@@ -9,36 +9,86 @@ and pass it to the session that step runs.
 
 from __future__ import annotations
 
-import time
-
 from . import logbook as _logbook
 
 
 class Stand:
-    def __init__(self, limits=None, averager=None, logbook=None):
+    """The hooks of one session (see the module's text). ``aux``: an :class:`~zkzap.api.aux.AuxHub`
+    (external sensors, merged into the records); ``corrections``: a
+    :class:`~zkzap.api.ambient.RecordCorrections` (corrected fields in the records); ``answer``: a
+    :class:`~zkzap.api.esr.PressureAnswer` (control ID 8 frames for the ECU's ESR request);
+    ``engine``: the engine's name in the logbook and the summary."""
+
+    def __init__(self, limits=None, averager=None, logbook=None, *, aux=None, corrections=None, answer=None,
+                 engine=None):
         self.limits = limits if limits else None          # api.limits.LimitSet (None: no limits)
         self.averager = averager                           # api.steady.StepAverager
         self.logbook = logbook                             # path of the logbook file
+        self.aux = aux if aux else None
+        self.corrections = corrections
+        self.answer = answer
+        self.engine = engine
         self.stats = _logbook.RunStats()
-        self.schedule = None                               # api.schedule.Schedule: bound to the ECU
-        self.wall0 = None
+        self.clock = None                                  # the session's (link.clock)
+        self.write = None                                  # how an ESR answer is sent (the session's source)
+        self._started = False
+
+    def start(self, timeout) -> None:
+        """Before the port opens: the external sensors' readers, and their first lines (their
+        field names; a silent sensor is exit 3 with nothing sent)."""
+        if self.aux is not None and not self._started:
+            self._started = True
+            self.aux.start(timeout)
+            self._check_fields()
+
+    def _check_fields(self):
+        from ..errors import unknown_name
+
+        quantities = []
+        if self.averager is not None:
+            quantities += [self.averager.thrust, self.averager.flow] + list(self.averager.ambient or ())
+        if self.corrections is not None:
+            c = self.corrections
+            quantities += [c.temperature, c.pressure, c.thrust, c.flow]
+        if self.answer is not None:
+            quantities.append(getattr(self.answer, "quantity", None))
+        for q in quantities:
+            if q is not None and q.field is not None and q.field not in self.aux.fields:
+                self.close()
+                raise unknown_name(q.option, q.field, self.aux.fields, noun="sensor field",
+                                   otherwise=f"; the --aux sensors give {', '.join(self.aux.fields) or 'no field'}")
+
+    def close(self) -> None:
+        if self.aux is not None:
+            self.aux.close()
 
     def columns(self, record_columns):
-        """Wrap the record column function: limit entries become CSV columns."""
-        if self.limits is None:
+        """Wrap the record column function: limit entries, sensor fields and corrected values
+        become CSV columns."""
+        extra = []
+        if self.limits is not None:
+            extra += ["warnings", "limit"]
+        if self.aux is not None:
+            extra += list(self.aux.fields)
+        if self.corrections is not None:
+            from .ambient import RecordCorrections
+
+            extra += list(RecordCorrections.KEYS)
+        if not extra:
             return record_columns
 
         def cols(snapshot, ids=None):
-            return record_columns(snapshot, ids) + ["warnings", "limit"]
+            return record_columns(snapshot, ids) + extra
 
         return cols
 
     def attach(self, telemetry, source, on_update):
         """Hook into ``telemetry``; returns the live-view callback (limit lines added)."""
         telemetry.on_frame = self.on_frame
-        if self.schedule is not None:
-            self.schedule.bind(telemetry)
-        self.wall0 = getattr(source, "wall0", None) or time.time()
+        self.clock = source.clock
+        self.write = source.write
+        if self.aux is not None:
+            self.aux.bind(source.now, source.clock.speed)
         if on_update is None or self.limits is None:
             return on_update
         limits = self.limits
@@ -49,18 +99,37 @@ class Stand:
         return update
 
     def on_frame(self, t, rec):
+        aux = self.aux
+        if aux is not None:
+            for ta, reading in aux.drain():
+                if self.averager is not None:
+                    self.averager.feed_aux(ta, reading)
         self.stats.feed(t, rec)
         if self.averager is not None:
             self.averager.feed(t, rec)
-        if self.limits is not None:
-            return self.limits.check(t, rec)
-        return None
+        extra = self.limits.check(t, rec) if self.limits is not None else {}
+        if aux is not None:
+            extra.update(aux.merge(t))
+        if self.corrections is not None:
+            extra.update(self.corrections.record(t, rec, aux.value if aux is not None else None))
+        if self.answer is not None:
+            frame = self.answer.on_frame(t, rec)
+            if frame is not None and self.write is not None:
+                self.write(frame)
+        return extra or None
 
     def summary(self) -> dict:
-        """Entries for the run summary: ``limits`` (per condition), ``running_s``, ``starts``."""
+        """Entries for the run summary: ``limits`` (per condition), ``running_s``, ``starts``, the
+        external sensors (``aux``), the ESR answers (``air_pressure_answers``), ``engine``."""
         out = {"running_s": round(self.stats.running_s, 3), "starts": self.stats.starts}
+        if self.engine is not None:
+            out["engine"] = self.engine
         if self.limits is not None:
             out["limits"] = self.limits.summary()
+        if self.aux is not None:
+            out["aux"] = self.aux.summary()
+        if self.answer is not None:
+            out["air_pressure_answers"] = self.answer.summary()
         return out
 
     def log_run(self, *, command, port, schedule, files, outcome, tel, session):
@@ -69,14 +138,21 @@ class Stand:
             return None
         s = tel.summary()
         duration = (session.ended_t or 0.0) if session is not None else 0.0
-        wall0 = self.wall0 or time.time()
+        clock = self.clock
+        if clock is None or clock.wall(0.0) is None:      # never attached, or a replay of a raw log
+            from ..link.clock import SessionClock
+
+            clock = SessionClock()
+            clock.wall0 -= clock.real(duration)
+        # the real moments the session's start and end correspond to (its one clock)
         run = {
-            "started": _logbook.iso(wall0), "ended": _logbook.iso(wall0 + duration),
+            "started": _logbook.iso(clock.wall(0.0)), "ended": _logbook.iso(clock.wall(duration)),
             "duration_s": round(duration, 3), "running_s": round(self.stats.running_s, 3),
             "starts": self.stats.starts, "max_rpm": s["max_rpm"], "max_egt_c": s["max_egt_c"],
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],
             "limits_violated": self.limits.violated() if self.limits is not None else [],
             "command": command, "port": port, "schedule": schedule, "files": [f for f in files if f],
-            "outcome": outcome.reason, "exit_status": outcome.exit_code,
+            "outcome": outcome.reason, "exit_status": outcome.exit_code, "engine": self.engine,
+            "throttle_s": self.stats.throttle_s,
         }
         return _logbook.record(self.logbook, run)

@@ -7,9 +7,10 @@ line by line, binary input in 64 KiB blocks).
 from __future__ import annotations
 
 import gc
+import os
 import sys
 
-from ..codec.hexfmt import iter_hex_stream, parse_hex
+from ..codec.hexfmt import HexError, iter_hex_stream, parse_hex
 from ..errors import UsageError
 
 CHUNK = 1 << 16
@@ -57,12 +58,49 @@ def _binary_chunks(paths):
 
 
 def hex_chunks(args):
-    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin."""
+    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin or
+    of the text files the arguments name (``zap decode dump.hex``: arguments that are not hex
+    but every one an existing file; raw bytes in one are refused with a pointer to --binary)."""
     if args and list(args) != ["-"]:
-        return [parse_hex(" ".join(args), what="hex input")], True
+        try:
+            return [parse_hex(" ".join(args), what="hex input")], True
+        except HexError as e:
+            if not all(a != "-" and os.path.isfile(a) for a in args):
+                named = [a for a in args if ("." in a or os.sep in a) and not os.path.exists(a)]
+                if named:
+                    raise HexError(f"{e} (nor a file: {named[0]} does not exist)") from None
+                raise
+        return _hex_files(list(args)), False
     if sys.stdin is None or sys.stdin.isatty() and not args:
         raise UsageError("input: none given; pass hex as arguments, pipe hex or bytes (--binary) to stdin")
     return iter_hex_stream(sys.stdin, what="stdin"), False
+
+
+def hex_file_inputs(args) -> bool:
+    """Whether the decoders read ``args`` as hex text files (see :func:`hex_chunks`)."""
+    if not args or list(args) == ["-"] or not all(os.path.isfile(a) for a in args):
+        return False
+    try:
+        parse_hex(" ".join(args), what="hex input")
+    except HexError:
+        return True
+    return False
+
+
+def _hex_files(paths):
+    for path in paths:
+        try:
+            stream = open(path, encoding="utf-8", errors="surrogateescape", newline=None)
+        except OSError as e:
+            raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
+        with stream:
+            try:
+                yield from iter_hex_stream(stream, what=path)
+            except HexError as e:
+                if "binary input" in str(e):
+                    raise HexError(f"{path}: raw bytes, not hex text: give --binary to decode them "
+                                   f"({' '.join(['--binary', *paths])})", path=path) from None
+                raise
 
 
 class _CollectorPaused:

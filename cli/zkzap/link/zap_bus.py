@@ -45,6 +45,10 @@ from __future__ import annotations
 import select
 import time
 from collections import deque
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from typing import Optional
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
@@ -83,19 +87,22 @@ class Reply:
 
     __slots__ = ("ident", "error", "data", "packet", "rtt", "latency")
 
-    def __init__(self, ident, error, data, packet, rtt=0.0, latency=None):
+    def __init__(self, ident: int, error: int, data: bytes, packet: bytes, rtt: float = 0.0,
+                 latency: Optional[float] = None) -> None:
         self.ident, self.error, self.data, self.packet, self.rtt = ident, error, data, packet, rtt
         self.latency = latency
 
     @property
-    def errors(self) -> list:
+    def errors(self) -> list[str]:
+        """The names of the error bits set (``overload``, ``input-voltage``)."""
         return zap.error_names(self.error)
 
     @property
     def value(self) -> int:
+        """The parameter bytes as one little-endian integer."""
         return int.from_bytes(self.data, "little")
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"Reply(id={self.ident}, error=0x{self.error:02x}, data={self.data.hex(' ')})"
 
 

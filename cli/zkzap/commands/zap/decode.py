@@ -7,12 +7,12 @@ import click
 
 from ...codec import zap
 from ...codec.framing import ZapFramer
-from ...errors import UsageError
+from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
-                       output_options)
+from ..options import (checked, close_output, decode_inputs, exits, format_option, note_skipped, open_output,
+                       output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -36,11 +36,12 @@ def _table_cells(rec):
     return rec
 
 
+@exits({CHECK_FAILED: "a single packet given as arguments has a bad checksum"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
-@output_options
+@output_options(formats=RECORD_FORMATS)
 def decode(inputs, binary, fmt, output, append):
     """Decode mightyZAP packets to a table, JSON, JSON Lines or CSV.
 
@@ -76,7 +77,7 @@ def decode(inputs, binary, fmt, output, append):
         chunks, explicit = binary_chunks(list(inputs)), False
     else:
         chunks, explicit = hex_chunks(inputs)
-    fmt = output_format(fmt, output)
+    fmt = output_format(fmt, output, RECORD_FORMATS)
     framer = ZapFramer()
     decoder = zap.ZapDecoder()
     if explicit:

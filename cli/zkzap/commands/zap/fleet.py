@@ -12,9 +12,10 @@ import click
 
 from ...api import fleet
 from ...codec import zap
-from ...errors import CheckFailed, NoReply, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, consent, note, resolve_format, warn, yes_option
+from ..options import (Choice, FilePath, OutputPath, consent, exits, note, plural, resolve_format, warn,
+                       zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -90,21 +91,6 @@ class RegisterList(click.ParamType):
                 if r.writable and r.name.startswith(last)]
 
 
-def _read_entries(bus, records):
-    """{ID: Entry} read from the bus: the actuators of ``records`` (scan records), each at the
-    baud rate it answered at."""
-    entries = {}
-    for rec in records:
-        ident = rec["id"]
-        if bus.baud != rec["baud"]:
-            bus.set_baud(rec["baud"])
-        values, error = fleet.PROCEDURES.read_map(bus, ident)
-        entry = fleet.entry_from_values(values, baud=bus.baud, error=error)
-        doc = {"format": fleet.FORMAT, "actuators": {str(ident): entry}}
-        entries[ident] = fleet.check_document(doc, f"bus ID {ident}")[ident]
-    return entries
-
-
 # -- backup --------------------------------------------------------------------------------------
 
 #: -b of the fleet commands that search the bus: one baud rate, a list, or all (as zap scan).
@@ -112,23 +98,18 @@ SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search:
                                                          "or 'all' (as zap scan) [env ZKZAP_ZAP_BAUD].")
 
 
-def _discover(bus, ids, bauds, retries):
-    """The actuators a scan of ``ids`` at ``bauds`` finds; a bus where two answer to one ID is
-    refused (exit 1, naming it), never backed up or compared without it."""
-    records = fleet.PROCEDURES.discover(bus, ids, bauds, retries=retries)
-    fleet.refuse_shared(records)
-    return records
-
-
+@exits({NO_REPLY: "a listed ID does not answer (nothing written)",
+        DEVICE_ERROR: "an actuator reports error bits (the backup is written first)",
+        CHECK_FAILED: "two actuators answer to one ID (nothing written)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Actuators to back up, like 1,2,5-8 (each must answer); with --scan: the IDs to search.")
 @click.option("--scan", "scan_", is_flag=True,
               help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud rates), found as "
                    "'zap scan' finds them. The default without --ids.")
-@click.option("-o", "--output", type=FilePath(), default=None,
+@click.option("-o", "--output", type=OutputPath(DOC_FORMATS, default=None), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
-@click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
 @link_options(**SEARCH_BAUDS)
 def backup(ids, scan_, output, fmt, **common):
@@ -164,7 +145,7 @@ def backup(ids, scan_, output, fmt, **common):
     args = dict(_link_args(common), baud=bauds[0])
     with open_link(ids=sim_ids, probe=None if search else sim_ids[0], **args) as bus:
         if search:
-            found = _discover(bus, targets, bauds, common["retries"])
+            found = fleet.survey(bus, targets, bauds, scan=True, retries=common["retries"])
             if not found:
                 raise NoReply(f"no actuator answered (IDs {fleet._ranges(targets)} at "
                               f"{', '.join(map(str, bauds))} baud)")
@@ -205,6 +186,8 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               ("unit", "unit")]
 
 
+@exits({OK: "equal", CHECK_FAILED: "they differ (like diff), or two actuators answer to one ID on the bus",
+        USAGE: "a bad file or option"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("a", metavar="A")
 @click.argument("b", metavar="B")
@@ -212,10 +195,10 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               help="Compare only these actuators (default: every ID of either file; on the bus, every "
                    "actuator a scan finds at -b's baud rates).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
-@click.option("--compare", type=click.Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
+@click.option("--compare", type=Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
               help="stored: the settings that survive power-off; settings: stored and volatile; all: "
                    "read-only values too.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @link_options(**SEARCH_BAUDS)
 def diff(a, b, ids, everything, compare, fmt, **common):
@@ -244,18 +227,13 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         if common["return_mode"] == "0":
             raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
         other = next(iter(sides.values()))
-        wanted = ids if ids is not None else list(range(zap.MAX_ID + 1))
         bauds = common["baud"]
         args = dict(_link_args(common), baud=bauds[0])
         with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
-            if ids is not None and len(bauds) == 1:
-                # the IDs asked for, each with an ordinary Echo: one that does not answer is absent
-                found = [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=common["retries"])]
-            else:
-                found = _discover(bus, wanted, bauds, common["retries"])
+            found = fleet.survey(bus, ids, bauds, retries=common["retries"])
             if common["return_mode"] == "auto" and found:
                 bus.detect_return_mode(found[0]["id"])
-            live = _read_entries(bus, found)
+            live = fleet.read_entries(bus, found)
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:
@@ -278,6 +256,10 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
               ("unit", "unit"), ("status", "status"), ("read_back", "read back"), ("errors", "errors")]
 
 
+@exits({OK: "every write reads back (or, with --plan, the plan was printed)",
+        CHECK_FAILED: "a write reads back another value",
+        USAGE: "a bad FILE or option (nothing written)", NO_REPLY: "an actuator does not answer",
+        DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", metavar="FILE", type=FilePath())
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
@@ -295,7 +277,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.option("--force", is_flag=True,
               help="Write id, baud-rate, protocol-type or feedback-return-mode named in --only; apply a file "
                    "from another model or firmware.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options
@@ -342,25 +324,18 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
 
     with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
-        current = {}
-        writes = []
-        unchanged = 0
-        for source, target in pairs:
-            values, error = fleet.PROCEDURES.read_map(bus, target)
-            current[target] = values
-            entry = entries[source]
-            mismatch = fleet.identity_mismatch(entry, values)
-            if mismatch:
-                text = f"ID {target} is {mismatch} (ID {source} in {file})"
-                if not force:
-                    raise UsageError(f"{text}; pass --force to apply it anyway")
-                warn(text)
-            w, u = fleet.plan(entry, target, values, only=only_regs, skip=skip_regs, force=force)
-            writes += w
-            unchanged += u
+        writes, unchanged, _ = fleet.plan_bus(bus, entries, pairs, name=file, only=only_regs, skip=skip_regs,
+                                              force=force, on_mismatch=warn)
         n_act = len({w.target for w in writes})
-        summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
-                   f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")
+        stored = sum(1 for w in writes if w.register.stored)
+        equal = plural(unchanged, "setting") + " already equal"
+        if stored and stored == len(writes):
+            kept = " (to a stored setting, which survives power-off)" if stored == 1 else \
+                " (all to stored settings, which survive power-off)"
+        else:
+            kept = f" ({stored} of them to stored settings, which survive power-off)" if stored else ""
+        to_write = f"{plural(len(writes), 'write')} on {plural(n_act, 'actuator')}{kept}"
+        summary = f"{to_write}; {equal}" if writes else f"nothing to write; {equal}"
         if plan_only:
             _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                         title=f"plan: {file}")
@@ -374,9 +349,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             if is_tty(sys.stderr):
                 _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
                             title=f"plan: {file}", stream=sys.stderr)
-            stored = sum(1 for w in writes if w.register.stored)
-            consent(f"apply {file} to {common['port']}: {summary}, {stored} of them stored settings that "
-                    "survive power-off", yes)
+            consent(f"apply {file} to {common['port']}: {summary}", yes)
         elif common["verbose"] or sys.stderr.isatty():
             note(f"applying {file}: {summary}")
         done: list = []
@@ -431,6 +404,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
 
 # -- setup ---------------------------------------------------------------------------------------
 
+@exits({OK: "every ID is done", CHECK_FAILED: "some IDs remain (stopped, skipped, or a refusal)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")

@@ -12,26 +12,33 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
+from ...io import SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
-from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
-                        reconnect_option, resolve_port, zk_timeout_help)
+from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors, summarizer, summary_option)
+from .telemetry import (check_log_options, errors_text, log_options, port_from_env, reconnect_option,
+                        resolve_port, session_exits, zk_timeout_help)
 
 
 class Output:
     """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    ``-o FILE`` is checked here (before any port opens) and opened by the first record (or by
-    :meth:`finish` after a run that ended well without one), so a run that fails to start —
-    no port, a silent ECU — leaves an existing file as it was."""
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record, never
+    before: a run that fails to start — no port, a silent ECU — or that writes no record
+    leaves an existing file as it was."""
 
     def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
 
         path = output if output and output != "-" else None
         if fmt is None and path:
-            fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+            fmt = format_for_path(path, SESSION_FORMATS)
+        self._xlsx = fmt == "xlsx"
+        if self._xlsx:
+            from ...io import xlsx
+
+            xlsx.check(output, append)
         if fmt == "mcap":
             from .mcap_output import open_mcap
 
@@ -52,7 +59,7 @@ class Output:
         elif path and stdout_tty:
             self.dashboard = _dashboard(title)
         if snapshot is None:
-            snapshot = fmt == "csv"
+            snapshot = fmt in ("csv", "xlsx")        # spreadsheets: every field's latest value on each row
         if fmt == "table" and self.dashboard is not None and not path:
             snapshot = False
         self.snapshot = snapshot
@@ -69,6 +76,11 @@ class Output:
         from ...io.writers import make_writer
 
         had = False
+        if self._xlsx:
+            from ...io.xlsx import XlsxWriter
+
+            self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
+            return
         if self.file is not None:
             self.stream, had = self.file.open(), self.file.had
         if self._table:
@@ -76,10 +88,11 @@ class Output:
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
-    def finish(self, ok):
-        """The run ended: a file no record opened is created only when the run went well."""
-        if ok and self.file is not None and self.writer is None:
-            self._open()
+    def finish(self, sheets=None):
+        """The run ended: a workbook that got records gets its steps and summary sheets
+        (``sheets``: ``(steps, summary)``). A file no record opened stays as it was."""
+        if sheets is not None and self._xlsx and self.writer is not None:
+            self.writer.sheets(*sheets)
 
     def write(self, rec):
         if self.writer is None and self.file is not None:
@@ -135,20 +148,23 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule"):
+                  reconnect=None, end=None, end_label="end of schedule", summarize=None, plan=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
-    an output.
+    an output. ``summarize(outcome, tel, session)`` gives ``(steps, summary)`` for the sheets of
+    an ``-o FILE.xlsx`` workbook (``steps``: ``(columns, rows)`` or None). ``plan``: the
+    :class:`~zkzap.api.prestart.Plan` of the frames ``control`` sends (checked against the ECU's
+    reported limits before the first).
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
     from ...io.outfile import OutFile, refuse_same_files
     from ...link.port import fit_note
-    from ...link.zk_port import READ_SLICE_S, ZkLink
+    from ...link.zk_port import ZkLink
     from ...link.zk_sources import LiveSource
     from .bridging import make_bridges
 
@@ -168,12 +184,22 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         check_mcap(output, append, snapshot)
     if bridges:
         bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
+    if stand is not None:
+        try:
+            # external sensors first: a silent load cell is found before the ECU is sent anything
+            stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
+        except BaseException:
+            if bridges:
+                bridges.close()
+            raise
     columns = record_columns if stand is None else stand.columns(record_columns)
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
         if bridges:
             bridges.close()
+        if stand is not None:
+            stand.close()
         raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
@@ -190,12 +216,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
             source = replay_source(replay, fast=fast)
         else:
-            # reads block at most half a control period, so frames go out on time up to 200 Hz
-            slice_s = min(READ_SLICE_S, 0.5 / (rate or DEFAULT_RATE)) if control else READ_SLICE_S
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
-                                reconnect=reconnect)
-        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                        wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits), reconnect=reconnect)
+        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -203,19 +225,22 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             from .taps import tap_session
 
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+            if stand is not None:
+                stand.write = source.write       # ESR answers are recorded like every control frame
         session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort,
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
                           stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
-                          on_update=on_update, notify=notify,
+                          on_update=on_update, notify=notify, plan=plan,
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
-            out.finish(outcome.ok)
-            if outcome.ok and raw is not None and raw.stream is None:
-                raw.open()
+            if summarize and out.fmt == "xlsx" and outcome.reason != "refused":
+                out.finish(summarize(outcome, tel, session))
     finally:
+        if stand is not None:
+            stand.close()
         if source is not None:
             source.close()
         out.close()
@@ -228,6 +253,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                 note(line)
         for message in held:
             note(message)
+    if outcome.reason == "refused":
+        raise outcome.error          # the ECU's limits refuse the plan: nothing was sent or written
     if bridges:
         session.bridges = session_stats
     if tel.version_note:
@@ -237,20 +264,23 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         if told:
             note(told + "; expect fewer status frames")
     framer = source.framer
-    if framer.bad:
+    if framer.bad and getattr(source, "signal", None) is not None and not source.signal.accepted:
+        pass                         # noise, not an ECU's frames: the error says what came
+    elif framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
              f"({framer.skipped} byte{'' if framer.skipped == 1 else 's'})")
     return outcome, tel, session
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@session_exits("done (--count, --duration, end of replay)", "with --fail-on-error, an ECU error code was seen")
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Stop after N records.")
 @click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
               help="Stop after SECONDS.")
@@ -263,11 +293,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 @limit_options
+@sensor_options
 @logbook_option
 @summary_option
 def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after,
             raw_log, count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
-            logbook, summary_json, reconnect=None):
+            logbook, summary_json, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
+            ambient_pressure=None, air_pressure=None, engine=None):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -310,7 +342,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     if rate is not None and not keepalive:
         raise UsageError("rate: applies only with --keepalive")
     check_log_options(ids, snapshot, fmt)
-    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook)
+    sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
+    if replay is not None and (sensors.specs or sensors.air):
+        raise UsageError(f"{'aux' if sensors.specs else 'air-pressure'}: not with --replay (a recording has no "
+                         f"sensors beside it and cannot be answered)")
+    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, sensors=sensors,
+                        engine=engine)
     check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     control = None
     if keepalive:
@@ -320,12 +357,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
             return frame
 
     if baud == "auto":
-        baud, stop_bits = _detect_line(url)
+        baud, stop_bits = detect_line(url)
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate, stand=stand,
-        reconnect=reconnect)
+        reconnect=reconnect, summarize=summarizer(stand, command="zk monitor", port=url or replay))
     report(stand, command="zk monitor", port=url or replay, files=(output, raw_log), outcome=outcome, tel=tel,
            session=session, summary_json=summary_json)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
@@ -339,8 +376,8 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
 zk_timeout_help(monitor)
 
 
-def _detect_line(url):
-    """``--baud auto``: the ECU's baud rate and stop bits, found by listening first."""
+def detect_line(url):
+    """``--baud auto`` (monitor, check): the ECU's baud rate and stop bits, found by listening first."""
     from ...api.detect import no_answer
     from .detect import run_detection
     from ...api.detect import BAUDS
