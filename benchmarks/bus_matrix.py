@@ -33,7 +33,9 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, os.path.join(ROOT, "cli"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "e2e"))
 
+sys.path.insert(0, HERE)
 from buscheck import LINES, check_capture  # noqa: E402
+from common import add_quick  # noqa: E402
 
 LATENCIES = (2, 18, 22, 25, 40, 60, 100, 140)
 def tool(name):
@@ -92,12 +94,17 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--latency", default=",".join(map(str, LATENCIES)), help="latencies (ms), comma separated")
     ap.add_argument("--mode", default="0,1,2", help="return modes, comma separated")
+    ap.add_argument("--gap", default="0,1", help="ms between reply bytes, comma separated")
+    ap.add_argument("--echo", default="no,yes", help="behind an echoing adapter: no, yes or both (no,yes)")
     ap.add_argument("--no-fail", action="store_true")
+    add_quick(ap, latency="40", mode="1", gap="1", echo="yes", no_fail=True)
     args = ap.parse_args(argv)
     latencies = [int(x) for x in args.latency.split(",")]
     modes = [int(x) for x in args.mode.split(",")]
+    gaps = [int(x) for x in args.gap.split(",")]
+    echoes = [x.strip() == "yes" for x in args.echo.split(",")]
     rows = []
-    for latency, gap, echo, mode in itertools.product(latencies, (0, 1), (False, True), modes):
+    for latency, gap, echo, mode in itertools.product(latencies, gaps, echoes, modes):
         with tempfile.TemporaryDirectory() as tmp:
             row = run_bus(latency, gap, echo, mode, tmp)
         rows.append(row)
