@@ -13,7 +13,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import FilePath, FiniteRange, port_options, protocol_version_option
+from .options import Choice, FilePath, FiniteRange, port_options, protocol_version_option
 
 #: Where a console listens unless told: loopback only; a busy port is followed by the next ones.
 DEFAULT_LISTEN = "127.0.0.1:8470"
@@ -180,7 +180,7 @@ def _make_zk():
     @click.option("--limit", "limit", multiple=True, metavar="EXPR", help=LIMIT_HELP)
     @click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
                   help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable.")
-    @click.option("--on-limit", type=click.Choice(["abort", "warn"]), default=None,
+    @click.option("--on-limit", type=Choice(["abort", "warn"]), default=None,
                   help="A violated limit while the console runs the engine: abort (the default: the abort "
                        "command, standby) or warn (shown, the engine goes on).")
     @protocol_version_option
