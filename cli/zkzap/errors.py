@@ -65,6 +65,15 @@ class UsageError(ZkzapError):
     code = USAGE
 
 
+class MissingExtra(UsageError):
+    """An optional library that ``what`` needs is not installed: the message names the extra
+    that provides it (``pip install 'zkzap[mqtt]'``)."""
+
+    def __init__(self, what, module, extra):
+        super().__init__(f"{what}: needs the {module} library; install it with pip install 'zkzap[{extra}]'",
+                         module=module, extra=extra)
+
+
 class CheckFailed(ZkzapError):
     """A check failed: a CRC or checksum mismatch, a read-back that differs, a goal not reached."""
 

@@ -176,5 +176,5 @@ def test_load_reads_a_file_and_names_it(tmp_path):
     with pytest.raises(UsageError, match=r"schedule: cannot read .*none\.csv: No such file"):
         Schedule.load(str(tmp_path / "none.csv"))
     path.write_bytes(b"0,10\n\xff\xfe\n")
-    with pytest.raises(UsageError, match="is not UTF-8 text"):
+    with pytest.raises(UsageError, match=r"run\.csv:2: not UTF-8 text \(byte 0xFF at byte 5\)"):
         Schedule.load(str(path))
