@@ -154,6 +154,7 @@ def test_linear_ramps_and_nothing_before_the_first_row():
     ("x,10\n", "s.csv:1: header 'x,10'"),
     ("0\n", "s.csv:1: 1 cells"),
     ("-1,0\n", "s.csv:1: time_s: -1 is out of range"),
+    ("0,10\n1e308,20\n", "s.csv:2: time_s: 1e308 is out of range; allowed 0..1000000000 s"),
     ("0,ten\n", "s.csv:1: throttle_pct: 'ten' is not a number"),
 ])
 def test_more_bad_rows_name_file_and_line(text, msg):

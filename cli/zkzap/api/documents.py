@@ -44,11 +44,12 @@ def line_of(text: str, pos: int) -> int:
     return text.count("\n", 0, max(0, pos)) + 1
 
 
-def loads(text: str, fmt: str, name: str = "document"):
+def loads(text: str, fmt: str, name: str = "document", *, finite: bool = True):
     """The value of ``text`` in ``fmt`` (``json``, ``toml``, ``yaml``); DocumentError naming
-    ``name`` and the line."""
+    ``name`` and the line. ``finite=False`` takes JSON's ``NaN`` and ``Infinity`` (as Python's
+    own JSON writer puts them for float values)."""
     if fmt == "json":
-        return load_json(text, name)
+        return load_json(text, name, finite=finite)
     if fmt == "toml":
         return load_toml(text, name)
     if fmt == "yaml":
@@ -56,12 +57,12 @@ def loads(text: str, fmt: str, name: str = "document"):
     raise ValueError(fmt)
 
 
-def read(path, what: str, fmt: str = "json", expected: str = "", limit=None):
+def read(path, what: str, fmt: str = "json", expected: str = "", limit=None, *, finite: bool = True):
     """``(value, name)`` of the document file ``path`` (``-``: stdin) in ``fmt``."""
     from .textfile import MAX_DOCUMENT, read_text
 
     text, name = read_text(path, what, expected, limit or MAX_DOCUMENT)
-    return loads(text, fmt, name), name
+    return loads(text, fmt, name, finite=finite), name
 
 
 # --- JSON -------------------------------------------------------------------------------------
@@ -102,15 +103,17 @@ def _constant(text):
 
 _DECODER = json.JSONDecoder(object_pairs_hook=_pairs, parse_int=_int, parse_float=_float,
                             parse_constant=_constant)
+_DECODER_NAN = json.JSONDecoder(object_pairs_hook=_pairs, parse_int=_int)
 
 #: The tokens that give JSON its structure: strings, brackets, braces, colons, commas.
 _JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[{}\[\]:,]')
 
 
-def load_json(text: str, name: str = "document"):
-    """The value of the JSON ``text`` (see the module's description)."""
+def load_json(text: str, name: str = "document", *, finite: bool = True):
+    """The value of the JSON ``text`` (see the module's description; ``finite``: see
+    :func:`loads`)."""
     try:
-        return _DECODER.decode(text)
+        return (_DECODER if finite else _DECODER_NAN).decode(text)
     except _Refused as e:
         pos = _first_duplicate(text) if e.text is None else text.find(e.text)
         raise DocumentError(f"{name}:{line_of(text, pos)}: {e.what}") from None

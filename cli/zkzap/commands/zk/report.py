@@ -78,6 +78,8 @@ def report(run_file, steps_file, summary_file, output, fmt, title, meta, termina
     steps = R.load_steps(steps_file) if steps_file else None
     summary = R.load_summary(summary_file) if summary_file else None
     run = R.load_run(run_file)
+    for text in run.notes:
+        note(text)
     title = title or f"Run report: {os.path.basename(run_file)}"
     if terminal:
         import sys
