@@ -115,19 +115,50 @@ def record(path, run: dict) -> int:
         raise OutputError(f"logbook: cannot write {path}: {e}") from None
 
 
+#: Columns that must hold a number (None where the column allows NULL), as :func:`totals` adds them.
+_NUMBERS = {"duration_s": False, "running_s": False, "starts": False, "max_rpm": True, "max_egt_c": True,
+            "fuel_used_l": True, "exit_status": False}
+
+
 def runs(path) -> list:
+    """Every run of the logbook at ``path``, in order. A damaged file (or one edited by hand:
+    a list column that is not a JSON list, text where a number belongs) is a UsageError
+    naming the file, the run and the column."""
+    import sqlite3
+
     db = connect(path, create=False)
     try:
         cur = db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs ORDER BY id")
         out = []
         for values in cur:
-            rec = dict(zip(COLUMNS, values))
-            for k in _LISTS:
-                rec[k] = json.loads(rec[k] or "[]")
-            out.append(rec)
+            out.append(_run(path, dict(zip(COLUMNS, values))))
         return out
+    except sqlite3.DatabaseError as e:
+        raise UsageError(f"logbook: {path}: {e}") from None
     finally:
         db.close()
+
+
+def _run(path, rec) -> dict:
+    def bad(column, what):
+        raise UsageError(f"logbook: {path}: run {rec.get('id')}: {column}: {what}")
+
+    for k in _LISTS:
+        text = rec[k]
+        try:
+            value = json.loads(text or "[]") if isinstance(text, (str, bytes)) or text is None else None
+        except (ValueError, RecursionError):
+            value = None
+        if not isinstance(value, list):
+            bad(k, "not a JSON list")
+        rec[k] = value
+    for k, nullable in _NUMBERS.items():
+        v = rec[k]
+        if v is None and nullable:
+            continue
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            bad(k, f"{v!r} is not a number")
+    return rec
 
 
 def totals(recs) -> dict:
