@@ -46,7 +46,10 @@ def read_limits(exprs=(), files=()) -> list:
     out = []
     for path in files:
         text, name = read_text(path, "limits", "FIELD OP NUMBER lines")
-        out += parse_lines(text, FIELDS, name=name)
+        found = parse_lines(text, FIELDS, name=name)
+        if not found:                  # only comments, or an empty file: not what was meant
+            raise UsageError(f"limits: {name}: no limits in it; expected FIELD OP NUMBER lines")
+        out += found
     for e in exprs:
         out.append(parse(e, FIELDS, where="limit"))
     return out

@@ -9,7 +9,7 @@ from __future__ import annotations
 import gc
 import sys
 
-from ..codec.hexfmt import iter_hex_stream, parse_hex
+from ..codec.hexfmt import HexSkips, iter_hex_stream, parse_hex
 from ..errors import UsageError
 
 CHUNK = 1 << 16
@@ -57,12 +57,46 @@ def _binary_chunks(paths):
 
 
 def hex_chunks(args):
-    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin."""
+    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin
+    (a :class:`HexStdin`)."""
     if args and list(args) != ["-"]:
         return [parse_hex(" ".join(args), what="hex input")], True
     if sys.stdin is None or sys.stdin.isatty() and not args:
         raise UsageError("input: none given; pass hex as arguments, pipe hex or bytes (--binary) to stdin")
-    return iter_hex_stream(sys.stdin, what="stdin"), False
+    return HexStdin(), False
+
+
+class HexStdin:
+    """The bytes of the hex text on stdin, line by line. Bytes that are not UTF-8 are read as
+    what they are (binary input, refused or, once the stream has given bytes, a damaged line
+    skipped), never as a decoding error that would end the stream: :meth:`note` counts the
+    lines skipped."""
+
+    what = "stdin"
+
+    def __init__(self, strict: bool = False):
+        #: None when ``strict``: every line that is not hex is an error
+        self.skipped = None if strict else HexSkips()
+
+    def __iter__(self):
+        import io
+
+        raw = getattr(sys.stdin, "buffer", None)
+        stream = sys.stdin if raw is None else io.TextIOWrapper(raw, encoding="utf-8", errors="surrogateescape")
+        try:
+            yield from iter_hex_stream(stream, what=self.what, skipped=self.skipped)
+        finally:
+            if raw is not None:
+                stream.detach()           # leave stdin's buffer open for whoever owns it
+
+    def note(self):
+        text = self.skipped.note() if self.skipped is not None else None
+        return f"{self.what}: {text}" if text else None
+
+
+def hex_note(chunks):
+    """The note on the damaged lines a hex stream skipped, or None."""
+    return chunks.note() if isinstance(chunks, HexStdin) else None
 
 
 class _CollectorPaused:

@@ -11,8 +11,8 @@ from ...errors import UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note_skipped, open_output, output_format,
-                       output_options)
+from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
+                       output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -64,7 +64,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode bus.pcapng -f json -o bus.json
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
+    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -100,6 +100,9 @@ def decode(inputs, binary, fmt, output, append):
     finally:
         close_output(writer, stream)
     note_skipped(framer, "packet", "checksum")
+    text = hex_note(chunks)
+    if text:
+        note(text)
 
 
 def _explain_single(data: bytes):

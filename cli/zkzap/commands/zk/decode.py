@@ -91,7 +91,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       xxd capture.bin | zk decode --accept status
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
+    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode
     from ...io.writers import csv_dialect, json_dialect, make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -143,6 +143,9 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
     finally:
         close_output(writer, stream)
     note_skipped(framer, "frame", "CRC")
+    text = hex_note(chunks)
+    if text:
+        note(text)
 
 
 def _explain_single(data: bytes):
