@@ -23,10 +23,12 @@ reported as a hang. What counts as a finding:
 - ``unnamed``: a refusal that does not name the input (its file name, or ``stdin``);
 - ``stdout``: a refusal that wrote to stdout;
 - ``hang``: no answer within the deadline;
-- ``memory``: the worker's peak RSS grew by more than ``--memory`` MiB during one case.
+- ``memory``: the worker's resident memory peaked more than ``--memory`` MiB above where the
+  case started (the high-water mark is reset before each case).
 
 The tally per kind (cases, outcomes by exit status, findings, the largest RSS growth of a case,
-the slowest case) is printed at the end; the exit status is 1 when anything was found.
+the most CPU time a case took) is printed at the end; the exit status is 1 when anything was
+found.
 """
 
 from __future__ import annotations
@@ -103,10 +105,11 @@ def make_seeds(d: str) -> dict:
             return f.read()
 
     seeds = {}
+    code, _, err = _cli(["zap", "backup", "--sim", "--sim-ids", "1,2", "--ids", "1,2", "-o", path("fleet.json")])
+    assert code == 0, err
+    doc = fleet.loads(read("fleet.json").decode(), "json", "fleet.json")
     for fmt in ("json", "toml", "yaml"):
-        code, _, err = _cli(["zap", "backup", "--sim", "--sim-ids", "1,2", "-o", path(f"fleet.{fmt}")])
-        assert code == 0, err
-        seeds[f"fleet.{fmt}"] = read(f"fleet.{fmt}")
+        seeds[f"fleet.{fmt}"] = fleet.dumps(doc, fmt).encode()
     state = fleet.SetupState(path("setup.json"), [1, 2, 3])
     state.mark_done(1, {"from_id": 0, "from_baud": 57600, "baud": 57600, "writes": 1, "time": fleet.now_iso()})
     state.mark_skipped(2)
@@ -172,9 +175,12 @@ class Kind:
     input (its file name, or ``stdin`` for standard input)."""
 
     def __init__(self, name, seeds, filename, run, allowed=(0, 2), binary=False, named=True, weight=1.0,
-                 needs=None):
+                 needs=None, warm=True):
         self.name, self.seeds, self.filename, self.run = name, seeds, filename, run
         self.allowed, self.binary, self.named, self.weight, self.needs = set(allowed), binary, named, weight, needs
+        #: run once on a seed when a worker starts, so the modules it imports are not counted as
+        #: a case's memory
+        self.warm = warm
 
 
 def _api(call, refusals=()):
@@ -262,8 +268,10 @@ def kinds(seeds: dict, d: str) -> list:
         Kind("schedule", ["profile.csv", "rpm.csv"], "stand.csv", cli("zk", "profile", "{}", "-n")),
         Kind("limits", ["engine.limits"], "engine.limits",
              cli("zk", "monitor", "--replay", raw, "--fast", "--limits", "{}", "--on-limit", "warn"), (0, 2)),
-        Kind("zap-batch", ["zap-batch.txt"], "batch.txt", cli("zap", "batch", "{}", "-p", NOT_A_PORT), (2, 4)),
-        Kind("zk-batch", ["zk-batch.txt"], "batch.txt", cli("zk", "batch", "{}", "-p", NOT_A_PORT), (2, 4)),
+        # every line is checked before the port opens: 2 for a bad line, else 4 (no such port), or 0
+        # for a batch without a command
+        Kind("zap-batch", ["zap-batch.txt"], "batch.txt", cli("zap", "batch", "{}", "-p", NOT_A_PORT), (0, 2, 4)),
+        Kind("zk-batch", ["zk-batch.txt"], "batch.txt", cli("zk", "batch", "{}", "-p", NOT_A_PORT), (0, 2, 4)),
         Kind("capture-zk", ["zk.pcapng"], "c.pcapng", cli("zk", "decode", "{}", "-f", "jsonl"), binary=True),
         Kind("capture-zk-csv", ["zk.pcapng"], "c.pcapng", cli("zk", "decode", "{}", "-f", "csv"), binary=True),
         Kind("capture-zap", ["zap.pcapng"], "c.pcapng", cli("zap", "decode", "{}", "-f", "jsonl"), binary=True),
@@ -366,6 +374,42 @@ def _maxrss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _status_mib(field):
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+class _Peak:
+    """A case's peak memory: the resident set's high-water mark reset before the case (Linux's
+    /proc/self/clear_refs), read after it, less the resident set before; elsewhere the growth
+    of the process's peak (which only sees a case that beats every case before it)."""
+
+    def start(self):
+        self.rss = _status_mib("VmRSS")
+        self.reset = False
+        if self.rss is not None:
+            try:
+                with open("/proc/self/clear_refs", "w") as f:
+                    f.write("5")
+                self.reset = True
+            except OSError:
+                pass
+        self.before = _maxrss_mib()
+
+    def grew(self) -> float:
+        if self.reset:
+            hwm = _status_mib("VmHWM")
+            if hwm is not None:
+                return max(0.0, hwm - self.rss)
+        return max(0.0, _maxrss_mib() - self.before)
+
+
 def _vsize() -> int:
     try:
         with open("/proc/self/statm") as f:
@@ -374,14 +418,16 @@ def _vsize() -> int:
         return 0
 
 
-def _worker(conn, seeds, d):
+def _worker(conn, seeds, d, table):
     os.environ["NO_COLOR"] = "1"
     for var in [v for v in os.environ if v.startswith("ZKZAP_")]:
         del os.environ[var]
     work = tempfile.mkdtemp(prefix="case-", dir=d)
     os.chdir(work)
-    table = {k.name: k for k in kinds(seeds, d)}
+    table = {k.name: k for k in table}
     for k in table.values():                          # warm every path up before measuring anything
+        if not k.warm:
+            continue
         try:
             _write_and_run(k, work, seeds[k.seeds[0]])
         except Exception:  # noqa: BLE001 - a finding is reported when the case itself runs
@@ -401,16 +447,17 @@ def _worker(conn, seeds, d):
             break
         index, name, data = msg
         kind = table[name]
-        before = _maxrss_mib()
-        t0 = time.perf_counter()
+        peak = _Peak()
+        peak.start()
+        t0 = time.process_time()             # CPU time: a loaded machine does not make a case slow
         exc = None
         code, out, err = None, b"", ""
         try:
             code, out, err = _write_and_run(kind, work, data)
         except BaseException:  # noqa: BLE001 - what escapes is the finding
             exc = traceback.format_exc(limit=-8)
-        conn.send((index, name, code, len(out), err[-2000:], exc, time.perf_counter() - t0,
-                   _maxrss_mib() - before, _maxrss_mib()))
+        err = err if len(err) <= 4000 else err[:2000] + err[-2000:]
+        conn.send((index, name, code, len(out), err, exc, time.process_time() - t0, peak.grew(), _maxrss_mib()))
         for f in os.listdir(work):
             p = os.path.join(work, f)
             if os.path.isdir(p):
@@ -479,14 +526,17 @@ class Tally:
             self.findings.append(Finding(kind.name, what, detail, data))
 
 
-def run(seed=1, count=3000, jobs=None, only=(), timeout=20.0, memory_mib=64.0, out=sys.stdout, keep=None):
-    """Fuzz every kind (or ``only`` those named) with ``count`` cases each; {kind: Tally}."""
+def run(seed=1, count=3000, jobs=None, only=(), timeout=60.0, memory_mib=64.0, out=sys.stdout, keep=None,
+        skip=(), extra=()):
+    """Fuzz every kind (or ``only`` those named, less those in ``skip``; ``extra``: more
+    :class:`Kind` objects) with ``count`` cases each; returns {kind: Tally}."""
     jobs = jobs or max(1, (os.cpu_count() or 1))
     d = tempfile.mkdtemp(prefix="zkzap-fuzz-")
     try:
         seeds = make_seeds(d)
-        table = [k for k in kinds(seeds, d) if not only or k.name in only]
-        unknown = set(only) - {k.name for k in table} - {k.name for k in kinds(seeds, d)}
+        every = kinds(seeds, d) + list(extra)
+        table = [k for k in every if (not only or k.name in only) and k.name not in skip]
+        unknown = set(only) - {k.name for k in every}
         if unknown:
             raise SystemExit(f"unknown kind(s): {', '.join(sorted(unknown))}")
         work = []
@@ -513,7 +563,8 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
     class W:
         def __init__(self):
             self.conn, child = ctx.Pipe()
-            self.proc = ctx.Process(target=_worker, args=(child, seeds, d), daemon=True)
+            # forked: the kinds (closures) are inherited, not pickled
+            self.proc = ctx.Process(target=_worker, args=(child, seeds, d, list(by_name.values())), daemon=True)
             self.proc.start()
             child.close()
             msg = self.conn.recv()
@@ -591,7 +642,7 @@ def _report(tallies, out):
     bad = sum(len(t.findings) for t in tallies.values())
     print(f"inputs: {total} cases over {len(tallies)} kinds; {bad} findings", file=out)
     print(f"  {'kind':<16} {'cases':>6}  {'exit statuses':<34} {'findings':>8} {'max RSS +MiB':>12} "
-          f"{'slowest s':>9}", file=out)
+          f"{'max CPU s':>9}", file=out)
     for name, t in tallies.items():
         codes = ", ".join(f"{c}: {n}" for c, n in sorted(t.codes.items(), key=lambda kv: (kv[0] is None, kv[0] or 0)))
         print(f"  {name:<16} {t.cases:>6}  {codes:<34} {len(t.findings):>8} {t.max_grew:>12.1f} {t.slowest:>9.2f}",
@@ -601,14 +652,33 @@ def _report(tallies, out):
     shown = {}
     for t in tallies.values():
         for f in t.findings:
-            key = (f.kind, f.what, f.detail.splitlines()[0][:120])
+            key = (f.kind, f.what, _signature(f))
             if key in shown:
                 continue
             shown[key] = f
-            print(f"  {f.kind}: {f.what}: {f.detail.strip()[:1500]}\n    input ({len(f.data)} bytes): "
-                  f"{f.data[:160]!r}", file=out)
+            print(f"  {f.kind}: {f.what}: {_short_detail(f)}\n    input ({len(f.data)} bytes): {f.data[:160]!r}",
+                  file=out)
             if len(shown) >= 40:
                 return
+
+
+def _signature(f):
+    """What makes two findings the same: a traceback's exception and innermost zkzap frame, else
+    the message without its numbers."""
+    import re
+
+    if f.what == "traceback":
+        frames = re.findall(r'File "([^"]*zkzap[^"]*)", line (\d+)', f.detail)
+        where = f"{os.path.basename(frames[-1][0])}:{frames[-1][1]}" if frames else ""
+        return f.detail.splitlines()[0].split(":")[0] + " " + where
+    return re.sub(r"\d+", "N", f.detail.splitlines()[0] if f.detail else "")[:100]
+
+
+def _short_detail(f):
+    if f.what != "traceback":
+        return f.detail.strip()[:600]
+    lines = f.detail.strip().splitlines()
+    return lines[0] + "\n" + "\n".join("      " + x for x in lines[-14:])
 
 
 def _keep(tallies, d):
@@ -628,7 +698,7 @@ def main(argv=None):
     ap.add_argument("--cases", type=int, default=3000, help="cases per kind (default 3000)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--kind", action="append", default=[], help="only this kind (repeatable)")
-    ap.add_argument("--timeout", type=float, default=20.0, help="seconds a case may take (default 20)")
+    ap.add_argument("--timeout", type=float, default=60.0, help="seconds a case may take (default 60)")
     ap.add_argument("--memory", type=float, default=64.0, help="MiB of RSS growth a case may cause (default 64)")
     ap.add_argument("--keep", metavar="DIR", help="write the inputs of the findings to DIR")
     a = ap.parse_args(argv)
