@@ -112,7 +112,7 @@ def test_hex_on_stdin_from_the_output_file_is_refused(sh, tmp_path):
     f = tmp_path / "dump.txt"
     f.write_text("FF 1D F4 70\n")
     with open(f) as stdin:
-        p = subprocess.run([_exe("zk"), "decode", "-o", str(f)], stdin=stdin, capture_output=True, text=True,
+        p = subprocess.run([_exe("zk"), "decode", "-f", "jsonl", "-o", str(f)], stdin=stdin, capture_output=True, text=True,
                            timeout=30)
     assert p.returncode == 2, p
     assert "is also the input (stdin" in p.stderr

@@ -61,12 +61,16 @@ def test_the_budget_bounds_the_search(cli):
     assert "out of time budget" in r.stderr
 
 
-def test_monitor_baud_auto_detects_then_monitors(cli):
+def test_monitor_and_check_baud_auto_detect_then_run(cli):
     r = cli("zk", "monitor", "-p", "sim://zk?baud=4800&stop_bits=2&speed=10", "--baud", "auto", "--count", "5",
             "-f", "jsonl")
     assert r.exit_code == 0, r
     assert len(r.stdout.splitlines()) == 5
     assert "detected 4800 baud, 2 stop bits, protocol version 6, 20 Hz" in r.stderr
+    r = cli("zk", "check", "-p", "sim://zk?baud=9600&speed=10", "--baud", "auto", "--count", "12",
+            "--limit", "power_voltage_v>=7.4")
+    assert r.exit_code == 0 and json.loads(r.stdout)["verdict"] == "pass", r
+    assert "detected 9600 baud, 1 stop bit" in r.stderr
 
 
 @pytest.mark.parametrize("args, needle", [
@@ -75,8 +79,8 @@ def test_monitor_baud_auto_detects_then_monitors(cli):
     (["zk", "monitor", "-p", "sim://zk", "--stop-bits", "3"], "'--stop-bits'"),
     (["zk", "send", "keepalive", "-n", "--stop-bits", "3"], "'--stop-bits'"),
     (["zap", "echo", "-n", "--stop-bits", "0"], "'--stop-bits'"),
-    (["zk", "send", "keepalive", "-n", "--baud", "auto"], "only 'zk monitor' and 'zk detect'"),
-    (["zk", "profile", "--example", "--baud", "auto"], "only 'zk monitor' and 'zk detect'"),
+    (["zk", "send", "keepalive", "-n", "--baud", "auto"], "only 'zk monitor', 'zk check' and 'zk detect'"),
+    (["zk", "profile", "--example", "--baud", "auto"], "only 'zk monitor', 'zk check' and 'zk detect'"),
     (["zap", "echo", "--sim", "--baud", "auto"], "'--baud': 'auto' is not allowed"),
     (["zk", "monitor", "--replay", "README.md", "--baud", "auto"], "auto makes no sense with --replay"),
 ])

@@ -103,10 +103,11 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     scl = [(rec["t"], rec["scl"]) for rec in recs if rec["id"] == 8]
     assert any(v == 1 for _, v in scl) and scl[-1][1] == 0          # RPM mode on, then off again
     rows = list(csv.DictReader(io.StringIO(steps.read_text())))
-    assert [row["target"] for row in rows] == ["0 %", "100000 rpm", "0 %"]
-    assert abs(float(rows[1]["rpm_mean"]) - 100000) < 3000 and float(rows[1]["tsfc_kg_kgf_h"]) > 0
+    assert [row["target"] for row in rows] == ["100000 rpm"]          # the start-up and standby rows are no steps
+    assert abs(float(rows[0]["rpm_mean"]) - 100000) < 3000 and float(rows[0]["tsfc_kg_kgf_h"]) > 0
     s = json.loads(summary.read_text())
-    assert s["fuel_density_kg_l"] == 0.84 and s["steps"][1]["mode"] == "rpm" and s["starts"] == 1
+    assert s["fuel_density_kg_l"] == 0.84 and s["steps"][0]["mode"] == "rpm" and s["starts"] == 1
+    assert [(r["line"], r["why"]) for r in s["rows_not_steps"]] == [(2, "start-up")]
     r = cli("zk", "logbook", str(book), "-f", "json")
     doc = json.loads(r.stdout)
     run = doc["runs"][0]
@@ -193,9 +194,21 @@ def test_a_damaged_logbook_is_one_line_naming_the_run(cli, tmp_path, damage, msg
     (["logbook", "{nodb}"], "not a zkzap logbook"),
     (["logbook", "missing.db"], "no such file"),
     (["report", "{s}"], "give -o REPORT"),
-    (["report", "{s}", "-o", "r.txt"], "cannot tell the format"),
+    (["report", "{s}", "-o", "r.txt"], "the suffix '.txt' is not a format this command writes"),
     (["report", "{s}", "--terminal", "-o", "r.png"], "not with --terminal"),
     (["report", "{s}", "-o", "r.png", "--meta", "novalue"], "meta: 'novalue' is not KEY=VALUE"),
+    (["profile", "{dup}", "-n"], "dup.csv:3: time_s: 20 is also the time of dup.csv:2"),
+    (["profile", "{big}", "-n"], "big.csv:1: time_s: '1e400' is not a finite number"),
+    (["profile", "{s}", "--sim", "--steps-csv", "x.csv", "--fuel-density", "800"],
+     "allowed 0.5..1.2 kg/L (800 kg/m³ would be 0.8 kg/L)"),
+    (["monitor", "--sim", "--limits", "{empty}"], "limits: empty.limits has no limit"),
+    (["monitor", "--sim", "--logbook", "/nonexistent/x.db"], "logbook: cannot create /nonexistent/x.db: no such "
+                                                             "directory /nonexistent"),
+    (["monitor", "--sim", "--mqtt", "mqtt://localhost/x/#"], "a topic prefix has no wildcards"),
+    (["monitor", "--sim", "-o", "run.xyz"], "run.xyz: the suffix '.xyz' is not a format this command writes"),
+    (["monitor", "--sim", "-o", "run.png"], "the suffix '.png' (png) is not a format this command writes"),
+    (["monitor", "--sim", "-o", "run.xlsx", "--append"], "a workbook cannot be appended to"),
+    (["monitor", "--sim", "-f", "xlsx"], "a workbook needs a file"),
     (["report", "{s}", "-o", "{s}.png", "--steps", "{nodb}"], "expected the CSV"),
     (["report", "{nodb}", "-o", "r.png"], "expected the CSV"),
 ])
@@ -204,8 +217,46 @@ def test_bad_input_exit_2(cli, tmp_path, monkeypatch, args, msg):
     (tmp_path / "s.csv").write_text("0,0,run\n1,0,standby\n")
     (tmp_path / "bad.csv").write_text("0,0,run\n1,nan\n")
     (tmp_path / "nodb").write_text("hello\n")
+    (tmp_path / "dup.csv").write_text("0,0,run\n20,30\n20,60\n30,0,standby\n")
+    (tmp_path / "big.csv").write_text("1e400,0,run\n")
+    (tmp_path / "empty.limits").write_text("# nothing yet\n\n")
     before = sorted(p.name for p in tmp_path.iterdir())
-    subst = {"{s}": "s.csv", "{bad}": "bad.csv", "{nodb}": "nodb", "{s}.png": "s.png"}
+    subst = {"{s}": "s.csv", "{bad}": "bad.csv", "{nodb}": "nodb", "{s}.png": "s.png", "{dup}": "dup.csv",
+             "{big}": "big.csv", "{empty}": "empty.limits"}
     r = cli("zk", *[subst.get(a, a) for a in args])
     assert r.exit_code == 2 and msg in r.stderr and r.stdout == "", r
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_path):
+    import sqlite3
+
+    book = str(tmp_path / "engines.db")
+    old = sqlite3.connect(book)                         # a logbook from before engines were named
+    from zkzap.api.logbook import SCHEMA
+
+    old.execute(SCHEMA.replace(",\n    engine TEXT,\n    throttle_s TEXT", ""))
+    old.close()
+    for throttle, engine in ((90, "K100-1"), (50, "K100-2")):
+        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "25", "-p", SIM,
+                "-f", "jsonl", "--logbook", book, "--engine", engine)
+        assert r.exit_code == 0, r
+    r = cli("zk", "logbook", book, "--service", "K100-1", "--note", "25 h inspection")
+    assert r.exit_code == 0 and "service 1 of K100-1 recorded" in r.stderr
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "25", "-p", SIM, "-f", "jsonl",
+            "--logbook", book, "--engine", "K100-1")
+    assert r.exit_code == 0, r
+    doc = json.loads(cli("zk", "logbook", book, "--engine", "K100-1", "--above", "80", "--above", "55",
+                         "-f", "json").stdout)
+    tot, since = doc["totals"], doc["since_service"]
+    assert [run["engine"] for run in doc["runs"]] == ["K100-1", "K100-1"] and tot["starts"] == 2
+    first, second = doc["runs"]
+    assert set(first["throttle_s"]) == {"90"} and set(second["throttle_s"]) == {"60"}
+    assert tot["hours_above"]["80"] == round(first["throttle_s"]["90"] / 3600, 4) > 0
+    assert tot["hours_above"]["55"] == round((first["throttle_s"]["90"] + second["throttle_s"]["60"]) / 3600, 4)
+    assert since["runs"] == 1 and since["hours_above"]["80"] == 0 and doc["last_service"]["note"] == "25 h inspection"
+    assert since["fuel_used_l"] == second["fuel_used_l"] and tot["run_hours"] > tot["running_hours"] > 0
+    rows = list(csv.DictReader(io.StringIO(cli("zk", "logbook", book, "--engine", "K100-1", "-f", "csv").stdout)))
+    assert [row["period"] for row in rows] == ["all runs", f"since the service of {doc['last_service']['at']}"]
+    r = cli("zk", "logbook", book, "--engine", "K100-9")
+    assert r.exit_code == 2 and "engines there: K100-1, K100-2" in r.stderr

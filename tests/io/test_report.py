@@ -18,6 +18,30 @@ SIM = "sim://zk?speed=20"
 ALL_PANELS = ["Engine speed", "Exhaust gas temperature", "Thrust", "Throttle", "Fuel flow", "Voltages"]
 
 
+def _profile(d, name, url, extra=()):
+    from click.testing import CliRunner
+
+    from zkzap.commands import root, run as run_cli
+
+    sched = d / "stand.csv"
+    sched.write_text("0,0,run\n20,40\n28,80\n36,0,standby\n40,0,standby\n")    # model seconds
+    files = {k: str(d / f"{name}-{n}") for k, n in (("tel", "tel.csv"), ("raw", "raw.bin"), ("steps", "steps.csv"),
+                                                   ("summary", "summary.json"))}
+    with CliRunner().isolation():
+        code = run_cli(root, "zkzap", ["zk", "profile", str(sched), "-p", url, "-o", files["tel"], "--raw-log",
+                                       files["raw"], "--settle", "4", "--steps-csv", files["steps"],
+                                       "--summary-json", files["summary"], *extra])
+    assert code == 0
+    files["dir"] = d
+    return files
+
+
+@pytest.fixture(scope="module")
+def other(tmp_path_factory):
+    """A second run, of an engine with less thrust and a lower redline, for comparisons."""
+    return _profile(tmp_path_factory.mktemp("other"), "b", SIM + "&max_thrust=11&max_rpm=150000")
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """One short profile run with every output a report reads."""
@@ -27,7 +51,7 @@ def run(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("run")
     sched = d / "stand.csv"
-    sched.write_text("0,0,run\n16,40\n24,80\n32,0,standby\n36,0,standby\n")    # model seconds
+    sched.write_text("0,0,run\n20,40\n28,80\n36,0,standby\n40,0,standby\n")    # model seconds
     files = {k: str(d / n) for k, n in (("tel", "tel.csv"), ("raw", "raw.bin"), ("steps", "steps.csv"),
                                         ("summary", "summary.json"))}
     with CliRunner().isolation():
@@ -133,3 +157,57 @@ def test_other_commands_never_import_plotting_or_sqlite(tmp_path):
                        env=dict(os.environ, PYTHONPATH=cli_dir))
     assert p.returncode == 0, p.stderr
     assert p.stderr.strip().splitlines()[-1] == "[]"
+
+
+def test_two_runs_compared_aligned_at_a_step(cli, run, other):
+    out = run["dir"] / "cmp.html"
+    r = cli("zk", "report", run["tel"], other["tel"], "--steps", run["steps"], "--steps", other["steps"],
+            "--summary", run["summary"], "--summary", other["summary"], "--label", "serial 1", "--label", "serial 2",
+            "--align", "step:1", "-o", str(out))
+    assert r.exit_code == 0 and "skipped" not in r.stderr, r
+    html = out.read_text()
+    assert "Runs compared: serial 1, serial 2" in html and 'id="step-comparison"' in html
+    assert "rpm — serial 1" in html and "rpm — serial 2" in html                  # the legend names each run
+    assert html.count("<svg") == 2 and "Δ serial 2" in html
+    runs = [R.load_run(p) for p in (run["tel"], other["tel"])]
+    for x, p in zip(runs, (run["steps"], other["steps"])):
+        x.steps = R.load_steps(p)
+    R.align(runs, "step:1")
+    assert [x.offset for x in runs] == [20.0, 20.0]
+    header, rows = R.step_comparison(runs)
+    i, j = header.index(f"thrust kgf {runs[0].label}"), header.index(f"thrust kgf {runs[1].label}")
+    a, b = float(rows[1][i]), float(rows[1][j])
+    assert b < a and rows[1][j + 1].startswith(f"{b - a:+.2f} (")                # 80 %: less thrust, and by how much
+    png = run["dir"] / "cmp.png"
+    r = cli("zk", "report", run["tel"], other["tel"], "--summary", run["summary"], "--summary", other["summary"],
+            "--align", "running", "-o", str(png))
+    assert r.exit_code == 0 and png.read_bytes()[:4] == b"\x89PNG", r            # the summaries' steps serve
+
+
+def test_limits_and_step_windows_on_the_plots(cli, run, tmp_path):
+    lim = tmp_path / "engine.limits"
+    lim.write_text("ecu_temp_c <= 85, warn=70\nrpm <= 165000\n")
+    out = tmp_path / "lim.svg"
+    title = "K-100 #1234 acceptance run on stand 4 with the revised start schedule and the new fuel nozzles " * 2
+    r = cli("zk", "report", run["tel"], "--steps", run["steps"], "--summary", run["summary"], "--limits", str(lim),
+            "-o", str(out), "--title", title)
+    assert r.exit_code == 0 and r.stderr == "", r
+    svg = out.read_text()
+    for text in ("limit ecu_temp_c &lt;= 85, warn=70", "warning &lt;= 70", "limit &lt;= 165000",
+                 "limit egt_c&lt;=600", "averaging window", "settling"):
+        assert text in svg, text
+    loaded = R.load_run(run["tel"], extra=["ecu_temp_c"])
+    panels, _, _ = R.plan(loaded, R.load_steps(run["steps"]), limits=[("ecu_temp_c<=85", "ecu_temp_c", "<=", 85, 70)])
+    assert panels[-1][0] == "ecu_temp_c"                     # a limited field without a panel gets one
+    steps = R.load_steps(run["steps"])
+    assert [s["target"] for s in steps] == ["40 %", "80 %"]   # no start-up, no standby rows
+
+
+def test_a_run_on_stdin(sh, run, tmp_path):
+    out = tmp_path / "stdin.png"
+    with open(run["tel"], "rb") as f:
+        data = f.read()
+    r = sh("zk", "report", "-", "-o", str(out), input=data.decode())
+    assert r.exit_code == 0 and out.read_bytes()[:4] == b"\x89PNG", r
+    r = sh("zk", "report", "-", "--terminal", input="not a run\n")
+    assert r.exit_code == 2 and "run: stdin: expected the CSV" in r.stderr

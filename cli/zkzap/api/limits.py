@@ -46,10 +46,11 @@ def read_limits(exprs=(), files=()) -> list:
     out = []
     for path in files:
         text, name = read_text(path, "limits", "FIELD OP NUMBER lines")
-        found = parse_lines(text, FIELDS, name=name)
-        if not found:                  # only comments, or an empty file: not what was meant
-            raise UsageError(f"limits: {name}: no limits in it; expected FIELD OP NUMBER lines")
-        out += found
+        got = parse_lines(text, FIELDS, name=name)
+        if not got:
+            raise UsageError(f"limits: {name} has no limit (only comments or blank lines); expected FIELD OP "
+                             f"NUMBER lines such as egt_c<=850,warn=800")
+        out += got
     for e in exprs:
         out.append(parse(e, FIELDS, where="limit"))
     return out

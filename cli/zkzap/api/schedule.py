@@ -3,7 +3,8 @@
 A schedule is CSV text, one row per step: ``time_s,throttle_pct[,state]``, or an RPM target
 ``time_s,rpm=95000[,state]``, or, with a header, any order of the columns ``time_s``,
 ``throttle_pct``, ``rpm`` and ``state`` (a row fills either ``throttle_pct`` or ``rpm``).
-``#`` starts a comment, blank lines are skipped, times must not decrease. The file may come
+``#`` starts a comment, blank lines are skipped, times must increase (two rows at one time are
+refused, naming both lines: only the second would ever be sent). The file may come
 from a spreadsheet: a UTF-8 byte order mark, quoted cells, ``;`` or tab separators (with a
 decimal comma when the separator is ``;``) are read as such. Every number must be finite and in
 range (times 0..:data:`MAX_TIME_S`); a bad cell is refused naming ``FILE:LINE``.
@@ -83,6 +84,19 @@ def _number(cell, what, where, decimal_comma=False):
     return value
 
 
+def _looks_numeric(cell, decimal_comma=False) -> bool:
+    """Whether a first cell is meant as a number (``1e400``, ``nan`` too: data, refused as such
+    later) rather than a column name."""
+    text = cell.strip().lower()
+    if decimal_comma:
+        text = text.replace(",", ".")
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _separator(line):
     for sep in (";", "\t"):
         if sep in line:
@@ -141,10 +155,9 @@ class Schedule:
             if not cells:
                 continue
             if cols is None:
-                try:
-                    _number(cells[0], "time_s", where, comma)
-                    cols = {}
-                except ScheduleError:
+                if _looks_numeric(cells[0], comma):
+                    cols = {}                         # data from the first row (a bad number says so)
+                else:
                     names = [c.lower() for c in cells]
                     unknown = [c for c in names if c not in COLUMNS]
                     if unknown or "time_s" not in names or not ({"throttle_pct", "rpm"} & set(names)) \
@@ -158,6 +171,10 @@ class Schedule:
             if len(rows) > 1 and rows[-1].t < rows[-2].t:
                 raise ScheduleError(f"{where}: time_s: {rows[-1].t:g} is before the previous row's "
                                     f"{rows[-2].t:g}; times must not decrease")
+            if len(rows) > 1 and rows[-1].t == rows[-2].t:
+                raise ScheduleError(f"{where}: time_s: {rows[-1].t:g} is also the time of {name}:{rows[-2].line}; "
+                                    f"of two rows at one time only the second would be sent: give each row "
+                                    f"its own time")
         sched = cls(rows, interpolate, name, notes)
         sched._round_rpm_notes()
         return sched
@@ -391,11 +408,12 @@ class Schedule:
 
     # --- steps for steady-state reduction ------------------------------------------------------------
     def steps(self):
-        """``[(number, row, t_start, t_end)]``: each row that holds for some time."""
+        """``[(number, row, t_start, t_end)]``: each row in state ``run`` that holds for some time
+        (a standby, stop or pwm row is no steady state of the engine)."""
         out = []
         for i, r in enumerate(self.rows[:-1]):
             end = self.rows[i + 1].t
-            if end > r.t:
+            if end > r.t and r.state == "run":
                 out.append((len(out) + 1, r, r.t, end))
         return out
 

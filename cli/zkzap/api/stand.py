@@ -15,21 +15,73 @@ from . import logbook as _logbook
 
 
 class Stand:
-    def __init__(self, limits=None, averager=None, logbook=None):
+    """The hooks of one session (see the module's text). ``aux``: an :class:`~zkzap.api.aux.AuxHub`
+    (external sensors, merged into the records); ``corrections``: a
+    :class:`~zkzap.api.ambient.RecordCorrections` (corrected fields in the records); ``answer``: a
+    :class:`~zkzap.api.esr.PressureAnswer` (control ID 8 frames for the ECU's ESR request);
+    ``engine``: the engine's name in the logbook and the summary."""
+
+    def __init__(self, limits=None, averager=None, logbook=None, *, aux=None, corrections=None, answer=None,
+                 engine=None):
         self.limits = limits if limits else None          # api.limits.LimitSet (None: no limits)
         self.averager = averager                           # api.steady.StepAverager
         self.logbook = logbook                             # path of the logbook file
+        self.aux = aux if aux else None
+        self.corrections = corrections
+        self.answer = answer
+        self.engine = engine
         self.stats = _logbook.RunStats()
         self.schedule = None                               # api.schedule.Schedule: bound to the ECU
         self.wall0 = None
+        self.write = None                                  # how an ESR answer is sent (the session's source)
+        self._started = False
+
+    def start(self, timeout) -> None:
+        """Before the port opens: the external sensors' readers, and their first lines (their
+        field names; a silent sensor is exit 3 with nothing sent)."""
+        if self.aux is not None and not self._started:
+            self._started = True
+            self.aux.start(timeout)
+            self._check_fields()
+
+    def _check_fields(self):
+        from ..errors import UsageError
+
+        quantities = []
+        if self.averager is not None:
+            quantities += [self.averager.thrust, self.averager.flow] + list(self.averager.ambient or ())
+        if self.corrections is not None:
+            c = self.corrections
+            quantities += [c.temperature, c.pressure, c.thrust, c.flow]
+        if self.answer is not None:
+            quantities.append(getattr(self.answer, "quantity", None))
+        for q in quantities:
+            if q is not None and q.field is not None and q.field not in self.aux.fields:
+                self.close()
+                raise UsageError(f"{q.option}: no field {q.field!r} among the --aux sensors' fields "
+                                 f"({', '.join(self.aux.fields) or 'none'})")
+
+    def close(self) -> None:
+        if self.aux is not None:
+            self.aux.close()
 
     def columns(self, record_columns):
-        """Wrap the record column function: limit entries become CSV columns."""
-        if self.limits is None:
+        """Wrap the record column function: limit entries, sensor fields and corrected values
+        become CSV columns."""
+        extra = []
+        if self.limits is not None:
+            extra += ["warnings", "limit"]
+        if self.aux is not None:
+            extra += list(self.aux.fields)
+        if self.corrections is not None:
+            from .ambient import RecordCorrections
+
+            extra += list(RecordCorrections.KEYS)
+        if not extra:
             return record_columns
 
         def cols(snapshot, ids=None):
-            return record_columns(snapshot, ids) + ["warnings", "limit"]
+            return record_columns(snapshot, ids) + extra
 
         return cols
 
@@ -39,6 +91,9 @@ class Stand:
         if self.schedule is not None:
             self.schedule.bind(telemetry)
         self.wall0 = getattr(source, "wall0", None) or time.time()
+        self.write = source.write
+        if self.aux is not None:
+            self.aux.bind(source.now, getattr(source, "speed", 1.0))
         if on_update is None or self.limits is None:
             return on_update
         limits = self.limits
@@ -49,18 +104,37 @@ class Stand:
         return update
 
     def on_frame(self, t, rec):
+        aux = self.aux
+        if aux is not None:
+            for ta, reading in aux.drain():
+                if self.averager is not None:
+                    self.averager.feed_aux(ta, reading)
         self.stats.feed(t, rec)
         if self.averager is not None:
             self.averager.feed(t, rec)
-        if self.limits is not None:
-            return self.limits.check(t, rec)
-        return None
+        extra = self.limits.check(t, rec) if self.limits is not None else {}
+        if aux is not None:
+            extra.update(aux.merge(t))
+        if self.corrections is not None:
+            extra.update(self.corrections.record(t, rec, aux.value if aux is not None else None))
+        if self.answer is not None:
+            frame = self.answer.on_frame(t, rec)
+            if frame is not None and self.write is not None:
+                self.write(frame)
+        return extra or None
 
     def summary(self) -> dict:
-        """Entries for the run summary: ``limits`` (per condition), ``running_s``, ``starts``."""
+        """Entries for the run summary: ``limits`` (per condition), ``running_s``, ``starts``, the
+        external sensors (``aux``), the ESR answers (``air_pressure_answers``), ``engine``."""
         out = {"running_s": round(self.stats.running_s, 3), "starts": self.stats.starts}
+        if self.engine is not None:
+            out["engine"] = self.engine
         if self.limits is not None:
             out["limits"] = self.limits.summary()
+        if self.aux is not None:
+            out["aux"] = self.aux.summary()
+        if self.answer is not None:
+            out["air_pressure_answers"] = self.answer.summary()
         return out
 
     def log_run(self, *, command, port, schedule, files, outcome, tel, session):
@@ -77,6 +151,7 @@ class Stand:
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],
             "limits_violated": self.limits.violated() if self.limits is not None else [],
             "command": command, "port": port, "schedule": schedule, "files": [f for f in files if f],
-            "outcome": outcome.reason, "exit_status": outcome.exit_code,
+            "outcome": outcome.reason, "exit_status": outcome.exit_code, "engine": self.engine,
+            "throttle_s": self.stats.throttle_s,
         }
         return _logbook.record(self.logbook, run)

@@ -78,6 +78,13 @@ class Command(QuickHelp, click.Command):
             args = head + ["--"] + tail if tail else head
         return super().parse_args(ctx, args)
 
+    def invoke(self, ctx):
+        if not ctx.resilient_parsing:
+            from .options import check_output_suffixes
+
+            check_output_suffixes(self, ctx.params)    # -o run.xlsx where .xlsx means nothing: exit 2
+        return super().invoke(ctx)
+
 
 def _long(option):
     return next((o for o in option.opts if o.startswith("--")), None)

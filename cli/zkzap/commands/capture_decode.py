@@ -3,7 +3,8 @@ direction (and mightyZAP reply latencies), through the same writers as the other
 
 from __future__ import annotations
 
-from .options import close_output, note, open_output, resolve_format
+from ..io import RECORD_FORMATS
+from .options import close_output, note, open_output, output_format
 
 #: Records per block written (each block flushed whole).
 BLOCK = 512
@@ -27,8 +28,8 @@ def zk_decode_captures(paths, *, fmt, output, append, protocol_version, accept, 
     from .zk.decode import TABLE_COLUMNS, columns, summary
 
     check_captures(paths, "zk")
+    fmt = output_format(fmt, output, RECORD_FORMATS)
     stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
     decoder = zk.ZkDecoder(protocol_version, raw=raw)
     if fmt == "table":
         def decode(frame):
@@ -75,8 +76,8 @@ def zap_decode_captures(paths, *, fmt, output, append, table_cells):
     from .zap.decode import COLUMNS, TABLE_COLUMNS
 
     check_captures(paths, "zap")
+    fmt = output_format(fmt, output, RECORD_FORMATS)
     stream, had = open_output(output, append)
-    fmt = resolve_format(fmt, stream)
     decoder = zap.ZapDecoder()
     decode = (lambda p: table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
     table = [("t", "t"), ("dir", "dir")] + TABLE_COLUMNS + [("latency_ms", "latency ms")]

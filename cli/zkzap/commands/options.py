@@ -55,7 +55,17 @@ class FiniteFloat(click.types.FloatParamType):
 class FiniteRange(click.FloatRange):
     """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
     and ``inf`` wherever there is no upper bound). Every float option of zkzap is one of these
-    or a :class:`FiniteFloat`."""
+    or a :class:`FiniteFloat`.
+
+    With ``unit`` a value out of range is refused naming the range in that unit, and ``hint``
+    (a function of the value, returning text or None) may add what the number probably meant
+    (``800`` for a density in kg/L: kg/m³)."""
+
+    def __init__(self, min=None, max=None, min_open=False, max_open=False, clamp=False, *, unit=None,
+                 hint=None):
+        super().__init__(min, max, min_open, max_open, clamp)
+        self.unit = unit
+        self.hint = hint
 
     def convert(self, value, param, ctx):
         if not isinstance(value, float) or not math.isfinite(value):
@@ -65,6 +75,15 @@ class FiniteRange(click.FloatRange):
                 number = 0.0        # not a number at all: click's own message below
             if not math.isfinite(number):
                 self.fail(f"{value!r} is not a finite number.", param, ctx)
+        if self.unit is not None:
+            number = click.types.FloatParamType.convert(self, value, param, ctx)
+            low = self.min is not None and (number <= self.min if self.min_open else number < self.min)
+            high = self.max is not None and (number >= self.max if self.max_open else number > self.max)
+            if low or high:
+                extra = self.hint(number) if self.hint is not None else None
+                self.fail(f"{number:g} is out of range; allowed {self.min:g}..{self.max:g} {self.unit}"
+                          + (f" ({extra})" if extra else ""), param, ctx)
+            return number
         return super().convert(value, param, ctx)
 
 
@@ -153,11 +172,52 @@ class FilePath(click.ParamType):
         return [CompletionItem(incomplete, type="file")]
 
 
-def output_options(f):
+class OutputPath(FilePath):
+    """``-o FILE``: a file whose suffix names its format when ``-f`` is not given (``formats``:
+    the command's; ``default``: the format of a name without a suffix, None to refuse one).
+    :class:`zkzap.commands.Command` checks the suffix before the command runs
+    (:func:`check_output_suffixes`), so an unknown one is exit 2 before anything opens."""
+
+    def __init__(self, formats, default="jsonl"):
+        self.formats = tuple(formats)
+        self.default = default
+
+    def format_of(self, path, fmt=None):
+        """The format for ``path``: ``fmt`` when given, else what its suffix names."""
+        from ..io import format_for_path
+
+        if fmt:
+            return fmt
+        return format_for_path(path, self.formats, self.default, what="output")
+
+
+def check_output_suffixes(cmd, params) -> None:
+    """Refuse (UsageError) an :class:`OutputPath` value whose suffix names no format of ``cmd``
+    while no ``-f`` was given; ``params`` are the parsed values (``ctx.params``)."""
+    if params.get("fmt"):
+        return
+    for p in cmd.params:
+        value = params.get(p.name)
+        if isinstance(p.type, OutputPath) and value and value != "-":
+            p.type.format_of(value)
+
+
+def output_options(f=None, *, formats=FORMATS):
+    """``-o/--output`` (an :class:`OutputPath` of ``formats``) and ``--append``; as a decorator
+    with or without ``formats``."""
+    if f is None:
+        return lambda g: output_options(g, formats=formats)
     f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
-    f = click.option("-o", "--output", type=FilePath(),
-                     help="Write records to FILE instead of stdout.")(f)
+    f = click.option("-o", "--output", type=OutputPath(formats),
+                     help="Write records to FILE instead of stdout (the format by its suffix: "
+                          + ", ".join(_suffixes(formats)) + "; JSON Lines without one).")(f)
     return f
+
+
+def _suffixes(formats):
+    from ..io import SUFFIXES
+
+    return [s for s, f in SUFFIXES.items() if f in formats]
 
 
 def output_file(path, append=False, *, fmt=None, columns=None, inputs=None):
@@ -179,12 +239,17 @@ def decode_inputs(inputs, binary, explicit):
     return {"--binary" if binary else "stdin": list(inputs) or ["-"]}
 
 
-def output_format(fmt, path):
+def output_format(fmt, path, formats=FORMATS):
     """The format for ``-o PATH`` or stdout: given, else a table on a terminal, JSON Lines
-    otherwise (a file is never a terminal)."""
+    otherwise; a file's suffix names its format (:func:`zkzap.io.format_for_path`; a file is
+    never a terminal)."""
     if fmt:
         return fmt
-    return resolve_format(None) if not path or path == "-" else "jsonl"
+    if not path or path == "-":
+        return resolve_format(None)
+    from ..io import format_for_path
+
+    return format_for_path(path, formats)
 
 
 def open_output(path, append=False, *, fmt=None, columns=None, inputs=None):
@@ -297,7 +362,7 @@ class BaudType(click.ParamType):
             allowed = "300..4000000" + (" or auto" if self.auto else "")
             self.fail(f"{value!r} is not allowed; allowed {allowed}"
                       + ("" if self.auto or str(value).strip().lower() != "auto"
-                         else " (auto: only 'zk monitor' and 'zk detect' find the baud rate)"), param, ctx)
+                         else " (auto: only 'zk monitor', 'zk check' and 'zk detect' find the baud rate)"), param, ctx)
         return number
 
     def shell_complete(self, ctx, param, incomplete):

@@ -15,7 +15,7 @@ import click
 from ..errors import UsageError
 from . import CONTEXT, Group
 from .complete import fault_kinds
-from .options import FiniteRange
+from .options import FiniteRange, OutputPath
 
 
 def _listen(ctx, param, value):
@@ -129,7 +129,7 @@ def _parse_set(ctx, param, values):
               help="Play the ECU's status frames of a pcapng capture (--capture) at their recorded "
                    "times instead of the engine model.")
 @click.option("--loop", is_flag=True, help="With --replay: start again at the end.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+@click.option("-o", "--output", type=OutputPath(("jsonl", "csv")), default=None, metavar="FILE",
               help="With --replay: log the host's control frames, decoded, to FILE (JSON Lines; CSV "
                    "for *.csv).")
 @serve_options
@@ -188,11 +188,12 @@ def _host_log(output):
     if not output:
         return None, lambda: None
     from ..io.writers import make_writer
+    from ..io import format_for_path
     from .options import open_output
     from .zk.decode import columns
 
     stream, had = open_output(output)
-    fmt = "csv" if output.lower().endswith(".csv") else "jsonl"
+    fmt = format_for_path(output, ("jsonl", "csv"))
     writer = make_writer(fmt, stream, ["t", "dir"] + columns("control"), header=not had)
 
     def close():

@@ -9,14 +9,15 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, capture_option,
-                      close_output, open_output)
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, OutputPath,
+                      capture_option, close_output, open_output)
 
 EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
              "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
              "Every record already written stays whole.")
 
-FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl"}
+#: What sniff writes (``-f``, or named by the suffix of ``-o``).
+SNIFF_FORMATS = ("table", "jsonl", "json", "csv")
 
 
 @click.group(cls=Group, context_settings=CONTEXT)
@@ -51,10 +52,11 @@ def _common(protocol):
                          default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                          help=f"{STOP_BITS_HELP[protocol]} [env {env['stop_bits']}]."),
             capture_option(protocol),
-            click.option("-f", "--format", "fmt", type=click.Choice(["table", "jsonl", "json", "csv"]), default=None,
+            click.option("-f", "--format", "fmt", type=click.Choice(SNIFF_FORMATS), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
-            click.option("-o", "--output", type=FilePath(), default=None, help="Write records to FILE."),
+            click.option("-o", "--output", type=OutputPath(SNIFF_FORMATS), default=None,
+                         help="Write records to FILE (.csv, .json, .jsonl by its suffix; JSON Lines without one)."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
             click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
                          help="Stop after N records."),
@@ -196,7 +198,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     from ..signals import SignalGuard
 
     if fmt is None and output and output != "-":
-        fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(output)[1].lower(), "jsonl")
+        from ..io import format_for_path
+
+        fmt = format_for_path(output, SNIFF_FORMATS)
     if stats_json:
         try:
             open(stats_json, "a").close()

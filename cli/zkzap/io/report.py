@@ -53,10 +53,13 @@ MISSING_EXTRA = "zk report needs matplotlib: pip install 'zkzap[plot]'"
 
 class Run:
     """A run's series: ``t`` and each measured column as float arrays (nan where empty), the
-    engine-state changes ``[(t, name)]`` and limit events ``[(t, limit)]``."""
+    engine-state changes ``[(t, name)]`` and limit events ``[(t, limit)]``. ``extra``: more
+    columns to keep (the fields limits name). ``label`` names the run in a comparison's legend."""
 
-    def __init__(self, name):
+    def __init__(self, name, extra=()):
         self.name = name
+        self.label = name
+        self.keep = tuple(MEASURED) + tuple(c for c in extra if c not in MEASURED)
         self.t = array("d")
         self.series = {}
         self.present = set()
@@ -65,13 +68,16 @@ class Run:
         self.warn_events = {}
         self.columns = set()         # the columns (keys) the input has
         self.notes = []              # what reading the input left out (a cut JSON array)
+        self.steps = None            # rows of its steps file (or its summary's steps)
+        self.summary = None
+        self.offset = 0.0            # subtracted from t on a comparison's common axis
 
     def add(self, rec):
         t = _float(rec.get("t"))
         if t is None:
             return
         self.t.append(t)
-        for c in MEASURED:
+        for c in self.keep:
             v = _float(rec.get(c))
             s = self.series.get(c)
             if s is None:
@@ -85,6 +91,12 @@ class Run:
         for key, events in (("limit", self.limit_events), ("warnings", self.warn_events)):
             for text in _texts(rec.get(key)):
                 events.setdefault(text, t)
+
+    def running_t(self):
+        """When the engine first reached a running state (None: never)."""
+        from ..api.logbook import RUNNING_STATES
+
+        return next((t for t, name in self.states if name in RUNNING_STATES), None)
 
 
 def _float(v):
@@ -128,19 +140,23 @@ def _is_binary(head: bytes) -> bool:
     return False
 
 
-def load_run(path) -> Run:
-    """Read a telemetry CSV / JSON Lines / JSON file, a raw log or a pcapng capture into a :class:`Run`.
+def load_run(path, extra=()) -> Run:
+    """Read a telemetry CSV / JSON Lines / JSON file, a raw log or a pcapng capture into a
+    :class:`Run` (``-``: standard input, spooled to a temporary file so that it is read in
+    constant memory like any file).
 
     The text formats are read line by line in constant memory (a JSON array too, so a run
     killed before its closing bracket reads up to its last whole record, noted in
     :attr:`Run.notes`); text that is not UTF-8, a line that is not a record and a CSV row the
     csv module refuses are a UsageError naming ``FILE:LINE``."""
+    if path == "-":
+        return _load_stdin(extra)
     try:
         with open(path, "rb") as f:
             head = f.read(4096)
     except OSError as e:
         raise UsageError(f"run: cannot read {path}: {e.strerror}") from None
-    run = Run(path)
+    run = Run(path, extra)
     if _is_binary(head):
         _load_raw(path, run)
     else:
@@ -252,6 +268,24 @@ def _csv_rows(lines, path, run):
         raise UsageError(f"run: {path}:{lines.n}: not a CSV row: {e}") from None
 
 
+def _load_stdin(extra):
+    import shutil
+    import sys
+    import tempfile
+
+    if sys.stdin is None:
+        raise UsageError("run: '-': no standard input")
+    with tempfile.NamedTemporaryFile(prefix="zkzap-report-", suffix=".run") as tmp:
+        shutil.copyfileobj(sys.stdin.buffer, tmp, 1 << 16)
+        tmp.flush()
+        try:
+            run = load_run(tmp.name, extra)
+        except UsageError as e:
+            raise UsageError(str(e).replace(tmp.name, "stdin")) from None
+    run.name = run.label = "stdin"
+    return run
+
+
 def _load_raw(path, run):
     """A raw log, or a pcapng capture (by its content: its own receive times become ``t``)."""
     from ..api.capture import replay_source
@@ -307,6 +341,8 @@ _SUMMARY_LISTS = {
     "limits": (lambda x: isinstance(x, dict) and isinstance(x.get("limit"), str)
                and isinstance(x.get("verdict", ""), str) and _number_or_null(x.get("first_violation_t")),
                "a limit: an object with limit, verdict and first_violation_t", "limits"),
+    "steps": (lambda x: isinstance(x, dict) and isinstance(x.get("step"), (str, int, float, type(None))),
+              "a step: an object with a step number", "steps"),
 }
 
 
@@ -338,38 +374,110 @@ def _short(value, width=40):
     return text if len(text) <= width else text[:width - 3] + "..."
 
 
+def summary_limits(summary) -> list:
+    """The limits a summary names, as ``(text, field, op, threshold, warn)``."""
+    out = []
+    for s in (summary or {}).get("limits") or ():
+        if s.get("field") and s.get("op") and _float(s.get("threshold")) is not None:
+            out.append((s.get("limit") or f"{s['field']}{s['op']}{s['threshold']}", s["field"], s["op"],
+                        float(s["threshold"]), _float(s.get("warn"))))
+    return out
+
+
+def align(runs, how="start") -> None:
+    """Put each run's time on a common axis: ``start`` (each from its first record), ``running``
+    (from the engine's first running state) or ``step:N`` (from the start of step N)."""
+    for run in runs:
+        if how == "start":
+            run.offset = run.t[0] if len(run.t) else 0.0
+        elif how == "running":
+            t = run.running_t()
+            if t is None:
+                raise UsageError(f"align: running: the engine never ran in {run.name}")
+            run.offset = t
+        else:
+            n = how.split(":", 1)[1]
+            row = next((r for r in run.steps or () if str(r.get("step")) == n), None)
+            if row is None or _float(row.get("step_start_s")) is None:
+                raise UsageError(f"align: step:{n}: {run.name} has no step {n}"
+                                 + ("" if run.steps else " (give its --steps or a --summary with steps)"))
+            run.offset = float(row["step_start_s"])
+
+
+def labels_for(paths) -> list:
+    """Legend names for runs: their file names, with as much of the path as tells them apart."""
+    parts = [os.path.normpath(p).split(os.sep) if p != "-" else ["stdin"] for p in paths]
+    n = 1
+    while True:
+        names = [os.sep.join(p[-n:]) for p in parts]
+        if len(set(names)) == len(names) or all(len(p) <= n for p in parts):
+            return names
+        n += 1
+
+
 # --- what to draw --------------------------------------------------------------------------------
 
-def plan(run, steps=None, summary=None):
-    """``(panels, step_plots, skipped)``: the panels that have data and the reasons others do not."""
+def plan(run, steps=None, summary=None, limits=()):
+    """``(panels, step_plots, skipped)``: the panels that have data and the reasons others do not.
+    A limit on a field no panel shows gets a panel of its own when the run has that field."""
+    return plan_many([run], [steps], limits)
+
+
+def plan_many(runs, steps_list, limits=()):
     skipped = []
     panels = []
-    targets = _targets(steps) if steps else {}
+    targets = {}
+    for steps in steps_list:
+        for c in _targets(steps or ()):
+            targets.setdefault(c, True)
+    present = set().union(*(r.present for r in runs))
+    columns = set().union(*(r.columns for r in runs))
+    names = " or ".join(r.name for r in runs)
     for title, unit, lines in PANELS:
-        have = [(c, label) for c, label in lines if c in run.present or c in targets]
-        if any(c in run.present for c, _ in have):
+        have = [(c, label) for c, label in lines if c in present or c in targets]
+        if any(c in present for c, _ in have):
             panels.append((title, unit, have))
         else:
             cols = [c for c, _ in lines if not c.startswith("target")]
-            absent = [c for c in cols if c not in run.columns]
+            absent = [c for c in cols if c not in columns]
             if len(absent) == len(cols):
-                why = f"{run.name} has no column {' or '.join(cols)}"
+                why = f"{names} has no column {' or '.join(cols)}"
             else:
-                why = f"no values in {' or '.join(cols)} in {run.name}"
+                why = f"no values in {' or '.join(cols)} in {names}"
             skipped.append(f"{title.lower()}: {why}")
+    shown = {c for _, _, lines in panels for c, _ in lines}
+    for text, field, *_ in limits:
+        if field in shown:
+            continue
+        shown.add(field)
+        if field in present:
+            panels.append((field, _unit(field), [(field, field)]))
+        else:
+            skipped.append(f"limit {text}: {names} has no values of {field}")
     step_plots = []
-    if not steps:
+    if not any(steps_list):
         skipped.append("steady-state plots (thrust vs rpm, EGT vs rpm, TSFC vs thrust): no --steps file")
     else:
         for title, x, xl, y, yl in STEP_PLOTS:
-            pts = [(float(r[x]), float(r[y]), str(r.get("settled")).lower() not in ("false", "none", ""))
-                   for r in steps if _float(r.get(x)) is not None and _float(r.get(y)) is not None
-                   and (y != "tsfc_g_kn_s" or float(r[y]) > 0)]
-            if pts:
-                step_plots.append((title, xl, yl, sorted(pts)))
+            series = []
+            for run, steps in zip(runs, steps_list):
+                pts = [(float(r[x]), float(r[y]), str(r.get("settled")).lower() not in ("false", "none", ""))
+                       for r in steps or () if _float(r.get(x)) is not None and _float(r.get(y)) is not None
+                       and (y != "tsfc_g_kn_s" or float(r[y]) > 0)]
+                if pts:
+                    series.append((run.label, sorted(pts)))
+            if series:
+                step_plots.append((title, xl, yl, series))
             else:
                 skipped.append(f"{title}: no step has both {x} and {y}")
     return panels, step_plots, skipped
+
+
+def _unit(field):
+    from .xlsx import unit_of
+
+    unit = unit_of(field)
+    return f"{field} ({unit})" if unit else field
 
 
 def _targets(steps):
@@ -403,7 +511,8 @@ def summary_rows(summary):
         return "-" if x is None else f"{x:g}{unit}" if isinstance(x, float) else f"{x}{unit}"
 
     rows = []
-    for key, label, unit in (("schedule", "schedule", ""), ("port", "port", ""), ("outcome", "outcome", ""),
+    for key, label, unit in (("engine", "engine", ""), ("schedule", "schedule", ""), ("port", "port", ""),
+                             ("outcome", "outcome", ""),
                              ("duration_s", "duration", " s"), ("frames", "frames", ""),
                              ("max_rpm", "max rpm", ""), ("max_egt_c", "max EGT", " °C"),
                              ("fuel_used_l", "fuel used", " L"), ("running_s", "engine running", " s"),
@@ -423,6 +532,53 @@ def summary_rows(summary):
     return rows
 
 
+#: Step quantities a comparison puts side by side: (column, label, decimals).
+COMPARED = (("rpm_mean", "rpm", 0), ("egt_c_mean", "EGT °C", 0), ("thrust_kg_mean", "thrust kgf", 2),
+            ("fuel_flow_l_min_mean", "fuel L/min", 3), ("tsfc_g_kn_s", "TSFC g/(kN·s)", 2))
+
+
+def step_comparison(runs, short=False):
+    """``(header, rows)``: the runs' steps side by side by step number, each quantity of
+    :data:`COMPARED` per run and its difference from the first run (value and %). ``short``
+    names the runs by their number (#1, #2: the header lists them)."""
+    names = [f"#{k + 1}" if short else run.label for k, run in enumerate(runs)]
+    header = ["step", "target"]
+    for _, label, _ in COMPARED:
+        header += [f"{label} {names[0]}"]
+        for name in names[1:]:
+            header += [f"{label} {name}", f"Δ {name}"]
+    numbers = []
+    for run in runs:
+        for r in run.steps or ():
+            if r.get("step") not in numbers:
+                numbers.append(r.get("step"))
+    rows = []
+    by_run = [{r.get("step"): r for r in run.steps or ()} for run in runs]
+    for n in numbers:
+        targets = [(b.get(n) or {}).get("target") for b in by_run]
+        target = targets[0] or next((t for t in targets if t), "")
+        if len({t for t in targets if t}) > 1:
+            target = " / ".join(t or "-" for t in targets)
+        row = [n, target]
+        for col, _, dec in COMPARED:
+            ref = _float((by_run[0].get(n) or {}).get(col))
+            row.append(_fmt(ref, dec))
+            for b in by_run[1:]:
+                v = _float((b.get(n) or {}).get(col))
+                row.append(_fmt(v, dec))
+                if v is None or ref is None:
+                    row.append("-")
+                else:
+                    pct = f" ({(v - ref) / ref * 100:+.1f} %)" if ref else ""
+                    row.append(f"{v - ref:+.{dec}f}{pct}")
+        rows.append(row)
+    return header, rows
+
+
+def _fmt(v, dec):
+    return "-" if v is None else f"{v:.{dec}f}"
+
+
 # --- matplotlib ----------------------------------------------------------------------------------
 
 def _mpl():
@@ -436,33 +592,68 @@ def _mpl():
     return Figure
 
 
-def _history_axes(fig, grid, run, panels, steps, summary):
+#: Line colours of a comparison's runs (matplotlib's default cycle, named so targets stay black).
+RUN_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+LIMIT_COLOUR, WARN_COLOUR = "#c00000", "#e69500"
+
+
+def _history_axes(fig, grid, runs, panels, limits):
     import numpy as np
 
-    t = np.frombuffer(run.t, dtype=float)
-    targets = _targets(steps) if steps else {}
+    many = len(runs) > 1
     axes = []
     shared = None
-    limit_events = _limit_times(run, summary)
+    ref = runs[0]
     for i, (title, unit, lines) in enumerate(panels):
         ax = fig.add_subplot(grid[i], sharex=shared)
         shared = shared or ax
         axes.append(ax)
-        _shade_states(ax, run, t[-1] if len(t) else 0, legend=i == 0)
-        for c, label in lines:
-            if c in targets:
-                xs, ys = [], []
-                for a, b, v in targets[c]:
-                    xs += [a, b, math.nan]
-                    ys += [v, v, math.nan]
-                ax.plot(xs, ys, color="black", linestyle="--", linewidth=1.0, label=label)
-            elif c in run.present:
-                ax.plot(t, np.frombuffer(run.series[c], dtype=float), linewidth=1.2, label=label)
-        if unit == "rpm":
+        if not many:
+            _shade_states(ax, ref, ref.t[-1] if len(ref.t) else 0, legend=i == 0)
+        if ref.steps:
+            _shade_windows(ax, ref, label=i == 0, numbers=i == 0)
+        for k, run in enumerate(runs):
+            t = np.frombuffer(run.t, dtype=float) - run.offset
+            targets = _targets(run.steps) if run.steps else {}
+            for j, (c, label) in enumerate(lines):
+                name = f"{label} — {run.label}" if many else label
+                if c in targets:
+                    if many and k:
+                        continue                     # the targets of the reference run
+                    xs, ys = [], []
+                    for a, b, v in targets[c]:
+                        xs += [a - run.offset, b - run.offset, math.nan]
+                        ys += [v, v, math.nan]
+                    ax.plot(xs, ys, color="black", linestyle="--", linewidth=1.0, label=label)
+                elif c in run.present:
+                    style = {"color": RUN_COLOURS[k % len(RUN_COLOURS)]} if many else {}
+                    if many and j:
+                        style["linestyle"] = (":", "-.", "--")[(j - 1) % 3]
+                    ax.plot(t, np.frombuffer(run.series[c], dtype=float), linewidth=1.2, label=name, **style)
+        fields = {c for c, _ in lines}
+        levels = [v for _, field, _, threshold, warn in limits if field in fields for v in (threshold, warn)
+                  if v is not None]
+        if levels:                                   # room for the lines and their labels
+            lo, hi = ax.get_ylim()
+            lo, hi = min([lo] + levels), max([hi] + levels)
+            pad = (hi - lo) * 0.08 or 1.0
+            ax.set_ylim(lo - (pad if min(levels) <= lo else 0), hi + pad)
+        for text, field, op, threshold, warn in limits:
+            if field not in fields:
+                continue
+            ax.axhline(threshold, color=LIMIT_COLOUR, linewidth=1.0, linestyle="-", label=f"limit {text}")
+            _line_label(ax, threshold, f"limit {op} {threshold:g}", LIMIT_COLOUR)
+            if warn is not None:
+                ax.axhline(warn, color=WARN_COLOUR, linewidth=1.0, linestyle="--", label=f"warning {op} {warn:g}")
+                _line_label(ax, warn, f"warn {op} {warn:g}", WARN_COLOUR)
+        for k, run in enumerate(runs):
+            for text, et in _limit_times(run, run.summary):
+                who = f" ({run.label})" if many else ""
+                ax.axvline(et - run.offset, color="red", linewidth=1.2,
+                           label=f"limit violated: {text}{who}" if i == 0 else None)
+        if "rpm" in unit:
             ax.yaxis.set_major_formatter(_kilo())
-        for n, (text, et) in enumerate(limit_events):
-            ax.axvline(et, color="red", linewidth=1.2, label=f"limit violated: {text}" if i == 0 else None)
-        ax.set_ylabel(unit)
+        ax.set_ylabel(unit, fontsize=8)
         ax.set_title(title, fontsize=9, loc="left")
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize=8)
@@ -472,8 +663,40 @@ def _history_axes(fig, grid, run, panels, steps, summary):
         if handles:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0, frameon=False)
     if axes:
-        axes[-1].set_xlabel("time since start (s)")
+        what = {"start": "the start", "running": "the engine's first running state"}
+        axes[-1].set_xlabel("time since " + (what.get(getattr(ref, "aligned", "start"), f"the start of "
+                                             f"{getattr(ref, 'aligned', 'the run').replace(':', ' ')}")) + " (s)")
     return axes
+
+
+def _line_label(ax, y, text, colour):
+    from matplotlib.transforms import blended_transform_factory
+
+    ax.text(0.995, y, text, color=colour, fontsize=6.5, ha="right", va="bottom",
+            transform=blended_transform_factory(ax.transAxes, ax.transData), clip_on=True)
+
+
+def _shade_windows(ax, run, label=True, numbers=True):
+    """Each step's settle time (hatched) and averaging window (shaded), numbered above."""
+    from matplotlib.transforms import blended_transform_factory
+
+    tr = blended_transform_factory(ax.transData, ax.transAxes)
+    first = True
+    for r in run.steps:
+        a, w0, w1 = (_float(r.get(k)) for k in ("step_start_s", "window_start_s", "window_end_s"))
+        if a is None or w0 is None or w1 is None:
+            continue
+        a, w0, w1 = a - run.offset, w0 - run.offset, w1 - run.offset
+        if w0 > a:
+            ax.axvspan(a, w0, facecolor="none", edgecolor="#9aa7b8", hatch="///", linewidth=0, zorder=0.5,
+                       label="settling" if label and first else None)
+        if w1 > w0:
+            ax.axvspan(w0, w1, color="#c9d7ea", alpha=0.45, zorder=0.6,
+                       label="averaging window" if label and first else None)
+        if numbers:
+            ax.text((a + max(w1, a)) / 2, 1.0, str(r.get("step")), transform=tr, ha="center", va="bottom",
+                    fontsize=7, color="#34495e", fontweight="bold")
+        first = False
 
 
 def _shade_states(ax, run, t_end, legend=True):
@@ -484,21 +707,26 @@ def _shade_states(ax, run, t_end, legend=True):
         g = group_of.get(name)
         if g is None or t1 <= t0:
             continue
-        ax.axvspan(t0, t1, color=g[1], zorder=0,
+        ax.axvspan(t0 - run.offset, t1 - run.offset, color=g[1], zorder=0,
                    label=f"state: {g[0]}" if legend and g[0] not in used else None)
         used.add(g[0])
 
 
 def _step_axes(fig, grid, step_plots):
-    for i, (title, xl, yl, pts) in enumerate(step_plots):
+    many = any(len(series) > 1 for *_, series in step_plots)
+    for i, (title, xl, yl, series) in enumerate(step_plots):
         ax = fig.add_subplot(grid[i])
-        good = [p for p in pts if p[2]]
-        bad = [p for p in pts if not p[2]]
-        if good:
-            ax.plot([p[0] for p in good], [p[1] for p in good], marker="o", linewidth=1.0, label="settled steps")
-        if bad:
-            ax.plot([p[0] for p in bad], [p[1] for p in bad], marker="o", linestyle="none", markerfacecolor="none",
-                    color="grey", label="never settled")
+        for k, (name, pts) in enumerate(series):
+            colour = RUN_COLOURS[k % len(RUN_COLOURS)]
+            good = [p for p in pts if p[2]]
+            bad = [p for p in pts if not p[2]]
+            who = f" — {name}" if many else ""
+            if good:
+                ax.plot([p[0] for p in good], [p[1] for p in good], marker="o", linewidth=1.0, color=colour,
+                        label=f"settled steps{who}")
+            if bad:
+                ax.plot([p[0] for p in bad], [p[1] for p in bad], marker="o", linestyle="none",
+                        markerfacecolor="none", color=colour if many else "grey", label=f"never settled{who}")
         for axis, label in ((ax.xaxis, xl), (ax.yaxis, yl)):
             if label == "rpm":
                 axis.set_major_formatter(_kilo())
@@ -507,7 +735,7 @@ def _step_axes(fig, grid, step_plots):
         ax.set_ylabel(yl, fontsize=8)
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize=7)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=6.5, loc="best")
 
 
 def _kilo():
@@ -516,13 +744,19 @@ def _kilo():
     return FuncFormatter(lambda v, _: f"{v / 1000:g}k" if v else "0")
 
 
-def figure_histories(run, panels, steps, summary, title, meta):
+def _wrap(text, width=95):
+    import textwrap
+
+    return "\n".join(textwrap.wrap(str(text), width)) or str(text)
+
+
+def figure_histories(runs, panels, limits, title):
     Figure = _mpl()
     n = max(len(panels), 1)
     fig = Figure(figsize=(11, 1.7 * n + 1.2), layout="constrained")
     grid = fig.add_gridspec(n, 1)
-    _history_axes(fig, grid, run, panels, steps, summary)
-    fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    _history_axes(fig, grid, runs, panels, limits)
+    fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
     return fig
 
 
@@ -531,34 +765,66 @@ def figure_steps(step_plots, title):
     fig = Figure(figsize=(11, 3.4), layout="constrained")
     grid = fig.add_gridspec(1, max(len(step_plots), 1))
     _step_axes(fig, grid, step_plots)
-    fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
     return fig
 
 
-def figure_all(run, panels, step_plots, steps, summary, title, meta):
-    """One figure: header (title, metadata, summary table), time histories, steady-state plots."""
+def header_rows(runs, meta):
+    """The header's rows: ``[label, value, ...]`` with one value per run (the metadata spans
+    them): the runs' files and where their time axis starts, then their summaries side by side."""
+    many = len(runs) > 1
+    rows = [[k, v] + [""] * (len(runs) - 1) for k, v in meta]
+    if many:
+        rows.append(["file"] + [r.name for r in runs])
+        rows.append(["t = 0 at"] + [f"{r.offset:g} s of the run" for r in runs])
+    table = {}
+    for k, run in enumerate(runs):
+        for label, value in summary_rows(run.summary):
+            table.setdefault(label, [""] * len(runs))[k] = value
+    rows += [[label] + values for label, values in table.items()]
+    return rows
+
+
+def figure_all(runs, panels, step_plots, limits, title, meta):
+    """One figure: header (title, metadata, summary table), time histories, steady-state plots
+    and, comparing runs, their steps side by side."""
     Figure = _mpl()
-    rows = list(meta) + summary_rows(summary)
-    header_h = 0.5 + 0.19 * len(rows) if rows else 0.15
+    rows = header_rows(runs, meta)
+    comparison = step_comparison(runs, short=True) if len(runs) > 1 and any(r.steps for r in runs) else None
+    title = _wrap(title, 90)
+    header_h = 0.35 + 0.2 * title.count("\n") + (0.19 * (len(rows) + (len(runs) > 1)) + 0.25 if rows else 0)
     n = len(panels)
     heights = [header_h] + [1.7] * n + ([3.0] if step_plots else [])
-    fig = Figure(figsize=(11, sum(heights) + 0.6), layout="constrained")
+    if comparison:
+        heights.append(0.5 + 0.2 * (len(comparison[1]) + 1))
+    fig = Figure(figsize=(11 if not comparison else 14, sum(heights) + 0.6), layout="constrained")
     grid = fig.add_gridspec(len(heights), 1, height_ratios=heights)
     head = fig.add_subplot(grid[0])
     head.axis("off")
     head.set_title(title, fontsize=12, loc="left", fontweight="bold")
     if rows:
-        table = head.table(cellText=[[k, _clip(v)] for k, v in rows], colWidths=[0.22, 0.78], loc="upper left",
-                           cellLoc="left", edges="horizontal")
+        many = len(runs) > 1
+        width = 0.74 / len(runs)
+        table = head.table(cellText=[[r[0]] + [_clip(v, 110 // len(runs)) for v in r[1:]] for r in rows],
+                           colLabels=[""] + [f"#{k + 1} {r.label}" for k, r in enumerate(runs)] if many else None,
+                           colWidths=[0.26] + [width] * len(runs), loc="upper left", cellLoc="left",
+                           edges="horizontal")
         table.auto_set_font_size(False)
         table.set_fontsize(8)
-        table.scale(1, 1.0)
     if n:
         sub = grid[1:1 + n].subgridspec(n, 1, hspace=0.08)
-        _history_axes(fig, sub, run, panels, steps, summary)
+        _history_axes(fig, sub, runs, panels, limits)
     if step_plots:
-        sub = grid[-1].subgridspec(1, len(step_plots), wspace=0.25)
+        sub = grid[1 + n].subgridspec(1, len(step_plots), wspace=0.25)
         _step_axes(fig, sub, step_plots)
+    if comparison:
+        ax = fig.add_subplot(grid[-1])
+        ax.axis("off")
+        ax.set_title("Steps side by side (Δ: difference from " + runs[0].label + ")", fontsize=9, loc="left")
+        header, body = comparison
+        table = ax.table(cellText=body, colLabels=header, loc="upper left", cellLoc="center")
+        table.auto_set_font_size(False)
+        table.set_fontsize(6.5)
     return fig
 
 
@@ -567,16 +833,29 @@ def _clip(text, width=110):
     return text if len(text) <= width else text[:width - 1] + "…"
 
 
-def render(path, fmt, run, steps=None, summary=None, title="zkzap run report", meta=()):
-    """Write the report to ``path`` in ``fmt`` (png, svg, pdf, html); returns the skipped plots."""
-    panels, step_plots, skipped = plan(run, steps, summary)
-    if fmt == "html":
-        text = _html(run, panels, step_plots, steps, summary, title, meta)
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(text)
-        return skipped
-    fig = figure_all(run, panels, step_plots, steps, summary, title, meta)
-    fig.savefig(path, format=fmt, dpi=110, metadata=_file_meta(fmt, title))
+def render(path, fmt, runs, limits=(), title="zkzap run report", meta=()):
+    """Write the report of ``runs`` (one, or several compared; each :class:`Run` with its
+    ``steps``, ``summary`` and ``offset``) to ``path`` in ``fmt``; returns the skipped plots."""
+    if isinstance(runs, Run):
+        runs = [runs]
+    limits = list(limits) + [x for run in runs for x in summary_limits(run.summary)
+                             if x[0] not in {y[0] for y in limits}]
+    limits = list({x[0]: x for x in limits}.values())
+    panels, step_plots, skipped = plan_many(runs, [r.steps for r in runs], limits)
+    import warnings
+
+    with warnings.catch_warnings():
+        # constrained layout says so when a long title or legend leaves it no room; the report
+        # is still whole, and the warning would be noise on the user's terminal
+        warnings.filterwarnings("ignore", message=".*constrained.*", category=UserWarning)
+        warnings.filterwarnings("ignore", message=".*[Tt]ight.*", category=UserWarning)
+        if fmt == "html":
+            text = _html(runs, panels, step_plots, limits, title, meta)
+            with open(path, "w", encoding="utf-8") as f:
+                f.write(text)
+            return skipped
+        fig = figure_all(runs, panels, step_plots, limits, title, meta)
+        fig.savefig(path, format=fmt, dpi=110, metadata=_file_meta(fmt, title))
     return skipped
 
 
@@ -598,85 +877,122 @@ def _svg(fig) -> str:
     return text[text.index("<svg"):]
 
 
-def _html(run, panels, step_plots, steps, summary, title, meta):
+def _table(rows, header=None, ident=None):
+    from html import escape
+
+    out = f"<table{f' id={chr(34)}{ident}{chr(34)}' if ident else ''}>"
+    if header:
+        out += "<tr>" + "".join(f"<th>{escape(str(c))}</th>" for c in header) + "</tr>"
+    return out + "".join("<tr>" + "".join(f"<td>{escape(str(c))}</td>" for c in r) + "</tr>" for r in rows) + \
+        "</table>"
+
+
+def _html(runs, panels, step_plots, limits, title, meta):
     from html import escape
 
     parts = [f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>",
-             "<style>body{font-family:sans-serif;margin:1.5em;max-width:1100px}table{border-collapse:collapse;"
+             "<style>body{font-family:sans-serif;margin:1.5em;max-width:1300px}table{border-collapse:collapse;"
              "font-size:0.9em;margin:0.5em 0 1em}td,th{border-bottom:1px solid #ccc;padding:2px 8px;text-align:left}"
              "figure{margin:1em 0}svg{max-width:100%;height:auto}</style></head><body>",
              f"<h1>{escape(title)}</h1>"]
-    rows = list(meta) + summary_rows(summary)
+    rows = header_rows(runs, meta)
     if rows:
-        parts.append("<table id=\"summary\">" + "".join(
-            f"<tr><th>{escape(str(k))}</th><td>{escape(str(v))}</td></tr>" for k, v in rows) + "</table>")
+        head = "" if len(runs) == 1 else "<tr><th></th>" + "".join(f"<th>{escape(r.label)}</th>" for r in runs) + \
+            "</tr>"
+        parts.append("<table id=\"summary\">" + head + "".join(
+            "<tr><th>" + escape(str(r[0])) + "</th>" + "".join(f"<td>{escape(str(v))}</td>" for v in r[1:]) + "</tr>"
+            for r in rows) + "</table>")
     if panels:
-        fig = figure_histories(run, panels, steps, summary, "Time histories", ())
+        fig = figure_histories(runs, panels, limits, "Time histories")
         parts.append(f"<figure id=\"time-histories\"><figcaption>Time histories: "
                      f"{escape(', '.join(p[0] for p in panels))}</figcaption>{_svg(fig)}</figure>")
     if step_plots:
         fig = figure_steps(step_plots, "Steady state (step means)")
         parts.append(f"<figure id=\"steady-state\"><figcaption>Steady state: "
                      f"{escape(', '.join(p[0] for p in step_plots))}</figcaption>{_svg(fig)}</figure>")
-    if steps:
-        cols = ["step", "target", "window_start_s", "window_end_s", "rpm_mean", "egt_c_mean", "thrust_kg_mean",
-                "fuel_flow_l_min_mean", "tsfc_g_kn_s", "tsfc_kg_kgf_h", "settled", "note"]
-        parts.append("<h2>Steps</h2><table id=\"steps\"><tr>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr>"
-                     + "".join("<tr>" + "".join(f"<td>{escape(str(r.get(c, '')))}</td>" for c in cols) + "</tr>"
-                               for r in steps) + "</table>")
+    if len(runs) > 1 and any(r.steps for r in runs):
+        header, body = step_comparison(runs)
+        parts.append(f"<h2>Steps side by side</h2><p>Δ: the difference from {escape(runs[0].label)}.</p>"
+                     + _table(body, header, "step-comparison"))
+    for run in runs:
+        if run.steps:
+            cols = ["step", "target", "window_start_s", "window_end_s", "rpm_mean", "egt_c_mean", "thrust_kg_mean",
+                    "fuel_flow_l_min_mean", "tsfc_g_kn_s", "tsfc_kg_kgf_h", "settled", "note"]
+            extra = [c for c in ("rpm_corrected", "thrust_corrected_kg", "tsfc_corrected_g_kn_s")
+                     if any(r.get(c) not in (None, "") for r in run.steps)]
+            cols[-2:-2] = extra
+            name = f"Steps: {run.label}" if len(runs) > 1 else "Steps"
+            ident = "steps" if run is runs[0] else None
+            parts.append(f"<h2>{escape(name)}</h2>" + _table([[r.get(c, "") for c in cols] for r in run.steps], cols,
+                                                            ident))
     parts.append("</body></html>\n")
     return "\n".join(parts)
 
 
 # --- terminal ------------------------------------------------------------------------------------
 
-def terminal(run, console, steps=None, width=None, height=6):
-    """Draw the time histories with block characters (rich), one panel per quantity."""
+def terminal(runs, console, width=None, height=6):
+    """Draw the time histories with block characters (rich), one panel per quantity and run;
+    comparing runs, their steps side by side as a table."""
     from rich.text import Text
 
-    panels, _, skipped = plan(run, steps, None)
+    if isinstance(runs, Run):
+        runs = [runs]
+    panels, _, skipped = plan_many(runs, [r.steps for r in runs])
     skipped = [s for s in skipped if not s.startswith("steady-state")]
     width = width or max(20, min(console.width, 160) - 16)
-    t = run.t
-    t_end = t[-1] if len(t) else 0.0
-    t0 = t[0] if len(t) else 0.0
-    span = (t_end - t0) or 1.0
     blocks = " ▁▂▃▄▅▆▇█"
     for title, unit, lines in panels:
-        c = next(c for c, _ in lines if c in run.present)
-        col = [math.nan] * width
-        s = run.series[c]
-        for i in range(len(t)):
-            v = s[i]
-            if v == v:
-                x = min(width - 1, int((t[i] - t0) / span * (width - 1)))
-                col[x] = v if col[x] != col[x] else max(col[x], v)
-        vals = [v for v in col if v == v]
-        lo, hi = min(vals), max(vals)
-        rng = (hi - lo) or 1.0
-        console.print(Text(f"{title} — {unit}", style="bold"))
-        for row in range(height, 0, -1):
-            line = []
-            for v in col:
-                if v != v:
-                    line.append(" ")
-                    continue
-                level = (v - lo) / rng * height
-                cell = min(max(level - (row - 1), 0.0), 1.0)
-                line.append(blocks[int(round(cell * 8))])
-            label = f"{hi:>10.6g} " if row == height else f"{lo:>10.6g} " if row == 1 else " " * 11
-            console.print(Text(label, style="dim") + Text("".join(line), style="cyan"))
-        console.print(Text(" " * 11 + f"{t0:<.6g} s".ljust(width - 10) + f"{t_end:.6g} s", style="dim"))
+        for run in runs:
+            c = next((c for c, _ in lines if c in run.present), None)
+            if c is None:
+                continue
+            t = run.t
+            t0 = t[0] if len(t) else 0.0
+            t_end = t[-1] if len(t) else 0.0
+            span = (t_end - t0) or 1.0
+            col = [math.nan] * width
+            s = run.series[c]
+            for i in range(len(t)):
+                v = s[i]
+                if v == v:
+                    x = min(width - 1, int((t[i] - t0) / span * (width - 1)))
+                    col[x] = v if col[x] != col[x] else max(col[x], v)
+            vals = [v for v in col if v == v]
+            lo, hi = min(vals), max(vals)
+            rng = (hi - lo) or 1.0
+            console.print(Text(f"{title} — {unit}" + (f" — {run.label}" if len(runs) > 1 else ""), style="bold"))
+            for row in range(height, 0, -1):
+                line = []
+                for v in col:
+                    if v != v:
+                        line.append(" ")
+                        continue
+                    level = (v - lo) / rng * height
+                    cell = min(max(level - (row - 1), 0.0), 1.0)
+                    line.append(blocks[int(round(cell * 8))])
+                label = f"{hi:>10.6g} " if row == height else f"{lo:>10.6g} " if row == 1 else " " * 11
+                console.print(Text(label, style="dim") + Text("".join(line), style="cyan"))
+            console.print(Text(" " * 11 + f"{t0 - run.offset:<.6g} s".ljust(width - 10)
+                               + f"{t_end - run.offset:.6g} s", style="dim"))
+    if len(runs) > 1 and any(r.steps for r in runs):
+        from rich.table import Table
+
+        header, body = step_comparison(runs)
+        table = Table(title=f"Steps side by side (Δ: difference from {runs[0].label})")
+        for h in header:
+            table.add_column(str(h))
+        for r in body:
+            table.add_row(*[str(c) for c in r])
+        console.print(table)
     return skipped
 
 
 def output_format(path, fmt=None):
+    """The report's format: ``fmt``, else what the suffix of ``path`` names (.png, .svg, .pdf,
+    .html); anything else is refused."""
     if fmt:
         return fmt
-    ext = os.path.splitext(path)[1].lower().lstrip(".")
-    if ext == "htm":
-        ext = "html"
-    if ext not in FORMATS:
-        raise UsageError(f"output: {path}: cannot tell the format from the name; use .png, .svg, .pdf or .html "
-                         f"(or --format)")
-    return ext
+    from . import format_for_path
+
+    return format_for_path(path, FORMATS, default=None)

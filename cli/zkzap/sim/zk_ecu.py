@@ -29,7 +29,8 @@ Engine model (all times in model seconds; ``--speed`` runs the model faster)
       ``zk send --for`` does) runs once; another frame or a pause longer than
       :data:`LOSS_OF_SIGNAL_S` re-arms it. Actions newer than the protocol version are ignored.
     - air pressure (ID 8) shows in status ID 3 and scales thrust; with ``esr=1`` the ECU asks for
-      it (status ID 8's ESR bit) until it is sent.
+      it (status ID 8's ESR bit) until it is sent, and with ``esr_again=S`` asks again S seconds
+      after each answer (0: an ECU that keeps asking).
     - ID 1 state ``pwm`` hands control to the PWM input, which this simulator reads as stop,
       throttle 0 (no receiver connected). A non-zero ID 6 state overrides ID 1's.
     - errors: an error (injected, or loss of control signal) cuts the fuel (the engine cools if
@@ -93,7 +94,7 @@ SW_CODE = {"stop": 0, "standby": 1, "run": 2}   # status ID 1 SwSt
 
 DEFAULTS = {
     "protocol_version": 6, "rate": 20, "max_rpm": 160000, "idle_rpm": 40000, "max_thrust": 14.0,
-    "ambient": 20.0, "battery": 12.0, "max_pump_voltage": 10.0, "esr": False, "baud": None,
+    "ambient": 20.0, "battery": 12.0, "max_pump_voltage": 10.0, "esr": False, "esr_again": None, "baud": None,
     "stop_bits": 1, "corrupt_every": 0, "silent_after": None, "error": None, "error_after": 0.0,
 }
 
@@ -106,7 +107,7 @@ class ZkEcu(Device):
     """The simulated ECU. Options are documented in the module docstring and :func:`from_options`."""
 
     def __init__(self, protocol_version=6, rate=20, max_rpm=160000, idle_rpm=40000, max_thrust=14.0,
-                 ambient=20.0, battery=12.0, max_pump_voltage=10.0, esr=False, baud=None,
+                 ambient=20.0, battery=12.0, max_pump_voltage=10.0, esr=False, esr_again=None, baud=None,
                  stop_bits=1, corrupt_every=0, silent_after=None, error=None, error_after=0.0):
         if not 1 <= protocol_version <= 63:
             raise ValueError(f"protocol_version: {protocol_version} is out of range; allowed 1..63")
@@ -150,6 +151,9 @@ class ZkEcu(Device):
         self.rpm_value = 0            # ID 7 raw value
         self.pressure_hpa = 1013
         self.esr = bool(esr)
+        self.esr_again = esr_again        # ask again this long after an answer (None: never)
+        self._esr_at = None
+        self.pressure_answers = 0         # control ID 8 frames received
         self.unlocked_until = -1.0
         self.ignition_pump_v = 1.2
         self.curve_inc = 40
@@ -336,7 +340,10 @@ class ZkEcu(Device):
                 self.rpm_value = rec["rpm_value"]
         elif cid == 8:
             self.pressure_hpa = rec["pressure_hpa"]
+            self.pressure_answers += 1
             self.esr = False
+            if self.esr_again is not None:
+                self._esr_at = now + self.esr_again
         if cid in (1, 6) and self.rearm and self.effective_sw() != "run":
             self.rearm = False
             self.error_code = 0
@@ -418,6 +425,8 @@ class ZkEcu(Device):
 
     def _step(self, dt):
         t = self._t
+        if self._esr_at is not None and t >= self._esr_at:
+            self._esr_at, self.esr = None, True
         if self._error_at is not None and t >= self._error_at[0]:
             code = self._error_at[1]
             self._error_at = None
@@ -569,7 +578,8 @@ _INT = _num(int)
 OPTIONS = {
     "protocol_version": _INT, "rate": _INT, "max_rpm": _INT, "idle_rpm": _INT,
     "max_thrust": _num(float, 0, 1000), "ambient": _num(float, -60, 100), "battery": _num(float, 0, 51),
-    "max_pump_voltage": _num(float, 0, 51), "esr": parse_flag, "baud": _INT, "stop_bits": _INT,
+    "max_pump_voltage": _num(float, 0, 51), "esr": parse_flag, "esr_again": _num(float, 0, 1e6), "baud": _INT,
+    "stop_bits": _INT,
     "corrupt_every": _INT,
     "silent_after": _num(float, 0, 1e6), "error": lambda k, v: v, "error_after": _num(float, 0, 1e6),
 }
@@ -583,7 +593,8 @@ def from_options(**options) -> ZkEcu:
 
     ``protocol_version`` (default 6), ``rate`` (20/50/100 Hz, default 20), ``max_rpm`` (160000),
     ``idle_rpm`` (40000), ``max_thrust`` (kg at max rpm, 14), ``ambient`` (degC, 20), ``battery``
-    (V, 12), ``max_pump_voltage`` (V, 10), ``esr`` (0/1: ask for air pressure), ``baud`` (the
+    (V, 12), ``max_pump_voltage`` (V, 10), ``esr`` (0/1: ask for air pressure), ``esr_again`` (ask again
+    S seconds after each answer), ``baud`` (the
     ECU's UART speed; unset: the host's), ``stop_bits`` (1 or 2), and the faults
     ``corrupt_every``, ``silent_after``, ``error``, ``error_after``. ``speed`` is accepted (it belongs to the clock).
     """

@@ -261,3 +261,37 @@ def test_a_serial_telemetry_radio_gets_the_same_messages(cli, tmp_path):
     parser.robust_parsing = True
     kinds = {m.get_type() for m in parser.parse_buffer(bytes(got)) or []}
     assert {"HEARTBEAT", "EFI_STATUS", "NAMED_VALUE_FLOAT", "STATUSTEXT"} <= kinds, kinds
+
+
+@pytest.mark.parametrize("error", [0, 3])
+def test_no_status_frames_is_warned_one_second_after_the_last_record(error):
+    """On the bridge's own clock: the warning is due exactly SILENT_S after the last status record
+    was handed over, with or without an ECU error active, and the thread is woken for it."""
+    now = [100.0]
+    b = bridge.MavlinkBridge("udpout:127.0.0.1:9", clock=lambda: now[0])
+    sent = []
+    b.m = mavutil.mavlink
+
+    class Mav:
+        def __getattr__(self, name):
+            return lambda *args, **kw: sent.append((name, args))
+
+    b.mav, b._pump_input = Mav(), lambda: None
+    rec = {"kind": "status", "id": 1, "rpm": 50000, "error_code": error, "error_name": "x",
+           "engine_state_name": "running"}
+    b.submit(rec)
+    b.absorb(b.queue.get_nowait())
+    now[0] = 100.3
+    b.submit({"kind": "control", "id": 1})                # the session's own frames are no status
+    wake = b.step(now[0])
+    assert min(wake, 101.0) == wake and b.step(100.99) <= 101.0
+
+    def warned():
+        return [a for name, a in sent if name == "statustext_send" and b"no status frames" in a[1]]
+
+    assert not warned()
+    now[0] = 101.0
+    b.step(now[0])
+    assert len(warned()) == 1 and warned()[0][0] == mavutil.mavlink.MAV_SEVERITY_WARNING
+    b.step(101.5)
+    assert len(warned()) == 1 and b.efi_values()["health"] == 0

@@ -40,7 +40,7 @@ def _table_cells(rec):
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
-@output_options
+@output_options(formats=RECORD_FORMATS)
 def decode(inputs, binary, fmt, output, append):
     """Decode mightyZAP packets to a table, JSON, JSON Lines or CSV.
 
@@ -76,7 +76,7 @@ def decode(inputs, binary, fmt, output, append):
         chunks, explicit = binary_chunks(list(inputs)), False
     else:
         chunks, explicit = hex_chunks(inputs)
-    fmt = output_format(fmt, output)
+    fmt = output_format(fmt, output, RECORD_FORMATS)
     framer = ZapFramer()
     decoder = zap.ZapDecoder()
     if explicit:

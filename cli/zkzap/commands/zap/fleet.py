@@ -14,7 +14,7 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CheckFailed, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, consent, note, resolve_format, warn, yes_option
+from ..options import FilePath, OutputPath, consent, note, resolve_format, warn, yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -111,7 +111,7 @@ def _read_entries(bus, ids, *, required=True):
 @click.option("--scan", "scan_", is_flag=True,
               help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud). The default "
                    "without --ids.")
-@click.option("-o", "--output", type=FilePath(), default=None,
+@click.option("-o", "--output", type=OutputPath(DOC_FORMATS, default=None), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
 @click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")

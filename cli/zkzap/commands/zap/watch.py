@@ -31,7 +31,8 @@ FORMATS = ("table", "jsonl", "json", "csv")
               help="Stop when every actuator meets EXPR, like 'moving==0' (REGISTER OP NUMBER; repeatable: all "
                    "must hold). The register is read too.")
 @click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="Record format (default: the live table on a terminal, csv for an -o *.csv, jsonl otherwise).")
+              help="Record format (default: the live table on a terminal, else by the suffix of -o: .csv, .json, .jsonl; "
+                   "jsonl in a pipe).")
 @output_options
 @link_options
 def watch(registers, ids, rate, count, duration, until, fmt, output, append, **common):
@@ -64,8 +65,10 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
     plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
                common["baud"])
-    if fmt is None and output and output.lower().endswith(".csv"):
-        fmt = "csv"
+    if fmt is None and output and output != "-":
+        from ...io import format_for_path
+
+        fmt = format_for_path(output, FORMATS)
     stdout_tty = is_tty(sys.stdout)
     live = (fmt in (None, "table") and stdout_tty and not output) or (bool(output) and stdout_tty)
     if fmt == "table" and not stdout_tty:

@@ -23,7 +23,7 @@ COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first
 
 
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@port_options("zk")
+@port_options("zk", baud_auto=True)
 @click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
               help="Check N status frames (default 50 unless --duration is given).")
 @click.option("--duration", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
@@ -51,6 +51,7 @@ def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_fi
       zk check -p /dev/ttyUSB0 --limit 'power_voltage_v>=7.4' --limit 'egt_c<=100'
       zk check --sim --duration 2 --limits engine.limits -f json | jq .verdict
       zk check -p /dev/ttyUSB0 --keepalive --count 100 && echo ready
+      zk check -p /dev/ttyUSB0 --baud auto --limits engine.limits    # find the line settings first
     """
     from ...api.limits import LimitSet, read_limits
     from ...io.term import is_tty
@@ -67,7 +68,10 @@ def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_fi
         fmt = "table" if is_tty(sys.stdout) else "json"
     limits = LimitSet(conditions, "warn")
     from ...api.stand import Stand
-    from .monitor import run_telemetry
+    from .monitor import detect_line, run_telemetry
+
+    if baud == "auto":
+        baud, stop_bits = detect_line(url)
 
     stand = Stand(limits if conditions else None)
     control = None

@@ -63,7 +63,7 @@ TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
-@output_options
+@output_options(formats=RECORD_FORMATS)
 @protocol_version_option
 @click.option("--accept", type=click.Choice(["both", "status", "control"]), default="both", show_default=True,
               help="Which frame kinds to look for (a one-direction capture: status or control).")
@@ -104,7 +104,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
         chunks, explicit = binary_chunks(list(inputs)), False
     else:
         chunks, explicit = hex_chunks(inputs)
-    fmt = output_format(fmt, output)
+    fmt = output_format(fmt, output, RECORD_FORMATS)
     cols = columns(accept, raw)
     framer = ZkFramer(accept)
     decoder = zk.ZkDecoder(protocol_version, raw=raw)

@@ -1,49 +1,85 @@
-"""``zk logbook FILE``: the runs recorded with ``--logbook FILE``, and the engine's totals."""
+"""``zk logbook FILE``: the runs recorded with ``--logbook FILE``, the engine's totals, one engine's
+book (``--engine NAME``: hours, starts, fuel, hours above a throttle, totals since a service) and
+services (``--service NAME``)."""
 
 from __future__ import annotations
 
 import click
 
+from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, format_option
+from ..options import FilePath, FiniteRange, format_option
 
-TABLE = [("id", "run"), ("started", "started UTC"), ("duration_s", "s"), ("running_s", "run s"),
-         ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"), ("fuel_used_l", "fuel L"),
-         ("command", "command"), ("outcome", "outcome")]
+TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "s"),
+         ("running_s", "run s"), ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"),
+         ("fuel_used_l", "fuel L"), ("command", "command"), ("outcome", "outcome")]
+#: Throttle (%) above which an engine's running hours are given by default.
+DEFAULT_ABOVE = (80.0,)
 
 
 @click.command(cls=Command, context_settings=CONTEXT,
-               epilog="Exit status: 0 listed; 2 FILE is missing or not a logbook.")
+               epilog="Exit status: 0 listed (or the service recorded); 2 FILE is missing or not a logbook, "
+                      "or bad usage; 7 the service could not be written.")
 @click.argument("logbook_file", metavar="FILE", type=FilePath())
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")
 @click.option("--last", type=click.IntRange(1), default=None, metavar="N", help="Only the last N runs.")
-def logbook(logbook_file, fmt, only_totals, last):
+@click.option("--engine", default=None, metavar="NAME",
+              help="One engine's book: its runs (recorded with --engine NAME), run and running hours, starts, "
+                   "fuel, hours above --above, and the totals since its last service.")
+@click.option("--above", "above", multiple=True, type=FiniteRange(0, 101), metavar="PCT",
+              help="With --engine: running hours at or above this throttle, % (default 80; 1 % resolution). "
+                   "Repeatable.")
+@click.option("--service", default=None, metavar="NAME",
+              help="Record a service of engine NAME now (the totals since a service start again).")
+@click.option("--note", default=None, metavar="TEXT", help="With --service: what was done.")
+def logbook(logbook_file, fmt, only_totals, last, engine, above, service, note):
     """List the runs in an engine logbook, with totals.
 
     FILE is the SQLite database that '--logbook FILE' on 'zk send --for', 'zk profile' and
     'zk monitor' append a run to: start and end time, duration, engine-running time, starts
     (entries into a running state), max rpm and EGT, fuel used, ECU errors, limits violated,
-    the command, schedule and files. On a terminal a table and the totals line; -f json gives
-    one document {"runs": [...], "totals": {...}}; jsonl/csv a row per run (--totals: the
-    totals alone).
+    the command, schedule and files, and the engine (--engine NAME on the session). On a
+    terminal a table and the totals line; -f json gives one document {"runs": [...],
+    "totals": {...}}; jsonl/csv a row per run (--totals: the totals alone).
+
+    --engine NAME gives that engine's book: run hours, running hours, starts, fuel, hours at or
+    above a throttle (--above PCT) and the same since its last service; --service NAME records
+    a service (now, UTC) so that the totals since the service start again.
 
     \b
     Examples:
       zk logbook engine.db
       zk logbook engine.db --totals -f json | jq .running_hours
       zk logbook engine.db -f csv > runs.csv
+      zk logbook engine.db --engine K100-1234 --above 80 --above 95
+      zk logbook engine.db --service K100-1234 --note 'bearings, 25 h inspection'
     """
     import sys
 
     from ...api import logbook as lb
     from ..options import resolve_format, write_rows
 
+    if service is not None:
+        if engine or above or only_totals or last:
+            raise UsageError("service: records a service; give no --engine, --above, --totals or --last with it")
+        if not service.strip():
+            raise UsageError("service: an empty engine name")
+        lb.runs(logbook_file)                         # a missing file or no logbook: exit 2, nothing created
+        svc = lb.record_service(logbook_file, service.strip(), note)
+        click.echo(f"logbook {logbook_file}: service {svc['id']} of {svc['engine']} recorded at {svc['at']}", err=True)
+        return
+    if note is not None:
+        raise UsageError("note: applies with --service NAME")
+    if above and engine is None:
+        raise UsageError("above: applies with --engine NAME")
+    fmt = resolve_format(fmt, sys.stdout)
+    if engine is not None:
+        return _engine(logbook_file, engine, tuple(above) or DEFAULT_ABOVE, fmt, only_totals, last)
     recs = lb.runs(logbook_file)
     totals = lb.totals(recs)
     if last:
         recs = recs[-last:]
-    fmt = resolve_format(fmt, sys.stdout)
     if fmt == "json":
         import json
 
@@ -53,17 +89,70 @@ def logbook(logbook_file, fmt, only_totals, last):
     if only_totals:
         write_rows([totals], list(totals), fmt)
         return
+    _runs(recs, fmt, f"logbook {logbook_file}: {len(recs)} runs")
+    if fmt == "table":
+        click.echo("totals: " + _totals_text(totals), err=True)
+
+
+def _runs(recs, fmt, title):
+    from ...api import logbook as lb
+    from ..options import write_rows
+
     if fmt == "table":
         rows = [dict(r, errors=", ".join(r["errors"]), limits_violated=", ".join(r["limits_violated"]),
                      started=r["started"].replace("T", " ").rstrip("Z"), duration_s=round(r["duration_s"]),
                      running_s=round(r["running_s"]), command=r["command"].replace("zk ", ""),
-                     outcome=r["outcome"] + (" !" if r["errors"] or r["limits_violated"] else ""))
+                     outcome=r["outcome"] + (" !" if r["errors"] or r["limits_violated"] else ""),
+                     engine=r.get("engine") or "-")
                 for r in recs]
-        write_rows(rows, list(lb.COLUMNS), "table", title=f"logbook {logbook_file}: {len(recs)} runs",
-                   table_columns=TABLE)
-        click.echo(f"totals: {totals['runs']} runs, {totals['running_hours']:.3f} running hours "
-                   f"({totals['running_s']:g} s), {totals['starts']} starts, {totals['fuel_used_l']:g} L fuel, "
-                   f"max rpm {totals['max_rpm'] if totals['max_rpm'] is not None else '-'}, "
-                   f"max EGT {totals['max_egt_c'] if totals['max_egt_c'] is not None else '-'} °C", err=True)
+        write_rows(rows, list(lb.COLUMNS), "table", title=title, table_columns=TABLE)
         return
-    write_rows(recs, list(lb.COLUMNS), fmt)
+    write_rows([dict(r, throttle_s=";".join(f"{k}={v:g}" for k, v in sorted(r["throttle_s"].items(),
+                                                                              key=lambda kv: int(kv[0]))))
+                if fmt == "csv" else r for r in recs], list(lb.COLUMNS), fmt)
+
+
+def _totals_text(t) -> str:
+    text = (f"{t['runs']} runs, {t['run_hours']:.3f} run hours, {t['running_hours']:.3f} running hours "
+            f"({t['running_s']:g} s), {t['starts']} starts, {t['fuel_used_l']:g} L fuel, "
+            f"max rpm {t['max_rpm'] if t['max_rpm'] is not None else '-'}, "
+            f"max EGT {t['max_egt_c'] if t['max_egt_c'] is not None else '-'} °C")
+    for pct, h in (t.get("hours_above") or {}).items():
+        text += f", {h:.3f} h at or above {pct} % throttle"
+    return text
+
+
+def _engine(path, engine, above, fmt, only_totals, last):
+    import json
+
+    from ...api import logbook as lb
+    from ..options import write_rows
+
+    doc = lb.engine_report(path, engine, above)
+    if not doc["runs"] and not doc["services"]:
+        known = sorted({r.get("engine") for r in lb.runs(path) if r.get("engine")})
+        raise UsageError(f"engine: no run of {engine!r} in {path}"
+                         + (f"; engines there: {', '.join(known)}" if known else
+                            " (runs name their engine with --engine NAME on the session)"))
+    if last:
+        doc["runs"] = doc["runs"][-last:]
+    if fmt == "json":
+        if only_totals:
+            doc = {k: doc[k] for k in ("engine", "totals", "last_service", "since_service")}
+        click.echo(json.dumps(doc, ensure_ascii=False, indent=2))
+        return
+    svc = doc["last_service"]
+    rows = [dict(doc["totals"], engine=engine, period="all runs"),
+            dict(doc["since_service"], engine=engine,
+                 period=f"since the service of {svc['at']}" if svc else "since the service (none recorded)")]
+    for r in rows:
+        for pct, h in (r.pop("hours_above", None) or {}).items():
+            r[f"hours_above_{pct}"] = h
+    if only_totals or fmt != "table":
+        write_rows(rows, list(rows[0]), fmt)
+        return
+    _runs(doc["runs"], fmt, f"engine {engine}: {len(doc['runs'])} runs")
+    click.echo(f"engine {engine}: " + _totals_text(doc["totals"]), err=True)
+    where = f"since the service of {svc['at']}" + (f" ({svc['note']})" if svc and svc.get("note") else "") \
+        if svc else "no service recorded"
+    click.echo(f"  {where}: " + _totals_text(doc["since_service"]), err=True)

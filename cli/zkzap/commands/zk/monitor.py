@@ -14,8 +14,10 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command
 from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
-from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
-from .telemetry import (EXIT_HELP, FORMAT_BY_SUFFIX, check_log_options, errors_text, log_options, port_from_env,
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors, summarizer, summary_option)
+from ...io import SESSION_FORMATS, format_for_path
+from .telemetry import (EXIT_HELP, check_log_options, errors_text, log_options, port_from_env,
                         reconnect_option, resolve_port, zk_timeout_help)
 
 
@@ -31,7 +33,12 @@ class Output:
 
         path = output if output and output != "-" else None
         if fmt is None and path:
-            fmt = FORMAT_BY_SUFFIX.get(os.path.splitext(path)[1].lower(), "jsonl")
+            fmt = format_for_path(path, SESSION_FORMATS)
+        self._xlsx = fmt == "xlsx"
+        if self._xlsx:
+            from ...io import xlsx
+
+            xlsx.check(output, append)
         if fmt == "mcap":
             from .mcap_output import open_mcap
 
@@ -52,7 +59,7 @@ class Output:
         elif path and stdout_tty:
             self.dashboard = _dashboard(title)
         if snapshot is None:
-            snapshot = fmt == "csv"
+            snapshot = fmt in ("csv", "xlsx")        # spreadsheets: every field's latest value on each row
         if fmt == "table" and self.dashboard is not None and not path:
             snapshot = False
         self.snapshot = snapshot
@@ -69,6 +76,11 @@ class Output:
         from ...io.writers import make_writer
 
         had = False
+        if self._xlsx:
+            from ...io.xlsx import XlsxWriter
+
+            self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
+            return
         if self.file is not None:
             self.stream, had = self.file.open(), self.file.had
         if self._table:
@@ -76,10 +88,13 @@ class Output:
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
-    def finish(self, ok):
-        """The run ended: a file no record opened is created only when the run went well."""
+    def finish(self, ok, sheets=None):
+        """The run ended: a file no record opened is created only when the run went well.
+        ``sheets``: a workbook's steps and summary (``(steps, summary)``)."""
         if ok and self.file is not None and self.writer is None:
             self._open()
+        if sheets is not None and self._xlsx and self.writer is not None:
+            self.writer.sheets(*sheets)
 
     def write(self, rec):
         if self.writer is None and self.file is not None:
@@ -135,14 +150,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule"):
+                  reconnect=None, end=None, end_label="end of schedule", summarize=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
-    an output.
+    an output. ``summarize(outcome, tel, session)`` gives ``(steps, summary)`` for the sheets of
+    an ``-o FILE.xlsx`` workbook (``steps``: ``(columns, rows)`` or None).
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
@@ -168,12 +184,22 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         check_mcap(output, append, snapshot)
     if bridges:
         bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
+    if stand is not None:
+        try:
+            # external sensors first: a silent load cell is found before the ECU is sent anything
+            stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
+        except BaseException:
+            if bridges:
+                bridges.close()
+            raise
     columns = record_columns if stand is None else stand.columns(record_columns)
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
         if bridges:
             bridges.close()
+        if stand is not None:
+            stand.close()
         raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
@@ -203,6 +229,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             from .taps import tap_session
 
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+            if stand is not None:
+                stand.write = source.write       # ESR answers are recorded like every control frame
         session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort,
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
@@ -212,10 +240,12 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
-            out.finish(outcome.ok)
+            out.finish(outcome.ok, summarize(outcome, tel, session) if summarize and out.fmt == "xlsx" else None)
             if outcome.ok and raw is not None and raw.stream is None:
                 raw.open()
     finally:
+        if stand is not None:
+            stand.close()
         if source is not None:
             source.close()
         out.close()
@@ -263,11 +293,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @click.option("--fail-on-error", is_flag=True,
               help="Exit with status 5 if any ECU error code was seen (after writing every record).")
 @limit_options
+@sensor_options
 @logbook_option
 @summary_option
 def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, append, snapshot, ids, stale_after,
             raw_log, count, duration, keepalive, rate, protocol_version, fail_on_error, limit, limits_files, on_limit,
-            logbook, summary_json, reconnect=None):
+            logbook, summary_json, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
+            ambient_pressure=None, air_pressure=None, engine=None):
     """Show or log the ECU's status frames as they arrive.
 
     On a terminal: a live dashboard. In a pipe: JSON Lines, one record per frame (as 'zk decode'
@@ -310,7 +342,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     if rate is not None and not keepalive:
         raise UsageError("rate: applies only with --keepalive")
     check_log_options(ids, snapshot, fmt)
-    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook)
+    sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
+    if replay is not None and (sensors.specs or sensors.air):
+        raise UsageError(f"{'aux' if sensors.specs else 'air-pressure'}: not with --replay (a recording has no "
+                         f"sensors beside it and cannot be answered)")
+    stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, sensors=sensors,
+                        engine=engine)
     check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     control = None
     if keepalive:
@@ -320,12 +357,12 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
             return frame
 
     if baud == "auto":
-        baud, stop_bits = _detect_line(url)
+        baud, stop_bits = detect_line(url)
     outcome, tel, session = run_telemetry(
         url=url, baud=baud, replay=replay, fast=fast, fmt=fmt, output=output, append=append, snapshot=snapshot,
         ids=ids, stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
         stop_bits=stop_bits, count=count, duration=duration, control=control, rate=rate, stand=stand,
-        reconnect=reconnect)
+        reconnect=reconnect, summarize=summarizer(stand, command="zk monitor", port=url or replay))
     report(stand, command="zk monitor", port=url or replay, files=(output, raw_log), outcome=outcome, tel=tel,
            session=session, summary_json=summary_json)
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
@@ -339,8 +376,8 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
 zk_timeout_help(monitor)
 
 
-def _detect_line(url):
-    """``--baud auto``: the ECU's baud rate and stop bits, found by listening first."""
+def detect_line(url):
+    """``--baud auto`` (monitor, check): the ECU's baud rate and stop bits, found by listening first."""
     from ...api.detect import no_answer
     from .detect import run_detection
     from ...api.detect import BAUDS

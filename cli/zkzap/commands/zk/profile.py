@@ -11,7 +11,8 @@ from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
 from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
-from .stand import Finite, build_stand, check_output_dir, limit_options, logbook_option, report
+from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors)
 from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -51,19 +52,24 @@ def example_text(kind="throttle") -> str:
 @click.option("--steps-csv", type=FilePath(), default=None, metavar="FILE",
               help="Write one row per step to FILE: window, mean/min/max of rpm, egt_c, thrust_kg, "
                    "fuel_flow_l_min, pump_voltage_v, throttle_pct, TSFC, and whether it settled.")
-@click.option("--fuel-density", type=Finite(0.5, 1.2), default=None, metavar="KG_PER_L",
-              help="Fuel density for TSFC (default 0.8: Jet A-1; kerosene 0.80, diesel 0.84).")
+@click.option("--fuel-density", type=Finite(0.5, 1.2, unit="kg/L", hint=lambda v: (
+                  f"{v:g} kg/m³ would be {v / 1000:g} kg/L" if 500 <= v <= 1200 else None)),
+              default=None, metavar="KG_PER_L",
+              help="Fuel density for TSFC, in kg/L (default 0.8: Jet A-1; kerosene 0.80, diesel 0.84; "
+                   "800 kg/m³ is 0.8 kg/L).")
 @dry_run_option
 @port_options("zk")
 @yes_option
 @protocol_version_option
 @log_options
 @limit_options
+@sensor_options
 @logbook_option
 @reconnect_option
 def profile(schedule, example, interpolate, rate, abort, summary_json, settle, average, steps_csv, fuel_density,
             dry_run, port, baud, stop_bits, timeout, sim, yes, protocol_version, fmt, output, append, snapshot, ids,
-            stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None):
+            stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None, aux=(), thrust_from=None,
+            fuel_flow_from=None, ambient_temp=None, ambient_pressure=None, air_pressure=None, engine=None):
     """Run a throttle or RPM schedule on the engine while its telemetry is logged.
 
     SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' or 'time_s,rpm=N[,state]' (an optional
@@ -113,12 +119,15 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if len(sched.notes) > 5:
         note(f"... and {len(sched.notes) - 5} more rounded values")
     averaging = settle is not None or average is not None or steps_csv is not None
-    if fuel_density is not None and not averaging:
-        raise UsageError("fuel-density: applies with --settle, --average or --steps-csv")
+    sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure,
+                              averaging=averaging, steps=True)
+    if fuel_density is not None and not averaging and sensors.ambient is None:
+        raise UsageError("fuel-density: applies with --settle, --average or --steps-csv (or --ambient-temp)")
     if dry_run:
         extra = [n for n, v in (("limit", limit), ("limits", limits_files), ("on-limit", on_limit),
                                 ("logbook", logbook), ("steps-csv", steps_csv), ("settle", settle),
-                                ("average", average), ("fuel-density", fuel_density)) if v]
+                                ("average", average), ("fuel-density", fuel_density), ("engine", engine))
+                 if v] + list(sensors.given())
         if extra:
             raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
         from .bridging import refuse_without
@@ -138,10 +147,11 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             raise UsageError("steps-csv: '-' needs -o FILE for the telemetry (both would go to stdout)")
         _check_dir(steps_csv, "steps-csv")
         averager = StepAverager(sched.steps(), 3.0 if settle is None else settle, average,
-                                fuel_density or DEFAULT_DENSITY)
+                                fuel_density or DEFAULT_DENSITY, thrust=sensors.thrust, flow=sensors.flow,
+                                ambient=sensors.ambient)
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
-                        averager=averager, force=True)
+                        averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density)
     stand.schedule = sched
     if not is_simulator(url):
         from ...codec import zk
@@ -151,6 +161,17 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             consent(f"schedule {name} on {url}: {hazard}", yes)
     from .monitor import run_telemetry
 
+    def summarize(outcome, tel, session):
+        summary = _summary(name, url, sched, outcome, tel, session)
+        summary.update(stand.summary())
+        if averager is not None:
+            summary["steps"] = averager.rows()
+            summary["rows_not_steps"] = [{"line": row.line, "target": row.target_text(), "from_s": a, "to_s": b,
+                                          "why": why} for row, a, b, why in averager.skipped]
+            summary["fuel_density_kg_l"] = averager.density
+        steps = (averager.columns(), summary["steps"]) if averager is not None else None
+        return steps, summary
+
     try:
         outcome, tel, session = run_telemetry(
             url=url, baud=baud, fmt=fmt, output=output, append=append, snapshot=snapshot, ids=ids,
@@ -158,7 +179,8 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
             title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
-            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv})
+            inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv},
+            summarize=summarize)
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
         if summary_file and e.code != USAGE:
@@ -168,16 +190,12 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         raise
     if sched.ends_in_rpm_mode and abort == "none":
         note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
-    summary = _summary(name, url, sched, outcome, tel, session)
-    summary.update(stand.summary())
-    if averager is not None:
-        summary["steps"] = averager.rows()
-        summary["fuel_density_kg_l"] = averager.density
+    steps, summary = summarize(outcome, tel, session)
     _print_summary(summary)
     report(stand, command="zk profile", port=url, schedule=name, files=(output, raw_log, steps_csv, summary_json),
            outcome=outcome, tel=tel, session=session)
     if steps_csv:
-        _write_steps(steps_csv, summary["steps"])
+        _write_steps(steps_csv, *steps)
     if summary_json:
         _write_json(summary_file or summary_json, summary)
     outcome.raise_for_status()
@@ -224,8 +242,16 @@ def _print_summary(s):
                      + ("no frames" if mean is None else
                         f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, "
                         f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
-                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else ""))
+                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else "")
+                        + (f"; corrected rpm {st['rpm_corrected']:.0f}, thrust {st['thrust_corrected_kg']:g} kg"
+                           if st.get("thrust_corrected_kg") is not None and st.get("rpm_corrected") is not None
+                           else "")
+                        + (f", TSFC {st['tsfc_corrected_g_kn_s']:g}" if st.get("tsfc_corrected_g_kn_s") is not None
+                           else ""))
                      + (f" [{st['note']}]" if st["note"] else ""))
+    for row in s.get("rows_not_steps") or ():
+        lines.append(f"  line {row['line']} ({row['target']}, {row['from_s']:g}..{row['to_s']:g} s): "
+                     f"{row['why']}, not a step")
     click.echo("\n".join(lines), err=True)
 
 
@@ -259,8 +285,7 @@ def _check_dir(path, what):
     check_output_dir(path, what)
 
 
-def _write_steps(path, rows):
-    from ...api.steady import columns
+def _write_steps(path, columns, rows):
     from ...io.writers import make_writer
 
     stream = sys.stdout if path == "-" else None
@@ -269,7 +294,7 @@ def _write_steps(path, rows):
             stream = open(path, "w", encoding="utf-8", newline="")
     except OSError as e:
         raise OutputError(f"steps-csv: cannot write {path}: {e.strerror}") from None
-    writer = make_writer("csv", stream, columns())
+    writer = make_writer("csv", stream, columns)
     try:
         for r in rows:
             writer.write(r)

@@ -16,7 +16,8 @@ from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
 from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
                        note, port_options, protocol_version_option, rate_option, warn, yes_option)
-from .stand import build_stand, check_output_dir, limit_options, logbook_option, report, summary_option
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
+                    session_sensors, summarizer, summary_option)
 from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
                         zk_timeout_help)
 
@@ -45,7 +46,9 @@ EXAMPLES = {
 _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "end": "--end", "fmt": "--format", "output": "--output",
              "append": "--append", "snapshot": "--snapshot/--frames", "ids": "--ids", "raw_log": "--raw-log",
              "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
-             "summary_json": "--summary-json", "reconnect": "--reconnect"}
+             "summary_json": "--summary-json", "reconnect": "--reconnect", "aux": "--aux",
+             "thrust_from": "--thrust-from", "fuel_flow_from": "--fuel-flow-from", "ambient_temp": "--ambient-temp",
+             "ambient_pressure": "--ambient-pressure", "air_pressure": "--air-pressure", "engine": "--engine"}
 
 
 def format_hex(frame) -> str:
@@ -76,6 +79,7 @@ def send_options(f):
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
         limit_options,
+        sensor_options,
         logbook_option,
         summary_option,
         reconnect_option,
@@ -93,7 +97,8 @@ def send_options(f):
 def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, protocol_version, stop_bits=1, for_s=None,
             rate=None, abort=None, end=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None,
             ids=None, stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
-            summary_json=None, reconnect=None):
+            summary_json=None, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
+            ambient_pressure=None, air_pressure=None, engine=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent."""
@@ -102,7 +107,10 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
                                ("raw_log", raw_log), ("limit", limit or None),
                                ("limits_files", limits_files or None), ("on_limit", on_limit),
                                ("logbook", logbook), ("summary_json", summary_json),
-                               ("reconnect", reconnect)) if v is not None}
+                               ("reconnect", reconnect), ("aux", aux or None), ("thrust_from", thrust_from),
+                               ("fuel_flow_from", fuel_flow_from), ("ambient_temp", ambient_temp),
+                               ("ambient_pressure", ambient_pressure), ("air_pressure", air_pressure),
+                               ("engine", engine)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -140,8 +148,9 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     controls = controls_engine(frame)
     stand = None
     if for_s is not None:
+        sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
-                            controls=controls)
+                            controls=controls, sensors=sensors, engine=engine)
         check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     hazard = zk.control_hazard(frame)
     if hazard and not is_simulator(url):
@@ -158,7 +167,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
         end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
-        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json})
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json},
+        summarize=summarizer(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url))
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)

@@ -36,9 +36,106 @@ def limit_options(f):
 
 
 def logbook_option(f):
-    return click.option("--logbook", type=FilePath(), default=None, metavar="FILE",
-                        help="Record the run in the engine logbook FILE (SQLite; 'zk logbook FILE' lists "
-                             "runs and totals).")(f)
+    opts = [
+        click.option("--logbook", type=FilePath(), default=None, metavar="FILE",
+                     help="Record the run in the engine logbook FILE (SQLite; 'zk logbook FILE' lists "
+                          "runs and totals)."),
+        click.option("--engine", default=None, metavar="NAME",
+                     help="The engine this session runs (its logbook entry and the summary name it; "
+                          "'zk logbook FILE --engine NAME' gives its hours, starts and fuel)."),
+    ]
+    return apply_options(f, opts)
+
+
+SENSOR_HELP = {
+    "aux": "Read an external sensor (load cell, flowmeter, barometer) from SOURCE: a serial port or URL "
+           "(9600 baud, or SOURCE@BAUD), a FIFO, a file (followed as it grows) or '-'. Lines of name=value pairs, "
+           "CSV with a header, or JSON objects; each is stamped on arrival and its fields merged into the "
+           "records. Repeatable.",
+    "thrust": "Use this --aux field as the thrust (FIELD:UNIT, UNIT kgf, kg, N, daN, lbf or g; or implied by the "
+              "name: load_n) for TSFC and the corrections instead of the ECU's 0.1 kg reading.",
+    "flow": "Use this --aux field as the fuel flow (FIELD:UNIT, UNIT L/min, mL/min, cc/min, L/h, kg/h, g/min or "
+            "g/s; or implied by the name: flow_ml_min) for TSFC and the corrections.",
+    "temp": "Ambient temperature, degC (or an --aux FIELD[:UNIT], UNIT C, K, F): adds the standard-day corrected "
+            "values N/sqrt(theta), F/delta, Wf/(delta*sqrt(theta)) and TSFC, theta = T/288.15 K.",
+    "pressure": "Ambient pressure for the corrections, hPa (or an --aux FIELD[:UNIT], UNIT hPa, mbar, Pa, kPa, "
+                "bar, psi, inHg); default: the ECU's own air pressure (status ID 3). delta = p/1013.25 hPa.",
+    "air": "Answer the ECU's request for the air pressure (status ID 8's ESR bit) with control ID 8: HPA, or "
+           "an --aux barometer FIELD[:UNIT]. Sent when ESR is seen, at most once a second while it stays set.",
+}
+
+
+def sensor_options(f):
+    """External sensors, standard-day corrections and the ESR answer (monitor, send --for, profile)."""
+    opts = [
+        click.option("--aux", "aux", multiple=True, metavar="SOURCE", help=SENSOR_HELP["aux"]),
+        click.option("--thrust-from", default=None, metavar="FIELD[:UNIT]", help=SENSOR_HELP["thrust"]),
+        click.option("--fuel-flow-from", default=None, metavar="FIELD[:UNIT]", help=SENSOR_HELP["flow"]),
+        click.option("--ambient-temp", default=None, metavar="DEGC|FIELD", help=SENSOR_HELP["temp"]),
+        click.option("--ambient-pressure", default=None, metavar="HPA|FIELD", help=SENSOR_HELP["pressure"]),
+        click.option("--air-pressure", default=None, metavar="HPA|FIELD", help=SENSOR_HELP["air"]),
+    ]
+    return apply_options(f, opts)
+
+
+class Sensors:
+    """The sensor options, parsed and checked before anything opens."""
+
+    def __init__(self, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None, ambient_pressure=None,
+                 air_pressure=None):
+        from ...api.ambient import Quantity
+        from ...api.aux import parse_specs
+
+        self.specs = parse_specs(aux)
+        self.thrust = Quantity.parse(thrust_from, "thrust", "thrust-from", constant=False) if thrust_from else None
+        self.flow = (Quantity.parse(fuel_flow_from, "fuel_flow", "fuel-flow-from", constant=False)
+                     if fuel_flow_from else None)
+        temp = Quantity.parse(ambient_temp, "temperature", "ambient-temp") if ambient_temp is not None else None
+        press = (Quantity.parse(ambient_pressure, "pressure", "ambient-pressure")
+                 if ambient_pressure is not None else None)
+        self.air = Quantity.parse(air_pressure, "pressure", "air-pressure") if air_pressure is not None else None
+        if press is not None and temp is None:
+            raise UsageError("ambient-pressure: the corrections need --ambient-temp too (theta = T/288.15 K)")
+        if temp is not None and temp.field is None and not -60 <= temp.value <= 60:
+            raise UsageError(f"ambient-temp: {temp.value:g} is out of range; allowed -60..60 degC (or an --aux "
+                             f"field)")
+        for q in (press, self.air):
+            if q is not None and q.field is None and not 300 <= q.value <= 1100:
+                raise UsageError(f"{q.option}: {q.value:g} is out of range; allowed 300..1100 hPa (or an --aux "
+                                 f"field)")
+        self.ambient = (temp, press) if temp is not None else None
+        for q in (self.thrust, self.flow, temp, press, self.air):
+            if q is not None and q.field is not None and not self.specs:
+                raise UsageError(f"{q.option}: {q.field} is a field of an external sensor: give --aux SOURCE")
+
+    def __bool__(self):
+        return bool(self.specs or self.ambient or self.air)
+
+    def given(self) -> dict:
+        """The options given, by their spelling (for 'not with' and 'only with' messages)."""
+        return {k: v for k, v in (("aux", self.specs), ("thrust-from", self.thrust), ("fuel-flow-from", self.flow),
+                                  ("ambient-temp", self.ambient), ("air-pressure", self.air)) if v}
+
+
+def session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure, *,
+                    averaging=False, steps=False) -> Sensors:
+    """The sensor options of a session; --thrust-from/--fuel-flow-from need something that uses
+    them: the corrections, or (``steps``: zk profile) the step averages (``averaging``)."""
+    sensors = Sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
+    for q in (sensors.thrust, sensors.flow):
+        if q is not None and sensors.ambient is None and not averaging:
+            raise UsageError(f"{q.option}: applies with --ambient-temp (the corrected values)"
+                             + (" or the step averages (--settle, --average, --steps-csv)" if steps else ""))
+    return sensors
+
+
+#: Record keys an external sensor's field must not shadow (it gets the prefix aux_).
+def _record_keys():
+    from ...api.ambient import RecordCorrections
+    from ...codec import zk
+
+    return set(zk.STATUS_KEYS) | {"time", "t", "kind", "id", "frame", "payload", "stale", "stale_ids", "warnings",
+                                  "limit", "reserved", "out_of_range"} | set(RecordCorrections.KEYS)
 
 
 def summary_option(f):
@@ -63,18 +160,31 @@ def check_output_dir(path, what, records_to_stdout=False):
         raise UsageError(f"{what}: cannot write {path}: permission denied")
 
 
-def write_summary(path, *, command, port, outcome, tel, session, stand):
-    """The run summary as JSON (``-``: stdout)."""
-    import json
-
-    from ...errors import OutputError
-
+def session_summary(*, command, port, outcome, tel, session, stand) -> dict:
+    """The run summary of ``zk monitor`` and ``zk send --for`` (``--summary-json``, a workbook's
+    summary sheet)."""
     out = {"command": command, "port": port, "outcome": outcome.reason, "exit_status": outcome.exit_code,
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
     if stand is not None:
         out.update(stand.summary())
+    return out
+
+
+def summarizer(stand, *, command, port):
+    """``summarize`` for :func:`.monitor.run_telemetry`: no steps, the session's summary."""
+    return lambda outcome, tel, session: (None, session_summary(command=command, port=port, outcome=outcome,
+                                                                tel=tel, session=session, stand=stand))
+
+
+def write_summary(path, *, command, port, outcome, tel, session, stand):
+    """The run summary as JSON (``-``: stdout)."""
+    import json
+
+    from ...errors import OutputError
+
+    out = session_summary(command=command, port=port, outcome=outcome, tel=tel, session=session, stand=stand)
     text = json.dumps(out, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
@@ -87,7 +197,7 @@ def write_summary(path, *, command, port, outcome, tel, session, stand):
 
 
 def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, controls=False, averager=None,
-                force=False):
+                force=False, sensors=None, engine=None, density=None):
     """A Stand for these options (None when none applies); raises UsageError (exit 2) first."""
     from ...api import limits as L
     from ...api.stand import Stand
@@ -105,9 +215,35 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
         from ...api import logbook as lb
 
         lb.check_writable(logbook)
-    if not conditions and not logbook and averager is None and not force:
+    if engine is not None and not engine.strip():
+        raise UsageError("engine: an empty name; give the engine's name or serial (--engine K100-1234)")
+    sensors = sensors or Sensors()
+    if not conditions and not logbook and averager is None and not force and not sensors and engine is None:
         return None
-    return Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook)
+    aux = corrections = answer = None
+    if sensors.specs:
+        from ...api.aux import AuxHub
+
+        aux = AuxHub(sensors.specs, taken=_record_keys(), notify=note)
+    if sensors.ambient is not None:
+        from ...api.ambient import RecordCorrections
+
+        corrections = RecordCorrections(*sensors.ambient, thrust=sensors.thrust, flow=sensors.flow,
+                                        density=density or 0.8)
+    if sensors.air is not None:
+        from ...api.esr import PressureAnswer
+
+        q = sensors.air
+        if q.field is None:
+            def pressure(t):
+                return q.value
+        else:
+            def pressure(t):
+                return q.convert(aux.value(q.field, t))
+        answer = PressureAnswer(pressure, q.describe(), notify=note)
+        answer.quantity = q
+    return Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook,
+                 aux=aux, corrections=corrections, answer=answer, engine=engine.strip() if engine else None)
 
 
 def report(stand, *, command, port, schedule=None, files=(), outcome, tel, session, quiet=False, summary_json=None):

@@ -12,13 +12,10 @@ import click
 
 from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
                        UsageError, exit_status_help)
-from ...io import LOG_FORMATS
-from ..options import FilePath, FiniteRange, apply_options, format_option
+from ...io import SESSION_FORMATS
+from ..options import FilePath, FiniteRange, OutputPath, apply_options, format_option
 from .bridging import bridge_options
 
-#: Output format by the extension of -o FILE when --format is not given.
-FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx",
-                    ".mcap": "mcap"}
 
 def exit_help(done: str, device: str) -> str:
     """The exit-status paragraph of a logging command, from the exit-code table: ``done`` is what
@@ -42,13 +39,14 @@ EXIT_HELP = exit_help("done (--count, --duration, end of replay)",
 def log_options(f):
     """Options for where and how status records are written (monitor, send --for, profile)."""
     opts = [
-        format_option(choices=LOG_FORMATS,
+        format_option(choices=SESSION_FORMATS,
                       help="Output format: table is the live dashboard on a terminal; influx is InfluxDB line "
                            "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
-                           "zkzap[mcap]); default table on a terminal, jsonl in a pipe, or by the extension of "
-                           "-o (.csv, .json, .jsonl, .lp, .mcap)."),
-        click.option("-o", "--output", type=FilePath(),
-                     help="Write records to FILE (the dashboard stays on a terminal)."),
+                           "zkzap[mcap]); xlsx a workbook with sheets records, steps and summary (needs "
+                           "zkzap[xlsx]); default table on a terminal, jsonl in a pipe, or by the suffix of -o."),
+        click.option("-o", "--output", type=OutputPath(SESSION_FORMATS),
+                     help="Write records to FILE, in the format its suffix names (.csv, .json, .jsonl, .lp, .mcap, "
+                          ".xlsx; JSON Lines without one; the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
                      help="Append to --output and --raw-log (a CSV gets no second header)."),
         click.option("--snapshot/--frames", "snapshot", default=None,

@@ -107,7 +107,9 @@ class MavlinkBridge(Bridge):
         self._state = None
         self._error = None
         self._last_rec = None
+        self._arrived = None          # when the last status record was submitted (the session's side)
         self._silent = False
+        self._due = None              # when the next HEARTBEAT, EFI_STATUS and slow named values are due
         self._t0 = clock()
 
     def connect(self):
@@ -133,6 +135,11 @@ class MavlinkBridge(Bridge):
             self.conn = None
 
     # records in
+    def submit(self, rec) -> None:
+        if rec.get("kind", "status") == "status":
+            self._arrived = self.clock()   # silence counts from here, not from when the thread took it
+        super().submit(rec)
+
     def absorb(self, rec):
         """Take a record's values; changes of engine state and ECU error become STATUSTEXT."""
         if rec.get("kind", "status") != "status":
@@ -212,41 +219,49 @@ class MavlinkBridge(Bridge):
                 break
 
     def run(self, q, stop):
-        clock = self.clock
-        period = 1.0 / self.rate
         fast = [k for k in FAST_NAMED if k in self._named]
         slow = [k for k in self._named if k not in FAST_NAMED]
-        now = clock()
-        next_hb = next_efi = now
-        next_slow = now + 1.0
+        self._due = None
+        wake = self.clock()
         while True:
-            # wake for the next message due, not for every record (they wait in the queue)
-            self._closing.wait(max(0.0, min(next_hb, next_efi) - clock()))
+            # wake for the next message due (or the moment the frames count as stopped), not
+            # for every record: they wait in the queue
+            self._closing.wait(max(0.0, wake - self.clock()))
             recs, stopped = self.drain(q, stop)
             for rec in recs:
                 self.absorb(rec)
             if stopped:
                 return
-            now = clock()
-            if now >= next_hb:
-                self._pump_input()
-                if self._last_rec is not None and not self._silent and now - self._last_rec > SILENT_S:
-                    self._silent = True
-                    self._text(self.m.MAV_SEVERITY_WARNING, "ZK ECU: no status frames")
-                self.heartbeat()
-                next_hb += 1.0
-                if next_hb <= now:
-                    next_hb = now + 1.0
-            if now >= next_efi:
-                if self.latest:
-                    self.efi_status()
-                    self.named(fast)
-                    if now >= next_slow:
-                        self.named(slow)
-                        next_slow = now + 1.0
-                next_efi += period
-                if next_efi <= now:
-                    next_efi = now + period
+            wake = self.step(self.clock(), fast, slow)
+
+    def step(self, now, fast=(), slow=()) -> float:
+        """Send what is due at ``now`` — the "no status frames" warning the moment the last
+        status record is :data:`SILENT_S` old (whatever the ECU's error state), HEARTBEAT at
+        1 Hz, EFI_STATUS and the named values at the EFI rate — and return when the next is due."""
+        due = self._due
+        if due is None:
+            due = self._due = {"hb": now, "efi": now, "slow": now + 1.0}
+        last = self._arrived if self._arrived is not None else self._last_rec
+        if last is not None and not self._silent and self._last_rec is not None and now - last >= SILENT_S:
+            self._silent = True
+            self._text(self.m.MAV_SEVERITY_WARNING, "ZK ECU: no status frames")
+        if now >= due["hb"]:
+            self._pump_input()
+            self.heartbeat()
+            due["hb"] = due["hb"] + 1.0 if due["hb"] + 1.0 > now else now + 1.0
+        if now >= due["efi"]:
+            period = 1.0 / self.rate
+            if self.latest:
+                self.efi_status()
+                self.named(fast)
+                if now >= due["slow"]:
+                    self.named(slow)
+                    due["slow"] = now + 1.0
+            due["efi"] = due["efi"] + period if due["efi"] + period > now else now + period
+        wake = min(due["hb"], due["efi"])
+        if last is not None and not self._silent:
+            wake = min(wake, last + SILENT_S)
+        return wake
 
     def stats(self) -> dict:
         s = super().stats()

@@ -60,6 +60,10 @@ class MqttUrl:
                              f"or mqtts://...")
         if not u.hostname:
             raise UsageError(f"mqtt: {self._redact(text)}: no broker host")
+        if "#" in text or "+" in unquote(u.path):
+            # urlsplit reads '#' as the start of a fragment: '/x/#' would publish under 'x/'
+            raise UsageError(f"mqtt: {self._redact(text)}: a topic prefix has no wildcards (+ #): it names "
+                             f"where records are published (mqtt://{u.hostname}/stand1)")
         if u.query or u.fragment:
             raise UsageError(f"mqtt: {self._redact(text)}: no query or fragment expected")
         self.tls = u.scheme == "mqtts"

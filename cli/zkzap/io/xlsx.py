@@ -1,0 +1,197 @@
+"""Excel workbooks of a logging session (``-o run.xlsx``; the optional ``xlsx`` extra: openpyxl).
+
+A workbook has three sheets: ``records`` (one row per record, the columns of the CSV, a units
+row under the header), ``steps`` (the per-step averages of ``zk profile``, with units) and
+``summary`` (the run's summary: one row per figure, the limits as a table). Numbers are
+numbers, booleans booleans, ``time`` a date-time (UTC), lists ``;``-joined text. More records
+than a sheet holds (1 048 576 rows) continue on ``records 2``, ``records 3``...
+
+openpyxl's write-only mode streams the rows to a temporary file, so memory stays flat whatever
+the run's length; the workbook is assembled when the session ends and renamed over ``-o FILE``
+whole (a zip has no end to append to: ``--append`` is refused, and a run that fails to start
+leaves an existing file as it was). Ctrl-C and SIGTERM end the session first, so the workbook
+is written; a process killed with SIGKILL leaves none (use ``--raw-log`` or CSV beside it when
+that matters).
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+
+from ..errors import OutputError, UsageError
+
+#: The extra that provides openpyxl.
+EXTRA = "xlsx"
+#: Rows of a sheet (Excel's limit).
+MAX_ROWS = 1_048_576
+#: Units of the columns that are not status fields (status fields take theirs from the tables).
+UNITS = {
+    "time": "UTC", "t": "s", "step_start_s": "s", "step_end_s": "s", "window_start_s": "s", "window_end_s": "s",
+    "tsfc_g_kn_s": "g/(kN·s)", "tsfc_kg_kgf_h": "kg/(kgf·h)", "target_throttle_pct": "%", "target_rpm": "rpm",
+    "duration_s": "s", "schedule_s": "s", "running_s": "s", "fuel_used_l": "L", "fuel_total_l": "L",
+    "max_rpm": "rpm", "max_egt_c": "°C", "fuel_density_kg_l": "kg/L", "gap_s": "s", "since_t": "s",
+}
+
+
+def require():
+    """Refuse (exit 2) without openpyxl, naming the extra."""
+    from .bridges import require_extra
+
+    require_extra("openpyxl", EXTRA, "format xlsx")
+
+
+def unit_of(column) -> str:
+    """The unit of a record, step or summary column: from the protocol tables, or from
+    :data:`UNITS`; a step's ``X_mean``/``X_min``/``X_max`` has the unit of X."""
+    if column in UNITS:
+        return UNITS[column]
+    units = _status_units()
+    if column in units:
+        return units[column]
+    for tail in ("_mean", "_min", "_max"):
+        if column.endswith(tail):
+            return unit_of(column[: -len(tail)])
+    if column.startswith("tsfc_corrected_"):
+        return unit_of("tsfc_" + column[len("tsfc_corrected_"):])
+    for suffix, unit in (("_kg", "kgf"), ("_l_min", "L/min"), ("_hpa", "hPa"), ("_c", "°C"), ("_pct", "%"),
+                         ("_s", "s"), ("_n", "N")):
+        if column.endswith(suffix):
+            return unit
+    if column.startswith("rpm"):
+        return "rpm"
+    return ""
+
+
+_UNITS = None
+
+
+def _status_units():
+    global _UNITS
+    if _UNITS is None:
+        from ..codec import zk
+
+        _UNITS = {}
+        for s in zk.STATUS:
+            for f in s.layout.fields:
+                if f.unit:
+                    _UNITS.setdefault(f.key, f.unit)
+    return _UNITS
+
+
+def cell(value, column=None):
+    """A value as a workbook cell: numbers and booleans as they are, ``time`` as a date-time,
+    lists ``;``-joined, dicts ``key=value``, anything else as text."""
+    if value is None or isinstance(value, (bool, int, float)):
+        if isinstance(value, float) and value != value:
+            return None
+        return value
+    if column == "time" and isinstance(value, str):
+        try:
+            return datetime.datetime.strptime(value.rstrip("Z"), "%Y-%m-%dT%H:%M:%S.%f")
+        except ValueError:
+            return value
+    from .writers import csv_cell
+
+    return csv_cell(value)
+
+
+class XlsxWriter:
+    """Records into a workbook saved as ``path`` at :meth:`close` (see the module's text).
+
+    :meth:`sheets` gives the steps (``columns``, ``rows``) and the summary (a dict) before the
+    close; without them those sheets say so."""
+
+    def __init__(self, path, columns):
+        from openpyxl import Workbook
+
+        self.path = path
+        self.columns = list(columns)
+        self.book = Workbook(write_only=True)
+        self._sheet = None
+        self._n = 0
+        self._rows = 0
+        self._steps = None
+        self._summary = None
+        self._new_sheet()
+
+    def _new_sheet(self):
+        self._n += 1
+        self._sheet = self.book.create_sheet("records" if self._n == 1 else f"records {self._n}")
+        self._sheet.append(self.columns)
+        self._sheet.append([unit_of(c) for c in self.columns])
+        self._rows = 2
+
+    def write(self, rec) -> None:
+        if self._rows >= MAX_ROWS:
+            self._new_sheet()
+        self._sheet.append([cell(rec.get(c), c) for c in self.columns])
+        self._rows += 1
+
+    def sheets(self, steps=None, summary=None) -> None:
+        """The steps (``(columns, rows)``) and the summary of the run, written at the close."""
+        self._steps = steps
+        self._summary = summary
+
+    def close(self) -> None:
+        if self.book is None:
+            return
+        book, self.book = self.book, None
+        steps = book.create_sheet("steps")
+        if self._steps:
+            cols, rows = self._steps
+            steps.append(list(cols))
+            steps.append([unit_of(c) for c in cols])
+            for r in rows:
+                steps.append([cell(r.get(c), c) for c in cols])
+        else:
+            steps.append(["no steps (zk profile --settle/--average/--steps-csv averages each step)"])
+        summary = book.create_sheet("summary")
+        _summary_rows(summary, self._summary)
+        tmp = f"{self.path}.tmp{os.getpid()}"
+        try:
+            book.save(tmp)
+            os.replace(tmp, self.path)
+        except OSError as e:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise OutputError(f"output: cannot write {self.path}: {e.strerror or e}") from None
+
+
+def _summary_rows(sheet, summary):
+    sheet.append(["figure", "value", "unit"])
+    if not summary:
+        sheet.append(["no summary"])
+        return
+    tables = []
+    for key, value in summary.items():
+        if key == "steps":
+            continue                           # the steps sheet
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            tables.append((key, value))
+            continue
+        if isinstance(value, dict):
+            for k, v in value.items():
+                sheet.append([f"{key}.{k}", cell(v) if not isinstance(v, dict) else cell(str(v)), unit_of(k)])
+            continue
+        if key == "states" and isinstance(value, list):
+            value = " > ".join(value)
+        sheet.append([key, cell(value), unit_of(key)])
+    for key, rows in tables:
+        sheet.append([])
+        cols = list(dict.fromkeys(k for r in rows for k in r))
+        sheet.append([f"{key}:"])
+        sheet.append(cols)
+        for r in rows:
+            sheet.append([cell(r.get(c), c) for c in cols])
+
+
+def check(output, append) -> None:
+    """Refuse what a workbook cannot do, before anything is opened."""
+    require()
+    if append:
+        raise UsageError("append: a workbook cannot be appended to; give a new -o FILE.xlsx")
+    if not output or output == "-":
+        raise UsageError("format xlsx: a workbook needs a file; give -o FILE.xlsx")

@@ -1,0 +1,109 @@
+"""Standard-day corrections against hand-computed values, sensor quantities and units, the
+three line shapes of an external sensor, and the ESR answer's rate."""
+
+from __future__ import annotations
+
+import pytest
+
+from zkzap.api import ambient as A
+from zkzap.api.aux import LineParser, field_name
+from zkzap.api.esr import PressureAnswer
+from zkzap.api.schedule import Schedule
+from zkzap.api.steady import StepAverager
+from zkzap.errors import UsageError
+
+
+def test_corrections_worked_example():
+    # 1000 hPa, 30 °C: delta = 1000/1013.25 = 0.986923, theta = 303.15/288.15 = 1.052056, sqrt 1.025698
+    assert A.delta(1000) == pytest.approx(0.986923, abs=1e-6) and A.theta(30) == pytest.approx(1.052056, abs=1e-6)
+    c = A.corrected(1000, 30, thrust=10.0, rpm=100000, flow=0.5)
+    assert c["thrust"] == pytest.approx(10.1325, abs=1e-4)            # 10 / 0.986923
+    assert c["rpm"] == pytest.approx(97494.6, abs=0.1)                 # 100000 / 1.025698
+    assert c["flow"] == pytest.approx(0.493932, abs=1e-6)              # 0.5 / (0.986923 * 1.025698)
+    assert A.corrected(None, 30, thrust=10.0, rpm=1.0)["thrust"] is None
+    assert A.corrected(1013.25, 15, thrust=7.0, rpm=5.0, flow=0.2) == {"thrust": 7.0, "rpm": 5.0, "flow": 0.2}
+
+
+def test_step_with_sensor_thrust_and_corrections_matches_the_hand_calculation():
+    sched = Schedule.parse("0,50\n10,50,standby\n", name="s")
+    temp, press = A.Quantity.parse("30", "temperature", "ambient-temp"), None        # pressure: the ECU's
+    avg = StepAverager(sched.steps(), settle=2, average=None, thrust=A.Quantity.parse("load_n", "thrust", "t"),
+                       ambient=(temp, press))
+    for i in range(100):
+        t = i * 0.1
+        avg.feed(t, {"id": 1, "rpm": 100000, "engine_state_name": "running"})
+        avg.feed(t, {"id": 3, "rpm": 100000, "pressure_pa": 100000})              # 1000 hPa
+        avg.feed(t, {"id": 4, "rpm": 100000, "thrust_kg": 9.8})                    # the ECU's 0.1 kg reading
+        avg.feed(t, {"id": 7, "rpm": 100000, "fuel_flow_l_min": 0.5})
+        avg.feed_aux(t, {"load_n": 98.0665})                                       # 10 kgf on the load cell
+    (row,) = avg.rows()
+    assert row["thrust_kg_mean"] == 9.8 and row["thrust_from"] == "load_n" and row["thrust_from_kg_mean"] == 10.0
+    # TSFC from the load cell: 0.5 L/min x 0.8 kg/L = 6.6667 g/s over 98.0665 N -> 67.98 g/(kN*s)
+    assert (row["tsfc_g_kn_s"], row["tsfc_kg_kgf_h"]) == (67.98, 2.4)
+    assert (row["ambient_temp_c"], row["ambient_pressure_hpa"], row["delta"], row["theta"]) == \
+        (30, 1000, 0.98692, 1.05206)
+    assert (row["rpm_corrected"], row["thrust_corrected_kg"], row["fuel_flow_corrected_l_min"]) == \
+        (97494.6, 10.1325, 0.4939)
+    assert row["tsfc_corrected_g_kn_s"] == 66.28                                   # 67.981 / 1.025698
+    assert list(row) == avg.columns()
+
+
+def test_a_start_up_row_is_no_step():
+    sched = Schedule.parse("0,0,run\n5,30\n10,30,standby\n12,0,standby\n", name="s")
+    avg = StepAverager(sched.steps(), settle=1, average=None)
+    for i in range(100):
+        t = i * 0.1
+        avg.feed(t, {"id": 1, "rpm": 40000, "engine_state_name": "preheat" if t < 4 else "running"})
+    rows = avg.rows()
+    assert [(r["step"], r["target"]) for r in rows] == [(1, "30 %")]
+    assert [(row.line, why) for row, _, _, why in avg.skipped] == [(1, "start-up")]
+
+
+@pytest.mark.parametrize("text,kind,raw,want", [
+    ("load_n", "thrust", 98.0665, 10.0), ("w:lbf", "thrust", 10.0, 4.5359237), ("f:mL/min", "fuel_flow", 500, 0.5),
+    ("f:kg/h", "fuel_flow", 24.0, 0.5), ("baro_pa", "pressure", 101325, 1013.25), ("p:inHg", "pressure", 29.92, 1013.21),
+    ("t:K", "temperature", 288.15, 15.0), ("t:F", "temperature", 59, 15.0),
+])
+def test_sensor_units(text, kind, raw, want):
+    assert A.Quantity.parse(text, kind, "x").convert(raw, density=0.8) == pytest.approx(want, abs=0.01)
+
+
+@pytest.mark.parametrize("text,kind,msg", [
+    ("load", "thrust", r"which unit\? write load:UNIT"), ("load:stone", "thrust", "unit 'stone'; allowed"),
+    ("12", "thrust", "give the field of an --aux sensor"), ("nan", "temperature", "not a finite number"),
+])
+def test_sensor_quantities_refused(text, kind, msg):
+    with pytest.raises(UsageError, match=msg):
+        A.Quantity.parse(text, kind, "x", constant=kind != "thrust")
+
+
+@pytest.mark.parametrize("lines,want", [
+    (["thrust_n=12.5 T-amb=21", "thrust_n=13;T-amb=21.5"], [{"thrust_n": 12.5, "t_amb": 21},
+                                                          {"thrust_n": 13, "t_amb": 21.5}]),
+    (["Thrust N;flow", "12,5;250", "1;2;3"], [{"thrust_n": "12,5", "flow": 250}]),
+    (['{"rpm": 1, "load": 2.5}', "not json", '[1]'], [{"aux_rpm": 1, "load": 2.5}]),
+])
+def test_the_three_line_shapes(lines, want):
+    p = LineParser(taken={"rpm"})
+    assert [r for r in map(p.feed, lines) if r] == want
+
+
+def test_a_csv_without_header_and_names():
+    with pytest.raises(UsageError, match="starts with its header"):
+        LineParser(set()).feed("1.5,2.5")
+    assert field_name("9 load", {"t"}) == "_9_load" and field_name("t", {"t"}) == "aux_t"
+
+
+def test_esr_is_answered_at_once_then_at_most_once_a_second():
+    said = []
+    ans = PressureAnswer(lambda t: 1007.6 if t >= 0.3 else None, "--air-pressure", notify=said.append)
+    sent = [t for t in (0.0, 0.25, 0.5, 0.75, 1.0, 1.3, 1.45, 2.0)
+            if ans.on_frame(t, {"id": 8, "esr": 1}) is not None]
+    assert ans.on_frame(3.0, {"id": 8, "esr": 0}) is None and ans.on_frame(3.0, {"id": 3, "esr": 1}) is None
+    assert sent == [0.5, 1.45] and ans.sent[0] == (0.5, 1008, "FF 83 F0 0E") and ans.asked == 8
+    assert "no value from --air-pressure yet" in said[0] and "answering 1008 hPa" in said[1]
+    big = PressureAnswer(lambda t: 1030, "x", notify=said.append)
+    from zkzap.codec import zk
+
+    assert big.on_frame(0, {"id": 8, "esr": 1}) == zk.encode_control("pressure", pressure_hpa=1023)[0]
+    assert big.sent[0][1] == 1023 and "does not fit control ID 8" in said[2]

@@ -1,0 +1,47 @@
+"""-o run.xlsx: a workbook with the records (a units row under the header, numbers as numbers,
+time as a date-time), the steps and the summary of a profile run on the simulator."""
+
+from __future__ import annotations
+
+import datetime
+
+import pytest
+
+openpyxl = pytest.importorskip("openpyxl")
+
+
+def test_profile_workbook_has_records_steps_and_summary(cli, tmp_path):
+    sched = tmp_path / "s.csv"
+    sched.write_text("0,0,run\n16,40\n22,0,standby\n24,0,standby\n")       # model seconds
+    book = tmp_path / "run.xlsx"
+    r = cli("zk", "profile", str(sched), "-p", "sim://zk?speed=20", "-o", str(book), "--settle", "2",
+            "--limit", "egt_c<=900")
+    assert r.exit_code == 0, r
+    wb = openpyxl.load_workbook(book)
+    assert wb.sheetnames == ["records", "steps", "summary"]
+    rows = list(wb["records"].iter_rows(values_only=True))
+    header, units, first = rows[0], rows[1], rows[2]
+    col = {k: i for i, k in enumerate(header)}
+    assert units[col["t"]] == "s" and units[col["egt_c"]] == "°C" and units[col["thrust_kg"]] == "kg"
+    assert isinstance(first[col["time"]], datetime.datetime) and isinstance(first[col["t"]], float)
+    assert isinstance(first[col["rpm"]], int) and isinstance(first[col["stale"]], bool)
+    assert "limit" in col and len(rows) > 100                                # snapshot rows, as in CSV
+    assert max(row[col["rpm"]] for row in rows[2:]) > 80000
+    steps = list(wb["steps"].iter_rows(values_only=True))
+    from zkzap.api.steady import columns
+
+    assert list(steps[0]) == columns() and steps[1][columns().index("tsfc_g_kn_s")] == "g/(kN·s)"
+    assert any(isinstance(row[columns().index("rpm_mean")], float) for row in steps[2:])
+    summary = {row[0]: row[1] for row in wb["summary"].iter_rows(values_only=True) if row and row[0]}
+    assert summary["outcome"] == "duration" and summary["frames"] > 100 and "limits:" in summary
+
+
+def test_monitor_workbook_and_a_failed_start_leaves_the_old_file(cli, tmp_path):
+    book = tmp_path / "m.xlsx"
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=20", "--count", "12", "-o", str(book))
+    assert r.exit_code == 0, r
+    wb = openpyxl.load_workbook(book)
+    assert wb["records"].max_row == 2 + 12 and wb["summary"]["A2"].value == "command"
+    before = book.read_bytes()
+    r = cli("zk", "monitor", "-p", "sim://zk?silent_after=0", "--timeout", "0.1", "-o", str(book))
+    assert r.exit_code == 3 and book.read_bytes() == before
