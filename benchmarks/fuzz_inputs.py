@@ -122,6 +122,9 @@ def make_seeds(d: str) -> dict:
     seeds["zap-batch.txt"] = (b"# new actuators on the bench\nstore goal-speed 600 --id 1\nmove 2000 --id 1 --wait\n"
                               b"load present-voltage --id 1 --physical\necho --id 2 --count 3\n"
                               b"sync-move 1:1000 2:2000\nraw load 8C 02 --id 1\n")
+    seeds["aux-pairs.txt"] = b"".join(f"thrust_n={i * 1.5:.1f} t_c=21.{i % 10} p_hpa=1013\n".encode() for i in range(40))
+    seeds["aux.csv"] = b"thrust_n;flow_ml_min;name\n" + b"".join(f"{i}.5;{250 + i};cell\n".encode() for i in range(40))
+    seeds["aux.jsonl"] = b"".join(f'{{"thrust_n": {i}.25, "rpm": {i}, "ok": true}}\n'.encode() for i in range(40))
     seeds["zk-batch.txt"] = (b"send keepalive\nsend control --state stop\nmonitor --count 20 --ids 1\n"
                              b"send action rate-50hz\nsend rpm 99990 --rpm-factor 3\n")
     # a ZK session: telemetry in every text format, its raw log and its capture
@@ -221,6 +224,16 @@ def _sim_zap_replay(path):
     recorded_replies(path)
 
 
+def _aux_lines(path):
+    from zkzap.api.aux import MAX_LINE, LineParser
+
+    parser = LineParser(frozenset({"rpm", "t"}))
+    with open(path, "rb") as f:
+        for line in iter(lambda: f.readline(MAX_LINE), b""):       # as the reader thread cuts them
+            parser.feed(line.decode("utf-8", "replace"))
+    parser.fields()
+
+
 def _setup_state(path):
     from zkzap.api.fleet import SetupState
 
@@ -264,6 +277,8 @@ def kinds(seeds: dict, d: str) -> list:
         Kind("fleet-yaml", ["fleet.yaml"], "fleet.yaml", cli("zap", "diff", "{}", fleet_ref), (0, 1, 2), needs="yaml"),
         Kind("fleet-stdin", ["fleet.json"], "-", cli("zap", "diff", "-", fleet_ref, stdin=True), (0, 1, 2)),
         Kind("setup-state", ["setup.json"], "setup.json", _api(_setup_state)),
+        # the lines an --aux sensor sends (a reader thread parses them; a refusal names the source there)
+        Kind("aux-lines", ["aux-pairs.txt", "aux.csv", "aux.jsonl"], "aux.txt", _api(_aux_lines), named=False),
         Kind("sim-state", ["bus.json"], "bus.json", _api(_sim_state, (ValueError,))),   # the simulator's refusal
         Kind("schedule", ["profile.csv", "rpm.csv"], "stand.csv", cli("zk", "profile", "{}", "-n")),
         Kind("limits", ["engine.limits"], "engine.limits",
@@ -289,6 +304,7 @@ def kinds(seeds: dict, d: str) -> list:
         Kind("hex-zap", ["zap.xxd"], "-", cli("zap", "decode", "-", stdin=True)),
         Kind("hex-crc", ["zk.hex"], "-", cli("crc", "zk", "-", stdin=True)),
         Kind("report-run", ["tel.csv", "tel.jsonl", "tel.json", "raw.bin"], "run.txt", report("run")),
+        Kind("report-stdin", ["tel.csv", "tel.jsonl", "raw.bin"], "-", cli("zk", "report", "-", "--terminal", stdin=True)),
         Kind("report-steps", ["steps.csv"], "steps.csv", report("steps")),
         Kind("report-summary", ["summary.json"], "summary.json", report("summary")),
         Kind("report-svg", ["tel.csv", "tel.json"], "run.txt", report_svg, weight=0.05, needs="matplotlib"),

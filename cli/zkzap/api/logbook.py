@@ -110,6 +110,8 @@ def connect(path, *, create=True):
         raise UsageError(f"logbook: {path}: no such file")
     try:
         db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+        # text a damaged file holds reads with replacement characters instead of failing the listing
+        db.text_factory = lambda b: b.decode("utf-8", "replace")
         db.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
         if create:
             db.execute("PRAGMA journal_mode = WAL")
@@ -123,8 +125,11 @@ def connect(path, *, create=True):
                 db.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
         if not create:
             db.execute(SERVICES)
-    except sqlite3.DatabaseError as e:
-        what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as e:
+        if isinstance(e, UnicodeDecodeError):       # sqlite's own message quotes a damaged schema
+            what = "a damaged database (its schema is not text)"
+        else:
+            what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
         raise (OutputError if create else UsageError)(f"logbook: {path}: {what}") from None
     return db
 
@@ -183,7 +188,7 @@ def runs(path) -> list:
         for values in cur:
             out.append(_run(path, dict(zip(COLUMNS, values))))
         return out
-    except sqlite3.DatabaseError as e:
+    except (sqlite3.DatabaseError, ValueError) as e:      # a damaged file: its pages, its encoding
         raise UsageError(f"logbook: {path}: {e}") from None
     finally:
         db.close()

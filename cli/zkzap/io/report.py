@@ -948,8 +948,9 @@ def terminal(runs, console, width=None, height=6):
             if c is None:
                 continue
             t = run.t
-            t0 = t[0] if len(t) else 0.0
-            t_end = t[-1] if len(t) else 0.0
+            # a file appended to by two runs starts its t again: the panel spans every t it holds
+            t0 = min(t) if len(t) else 0.0
+            t_end = max(t) if len(t) else 0.0
             span = (t_end - t0) or 1.0
             col = [math.nan] * width
             s = run.series[c]
