@@ -473,7 +473,8 @@ def _worker(conn, seeds, d, table):
         except BaseException:  # noqa: BLE001 - what escapes is the finding
             exc = traceback.format_exc(limit=-8)
         err = err if len(err) <= 4000 else err[:2000] + err[-2000:]
-        conn.send((index, name, code, len(out), err, exc, time.process_time() - t0, peak.grew(), _maxrss_mib()))
+        grew = peak.grew()
+        conn.send((index, name, code, len(out), err, exc, time.process_time() - t0, grew, (peak.rss or 0.0) + grew))
         for f in os.listdir(work):
             p = os.path.join(work, f)
             if os.path.isdir(p):
@@ -555,14 +556,15 @@ def run(seed=1, count=3000, jobs=None, only=(), timeout=60.0, memory_mib=64.0, o
         unknown = set(only) - {k.name for k in every}
         if unknown:
             raise SystemExit(f"unknown kind(s): {', '.join(sorted(unknown))}")
-        work = []
-        for k in table:
-            krng = random.Random(f"{seed}:{k.name}")     # the same cases whichever kinds run
-            n = max(1, int(count * k.weight))
-            work += [(k.name, data) for data in cases(k, seeds, krng, n)]
+        def work():                     # made as they are handed out: the cases are never all in memory
+            for k in table:
+                krng = random.Random(f"{seed}:{k.name}")     # the same cases whichever kinds run
+                for data in cases(k, seeds, krng, max(1, int(count * k.weight))):
+                    yield k.name, data
+
         by_name = {k.name: k for k in table}
         tallies = {k.name: Tally() for k in table}
-        _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib)
+        _dispatch(work(), by_name, tallies, seeds, d, jobs, timeout, memory_mib)
         _report(tallies, out)
         if keep:
             _keep(tallies, keep)
@@ -589,11 +591,10 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
             self.deadline = None
             self.done = 0
 
-        def give(self, index):
-            name, data = work[index]
-            self.case = index
+        def give(self, case):
+            self.case = case
             self.deadline = time.monotonic() + timeout
-            self.conn.send((index, name, data))
+            self.conn.send((0, *case))
 
         def stop(self, kill=False):
             if kill:
@@ -606,12 +607,15 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
             self.proc.join(10)
             self.conn.close()
 
-    pending = list(range(len(work)))
-    pending.reverse()
-    workers = [W() for _ in range(min(jobs, len(work)) or 1)]
+    first = next(work, None)
+    if first is None:
+        return
+    workers = [W() for _ in range(max(1, jobs))]
+    pending = [first]
     for w in workers:
-        if pending:
-            w.give(pending.pop())
+        case = pending.pop() if pending else next(work, None)
+        if case is not None:
+            w.give(case)
     while any(w.case is not None for w in workers):
         busy = [w for w in workers if w.case is not None]
         left = max(0.0, min(w.deadline for w in busy) - time.monotonic())
@@ -619,14 +623,14 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
         for w in list(workers):
             if w.case is None:
                 continue
-            name, data = work[w.case]
+            name, data = w.case
             kind = by_name[name]
             replace = False
             if w.conn in ready:
                 try:
                     result = w.conn.recv()
                 except EOFError:           # the worker died (a crash of the interpreter itself)
-                    result = (w.case, name, None, 0, "", f"the worker died (exit {w.proc.exitcode})", 0.0, 0.0, 0.0)
+                    result = (0, name, None, 0, "", f"the worker died (exit {w.proc.exitcode})", 0.0, 0.0, 0.0)
                     replace = True
                 found = judge(kind, result, data)
                 if result[7] > memory_mib:
@@ -634,7 +638,7 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
                     replace = True          # its peak no longer measures the next cases
                 tallies[name].add(kind, result, data, found)
             elif time.monotonic() >= w.deadline:
-                result = (w.case, name, None, 0, "", None, timeout, 0.0, 0.0)
+                result = (0, name, None, 0, "", None, timeout, 0.0, 0.0)
                 tallies[name].add(kind, result, data, [("hang", f"no answer within {timeout:g} s")])
                 replace = True
             else:
@@ -645,8 +649,9 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
                 workers[workers.index(w)] = w = W()
             else:
                 w.case = None
-            if pending:
-                w.give(pending.pop())
+            case = next(work, None)
+            if case is not None:
+                w.give(case)
             else:
                 w.case = None
     for w in workers:
@@ -664,7 +669,7 @@ def _report(tallies, out):
         print(f"  {name:<16} {t.cases:>6}  {codes:<34} {len(t.findings):>8} {t.max_grew:>12.1f} {t.slowest:>9.2f}",
               file=out)
     peak = max((t.peak for t in tallies.values()), default=0.0)
-    print(f"  peak RSS of a worker: {peak:.0f} MiB", file=out)
+    print(f"  peak resident memory of a worker during a case: {peak:.0f} MiB", file=out)
     shown = {}
     for t in tallies.values():
         for f in t.findings:

@@ -28,7 +28,8 @@ class Bad:
 
 
 CRC = [
-    Bad("crc zk", "hex input: no bytes given", input=""),
+    Bad("crc zk", "stdin: no bytes given", input=""),
+    Bad("crc zk -", "stdin: no bytes given", input="# only a comment\n"),
     Bad("crc zk 1", "hex input: '1' has an odd number of hex digits"),
     Bad("crc zk 14 6", "hex input: '6' has an odd number of hex digits"),
     Bad("crc zk XY", "hex input: 'XY' is not hex"),
