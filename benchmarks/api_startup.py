@@ -15,6 +15,8 @@ import statistics
 import subprocess
 import sys
 import time
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 TARGET = 1.2
 
@@ -31,6 +33,7 @@ def main(argv=None):
     ap.add_argument("--warmup", type=int, default=3)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-fail", action="store_true")
+    add_quick(ap, runs=2, warmup=0, no_fail=True)
     args = ap.parse_args(argv)
     env = dict(os.environ)
     for var in ("PYTHONDONTWRITEBYTECODE", "PYTHONPROFILEIMPORTTIME", "PYTHONDEVMODE", "PYTHONTRACEMALLOC"):

@@ -26,6 +26,8 @@ import subprocess
 import sys
 import tempfile
 import time
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick, until_ready  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
@@ -46,6 +48,9 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of API loop and batch (medians)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-fail", action="store_true")
+    ap.add_argument("--timeout", type=float, default=None,
+                    help="reply timeout in seconds (default: derived from the baud rate)")
+    add_quick(ap, count=20, commands=2, rounds=1, no_fail=True, timeout=1.0)
     args = ap.parse_args(argv)
 
     from zkzap import Bus
@@ -60,16 +65,17 @@ def main(argv=None):
     with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as f:
         f.write("load present-position --id 1\n" * args.count)
     apis, batches = [], []
+    timeout = ["--timeout", str(args.timeout)] if args.timeout is not None else []
     try:
         for _ in range(args.rounds):            # interleaved: both see the same machine load
-            with Bus(port, baud=args.baud) as bus:
-                bus.load(1, "present-position")
+            with Bus(port, baud=args.baud, timeout=args.timeout) as bus:
+                until_ready(lambda: bus.load(1, "present-position"))      # warm up, once it answers
                 t0 = time.perf_counter()
                 for _ in range(args.count):
                     bus.load(1, "present-position")
                 apis.append(args.count / (time.perf_counter() - t0))
             t0 = time.perf_counter()
-            p = subprocess.run(tool("zap") + ["batch", f.name, "-p", port, "-b", str(args.baud)],
+            p = subprocess.run(tool("zap") + ["batch", f.name, "-p", port, "-b", str(args.baud), *timeout],
                                capture_output=True, text=True, env=env)
             took = time.perf_counter() - t0
             if p.returncode != 0 or len(p.stdout.splitlines()) != args.count:
@@ -80,7 +86,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         for _ in range(args.commands):
             subprocess.run(tool("zap") + ["load", "present-position", "--id", "1", "-p", port, "-b",
-                                          str(args.baud)], capture_output=True, check=True, env=env)
+                                          str(args.baud), *timeout], capture_output=True, check=True, env=env)
         commands = args.commands / (time.perf_counter() - t0)
     finally:
         os.unlink(f.name)

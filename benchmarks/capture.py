@@ -18,6 +18,8 @@ import subprocess
 import sys
 import tempfile
 import time
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 
 def zk_command():
@@ -83,6 +85,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=200_000)
     ap.add_argument("--repeat", type=int, default=3)
+    add_quick(ap, frames=500, repeat=1)
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as d:
         raw, cap, data = make(d, args.frames)

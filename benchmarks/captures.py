@@ -20,7 +20,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
 
 from zkzap.codec import zap, zk  # noqa: E402
 
-DATA = os.path.join(HERE, "data")
+#: Where generated captures are kept (git-ignored); ZKZAP_BENCH_DATA puts them elsewhere.
+DATA = os.environ.get("ZKZAP_BENCH_DATA") or os.path.join(HERE, "data")
 
 # (seconds, throttle %) steps of one run; rpm follows throttle with a first-order lag
 PROFILE = [(20, 0), (15, 0), (30, 20), (30, 40), (30, 60), (30, 80), (20, 100), (30, 50), (30, 0), (40, 0)]

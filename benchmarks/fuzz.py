@@ -51,6 +51,8 @@ sys.path.insert(0, HERE)
 from zkzap.codec import zap, zk  # noqa: E402
 from zkzap.codec.framing import ZapFramer, ZkFramer  # noqa: E402
 from zkzap.io.zk_lines import ZkLines  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 ZK_HEADS = bytes(range(0xF1, 0x100))
 
@@ -353,6 +355,7 @@ def framers(argv=None):
     ap.add_argument("--proto", choices=["zk", "zap", "both"], default="both")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--no-encoders", action="store_true", help="framers only (faster)")
+    add_quick(ap, count=200, jobs=1)
     args = ap.parse_args(argv)
     protos = ["zk", "zap"] if args.proto == "both" else [args.proto]
     failed = False

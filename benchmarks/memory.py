@@ -21,6 +21,7 @@ sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
 from zk_decode import zk_command  # noqa: E402
+from common import add_quick  # noqa: E402
 
 PROBE = r"""
 import resource, subprocess, sys
@@ -43,6 +44,7 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=1_000_000)
     ap.add_argument("--factor", type=int, default=10)
     ap.add_argument("--formats", default="jsonl,csv")
+    add_quick(ap, frames=2000, factor=2)
     args = ap.parse_args(argv)
     small = captures.zk_capture(args.frames, "engine")
     large = captures.zk_capture(args.frames * args.factor, "engine")

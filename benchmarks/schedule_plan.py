@@ -22,6 +22,8 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli"))
 
 from zkzap.api.schedule import Schedule  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 TARGET = 2.0
 
@@ -48,6 +50,7 @@ def main(argv=None):
     ap.add_argument("--rate", type=float, default=200.0)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-fail", action="store_true")
+    add_quick(ap, runs=1, no_fail=True)
     a = ap.parse_args(argv)
     out = {}
     for interpolate in ("step", "linear"):

@@ -24,6 +24,8 @@ import statistics
 import subprocess
 import sys
 import time
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick  # noqa: E402
 
 TARGETS = {"dry-run": 1.15, "help": 1.3}
 
@@ -62,6 +64,7 @@ def main(argv=None):
     ap.add_argument("--zkzap", help="path of the zkzap script (default: beside this Python, else PATH)")
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of a report")
     ap.add_argument("--no-fail", action="store_true", help="exit 0 even when a target is missed")
+    add_quick(ap, runs=2, warmup=0, no_fail=True)
     args = ap.parse_args(argv)
 
     exe = find_zkzap(args.zkzap)

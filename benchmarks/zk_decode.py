@@ -29,7 +29,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 import captures  # noqa: E402
-
+from common import add_quick  # noqa: E402
 
 def zk_command():
     exe = os.path.join(os.path.dirname(sys.executable), "zk")
@@ -85,6 +85,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--captures", default="engine,distinct", help="engine, distinct or both (comma-separated)")
     ap.add_argument("--formats", default="jsonl,csv")
+    add_quick(ap, frames=500, repeat=1)
     args = ap.parse_args(argv)
     n = args.frames
     print(f"zk decode --binary vs the floor: {n:,} status frames, best of {args.repeat}")

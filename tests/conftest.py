@@ -17,6 +17,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from zkzap.commands import root, run  # noqa: E402
 
+#: ``pytester``: tests of zkzap's pytest plugin run pytest on a test file of their own.
+pytest_plugins = ("pytester",)
+
 #: Variables that change zkzap's behaviour or its output's look: none of the developer's (or
 #: CI's) values may reach a test. A test that wants one sets it itself.
 LEAKY = ("NO_COLOR", "FORCE_COLOR", "COLUMNS", "LINES", "TERM_PROGRAM", "CLICOLOR", "CLICOLOR_FORCE")

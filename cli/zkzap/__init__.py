@@ -12,43 +12,87 @@ The public API (imported lazily: ``from zkzap import Bus`` loads neither click n
 - :mod:`zkzap.sim`: the simulators, started from Python (:func:`zkzap.sim.start_zk`,
   :func:`zkzap.sim.start_zap`), and the pytest fixtures ``zk_sim``/``zap_sim``;
 - :mod:`zkzap.errors`: one exception hierarchy with exit codes (:class:`ZkzapError`,
-  :class:`NoReply`, ...).
+  :class:`NoReply`, ...); every error zkzap raises for bad input or a device is one, and each
+  is importable from here.
 """
 
 __version__ = "0.1.0"
 
+#: The public names and the modules they are imported from on first use. Type checkers see the
+#: same names through the imports below (a test keeps the two lists equal).
 _LAZY = {
     "Ecu": "zkzap.api.zk",
     "Status": "zkzap.api.zk",
+    "ProfileResult": "zkzap.api.zk",
     "Bus": "zkzap.api.zap",
     "Actuator": "zkzap.api.zap",
     "Reading": "zkzap.api.zap",
     "ZkzapError": "zkzap.errors",
     "UsageError": "zkzap.errors",
+    "InvalidValue": "zkzap.errors",
+    "MissingExtra": "zkzap.errors",
     "CheckFailed": "zkzap.errors",
     "NoReply": "zkzap.errors",
     "PortError": "zkzap.errors",
     "DeviceError": "zkzap.errors",
     "BadReply": "zkzap.errors",
     "OutputError": "zkzap.errors",
+    "Interrupted": "zkzap.errors",
+    "FieldValueError": "zkzap.codec.fields",
+    "HexError": "zkzap.codec.hexfmt",
+    "FrameError": "zkzap.codec.zk",
+    "CrcError": "zkzap.codec.zk",
+    "PacketError": "zkzap.codec.zap",
+    "ChecksumError": "zkzap.codec.zap",
+    "ExpressionError": "zkzap.api.expr",
+    "LimitViolation": "zkzap.api.limits",
+    "EcuLimitError": "zkzap.api.prestart",
+    "ScheduleError": "zkzap.api.schedule",
+    "ScheduleTargetError": "zkzap.api.schedule",
+    "DocumentError": "zkzap.api.fleet",
+    "NotFound": "zkzap.api.fleet",
+    "TwoAnswer": "zkzap.api.fleet",
+    "CaptureError": "zkzap.link.pcapng",
+    "NoActuator": "zkzap.sim.zap_actuators",
+    "PtyUnsupported": "zkzap.sim.serve",
 }
 
 __all__ = ["__version__", *_LAZY]
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time, imported on first use
+    from .api.expr import ExpressionError as ExpressionError
+    from .api.fleet import DocumentError as DocumentError, NotFound as NotFound, TwoAnswer as TwoAnswer
+    from .api.limits import LimitViolation as LimitViolation
+    from .api.prestart import EcuLimitError as EcuLimitError
+    from .api.schedule import ScheduleError as ScheduleError, ScheduleTargetError as ScheduleTargetError
+    from .api.zap import Actuator as Actuator, Bus as Bus, Reading as Reading
+    from .api.zk import Ecu as Ecu, ProfileResult as ProfileResult, Status as Status
+    from .codec.fields import FieldValueError as FieldValueError
+    from .codec.hexfmt import HexError as HexError
+    from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
+    from .codec.zk import CrcError as CrcError, FrameError as FrameError
+    from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
+                         Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
+                         NoReply as NoReply, OutputError as OutputError, PortError as PortError,
+                         UsageError as UsageError, ZkzapError as ZkzapError)
+    from .link.pcapng import CaptureError as CaptureError
+    from .sim.serve import PtyUnsupported as PtyUnsupported
+    from .sim.zap_actuators import NoActuator as NoActuator
+else:
+    def __getattr__(name: str) -> object:
+        module = _LAZY.get(name)
+        if module is None:
+            raise AttributeError(f"module 'zkzap' has no attribute {name!r}")
+        import importlib
 
-def __getattr__(name):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'zkzap' has no attribute {name!r}")
-    import importlib
+        value = getattr(importlib.import_module(module), name)
+        globals()[name] = value
+        return value
 
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+    def __dir__() -> list:
+        return sorted(set(globals()) | set(_LAZY))
 
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
 
 def _program_start():
     # Run as one of the programs (zk, zap, zkzap, python -m zkzap), SIGINT and SIGTERM are

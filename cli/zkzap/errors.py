@@ -1,6 +1,28 @@
-"""Exit codes and the errors that carry them. Stable: scripts branch on these numbers."""
+"""Exit codes and the errors that carry them. Stable: scripts branch on these numbers.
+
+Every error zkzap raises for bad input or for what a device did is a :class:`ZkzapError`:
+
+- :class:`UsageError` (exit 2): bad usage or input; nothing was sent.
+
+  - :class:`InvalidValue` (also a ``ValueError``): a value outside its range or grid, an
+    unknown name (with the closest names: :func:`did_you_mean`), malformed text. The codec's
+    :class:`~zkzap.codec.fields.FieldValueError` and :class:`~zkzap.codec.hexfmt.HexError`
+    are InvalidValue errors.
+
+- :class:`CheckFailed` (1), :class:`NoReply` (3), :class:`PortError` (4),
+  :class:`DeviceError` (5), :class:`BadReply` (6), :class:`OutputError` (7),
+  :class:`Interrupted` (130/143).
+- The codec's frame errors (:class:`~zkzap.codec.zk.FrameError`,
+  :class:`~zkzap.codec.zap.PacketError`; exit 2) are ZkzapErrors and ValueErrors; their CRC
+  and checksum mismatches (:class:`~zkzap.codec.zk.CrcError`,
+  :class:`~zkzap.codec.zap.ChecksumError`) are also :class:`CheckFailed` (exit 1).
+"""
 
 from __future__ import annotations
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Iterable, Mapping, Optional
 
 OK = 0
 #: A check failed: CRC/checksum mismatch (``crc --check``, an explicit bad frame), read-back mismatch.
@@ -43,15 +65,20 @@ class ZkzapError(Exception):
     """
 
     #: The exit status the command line exits with for this error.
-    code = USAGE
+    code: int = USAGE
+    #: The facts given as keyword arguments (each also an attribute).
+    facts: dict[str, Any]
 
-    def __init__(self, message, code=None, **facts):
+    def __init__(self, message: object, code: Optional[int] = None, **facts: Any) -> None:
         super().__init__(message)
         if code is not None:
             self.code = code
         self.facts = facts
         for key, value in facts.items():
             setattr(self, key, value)
+
+    if TYPE_CHECKING:  # the facts are attributes too (which ones depends on where it was raised)
+        def __getattr__(self, name: str) -> Any: ...
 
     @property
     def message(self) -> str:
@@ -69,9 +96,15 @@ class MissingExtra(UsageError):
     """An optional library that ``what`` needs is not installed: the message names the extra
     that provides it (``pip install 'zkzap[mqtt]'``)."""
 
-    def __init__(self, what, module, extra):
+    def __init__(self, what: str, module: str, extra: str) -> None:
         super().__init__(f"{what}: needs the {module} library; install it with pip install 'zkzap[{extra}]'",
                          module=module, extra=extra)
+
+
+class InvalidValue(UsageError, ValueError):
+    """A value outside what is allowed (a range, a grid, a set of names) or malformed text; the
+    message names the field and what is allowed. Also a ``ValueError``. An unknown name carries
+    ``suggestions``, the closest allowed names (:func:`did_you_mean`)."""
 
 
 class CheckFailed(ZkzapError):
@@ -117,6 +150,62 @@ class Interrupted(ZkzapError):
     code = INTERRUPTED
 
 
+def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list[str]:
+    """The names of ``choices`` closest to ``word``, best first (at most ``n``; none when nothing
+    is close). Case, ``-``/``_`` and surrounding blanks do not count; a name that contains the
+    word (``voltage`` -> ``present-voltage``) counts as close, in the order of ``choices``, those
+    that start like it first; otherwise
+    :mod:`difflib` ranks the names by similarity and only the nearly best count. The one "did you mean" of zkzap: register and field
+    names in files and on the command line, option choices, API names and keyword arguments."""
+    names = [str(c) for c in choices]
+    key = _fold(word)
+    if not key or not names:
+        return []
+    folded = {}
+    for name in names:
+        folded.setdefault(_fold(name), name)
+    if key in folded:
+        return [folded[key]]
+    import difflib
+
+    contains = [name for f, name in folded.items() if len(key) >= 3 and key in f]
+    if contains:         # in the order given (a table's), those that start like the word first
+        return sorted(contains, key=lambda name: not _fold(name).startswith(key))[:n]
+    scored = sorted(((difflib.SequenceMatcher(None, key, f).ratio(), f) for f in folded), reverse=True)
+    best = scored[0][0] if scored else 0.0
+    return [folded[f] for ratio, f in scored[:n] if ratio >= max(0.6, best - 0.1)]
+
+
+def did_you_mean(word: object, choices: Iterable[object], *, otherwise: str = "", n: int = 3) -> str:
+    """``"; did you mean speed-limit?"`` (or ``"; did you mean a, b or c?"``) for the names of
+    ``choices`` closest to ``word`` (:func:`close_names`); ``otherwise`` when none is close."""
+    close = close_names(word, choices, n=n)
+    if not close:
+        return otherwise
+    listed = close[0] if len(close) == 1 else f"{', '.join(close[:-1])} or {close[-1]}"
+    return f"; did you mean {listed}?"
+
+
+def unknown_name(what: str, word: object, choices: Iterable[object], *, noun: str = "name",
+                 otherwise: Optional[str] = None, cls: type = InvalidValue, **facts: Any) -> InvalidValue:
+    """The :class:`InvalidValue` for an unknown name: ``"WHAT: unknown NOUN 'x'; did you mean
+    y?"``,
+    with ``name``, ``suggestions`` and ``facts`` as attributes (raise it). When no name is
+    close the message ends with ``otherwise`` (default: ``"; allowed a, b, c"`` when there are
+    at most 16 choices). ``cls``: a subclass of InvalidValue to raise instead."""
+    choices = [str(c) for c in choices]
+    if otherwise is None:
+        otherwise = f"; allowed {', '.join(choices)}" if len(choices) <= 16 else ""
+    hint = did_you_mean(word, choices, otherwise=otherwise)
+    error: InvalidValue = cls(f"{what}: unknown {noun} {str(word)!r}{hint}", name=word,
+                              suggestions=close_names(word, choices), **facts)
+    return error
+
+
+def _fold(text: object) -> str:
+    return str(text).strip().lower().replace("_", "-")
+
+
 def exit_code(exc: BaseException) -> int:
     """The exit status that goes with ``exc``: its code for a :class:`ZkzapError`, 130 for
     KeyboardInterrupt, 2 for a codec value error, else 1."""
@@ -129,7 +218,7 @@ def exit_code(exc: BaseException) -> int:
     return CHECK_FAILED
 
 
-def exit_status_help(meanings=None, tail="") -> str:
+def exit_status_help(meanings: Optional[Mapping[int, str]] = None, tail: str = "") -> str:
     """'Exit status: 0 success; 1 ...' from :data:`EXIT_CODES` (for help texts).
 
     ``meanings`` maps the codes a command can exit with to what they mean for it (a command's
@@ -141,5 +230,5 @@ def exit_status_help(meanings=None, tail="") -> str:
     order.insert(order.index(INTERRUPTED) + 1, TERMINATED)
     unknown = sorted(set(meanings) - set(order))
     if unknown:
-        raise ValueError(f"exit codes {unknown} are not in the exit-code table")
+        raise InvalidValue(f"exit codes {unknown} are not in the exit-code table")
     return "Exit status: " + "; ".join(f"{c} {meanings[c]}" for c in order if c in meanings) + "." + tail

@@ -28,8 +28,14 @@ from __future__ import annotations
 
 import pytest
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any, Callable, Iterator
 
-def pytest_configure(config):
+    from .sim.launch import Simulator
+
+
+def pytest_configure(config: pytest.Config) -> None:
     """Register the ``zap_sim`` and ``zk_sim`` markers."""
     config.addinivalue_line("markers", "zap_sim(**options): options for the zap_sim fixture "
                                        "(zkzap.sim.start_zap: ids, baud, return_mode, faults, transport, replay, ...)")
@@ -37,27 +43,42 @@ def pytest_configure(config):
                                        "(zkzap.sim.start_zk: protocol_version, speed, error, transport, replay, ...)")
 
 
-def _options(request, name, defaults):
+def _options(request: pytest.FixtureRequest, name: str, start: Callable[..., Simulator],
+             defaults: dict[str, Any]) -> dict[str, Any]:
+    """The marker's options over ``defaults``, checked against ``start``'s keyword arguments: a
+    misspelt one is an :class:`~zkzap.errors.InvalidValue` naming the closest."""
+    import inspect
+
+    from .errors import InvalidValue, unknown_name
+
     marker = request.node.get_closest_marker(name)
     given = dict(marker.kwargs) if marker is not None else {}
+    if marker is not None and marker.args:
+        raise InvalidValue(f"@pytest.mark.{name}: takes keyword arguments only (like ids=[1, 2]); "
+                           f"got {', '.join(repr(a) for a in marker.args)}")
+    allowed = list(inspect.signature(start).parameters)
+    for key in given:
+        if key not in allowed:
+            raise unknown_name(f"@pytest.mark.{name}", key, allowed, noun="option",
+                               otherwise=f"; allowed {', '.join(allowed)}")
     if given.get("replay") is not None:        # a recording brings its own actuators
         defaults = {k: v for k, v in defaults.items() if k != "ids"}
     return {**defaults, **given}
 
 
 @pytest.fixture
-def zap_sim(request):
+def zap_sim(request: pytest.FixtureRequest) -> Iterator[Simulator]:
     """A running actuator-bus simulator (:class:`zkzap.sim.launch.Simulator`); open ``.url``."""
     from zkzap.sim import start_zap
 
-    with start_zap(**_options(request, "zap_sim", {"ids": (1,)})) as sim:
+    with start_zap(**_options(request, "zap_sim", start_zap, {"ids": (1,)})) as sim:
         yield sim
 
 
 @pytest.fixture
-def zk_sim(request):
+def zk_sim(request: pytest.FixtureRequest) -> Iterator[Simulator]:
     """A running ECU simulator (:class:`zkzap.sim.launch.Simulator`); open ``.url``."""
     from zkzap.sim import start_zk
 
-    with start_zk(**_options(request, "zk_sim", {"speed": 10.0})) as sim:
+    with start_zk(**_options(request, "zk_sim", start_zk, {"speed": 10.0})) as sim:
         yield sim

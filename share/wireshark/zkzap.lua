@@ -289,11 +289,15 @@ local function zk_decode(b, n)
   return out
 end
 
--- scan a ZK stream: complete frames (and CRC failures at frame boundaries)
-local function zk_scan(buf, dir)
+-- scan a ZK stream: complete frames (and CRC failures at frame boundaries). ``aligned`` says
+-- whether the stream was at a frame boundary where the previous packet's scan stopped (false
+-- after a bad frame: the bytes held back then are not reported as a second one); the scan
+-- returns it for the next packet, as zk decode's framer keeps it from one read to the next.
+local function zk_scan(buf, dir, aligned)
   local want_control = dir ~= 1
   local want_status = dir ~= 2
-  local found, i, n, aligned = {}, 1, #buf, true
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
   while i <= n do
     local h = buf[i]
     local need = nil
@@ -319,7 +323,7 @@ local function zk_scan(buf, dir)
       i = i + 1
     end
   end
-  return found, i
+  return found, i, aligned
 end
 
 local ZK_NAMES = {[0] = "keepalive"}
@@ -342,7 +346,8 @@ function zk_proto.dissector(tvb, pinfo, tree)
     local dir = direction(pinfo)
     local s = stream_of("zk", pinfo)
     local buf, start = feed(s, tvb)
-    local found, rest = zk_scan(buf, dir)
+    local found, rest, aligned = zk_scan(buf, dir, s.aligned)
+    s.aligned = aligned
     for _, fr in ipairs(found) do
       local b = frame_bytes(buf, fr.pos, fr.len)
       local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
@@ -495,8 +500,9 @@ local function zap_decode(b, n, request)
   return out
 end
 
-local function zap_scan(buf)
-  local found, i, n, aligned = {}, 1, #buf, true
+local function zap_scan(buf, aligned)          -- aligned: as zk_scan's
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
   while i <= n do
     if buf[i] == 0xFF then
       -- the header is the last three FFs of a run
@@ -530,7 +536,7 @@ local function zap_scan(buf)
       i = i + 1
     end
   end
-  return found, i
+  return found, i, aligned
 end
 
 function zap_proto.dissector(tvb, pinfo, tree)
@@ -542,7 +548,8 @@ function zap_proto.dissector(tvb, pinfo, tree)
     local dir = direction(pinfo)
     local s = stream_of("zap", pinfo)
     local buf, start = feed(s, tvb)
-    local found, rest = zap_scan(buf)
+    local found, rest, aligned = zap_scan(buf, s.aligned)
+    s.aligned = aligned
     for _, fr in ipairs(found) do
       local b = frame_bytes(buf, fr.pos, fr.len)
       b.n = fr.len

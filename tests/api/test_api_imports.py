@@ -9,7 +9,7 @@ import sys
 import pytest
 
 CLI = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "cli")
-NEVER = ("click", "rich", "serial", "typing", "zkzap.commands", "zkzap.io", "prompt_toolkit", "pdoc")
+NEVER = ("click", "rich", "serial", "typing", "zkzap.commands", "zkzap.io", "prompt_toolkit", "mkdocs", "griffe")
 
 
 @pytest.mark.parametrize("statement", ["from zkzap import Bus", "from zkzap import Ecu",

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from zkzap.api.schedule import RPM_MAX, Schedule, ScheduleError, ScheduleTargetError
 from zkzap.codec import zk
+from zkzap.codec.crc import crc8_maxim
 from zkzap.errors import UsageError
 
 
@@ -67,23 +68,26 @@ def test_rpm_rows_choose_the_finest_factor_and_leave_rpm_mode():
     assert any("rounded to 95010" in n for n in s.notes)
 
 
-class FakeEcu:
-    def __init__(self, max_rpm, version=6):
-        self.latest = {"max_rpm": max_rpm}
-        self.decoder = type("D", (), {"known": version})()
+def _six(max_rpm, version=6):
+    """A status ID 6 frame reporting ``max_rpm`` and protocol ``version``."""
+    body = bytes([0xF6, 0, 0, max_rpm // 1000, 0, version << 2])
+    return body + bytes([crc8_maxim(body)])
 
 
-def test_rpm_frames_wait_for_the_ecu_and_refuse_targets_above_its_max():
-    s = parse("0,rpm=150000\n5,rpm=150000\n").bind(FakeEcu(None))
-    assert s.frame_at(0.0) is None                            # max rpm not known yet: nothing sent
-    s.bind(FakeEcu(160000))
-    assert zk.decode_control(s.frame_at(0.0))["id"] in (6, 7)
-    s = parse("0,rpm=170000\n5,0\n").bind(FakeEcu(160000))
-    with pytest.raises(ScheduleTargetError, match=r"s.csv:1: rpm 170000 is above the ECU's max rpm 160000"):
-        s.frame_at(0.0)
-    s = parse("0,rpm=90000\n5,0\n").bind(FakeEcu(160000, version=3))
-    with pytest.raises(ScheduleTargetError, match="protocol version 4"):
-        s.frame_at(0.0)
+def test_the_schedule_plan_is_checked_against_the_ecu_before_any_frame():
+    from zkzap.api.prestart import EcuLimits
+
+    plan = parse("0,rpm=150000\n5,rpm=150000\n").plan_check()
+    assert plan.needs_ecu and plan.needs == 4
+    plan.check(EcuLimits(_six(160000)))                                   # within the ECU's limits
+    with pytest.raises(ScheduleTargetError, match=r"s.csv:1: target 150000 rpm is above the ECU's max rpm 120000"):
+        plan.check(EcuLimits(_six(120000)))
+    with pytest.raises(ScheduleTargetError, match="needs protocol version 4 or later; the ECU reports 3") as e:
+        parse("0,rpm=90000\n5,0\n").plan_check().check(EcuLimits(_six(160000, version=3)))
+    assert e.value.code == 2 and e.value.protocol_version == 3        # a usage error: nothing sent
+    with pytest.raises(ScheduleTargetError, match="max rpm is not known"):
+        plan.check(EcuLimits(None))                                    # no status ID 6 heard
+    assert not parse("0,30\n5,0,standby\n").plan_check().needs_ecu    # throttle rows need nothing
 
 
 def test_plan_cost_does_not_grow_with_duration():

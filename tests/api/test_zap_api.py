@@ -36,7 +36,7 @@ def test_reading_carries_unit_and_raw(zap_sim):
 
 def test_unknown_register_attribute(zap_sim):
     with Bus(zap_sim) as bus:
-        with pytest.raises(AttributeError, match="no register 'goal-positon'"):
+        with pytest.raises(AttributeError, match="no register 'goal_positon'; did you mean goal_position"):
             bus[1].goal_positon  # noqa: B018
         assert "goal_position" in dir(bus[1])
 

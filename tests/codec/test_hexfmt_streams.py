@@ -25,12 +25,15 @@ DATA = {
     "repeat-at-the-end": FRAME + bytes(100),
     "random": bytes(rng.randrange(256) for _ in range(1000)),
     "16": bytes(range(16)),
+    "printable": b"  >x< |y| #z  " * 9 + FRAME,                   # what the ASCII columns show
 }
 TOOLS = {
     "od -A x -t x1": ["od", "-A", "x", "-t", "x1"],
     "od -t x1": ["od", "-t", "x1"],
     "od -A o -t x1": ["od", "-A", "o", "-t", "x1"],
     "od -A d -t x1": ["od", "-A", "d", "-t", "x1"],
+    "od -A x -t x1z": ["od", "-A", "x", "-t", "x1z"],              # z: the >printable< column
+    "od -t x1z": ["od", "-t", "x1z"],
     "hexdump -C": ["hexdump", "-C"],
     "xxd": ["xxd"],
     "xxd -a": ["xxd", "-a"],

@@ -131,7 +131,8 @@ def test_send_for_ends_with_the_end_command(cli, monkeypatch, command, end, expe
     assert r.exit_code == 0, r
     (ecu,) = devices
     if expected is None:
-        assert "--end hold: nothing more sent; the engine keeps the last command" in r.stderr
+        # a session left running says how it leaves the engine
+        assert "end of --for: --end hold: nothing more sent; the engine is left " in r.stderr
         assert list(ecu.received)[-1]["command"] == zk.decode_control(
             zk.encode_control_raw(7, rpm_value=3000) if command[0] == "raw" else
             zk.encode_control(command[0], **_values(command))[0])["command"]

@@ -115,13 +115,6 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     assert run["max_rpm"] >= 95000 and doc["totals"]["starts"] == 1 and doc["totals"]["running_s"] > 0
 
 
-def test_rpm_target_above_the_ecus_max_stops_before_sending_it(cli, tmp_path):
-    sched = tmp_path / "rpm.csv"
-    sched.write_text("0,rpm=150000,run\n2,0,standby\n")
-    r = cli("zk", "profile", str(sched), "-p", SIM + "&max_rpm=120000", "-f", "jsonl")
-    assert r.exit_code == 5 and "rpm 150000 is above the ECU's max rpm 120000" in r.stderr
-
-
 def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
     book = str(tmp_path / "engine.db")
     cli("zk", "monitor", "-p", SIM, "--count", "5", "-f", "jsonl", "--logbook", book)

@@ -120,7 +120,7 @@ def test_output_file_and_append(cli, tmp_path):
 @pytest.mark.parametrize("args,code,needle", [
     (["zk", "decode", "XYZ"], 2, "is not hex"),
     (["zk", "decode", "--binary", "/nonexistent/file"], 2, "cannot read /nonexistent/file"),
-    (["zk", "decode", "-f", "yaml", "FF"], 2, "'yaml' is not one of"),
+    (["zk", "decode", "-f", "yaml", "FF"], 2, "'yaml' is not allowed; allowed"),
     (["zk", "decode", "--protocol-version", "0", "FF"], 2, "--protocol-version"),
 ])
 def test_decode_bad_input(cli, args, code, needle):

@@ -112,7 +112,7 @@ def test_monitor_duration_and_version_note(cli):
     (["-p", SIM, "--fast"], "fast: only with --replay"),
     (["-p", SIM, "--ids", "0"], "ids: 0 is out of range; allowed status IDs 1..14"),
     (["-p", SIM, "--rate", "50"], "rate: applies only with --keepalive"),
-    (["-p", SIM, "--count", "0"], "0 is not in the range"),
+    (["-p", SIM, "--count", "0"], "0 is out of range; allowed 1 or more"),
 ])
 def test_monitor_usage_errors(cli, args, msg):
     r = cli("zk", "monitor", *args)

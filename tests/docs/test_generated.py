@@ -208,3 +208,49 @@ def test_committed_bash_script_completes_through_the_program(prog, words, expect
     p = subprocess.run(["bash", "--norc", "--noprofile", "-c", code], capture_output=True, text=True, env=env,
                        timeout=30)
     assert p.stdout.strip() == expected, p.stderr
+
+
+# --- each command's own exit statuses ------------------------------------------------------------
+
+def _exit_section(text):
+    return text.split(".SH EXIT STATUS", 1)[1].split(".SH", 1)[0]
+
+
+def test_every_command_page_states_that_commands_exit_statuses(pages):
+    from cmdtree import commands
+
+    from zkzap.commands.options import exit_statuses
+
+    for path, cmd in commands(hidden=False):
+        page = pages["-".join(("zkzap", *path)) + ".1"]
+        codes = [int(c) for c in re.findall(r"^\\fB(\d+)\\fR$", _exit_section(page), re.M)]
+        own = exit_statuses(cmd)
+        assert codes == [c for c, _ in own], path
+        assert {0, 2, 130}.issubset(codes) or path[0] == "sim", path
+
+
+def test_the_check_page_has_the_limit_no_frame_carried(pages):
+    section = _exit_section(pages["zkzap-zk-check.1"])
+    assert "\\fB1\\fR\nA limit no frame carried" in section
+    assert "\\fB6\\fR" not in section                       # no checksum on ZK status frames to fail
+    scan = _exit_section(pages["zkzap-zap-scan.1"])
+    assert "\\fB3\\fR\nNothing answers." in scan and "\\fB6\\fR" in scan
+    assert "\\fB1\\fR" not in _exit_section(pages["zkzap-zk-states.1"])
+
+
+def test_what_a_help_text_says_of_exit_statuses_is_declared():
+    """Every 'exit status N' / 'exit N' a command's help mentions is one of its statuses."""
+    from cmdtree import commands
+
+    from zkzap.commands.options import exit_statuses
+
+    checked = 0
+    for path, cmd in commands(hidden=False):
+        text = " ".join(filter(None, [cmd.help, cmd.epilog] + [getattr(p, "help", None) for p in cmd.params]))
+        said = set()
+        for m in re.finditer(r"\bexit(?:s| status(?:es)?)? ((?:\d+(?:/\d+)?(?:,| and| or|)\s*)+)", text, re.I):
+            said |= {int(n) for n in re.findall(r"\d+", m.group(1))}
+        declared = {c for c, _ in exit_statuses(cmd)}
+        assert said <= declared, (path, sorted(said - declared))
+        checked += bool(said)
+    assert checked >= 10

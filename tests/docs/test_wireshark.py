@@ -202,3 +202,23 @@ def test_tshark_decodes_zap_captures_as_zkzap_does_and_links_replies(cli, zap_ca
                 assert "zap.request_in" in f
                 linked += 1
     assert total > 60 and linked >= 10
+
+
+@needs_tshark
+def test_one_corrupted_frame_is_one_bad_frame_even_when_its_bytes_look_like_a_head(cli, tmp_path):
+    # a corrupted status frame whose second byte is also a status head, at the end of a packet:
+    # the bytes held back for the next packet must not be reported as a second bad frame
+    good = [zk.encode_status(i, 6, rpm=12340) for i in range(1, 5)]
+    corrupted = bytearray(zk.encode_status(1, 6, rpm=12340))
+    corrupted[1] = 0xF2
+    path = tmp_path / "bad.pcapng"
+    w = Writer(str(path))
+    i = w.interface("zk", "synthetic")
+    w.packet(i, 1767225600.0, good[0] + bytes(corrupted), INBOUND)
+    w.packet(i, 1767225600.01, b"".join(good[1:]), INBOUND)
+    w.close()
+    frames = tshark(path)
+    assert len([f for p, f in frames if "zk.bad" in f]) == 1
+    assert len([f for p, f in frames if p == "zk" and "zk.bad" not in f]) == 4
+    r = cli("zk", "decode", str(path), "-f", "jsonl")
+    assert r.exit_code == 0 and len(r.stdout.splitlines()) == 4 and "1 bad (CRC)" in r.stderr, r

@@ -40,7 +40,7 @@ def test_stand_run_report_and_logbook(start_sim, tmp_path):
     assert r.returncode == 0 and out.read_bytes()[:4] == b"\x89PNG", r.stderr
     r = zk("logbook", str(book), "-f", "json")
     assert json.loads(r.stdout)["totals"]["starts"] == 1
-    r = zk("check", "-p", url, "--duration", "0.5", "--limits", str(limits))
+    r = zk("check", "-p", url, "--count", "20", "--limits", str(limits))
     assert r.returncode == 0 and json.loads(r.stdout)["verdict"] == "pass", r.stderr
 
 

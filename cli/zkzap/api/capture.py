@@ -13,17 +13,12 @@ from __future__ import annotations
 
 from ..codec import zap, zk
 from ..link.capture import CaptureFrames
+from ..link.clock import iso_utc  # noqa: F401 - the one rendering of a date, re-exported
 from ..link.pcapng import INBOUND, OUTBOUND, Reader
 from ..link.zk_sources import PacedReplay
 
 #: Keys captures add in front of a record (and ``latency_ms`` after a mightyZAP one).
 TIME_KEYS = ["time", "t", "dir"]
-
-
-def iso_utc(ts: float) -> str:
-    from .telemetry import iso_utc as _iso
-
-    return _iso(ts)
 
 
 def direction_label(direction):
@@ -136,9 +131,6 @@ class CaptureReplaySource(PacedReplay):
     times (``t`` from the capture's first chunk, ``time`` the capture's own clock), paced in real
     time or, with ``fast``, as fast as they decode. The interface of
     :class:`zkzap.link.zk_sources.ReplaySource`."""
-
-    #: a capture keeps the receive time of every chunk: records get real wall-clock times
-    wall_clock = True
 
     def __init__(self, path, fast=False):
         import time

@@ -25,7 +25,7 @@ import json
 import math
 import re
 
-from ..errors import MissingExtra, UsageError
+from ..errors import InvalidValue, MissingExtra, UsageError
 
 #: Deepest nesting of objects and lists read (zkzap's own documents need 4).
 MAX_DEPTH = 100
@@ -54,7 +54,7 @@ def loads(text: str, fmt: str, name: str = "document", *, finite: bool = True):
         return load_toml(text, name)
     if fmt == "yaml":
         return load_yaml(text, name)
-    raise ValueError(fmt)
+    raise InvalidValue(f"{name}: format {fmt!r}; allowed json, toml, yaml")
 
 
 def read(path, what: str, fmt: str = "json", expected: str = "", limit=None, *, finite: bool = True):

@@ -19,7 +19,7 @@ import math
 import operator
 import re
 
-from ..errors import UsageError
+from ..errors import UsageError, close_names, did_you_mean
 
 #: Operators, longest first (the parser tries them in this order).
 OPERATORS = {
@@ -100,25 +100,27 @@ class Condition:
         return self.text
 
 
-def parse(text: str, fields=None, *, where: str = "", allow_warn: bool = True) -> Condition:
+def parse(text: str, fields=None, *, where: str = "", allow_warn: bool = True,
+          example: str = "egt_c<=850") -> Condition:
     """Parse one condition. ``fields``: the allowed field names (a collection or a predicate;
-    None allows any); ``where``: ``FILE:LINE`` or an option name for messages."""
+    None allows any); ``where``: ``FILE:LINE`` or an option name for messages; ``example``: a
+    valid condition where these fields are used, for the message of a malformed one."""
     label = f"{where}: " if where else ""
     raw = str(text)
     main, *extras = raw.split(",")
     m = _SPLIT.match(main)
     if not m:
         raise ExpressionError(f"{label}{raw.strip()!r}: expected FIELD OP NUMBER with OP one of "
-                              f"{' '.join(sorted(OPERATORS, key=len))} (for example egt_c<=850)")
+                              f"{' '.join(sorted(OPERATORS, key=len))} (for example {example})")
     field, op, number = m.group(1), m.group(2), m.group(3)
     if fields is not None and not _allowed(field, fields) and _allowed(field.replace("-", "_"), fields):
         field = field.replace("-", "_")
     if fields is not None and not _allowed(field, fields):
         names = sorted(fields) if not callable(fields) else []
-        close = [n for n in names if field.lower() in n.lower()][:5]
-        hint = f"; did you mean {', '.join(close)}?" if close else (
-            f"; allowed {', '.join(names)}" if names and len(names) <= 60 else "")
-        raise ExpressionError(f"{label}{raw.strip()!r}: unknown field {field!r}{hint}")
+        hint = did_you_mean(field, names, otherwise=f"; allowed {', '.join(names)}" if names and len(names) <= 60
+                            else "")
+        raise ExpressionError(f"{label}{raw.strip()!r}: unknown field {field!r}{hint}", field=field,
+                              suggestions=close_names(field, names))
     threshold = parse_number(number, f"{label}{raw.strip()!r}")
     warn = None
     for extra in extras:

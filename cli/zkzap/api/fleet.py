@@ -42,7 +42,7 @@ import time
 
 from ..codec import zap
 from ..codec.fields import FieldValueError
-from ..errors import CheckFailed, UsageError
+from ..errors import CheckFailed, UsageError, did_you_mean
 from . import documents
 from .documents import DocumentError
 
@@ -216,11 +216,7 @@ def check_document(doc, name="document") -> dict:
                 rkey = f"{where}.{section}.{rname}"
                 reg = REG.get(str(rname))
                 if reg is None:
-                    import difflib
-
-                    close = difflib.get_close_matches(str(rname).lower(), list(REG), n=3, cutoff=0.75)
-                    fail(rkey, "unknown register" + (f"; did you mean {', '.join(close)}?" if close
-                                                     else "; see 'zap registers'"))
+                    fail(rkey, "unknown register" + did_you_mean(rname, REG, otherwise="; see 'zap registers'"))
                 if section_of(reg) != section:
                     fail(rkey, f"{reg.name} is a {section_of(reg)} register, not {section}")
                 if not _is_int(value):
@@ -258,7 +254,7 @@ def dumps(doc: dict, fmt: str) -> str:
         return _toml(doc)
     if fmt == "yaml":
         return _yaml(doc)
-    raise ValueError(fmt)
+    raise UsageError(f"format: {fmt!r}; allowed json, toml, yaml")
 
 
 def dump_document(doc: dict, path: str) -> None:
@@ -456,7 +452,15 @@ def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
     targets = [t for _, t in pairs]
     dup = sorted({t for t in targets if targets.count(t) > 1})
     if dup:
-        raise UsageError(f"--map: bus ID {dup[0]} would get the settings of two actuators of the file")
+        t = dup[0]
+        sources = [f"ID {i} ({'--map ' + str(i) + ':' + str(t) if i in mapping else 'kept as it is'})"
+                   for i, target in pairs if target == t]
+        unmapped = [i for i in chosen if i not in mapping]
+        hint = (f"; an ID of the file that --map does not name keeps its own, and without --ids every ID "
+                f"of the file ({_ranges(sorted(entries))}) is applied: add --ids {','.join(map(str, mapping))} "
+                f"to apply only the mapped ones" if unmapped and ids is None else "")
+        raise UsageError(f"--map: bus ID {t} would get the settings of two actuators of the file: "
+                         f"{' and '.join(sources)}{hint}", bus_id=t)
     return pairs
 
 
@@ -494,6 +498,45 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
     order = {"feedback-return-mode": 1, "baud-rate": 2, "id": 3}
     writes.sort(key=lambda w: order.get(w.register.name, 0))
     return writes, unchanged
+
+
+def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
+    """{ID: Entry} read from the bus (every register of each actuator). ``required``: every ID
+    must answer (else NoReply); otherwise IDs that do not answer an Echo are left out."""
+    entries = {}
+    for ident in ids:
+        if not required and bus.ping(ident, retries=1) is None:
+            continue
+        values, error = procedures.read_map(bus, ident)
+        entry = entry_from_values(values, baud=bus.baud, error=error)
+        doc = {"format": FORMAT, "actuators": {str(ident): entry}}
+        entries[ident] = check_document(doc, f"bus ID {ident}")[ident]
+    return entries
+
+
+def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), force=False, on_mismatch=None,
+             procedures=PROCEDURES) -> tuple:
+    """(writes, unchanged, current) that make the bus match ``entries`` for each (document ID,
+    bus ID) of ``pairs`` (see :func:`assignments`): every target is read
+    (``current``: {bus ID: {register name: raw}}) and planned (:func:`plan`). A target of another
+    model or firmware than its entry raises UsageError unless ``force`` (then
+    ``on_mismatch(text)`` is told); ``name`` names the document in messages."""
+    current, writes, unchanged = {}, [], 0
+    for source, target in pairs:
+        values, _ = procedures.read_map(bus, target)
+        current[target] = values
+        entry = entries[source]
+        mismatch = identity_mismatch(entry, values)
+        if mismatch:
+            text = f"ID {target} is {mismatch} (ID {source} in {name})"
+            if not force:
+                raise UsageError(f"{text}; pass --force to apply it anyway")
+            if on_mismatch is not None:
+                on_mismatch(text)
+        w, u = plan(entry, target, values, only=only, skip=skip, force=force)
+        writes += w
+        unchanged += u
+    return writes, unchanged, current
 
 
 def identity_mismatch(entry: Entry, current: dict):

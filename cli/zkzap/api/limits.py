@@ -6,9 +6,10 @@ carry its field (status ID 1 carries ``egt_c``, every ID carries ``rpm``): a sna
 value is never tested twice. For each frame it returns the entries the record gets:
 ``warnings`` (the conditions in their warning band) and ``limit`` (the conditions violated).
 
-``on_limit`` says what a violation does to the session: ``abort`` (the session's abort command,
-then exit status 5), ``exit`` (exit status 5, no abort) or ``warn`` (keep going; the summary
-still names it). :attr:`LimitSet.tripped` is the first violation that ends the session.
+``on_limit`` says what a violation does to the session: ``abort`` or ``exit`` end it with exit
+status 5 — a session that controls the engine ends as every session does, with its abort
+command (``--abort``; ``none`` sends nothing, and says so) — or ``warn`` (keep going; the
+summary still names it). :attr:`LimitSet.tripped` is the first violation that ends the session.
 
 :meth:`LimitSet.summary` gives, per condition, the frames that carried the field, the extreme
 value reached (in the violating direction), the first warning and first violation times, and
@@ -21,18 +22,27 @@ from ..codec import zk
 from ..errors import DeviceError, UsageError
 from .expr import parse, parse_lines
 
-#: What a violation does: abort (the abort command, then exit 5), exit (exit 5), warn (go on).
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Optional
+
+    from .expr import Condition
+
+#: What a violation does: abort or exit (end the session, exit 5; one that controls the engine
+#: sends its abort either way), warn (go on).
 ON_LIMIT = ("abort", "exit", "warn")
-#: Status keys a limit may name.
-FIELDS = frozenset(zk.STATUS_KEYS)
+#: Status keys a limit may name: the numeric ones (an engine state or error code by its number;
+#: the name keys, ``out_of_range`` and the frame's own keys hold no number to compare).
+FIELDS = frozenset(f.key for s in zk.STATUS for f in s.fields)
 #: Status keys each status frame ID carries.
-KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in zk.STATUS}
+KEYS_BY_ID = zk.STATUS_KEYS_BY_ID
 
 
 class LimitViolation(DeviceError):
     """A limit violated (exit status 5); carries the condition, time and value."""
 
-    def __init__(self, message, condition=None, t=None, value=None):
+    def __init__(self, message: str, condition: Optional[Condition] = None, t: Optional[float] = None,
+                 value: Optional[float] = None) -> None:
         super().__init__(message)
         self.condition = condition
         self.t = t
@@ -91,10 +101,6 @@ class LimitSet:
 
     def __bool__(self):
         return bool(self.conditions)
-
-    @property
-    def abort(self) -> bool:
-        return self.on_limit == "abort"
 
     def check(self, t, rec) -> dict:
         """Evaluate the conditions whose field ``rec`` (one decoded status frame) carries.

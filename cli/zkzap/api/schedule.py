@@ -13,10 +13,11 @@ Throttle rows send control ID 1 (state, throttle). RPM rows put the ECU in RPM m
 the row's state and the RPM factor ``RPM_X`` (the smallest factor whose range, 40 950 x RPM_X
 rpm, holds the schedule's highest target: the finest resolution, 10 x RPM_X rpm), alternating
 with ID 7 targets. In a schedule with RPM rows the throttle rows alternate ID 1 with ID 6
-``none`` (factor 0), which leaves RPM mode and hands the state back to ID 1. RPM frames wait
-for the ECU's status ID 6; a target above the max rpm it reports, or an ECU older than protocol
-version 4, stops the run (:class:`ScheduleTargetError`, exit status 5) before any RPM frame is
-sent.
+``none`` (factor 0), which leaves RPM mode and hands the state back to ID 1. :meth:`Schedule.plan_check`
+is the schedule's :class:`~zkzap.api.prestart.Plan`: a session running it listens for the ECU's
+status ID 6 first and refuses the schedule before its first frame when a target is above the max
+rpm the ECU reports or the ECU is older than protocol version 4 (:class:`ScheduleTargetError`,
+exit status 2, nothing sent).
 
 :meth:`Schedule.plan` lists the commands and when they change without stepping through every
 control period, so its cost grows with the number of rows, not with the schedule's duration.
@@ -29,7 +30,14 @@ import math
 
 from ..codec import zk
 from ..codec.fields import FieldValueError
-from ..errors import DeviceError, UsageError
+from ..errors import UsageError
+from .prestart import EcuLimitError, Plan
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Literal, Optional
+
+    from typing_extensions import Self
 
 _THROTTLE = zk.CONTROL_BY_NAME["control"].layout.by_key["throttle_pct"]
 _SW = zk.CONTROL_BY_NAME["control"].layout.by_key["sw"]
@@ -48,8 +56,14 @@ class ScheduleError(UsageError):
     """A schedule that cannot be read; the message names ``FILE:LINE``."""
 
 
-class ScheduleTargetError(DeviceError):
-    """An RPM target the connected ECU cannot follow (above its max rpm, or too old for RPM mode)."""
+#: A schedule the connected ECU cannot follow (an RPM target above its max rpm, an ECU too old for
+#: RPM mode): refused before the first frame (exit 2).
+ScheduleTargetError = EcuLimitError
+
+
+def rpm_factor_for(top) -> int:
+    """The RPM_X that expresses targets up to ``top`` rpm with the finest steps (10 x RPM_X rpm)."""
+    return max(1, math.ceil(top / (_RPM_VALUE_MAX * 10)))
 
 
 class Row:
@@ -112,7 +126,8 @@ def _cells(line, sep):
 class Schedule:
     """Rows of throttle or RPM targets; see the module documentation."""
 
-    def __init__(self, rows, interpolate="step", name="schedule", notes=()):
+    def __init__(self, rows: Iterable[Row], interpolate: Literal["step", "linear"] = "step", name: str = "schedule",
+                 notes: Iterable[str] = ()) -> None:
         if not rows:
             raise ScheduleError(f"{name}: no rows; expected {SHAPE}")
         self.rows = rows
@@ -122,16 +137,17 @@ class Schedule:
         self.has_rpm = any(r.rpm is not None for r in rows)
         top = max((r.rpm for r in rows if r.rpm is not None), default=0)
         self.max_target = top
-        self.rpm_factor = max(1, math.ceil(top / (_RPM_VALUE_MAX * 10))) if self.has_rpm else 0
+        self.rpm_factor = rpm_factor_for(top) if self.has_rpm else 0
         self._i = 0
         self._cache = {}
         self._toggle = 0
-        self._ecu = None
-        self._checked = False
 
     # --- reading ---------------------------------------------------------------------------------
     @classmethod
-    def parse(cls, text, name="schedule", interpolate="step", default_state="run"):
+    def parse(cls, text: str, name: str = "schedule", interpolate: Literal["step", "linear"] = "step",
+              default_state: str = "run") -> Self:
+        """Parse schedule text (``time_s,throttle_pct[,state]`` or ``time_s,rpm=N[,state]`` rows,
+        optionally under a header; ``#`` comments); errors name ``NAME:LINE``."""
         rows, notes = [], []
         cols = None
         sep = None
@@ -180,7 +196,8 @@ class Schedule:
         return sched
 
     @classmethod
-    def load(cls, path, name=None, interpolate="step", default_state="run"):
+    def load(cls, path: str, name: Optional[str] = None, interpolate: Literal["step", "linear"] = "step",
+             default_state: str = "run") -> Self:
         """Read and parse the schedule file ``path`` (``-``: stdin, UTF-8); messages call it
         ``name`` (default: the path, or ``stdin``). A file that cannot be read is a
         :class:`~zkzap.errors.UsageError`."""
@@ -316,37 +333,16 @@ class Schedule:
             self._cache[key] = got
         return got
 
-    def bind(self, ecu):
-        """Check RPM targets against a live ECU: ``ecu`` is a :class:`~zkzap.api.telemetry.Telemetry`
-        (its latest ``max_rpm`` and protocol version)."""
-        self._ecu = ecu
-        return self
-
-    def _ecu_ready(self):
-        """For RPM rows: whether the ECU's limits are known (and the targets within them)."""
-        if self._checked or self._ecu is None:
-            return True
-        latest = self._ecu.latest
-        max_rpm = latest.get("max_rpm")
-        version = self._ecu.decoder.known
-        if max_rpm is None:
-            return False
-        if version is not None and version < 4:
-            raise ScheduleTargetError(f"schedule {self.name}: RPM targets need an ECU of protocol version 4 "
-                                      f"or later; this one reports {version}")
-        over = next((r for r in self.rows if r.rpm is not None and r.rpm > max_rpm), None)
-        if over is not None:
-            raise ScheduleTargetError(f"schedule {self.name}:{over.line}: rpm {over.rpm:g} is above the ECU's "
-                                      f"max rpm {max_rpm:g}")
-        self._checked = True
-        return True
+    def plan_check(self) -> Plan:
+        """The schedule as a :class:`~zkzap.api.prestart.Plan`: every frame it sends and each
+        RPM target with its ``FILE:LINE``, checked against the ECU before the first frame."""
+        targets = [(r.rpm, f"schedule {self.name}:{r.line}") for r in self.rows if r.rpm is not None]
+        return Plan(self.frames(), targets=targets, what=f"schedule {self.name}")
 
     def frame_at(self, t):
         """The frame to send at ``t`` (the session calls this every control period)."""
         cmd = self.command_at(t)
         if cmd is None:
-            return None
-        if cmd[0] == "rpm" and not self._ecu_ready():
             return None
         frames = self._frames(*cmd)
         self._toggle = (self._toggle + 1) % len(frames)
@@ -360,7 +356,7 @@ class Schedule:
         return out
 
     # --- the plan ------------------------------------------------------------------------------------
-    def plan(self, rate):
+    def plan(self, rate: float) -> list[tuple[float, str, str, Optional[float], tuple[bytes, ...]]]:
         """``[(t, mode, state, value, frames)]``: each change of the command sent at ``rate`` Hz.
 
         Changes happen at row times and, with linear ramps, where the rounded value steps; only
@@ -407,7 +403,7 @@ class Schedule:
         return out
 
     # --- steps for steady-state reduction ------------------------------------------------------------
-    def steps(self):
+    def steps(self) -> list[tuple[int, Row, float, float]]:
         """``[(number, row, t_start, t_end)]``: each row in state ``run`` that holds for some time
         (a standby, stop or pwm row is no steady state of the engine)."""
         out = []

@@ -10,14 +10,17 @@ Sources are :class:`zkzap.link.zk_sources.LiveSource` and
 
 from __future__ import annotations
 
-import time
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Optional
 
 from ..codec import zk
 from ..codec.ids import id_ranges
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
 from ..errors import TERMINATED
 from ..signals import INTERRUPT_SIGNALS, SignalGuard
-from .telemetry import describe_error, iso_utc
+from .prestart import EcuLimitError, listen, silence_error
+from .telemetry import describe_error
 
 #: Control frames per second while a session controls the engine (``--rate``).
 DEFAULT_RATE = 20.0
@@ -69,16 +72,18 @@ DEFAULT_END = "standby"
 
 class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
-    done), ``interrupted``, ``terminated``, ``port``, ``silence``, ``ecu-error``, ``limit``, ``pipe``,
-    ``output`` (an output file could not be written)."""
+    done), ``interrupted``, ``terminated``, ``port``, ``silence`` (no status frame within the
+    timeout, or none at all in a session that ended by its time), ``ecu-error``, ``limit``,
+    ``pipe``, ``output`` (an output file could not be written), ``refused`` (the ECU's reported
+    limits refuse the plan: nothing was sent)."""
 
-    def __init__(self, reason, error=None, aborted=None):
+    def __init__(self, reason: str, error: Optional[BaseException] = None, aborted: Optional[str] = None) -> None:
         self.reason = reason
         self.error = error
         self.aborted = aborted   # the abort kind sent, or None
 
     @property
-    def ok(self):
+    def ok(self) -> bool:
         """True for a normal end: ``count``, ``duration`` or ``end``."""
         return self.reason in ("count", "duration", "end")
 
@@ -95,7 +100,7 @@ class Outcome:
             return TERMINATED
         return getattr(self.error, "code", 1)
 
-    def raise_for_status(self):
+    def raise_for_status(self) -> None:
         """Raise the exception (exit status) that goes with this outcome, if any."""
         r = self.reason
         if r == "interrupted":
@@ -116,14 +121,24 @@ class Session:
     ``control(t)`` returns the frame to send at time ``t`` (None: nothing); it is called every
     ``1/rate`` s. Ends on ``count`` records, ``duration`` seconds, the end of a replay, a signal,
     a port failure, ``silence`` seconds without a status frame, or (``stop_on_error``) a new ECU
-    error. On an abnormal end — or at the end when ``abort_at_end`` — the abort command is sent if
-    the frames sent controlled the engine (see :func:`controls_engine`).
+    error. A live session that received no status frame at all ends as ``silence`` (exit 3)
+    whatever its length. On an abnormal end — or at the end when ``abort_at_end`` — the abort
+    command is sent if the frames sent controlled the engine (see :func:`controls_engine`);
+    a session that leaves the engine running (``--abort none``, ``--end hold``) says so through
+    ``notify``.
+
+    ``plan`` (:class:`~zkzap.api.prestart.Plan`): the frames ``control`` can send. When they
+    need the ECU's limits, the session first listens for its status ID 6 and refuses the plan
+    (``refused``, exit 2) before the first frame goes out; the session's time 0 is then the end
+    of that listening (the frames heard meanwhile only set the protocol version).
+
+    Every time is the source's clock (session seconds: model time on a sped-up simulator).
     """
 
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
                  abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
-                 end_label="end of schedule"):
+                 end_label="end of schedule", plan=None):
         self.source = source
         self.telemetry = telemetry
         self.sink = sink
@@ -141,18 +156,22 @@ class Session:
         self.notify = notify or (lambda message: None)
         self.update_interval = update_interval
         self.limits = limits     # an api.limits.LimitSet: its first violation ends the session
+        self.plan = plan         # an api.prestart.Plan: checked against the ECU before sending
+        self.ecu_limits = None   # what the ECU reported (api.prestart.EcuLimits), once listened
         self.sent = 0
         self.last_sent = None
         self.ended_t = None
         self.written = 0
         self.controlling = False
         self.pump_on = False
+        self.rpm_factor = None           # the RPM_X of the last ID 6 sent
         self.last_frame_t = None
         # the status IDs seen, until the ECU's cycle is known (an ID comes again): then --ids
         # that the ECU never sends are reported (all of them: the session ends)
         self._cycle = set() if telemetry.ids is not None else None
         self._back_t = 0.0
         self.interrupted = None           # PortError text when a reconnect cut engine control
+        self.abort_error = None           # the PortError that kept the abort from going out
 
     def _check_ids(self, sid):
         cycle = self._cycle
@@ -198,7 +217,7 @@ class Session:
             self.interrupted = f"{reason}; the port came back after {up - down:.1f} s"
         else:
             self.notify(f"port back after {up - down:.1f} s ({reason})")
-        rec = {"time": iso_utc(self.telemetry.wall0 + up), "t": round(up, 3), "kind": "gap",
+        rec = {"time": self.source.clock.iso(up), "t": round(up, 3), "kind": "gap",
                "gap_s": round(up - down, 3), "since_t": round(down, 3), "reason": reason}
         self.sink(rec)
 
@@ -208,12 +227,24 @@ class Session:
         self.last_sent = frame
         if not self.controlling and controls_engine(frame):
             self.controlling = True
+        if frame[1] >> 4 == 6:
+            self.rpm_factor = zk.ControlFrame(frame).rpm_factor
         if frame[1] >> 4 == 2:
             action = zk.ACTIONS.get(frame[2])
             if action == "pump-on":
                 self.pump_on = True
             elif action == "pump-off":
                 self.pump_on = False
+
+    def _prestart(self):
+        """Listen for the ECU's limits and check the plan against them (EcuLimitError), then
+        start the session's clock."""
+        src, tel = self.source, self.telemetry
+        self.ecu_limits = limits = listen(src, self.silence, given=tel.decoder.given)
+        if limits.frame is not None:
+            tel.seed(limits.frame)
+        self.plan.check(limits)
+        src.restart()
 
     def run(self) -> Outcome:
         """Run until an end (see the class); returns the :class:`Outcome` (the abort, if sent,
@@ -224,8 +255,22 @@ class Session:
         next_update = 0.0
         outcome = None
         told = False
+        first_poll = None
+        if self.control is not None:
+            src.pace(self.period)           # reads never hold a control frame up
         with SignalGuard() as guard:
             try:
+                if self.plan is not None and self.plan.needs_ecu and src.live:
+                    try:
+                        self._prestart()
+                    except EcuLimitError as e:
+                        outcome = Outcome("refused", e)
+                    except NoReply as e:
+                        outcome = Outcome("silence", e)
+                    if guard.signum is not None and outcome is None:
+                        outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
+                elif src.live:
+                    src.restart()               # the session's time 0: now, not when the port opened
                 while outcome is None:
                     if guard.signum is not None:
                         outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
@@ -236,6 +281,15 @@ class Session:
                             frame = self.control(self.duration)   # schedule's last row)
                             if frame is not None and frame != self.last_sent:
                                 self._send(frame)
+                        if src.live and self.last_frame_t is None:
+                            # held up for the whole session (a loaded machine): what the ECU sent
+                            # meanwhile is waiting to be read, and it is no silence
+                            for t, frame in src.poll():
+                                self.last_frame_t = t
+                                for rec in tel.feed(t, frame):
+                                    if self.count is None or written < self.count:
+                                        self.sink(rec)
+                                        written += 1
                         outcome = Outcome("duration")
                         break
                     if self.control is not None and now >= next_send:
@@ -243,9 +297,12 @@ class Session:
                         if frame is not None:
                             self._send(frame)
                         next_send += self.period
-                        if next_send <= now:
+                        if next_send <= now - self.period:     # a stall: skip the backlog
                             next_send = now + self.period
                     got = src.poll()
+                    polled = src.now()          # a silence is judged by reads, never by a stall
+                    if first_poll is None:
+                        first_poll = polled     # (nor by one before the first read)
                     if got is None:
                         outcome = Outcome("end")
                         break
@@ -253,7 +310,10 @@ class Session:
                         self._reconnected(src.take_gap())
                     for t, frame in got:
                         if self.duration is not None and t + 1e-9 >= self.duration:
-                            outcome = Outcome("duration")     # a fast replay's batch reaches past it
+                            # read after the end (a fast replay's batch; a live read after a stall):
+                            # no record, but the ECU was heard
+                            self.last_frame_t = t
+                            outcome = Outcome("duration")
                             break
                         self.last_frame_t = t
                         if self._cycle is not None:
@@ -286,17 +346,11 @@ class Session:
                         self.on_update(tel.snapshot(now), tel.health(now, src.framer))
                         next_update = now + self.update_interval
                     if src.live and self.silence is not None and getattr(src, "down", None) is None:
-                        since = self.last_frame_t if self.last_frame_t is not None else 0.0
+                        since = self.last_frame_t if self.last_frame_t is not None else first_poll
                         since = max(since, self._back_t)
-                        # a silence is measured in real seconds, whatever the session's clock
-                        if (now - since) / getattr(src, "speed", 1.0) > self.silence:
-                            where = getattr(getattr(src, "link", None), "url", "the port")
-                            if self.last_frame_t is None:
-                                msg = (f"no status frame from the ECU on {where} within {self.silence:g} s "
-                                       f"(check the port, baud rate and wiring)")
-                            else:
-                                msg = f"the ECU on {where} fell silent: no status frame for {self.silence:g} s"
-                            outcome = Outcome("silence", NoReply(msg))
+                        if not got and polled - since > self.silence:
+                            outcome = Outcome("silence", silence_error(
+                                src, self.silence, heard=self.last_frame_t is not None))
                             break
             except PortError as e:
                 outcome = Outcome("port", e)
@@ -307,7 +361,7 @@ class Session:
             finally:
                 if outcome is None:            # an unexpected exception: still try to abort
                     self._abort(Outcome("error"))
-            if outcome.reason != "count":
+            if outcome.reason not in ("count", "refused"):
                 try:
                     for rec in tel.flush():
                         if self.count is not None and written >= self.count:
@@ -316,14 +370,31 @@ class Session:
                         written += 1
                 except BrokenPipeError:
                     outcome = Outcome("pipe")
+            if outcome.ok and src.live and self.last_frame_t is None and self.ecu_limits is None:
+                # a silent device never passes: no status frame in the whole session, however
+                # short, is the silence it would have been given more time
+                ran = self.duration if self.duration is not None else src.now()
+                outcome = Outcome("silence", silence_error(src, ran, heard=False, ran=True))
             self._abort(outcome)
-        if self.interrupted is not None and outcome.ok:
+        if outcome.aborted == "failed" and (outcome.ok or outcome.reason in ("interrupted", "terminated")):
+            # the end or abort command did not go out: the engine is in no stated state
+            outcome = Outcome("port", self.abort_error, aborted="failed")
+        if self.interrupted is not None and (outcome.ok or outcome.reason in ("interrupted", "terminated")):
+            # engine control was cut by the port failure: that is how the session ended, whatever
+            # ended the logging afterwards (its time, Ctrl-C, SIGTERM)
             outcome = Outcome("port", PortError(self.interrupted), aborted=self.abort)
         self.ended_t = now = src.now()
         if self.on_update is not None:
             self.on_update(tel.snapshot(now), tel.health(now, src.framer))
         self.written = written
         return outcome
+
+    def _left(self) -> str:
+        """What the engine keeps doing after the last frame sent, in words."""
+        if self.last_sent is None:
+            return "the last command"
+        left = zk.ControlFrame(self.last_sent).leaves(self.rpm_factor)
+        return f"the engine is left {left}" if left else "the engine keeps the last command"
 
     def _abort(self, outcome):
         if outcome.aborted is not None or not self.controlling:
@@ -333,29 +404,34 @@ class Session:
             kind = self.end if self.end is not None else (self.abort if self.abort_at_end else None)
             if kind == "hold":
                 outcome.aborted = "hold"
-                self.notify(f"{self.end_label}: --end hold: nothing more sent; the engine keeps the last "
-                            f"command")
+                self.notify(f"{self.end_label}: --end hold: nothing more sent; {self._left()}")
                 return
-        if kind is None or kind == "none":
+        if kind is None:
             return
-        if outcome.reason == "limit" and not self.limits.abort:
+        if kind == "none":
+            why = self.end_label if outcome.ok else _WHY.get(outcome.reason, outcome.reason)
+            self.notify(f"{why}: --abort none: nothing sent; {self._left()}")
             return
         known = self.telemetry.decoder.known
         frames = abort_frames(kind, known, pump=self.pump_on)
         try:
             for f in frames:
                 self.source.write(f)
-            time.sleep(0.02)
+            self.source.clock.sleep(0.02)
             self.source.write(frames[0])
         except PortError as e:
             self.notify(f"could not send the abort command ({describe_abort(kind)}): {e}")
             outcome.aborted = "failed"
+            self.abort_error = e
             return
         outcome.aborted = kind
-        why = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
-               "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-               "output": "output failed", "error": "error", "limit": "limit violated"}.get(outcome.reason,
-                                                                                          self.end_label)
+        why = _WHY.get(outcome.reason, self.end_label)
         self.notify(f"{why}: sent {describe_abort(kind)}")
+
+
+#: How a session's end is worded in its notes (an ok end: the session's ``end_label``).
+_WHY = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
+        "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
+        "output": "output failed", "error": "error", "limit": "limit violated"}
 
 

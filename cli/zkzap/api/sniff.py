@@ -25,8 +25,8 @@ import time
 from collections import Counter, deque
 
 from ..codec import zap, zk
-from ..codec.framing import ZapFramer, ZkFramer
-from ..errors import PortError, UsageError
+from ..codec.framing import SignalLock, ZapFramer, ZkFramer
+from ..errors import NoReply, PortError, UsageError
 from ..link.pcapng import INBOUND, OUTBOUND, UNKNOWN
 from .capture import iso_utc
 
@@ -41,6 +41,8 @@ DEFAULT_REPLY_TIMEOUT_S = 0.1
 GAP_PERIODS = 3
 #: How many of the slowest replies the summary keeps.
 SLOWEST = 5
+#: A line whose bytes are noise for this long (no frame trusted meanwhile) ends the sniff (exit 3).
+NOISE_S = 2.0
 
 ROLES = {"both": UNKNOWN, "host": OUTBOUND, "device": INBOUND}
 
@@ -169,6 +171,8 @@ class Sniffer:
         self._seq = 0
         self._last_ts = {}
         self.framers = []
+        self.locks = []                   # one SignalLock per port: frames, or noise?
+        self.heard = None                 # monotonic time of the last frame trusted (or the start)
 
     # -- ports ---------------------------------------------------------------------------------
     def open(self):
@@ -187,11 +191,12 @@ class Sniffer:
                 else:
                     taps.append(None)
                 self.framers.append(self._framer(role))
+                self.locks.append(SignalLock(self.framers[-1], confirm=1))   # records as they happen
         except BaseException:
             for p in self.ports:
                 close_port(p)
             raise
-        self.t0 = time.monotonic()
+        self.t0 = self.heard = time.monotonic()
         self.wall0 = time.time()
         for i, p in enumerate(self.ports):
             r = _Reader(i, p, self.ports_spec[i][0], self.queue, taps[i])
@@ -269,8 +274,10 @@ class Sniffer:
             out += self.chunk(ts, index, data)
         now = time.time()
         for i, framer in enumerate(self.framers):
-            for frame in framer.flush():
-                out += self.frame(now, i, frame)
+            frames = framer.flush()
+            for t, frame in self.locks[i].admit(0, frames, [(now, f) for f in frames]):
+                out += self.frame(t, i, frame)
+            self.locks[i].finish()
         out += self.finish(now)
         self._count_framers()
         for rec in out:
@@ -292,14 +299,56 @@ class Sniffer:
         n = len(data)
         after = sum(len(f) for f in frames)
         last = self._last_ts.get(index, 0.0)
+        stamped = []
         for frame in frames:
             after -= len(frame)
             t = max(last, ts - min(after, n) * byte_s)
             last = t
-            out += self.frame(t, index, frame)
+            stamped.append((t, frame))
         self._last_ts[index] = last
+        # noise gives CRC-valid frames by chance: only a port's trusted stream makes records
+        trusted = self.locks[index].admit(n, frames, stamped)
+        if trusted:
+            self.heard = time.monotonic()
+        for t, frame in trusted:
+            out += self.frame(t, index, frame)
         self._count_framers()
         return out
+
+    @property
+    def frames_trusted(self) -> int:
+        """Frames handed on as records (not taken for chance in noise)."""
+        return sum(lock.accepted for lock in self.locks)
+
+    def noise(self):
+        """The :class:`~zkzap.errors.NoReply` to end with when the line has carried only noise
+        (bytes, too few of them in frames) for :data:`NOISE_S` without a frame trusted; else
+        None. Facts: ``protocol``, ``port``, ``baud``, ``noise``, ``bytes``, ``chance_frames``."""
+        if time.monotonic() - self.heard < NOISE_S:
+            return None
+        noisy = [i for i, lock in enumerate(self.locks) if lock.noise]
+        if not noisy:
+            return None
+        i = noisy[0]
+        lock, url = self.locks[i], self.ports_spec[i][0]
+        what = "ZK frames" if self.protocol == "zk" else "mightyZAP packets"
+        chance = lock.rejected + len(lock.held)
+        return NoReply(f"{url}: {lock.bytes:,} bytes in {self.elapsed():.1f} s, but not as {what} at "
+                       f"{self.baud} baud ({chance} valid by chance among them): line noise, another "
+                       f"device, or a wrong baud rate or stop bits", protocol=self.protocol, port=url,
+                       baud=self.baud, noise=True, bytes=lock.bytes, chance_frames=chance, sniff=True)
+
+    def silent(self):
+        """The :class:`~zkzap.errors.NoReply` for a sniff that ended without one frame."""
+        what = "ZK frame" if self.protocol == "zk" else "mightyZAP packet"
+        ports = ", ".join(url for url, _ in self.ports_spec)
+        got = sum(lock.bytes for lock in self.locks)
+        chance = sum(lock.rejected + len(lock.held) for lock in self.locks)
+        tail = (f": {got:,} bytes came, none as a stream of frames ({chance} valid by chance)" if got
+                else ": nothing came")
+        return NoReply(f"no {what} on {ports} at {self.baud} baud in {self.elapsed():.1f} s{tail}",
+                       protocol=self.protocol, port=ports, baud=self.baud, noise=bool(got), bytes=got,
+                       chance_frames=chance, sniff=True)
 
     def _count_framers(self):
         self.stats.crc_errors = sum(f.bad for f in self.framers)

@@ -9,8 +9,6 @@ and pass it to the session that step runs.
 
 from __future__ import annotations
 
-import time
-
 from . import logbook as _logbook
 
 
@@ -31,8 +29,7 @@ class Stand:
         self.answer = answer
         self.engine = engine
         self.stats = _logbook.RunStats()
-        self.schedule = None                               # api.schedule.Schedule: bound to the ECU
-        self.wall0 = None
+        self.clock = None                                  # the session's (link.clock)
         self.write = None                                  # how an ESR answer is sent (the session's source)
         self._started = False
 
@@ -45,7 +42,7 @@ class Stand:
             self._check_fields()
 
     def _check_fields(self):
-        from ..errors import UsageError
+        from ..errors import unknown_name
 
         quantities = []
         if self.averager is not None:
@@ -58,8 +55,8 @@ class Stand:
         for q in quantities:
             if q is not None and q.field is not None and q.field not in self.aux.fields:
                 self.close()
-                raise UsageError(f"{q.option}: no field {q.field!r} among the --aux sensors' fields "
-                                 f"({', '.join(self.aux.fields) or 'none'})")
+                raise unknown_name(q.option, q.field, self.aux.fields, noun="sensor field",
+                                   otherwise=f"; the --aux sensors give {', '.join(self.aux.fields) or 'no field'}")
 
     def close(self) -> None:
         if self.aux is not None:
@@ -88,12 +85,10 @@ class Stand:
     def attach(self, telemetry, source, on_update):
         """Hook into ``telemetry``; returns the live-view callback (limit lines added)."""
         telemetry.on_frame = self.on_frame
-        if self.schedule is not None:
-            self.schedule.bind(telemetry)
-        self.wall0 = getattr(source, "wall0", None) or time.time()
+        self.clock = source.clock
         self.write = source.write
         if self.aux is not None:
-            self.aux.bind(source.now, getattr(source, "speed", 1.0))
+            self.aux.bind(source.now, source.clock.speed)
         if on_update is None or self.limits is None:
             return on_update
         limits = self.limits
@@ -143,9 +138,15 @@ class Stand:
             return None
         s = tel.summary()
         duration = (session.ended_t or 0.0) if session is not None else 0.0
-        wall0 = self.wall0 or time.time()
+        clock = self.clock
+        if clock is None or clock.wall(0.0) is None:      # never attached, or a replay of a raw log
+            from ..link.clock import SessionClock
+
+            clock = SessionClock()
+            clock.wall0 -= clock.real(duration)
+        # the real moments the session's start and end correspond to (its one clock)
         run = {
-            "started": _logbook.iso(wall0), "ended": _logbook.iso(wall0 + duration),
+            "started": _logbook.iso(clock.wall(0.0)), "ended": _logbook.iso(clock.wall(duration)),
             "duration_s": round(duration, 3), "running_s": round(self.stats.running_s, 3),
             "starts": self.stats.starts, "max_rpm": s["max_rpm"], "max_egt_c": s["max_egt_c"],
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],

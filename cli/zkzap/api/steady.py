@@ -33,7 +33,7 @@ from .logbook import STARTING_STATES
 QUANTITIES = ("rpm", "egt_c", "thrust_kg", "fuel_flow_l_min", "pump_voltage_v", "throttle_pct")
 #: Default fuel density (Jet A-1 at 15 °C), kg/L.
 DEFAULT_DENSITY = 0.8
-#: Documented densities (kg/L at 15 °C) for the help text and README.
+#: Documented densities (kg/L at 15 °C) for the help text and the manual.
 DENSITIES = {"Jet A-1": 0.8, "kerosene": 0.80, "diesel": 0.84}
 #: RPM change between the halves of the averaging window, as a fraction of the mean, above which
 #: a step has not settled.

@@ -10,11 +10,11 @@ pyserial.
 
 from __future__ import annotations
 
-import time
 from collections import deque
 
 from ..codec import zk
 from ..errors import UsageError
+from ..link.clock import iso_utc  # noqa: F401 - the one rendering of a date, re-exported
 
 #: A status ID is stale when it has not been seen for more than this many of its periods.
 STALE_PERIODS = 3
@@ -31,10 +31,6 @@ def describe_error(code, name=None, t=None) -> str:
     return f"ECU error {code} ({name}: {text})" + (f" at t={t:.2f} s" if t is not None else "")
 
 
-def iso_utc(ts: float) -> str:
-    """``2024-05-01T12:00:00.123Z`` for a POSIX time."""
-    sec, ms = divmod(int(round(ts * 1000)), 1000)
-    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z"
 
 
 def parse_ids(text):
@@ -92,6 +88,9 @@ class Telemetry:
     - ``snapshot=True``: one row per frame with every field's latest value; otherwise one record
       per frame, as ``zk decode`` gives it. Both carry ``time`` (ISO 8601 UTC), ``t`` (seconds
       since the start), and ``stale``/``stale_ids``.
+    - ``clock``: the session's clock (:class:`~zkzap.link.clock.SessionClock`; a source's
+      ``clock``), which turns ``t`` into ``time``; None: real time from now (``wall0``, a POSIX
+      time, moves its origin). A replay's clock without dates gives ``time: null``.
     - Stale rule: an ID is stale when it has not been seen for more than ``stale_periods`` of its
       period; the period of one ID is (IDs in the ECU's cycle) / (status rate from ID 6; 20 Hz
       until seen), as the ECU sends one frame per period, the IDs in turn.
@@ -101,22 +100,27 @@ class Telemetry:
     """
 
     def __init__(self, protocol_version=None, ids=None, snapshot=False, stale_periods=STALE_PERIODS,
-                 wall0=None, wall_clock=True, speed=1.0):
+                 clock=None, wall0=None):
         self.decoder = zk.ZkDecoder(protocol_version)
-        #: False for a replay: a raw log holds no times, so records carry ``time: null``
-        self.wall_clock = wall_clock
+        if clock is None:
+            from ..link.clock import SessionClock
+
+            clock = SessionClock()
+            if wall0 is not None:
+                clock.wall0 = wall0
+        #: the session's clock: ``time`` of the record at ``t`` is ``clock.iso(t)``
+        self.clock = clock
         self.holding = protocol_version is None
         self.held = []
         self.ids = ids
         self.snapshot_rows = snapshot
         self.stale_periods = stale_periods
-        self.wall0 = time.time() if wall0 is None else wall0
-        self.speed = speed            # model seconds per real second: ``time`` stays wall-clock time
         self.keys = status_keys(ids)
         self.latest = dict.fromkeys(zk.STATUS_KEYS)
         self.last_seen = {}
         self.rate = 20
         self.frames = 0
+        self.frames_by_id = {}        # status ID -> frames decoded
         self.records = 0
         self.version_note = None
         # ECU errors
@@ -147,6 +151,18 @@ class Telemetry:
             return []
         return self._emit(t, frame)
 
+    def seed(self, six) -> None:
+        """Learn from a status ID 6 frame heard before the session began (its protocol version,
+        status rate and limits), so that no frame is held back for one; it is no record."""
+        rec = self.decoder.decode(six)
+        for k, v in rec.items():
+            if k in self.latest:
+                self.latest[k] = v
+        if rec.get("status_rate_hz"):
+            self.rate = rec["status_rate_hz"]
+        if self.holding and not self.held:
+            self.holding = False
+
     def flush(self) -> list:
         """Records of frames still held (end of the stream)."""
         return self._release() if self.held else []
@@ -171,6 +187,7 @@ class Telemetry:
         sid = rec["id"]
         extra = self.on_frame(t, rec) if self.on_frame is not None else None
         self.frames += 1
+        self.frames_by_id[sid] = self.frames_by_id.get(sid, 0) + 1
         self.last_seen[sid] = t
         if self.first_t is None:
             self.first_t = t
@@ -199,7 +216,7 @@ class Telemetry:
             return []
         stale = self.stale_ids(t)
         self.records += 1
-        when = iso_utc(self.wall0 + t / self.speed) if self.wall_clock else None
+        when = self.clock.iso(t)
         if self.snapshot_rows:
             row = {"time": when, "t": round(t, 3), "id": sid}
             for k in self.keys:
@@ -234,6 +251,10 @@ class Telemetry:
             self.new_error = (code, rec.get("error_name"), t)
 
     # views
+    def frames_with(self, key) -> int:
+        """How many decoded frames carried the status field ``key`` (``error_code``: ID 1's)."""
+        return sum(n for sid, n in self.frames_by_id.items() if key in zk.STATUS_KEYS_BY_ID.get(sid, ()))
+
     def period(self, sid=None) -> float:
         """Expected seconds between two frames of one ID."""
         return max(len(self.last_seen), 1) / self.rate

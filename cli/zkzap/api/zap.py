@@ -24,10 +24,18 @@ import time
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Callable, Iterable, Iterator, Mapping, Optional, Union
+    from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, Optional, Union, overload
+
+    from typing_extensions import Self, TypeAlias
+
+    from ..link.zap_bus import Reply, ZapBus
+    from ..sim.launch import Simulator
+    from ._registers import RegisterAttributes as _Registers
+else:
+    _Registers = object
 
 from ..codec import zap
-from ..errors import BadReply, CheckFailed, NoReply, UsageError
+from ..errors import BadReply, CheckFailed, NoReply, UsageError, did_you_mean
 
 __all__ = ["Bus", "Actuator", "Reading", "ALL_BAUDS", "register_records", "map_blocks"]
 
@@ -46,8 +54,14 @@ SPEED = zap.REGISTER_BY_NAME["goal-speed"]
 ID_REG = zap.REGISTER_BY_NAME["id"]
 BAUD_REG = zap.REGISTER_BY_NAME["baud-rate"]
 
-#: A register: its name, its address or the Register itself.
-RegisterSpec = "str | int | zap.Register"
+if TYPE_CHECKING:
+    #: A register: its name, its address or the Register itself.
+    RegisterSpec: TypeAlias = Union[str, int, zap.Register]
+    #: A record: a dict of JSON-ready values.
+    Record: TypeAlias = dict[str, Any]
+else:
+    #: A register: its name, its address or the Register itself.
+    RegisterSpec = "str | int | zap.Register"
 
 
 class Reading(float):
@@ -55,25 +69,29 @@ class Reading(float):
     integer on the wire, ``120``) and ``register`` (the :class:`zkzap.codec.zap.Register`)."""
 
     __slots__ = ("unit", "raw", "register")
+    unit: str
+    raw: int
+    register: zap.Register
 
-    def __new__(cls, register: zap.Register, raw: int):
+    def __new__(cls, register: zap.Register, raw: int) -> Self:
         self = super().__new__(cls, register.physical(raw))
         self.unit = register.unit
         self.raw = raw
         self.register = register
         return self
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"{float(self)!r} {self.unit}".rstrip()
 
     __str__ = __repr__
 
 
-def _value(reg: zap.Register, raw: int):
+def _value(reg: zap.Register, raw: int) -> Union[Reading, int]:
     return Reading(reg, raw) if reg.unit else raw
 
 
-def register_records(ident: int, values, errors=()) -> list:
+def register_records(ident: int, values: Iterable[tuple[zap.Register, int]],
+                     errors: Iterable[str] = ()) -> list[Record]:
     """Records (id, register, address, value, physical/unit where scaled, meaning where the
     register has named values, errors) for ``[(Register, raw), ...]``."""
     out = []
@@ -91,7 +109,7 @@ def register_records(ident: int, values, errors=()) -> list:
     return out
 
 
-def map_blocks(gap: int = 8) -> list:
+def map_blocks(gap: int = 8) -> list[tuple[int, int]]:
     """Contiguous runs of the register map, as ``(address, length)``: few, efficient Load Data
     reads (gaps of at most ``gap`` unmapped bytes are read through)."""
     blocks = []
@@ -118,8 +136,9 @@ class Bus:
     the baud rate; ``retries`` after a failed attempt.
     """
 
-    def __init__(self, port=None, *, baud: int = 57600, return_mode: Union[int, str] = 1, timeout=None,
-                 retries: int = 2, _link=None):
+    def __init__(self, port: Union[str, Simulator, None] = None, *, baud: int = 57600,
+                 return_mode: Union[int, Literal["auto"]] = 1, timeout: Optional[float] = None,
+                 retries: int = 2, _link: Optional[ZapBus] = None) -> None:
         if _link is None:
             from ..link.zap_bus import RETRIES, open_bus
 
@@ -136,7 +155,7 @@ class Bus:
         """The :class:`zkzap.link.zap_bus.ZapBus` doing the transactions."""
 
     @classmethod
-    def over(cls, link) -> "Bus":
+    def over(cls, link: ZapBus) -> Self:
         """A Bus over an open :class:`~zkzap.link.zap_bus.ZapBus` (closing the Bus closes it)."""
         return cls(_link=link)
 
@@ -169,13 +188,13 @@ class Bus:
         """Close the port."""
         self.link.close()
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def __getitem__(self, ident: int) -> "Actuator":
+    def __getitem__(self, ident: int) -> Actuator:
         return Actuator(self, zap.check_id(ident))
 
     def _mode_for(self, ident: int) -> None:
@@ -190,17 +209,18 @@ class Bus:
 
     # -- instructions --------------------------------------------------------------------------
 
-    def echo(self, ident: int, *, check: bool = True):
+    def echo(self, ident: int, *, check: bool = True) -> Reply:
         """Echo: the actuator's feedback (a :class:`~zkzap.link.zap_bus.Reply` with ``rtt``).
         Error bits raise DeviceError unless ``check=False``."""
         ident = zap.check_id(ident, allow_broadcast=False)
         return self.link.echo(ident, check=check)
 
-    def ping(self, ident: int, *, retries: int = 0):
+    def ping(self, ident: int, *, retries: int = 0) -> Optional[Reply]:
         """Echo that returns None when nothing answers (a corrupted reply raises BadReply)."""
         return self.link.ping(zap.check_id(ident, allow_broadcast=False), retries=retries)
 
-    def load_reply(self, ident: int, reg: RegisterSpec, length: Optional[int] = None, *, check: bool = True):
+    def load_reply(self, ident: int, reg: RegisterSpec, length: Optional[int] = None, *,
+                   check: bool = True) -> tuple[Reply, list[tuple[zap.Register, int]]]:
         """Load Data: ``(reply, [(Register, raw), ...])`` for ``length`` bytes from ``reg``."""
         ident = zap.check_id(ident, allow_broadcast=False)
         reg = zap.register(reg)
@@ -211,7 +231,13 @@ class Bus:
                              ident=ident)
         return self.link.read_registers(ident, reg.address, length, check=check)
 
-    def load(self, ident: int, reg: RegisterSpec, length: Optional[int] = None):
+    if TYPE_CHECKING:
+        @overload
+        def load(self, ident: int, reg: RegisterSpec, length: None = None) -> int: ...
+        @overload
+        def load(self, ident: int, reg: RegisterSpec, length: int) -> Union[int, dict[str, int]]: ...
+
+    def load(self, ident: int, reg: RegisterSpec, length: Optional[int] = None) -> Union[int, dict[str, int]]:
         """Load Data: the raw value of ``reg``; with a ``length`` spanning several registers a
         dict ``{name: raw}``."""
         _, values = self.load_reply(ident, reg, length)
@@ -219,12 +245,13 @@ class Bus:
             return values[0][1]
         return {r.name: raw for r, raw in values}
 
-    def read(self, ident: int, reg: RegisterSpec):
+    def read(self, ident: int, reg: RegisterSpec) -> Union[Reading, int]:
         """One register's value: a :class:`Reading` for a register with a unit, else an int."""
         reg = zap.register(reg)
         return _value(reg, self.load(ident, reg))
 
-    def _write(self, builder, ident, reg, value, force):
+    def _write(self, builder: Callable[..., bytes], ident: int, reg: RegisterSpec, value: Union[int, Reading],
+               force: bool) -> Optional[Reply]:
         ident = zap.check_id(ident)
         reg = zap.register(reg)
         raw = getattr(value, "raw", value)
@@ -236,16 +263,18 @@ class Bus:
         self._mode_for(ident)
         return self.link.command(pkt)
 
-    def store(self, ident: int, reg: RegisterSpec, value: int, *, force: bool = False):
+    def store(self, ident: int, reg: RegisterSpec, value: Union[int, Reading], *,
+              force: bool = False) -> Optional[Reply]:
         """Store Data: write ``value`` (raw) to ``reg``. Returns the acknowledgement (return
         mode 2) or None."""
         return self._write(zap.store, ident, reg, value, force)
 
-    def send(self, ident: int, reg: RegisterSpec, value: int, *, force: bool = False):
+    def send(self, ident: int, reg: RegisterSpec, value: Union[int, Reading], *,
+             force: bool = False) -> Optional[Reply]:
         """Send Data: stage ``value`` for ``reg``; :meth:`execute` applies it."""
         return self._write(zap.send_data, ident, reg, value, force)
 
-    def execute(self, ident: int = zap.BROADCAST):
+    def execute(self, ident: int = zap.BROADCAST) -> Optional[Reply]:
         """Execution: apply the writes staged by :meth:`send` (default: every actuator)."""
         return self.link.command(zap.execute(zap.check_id(ident)))
 
@@ -258,21 +287,21 @@ class Bus:
         for p in packets:
             self.link.command(p)
 
-    def factory_reset(self, ident: int, *, reset_id: bool = False, reset_baud: bool = False):
+    def factory_reset(self, ident: int, *, reset_id: bool = False, reset_baud: bool = False) -> Optional[Reply]:
         """Factory Reset: restore factory settings (also the ID and/or baud rate if asked)."""
         return self.link.command(zap.factory_reset(zap.check_id(ident), reset_id, reset_baud))
 
-    def restart(self, ident: int):
+    def restart(self, ident: int) -> Optional[Reply]:
         """Restart the actuator (a stored baud-rate change takes effect)."""
         return self.link.command(zap.restart(zap.check_id(ident)))
 
-    def command(self, packet: bytes, *, check: bool = True):
+    def command(self, packet: bytes, *, check: bool = True) -> Optional[Reply]:
         """Send any command packet; returns the reply it gets (inferred from the packet), or None."""
         return self.link.command(bytes(packet), check=check)
 
     # -- procedures ----------------------------------------------------------------------------
 
-    def identify(self, ident: int, *, retries: int = 2) -> dict:
+    def identify(self, ident: int, *, retries: int = 2) -> Record:
         """``{"model", "firmware", "return_mode", "status", "errors"}`` of an actuator that answers
         Echo, from one Load Data. An actuator that answers Echo but not Load Data (after a full
         wait) is in return mode 0; a read that fails leaves the fields None with status
@@ -287,7 +316,7 @@ class Bus:
     def scan(self, ids: Iterable[int] = range(254), bauds: Iterable[int] = (57600,), *, retries: int = 2,
              on_probe: Optional[Callable[[int, int, int], None]] = None,
              on_warning: Optional[Callable[[str], None]] = None,
-             include_garbled: bool = True) -> Iterator[dict]:
+             include_garbled: bool = True) -> Iterator[Record]:
         """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, a second full
         wait for the IDs near a late or garbled reply, then the model, firmware and return mode of
         each actuator found (see :mod:`zkzap.link.zap_scan` for the policy). Yields records in ID
@@ -314,7 +343,7 @@ class Bus:
             elif on_warning is not None:
                 on_warning(event[1])
 
-    def dump_records(self, ident: int):
+    def dump_records(self, ident: int) -> tuple[list[Record], Optional[Reply]]:
         """``(records, reply with error bits or None)``: the whole register map of one actuator,
         read in as few Load Data reads as it has contiguous blocks (see :meth:`dump`)."""
         ident = zap.check_id(ident, allow_broadcast=False)
@@ -333,7 +362,7 @@ class Bus:
                 records.append(rec)
         return records, worst
 
-    def dump(self, ident: int) -> list:
+    def dump(self, ident: int) -> list[Record]:
         """The whole register map of one actuator as records: id, register, address, value,
         physical and unit (scaled registers), meaning (coded ones), access (R/RW) and memory
         (NV stored, V volatile). Error bits in a reply raise DeviceError."""
@@ -344,10 +373,27 @@ class Bus:
             raise device_error(worst)
         return records
 
+    if TYPE_CHECKING:
+        @overload
+        def move(self, ident: int, position: int, *, wait: Literal[True] = True, speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> int: ...
+        @overload
+        def move(self, ident: int, position: int, *, wait: Literal[False], speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> None: ...
+        @overload
+        def move(self, ident: int, position: int, *, wait: bool, speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]: ...
+
     def move(self, ident: int, position: int, *, wait: bool = True, speed: Optional[int] = None,
              timeout: float = 10.0, poll: float = 0.01,
              on_progress: Optional[Callable[[int, int, int], None]] = None,
-             notify: Optional[Callable[[str], None]] = None, stop: bool = True):
+             notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]:
         """Move to ``position`` (0..4095), writing goal-speed first when ``speed`` is given.
 
         With ``wait`` (the default) it reads the goal back (the actuator clamps it to its stroke
@@ -381,8 +427,16 @@ class Bus:
             return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
                                      notify=notify)
 
+    def stop(self, ident: int) -> int:
+        """Stop actuator ``ident`` where it is: its present position becomes its goal position.
+        Returns that position."""
+        from ..link.zap_safety import stop_where_it_is
+
+        return stop_where_it_is(self.link, zap.check_id(ident, allow_broadcast=False))
+
     def wait_stopped(self, ident: int, position: int, *, timeout: float = 10.0, poll: float = 0.01,
-                     on_progress=None, notify=None) -> int:
+                     on_progress: Optional[Callable[[int, int, int], None]] = None,
+                     notify: Optional[Callable[[str], None]] = None) -> int:
         """Wait until actuator ``ident``, sent to ``position``, stops; its final position (see
         :meth:`move`)."""
         goal = self.load(ident, POSITION)
@@ -413,7 +467,7 @@ class Bus:
             if poll:
                 time.sleep(poll)
 
-    def _read_back(self, ident, reg, within, message, change):
+    def _read_back(self, ident: int, reg: zap.Register, within: float, message: str, change: str) -> int:
         try:
             self.link.wait_ready(ident, within=within)
             return self.link.read(ident, reg)
@@ -483,75 +537,103 @@ def _attr_register(name: str) -> zap.Register:
     key = name.replace("_", "-")
     reg = zap.REGISTER_BY_NAME.get(key)
     if reg is None:
-        raise AttributeError(f"no register {key!r}; see 'zap registers'")
+        names = [r.name.replace("-", "_") for r in zap.REGISTERS]
+        raise AttributeError(f"no register {name!r}" + did_you_mean(name, names), name=name)
     return reg
 
 
-class Actuator:
+class Actuator(_Registers):
     """One actuator on a :class:`Bus` (``bus[3]``): its registers read and write as attributes
     (``act.goal_position = 2000``; ``act.present_voltage`` -> ``12.0 V``), and the bus's
     instructions and procedures without the ID."""
 
     __slots__ = ("bus", "ident")
 
-    def __init__(self, bus: Bus, ident: int):
+    def __init__(self, bus: Bus, ident: int) -> None:
         object.__setattr__(self, "bus", bus)
         object.__setattr__(self, "ident", ident)
 
-    def __repr__(self):
+    bus: Bus
+    ident: int
+
+    def __repr__(self) -> str:
         return f"Actuator(id={self.ident}, port={self.bus.url!r})"
 
-    def __dir__(self):
+    def __dir__(self) -> list[str]:
         return sorted(set(super().__dir__()) | {r.name.replace("-", "_") for r in zap.REGISTERS})
 
-    def __getattr__(self, name):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return self.bus.read(self.ident, _attr_register(name))
+    if not TYPE_CHECKING:  # type checkers see the registers as attributes (_registers.pyi)
+        def __getattr__(self, name: str) -> Union[Reading, int]:
+            if name.startswith("_"):
+                raise AttributeError(name)
+            return self.bus.read(self.ident, _attr_register(name))
 
-    def __setattr__(self, name, value):
-        if name in Actuator.__slots__:
-            raise AttributeError(f"{name} is fixed")
-        self.bus.store(self.ident, _attr_register(name), value)
+        def __setattr__(self, name: str, value: Union[int, Reading]) -> None:
+            if name in Actuator.__slots__:
+                raise AttributeError(f"{name} is fixed")
+            self.bus.store(self.ident, _attr_register(name), value)
 
-    def __getitem__(self, reg: RegisterSpec):
+    def __getitem__(self, reg: RegisterSpec) -> Union[Reading, int]:
         return self.bus.read(self.ident, reg)
 
-    def __setitem__(self, reg: RegisterSpec, value: int):
+    def __setitem__(self, reg: RegisterSpec, value: Union[int, Reading]) -> None:
         self.bus.store(self.ident, reg, value)
 
-    def echo(self):
+    def echo(self) -> Reply:
         """Echo (see :meth:`Bus.echo`)."""
         return self.bus.echo(self.ident)
 
-    def load(self, reg: RegisterSpec, length: Optional[int] = None):
+    if TYPE_CHECKING:
+        @overload
+        def load(self, reg: RegisterSpec, length: None = None) -> int: ...
+        @overload
+        def load(self, reg: RegisterSpec, length: int) -> Union[int, dict[str, int]]: ...
+
+    def load(self, reg: RegisterSpec, length: Optional[int] = None) -> Union[int, dict[str, int]]:
         """Load Data (see :meth:`Bus.load`)."""
         return self.bus.load(self.ident, reg, length)
 
-    def read(self, reg: RegisterSpec):
+    def read(self, reg: RegisterSpec) -> Union[Reading, int]:
         """One register's value (see :meth:`Bus.read`)."""
         return self.bus.read(self.ident, reg)
 
-    def store(self, reg: RegisterSpec, value: int, *, force: bool = False):
+    def store(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False) -> Optional[Reply]:
         """Store Data (see :meth:`Bus.store`)."""
         return self.bus.store(self.ident, reg, value, force=force)
 
-    def send(self, reg: RegisterSpec, value: int, *, force: bool = False):
+    def send(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False) -> Optional[Reply]:
         """Send Data (see :meth:`Bus.send`)."""
         return self.bus.send(self.ident, reg, value, force=force)
 
-    def move(self, position: int, **kw):
+    if TYPE_CHECKING:
+        @overload
+        def move(self, position: int, *, wait: Literal[True] = True, speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> int: ...
+        @overload
+        def move(self, position: int, *, wait: Literal[False], speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> None: ...
+        @overload
+        def move(self, position: int, *, wait: bool, speed: Optional[int] = None,
+                 timeout: float = 10.0, poll: float = 0.01,
+                 on_progress: Optional[Callable[[int, int, int], None]] = None,
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]: ...
+
+    def move(self, position: int, **kw: Any) -> Optional[int]:
         """Move, waiting by default (see :meth:`Bus.move`)."""
         return self.bus.move(self.ident, position, **kw)
 
-    def identify(self) -> dict:
+    def identify(self) -> Record:
         """Model, firmware and return mode (see :meth:`Bus.identify`)."""
         return self.bus.identify(self.ident)
 
-    def dump(self) -> list:
+    def dump(self) -> list[Record]:
         """The whole register map (see :meth:`Bus.dump`)."""
         return self.bus.dump(self.ident)
 
-    def restart(self):
+    def restart(self) -> Optional[Reply]:
         """Restart (see :meth:`Bus.restart`)."""
         return self.bus.restart(self.ident)

@@ -15,7 +15,16 @@ given.
 Safety: a session that sent a frame controlling the engine (see
 :attr:`zkzap.codec.zk.ControlFrame.controls_engine`) sends the abort command (``abort``:
 standby or stop with throttle 0; ``none`` sends nothing) when a :meth:`Ecu.hold` ends
-abnormally (an exception, Ctrl-C, the generator closed early) and when the Ecu closes.
+abnormally (an exception, Ctrl-C, the generator closed early) and when the Ecu closes. A frame
+the ECU cannot follow — an RPM target above the max rpm it reports, a command newer than its
+protocol version — is refused before anything is sent (:class:`~zkzap.api.prestart.EcuLimitError`,
+exit status 2): :meth:`Ecu.send`, :meth:`Ecu.hold` and :meth:`Ecu.run_profile` first read the
+ECU's status ID 6 when a frame needs it (:mod:`zkzap.api.prestart`).
+
+Time is the session's one clock (:mod:`zkzap.link.clock`): ``seconds``, ``duration``,
+``silence`` and every record's ``t`` are model seconds on a sped-up simulator
+(``sim://zk?speed=10``), real seconds elsewhere. A call that reads status frames and gets none
+raises :class:`~zkzap.errors.NoReply`, however short it was.
 
 Built on :class:`~zkzap.link.zk_port.ZkLink` (the port), :class:`~zkzap.link.zk_sources.LiveSource`
 (status frames), :class:`~zkzap.api.telemetry.Telemetry` (records), :class:`~zkzap.api.session.Session`
@@ -25,28 +34,42 @@ Built on :class:`~zkzap.link.zk_port.ZkLink` (the port), :class:`~zkzap.link.zk_
 
 from __future__ import annotations
 
-import time
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Callable, Iterator, Optional, Union
+    import os
+    from typing import Any, Callable, Iterable, Iterator, Literal, Optional, Sequence, Union
+
+    from typing_extensions import Self, TypeAlias
+
+    from ..sim.launch import Simulator
+    from .prestart import EcuLimits, Plan
+    from .schedule import Schedule
+    from .session import Outcome
+
+    _StatusBase: TypeAlias = dict[str, Any]
+    #: What :meth:`Ecu.run_profile` runs: a Schedule, CSV text, a CSV file's path or rows.
+    ScheduleSpec: TypeAlias = Union[Schedule, str, os.PathLike[str], Iterable[Sequence[Union[float, str]]]]
+else:
+    _StatusBase = dict
 
 from ..codec import zk
-from ..errors import DeviceError, NoReply, UsageError
+from ..errors import DeviceError, UsageError, did_you_mean
 
 __all__ = ["Ecu", "Status", "ProfileResult"]
 
 
-class Status(dict):
+class Status(_StatusBase):
     """One status record: a dict whose keys also read as attributes (``rec.rpm``, ``rec.egt_c``)."""
 
     __slots__ = ()
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         try:
             return self[name]
         except KeyError:
-            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}") from None
+            raise AttributeError(f"status ID {self.get('id')} has no field {name!r}" + did_you_mean(name, self),
+                                 name=name) from None
 
 
 class ProfileResult:
@@ -55,7 +78,7 @@ class ProfileResult:
     states, errors, as ``zk profile --summary-json`` writes it), ``records`` written and
     ``notes`` (values the schedule rounded, ``FILE:LINE: ...``)."""
 
-    def __init__(self, outcome, summary, records, notes=()):
+    def __init__(self, outcome: Outcome, summary: dict[str, Any], records: int, notes: Iterable[str] = ()) -> None:
         self.outcome = outcome
         self.summary = summary
         self.records = records
@@ -66,7 +89,7 @@ class ProfileResult:
         """True when the schedule ran to its end."""
         return self.outcome.ok
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"ProfileResult(reason={self.outcome.reason!r}, records={self.records})"
 
 
@@ -75,13 +98,15 @@ class Ecu:
     session controlled the engine, then the port closes).
 
     ``port`` is a device path, any pyserial URL, ``sim://zk?speed=10`` or a simulator started
-    with :func:`zkzap.sim.start`; ``baud`` the line speed; ``protocol_version`` the ECU's (None:
-    read from status ID 6); ``silence`` the longest wait for a status frame before NoReply;
-    ``abort`` the abort command (``standby``, ``stop`` or ``none``).
+    with :func:`zkzap.sim.start`; ``baud`` the line speed and ``stop_bits`` (1 or 2);
+    ``protocol_version`` the ECU's (None: read from status ID 6); ``silence`` the longest wait
+    for a status frame before NoReply (session seconds; None: no limit); ``abort`` the abort
+    command (``standby``, ``stop`` or ``none``).
     """
 
-    def __init__(self, port, *, baud: int = 115200, protocol_version: Optional[int] = None,
-                 silence: float = 2.0, abort: str = "standby"):
+    def __init__(self, port: Union[str, Simulator], *, baud: int = 115200, protocol_version: Optional[int] = None,
+                 silence: Optional[float] = 2.0, abort: Literal["standby", "stop", "none"] = "standby",
+                 stop_bits: Literal[1, 2] = 1) -> None:
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -99,24 +124,28 @@ class Ecu:
         self.abort_kind = abort
         """The abort command sent on an abnormal end and at close (standby, stop, none)."""
         self.silence = silence
-        self.link = ZkLink.open(url, baud)
+        self.link = ZkLink.open(url, baud, stop_bits=stop_bits)
         """The :class:`~zkzap.link.zk_port.ZkLink` (the port)."""
         self.source = LiveSource(self.link)
-        self.telemetry = Telemetry(protocol_version, wall0=self.source.wall0)
+        self.telemetry = Telemetry(protocol_version, clock=self.source.clock)
         """The :class:`~zkzap.api.telemetry.Telemetry`: snapshot, errors, summary."""
         self.controlling = False
         """True once a frame that controls the engine was sent."""
         self.pump_on = False
         self.sent = 0
+        self.limits: Optional[EcuLimits] = None
+        """What the ECU reported about itself (:class:`~zkzap.api.prestart.EcuLimits`: max rpm,
+        protocol version), once a frame needed it."""
+        self._rpm_factor = None
         self._last_frame_t = None
         self._closed = False
 
     # -- context -------------------------------------------------------------------------------
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         self.close()
         return False
 
@@ -138,7 +167,7 @@ class Ecu:
         """The ECU's protocol version (from status ID 6, given, or the default 4)."""
         return self.telemetry.decoder.version
 
-    def frame(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
+    def frame(self, kind: Union[str, int], **fields: Any) -> zk.ControlFrame:
         """The control frame ``kind`` (a ``zk send`` name or ID) with physical ``fields``
         (``state="run", throttle_pct=40``), checked; nothing is sent."""
         values = dict(fields)
@@ -158,14 +187,47 @@ class Ecu:
             self.pump_on = True
         elif cf.action == "pump-off":
             self.pump_on = False
+        if cf.id == 6:
+            self._rpm_factor = cf.rpm_factor
 
-    def send(self, kind: Union[str, int], **fields) -> zk.ControlFrame:
-        """Send one control frame (see :meth:`frame`); returns it."""
+    def check(self, plan: Plan, *, listen: bool = True) -> None:
+        """Check a :class:`~zkzap.api.prestart.Plan` against the ECU's reported limits, reading
+        its status ID 6 first when the plan needs it and they are not known yet (``listen``
+        False: against what is known, nothing read). Raises EcuLimitError (nothing sent) or
+        NoReply."""
+        from .prestart import EcuLimits, listen as listen_for
+
+        if not plan.needs_ecu:
+            return
+        if self.limits is None:
+            if not listen:
+                plan.check(EcuLimits(None, self.telemetry.decoder.given, read=False))
+                return
+            self.limits = listen_for(self.source, self.silence, given=self.telemetry.decoder.given,
+                                     on_frame=self._heard, where=self.url)
+        plan.check(self.limits)
+
+    def _heard(self, t, frame):
+        self._last_frame_t = t
+        self.telemetry.feed(t, frame)          # the snapshot stays current; no record is yielded
+
+    def _plan(self, cf, rpm_factor=None):
+        from .prestart import Plan
+
+        return Plan([cf], rpm_factor=rpm_factor or self._rpm_factor,
+                    what=cf.command.name if cf.command is not None else f"ID {cf.id}")
+
+    def send(self, kind: Union[str, int, zk.ControlFrame], *, listen: bool = True, **fields: Any) -> zk.ControlFrame:
+        """Send one control frame (see :meth:`frame`); returns it. A frame that needs the ECU's
+        limits (an ID 7 target, a command newer than protocol version 1) is checked against them
+        first (see :meth:`check`; ``listen`` False: nothing is read, the frame is checked
+        against the version given or assumed, and an RPM target is refused)."""
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        self.check(self._plan(cf, fields.get("rpm_factor")), listen=listen)
         self._write(cf)
         return cf
 
-    def abort(self) -> list:
+    def abort(self) -> list[bytes]:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
         on protocol version 4 or later also leaves RPM mode; pump-off after a pump-on).
         Returns the frames sent."""
@@ -175,7 +237,7 @@ class Ecu:
         for f in frames:
             self.link.write(f)
         if frames:
-            time.sleep(0.02)
+            self.source.clock.sleep(0.02)
             self.link.write(frames[0])
             self.controlling = False
             self.pump_on = False
@@ -183,32 +245,49 @@ class Ecu:
 
     # -- status in -----------------------------------------------------------------------------
 
-    def _records(self, control=None, period=None, duration=None, count=None) -> Iterator[Status]:
+    def _records(self, control: Optional[zk.ControlFrame] = None, period: Optional[float] = None,
+                 duration: Optional[float] = None, count: Optional[int] = None) -> Iterator[Status]:
+        from .prestart import silence_error
+
         src, tel = self.source, self.telemetry
         start = src.now()
-        if self._last_frame_t is None:
-            self._last_frame_t = start
+        since = None                          # silence counts from this call's first read
+        if period is not None:
+            src.pace(period)
         next_send = start
         n = 0
+        heard = False
         while True:
             now = src.now()
             if duration is not None and now - start >= duration:
+                if not heard:
+                    # held up for the whole call (a loaded machine)? What came meanwhile is waiting
+                    for t, frame in src.poll():
+                        self._last_frame_t, heard = t, True
+                        for rec in tel.feed(t, frame):
+                            yield Status(rec)
+                if not heard:                 # a silent device never passes, however short the call
+                    raise silence_error(src, now - start, heard=False, where=self.url, ran=True)
                 return
             if control is not None and now >= next_send:
                 self._write(control)
                 next_send += period
-                if next_send <= now:
+                if next_send <= now - period:     # a stall: skip the backlog
                     next_send = now + period
-            for t, frame in src.poll():
-                self._last_frame_t = t
+            got = src.poll()
+            polled = src.now()               # a silence is judged by reads, never by a stall
+            if since is None:
+                since = polled
+            for t, frame in got:
+                self._last_frame_t = since = t
+                heard = True
                 for rec in tel.feed(t, frame):
                     yield Status(rec)
                     n += 1
                     if count is not None and n >= count:
                         return
-            if self.silence is not None and src.now() - self._last_frame_t > self.silence:
-                raise NoReply(f"no status frame from the ECU on {self.url} for {self.silence:g} s",
-                              port=self.url, baud=self.baud, timeout=self.silence, protocol="zk")
+            if not got and self.silence is not None and polled - since > self.silence:
+                raise silence_error(src, self.silence, heard=self._last_frame_t is not None, where=self.url)
             if tel.new_error is not None and control is not None and self.controlling:
                 code, name, et = tel.new_error
                 tel.new_error = None
@@ -221,23 +300,45 @@ class Ecu:
         Raises NoReply when the ECU is silent for ``silence`` s."""
         return self._records(count=count, duration=duration)
 
-    def hold(self, kind: Union[str, int], seconds: float, *, rate: float = 20.0, **fields) -> Iterator[Status]:
+    def hold(self, kind: Union[str, int, zk.ControlFrame], seconds: float, *, rate: float = 20.0,
+             **fields: Any) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
-        raises DeviceError; any abnormal end sends the abort command."""
+        raises DeviceError; any abnormal end sends the abort command — Ctrl-C, and SIGTERM too:
+        while the hold runs (in the main thread) SIGTERM raises
+        :class:`~zkzap.signals.Terminated` (a KeyboardInterrupt) instead of ending the process
+        where it stands, and the previous handler comes back after. A frame the ECU cannot
+        follow is refused before the first is sent (see :meth:`check`); a hold that read no
+        status frame raises NoReply."""
         if not 1 <= rate <= 200:
             raise UsageError(f"rate: {rate:g} is out of range; allowed 1..200 Hz")
+        import signal
+
+        from ..signals import Terminated, handle, held, restore
+
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        self.check(self._plan(cf, fields.get("rpm_factor")))
         done = False
+
+        def terminated(signum, frame):
+            raise Terminated()
+
+        # while the engine is held, SIGTERM ends the hold as Ctrl-C does (so the abort goes out)
+        # instead of killing the process; the previous handler comes back after
+        old = handle([signal.SIGTERM], terminated)
         try:
             yield from self._records(cf, 1.0 / rate, duration=seconds)
             done = True
         finally:
-            if not done and self.controlling and self.abort_kind != "none":
-                try:
-                    self.abort()
-                except Exception:  # noqa: BLE001 - the port may be what failed; the first error wins
-                    pass
+            try:
+                if not done and self.controlling and self.abort_kind != "none":
+                    with held():             # a second signal does not cut the abort short
+                        try:
+                            self.abort()
+                        except Exception:  # noqa: BLE001 - the port may be what failed; the first error wins
+                            pass
+            finally:
+                restore(old)
 
     def keepalive(self, seconds: float, *, rate: float = 20.0) -> Iterator[Status]:
         """Send keep-alives (ID 0) for ``seconds`` s, yielding status records (ECUs before
@@ -245,7 +346,7 @@ class Ecu:
         return self.hold("keepalive", seconds, rate=rate)
 
     @property
-    def health(self) -> dict:
+    def health(self) -> dict[str, Any]:
         """Link health: ``frames``, ``frames_per_s`` (over the last second), ``crc_errors``,
         ``skipped`` bytes, ``stale`` (and :meth:`stale_ids`), ``protocol_version`` and
         ``version_source``."""
@@ -254,18 +355,19 @@ class Ecu:
         h["stale_ids"] = self.telemetry.stale_ids(now)
         return h
 
-    def stale_ids(self) -> list:
+    def stale_ids(self) -> list[int]:
         """Status IDs not seen for more than three of their periods."""
         return self.telemetry.stale_ids(self.source.now())
 
     @property
-    def snapshot(self) -> dict:
+    def snapshot(self) -> dict[str, Any]:
         """Every status field's latest value."""
         return self.telemetry.snapshot(self.source.now())
 
     # -- schedules -----------------------------------------------------------------------------
 
-    def run_profile(self, schedule, *, rate: float = 20.0, interpolate: str = "step",
+    def run_profile(self, schedule: ScheduleSpec, *, rate: float = 20.0,
+                    interpolate: Literal["step", "linear"] = "step",
                     on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
         """Run a throttle or RPM schedule as ``zk profile`` does: a
         :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or
@@ -278,8 +380,9 @@ class Ecu:
         Ends at the schedule's last row (the abort command follows when it ends in state run or
         in RPM mode), or on Ctrl-C/SIGTERM, a port failure, a silent ECU or a new ECU error (the
         abort command is sent). An RPM target above the ECU's max rpm (or an ECU too old for RPM
-        mode) raises :class:`~zkzap.api.schedule.ScheduleTargetError` before any RPM frame is
-        sent. With ``check`` a failure is raised (DeviceError, NoReply, PortError,
+        mode) is refused before the schedule's first frame
+        (:class:`~zkzap.api.prestart.EcuLimitError`, exit status 2, nothing sent). With
+        ``check`` a failure is raised (EcuLimitError, DeviceError, NoReply, PortError,
         KeyboardInterrupt) after the abort; otherwise the result says how it ended."""
         import os
 
@@ -298,15 +401,22 @@ class Ecu:
             text = "\n".join(",".join(str(c) for c in row) for row in schedule)
             sched = Schedule.parse(text, interpolate=interpolate)
         sched.check_length()
+        plan = sched.plan_check()
+        if self.limits is not None:
+            plan.check(self.limits)            # known already: nothing to listen for
         source = LiveSource(self.link)
-        source.framer = self.source.framer
-        tel = Telemetry(self.telemetry.decoder.known, wall0=source.wall0)
-        sched.bind(tel)
+        source.framer, source.signal = self.source.framer, self.source.signal
+        tel = Telemetry(self.telemetry.decoder.known, clock=source.clock)
         sink = (lambda rec: on_record(Status(rec))) if on_record is not None else (lambda rec: None)
         session = Session(source, tel, sink, control=sched.frame_at, rate=rate, abort=self.abort_kind,
-                        duration=sched.length, silence=self.silence, stop_on_error=True,
-                        abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode)
+                          duration=sched.length, silence=self.silence, stop_on_error=True,
+                          abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
+                          plan=plan if self.limits is None else None)
         outcome = session.run()
+        if session.ecu_limits is not None:
+            self.limits = session.ecu_limits
+        if session.controlling:
+            self.controlling = True
         summary = {"outcome": outcome.reason, "exit_status": outcome.exit_code, "aborted": outcome.aborted,
                    "duration_s": round(session.ended_t or 0.0, 3), "schedule_s": sched.length,
                    "crc_errors": source.framer.bad}

@@ -15,11 +15,18 @@ _WHERE = {"crc8_maxim": "crc", "zap_checksum": "crc", "FieldValueError": "fields
           "ZapFramer": "framing", "HexError": "hexfmt", "format_hex": "hexfmt", "parse_hex": "hexfmt"}
 
 
-def __getattr__(name):
-    # Lazy re-exports: importing one codec module does not import the others.
-    if name in _WHERE:
-        import importlib
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # what type checkers see; at run time each name is imported on first use
+    from .crc import crc8_maxim as crc8_maxim, zap_checksum as zap_checksum
+    from .fields import FieldValueError as FieldValueError
+    from .framing import ZapFramer as ZapFramer, ZkFramer as ZkFramer
+    from .hexfmt import HexError as HexError, format_hex as format_hex, parse_hex as parse_hex
+else:
+    def __getattr__(name: str) -> object:
+        # Lazy re-exports: importing one codec module does not import the others.
+        if name in _WHERE:
+            import importlib
 
-        value = globals()[name] = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
-        return value
-    raise AttributeError(name)
+            value = globals()[name] = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+            return value
+        raise AttributeError(name)

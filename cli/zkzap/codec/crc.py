@@ -7,6 +7,10 @@ mightyZAP uses ``0xFF - (sum & 0xFF)`` over ID, SIZE, instruction/error and para
 
 from __future__ import annotations
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable, Union
+
 
 def build_table(poly: int = 0x8C) -> bytes:
     """The lookup table of a reflected CRC-8 (how :data:`CRC8_TABLE` was made; a test checks it)."""
@@ -33,7 +37,7 @@ CRC8_TABLE = bytes.fromhex(
 )
 
 
-def crc8_maxim(data, seed: int = 0) -> int:
+def crc8_maxim(data: Union[bytes, bytearray, memoryview, Iterable[int]], seed: int = 0) -> int:
     """CRC-8/MAXIM-DOW of ``data`` (bytes-like or iterable of ints), table-driven."""
     crc = seed
     table = CRC8_TABLE
@@ -42,6 +46,6 @@ def crc8_maxim(data, seed: int = 0) -> int:
     return crc
 
 
-def zap_checksum(data) -> int:
+def zap_checksum(data: Union[bytes, bytearray, memoryview, Iterable[int]]) -> int:
     """mightyZAP checksum of the bytes from ID to the last parameter."""
     return 0xFF - (sum(data) & 0xFF)

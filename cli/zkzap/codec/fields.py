@@ -11,10 +11,12 @@ with no per-field interpretation.
 
 from __future__ import annotations
 
+from ..errors import InvalidValue, unknown_name
 
 
-class FieldValueError(ValueError):
-    """A value outside a field's range or grid, or an unknown name. The message names the field."""
+class FieldValueError(InvalidValue):
+    """A value outside a field's range or grid, or an unknown name. The message names the field.
+    A :class:`zkzap.errors.InvalidValue` (exit 2), so also a ``ValueError``."""
 
 
 def parse_bits(spec: str) -> tuple:
@@ -35,9 +37,9 @@ def parse_bits(spec: str) -> tuple:
             else:
                 hi, lo = 7, 0
         except (ValueError, IndexError):
-            raise ValueError(f"bad bit spec {spec!r}") from None
+            raise InvalidValue(f"bad bit spec {spec!r}") from None
         if not 0 <= lo <= hi <= 7:
-            raise ValueError(f"bad bit range in {spec!r}")
+            raise InvalidValue(f"bad bit range in {spec!r}")
         parts.append((byte, hi, lo))
     return tuple(parts)
 
@@ -137,7 +139,7 @@ class Field:
         self.lo = lo
         self.hi = (1 << self.width) - 1 if hi is None else hi
         if self.hi >= 1 << self.width:
-            raise ValueError(f"{key}: range exceeds {self.width} bits")
+            raise InvalidValue(f"{key}: range exceeds {self.width} bits")
         self.since = since
         self.names = names
         self.name_key = name_key
@@ -245,8 +247,9 @@ class Field:
                 try:
                     value = int(lowered, 0)
                 except ValueError:
-                    raise FieldValueError(
-                        f"{self.label}: unknown name {value!r}; allowed {self.describe_range(ctx)}") from None
+                    raise unknown_name(self.label, value, [n for r, n in self.names.items() if self.lo <= r <= self.hi],
+                                       otherwise=f"; allowed {self.describe_range(ctx)}",
+                                       cls=FieldValueError) from None
             if not isinstance(value, int) or not self.lo <= value <= self.hi:
                 raise self._range_error(value, ctx)
             return value, None
@@ -748,7 +751,7 @@ def compile_text(code, items, dialect, flagged=None, size=None, guard=None):
                                                    var, count, expr)
             cells.append((key, "%s", f"(t{n}[{var}] or f{n}({var}))"))
         else:  # pragma: no cover - the kinds above are all Layout.items produces
-            raise ValueError(f"item kind {kind!r}")
+            raise InvalidValue(f"item kind {kind!r}")
     template, args = dialect.template(cells)
     mask = ""
     if flagged is not None:

@@ -33,7 +33,16 @@ not part of a good frame, including those of truncated and filtered frames).
 
 from __future__ import annotations
 
+from ..errors import InvalidValue
 from .crc import CRC8_TABLE
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Literal, Optional, Sequence, Union
+
+    from typing_extensions import TypeAlias
+
+    Bytes: TypeAlias = Union[bytes, bytearray, memoryview]
 
 _T = CRC8_TABLE
 _HDR = b"\xff\xff\xff"
@@ -58,7 +67,18 @@ class _Framer:
     """What both framers share: counters, the bytes held between calls, the end of a scan, and
     the choice between overlapping valid candidates after damage."""
 
-    def __init__(self):
+    #: Frames returned so far.
+    frames: int
+    #: Frames that failed their check (CRC or checksum) at a frame boundary.
+    bad: int
+    #: Frames cut short by the end of the input.
+    truncated: int
+    #: Frames of the kind ``accept`` leaves out (ZK).
+    filtered: int
+    #: Bytes skipped (garbage, bad frames, a truncated end).
+    skipped: int
+
+    def __init__(self) -> None:
         self._buf = b""
         self._bad_until = 0
         self._synced = True
@@ -121,9 +141,9 @@ class ZkFramer(_Framer):
     frame's does not.
     """
 
-    def __init__(self, accept: str = "both"):
+    def __init__(self, accept: Literal["both", "status", "control"] = "both") -> None:
         if accept not in ("both", "status", "control"):
-            raise ValueError(f"accept: {accept!r}; allowed both, status, control")
+            raise InvalidValue(f"accept: {accept!r}; allowed both, status, control")
         self.accept = accept
         lengths = [0] * 256
         other = [0] * 256               # the kind left out: recognised, counted, not returned
@@ -183,25 +203,25 @@ class ZkFramer(_Framer):
             return None
         return lo if wins else 0
 
-    def feed(self, data) -> list:
+    def feed(self, data: Bytes) -> list[bytes]:
         """Frames completed by ``data`` (a frame right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
         return self._scan(buf, False)
 
-    def flush(self) -> list:
+    def flush(self) -> list[bytes]:
         """End of stream: decide about held frames with the bytes there are and return them;
         bytes still held after that are a truncated frame (counted as skipped)."""
         return self.flush_lines(None)
 
-    def feed_lines(self, data, lines) -> list:
+    def feed_lines(self, data: Bytes, lines: Any) -> list[Any]:
         """:meth:`feed`, returning ``lines.line(frame)`` for each frame instead of the frame,
         where ``lines`` is a :class:`~zkzap.io.zk_lines.ZkLines`. A frame in step whose line is
         in ``lines.memo`` (where only checked frames go) costs one look-up."""
         buf = self._buf + bytes(data) if self._buf else bytes(data)
         return self._scan(buf, False, lines)
 
-    def flush_lines(self, lines) -> list:
+    def flush_lines(self, lines: Optional[Any]) -> list[Any]:
         """:meth:`flush`, returning lines as :meth:`feed_lines` does (frames when None)."""
         out = self._scan(self._buf, True, lines) if self._buf else []
         self._reset()
@@ -346,7 +366,7 @@ class ZapFramer(_Framer):
     The header is the last three of a run of FF bytes (ID is never FF). SIZE must be at least 2.
     """
 
-    def feed(self, data) -> list:
+    def feed(self, data: Bytes) -> list[bytes]:
         """Packets completed by ``data`` (a packet right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
         if self._buf:
@@ -365,7 +385,7 @@ class ZapFramer(_Framer):
                 return [data]
         return self._scan(data, False)
 
-    def flush(self) -> list:
+    def flush(self) -> list[bytes]:
         """End of stream: decide about held packets and return them; bytes still held after
         that are a truncated packet (counted as skipped, and as bad when they began with a
         header)."""
@@ -500,3 +520,114 @@ class ZapFramer(_Framer):
                 i += 1
                 synced = False
         return self._end_scan(buf, i, out, skipped, bad_until, synced, final)
+
+
+#: A stream is taken for a device talking the protocol once this many valid frames came while
+#: at least :data:`LOCK_SHARE` of its recent bytes were in valid frames.
+LOCK_FRAMES = 3
+#: Share of the recent bytes that valid frames must account for before frames are trusted.
+LOCK_SHARE = 0.3
+#: Below this share (over at least :data:`NOISE_BYTES` recent bytes) a trusted stream is noise
+#: again: frames are held back until it proves itself anew.
+UNLOCK_SHARE = 0.1
+#: "Recent": each byte's weight halves over this many later bytes.
+SHARE_HALF_LIFE = 256
+#: Bytes that must have come (with too few of them in frames) before a stream is called noise.
+NOISE_BYTES = 64
+#: Valid frames held back at most while a stream has not proved itself (the oldest go first).
+HELD_MAX = 4 * LOCK_FRAMES
+
+
+class SignalLock:
+    """Whether a byte stream is a device talking the protocol, or noise that an 8-bit check
+    lets through by chance — the one place that decides "have we got a device".
+
+    A CRC-8 (or an 8-bit checksum) accepts 1 random candidate in 256: random bytes on a line
+    (a wrong baud rate, another device, a floating input) give a ZK status frame about every
+    4 700 bytes, 2.5 a second at 115200 baud. A device's stream is frames back to back, so
+    almost every byte is in one; noise is almost all skipped bytes. The lock weighs the recent
+    bytes (:data:`SHARE_HALF_LIFE`): valid frames are handed on only once
+    :data:`LOCK_FRAMES` of them came while at least :data:`LOCK_SHARE` of the recent bytes
+    were in valid frames (the first ones are held back until then, and handed on with their
+    own items), and no longer once the share falls below :data:`UNLOCK_SHARE`.
+
+    ``confirm`` (default :data:`LOCK_FRAMES`) is how many valid frames it takes: a session
+    can wait for three frames; a sniffer, whose records must come as they happen and in time
+    order, trusts a frame at once when the share allows (noise can then pass one frame, and
+    only within its first bytes: about 1 stream start in 300).
+
+    Feed it what a framer returned for each chunk: :meth:`admit` (``nbytes`` the chunk's
+    length, ``frames`` the framer's frames, ``items`` what to hand on for each, default the
+    frames). Frames of the kind a :class:`ZkFramer` leaves out (``accept``) count as framed
+    bytes: a half-duplex echo of the host's control frames is not noise.
+
+    ``locked``; ``noise`` (bytes came, too few in frames); counters ``bytes``, ``accepted``,
+    ``rejected`` (valid frames taken for chance: never handed on).
+    """
+
+    def __init__(self, framer: Union[ZkFramer, ZapFramer], confirm: int = LOCK_FRAMES) -> None:
+        self.framer = framer
+        self.confirm = confirm
+        accept = getattr(framer, "accept", "both")
+        self._other_len = 4 if accept == "status" else 7 if accept == "control" else 0
+        self._filtered = framer.filtered
+        self.locked = False
+        self.held: list[Any] = []
+        self.bytes = 0
+        self.accepted = 0
+        self.rejected = 0
+        self._good = 0.0
+        self._seen = 0.0
+
+    @property
+    def share(self) -> float:
+        """The share of the recent bytes that were in valid frames (0..1)."""
+        return min(1.0, self._good / self._seen) if self._seen else 0.0
+
+    @property
+    def noise(self) -> bool:
+        """True when bytes come but not as frames: not (or no longer) a device's stream."""
+        return not self.locked and self._seen >= NOISE_BYTES and self.share < LOCK_SHARE
+
+    def admit(self, nbytes: int, frames: Sequence[Bytes], items: Optional[Sequence[Any]] = None) -> list[Any]:
+        """The items (default: the frames) to hand on for a chunk of ``nbytes`` bytes whose
+        framer returned ``frames``."""
+        items = list(frames) if items is None else list(items)
+        framed = sum(len(f) for f in frames)
+        filtered = self.framer.filtered
+        if filtered != self._filtered:
+            framed += (filtered - self._filtered) * self._other_len
+            self._filtered = filtered
+        if nbytes:
+            decay = 0.5 ** (nbytes / SHARE_HALF_LIFE)
+            self._good *= decay
+            self._seen *= decay
+        self._good += framed
+        self._seen += nbytes
+        self.bytes += nbytes
+        share = self.share
+        if self.locked:
+            if share < UNLOCK_SHARE and self._seen >= NOISE_BYTES:
+                self.locked = False
+            else:
+                self.accepted += len(items)
+                return items
+        held = self.held
+        held += items
+        if share >= LOCK_SHARE and len(held) >= self.confirm:
+            self.locked = True
+            self.held = []
+            self.accepted += len(held)
+            return held
+        if self._seen >= NOISE_BYTES and share < UNLOCK_SHARE:
+            self.rejected += len(held)
+            held.clear()
+        elif len(held) > HELD_MAX:
+            self.rejected += len(held) - HELD_MAX
+            del held[:len(held) - HELD_MAX]
+        return []
+
+    def finish(self) -> None:
+        """The end of the stream: frames still held never proved themselves (rejected)."""
+        self.rejected += len(self.held)
+        self.held = []

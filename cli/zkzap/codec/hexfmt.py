@@ -6,8 +6,10 @@ byte cells; a row that mixes ``0x..`` cells with others, such as a time column
 ``1e-05,0x1D`` or ``10,0xFF``, gives only its ``0x..`` cells), and dump lines from ``xxd``
 (``00000010: ff14 ...`` and its ASCII column), ``hexdump -C`` (offset, ``|ascii|`` gutter),
 ``od -t x1`` (a 7-digit offset) and ``od -A x -t x1`` (a 6-digit offset before single bytes:
-``000000`` on the first line, any on the lines of a dump after it). An offset is dropped only where it cannot be data: it ends in a colon,
-is followed by a ``|...|`` gutter, has an odd number of digits, or is od's 6-digit form.
+``000000`` on the first line, any on the lines of a dump after it), with od's ``z`` column
+(``-t x1z``: ``>ascii<`` after two spaces) too. An offset is dropped only where it cannot be
+data: it ends in a colon, is followed by a ``|...|`` or ``>...<`` gutter, has an odd number of
+digits, or is od's 6-digit form.
 The ``*`` lines of ``hexdump``/``od``/``xxd -a`` (the line before repeats up to the next
 offset) are expanded, in blocks, whatever the length they stand for; the radix of od's
 offsets (hex, octal, decimal) is read from two consecutive offsets, else hex for 6 or 8
@@ -22,10 +24,18 @@ from __future__ import annotations
 
 import re
 
+from ..errors import InvalidValue
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Iterable, Iterator, Optional, TextIO, Union
+
 _HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
 _PATTERNS = {
     "colon_offset": r"^\s*(?:0[xX])?[0-9A-Fa-f]{1,16}:(?=\s)",
-    "gutter": r"\s\s\|.*\|\s*$",
+    # hexdump -C's |ascii| and od -t x1z's >ascii< column after two spaces (the hex part holds
+    # neither character, so the first such start is the column's)
+    "gutter": r"\s\s(?:\|.*\||>.*<)\s*$",
     "hexdump_offset": r"^\s*[0-9A-Fa-f]{4,16}\s",
     "odd_offset": r"^\s*[0-9A-Fa-f]{5}(?:[0-9A-Fa-f]{2})*\s",
     "end_offset": r"^\s*([0-9A-Fa-f]{6,8})\s*$",
@@ -54,11 +64,11 @@ class _Patterns:
 _rx = _Patterns()
 
 
-class HexError(ValueError):
-    """Malformed hex text."""
+class HexError(InvalidValue):
+    """Malformed hex text (a :class:`zkzap.errors.InvalidValue`, so also a ``ValueError``)."""
 
 
-def format_hex(data) -> str:
+def format_hex(data: Union[bytes, bytearray, memoryview, Iterable[int]]) -> str:
     """``b"\\xff\\x1d"`` -> ``"FF 1D"``."""
     return bytes(data).hex(" ").upper()
 
@@ -95,7 +105,8 @@ def _binary(what, lineno):
     return HexError(f"{what}: binary input{where}: use --binary for raw bytes")
 
 
-def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state=None) -> bytes:
+def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0,
+                   state: Optional[dict[str, Any]] = None) -> bytes:
     """Parse one line of hex text (dump offsets and gutters dropped). Raises :class:`HexError`.
 
     ``state`` (a dict kept across the lines of one input) lets the lone final-offset line that
@@ -111,9 +122,9 @@ def parse_hex_line(line: str, *, what: str = "hex input", lineno: int = 0, state
 
 def _line_pieces(line, what, lineno, state):
     """The bytes of one line, as pieces (a ``*`` line's expansion comes in blocks)."""
-    g = _rx.gutter.search(line) if "|" in line else None
+    g = _rx.gutter.search(line) if "|" in line or ">" in line else None
     if g is not None and "#" not in line[:g.start()]:
-        pass                        # a '#' in hexdump's ASCII gutter is no comment
+        pass                        # a '#' in a dump's ASCII column is no comment
     else:
         line = line.split("#", 1)[0]
     if not line.strip():
@@ -290,7 +301,8 @@ class HexSkips:
                 f"not hex skipped (the first: {self.first})")
 
 
-def iter_hex_stream(stream, *, what: str = "stdin", skipped: HexSkips | None = None):
+def iter_hex_stream(stream: TextIO, *, what: str = "stdin",
+                    skipped: HexSkips | None = None) -> Iterator[bytes]:
     """Yield the bytes of a text stream's lines as they are read, in constant memory: a line
     longer than :data:`PIECE` characters (one long hex string, as some tools write) is taken
     in pieces cut at a separator or between two hex digits.

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Iterable
 
-def id_ranges(ids) -> str:
+
+def id_ranges(ids: Iterable[int]) -> str:
     """``[1, 2, 3, 7]`` -> ``"1-3,7"`` (sorted; for messages: actuator IDs, status IDs)."""
     out, start, prev = [], None, None
     for i in sorted(ids):

@@ -10,6 +10,22 @@ the ``zap registers`` table come from it.
 
 from __future__ import annotations
 
+from ..errors import CHECK_FAILED, USAGE, CheckFailed, ZkzapError, unknown_name
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Iterable, Mapping, Optional, Union
+
+    from typing_extensions import TypeAlias
+
+    #: Bytes of a packet: bytes, a bytearray, a memoryview or a list of ints.
+    Bytes: TypeAlias = Union[bytes, bytearray, memoryview, "list[int]"]
+    #: A register: its name (``goal-position`` or ``goal_position``), its address or itself.
+    RegisterSpec: TypeAlias = Union[str, int, "Register"]
+    #: An actuator ID: 0..253, 254 or ``"broadcast"`` where a broadcast is allowed.
+    Ident: TypeAlias = Union[int, str]
+    #: A decoded record: a dict of JSON-ready values.
+    Record: TypeAlias = dict[str, Any]
 from .crc import zap_checksum
 from .fields import FieldValueError
 from .ids import id_ranges  # noqa: F401 - part of this module's interface
@@ -32,7 +48,8 @@ class Instruction:
     ``"always"`` (Echo), ``"load"`` (Load Data: return modes 1 and 2), ``"all"`` (mode 2 only),
     ``"unknown"`` (an undocumented vendor instruction: a reply may or may not come)."""
 
-    def __init__(self, code, name, cli, help, reply, params_help="", documented=True):
+    def __init__(self, code: int, name: str, cli: str, help: str, reply: str, params_help: str = "",
+                 documented: bool = True) -> None:
         self.code, self.name, self.cli, self.help, self.reply = code, name, cli, help, reply
         self.params_help = params_help
         self.documented = documented
@@ -109,8 +126,9 @@ class Register:
     __slots__ = ("address", "name", "size", "access", "stored", "default", "lo", "hi", "unit",
                  "scale", "choices", "help")
 
-    def __init__(self, address, name, size, access, default=None, lo=None, hi=None, unit="",
-                 scale=1, choices=None, help=""):
+    def __init__(self, address: int, name: str, size: int, access: str, default: Optional[int] = None,
+                 lo: Optional[int] = None, hi: Optional[int] = None, unit: str = "", scale: float = 1,
+                 choices: Optional[Mapping[int, str]] = None, help: str = "") -> None:
         self.address = address
         self.name = name
         self.size = size
@@ -136,12 +154,14 @@ class Register:
         return "NV" if self.stored else "V"
 
     def describe_range(self) -> str:
+        """The allowed raw values, as messages say them (``0..4095``, ``0 (off), 1 (on)``)."""
         if self.choices:
             return ", ".join(f"{k} ({v})" for k, v in self.choices.items())
         unit = f" {self.unit}" if self.unit and self.scale == 1 else ""
         return f"{self.lo}..{self.hi}{unit}"
 
     def check(self, value: int) -> int:
+        """``value`` if the register takes it; FieldValueError naming the register otherwise."""
         if not isinstance(value, int) or isinstance(value, bool):
             raise FieldValueError(f"{self.name}: {value!r} is not an integer")
         if self.choices is not None and value not in self.choices:
@@ -151,9 +171,11 @@ class Register:
         return value
 
     def to_bytes(self, value: int) -> bytes:
+        """``value`` little-endian in the register's size."""
         return value.to_bytes(self.size, "little")
 
-    def physical(self, raw):
+    def physical(self, raw: int) -> Union[int, float]:
+        """``raw`` in the register's unit (tenths of a volt as volts); unscaled values as they are."""
         if self.scale == 1:
             return raw
         return round(raw * self.scale, 3)
@@ -221,7 +243,7 @@ UNDOCUMENTED_BY_NAME = {r.name: r for r in UNDOCUMENTED_REGISTERS}
 UNDOCUMENTED_BY_ADDRESS = {r.address: r for r in UNDOCUMENTED_REGISTERS}
 
 
-def register(spec) -> Register:
+def register(spec: RegisterSpec) -> Register:
     """A register by kebab-case name, or by address (``0x86``, ``134``). An address outside the
     map gives an anonymous one-byte read/write register so raw access stays possible."""
     if isinstance(spec, Register):
@@ -235,9 +257,8 @@ def register(spec) -> Register:
         try:
             addr = int(key, 0)
         except ValueError:
-            close = [n for n in REGISTER_BY_NAME if key in n]
-            hint = f"; did you mean {', '.join(close[:4])}?" if close else "; see 'zap registers'"
-            raise FieldValueError(f"register: unknown name {spec!r}{hint}") from None
+            raise unknown_name("register", spec, [*REGISTER_BY_NAME, *UNDOCUMENTED_BY_NAME], otherwise="",
+                               cls=FieldValueError, field="register") from None
     else:
         addr = spec
     if not 0 <= addr <= 0xFF:
@@ -248,7 +269,8 @@ def register(spec) -> Register:
     return reg
 
 
-def check_id(value, *, allow_broadcast=True) -> int:
+def check_id(value: Ident, *, allow_broadcast: bool = True) -> int:
+    """An actuator ID as an int (``"broadcast"`` is 254 where allowed); FieldValueError otherwise."""
     if isinstance(value, str):
         v = value.strip().lower()
         if v in ("broadcast", "all", "bc"):
@@ -269,7 +291,7 @@ def check_id(value, *, allow_broadcast=True) -> int:
 
 # --- packets -----------------------------------------------------------------------------------
 
-def packet(ident: int, code: int, params=b"") -> bytes:
+def packet(ident: int, code: int, params: Bytes = b"") -> bytes:
     """``FF FF FF ID SIZE CODE params CHK`` for a command (CODE = instruction) or feedback (error)."""
     params = bytes(params)
     size = len(params) + 2
@@ -283,11 +305,13 @@ def _id(ident):
     return check_id(ident)
 
 
-def echo(ident=0) -> bytes:
+def echo(ident: Ident = 0) -> bytes:
+    """Echo: ask an actuator to answer (any return mode)."""
     return packet(_id(ident), ECHO)
 
 
-def load(ident, reg, length=None) -> bytes:
+def load(ident: Ident, reg: RegisterSpec, length: Optional[int] = None) -> bytes:
+    """Load Data: read ``length`` bytes (default: the register's size) from ``reg``."""
     reg = register(reg)
     length = reg.size if length is None else length
     if not isinstance(length, int) or not 1 <= length <= 0xFF:
@@ -303,29 +327,32 @@ def _write(code, ident, reg, value, *, force=False):
     return packet(_id(ident), code, bytes((reg.address,)) + reg.to_bytes(value))
 
 
-def store(ident, reg, value, *, force=False) -> bytes:
+def store(ident: Ident, reg: RegisterSpec, value: int, *, force: bool = False) -> bytes:
     """Store Data: write ``value`` (raw, in the register's units) little-endian in its size."""
     return _write(STORE_DATA, ident, reg, value, force=force)
 
 
-def send_data(ident, reg, value, *, force=False) -> bytes:
+def send_data(ident: Ident, reg: RegisterSpec, value: int, *, force: bool = False) -> bytes:
     """Send Data: stage a write, applied by :func:`execute`."""
     return _write(SEND_DATA, ident, reg, value, force=force)
 
 
-def execute(ident=BROADCAST) -> bytes:
+def execute(ident: Ident = BROADCAST) -> bytes:
+    """Execution: apply the writes staged by Send Data (default: every actuator)."""
     return packet(_id(ident), EXECUTION)
 
 
-def factory_reset(ident, reset_id=False, reset_baud=False) -> bytes:
+def factory_reset(ident: Ident, reset_id: bool = False, reset_baud: bool = False) -> bytes:
+    """Factory Reset: restore factory settings, also the ID (to 0) and baud rate (57600) if asked."""
     return packet(_id(ident), FACTORY_RESET, bytes(((1 if reset_id else 0) | (2 if reset_baud else 0),)))
 
 
-def restart(ident) -> bytes:
+def restart(ident: Ident) -> bytes:
+    """Restart the actuator."""
     return packet(_id(ident), RESTART)
 
 
-def symmetric_store(reg, targets) -> list:
+def symmetric_store(reg: RegisterSpec, targets: Union[Mapping[int, int], Iterable[tuple[int, int]]]) -> list[bytes]:
     """Symmetric Store to broadcast: ``targets`` maps ID -> value (or is a list of pairs).
 
     SIZE is one byte, so one packet carries at most ``(255 - 4) // (1 + length)`` actuators;
@@ -357,6 +384,7 @@ def symmetric_store(reg, targets) -> list:
 
 
 def max_per_packet(length: int) -> int:
+    """Actuators one Symmetric Store packet carries for a register block of ``length`` bytes."""
     return (MAX_SIZE - 4) // (1 + length)
 
 
@@ -373,8 +401,17 @@ class Command:
     """
 
     __slots__ = ("packet", "ident", "code", "instruction", "params", "address", "length", "data", "targets")
+    packet: bytes
+    ident: int
+    code: int
+    instruction: Optional[Instruction]
+    params: bytes
+    address: Optional[int]
+    length: Optional[int]
+    data: Optional[bytes]
+    targets: Optional[list[tuple[int, bytes]]]
 
-    def __init__(self, pkt):
+    def __init__(self, pkt: Bytes) -> None:
         pkt = bytes(pkt)
         self.packet = pkt
         self.ident = pkt[3]
@@ -394,7 +431,7 @@ class Command:
             if params[1] and len(body) % step == 0:
                 self.targets = [(body[j], body[j + 1:j + step]) for j in range(0, len(body), step)]
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         name = self.instruction.cli if self.instruction else f"0x{self.code:02X}"
         return f"Command({name}, id={self.ident}, params={self.params.hex(' ')})"
 
@@ -413,14 +450,14 @@ class Command:
         return self.instruction is not None and self.instruction.answered(return_mode, self.ident)
 
     @property
-    def reply_data_length(self):
+    def reply_data_length(self) -> Optional[int]:
         """Data bytes the reply carries: Load Data's length, 0 for other documented
         instructions, None for an undocumented code."""
         if self.code == LOAD_DATA:
             return self.length
         return 0 if self.instruction is not None else None
 
-    def writes(self):
+    def writes(self) -> list[tuple[Optional[int], bytes]]:
         """``[(address, data bytes), ...]``: the register blocks this command writes (one per
         target for Symmetric Store)."""
         if self.code in WRITE_CODES and self.data is not None:
@@ -430,7 +467,7 @@ class Command:
         return []
 
     @property
-    def stored_writes(self) -> list:
+    def stored_writes(self) -> list[str]:
         """Names of the stored (NV) settings this command writes (consent, memory pauses)."""
         if self.code == FACTORY_RESET:
             return ["every stored setting (factory reset)"]
@@ -447,7 +484,7 @@ class Command:
                     names.append(reg.name)
         return names
 
-    def written_value(self, reg):
+    def written_value(self, reg: RegisterSpec) -> list[int]:
         """The values this command writes to ``reg`` (one per target), or ``[]``."""
         reg = register(reg)
         out = []
@@ -465,7 +502,7 @@ class Command:
         protocol and no longer answer it."""
         return 0 in self.written_value(REGISTER_BY_NAME["protocol-type"])
 
-    def target_ids(self) -> list:
+    def target_ids(self) -> list[int]:
         """The actuator IDs this command addresses (Symmetric Store: its targets)."""
         if self.code == SYMMETRIC_STORE and self.targets:
             return [i for i, _ in self.targets]
@@ -474,18 +511,23 @@ class Command:
 
 # --- decoding ----------------------------------------------------------------------------------
 
-class PacketError(ValueError):
-    """A malformed packet."""
+class PacketError(ZkzapError, ValueError):
+    """A malformed packet: bad input (exit 2), also a ``ValueError``."""
+
+    code = USAGE
 
 
-class ChecksumError(PacketError):
-    def __init__(self, message, expected, found):
-        super().__init__(message)
-        self.expected = expected
-        self.found = found
+class ChecksumError(PacketError, CheckFailed):
+    """A packet whose checksum does not match: a failed check (exit 1), with the ``expected``
+    and ``found`` checksum bytes."""
+
+    code = CHECK_FAILED
+
+    def __init__(self, message: str, expected: int, found: int) -> None:
+        super().__init__(message, expected=expected, found=found)
 
 
-def check_packet(pkt) -> None:
+def check_packet(pkt: Bytes) -> None:
     """Raise :class:`PacketError`/:class:`ChecksumError` unless ``pkt`` is one whole packet."""
     n = len(pkt)
     if n < 7 or pkt[:3] != HEADER:
@@ -520,7 +562,8 @@ def packet_kind(code: int) -> str:
     return "feedback" if not code & ~ERROR_MASK else "unknown"
 
 
-def error_names(err: int) -> list:
+def error_names(err: int) -> list[str]:
+    """The names of the error bits set in ``err`` (undocumented bits as ``undocumented-0x..``)."""
     names = [name for bit, name in ERROR_BITS.items() if err & (1 << bit)]
     other = err & ~0x21
     if other:
@@ -562,7 +605,7 @@ def _with_register(rec, address, data):
         rec["values"] = {r.name: v for r, v in values}
 
 
-def decode_packet(pkt, request=None) -> dict:
+def decode_packet(pkt: Bytes, request: Optional[Bytes] = None) -> Record:
     """Decode a checked packet into a record.
 
     ``request`` is the Load Data command this feedback answers (when known, e.g. paired in a
@@ -616,10 +659,11 @@ class ZapDecoder:
     """Stateful record decoder: pairs each feedback with the last Load Data sent to its ID, so
     feedback data from a capture of both directions is named by register."""
 
-    def __init__(self):
-        self.pending = {}
+    def __init__(self) -> None:
+        self.pending: dict[int, bytes] = {}
 
-    def decode(self, pkt) -> dict:
+    def decode(self, pkt: Bytes) -> Record:
+        """The record of one checked packet (a feedback named by the Load Data it answers)."""
         ident, code = pkt[3], pkt[5]
         if is_command(code):
             if code == LOAD_DATA:
@@ -633,3 +677,28 @@ class ZapDecoder:
 
 ZAP_KEYS = ("kind", "id", "instruction", "code", "documented", "error", "errors", "register", "address",
             "length", "value", "physical", "unit", "values", "targets", "reset_id", "reset_baud", "params")
+
+
+def parse_id_list(text: "str | int", what: str = "--ids") -> "list[int]":
+    """Actuator IDs like ``0-253`` or ``1,2,5-8`` (no broadcast), in the order given, each once.
+    FieldValueError names ``what`` and the part that is wrong."""
+    out = []
+    for part in str(text).replace(" ", ",").split(","):
+        if not part:
+            continue
+        lo, dash, hi = part.partition("-")
+        if not lo and hi.isdigit():
+            raise FieldValueError(f"{what}: {part} is out of range; allowed 0..253 (a range is written like 1-4)")
+        if dash and not (lo and hi):
+            raise FieldValueError(f"{what}: {part!r}: a range needs both ends, like 1-4")
+        try:
+            first = check_id(lo, allow_broadcast=False)
+            last = check_id(hi, allow_broadcast=False) if dash else first
+        except FieldValueError as e:
+            raise FieldValueError(f"{what}: {part!r}: {e}") from None
+        if last < first:
+            raise FieldValueError(f"{what}: {part!r} runs backwards; write {last}-{first}")
+        out.extend(i for i in range(first, last + 1) if i not in out)
+    if not out:
+        raise FieldValueError(f"{what}: none given; expected a list like 0-253 or 1,2,5-8")
+    return out

@@ -11,6 +11,18 @@ bytes 0..5. ``bN`` below is byte N of the frame.
 
 from __future__ import annotations
 
+from ..errors import CHECK_FAILED, USAGE, CheckFailed, ZkzapError, close_names, did_you_mean, unknown_name
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Iterable, Mapping, Optional, Union
+
+    from typing_extensions import Self, TypeAlias
+
+    #: Bytes of a frame: bytes, a bytearray, a memoryview or a list of ints.
+    Bytes: TypeAlias = Union[bytes, bytearray, memoryview, "list[int]"]
+    #: A decoded record: a dict of JSON-ready values.
+    Record: TypeAlias = dict[str, Any]
 from .crc import crc8_maxim
 from .fields import OUT_OF_RANGE, ContextScale, Field, FieldValueError, Layout, VersionScale
 
@@ -85,7 +97,8 @@ VOLTAGE = VersionScale(((3, 0.1),), 0.2)
 class ControlCommand:
     """One control command (host -> ECU)."""
 
-    def __init__(self, id, name, help, fields=(), since=1, params=(), hazard=None, needs_unlock=False):
+    def __init__(self, id: int, name: str, help: str, fields: Iterable[Field] = (), since: int = 1,
+                 params: Iterable[Param] = (), hazard: Optional[str] = None, needs_unlock: bool = False) -> None:
         self.id = id
         self.name = name
         self.help = help
@@ -96,21 +109,24 @@ class ControlCommand:
         self.layout = Layout(fields, CONTROL_LEN, covered={0: 0xFF, 1: 0xF0, 3: 0xFF})
 
     @property
-    def fields(self):
+    def fields(self) -> tuple[Field, ...]:
+        """The command's fields, in frame order."""
         return self.layout.fields
 
 
 class Param:
     """A context parameter a command needs to convert physical values (not sent in the frame)."""
 
-    def __init__(self, key, lo, hi, cli, help):
+    def __init__(self, key: str, lo: int, hi: int, cli: str, help: str) -> None:
         self.key, self.lo, self.hi, self.cli, self.help = key, lo, hi, cli, help
 
     @property
-    def label(self):
+    def label(self) -> str:
+        """The parameter's name in messages (``rpm-factor``)."""
         return self.cli.lstrip("-")
 
-    def check(self, value):
+    def check(self, value: int) -> int:
+        """``value`` if it is within the parameter's range; FieldValueError otherwise."""
         if not isinstance(value, int) or not self.lo <= value <= self.hi:
             raise FieldValueError(f"{self.label}: {value} is out of range; allowed {self.lo}..{self.hi}")
         return value
@@ -166,7 +182,7 @@ RPM = Field("rpm", "b2 b1", scale=10, unit="rpm", help="engine speed")
 class StatusFrame:
     """One status frame kind (ECU -> host)."""
 
-    def __init__(self, id, name, fields, since=1, help=""):
+    def __init__(self, id: int, name: str, fields: Iterable[Field], since: int = 1, help: str = "") -> None:
         self.id = id
         self.name = name
         self.since = since
@@ -174,7 +190,8 @@ class StatusFrame:
         self.layout = Layout((RPM,) + tuple(fields), STATUS_LEN, covered={0: 0xFF, 6: 0xFF})
 
     @property
-    def fields(self):
+    def fields(self) -> tuple[Field, ...]:
+        """The frame's fields (``rpm`` first), in frame order."""
         return self.layout.fields
 
 
@@ -233,6 +250,8 @@ STATUS = (
     ), since=1, help="added by the V1.4 edition"),
 )
 STATUS_BY_ID = {s.id: s for s in STATUS}
+#: The keys each status frame ID carries (``rpm`` in every one, ``error_code`` in ID 1's).
+STATUS_KEYS_BY_ID = {s.id: frozenset(s.layout.keys()) for s in STATUS}
 
 #: Every status key in table order (CSV columns, snapshot rows).
 STATUS_KEYS = []
@@ -253,17 +272,20 @@ for _keys in (STATUS_KEYS, CONTROL_KEYS):
 del _s, _c, _k, _keys
 
 
-class FrameError(ValueError):
-    """A frame of the wrong length, head or ID."""
+class FrameError(ZkzapError, ValueError):
+    """A frame of the wrong length, head or ID: bad input (exit 2), also a ``ValueError``."""
+
+    code = USAGE
 
 
-class CrcError(FrameError):
-    """A frame whose CRC does not match."""
+class CrcError(FrameError, CheckFailed):
+    """A frame whose CRC does not match: a failed check (exit 1), with the ``expected`` and
+    ``found`` CRC bytes."""
 
-    def __init__(self, message, expected, found):
-        super().__init__(message)
-        self.expected = expected
-        self.found = found
+    code = CHECK_FAILED
+
+    def __init__(self, message: str, expected: int, found: int) -> None:
+        super().__init__(message, expected=expected, found=found)
 
 
 # --- control frames ----------------------------------------------------------------------------
@@ -274,15 +296,18 @@ def control_frame(cmd_id: int, b1_low: int, b2: int) -> bytes:
     return bytes((CONTROL_HEAD, b1, b2, crc8_maxim((b1, b2))))
 
 
-def control_command(name_or_id):
+def control_command(name_or_id: Union[str, int]) -> ControlCommand:
+    """The control command by ``zk send`` name or command ID; FieldValueError naming the
+    closest names otherwise."""
     cmd = CONTROL_BY_NAME.get(name_or_id) if isinstance(name_or_id, str) else CONTROL_BY_ID.get(name_or_id)
     if cmd is None:
         names = ", ".join(c.name for c in CONTROL)
-        raise FieldValueError(f"command: unknown {name_or_id!r}; allowed {names} (or IDs 0..8)")
+        raise unknown_name("command", name_or_id, CONTROL_BY_NAME, noun="kind",
+                           otherwise=f"; allowed {names} (or IDs 0..8)", cls=FieldValueError)
     return cmd
 
 
-def encode_control(name_or_id, **values):
+def encode_control(name_or_id: Union[str, int], **values: Any) -> tuple[bytes, list[str]]:
     """Encode a control command from physical values. Returns ``(frame, notes)``.
 
     Enumerated fields take names or numbers (``sw="run"``); context parameters go in the
@@ -300,7 +325,9 @@ def encode_control(name_or_id, **values):
     known = {f.key for f in cmd.fields} | {f.name_key for f in cmd.fields if f.name_key}
     for key in values:
         if key not in known:
-            raise FieldValueError(f"{key}: not a field of {cmd.name}; fields: {', '.join(sorted(known)) or 'none'}")
+            raise FieldValueError(f"{key}: not a field of {cmd.name}"
+                                  + did_you_mean(key, known, otherwise=f"; fields: {', '.join(sorted(known)) or 'none'}"),
+                                  suggestions=close_names(key, known))
     for f in cmd.fields:
         v = values.get(f.key, values.get(f.name_key, 0) if f.name_key else 0)
         raw, note = f.to_raw(v, ctx)
@@ -311,7 +338,7 @@ def encode_control(name_or_id, **values):
     return bytes(frame), notes
 
 
-def encode_control_raw(cmd_id: int, **raws) -> bytes:
+def encode_control_raw(cmd_id: int, **raws: Union[int, str]) -> bytes:
     """Encode a control frame from raw field values (``throttle_pct=500``). Reserved bits may be
     set with ``reserved_b1`` / ``reserved_b2`` for one-off crafting (only bits no field of the
     command uses: they never change a real field); unknown keys are an error."""
@@ -330,8 +357,10 @@ def encode_control_raw(cmd_id: int, **raws) -> bytes:
         f = fields.get(key)
         if f is None:
             allowed = ", ".join(sorted(fields)) or "none"
-            raise FieldValueError(f"{key}: not a field of command {cmd.id} ({cmd.name}); fields: {allowed}"
-                                  f"; reserved bits: reserved_b1, reserved_b2")
+            raise FieldValueError(f"{key}: not a field of command {cmd.id} ({cmd.name})"
+                                  + did_you_mean(key, [*fields, "reserved_b1", "reserved_b2"],
+                                                 otherwise=f"; fields: {allowed}; reserved bits: reserved_b1, reserved_b2"),
+                                  suggestions=close_names(key, [*fields, "reserved_b1", "reserved_b2"]))
         if f.names is not None and isinstance(raw, str):
             raw, _ = f.to_raw(raw)
         f.insert(frame, f.check_raw(raw, key))
@@ -351,7 +380,7 @@ def _check_byte(key, value, mask, cmd):
     return value
 
 
-def check_control(frame) -> None:
+def check_control(frame: Bytes) -> None:
     """Raise :class:`FrameError`/:class:`CrcError` unless ``frame`` is a well-formed control frame."""
     if len(frame) != CONTROL_LEN:
         raise FrameError(f"control frame: {len(frame)} bytes; a control frame has {CONTROL_LEN}")
@@ -362,7 +391,7 @@ def check_control(frame) -> None:
         raise CrcError(f"control frame: CRC mismatch: expected {crc:02X}, found {frame[3]:02X}", crc, frame[3])
 
 
-def decode_control(frame, ctx=None, raw=False) -> dict:
+def decode_control(frame: Bytes, ctx: Optional[Mapping[str, Any]] = None, raw: bool = False) -> Record:
     """Decode a checked control frame into a record."""
     cmd_id = frame[1] >> 4
     cmd = CONTROL_BY_ID.get(cmd_id)
@@ -381,13 +410,13 @@ def decode_control(frame, ctx=None, raw=False) -> dict:
 
 # --- status frames -----------------------------------------------------------------------------
 
-def status_frame(status_id: int, payload) -> bytes:
+def status_frame(status_id: int, payload: Bytes) -> bytes:
     """Assemble ``F0|ID b1..b5 CRC`` from five payload bytes."""
     body = bytes((STATUS_HEAD | status_id,)) + bytes(payload)
     return body + bytes((crc8_maxim(body),))
 
 
-def encode_status(status_id: int, version=DEFAULT_PROTOCOL_VERSION, **values) -> bytes:
+def encode_status(status_id: int, version: int = DEFAULT_PROTOCOL_VERSION, **values: Any) -> bytes:
     """Encode a status frame from physical values (used by the simulator and the tests)."""
     st = STATUS_BY_ID.get(status_id)
     if st is None:
@@ -398,7 +427,9 @@ def encode_status(status_id: int, version=DEFAULT_PROTOCOL_VERSION, **values) ->
     keys = {f.key: f for f in st.fields}
     for key in values:
         if key not in keys:
-            raise FieldValueError(f"{key}: not a field of status {status_id}; fields: {', '.join(keys)}")
+            raise FieldValueError(f"{key}: not a field of status {status_id}"
+                                  + did_you_mean(key, keys, otherwise=f"; fields: {', '.join(keys)}"),
+                                  suggestions=close_names(key, keys))
     for f in st.fields:
         v = values.get(f.key)
         if v is None:
@@ -409,7 +440,8 @@ def encode_status(status_id: int, version=DEFAULT_PROTOCOL_VERSION, **values) ->
     return bytes(frame)
 
 
-def check_status(frame) -> None:
+def check_status(frame: Bytes) -> None:
+    """Raise :class:`FrameError`/:class:`CrcError` unless ``frame`` is a well-formed status frame."""
     if len(frame) != STATUS_LEN:
         raise FrameError(f"status frame: {len(frame)} bytes; a status frame has {STATUS_LEN}")
     if frame[0] & 0xF0 != STATUS_HEAD:
@@ -423,14 +455,15 @@ def check_status(frame) -> None:
 VERSION_HEAD = STATUS_HEAD | 6
 
 
-def protocol_version_of(frame):
+def protocol_version_of(frame: Bytes) -> Optional[int]:
     """The protocol version a status ID 6 frame reports (``b5[7:2]``), or None for any other frame."""
     if len(frame) == STATUS_LEN and frame[0] == VERSION_HEAD:
         return frame[5] >> 2
     return None
 
 
-def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False) -> dict:
+def decode_status(frame: Bytes, version: int = DEFAULT_PROTOCOL_VERSION, known: Optional[int] = None,
+                  raw: bool = False) -> Record:
     """Decode a checked status frame. ``version`` sets version-dependent units; ``known`` is the
     version actually known (seen or given) and gates fields newer than it (None: ungated)."""
     sid = frame[0] & 0x0F
@@ -446,7 +479,7 @@ def decode_status(frame, version=DEFAULT_PROTOCOL_VERSION, known=None, raw=False
     return rec
 
 
-def check_defined(frame) -> None:
+def check_defined(frame: Bytes) -> None:
     """Raise :class:`FrameError` for a control frame whose command ID is not defined (0..8);
     its CRC may well be right (``crc check`` accepts it, the decoders skip it)."""
     if len(frame) == CONTROL_LEN and frame[1] >> 4 not in CONTROL_BY_ID:
@@ -454,7 +487,7 @@ def check_defined(frame) -> None:
                          f"allowed 0..{max(CONTROL_BY_ID)}")
 
 
-def check_frame(frame):
+def check_frame(frame: Bytes) -> str:
     """Check a whole ZK frame of either kind by its length. Returns ``"control"`` or ``"status"``."""
     if len(frame) == CONTROL_LEN:
         check_control(frame)
@@ -479,16 +512,17 @@ class ZkDecoder:
     when a frame with a version-dependent unit was decoded with the default version.
     """
 
-    def __init__(self, protocol_version=None, raw=False):
+    def __init__(self, protocol_version: Optional[int] = None, raw: bool = False) -> None:
         self.given = protocol_version
         self.version = protocol_version if protocol_version is not None else DEFAULT_PROTOCOL_VERSION
         self.known = protocol_version
         self.version_source = "given" if protocol_version is not None else "default"
-        self.rpm_factor = None
+        self.rpm_factor: Optional[int] = None
         self.raw = raw
         self.assumed = False
 
-    def decode(self, frame) -> dict:
+    def decode(self, frame: Bytes) -> Record:
+        """The record of one checked frame of either kind (tracking version and RPM factor)."""
         if len(frame) == STATUS_LEN:
             v = protocol_version_of(frame)
             if v is not None:
@@ -522,24 +556,27 @@ class ControlFrame:
     """
 
     __slots__ = ("frame", "id", "command")
+    frame: bytes
+    id: int
+    command: Optional[ControlCommand]
 
-    def __init__(self, frame):
+    def __init__(self, frame: Bytes) -> None:
         self.frame = bytes(frame)
         self.id = self.frame[1] >> 4
         self.command = CONTROL_BY_ID.get(self.id)
 
     @classmethod
-    def build(cls, name_or_id, **values) -> "ControlFrame":
+    def build(cls, name_or_id: Union[str, int], **values: Any) -> Self:
         """Encode a command from physical values (see :func:`encode_control`)."""
         return cls(encode_control(name_or_id, **values)[0])
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"ControlFrame({self.frame.hex(' ').upper()})"
 
-    def __eq__(self, other):
+    def __eq__(self, other: object) -> bool:
         return isinstance(other, ControlFrame) and other.frame == self.frame
 
-    def __hash__(self):
+    def __hash__(self) -> int:
         return hash(self.frame)
 
     @property
@@ -552,12 +589,12 @@ class ControlFrame:
         return 0
 
     @property
-    def action(self):
+    def action(self) -> Optional[str]:
         """ID 2's action name (None for other IDs or an undefined parameter)."""
         return ACTIONS.get(self.frame[2]) if self.id == 2 else None
 
     @property
-    def hazard(self) -> str | None:
+    def hazard(self) -> Optional[str]:
         """What the frame can do to an engine, or None when it is harmless.
 
         Hazardous: ID 1 or ID 6 with state run (can start the engine), ID 2 actions that drain
@@ -590,11 +627,53 @@ class ControlFrame:
             return self.hazardous
         return False
 
-    def decode(self, ctx=None) -> dict:
+    @property
+    def since(self) -> int:
+        """The protocol version an ECU needs for this frame: the command's, or the action's
+        (``reset-fuel`` needs 2, ``pump-on``/``pump-off`` 5); 1 for an undefined ID."""
+        if self.command is None:
+            return 1
+        if self.id == 2:
+            return max(self.command.since, ACTION_SINCE.get(self.frame[2], 1))
+        return self.command.since
+
+    @property
+    def rpm_factor(self) -> Optional[int]:
+        """ID 6's RPM factor RPM_X (0: throttle mode); None for other IDs."""
+        return (self.frame[2] >> 2) & 7 if self.id == 6 else None
+
+    @property
+    def rpm_value(self) -> Optional[int]:
+        """ID 7's 12-bit RPM value (target rpm = value x 10 x RPM_X); None for other IDs."""
+        return ((self.frame[1] & 0x0F) << 8) | self.frame[2] if self.id == 7 else None
+
+    def leaves(self, rpm_factor: Optional[int] = None) -> Optional[str]:
+        """What the engine is left doing once this frame was the last one it got, in words, when
+        that is more than standing safe (None: stop, standby, pwm and harmless commands).
+        ``rpm_factor``: the RPM_X in force, for an ID 7 target."""
+        if self.id == 1 and self.sw == 3:
+            throttle = (((self.frame[1] & 3) << 8) | self.frame[2]) / 10
+            return f"running at {throttle:g} % throttle (state run)"
+        if self.id == 6 and self.frame[2] & 0x1F:
+            what = []
+            if self.sw == 3:
+                what.append("in state run")
+            if self.rpm_factor:
+                what.append(f"in RPM mode (RPM_X {self.rpm_factor})")
+            return " and ".join(what) if what else None
+        if self.id == 7:
+            target = (f"{self.rpm_value * 10 * rpm_factor:,} rpm" if rpm_factor
+                      else f"RPM value {self.rpm_value} (x 10 x RPM_X rpm)")
+            return f"holding a target of {target} (RPM mode)"
+        if self.id == 2 and self.frame[2] == 12:
+            return "with the fuel pump on (until pump-off)"
+        return None
+
+    def decode(self, ctx: Optional[Mapping[str, Any]] = None) -> Record:
         """The frame's record (as ``zk decode`` gives it)."""
         return decode_control(self.frame, ctx)
 
 
-def control_hazard(frame) -> str | None:
+def control_hazard(frame: Bytes) -> Optional[str]:
     """What a control frame can do to an engine, or None (see :attr:`ControlFrame.hazard`)."""
     return ControlFrame(frame).hazard

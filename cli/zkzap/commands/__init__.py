@@ -14,7 +14,7 @@ import click
 
 from .. import __version__
 from .. import signals as _signals
-from ..errors import EXIT_CODES, INTERRUPTED, USAGE, ZkzapError, exit_status_help
+from ..errors import EXIT_CODES, INTERRUPTED, ZkzapError, exit_status_help
 
 EXIT_EPILOG = exit_status_help()
 
@@ -86,6 +86,18 @@ class Command(QuickHelp, click.Command):
         return super().invoke(ctx)
 
 
+    def format_epilog(self, ctx, formatter):
+        """The epilog, then the command's exit statuses (:func:`zkzap.commands.options.exit_help`)."""
+        import inspect
+
+        from .options import exit_help
+
+        text = " ".join(p for p in (inspect.cleandoc(self.epilog or ""), exit_help(self)) if p)
+        formatter.write_paragraph()
+        with formatter.indentation():
+            formatter.write_text(text)
+
+
 def _long(option):
     return next((o for o in option.opts if o.startswith("--")), None)
 
@@ -103,9 +115,22 @@ def _is_negative_number(token: str) -> bool:
 
 
 class Group(QuickHelp, click.Group):
-    """Every zkzap group: click's, with the quick help option for itself and its commands."""
+    """Every zkzap group: click's, with the quick help option for itself and its commands, and
+    the closest command names when one is misspelt ("No such command 'sned'; did you mean
+    send?")."""
 
     command_class = Command
+
+    def resolve_command(self, ctx, args):
+        try:
+            return super().resolve_command(ctx, args)
+        except click.UsageError as e:
+            name = args[0] if args else ""
+            if name and not name.startswith("-") and self.get_command(ctx, name) is None:
+                from ..errors import did_you_mean
+
+                e.message = e.message.rstrip(".") + did_you_mean(name, self.list_commands(ctx))
+            raise
 
 
 class LazyGroup(Group):
@@ -241,6 +266,7 @@ ROOT_COMMANDS = {
     "sim": (".sim", "sim", "Run the built-in ECU or actuator-bus simulator."),
     "sniff": (".sniff", "sniff", "Watch a live ZK or mightyZAP link passively (never transmits)."),
     "shell": (".shell", "shell", "An interactive zap or zk session over one open port."),
+    "web": (".web", "web", "A browser console for the actuator bus or the engine (extra 'web')."),
     "ports": (".ports", "ports", "List serial ports, with adapter hints."),
     "completion": (".completion", "completion", "Print the shell completion script."),
 }
@@ -374,11 +400,6 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
         if debug or not _output_full(e):
             raise
         return _output_failed(e, prog_name)
-    except Exception as e:
-        if debug or not _bad_input(e):
-            raise
-        _error(str(e), prog_name or "zkzap")
-        return USAGE
 
 
 def _interrupted(code) -> int:
@@ -393,14 +414,6 @@ def _interrupted(code) -> int:
 
 #: click >= 8.2 raises this for a bare group (it shows the group's help); 8.1 exits 0 instead.
 _NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
-
-
-def _bad_input(e) -> bool:
-    """A codec error about a value or hex text (imported only when one is raised)."""
-    from ..codec.fields import FieldValueError
-    from ..codec.hexfmt import HexError
-
-    return isinstance(e, (FieldValueError, HexError))
 
 
 def _quiet_stdout():

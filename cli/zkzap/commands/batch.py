@@ -23,8 +23,8 @@ import sys
 import click
 
 from .. import signals
-from ..errors import INTERRUPTED, TERMINATED, USAGE, UsageError, ZkzapError
-from .options import consent, note
+from ..errors import INTERRUPTED, OK, TERMINATED, USAGE, UsageError, ZkzapError
+from .options import consent, exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
 PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture")
@@ -296,7 +296,7 @@ def invoke(line, protocol) -> int:
     """Run a checked line's command with the parameters its check parsed (the same defaults,
     so the same values as parsing it again), with the command line's error conventions.
     Returns its exit status."""
-    from . import PipeClosed, _bad_input, _error
+    from . import PipeClosed, _error
     from .hints import with_hint
 
     leaf, parent = line.leaf
@@ -321,11 +321,11 @@ def invoke(line, protocol) -> int:
     except ZkzapError as e:
         _error(with_hint(e), prog)
         return e.code
-    except Exception as e:
-        if not _bad_input(e):
-            raise
-        _error(str(e), prog)
-        return USAGE
+
+
+#: The exit statuses of 'zap batch' and 'zk batch': a failed line's, the first one's.
+BATCH_EXITS = exits({OK: "every line succeeded", USAGE: "a bad line (FILE:LINE) or usage: nothing was sent"},
+                    tail=" Any other status is the first failed line's (its record says it too).")
 
 
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):

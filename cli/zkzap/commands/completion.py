@@ -7,11 +7,12 @@ import sys
 import click
 
 from . import CONTEXT, Command
+from .options import Choice
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("shell", type=click.Choice(["bash", "zsh", "fish"]))
-@click.option("--prog", type=click.Choice(["zkzap", "zk", "zap"]), default="zkzap", show_default=True,
+@click.argument("shell", type=Choice(["bash", "zsh", "fish"]))
+@click.option("--prog", type=Choice(["zkzap", "zk", "zap"]), default="zkzap", show_default=True,
               help="The command to complete: zkzap, or the direct entry points zk and zap.")
 def completion(shell, prog):
     """Print the completion script of SHELL for zkzap (or zk, zap with --prog).

@@ -7,9 +7,9 @@ import click
 from ..codec import crc as crcs
 from ..codec import zap, zk
 from ..codec.hexfmt import format_hex
-from ..errors import UsageError
+from ..errors import CHECK_FAILED, OK, UsageError
 from . import CONTEXT, Group
-from .options import checked, read_hex_input
+from .options import checked, exits, read_hex_input
 
 HEX = click.argument("hex_bytes", nargs=-1, metavar="HEX...")
 APPEND = click.option("-a", "--append", is_flag=True, help="Print the input followed by the checksum.")
@@ -54,6 +54,7 @@ def _run(hex_bytes, append, check, compute):
     click.echo(format_hex(data + bytes((value,))) if append else f"{value:02X}")
 
 
+@exits({CHECK_FAILED: "with --check, the frame's CRC or checksum does not match"})
 @crc.command("zk", context_settings=CONTEXT)
 @HEX
 @APPEND
@@ -72,6 +73,7 @@ def crc_zk(hex_bytes, append, check):
     _run(hex_bytes, append, check, crcs.crc8_maxim)
 
 
+@exits({CHECK_FAILED: "with --check, the frame's CRC or checksum does not match"})
 @crc.command("zap", context_settings=CONTEXT)
 @HEX
 @APPEND
@@ -87,6 +89,8 @@ def crc_zap(hex_bytes, append, check):
     _run(hex_bytes, append, check, crcs.zap_checksum)
 
 
+@exits({OK: "the frame is whole and its CRC or checksum matches",
+        CHECK_FAILED: "the CRC or checksum does not match"})
 @crc.command("check", context_settings=CONTEXT)
 @HEX
 def crc_check(hex_bytes):

@@ -7,7 +7,7 @@ never names a command.
 
 from __future__ import annotations
 
-from ..errors import CheckFailed, NoReply, PortError, UsageError
+from ..errors import CheckFailed, InvalidValue, NoReply, PortError, UsageError
 
 
 def hint(e) -> str:
@@ -18,6 +18,12 @@ def hint(e) -> str:
         if facts.get("mode_dependent"):
             text += "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
         return text
+    if isinstance(e, InvalidValue) and facts.get("field") == "register" and not facts.get("suggestions"):
+        return "; 'zap registers' lists them"
+    if isinstance(e, NoReply) and facts.get("noise"):
+        if facts.get("protocol") == "zap":
+            return "; sniff at the bus's baud rate (-b); 'zap scan --baud all' finds the actuators' (it transmits)"
+        return "; 'zk detect -p PORT' finds the ECU's baud rate and stop bits by listening"
     if isinstance(e, UsageError):
         if facts.get("assumed_mode"):
             return "; give --return-mode 1 or 2 if the actuator is set so"

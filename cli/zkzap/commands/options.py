@@ -41,25 +41,42 @@ class SignedCommand(Command):
     negative_numbers = True
 
 
-class FiniteFloat(click.types.FloatParamType):
-    """A float that must be a finite number: ``nan``, ``inf`` and ``-inf`` are refused (exit 2,
-    naming the option), where click's FLOAT takes them and a timeout or duration never ends."""
+def _number(value, kind, allowed, param, ctx, fail):
+    """``value`` as a finite ``kind`` (int or float), or ``fail`` with zkzap's wording: "'abc' is
+    not a number; allowed 1..200" (never click's "is not a valid float range")."""
+    if isinstance(value, bool):
+        value = str(value)
+    if isinstance(value, (int, float)) and not (kind is int and isinstance(value, float)):
+        number = value
+    else:
+        text = str(value).strip()
+        try:
+            number = int(text, 0) if kind is int else float(text)
+        except ValueError:
+            what = "an integer" if kind is int else "a number"
+            fail(f"{value!r} is not {what}{allowed}", param, ctx)
+    if not math.isfinite(number):
+        fail(f"{value!r} is not a finite number{allowed}", param, ctx)
+    return kind(number)
 
-    def convert(self, value, param, ctx):
-        rv = super().convert(value, param, ctx)
-        if not math.isfinite(rv):
-            self.fail(f"{value!r} is not a finite number.", param, ctx)
-        return rv
+
+def range_text(lo, hi, lo_open=False, hi_open=False) -> str:
+    """A range as messages and help say it: ``1..200``, ``1 or more``, ``more than 0``."""
+    if lo is not None and hi is not None and not lo_open and not hi_open:
+        return f"{lo:g}..{hi:g}"
+    parts = []
+    if lo is not None:
+        parts.append(f"more than {lo:g}" if lo_open else f"{lo:g} or more")
+    if hi is not None:
+        parts.append(f"less than {hi:g}" if hi_open else f"at most {hi:g}")
+    return " and ".join(parts) or "any number"
 
 
-class FiniteRange(click.FloatRange):
-    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
-    and ``inf`` wherever there is no upper bound). Every float option of zkzap is one of these
-    or a :class:`FiniteFloat`.
+class _NumberRange:
+    """zkzap's wording for click's numeric range types: "'x' is not a number; allowed 1..200",
+    "500 is out of range; allowed 1..200"."""
 
-    With ``unit`` a value out of range is refused naming the range in that unit, and ``hint``
-    (a function of the value, returning text or None) may add what the number probably meant
-    (``800`` for a density in kg/L: kg/m³)."""
+    kind = float
 
     def __init__(self, min=None, max=None, min_open=False, max_open=False, clamp=False, *, unit=None,
                  hint=None):
@@ -67,27 +84,137 @@ class FiniteRange(click.FloatRange):
         self.unit = unit
         self.hint = hint
 
+    def allowed(self) -> str:
+        text = range_text(self.min, self.max, self.min_open, self.max_open)
+        return f"{text} {self.unit}" if self.unit else text
+
+    def _describe_range(self) -> str:
+        """The range as ``--help`` shows it after an option's text (``[1..200]``)."""
+        return self.allowed()
+
     def convert(self, value, param, ctx):
-        if not isinstance(value, float) or not math.isfinite(value):
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                number = 0.0        # not a number at all: click's own message below
-            if not math.isfinite(number):
-                self.fail(f"{value!r} is not a finite number.", param, ctx)
-        if self.unit is not None:
-            number = click.types.FloatParamType.convert(self, value, param, ctx)
-            low = self.min is not None and (number <= self.min if self.min_open else number < self.min)
-            high = self.max is not None and (number >= self.max if self.max_open else number > self.max)
-            if low or high:
-                extra = self.hint(number) if self.hint is not None else None
-                self.fail(f"{number:g} is out of range; allowed {self.min:g}..{self.max:g} {self.unit}"
-                          + (f" ({extra})" if extra else ""), param, ctx)
-            return number
-        return super().convert(value, param, ctx)
+        number = _number(value, self.kind, f"; allowed {self.allowed()}", param, ctx, self.fail)
+        lo_bad = self.min is not None and (number <= self.min if self.min_open else number < self.min)
+        hi_bad = self.max is not None and (number >= self.max if self.max_open else number > self.max)
+        if lo_bad or hi_bad:
+            extra = self.hint(number) if self.hint is not None else None
+            self.fail(f"{number:g} is out of range; allowed {self.allowed()}" + (f" ({extra})" if extra else ""),
+                      param, ctx)
+        return number
+
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float that must be a finite number: ``nan``, ``inf`` and ``-inf`` are refused (exit 2,
+    naming the option), where click's FLOAT takes them and a timeout or duration never ends."""
+
+    def convert(self, value, param, ctx):
+        return _number(value, float, "", param, ctx, self.fail)
+
+
+class Integer(click.types.IntParamType):
+    """An integer (decimal or ``0x..``) in zkzap's words, for values whose range the codec
+    checks itself."""
+
+    def convert(self, value, param, ctx):
+        return _number(value, int, "", param, ctx, self.fail)
+
+
+class FiniteRange(_NumberRange, click.FloatRange):
+    """``click.FloatRange`` for finite numbers only (its own comparisons let ``nan`` through,
+    and ``inf`` wherever there is no upper bound), in zkzap's words. Every float option of
+    zkzap is one of these or a :class:`FiniteFloat`.
+
+    With ``unit`` the range is named in that unit (help and messages), and ``hint`` (a function
+    of an out-of-range value, returning text or None) may add what the number probably meant
+    (``800`` for a density in kg/L: kg/m³)."""
+
+    name = "number"
+    kind = float
+
+
+class IntRange(_NumberRange, click.IntRange):
+    """``click.IntRange`` in zkzap's words (decimal or ``0x..``). Every integer option of zkzap
+    is one of these."""
+
+    name = "integer"
+    kind = int
+
+
+class Choice(click.Choice):
+    """``click.Choice`` that names the closest choices of a misspelt value ("'rn' is not
+    allowed; allowed pwm, stop, standby, run; did you mean run?"). Every choice option of zkzap
+    is one of these."""
+
+    def convert(self, value, param, ctx):
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter:
+            from ..errors import did_you_mean
+
+            choices = [str(c) for c in self.choices]
+            self.fail(f"{value!r} is not allowed; allowed {', '.join(choices)}{did_you_mean(value, choices)}",
+                      param, ctx)
 
 
 FINITE = FiniteFloat()
+INTEGER = Integer()
+
+
+# --- exit statuses ---------------------------------------------------------------------------------
+
+def exits(meanings=None, tail=""):
+    """Declare a command's own exit statuses: ``{code: what it means for this command}`` over
+    the defaults :func:`exit_statuses` derives from its parameters (a meaning of None drops a
+    default); ``tail`` follows the list in ``--help``. Decorates a click command (put it above
+    ``@click.command``) or applies to one: ``exits({...})(command)``."""
+    def apply(cmd):
+        if not isinstance(cmd, click.Command):
+            raise TypeError("exits(): put it above @click.command (it decorates a command)")
+        cmd.exit_meanings = dict(meanings or {})
+        cmd.exit_tail = tail
+        return cmd
+
+    return apply
+
+
+def exit_statuses(cmd) -> list:
+    """``[(code, meaning), ...]`` of a leaf command, in the order of the exit-code table (143
+    after 130): what every command can exit with (0, 2, 7, 130, 143), what a command that opens
+    a port can (3 and 4; 5 and 6 on a mightyZAP bus, whose replies carry error bits and
+    checksums), what ``--verify`` adds (1 and 3: the read-back), ``--limit`` (5), and what the
+    command declares with :func:`exits`."""
+    from ..errors import (BAD_REPLY, CHECK_FAILED, DEVICE_ERROR, EXIT_CODES, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR,
+                          PORT_ERROR, TERMINATED, USAGE)
+
+    meanings = {OK: "success", USAGE: "bad usage or input (nothing was sent)",
+                OUTPUT_ERROR: "the output could not be written (disk full)", INTERRUPTED: "Ctrl-C",
+                TERMINATED: "SIGTERM"}
+    port = next((p for p in cmd.params if p.name == "port" and isinstance(p, click.Option)), None)
+    if port is not None:
+        envvar = port.envvar if isinstance(port.envvar, str) else " ".join(port.envvar or ())
+        meanings[PORT_ERROR] = "the port cannot be opened, or failed or vanished"
+        if ENV["zap"]["port"] in envvar:
+            meanings[NO_REPLY] = "no reply within the timeout, after the retries"
+            meanings[DEVICE_ERROR] = "a reply carried error bits"
+            meanings[BAD_REPLY] = "a corrupted or unexpected reply, after the retries"
+        else:
+            meanings[NO_REPLY] = "no status frame within --timeout"
+    if any(p.name == "verify" for p in cmd.params):          # writes read back (store, sync-move)
+        meanings[CHECK_FAILED] = "with --verify, a value reads back different"
+        meanings[NO_REPLY] = "no reply; with --verify, nothing answers the read-back (the write is unconfirmed)"
+    meanings.update(getattr(cmd, "exit_meanings", {}))
+    if any(p.name == "limit" for p in cmd.params) and "limit" not in (meanings.get(DEVICE_ERROR) or ""):
+        meanings[DEVICE_ERROR] = ", or ".join(m for m in (meanings.get(DEVICE_ERROR), "a --limit was violated") if m)
+    order = [c for c, _ in EXIT_CODES]
+    order.insert(order.index(INTERRUPTED) + 1, TERMINATED)
+    return [(code, meanings[code]) for code in order if meanings.get(code) is not None]
+
+
+def exit_help(cmd) -> str:
+    """The ``Exit status: ...`` paragraph of a command's ``--help``."""
+    from ..errors import exit_status_help
+
+    return exit_status_help(dict(exit_statuses(cmd)), tail=getattr(cmd, "exit_tail", ""))
 
 
 def note(message: str) -> None:
@@ -106,7 +233,7 @@ def format_option(*, choices=FORMATS, help_extra="", default=None, help=None):
     """``-f/--format``, the one definition: by default a table on a terminal, JSON Lines
     otherwise; a command with its own ``default`` (``value``, ``text``) or ``help`` says so."""
     return click.option(
-        "-f", "--format", "fmt", type=click.Choice(choices), default=default, show_default=default is not None,
+        "-f", "--format", "fmt", type=Choice(choices), default=default, show_default=default is not None,
         help=(help if help is not None else "Output format (default: table on a terminal, jsonl otherwise).")
         + help_extra)
 
@@ -121,7 +248,7 @@ def abort_option(help, default=None):
     choices are :data:`zkzap.codec.zk.ABORTS`)."""
     from ..codec.zk import ABORTS
 
-    return click.option("--abort", type=click.Choice(list(ABORTS)), default=default,
+    return click.option("--abort", type=Choice(list(ABORTS)), default=default,
                         show_default=default is not None, help=help)
 
 
@@ -236,7 +363,9 @@ def decode_inputs(inputs, binary, explicit):
     """The files a decoder reads, for ``inputs=`` of :func:`output_file` (hex arguments: none)."""
     if explicit:
         return None
-    return {"--binary" if binary else "stdin": list(inputs) or ["-"]}
+    if binary:
+        return {"--binary": list(inputs) or ["-"]}
+    return {"FILE" if inputs and list(inputs) != ["-"] else "stdin": list(inputs) or ["-"]}
 
 
 def output_format(fmt, path, formats=FORMATS):
@@ -324,8 +453,14 @@ zap_yes_option = click.option(
          "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
          "prompts and a script is refused (sim:// and --sim never ask).")
 
+zap_move_yes_option = click.option(
+    "-y", "--yes", is_flag=True,
+    help="Consent to moving the rods (a full stroke each, then back to where they were) on a real "
+         "port; without it a terminal prompts and a script is refused (--no-move checks without "
+         "moving; sim:// and --sim never ask).")
+
 protocol_version_option = click.option(
-    "--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+    "--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
     help="ECU protocol version assumed until a status ID 6 frame reveals it "
          "(sets the voltage unit: 0.1 V up to 3, 0.2 V from 4; default 4).")
 
@@ -428,7 +563,7 @@ def port_options(group: str, *, baud_auto: bool = False):
                      default=DEFAULT_BAUD[group], show_default=True,
                      help=(f"Baud rate, or auto to detect it (and the stop bits) first [env {env['baud']}]."
                            if baud_auto else f"Baud rate [env {env['baud']}].")),
-        click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+        click.option("--stop-bits", "stop_bits", type=Choice(["1", "2"]), envvar=env["stop_bits"],
                      default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                      help=f"{STOP_BITS_HELP[group]} [env {env['stop_bits']}]."),
         click.option("--timeout", type=FiniteRange(0.001, 3600), default=None, metavar="SECONDS",
@@ -498,10 +633,10 @@ def read_hex_input(args, *, what="hex input") -> bytes:
     if not args or list(args) == ["-"]:
         if sys.stdin is None or (sys.stdin.isatty() and not args):
             raise UsageError(f"{what}: none given; pass hex bytes as arguments or on stdin")
-        from ..io.sources import HexStdin
+        from ..io.sources import HexText
 
         parts, size = [], 0
-        for block in HexStdin(strict=True):
+        for block in HexText(strict=True):
             parts.append(block)
             size += len(block)
             if size > MAX_HEX_INPUT:

@@ -14,9 +14,10 @@ import sys
 
 import click
 
+from ..errors import OK
 from . import CONTEXT, Command, Group
 from .batch import EXCLUDED, PORT_TOKENS, port_tokens
-from .options import port_options
+from .options import exits, port_options
 
 BUILTINS = ("help", "exit", "quit")
 
@@ -190,9 +191,15 @@ def _description(protocol):
             "by line without a prompt; the exit status is the last failed command's.")
 
 
+#: A shell at a terminal ends well however its commands ended; piped, it reports the last failure.
+SHELL_EXITS = exits({OK: "exit, quit or Ctrl-D (piped: every command succeeded)"},
+                    tail=" Piped, any other status is the last failed command's.")
+
+
 def _make_zap():
     from .zap.compose import link_options
 
+    @SHELL_EXITS
     @click.command("zap", cls=Command, context_settings=CONTEXT, help=_description("zap") + """
 
 \b
@@ -220,6 +227,7 @@ Examples:
 
 
 def _make_zk():
+    @SHELL_EXITS
     @click.command("zk", cls=Command, context_settings=CONTEXT, help=_description("zk") + """
 
 \b

@@ -12,10 +12,10 @@ import sys
 
 import click
 
-from ..errors import UsageError
+from ..errors import INTERRUPTED, OK, OUTPUT_ERROR, TERMINATED, UsageError
 from . import CONTEXT, Group
 from .complete import fault_kinds
-from .options import FiniteRange, OutputPath
+from .options import Choice, FiniteRange, IntRange, OutputPath, exits
 
 
 def _listen(ctx, param, value):
@@ -111,16 +111,22 @@ def _parse_set(ctx, param, values):
     return out
 
 
+#: A simulator serves until it is stopped: that is its normal end.
+SIM_EXITS = exits({OK: "stopped by Ctrl-C or SIGTERM", INTERRUPTED: None, TERMINATED: None,
+                   OUTPUT_ERROR: "the log (-o) could not be written"})
+
+
+@SIM_EXITS
 @sim.command("zk", context_settings=CONTEXT)
-@click.option("--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+@click.option("--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
               help="The protocol version the ECU reports (status ID 6).")
-@click.option("--rate", type=click.Choice(["20", "50", "100"]), default=None,
+@click.option("--rate", type=Choice(["20", "50", "100"]), default=None,
               help="Status rate in Hz at power-up (the rate actions change it).")
-@click.option("-b", "--baud", type=click.Choice(["2400", "4800", "9600", "19200", "38400", "57600", "115200"]),
+@click.option("-b", "--baud", type=Choice(["2400", "4800", "9600", "19200", "38400", "57600", "115200"]),
               default=None,
               help="The ECU's UART speed (the document's list): a pty host at another speed reads "
                    "misframed garbage. Default: whatever the host uses.")
-@click.option("--stop-bits", type=click.Choice(["1", "2"]), default=None,
+@click.option("--stop-bits", type=Choice(["1", "2"]), default=None,
               help="The ECU's stop bits (8 data bits, no parity; default 1): a pty host at another "
                    "setting reads garbage (the host's receiver is modelled strictly).")
 @click.option("--set", "extra", multiple=True, callback=_parse_set, metavar="KEY=VALUE",
@@ -205,16 +211,17 @@ def _host_log(output):
     return writer.write, close
 
 
+@SIM_EXITS
 @sim.command("zap", context_settings=CONTEXT)
 @click.option("--ids", default="0", show_default=True, metavar="LIST",
               help="Actuator IDs on the bus, like 1,2,5-8; ID@BAUD puts one at another baud rate; "
                    "an ID given twice makes two actuators that collide.")
-@click.option("-b", "--baud", type=click.Choice(["9600", "19200", "38400", "57600", "115200"]), default="57600",
+@click.option("-b", "--baud", type=Choice(["9600", "19200", "38400", "57600", "115200"]), default="57600",
               show_default=True, help="The actuators' baud rate (a pty host at another rate is not heard).")
 @click.option("--state", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Keep stored registers (and rod positions) in FILE across runs; when FILE exists "
                    "it defines the bus and --ids/--baud/--return-mode are not applied.")
-@click.option("--return-mode", type=click.Choice(["0", "1", "2"]), default=None,
+@click.option("--return-mode", type=Choice(["0", "1", "2"]), default=None,
               help="Every actuator's feedback-return-mode at first start (default 1).")
 @click.option("--voltage", type=FiniteRange(0, 25.5), default=None, metavar="VOLTS",
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")

@@ -7,14 +7,21 @@ import sys
 
 import click
 
-from ..errors import UsageError
+from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, UsageError
 from . import CONTEXT, Command, Group
-from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, FilePath, FiniteRange, OutputPath,
-                      capture_option, close_output, open_output)
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FilePath, FiniteRange, IntRange,
+                      OutputPath, capture_option, close_output, exits, open_output)
 
-EXIT_HELP = ("Exit status: 0 done (--count, --duration); 2 bad usage; 4 a port cannot be opened or "
-             "vanished; 7 the output or the capture could not be written; 130 Ctrl-C; 143 SIGTERM. "
-             "Every record already written stays whole.")
+
+#: A sniffer only listens: it never waits for a reply, and decodes what it hears (no 5, 6); it
+#: ends with 3 when what it heard is no device's.
+SNIFF_EXITS = exits({OK: "done (--count, --duration)",
+                     NO_REPLY: "no frame at all by the end (a silent line), or bytes that are noise, not frames, "
+                               "for 2 s (a wrong baud rate or stop bits)",
+                     PORT_ERROR: "a port cannot be opened, or failed or vanished",
+                     DEVICE_ERROR: None, BAD_REPLY: None,
+                     OUTPUT_ERROR: "the output or the capture could not be written"},
+                    tail=" Every record already written stays whole.")
 
 #: What sniff writes (``-f``, or named by the suffix of ``-o``).
 SNIFF_FORMATS = ("table", "jsonl", "json", "csv")
@@ -48,17 +55,17 @@ def _common(protocol):
                                "directions).") + f" [env {env['port']}]"),
             click.option("-b", "--baud", type=BaudType(), envvar=env["baud"],
                          default=DEFAULT_BAUD[protocol], show_default=True, help=f"Baud rate [env {env['baud']}]."),
-            click.option("--stop-bits", "stop_bits", type=click.Choice(["1", "2"]), envvar=env["stop_bits"],
+            click.option("--stop-bits", "stop_bits", type=Choice(["1", "2"]), envvar=env["stop_bits"],
                          default="1", show_default=True, callback=lambda ctx, param, v: int(v),
                          help=f"{STOP_BITS_HELP[protocol]} [env {env['stop_bits']}]."),
             capture_option(protocol),
-            click.option("-f", "--format", "fmt", type=click.Choice(SNIFF_FORMATS), default=None,
+            click.option("-f", "--format", "fmt", type=Choice(SNIFF_FORMATS), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
             click.option("-o", "--output", type=OutputPath(SNIFF_FORMATS), default=None,
                          help="Write records to FILE (.csv, .json, .jsonl by its suffix; JSON Lines without one)."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
-            click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+            click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
                          help="Stop after N records."),
             click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
                          help="Stop after SECONDS."),
@@ -75,9 +82,10 @@ def _common(protocol):
     return deco
 
 
-@sniff.command("zk", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@SNIFF_EXITS
+@sniff.command("zk", cls=Command, context_settings=CONTEXT)
 @_common("zk")
-@click.option("--protocol-version", type=click.IntRange(1, 63), default=None, metavar="N",
+@click.option("--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
               help="ECU protocol version assumed until a status ID 6 frame reveals it (default 4).")
 def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, protocol_version):
     """Sniff a ZK flight-controller <-> ECU link.
@@ -103,7 +111,8 @@ def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats,
          table=lambda r: summary(r))
 
 
-@sniff.command("zap", cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@SNIFF_EXITS
+@sniff.command("zap", cls=Command, context_settings=CONTEXT)
 @_common("zap")
 @click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.1, show_default=True,
               metavar="SECONDS", help="A request that expects an answer and gets none for this long is a "
@@ -215,7 +224,7 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
         writer = make_writer(fmt, stream, cols, header=not had)
     live = _live(sniffer) if is_tty(sys.stderr) else None
     written = 0
-    reason = None
+    reason = failure = None
     try:
         with sniffer, SignalGuard() as guard:
             end = None if duration is None else time.monotonic() + duration
@@ -237,6 +246,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
                     break
                 if end is not None and time.monotonic() >= end:
                     reason = "duration"
+                    break
+                failure = sniffer.noise()
+                if failure is not None:
+                    reason = "noise"
                     break
                 if guard.signum is not None:
                     from ..signals import INTERRUPT_SIGNALS
@@ -263,6 +276,10 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
             f.write("\n")
     if reason == "interrupted":
         raise KeyboardInterrupt
+    if reason == "noise":
+        raise failure
+    if not sniffer.frames_trusted and reason != "terminated":
+        raise sniffer.silent()         # a silent line never passes
     if reason == "terminated":
         from ..errors import TERMINATED, ZkzapError
 

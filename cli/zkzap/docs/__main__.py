@@ -1,12 +1,12 @@
-"""``python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR}``."""
+"""``python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR | protocol OUTDIR}``."""
 
 from __future__ import annotations
 
 import os
 import sys
 
-USAGE = ("usage: python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR | protocol OUTDIR | "
-         "api [OUTDIR]}")  # all: also share/wireshark/zkzap.lua and docs/protocol.md
+USAGE = "usage: python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR | protocol OUTDIR}"
+# all: also share/wireshark/zkzap.lua, docs/protocol.md and cli/zkzap/api/_registers.pyi
 
 
 def main(argv=None) -> int:
@@ -15,23 +15,15 @@ def main(argv=None) -> int:
         print(USAGE, file=sys.stderr if not args else sys.stdout)
         return 2 if not args else 0
     what, rest = args[0], args[1:]
-    from . import completions, man, protocol, wireshark
+    from . import completions, man, protocol, stubs, wireshark
 
     if what == "all" and len(rest) <= 1:
         root = rest[0] if rest else os.getcwd()
         written = man.generate(os.path.join(root, "man")) + completions.generate(os.path.join(root, "completions"))
-        written += wireshark.generate(root)
-        written += protocol.generate(os.path.join(root, "docs"), os.path.join(root, "README.md"))
+        written += wireshark.generate(root) + stubs.generate(root)
+        written += protocol.generate(os.path.join(root, "docs"))
     elif what == "protocol" and len(rest) == 1:
         written = protocol.generate(rest[0])
-    elif what == "api" and len(rest) <= 1:
-        from . import api
-
-        try:
-            written = api.generate(rest[0] if rest else api.default_dir())
-        except ImportError as e:
-            print(f"zkzap.docs: {e}", file=sys.stderr)
-            return 2
     elif what == "man" and len(rest) == 1:
         written = man.generate(rest[0])
     elif what == "completions" and len(rest) == 1:

@@ -186,6 +186,16 @@ def tree(cmd=None, name="zkzap"):
 
 # --- one page ----------------------------------------------------------------------------------
 
+def exit_statuses(cmd) -> list:
+    """``[(code, meaning), ...]`` of ``cmd``: a command's own (see
+    :func:`zkzap.commands.options.exit_statuses`); for a group, the table of every exit code."""
+    if isinstance(cmd, click.Group):
+        return list(EXIT_CODES)
+    from ..commands.options import exit_statuses as own
+
+    return own(cmd)
+
+
 def _env_help(page):
     """{variable: roff text} for the variables of ``page``'s options: which option of which
     commands each one gives the default of."""
@@ -320,8 +330,10 @@ def render(page, entry=None) -> str:
         out += [".TP", line(bold(var))] + text_lines(esc(text))
 
     out.append(".SH EXIT STATUS")
-    for code, text in EXIT_CODES:
+    for code, text in exit_statuses(page.cmd):
         out += [".TP", line(bold(str(code)))] + text_lines(esc(text[:1].upper() + text[1:] + "."))
+    if getattr(page.cmd, "exit_tail", ""):
+        out += [".PP"] + text_lines(esc(page.cmd.exit_tail.strip()))
 
     examples = page.examples()
     if examples:

@@ -397,11 +397,15 @@ local function zk_decode(b, n)
   return out
 end
 
--- scan a ZK stream: complete frames (and CRC failures at frame boundaries)
-local function zk_scan(buf, dir)
+-- scan a ZK stream: complete frames (and CRC failures at frame boundaries). ``aligned`` says
+-- whether the stream was at a frame boundary where the previous packet's scan stopped (false
+-- after a bad frame: the bytes held back then are not reported as a second one); the scan
+-- returns it for the next packet, as zk decode's framer keeps it from one read to the next.
+local function zk_scan(buf, dir, aligned)
   local want_control = dir ~= 1
   local want_status = dir ~= 2
-  local found, i, n, aligned = {}, 1, #buf, true
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
   while i <= n do
     local h = buf[i]
     local need = nil
@@ -427,7 +431,7 @@ local function zk_scan(buf, dir)
       i = i + 1
     end
   end
-  return found, i
+  return found, i, aligned
 end
 
 local ZK_NAMES = {[0] = "keepalive"}
@@ -450,7 +454,8 @@ function zk_proto.dissector(tvb, pinfo, tree)
     local dir = direction(pinfo)
     local s = stream_of("zk", pinfo)
     local buf, start = feed(s, tvb)
-    local found, rest = zk_scan(buf, dir)
+    local found, rest, aligned = zk_scan(buf, dir, s.aligned)
+    s.aligned = aligned
     for _, fr in ipairs(found) do
       local b = frame_bytes(buf, fr.pos, fr.len)
       local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
@@ -603,8 +608,9 @@ local function zap_decode(b, n, request)
   return out
 end
 
-local function zap_scan(buf)
-  local found, i, n, aligned = {}, 1, #buf, true
+local function zap_scan(buf, aligned)          -- aligned: as zk_scan's
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
   while i <= n do
     if buf[i] == 0xFF then
       -- the header is the last three FFs of a run
@@ -638,7 +644,7 @@ local function zap_scan(buf)
       i = i + 1
     end
   end
-  return found, i
+  return found, i, aligned
 end
 
 function zap_proto.dissector(tvb, pinfo, tree)
@@ -650,7 +656,8 @@ function zap_proto.dissector(tvb, pinfo, tree)
     local dir = direction(pinfo)
     local s = stream_of("zap", pinfo)
     local buf, start = feed(s, tvb)
-    local found, rest = zap_scan(buf)
+    local found, rest, aligned = zap_scan(buf, s.aligned)
+    s.aligned = aligned
     for _, fr in ipairs(found) do
       local b = frame_bytes(buf, fr.pos, fr.len)
       b.n = fr.len

@@ -292,7 +292,7 @@ def _load_raw(path, run):
     from ..api.telemetry import Telemetry
 
     src = replay_source(path, fast=True)
-    tel = Telemetry(None, None, True, wall0=src.wall0, wall_clock=getattr(src, "wall_clock", False))
+    tel = Telemetry(None, None, True, clock=src.clock)
     try:
         while True:
             got = src.poll()

@@ -7,9 +7,10 @@ line by line, binary input in 64 KiB blocks).
 from __future__ import annotations
 
 import gc
+import os
 import sys
 
-from ..codec.hexfmt import HexSkips, iter_hex_stream, parse_hex
+from ..codec.hexfmt import HexError, HexSkips, iter_hex_stream, parse_hex
 from ..errors import UsageError
 
 CHUNK = 1 << 16
@@ -57,37 +58,69 @@ def _binary_chunks(paths):
 
 
 def hex_chunks(args):
-    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin
-    (a :class:`HexStdin`)."""
+    """(chunks, explicit): the bytes of hex arguments (explicit=True), or hex lines of stdin or
+    of the text files the arguments name (``zap decode dump.hex``: arguments that are not hex
+    but every one an existing file; raw bytes in one are refused with a pointer to --binary)."""
     if args and list(args) != ["-"]:
-        return [parse_hex(" ".join(args), what="hex input")], True
+        try:
+            return [parse_hex(" ".join(args), what="hex input")], True
+        except HexError as e:
+            if not all(a != "-" and os.path.isfile(a) for a in args):
+                named = [a for a in args if ("." in a or os.sep in a) and not os.path.exists(a)]
+                if named:
+                    raise HexError(f"{e} (nor a file: {named[0]} does not exist)") from None
+                raise
+        return HexText(list(args)), False
     if sys.stdin is None or sys.stdin.isatty() and not args:
         raise UsageError("input: none given; pass hex as arguments, pipe hex or bytes (--binary) to stdin")
-    return HexStdin(), False
+    return HexText(), False
 
 
-class HexStdin:
-    """The bytes of the hex text on stdin, line by line. Bytes that are not UTF-8 are read as
-    what they are (binary input, refused or, once the stream has given bytes, a damaged line
-    skipped), never as a decoding error that would end the stream: :meth:`note` counts the
-    lines skipped."""
+class HexText:
+    """The bytes of hex text, line by line: stdin, or the text files ``paths`` in turn. Bytes
+    that are not UTF-8 are read as what they are (binary input, refused or, once a stream has
+    given bytes, a damaged line skipped), never as a decoding error that would end the stream:
+    :meth:`note` counts the lines skipped. ``strict``: every line that is not hex is an error."""
 
-    what = "stdin"
-
-    def __init__(self, strict: bool = False):
-        #: None when ``strict``: every line that is not hex is an error
+    def __init__(self, paths=None, strict: bool = False):
+        self.paths = paths
+        self.what = "stdin"              # the input the first skipped line came from
         self.skipped = None if strict else HexSkips()
 
     def __iter__(self):
+        if self.paths is None:
+            yield from self._stdin()
+        else:
+            for path in self.paths:
+                yield from self._file(path)
+
+    def _stdin(self):
         import io
 
         raw = getattr(sys.stdin, "buffer", None)
         stream = sys.stdin if raw is None else io.TextIOWrapper(raw, encoding="utf-8", errors="surrogateescape")
         try:
-            yield from iter_hex_stream(stream, what=self.what, skipped=self.skipped)
+            yield from iter_hex_stream(stream, what="stdin", skipped=self.skipped)
         finally:
             if raw is not None:
                 stream.detach()           # leave stdin's buffer open for whoever owns it
+
+    def _file(self, path):
+        try:
+            stream = open(path, encoding="utf-8", errors="surrogateescape", newline=None)
+        except OSError as e:
+            raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
+        before = self.skipped.lines if self.skipped is not None else 0
+        with stream:
+            try:
+                yield from iter_hex_stream(stream, what=path, skipped=self.skipped)
+            except HexError as e:
+                if "binary input" in str(e):
+                    raise HexError(f"{path}: raw bytes, not hex text: give --binary to decode them "
+                                   f"({' '.join(['--binary', *self.paths])})", path=path) from None
+                raise
+        if self.skipped is not None and not before and self.skipped.lines:
+            self.what = path
 
     def note(self):
         text = self.skipped.note() if self.skipped is not None else None
@@ -96,7 +129,18 @@ class HexStdin:
 
 def hex_note(chunks):
     """The note on the damaged lines a hex stream skipped, or None."""
-    return chunks.note() if isinstance(chunks, HexStdin) else None
+    return chunks.note() if isinstance(chunks, HexText) else None
+
+
+def hex_file_inputs(args) -> bool:
+    """Whether the decoders read ``args`` as hex text files (see :func:`hex_chunks`)."""
+    if not args or list(args) == ["-"] or not all(os.path.isfile(a) for a in args):
+        return False
+    try:
+        parse_hex(" ".join(args), what="hex input")
+    except HexError:
+        return True
+    return False
 
 
 class _CollectorPaused:

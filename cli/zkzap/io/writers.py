@@ -457,4 +457,6 @@ def make_writer(fmt, stream, columns, *, title=None, table_columns=None, header=
         return TableWriter(stream, table_columns or columns, title=title)
     if fmt == "influx":
         return InfluxWriter(stream, default_measurement=measurement)
-    raise ValueError(f"format: {fmt!r}; allowed {', '.join(FORMATS)}")
+    from ..errors import InvalidValue
+
+    raise InvalidValue(f"format: {fmt!r}; allowed {', '.join(FORMATS)}")

@@ -6,7 +6,7 @@ Any pyserial URL works (``socket://``, ``rfc2217://``, ``loop://``, ``spy://``,
 
 from __future__ import annotations
 
-from ..errors import PortError, UsageError
+from ..errors import InvalidValue, PortError, UsageError
 
 _HANDLERS = "zkzap.link"
 
@@ -49,7 +49,12 @@ def fit_note(what: str, rate_hz: float, frame_bytes: int, baud: int, stop_bits: 
 def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1, capture=None):
     """A pyserial port for ``url`` at ``baud`` (8 data bits, no parity, ``stop_bits`` 1 or 2),
     opened exclusively where the OS allows; recorded to a pcapng capture when one was asked for
-    (``capture`` = (path, protocol), else the one named by :func:`zkzap.link.capture.request`)."""
+    (``capture`` = (path, protocol), else the one named by :func:`zkzap.link.capture.request`).
+    A ``url`` that is no string or a ``baud`` that is no positive integer is an InvalidValue."""
+    if not isinstance(url, str):
+        raise InvalidValue(f"port: {url!r} is not a device path or URL", port=url)
+    if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
+        raise InvalidValue(f"baud: {baud!r} is not a baud rate (a positive integer)", baud=baud)
     _check_url(url)
     import serial
 
@@ -62,6 +67,8 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
                                      exclusive=True, stopbits=stop_bits)
         _no_delay(port)
         return _tap(port, url, baud, capture)
+    except InvalidValue:
+        raise                        # a sim:// URL's option, named by the simulator
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:

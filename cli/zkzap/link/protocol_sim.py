@@ -16,6 +16,7 @@ import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..sim import make_device
+from ..errors import InvalidValue
 from ..sim.base import Clock, parse_number
 
 
@@ -42,7 +43,7 @@ class Serial(SerialBase):
                 self._device = make_device(kind, **options)
             except (TypeError, ValueError) as e:
                 # bad input (exit 2 naming the option), not a port failure
-                raise ValueError(f"sim://{kind}: {e}") from None
+                raise InvalidValue(f"sim://{kind}: {e}") from None
         self._rx = bytearray()
         self.is_open = True
 

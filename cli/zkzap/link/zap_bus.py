@@ -116,18 +116,20 @@ class Reply:
 
     __slots__ = ("ident", "error", "data", "packet", "rtt")
 
-    def __init__(self, ident, error, data, packet, rtt=0.0):
+    def __init__(self, ident: int, error: int, data: bytes, packet: bytes, rtt: float = 0.0) -> None:
         self.ident, self.error, self.data, self.packet, self.rtt = ident, error, data, packet, rtt
 
     @property
-    def errors(self) -> list:
+    def errors(self) -> list[str]:
+        """The names of the error bits set (``overload``, ``input-voltage``)."""
         return zap.error_names(self.error)
 
     @property
     def value(self) -> int:
+        """The parameter bytes as one little-endian integer."""
         return int.from_bytes(self.data, "little")
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"Reply(id={self.ident}, error=0x{self.error:02x}, data={self.data.hex(' ')})"
 
 

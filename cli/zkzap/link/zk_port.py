@@ -60,9 +60,15 @@ class ZkLink:
     def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
         """A link over this one's port for one command; its close() leaves the port open."""
         self.ser.timeout = slice_s
-        link = ZkLink(self.ser, self.url, raw_log)
+        link = ZkLink(self.ser, self.url, raw_log, slice_s=slice_s)
         link.close = lambda: None
         return link
+
+    def set_slice(self, slice_s: float) -> None:
+        """Block at most ``slice_s`` real seconds in a read."""
+        if slice_s != self.slice_s:
+            self.slice_s = slice_s
+            self.ser.timeout = slice_s
 
     @property
     def device(self):

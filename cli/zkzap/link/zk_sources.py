@@ -3,8 +3,8 @@ them from a :class:`~zkzap.link.zk_port.ZkLink` (and reopens a port that vanishe
 :class:`ReplaySource` from a raw log (paced in real time or as fast as possible).
 
 A source has ``now()``, ``poll()`` (``[(t, frame), ...]``; None at the end of a replay),
-``write(frame)``, ``close()``, its ``framer`` and ``wall0``; :class:`zkzap.api.session.Session`
-runs one.
+``write(frame)``, ``close()``, its ``framer`` and its ``clock`` (the session's one clock, see
+:mod:`zkzap.link.clock`); :class:`zkzap.api.session.Session` runs one.
 """
 
 from __future__ import annotations
@@ -13,22 +13,27 @@ import time
 from collections import deque
 
 from ..codec import zk
-from ..codec.framing import ZkFramer
+from ..codec.framing import SignalLock, ZkFramer
 from ..errors import PortError, UsageError
-from .zk_port import READ_SIZE, ZkLink
+from .clock import ReplayClock, SessionClock
+from .zk_port import READ_SIZE, READ_SLICE_S, ZkLink
 
 #: Pause between two attempts to reopen a vanished port (seconds).
 REOPEN_INTERVAL = 0.25
 
 
 class LiveSource:
-    """Status frames from a :class:`ZkLink`, stamped with seconds since the source started.
+    """Status frames from a :class:`ZkLink`, stamped with session seconds (:attr:`clock`).
 
-    With ``reconnect`` (seconds), a port that fails or vanishes is reopened (the same device
-    path or URL) every :data:`REOPEN_INTERVAL` for up to that long: meanwhile :meth:`poll`
-    returns no frames and :attr:`down` is the time it failed; once it is back, :attr:`gap` is
-    ``(t_down, t_up, reason)`` until :meth:`take_gap`. After ``reconnect`` seconds the port
-    failure is raised as it would have been without it.
+    Frames are handed on only from a stream that is an ECU's: :attr:`signal` (a
+    :class:`~zkzap.codec.framing.SignalLock`) holds back the CRC-valid frames that random
+    bytes give by chance, so a line carrying noise is as silent as one carrying nothing.
+
+    With ``reconnect`` (session seconds), a port that fails or vanishes is reopened (the same
+    device path or URL) every :data:`REOPEN_INTERVAL` for up to that long: meanwhile
+    :meth:`poll` returns no frames and :attr:`down` is the time it failed; once it is back,
+    :attr:`gap` is ``(t_down, t_up, reason)`` until :meth:`take_gap`. After ``reconnect``
+    seconds the port failure is raised as it would have been without it.
     """
 
     live = True
@@ -37,23 +42,34 @@ class LiveSource:
         self.link = link
         self.reconnect = reconnect
         self.framer = ZkFramer("status")
-        # An in-process simulator (sim://...?speed=N) runs in model time: so does the session
-        # (durations, schedules, control rate, record times), or a schedule would run N times
-        # slower than the engine it drives. ``speed`` converts back to real time (silences).
-        clock = getattr(link.ser, "clock", None)
-        self._clock = clock.now if clock is not None and callable(getattr(clock, "now", None)) else time.monotonic
-        self.speed = float(getattr(clock, "speed", 1.0)) if clock is not None else 1.0
-        self.t0 = self._clock()
-        self.wall0 = time.time()
-        self.down = None                  # model time the port failed, while it is away
+        self.signal = SignalLock(self.framer)
+        #: The session's one clock: model time on an in-process simulator (sim://zk?speed=N),
+        #: so durations, schedules, the control rate and timeouts follow the simulated engine.
+        self.clock = SessionClock.of_port(link.ser)
+        self.speed = self.clock.speed
+        self.down = None                  # session time the port failed, while it is away
         self.gap = None
         self.reconnects = 0
         self._error = None
         self._next_try = 0.0
 
+    @property
+    def wall0(self) -> float:
+        """The POSIX time of the session's time 0."""
+        return self.clock.wall0
+
     def now(self) -> float:
-        """Seconds since the source started (model seconds on a sped-up simulator)."""
-        return self._clock() - self.t0
+        """Session seconds since the source started (model seconds on a sped-up simulator)."""
+        return self.clock.now()
+
+    def restart(self) -> None:
+        """Make now the session's time 0 (a session begins after listening first)."""
+        self.clock.start()
+
+    def pace(self, period: float) -> None:
+        """Read in slices short enough for something due every ``period`` session seconds:
+        half of it, in real seconds, at most :data:`~zkzap.link.zk_port.READ_SLICE_S`."""
+        self.link.set_slice(min(READ_SLICE_S, self.clock.real(period) / 2))
 
     def poll(self):
         """Frames read within one slice, as ``[(t, frame), ...]``."""
@@ -69,7 +85,16 @@ class LiveSource:
         if not data:
             return []
         t = self.now()
-        return [(t, f) for f in self.framer.feed(data)]
+        frames = self.framer.feed(data)
+        return self.signal.admit(len(data), frames, [(t, f) for f in frames])
+
+    def noise_facts(self) -> dict:
+        """What the line carried when no status frame came: ``bytes`` received and
+        ``chance_frames`` (CRC-valid frames taken for chance), when it was noise."""
+        sig = self.signal
+        if not sig.noise or sig.accepted:
+            return {}                      # nothing came, a frame's worth at most, or an ECU
+        return {"bytes": sig.bytes, "chance_frames": sig.rejected + len(sig.held)}
 
     def _fail(self, e):
         self.down = self.now()
@@ -82,7 +107,7 @@ class LiveSource:
         if now - self.down > self.reconnect:
             raise PortError(f"{self._error}; not back within --reconnect {self.reconnect:g} s")
         if now < self._next_try:
-            time.sleep(min(0.05, self._next_try - now))
+            self.clock.sleep(min(0.05, self._next_try - now))
             return []
         self._next_try = now + REOPEN_INTERVAL
         try:
@@ -125,6 +150,16 @@ class PacedReplay:
 
     live = False
     FAST_BATCH = 256
+    #: The recording's date at time 0 (None: a raw log holds no dates; records get ``time: null``).
+    wall0 = None
+
+    @property
+    def clock(self) -> ReplayClock:
+        """The replay's clock: its own time, and the recording's dates where it has them."""
+        return ReplayClock(self.now, self.wall0)
+
+    def pace(self, period: float) -> None:
+        """Nothing to pace: a replay is read as it was recorded."""
 
     def now(self) -> float:
         """The replay's time: the last frame's with ``fast``, else seconds since the start."""
@@ -182,7 +217,6 @@ class ReplaySource(PacedReplay):
         self.last_t = 0.0
         self.eof = False
         self.t0 = time.monotonic()
-        self.wall0 = time.time()
 
     def _fill(self):
         while not self.queue and not self.eof:

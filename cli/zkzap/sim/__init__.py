@@ -10,6 +10,8 @@ pseudo-terminal or a TCP socket, and :mod:`zkzap.link.protocol_sim` runs one in-
 behind a ``sim://`` pyserial URL (``sim://zk?protocol_version=4``, ``sim://zap?ids=1,2``).
 """
 
+from __future__ import annotations
+
 #: Device kinds by URL host: "module:factory". The factory takes the URL's query options as
 #: keyword strings and returns a Device.
 DEVICES = {
@@ -23,21 +25,29 @@ INSTANCES: dict = {}
 
 _LAUNCH = ("start", "start_zk", "start_zap", "Simulator")
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # what type checkers see; at run time zkzap.sim.launch is imported on first use
+    from typing import Any
 
-def __getattr__(name):
-    if name in _LAUNCH:
-        from . import launch
+    from .base import Device
+    from .launch import Simulator as Simulator, start as start, start_zap as start_zap, start_zk as start_zk
+else:
+    def __getattr__(name: str) -> object:
+        if name in _LAUNCH:
+            from . import launch
 
-        return getattr(launch, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+            return getattr(launch, name)
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def make_device(kind: str, **options):
+def make_device(kind: str, **options: Any) -> Device:
     """Build a device of ``kind`` ("zk" or "zap") from string options."""
     import importlib
 
     spec = DEVICES.get(kind)
     if spec is None:
-        raise ValueError(f"simulator: unknown kind {kind!r}; allowed {', '.join(DEVICES)}")
+        from ..errors import unknown_name
+
+        raise unknown_name("simulator", kind, DEVICES)
     module, _, attr = spec.partition(":")
     return getattr(importlib.import_module(module), attr)(**options)

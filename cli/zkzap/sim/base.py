@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+from ..errors import InvalidValue
+
 
 def parse_flag(key: str, value) -> bool:
     """A simulator's on/off option (a URL query or a command-line value): 1/0, true/false,
@@ -15,7 +17,7 @@ def parse_flag(key: str, value) -> bool:
         return True
     if text in ("0", "false", "no", "off", ""):
         return False
-    raise ValueError(f"{key}: {value!r} is not a boolean; allowed 0/1, true/false")
+    raise InvalidValue(f"{key}: {value!r} is not a boolean; allowed 0/1, true/false")
 
 
 def parse_number(key: str, value, lo=None, hi=None) -> float:
@@ -24,13 +26,13 @@ def parse_number(key: str, value, lo=None, hi=None) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{key}: {value!r} is not a number") from None
+        raise InvalidValue(f"{key}: {value!r} is not a number") from None
     if number != number or number in (float("inf"), float("-inf")):
-        raise ValueError(f"{key}: {value!r} is not a finite number")
+        raise InvalidValue(f"{key}: {value!r} is not a finite number")
     if (lo is not None and number < lo) or (hi is not None and number > hi):
         allowed = f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (
             f"{lo:g} or more" if lo is not None else f"{hi:g} or less")
-        raise ValueError(f"{key}: {value} is out of range; allowed {allowed}")
+        raise InvalidValue(f"{key}: {value} is out of range; allowed {allowed}")
     return number
 
 
@@ -39,7 +41,7 @@ class Clock:
 
     def __init__(self, speed: float = 1.0):
         if not isinstance(speed, (int, float)) or speed != speed or not 0 < speed < float("inf"):
-            raise ValueError(f"speed: {speed} is out of range; allowed a finite number > 0")
+            raise InvalidValue(f"speed: {speed} is out of range; allowed a finite number > 0")
         self.speed = speed
         self._t0 = time.monotonic()
 

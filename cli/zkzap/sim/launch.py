@@ -21,9 +21,20 @@ import os
 import threading
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Callable, Iterable, Optional, Sequence, Union
+    from typing import Any, Callable, Iterable, Literal, Optional, Sequence, Union
+
+    from typing_extensions import Self, TypeAlias
+
+    #: How a simulator is served: in this process (a sim:// URL), on a pty or on TCP.
+    Transport: TypeAlias = Literal["inprocess", "pty", "tcp"]
+    #: A capture file to replay.
+    CapturePath: TypeAlias = Union[str, os.PathLike[str]]
+    #: A fault of the actuator-bus simulator: ``"[ID:]KIND[=VALUE][/COUNT]"`` or
+    #: ``(id or None, kind, value, count)``.
+    Fault: TypeAlias = Union[str, tuple[Optional[int], str, Optional[float], Optional[int]]]
 
 from . import INSTANCES
+from ..errors import InvalidValue
 from .base import Clock
 
 __all__ = ["Simulator", "start", "start_zk", "start_zap"]
@@ -36,10 +47,17 @@ class Simulator:
     """A running simulator: ``kind`` (``zk``/``zap``), ``url`` (what to open), ``transport``,
     ``device``, ``clock`` (model time) and ``lock``. A context manager; :meth:`close` stops it."""
 
-    def __init__(self, kind: str, device, clock: Clock, transport: str = "inprocess",
-                 host: str = "127.0.0.1", port: int = 0):
+    url: str
+    """What to open: ``sim://KIND?instance=N``, the pty's path or ``socket://127.0.0.1:PORT``."""
+    device: Any
+    """The simulated device (:class:`~zkzap.sim.zk_ecu.ZkEcu`,
+    :class:`~zkzap.sim.zap_actuators.ActuatorBus` or a replay), for inspection and fault
+    injection."""
+
+    def __init__(self, kind: str, device: Any, clock: Clock, transport: Transport = "inprocess",
+                 host: str = "127.0.0.1", port: int = 0) -> None:
         if transport not in TRANSPORTS:
-            raise ValueError(f"transport: {transport!r}; allowed {', '.join(TRANSPORTS)}")
+            raise InvalidValue(f"transport: {transport!r}; allowed {', '.join(TRANSPORTS)}")
         self.kind = kind
         self.device = device
         self.clock = clock
@@ -63,13 +81,13 @@ class Simulator:
             if self._error is not None:
                 raise self._error
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"Simulator({self.kind!r}, url={self.url!r})"
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
@@ -86,7 +104,7 @@ class Simulator:
         with self.lock:
             self.device.close()
 
-    def inject(self, *args, **kw):
+    def inject(self, *args: Any, **kw: Any) -> Any:
         """Inject a fault (the device's ``inject``/``inject_error``), under :attr:`lock`."""
         with self.lock:
             fn = getattr(self.device, "inject", None) or getattr(self.device, "inject_error")
@@ -94,7 +112,7 @@ class Simulator:
 
     # -- servers --------------------------------------------------------------------------------
 
-    def _serve(self, ready, host, port):
+    def _serve(self, ready: threading.Event, host: str, port: int) -> None:
         """The server thread: :func:`zkzap.sim.serve.run_pty` or ``run_tcp`` until :meth:`close`."""
         from .serve import run_pty, run_tcp
 
@@ -120,15 +138,15 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
              idle_rpm: int = 40000, max_thrust: float = 14.0, ambient: float = 20.0, battery: float = 12.0,
              max_pump_voltage: float = 10.0, esr: bool = False, baud: Optional[int] = None,
              stop_bits: int = 1, corrupt_every: int = 0, silent_after: Optional[float] = None, error: Union[int, str, None] = None,
-             error_after: float = 0.0, transport: str = "inprocess", host: str = "127.0.0.1",
-             port: int = 0, replay=None, loop: bool = False,
-             on_control: Optional[Callable[[dict], None]] = None) -> Simulator:
+             error_after: float = 0.0, transport: Transport = "inprocess", host: str = "127.0.0.1",
+             port: int = 0, replay: Optional[CapturePath] = None, loop: bool = False,
+             on_control: Optional[Callable[[dict[str, Any]], None]] = None) -> Simulator:
     """Start the ECU simulator (a :class:`~zkzap.sim.zk_ecu.ZkEcu`): ``protocol_version``,
     status ``rate`` (20/50/100 Hz), ``speed`` (model time runs this many times faster), engine
     figures, the line settings of its UART (``baud``, ``stop_bits`` 1 or 2, 8 data bits, no
     parity, as ``zkzap sim zk --baud --stop-bits``: a host at another setting reads garbage;
     without ``baud`` the ECU follows the host's settings), and faults (``corrupt_every`` Nth
-    frame, ``silent_after`` s, ``error`` code at ``error_after`` s). ValueError names a bad
+    frame, ``silent_after`` s, ``error`` code at ``error_after`` s). InvalidValue names a bad
     argument.
 
     ``replay`` (the path of a zkzap ZK capture) plays a recorded session instead, as ``zkzap sim
@@ -136,7 +154,7 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
     once or, with ``loop``, again and again; the engine, line and fault arguments do not apply.
     The control frames the host sends meanwhile go to ``on_control`` as decoded records.
     :class:`~zkzap.link.pcapng.CaptureError` (a :class:`~zkzap.errors.UsageError`) for a
-    file that is not such a capture; ValueError for one without a status frame."""
+    file that is not such a capture; InvalidValue for one without a status frame."""
     if replay is not None:
         from ..link.pcapng import check_capture
         from .replay import ZkReplay
@@ -146,11 +164,11 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
         return Simulator("zk", ZkReplay(path, loop=bool(loop), log=on_control), Clock(speed), transport,
                          host, port)
     if loop or on_control is not None:
-        raise ValueError("loop, on_control: only with replay")
+        raise InvalidValue("loop, on_control: only with replay")
     from .zk_ecu import ZkEcu
 
     if isinstance(stop_bits, bool) or stop_bits not in (1, 2):
-        raise ValueError(f"stop_bits: {stop_bits!r}; allowed 1, 2")
+        raise InvalidValue(f"stop_bits: {stop_bits!r}; allowed 1, 2")
     device = ZkEcu(protocol_version=protocol_version, rate=rate, max_rpm=max_rpm, idle_rpm=idle_rpm,
                    max_thrust=max_thrust, ambient=ambient, battery=battery, max_pump_voltage=max_pump_voltage,
                    esr=esr, baud=baud, stop_bits=int(stop_bits), corrupt_every=corrupt_every, silent_after=silent_after,
@@ -158,11 +176,11 @@ def start_zk(*, protocol_version: int = 6, rate: int = 20, speed: float = 1.0, m
     return Simulator("zk", device, Clock(speed), transport, host, port)
 
 
-def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600, return_mode: Optional[int] = None,
-              echo: bool = False, voltage: Optional[float] = None, faults: Sequence = (),
-              state: Optional[str] = None, turnaround: Optional[float] = None, gap: Optional[float] = None,
-              speed: float = 1.0, transport: str = "inprocess",
-              host: str = "127.0.0.1", port: int = 0, replay=None) -> Simulator:
+def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = None, baud: int = 57600,
+              return_mode: Optional[Literal[0, 1, 2]] = None, echo: bool = False, voltage: Optional[float] = None,
+              faults: Sequence[Fault] = (), state: Optional[str] = None, turnaround: Optional[float] = None,
+              gap: Optional[float] = None, speed: float = 1.0, transport: Transport = "inprocess",
+              host: str = "127.0.0.1", port: int = 0, replay: Optional[CapturePath] = None) -> Simulator:
     """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
     actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate; default
     ID 0, or with ``replay`` the IDs that answered in the capture) at
@@ -172,7 +190,7 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     keeping stored registers across runs), the reply timing — ``turnaround`` (milliseconds from
     a command's last byte to the reply's first, 0..1000, default 2) and ``gap`` (milliseconds
     between two reply bytes, 0..100, default 0), as ``zkzap sim zap --turnaround --gap``.
-    ValueError names a bad argument.
+    InvalidValue (a UsageError and a ValueError) names a bad argument.
 
     ``replay`` (the path of a zkzap mightyZAP capture) answers as recorded, as ``zkzap sim zap
     --replay``: a request recorded in the capture (the same bytes) gets the reply recorded for
@@ -197,7 +215,7 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     if ids is None:
         ids = (0,)
     if baud not in zap.BAUD_TO_CODE:
-        raise ValueError(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+        raise InvalidValue(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
     if isinstance(ids, str):
         pairs = parse_ids(ids)
     else:
@@ -207,14 +225,14 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     timing = {}
     for key, value, top, default in (("turnaround", turnaround, 1000.0, TURNAROUND), ("gap", gap, 100.0, 0.0)):
         if isinstance(value, bool):
-            raise ValueError(f"{key}: {value!r} is not a number of milliseconds")
+            raise InvalidValue(f"{key}: {value!r} is not a number of milliseconds")
         timing[key] = default if value is None else _millis(key, value, top)
     bus = ActuatorBus([], state_path=state, echo=bool(echo), **timing)
     if not (state and bus.load_state()):
         bus.actuators = [Actuator(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
         if return_mode is not None:
             if return_mode not in (0, 1, 2):
-                raise ValueError(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
+                raise InvalidValue(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
             for a in bus.actuators:
                 a.set("feedback-return-mode", return_mode)
         if state:
@@ -233,10 +251,10 @@ def start_zap(*, ids: Union[Iterable[int], str, None] = None, baud: int = 57600,
     return Simulator("zap", bus, Clock(speed), transport, host, port)
 
 
-def start(kind: str, **options) -> Simulator:
+def start(kind: Literal["zk", "zap"], **options: Any) -> Simulator:
     """Start the ``"zk"`` or ``"zap"`` simulator (see :func:`start_zk`, :func:`start_zap`)."""
     if kind == "zk":
         return start_zk(**options)
     if kind == "zap":
         return start_zap(**options)
-    raise ValueError(f"simulator: unknown kind {kind!r}; allowed zk, zap")
+    raise InvalidValue(f"simulator: unknown kind {kind!r}; allowed zk, zap")

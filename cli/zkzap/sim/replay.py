@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 from ..codec import zap, zk
+from ..errors import InvalidValue
 from ..codec.framing import ZapFramer, ZkFramer
 from ..link.capture import CaptureFrames
 from ..link.pcapng import INBOUND, OUTBOUND
@@ -29,7 +30,7 @@ class ZkReplay(Device):
         self._start(0.0)
         self.first = self._peek()
         if self.first is None:
-            raise ValueError(f"{path}: no status frame to replay")
+            raise InvalidValue(f"{path}: no status frame to replay")
         self.received = 0
         self.sent = 0
 

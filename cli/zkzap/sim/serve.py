@@ -14,6 +14,7 @@ import selectors
 import socket
 import sys
 
+from ..errors import UsageError
 from .base import Clock
 
 _BAUDS = (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400, 57600, 115200,
@@ -21,8 +22,8 @@ _BAUDS = (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19
           3500000, 4000000)
 
 
-class PtyUnsupported(RuntimeError):
-    """Pseudo-terminals need a POSIX system (termios)."""
+class PtyUnsupported(UsageError, RuntimeError):
+    """Pseudo-terminals need a POSIX system (termios): a :class:`~zkzap.errors.UsageError`."""
 
 
 def _termios():

@@ -16,7 +16,7 @@ frames. The model, for 8 data bits and no parity:
   extra stop bits are idle line to it). One expecting more stop bits than the sender sends
   gets framing errors on back-to-back bytes: that is how a 1- and a 2-stop-bit device are
   told apart. Real UARTs differ here (many check only the first stop bit); the strict model is
-  documented in the README.
+  documented in the manual (docs/how-to/zk-line.md).
 """
 
 from __future__ import annotations

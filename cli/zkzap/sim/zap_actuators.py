@@ -49,6 +49,7 @@ import os
 from collections import deque
 
 from ..codec import zap
+from ..errors import InvalidValue, unknown_name
 from ..codec.framing import ZapFramer
 from ..link.port import wire_time
 from .base import parse_flag, parse_number
@@ -110,6 +111,13 @@ FAULT_HELP = ("overload, voltage[=V], silent, corrupt, truncate[=N], wrong-id[=I
 REPLY_FAULTS = ("silent", "corrupt", "truncate", "wrong-id", "delay")
 
 
+class NoActuator(InvalidValue, KeyError):
+    """No actuator with that ID on the simulated bus (an :class:`~zkzap.errors.InvalidValue`
+    and a KeyError)."""
+
+    __str__ = Exception.__str__
+
+
 def baud_of(code: int) -> int:
     return zap.BAUD_CODES.get(code, 57600)
 
@@ -131,7 +139,7 @@ def parse_fault(text: str):
     """
     spec = text.strip()
     if not spec:
-        raise ValueError("fault: empty; expected [ID:]KIND[=VALUE][/COUNT]")
+        raise InvalidValue("fault: empty; expected [ID:]KIND[=VALUE][/COUNT]")
     ident = None
     if ":" in spec:
         who, spec = spec.split(":", 1)
@@ -140,9 +148,9 @@ def parse_fault(text: str):
             try:
                 ident = int(who, 0)
             except ValueError:
-                raise ValueError(f"fault {text!r}: ID {who!r} is not a number; allowed 0..253 or all") from None
+                raise InvalidValue(f"fault {text!r}: ID {who!r} is not a number; allowed 0..253 or all") from None
             if not 0 <= ident <= zap.MAX_ID:
-                raise ValueError(f"fault {text!r}: ID {ident} is out of range; allowed 0..253 or all")
+                raise InvalidValue(f"fault {text!r}: ID {ident} is out of range; allowed 0..253 or all")
     count = None
     if "/" in spec:
         spec, cnt = spec.rsplit("/", 1)
@@ -151,29 +159,29 @@ def parse_fault(text: str):
         except ValueError:
             count = -1
         if count < 1:
-            raise ValueError(f"fault {text!r}: COUNT {cnt!r} must be a positive integer")
+            raise InvalidValue(f"fault {text!r}: COUNT {cnt!r} must be a positive integer")
     name, _, raw = spec.partition("=")
     kind = FAULT_KINDS.get(name.strip().lower())
     if kind is None:
-        raise ValueError(f"fault {text!r}: unknown kind {name!r}; allowed {FAULT_HELP}")
+        raise InvalidValue(f"fault {text!r}: unknown kind {name!r}; allowed {FAULT_HELP}")
     value = None
     if raw:
         try:
             value = parse_number(kind, raw) if kind in ("voltage", "delay") else int(raw, 0)
         except ValueError as e:
             if "finite" in str(e):
-                raise ValueError(f"fault {text!r}: {e}") from None
-            raise ValueError(f"fault {text!r}: value {raw!r} is not a number") from None
+                raise InvalidValue(f"fault {text!r}: {e}") from None
+            raise InvalidValue(f"fault {text!r}: value {raw!r} is not a number") from None
         if kind == "voltage" and not 0 <= value <= 25.5:
-            raise ValueError(f"fault {text!r}: voltage {value} is out of range; allowed 0..25.5 V")
+            raise InvalidValue(f"fault {text!r}: voltage {value} is out of range; allowed 0..25.5 V")
         if kind == "delay" and not 0 <= value <= 60000:
-            raise ValueError(f"fault {text!r}: delay {value} is out of range; allowed 0..60000 ms")
+            raise InvalidValue(f"fault {text!r}: delay {value} is out of range; allowed 0..60000 ms")
         if kind == "truncate" and not 1 <= value <= 255:
-            raise ValueError(f"fault {text!r}: truncate {value} is out of range; allowed 1..255 bytes")
+            raise InvalidValue(f"fault {text!r}: truncate {value} is out of range; allowed 1..255 bytes")
         if kind == "wrong-id" and not 0 <= value <= 254:
-            raise ValueError(f"fault {text!r}: wrong-id {value} is out of range; allowed 0..254")
+            raise InvalidValue(f"fault {text!r}: wrong-id {value} is out of range; allowed 0..254")
         if kind in ("overload", "silent", "corrupt", "stuck", "echo"):
-            raise ValueError(f"fault {text!r}: {kind} takes no value")
+            raise InvalidValue(f"fault {text!r}: {kind} takes no value")
     return ident, kind, value, count
 
 
@@ -193,19 +201,19 @@ def parse_ids(text: str):
             except ValueError:
                 b = -1
             if b not in zap.BAUD_TO_CODE:
-                raise ValueError(f"ids: baud {baud!r} in {part}@{baud}; allowed "
+                raise InvalidValue(f"ids: baud {baud!r} in {part}@{baud}; allowed "
                                  f"{', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
         lo, dash, hi = part.partition("-")
         try:
             first = int(lo, 0)
             last = int(hi, 0) if dash else first
         except ValueError:
-            raise ValueError(f"ids: {part!r} is not an ID or range (like 1,2,5-8)") from None
+            raise InvalidValue(f"ids: {part!r} is not an ID or range (like 1,2,5-8)") from None
         if not (0 <= first <= zap.MAX_ID and 0 <= last <= zap.MAX_ID) or last < first:
-            raise ValueError(f"ids: {part!r} is out of range; allowed 0..253")
+            raise InvalidValue(f"ids: {part!r} is out of range; allowed 0..253")
         out.extend((i, b) for i in range(first, last + 1))
     if not out:
-        raise ValueError("ids: none given; expected a list like 1,2,5-8")
+        raise InvalidValue("ids: none given; expected a list like 1,2,5-8")
     return out
 
 
@@ -495,17 +503,17 @@ class Actuator:
     def restore(self, st: dict) -> None:
         regs = st.get("registers", {})
         if not isinstance(regs, dict):
-            raise ValueError("registers is not an object")
+            raise InvalidValue("registers is not an object")
         for name, value in regs.items():
             reg = R.get(name)
             if reg is None or not reg.stored:
-                raise ValueError(f"unknown stored register {name!r}")
+                raise InvalidValue(f"unknown stored register {name!r}")
             if not isinstance(value, int) or not self._accept(reg, value):
-                raise ValueError(f"{name}: {value!r} is out of range; allowed {reg.describe_range()}")
+                raise InvalidValue(f"{name}: {value!r} is out of range; allowed {reg.describe_range()}")
             self._poke(reg, value)
         pos = st.get("position", 0)
         if not isinstance(pos, int) or not 0 <= pos <= 4095:
-            raise ValueError(f"position: {pos!r} is out of range; allowed 0..4095")
+            raise InvalidValue(f"position: {pos!r} is out of range; allowed 0..4095")
         self.pos = float(pos)
         self.power_on(0.0)
 
@@ -553,11 +561,11 @@ class ActuatorBus:
     # -- Python API for tests -----------------------------------------------------------------
 
     def actuator(self, ident: int) -> Actuator:
-        """The first actuator whose ID is ``ident`` (KeyError if none)."""
+        """The first actuator whose ID is ``ident`` (:class:`NoActuator`, a KeyError, if none)."""
         for a in self.actuators:
             if a.ident == ident:
                 return a
-        raise KeyError(f"no actuator with ID {ident} on the simulated bus")
+        raise NoActuator(f"no actuator with ID {ident} on the simulated bus", ident=ident)
 
     def _targets(self, ident):
         if ident is None or ident == "all":
@@ -569,13 +577,13 @@ class ActuatorBus:
         module documentation for kinds. ``count`` limits a reply fault to the next N replies."""
         kind = FAULT_KINDS.get(kind, kind)
         if kind not in set(FAULT_KINDS.values()):
-            raise ValueError(f"fault: unknown kind {kind!r}; allowed {FAULT_HELP}")
+            raise InvalidValue(f"fault: unknown kind {kind!r}; allowed {FAULT_HELP}")
         if kind == "echo":
             self.echo = True
             return
         targets = self._targets(ident)
         if not targets:
-            raise ValueError(f"fault: no actuator with ID {ident} on the simulated bus")
+            raise InvalidValue(f"fault: no actuator with ID {ident} on the simulated bus")
         for a in targets:
             if kind == "overload":
                 a.overload = True
@@ -718,17 +726,17 @@ class ActuatorBus:
         try:
             doc, _ = read(path, "state")
         except UsageError as e:            # unreadable, not UTF-8, not JSON: FILE:LINE: what
-            raise ValueError(str(e) if str(e).startswith("state: ") else f"state: {e}") from None
+            raise InvalidValue(str(e) if str(e).startswith("state: ") else f"state: {e}") from None
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
-            raise ValueError(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")
+            raise InvalidValue(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")
         actuators = []
         for i, st in enumerate(doc["actuators"]):
             a = Actuator(i)
             try:
                 a.restore(st)
             except (ValueError, TypeError, AttributeError) as e:
-                raise ValueError(f"state {path}: actuator {i}: {e}") from None
+                raise InvalidValue(f"state {path}: actuator {i}: {e}") from None
             actuators.append(a)
         self.actuators = actuators
         self.restored = True
@@ -740,9 +748,9 @@ def _millis(key, value, top=1000.0) -> float:
     try:
         ms = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{key}: {value!r} is not a number of milliseconds") from None
+        raise InvalidValue(f"{key}: {value!r} is not a number of milliseconds") from None
     if not (math.isfinite(ms) and 0 <= ms <= top):
-        raise ValueError(f"{key}: {value!r} is out of range; allowed 0..{top:g} ms")
+        raise InvalidValue(f"{key}: {value!r} is out of range; allowed 0..{top:g} ms")
     return ms / 1000.0
 
 
@@ -758,15 +766,17 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
     file keeping stored registers across runs (when it exists
     it defines the bus and ``ids``/``baud``/``return_mode`` are not applied).
     """
+    allowed = ("ids", "state", "baud", "echo", "faults", "return_mode", "voltage", "turnaround", "gap", "speed")
+    if len(unknown) == 1:
+        raise unknown_name("zap simulator", next(iter(unknown)), allowed, noun="option")
     if unknown:
-        raise ValueError(f"unknown option {', '.join(sorted(unknown))}; allowed ids, state, baud, echo, "
-                         "faults, return_mode, voltage, turnaround, gap, speed")
+        raise InvalidValue(f"unknown options {', '.join(sorted(unknown))}; allowed {', '.join(allowed)}")
     try:
         line = int(baud)
     except ValueError:
         line = -1
     if line not in zap.BAUD_TO_CODE:
-        raise ValueError(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
+        raise InvalidValue(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
     bus = ActuatorBus([], state_path=state or None, echo=parse_flag("echo", echo),
                       turnaround=TURNAROUND if turnaround in (None, "") else _millis("turnaround", turnaround),
                       gap=0.0 if gap in (None, "") else _millis("gap", gap, 100.0))
@@ -774,14 +784,14 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
         bus.actuators = [Actuator(i, ident, b or line) for i, (ident, b) in enumerate(parse_ids(ids))]
         if return_mode not in (None, ""):
             if str(return_mode) not in ("0", "1", "2"):
-                raise ValueError(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
+                raise InvalidValue(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
             for a in bus.actuators:
                 a.set("feedback-return-mode", int(return_mode))
         if state:
             try:
                 bus.save()
             except OSError as e:
-                raise ValueError(f"state {state}: cannot write: {e.strerror or e}"
+                raise InvalidValue(f"state {state}: cannot write: {e.strerror or e}"
                                  + (f" (no directory {os.path.dirname(os.path.abspath(state))})"
                                     if isinstance(e, FileNotFoundError) else "")) from None
     if voltage not in (None, ""):

@@ -62,6 +62,7 @@ import math
 from collections import deque
 
 from ..codec import zk
+from ..errors import InvalidValue, unknown_name
 from ..codec.framing import ZkFramer
 from ..link.port import STOP_BITS, wire_time
 from .base import Device, parse_flag, parse_number
@@ -110,20 +111,20 @@ class ZkEcu(Device):
                  ambient=20.0, battery=12.0, max_pump_voltage=10.0, esr=False, esr_again=None, baud=None,
                  stop_bits=1, corrupt_every=0, silent_after=None, error=None, error_after=0.0):
         if not 1 <= protocol_version <= 63:
-            raise ValueError(f"protocol_version: {protocol_version} is out of range; allowed 1..63")
+            raise InvalidValue(f"protocol_version: {protocol_version} is out of range; allowed 1..63")
         if rate not in RATE_BY_ACTION.values():
-            raise ValueError(f"rate: {rate} is not a status rate; allowed 20, 50, 100")
+            raise InvalidValue(f"rate: {rate} is not a status rate; allowed 20, 50, 100")
         if max_rpm % 1000 or not 1000 <= max_rpm <= 255000:
-            raise ValueError(f"max_rpm: {max_rpm}; allowed multiples of 1000 in 1000..255000")
+            raise InvalidValue(f"max_rpm: {max_rpm}; allowed multiples of 1000 in 1000..255000")
         if idle_rpm % 1000 or not 1000 <= idle_rpm < max_rpm:
-            raise ValueError(f"idle_rpm: {idle_rpm}; allowed multiples of 1000 below max_rpm")
+            raise InvalidValue(f"idle_rpm: {idle_rpm}; allowed multiples of 1000 below max_rpm")
         if baud is not None and not 300 <= baud <= 4_000_000:
-            raise ValueError(f"baud: {baud} is out of range; allowed 300..4000000 (the document lists "
+            raise InvalidValue(f"baud: {baud} is out of range; allowed 300..4000000 (the document lists "
                              f"2400, 4800, 9600, 19200, 38400, 57600, 115200)")
         if stop_bits not in STOP_BITS:
-            raise ValueError(f"stop_bits: {stop_bits}; allowed 1, 2")
+            raise InvalidValue(f"stop_bits: {stop_bits}; allowed 1, 2")
         if corrupt_every < 0:
-            raise ValueError(f"corrupt_every: {corrupt_every} is out of range; allowed 0 (off) or more")
+            raise InvalidValue(f"corrupt_every: {corrupt_every} is out of range; allowed 0 (off) or more")
         self.version = protocol_version
         self.rate = rate
         self.max_rpm = float(max_rpm)
@@ -556,10 +557,10 @@ def _error_code(value):
         try:
             value = int(text, 0)
         except ValueError:
-            raise ValueError(f"error={value}: not an ECU error code or name; allowed 1..18 or a name: "
+            raise InvalidValue(f"error={value}: not an ECU error code or name; allowed 1..18 or a name: "
                              f"{', '.join(n for c, n in zk.ERRORS.items() if c)}") from None
     if not isinstance(value, int) or not 1 <= value <= 31:
-        raise ValueError(f"error={value!r} is out of range; allowed 1..31 (18 documented)")
+        raise InvalidValue(f"error={value!r} is out of range; allowed 1..31 (18 documented)")
     return value
 
 
@@ -570,7 +571,7 @@ def _num(kind, lo=None, hi=None):
         try:
             return kind(v) if not isinstance(v, str) else int(v, 0)
         except (TypeError, ValueError):
-            raise ValueError(f"{key}: {v!r} is not an integer") from None
+            raise InvalidValue(f"{key}: {v!r} is not an integer") from None
     return conv
 
 
@@ -589,7 +590,7 @@ PASSED_THROUGH = {"speed"}
 
 def from_options(**options) -> ZkEcu:
     """A :class:`ZkEcu` from string (or typed) options, as ``sim://zk?...`` and ``zkzap sim zk``
-    give them. None values are ignored; unknown names raise ValueError naming them.
+    give them. None values are ignored; unknown names raise InvalidValue (a ValueError) naming them.
 
     ``protocol_version`` (default 6), ``rate`` (20/50/100 Hz, default 20), ``max_rpm`` (160000),
     ``idle_rpm`` (40000), ``max_thrust`` (kg at max rpm, 14), ``ambient`` (degC, 20), ``battery``
@@ -600,8 +601,11 @@ def from_options(**options) -> ZkEcu:
     """
     options = {k.replace("-", "_"): v for k, v in options.items() if v is not None}
     unknown = sorted(set(options) - set(OPTIONS) - PASSED_THROUGH)
+    if len(unknown) == 1:
+        raise unknown_name("zk simulator", unknown[0], sorted(set(OPTIONS) | PASSED_THROUGH), noun="option",
+                           otherwise="; allowed " + ", ".join(sorted(set(OPTIONS) | PASSED_THROUGH)))
     if unknown:
-        raise ValueError(f"zk simulator: unknown option{'s' if len(unknown) > 1 else ''} "
+        raise InvalidValue(f"zk simulator: unknown option{'s' if len(unknown) > 1 else ''} "
                          f"{', '.join(unknown)}; allowed {', '.join(sorted(set(OPTIONS) | PASSED_THROUGH))}")
     kw = {k: OPTIONS[k](k, v) for k, v in options.items() if k in OPTIONS}
     if "error" in kw:

@@ -186,9 +186,9 @@ def test_udpin_answers_the_ground_station_that_calls(cli, gcs):
     assert rx.of("EFI_STATUS") and rx.of("HEARTBEAT")
 
 
-def test_the_readme_mapping_table_is_the_code_mapping():
-    readme = os.path.join(os.path.dirname(__file__), "..", "..", "..", "README.md")
-    with open(readme, encoding="utf-8") as f:
+def test_the_manual_mapping_table_is_the_code_mapping():
+    page = os.path.join(os.path.dirname(__file__), "..", "..", "..", "docs", "how-to", "telemetry.md")
+    with open(page, encoding="utf-8") as f:
         text = f.read()
     table = text.split("<!-- efi-status-mapping -->", 1)[1].strip().split("\n\n", 1)[0].splitlines()[2:]
     rows = {}

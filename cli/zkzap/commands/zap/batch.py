@@ -8,10 +8,12 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..options import consent, yes_option
+from ..batch import BATCH_EXITS
+from ..options import consent, zap_yes_option as yes_option
 from .compose import link_options, open_link
 
 
+@BATCH_EXITS
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", required=False, default="-", metavar="[FILE|-]")
 @click.option("-k", "--keep-going", is_flag=True,

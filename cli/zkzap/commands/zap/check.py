@@ -6,9 +6,9 @@ import sys
 
 import click
 
-from ...errors import CheckFailed, DeviceError, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, DeviceError, OK, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, consent, resolve_format, yes_option
+from ..options import Choice, FiniteRange, consent, exits, resolve_format, zap_move_yes_option as yes_option
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -16,13 +16,15 @@ TABLE = [("id", "id"), ("check", "check"), ("verdict", "verdict"), ("value", "va
          ("detail", "detail")]
 
 
+@exits({OK: "every check passes", CHECK_FAILED: "a check fails",
+        DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0", show_default=True, metavar="LIST",
               help="Actuators to check, one after the other, like 1-4.")
 @click.option("--no-move", is_flag=True, help="Check without moving: echo, identity, voltage and error bits only.")
 @click.option("--move-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True,
               metavar="SECONDS", help="The longest a stroke may take.")
-@click.option("-f", "--format", "fmt", type=click.Choice(("table", "json", "jsonl", "csv")), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(("table", "json", "jsonl", "csv")), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options

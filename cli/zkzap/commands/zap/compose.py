@@ -17,7 +17,8 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, SignedCommand, consent, dry_run_option, port_options, zap_yes_option as yes_option
+from ..options import (Choice, FiniteRange, IntRange, SignedCommand, consent, dry_run_option, port_options,
+                       zap_yes_option as yes_option)
 from .params import INT, REGISTER, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -46,9 +47,9 @@ def link_options(f=None, *, baud_type=None, baud_help=None):
     f = click.option("--sim-ids", metavar="LIST", default=None, callback=_check_sim_ids,
                      help="With --sim: the IDs on the in-process simulated bus, like 1,2,5-8 "
                           "(default: the IDs the command addresses).")(f)
-    f = click.option("--retries", type=click.IntRange(0, 20), default=2, show_default=True,
+    f = click.option("--retries", type=IntRange(0, 20), default=2, show_default=True,
                      help="Retries after no reply or a corrupted reply.")(f)
-    f = click.option("--return-mode", type=click.Choice(RETURN_MODES), default="1", show_default=True,
+    f = click.option("--return-mode", type=Choice(RETURN_MODES), default="1", show_default=True,
                      envvar="ZKZAP_ZAP_RETURN_MODE",
                      help="The actuators' feedback-return-mode: 0 answers Echo only, 1 Load Data and "
                           "Echo, 2 every command; 'auto' asks the actuator first "
@@ -291,7 +292,7 @@ def _link_args(common):
 
 @click.command(cls=Command, context_settings=CONTEXT)
 @id_option()
-@click.option("-c", "--count", type=click.IntRange(0, None), default=1, show_default=True,
+@click.option("-c", "--count", type=IntRange(0, None), default=1, show_default=True,
               help="Echo this many times, like ping (0: until Ctrl-C); a summary goes to stderr.")
 @click.option("--interval", type=FiniteRange(0, 3600), default=0.0, metavar="SECONDS",
               help="Pause between echoes with --count.")
@@ -377,36 +378,44 @@ LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meani
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("reg", metavar="REGISTER", type=REGISTER)
-@click.option("-l", "--length", type=click.IntRange(1, 253), default=None,
-              help="Bytes to read (default: the register's size); more bytes read the registers that follow.")
+@click.argument("regs", nargs=-1, required=True, metavar="REGISTER...", type=REGISTER)
+@click.option("-l", "--length", type=IntRange(1, 253), default=None,
+              help="Bytes to read from one REGISTER (default: its size); more bytes read the registers that "
+                   "follow.")
 @click.option("--physical", is_flag=True, help="Print scaled registers in their unit (present-voltage 12.0, not 120).")
 @_format("value", ("value", "table", "json", "jsonl", "csv"),
          "'value' prints the bare value (for pos=$(zap load ...)); the others give records")
 @id_option(allow_broadcast=True)
 @wire_options
-def load(reg, length, physical, fmt, ident, **common):
-    """Load Data (0xF2): read REGISTER.
+def load(regs, length, physical, fmt, ident, **common):
+    """Load Data (0xF2): read REGISTER (one Load Data each, when several are given).
 
-    Prints the bare value (one register), or one NAME=VALUE line per register when --length
-    spans several; --format json|jsonl|csv|table gives records with id, register, address,
-    value (and physical/unit for scaled registers, meaning for coded ones). Error bits in the
-    reply are reported on stderr and give exit status 5 after the value is printed.
+    Prints the bare value of one register, or one NAME=VALUE line per register when several
+    are given or --length spans several; --format json|jsonl|csv|table gives records with id,
+    register, address, value (and physical/unit for scaled registers, meaning for coded ones).
+    Error bits in a reply are reported on stderr and give exit status 5 after the values are
+    printed.
 
     \b
     Examples:
       zap load present-position -n        # FF FF FF 00 04 F2 8C 02 7B
       zap load present-voltage --id 1 -p /dev/ttyUSB0 --physical
       pos=$(zap load present-position --id 1 -p /dev/ttyUSB0)
+      zap load present-position present-current moving --id 1 --sim
       zap load model-number --length 17 --id 1 --sim -f json
     """
-    length = reg.size if length is None else length
-    if reg.address + length > 0x100:
-        raise UsageError(f"--length: {length} bytes from 0x{reg.address:02X} run past address 0xFF; "
-                         f"allowed 1..{0x100 - reg.address}")
-    pkt = zap.load(ident, reg, length)
+    if length is not None and len(regs) > 1:
+        raise UsageError(f"--length: reads from one REGISTER; {len(regs)} are given (each is read whole)")
+    reads = []
+    for reg in regs:
+        size = reg.size if length is None else length
+        if reg.address + size > 0x100:
+            raise UsageError(f"--length: {size} bytes from 0x{reg.address:02X} run past address 0xFF; "
+                             f"allowed 1..{0x100 - reg.address}")
+        reads.append((reg, size))
+    pkts = [zap.load(ident, reg, size) for reg, size in reads]
     if common["dry_run"]:
-        return deliver([pkt], **common)
+        return deliver(pkts, **common)
     if ident == zap.BROADCAST:
         raise UsageError("id: a broadcast Load Data is never answered; give one actuator's ID")
     if common["return_mode"] == "0":
@@ -416,11 +425,14 @@ def load(reg, length, physical, fmt, ident, **common):
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
-        reply, values = bus.read_registers(ident, reg.address, length, check=False)
+        replies = [(reg, size, *bus.read_registers(ident, reg.address, size, check=False)) for reg, size in reads]
     from ...api.zap import register_records
 
-    records = register_records(reply.ident, values, reply.errors)
-    partial = _mark_partial(records, reg.address, length)
+    records, partial = [], []
+    for reg, size, reply, values in replies:
+        got = register_records(reply.ident, values, reply.errors)
+        partial += _mark_partial(got, reg.address, size)
+        records += got
     if fmt == "value":
         for rec in records:
             v = rec["physical"] if physical and "physical" in rec else rec["value"]
@@ -434,9 +446,11 @@ def load(reg, length, physical, fmt, ident, **common):
             writer.write(rec)
         writer.close()
     if common["verbose"]:
-        _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
-    if reply.error:
-        raise device_error(reply)
+        for pkt, (_, _, reply, _) in zip(pkts, replies):
+            _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
+    for _, _, reply, _ in replies:
+        if reply.error:
+            raise device_error(reply)
 
 
 def _mark_partial(records, address, length) -> list:

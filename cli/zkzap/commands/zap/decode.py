@@ -7,11 +7,11 @@ import click
 
 from ...codec import zap
 from ...codec.framing import ZapFramer
-from ...errors import UsageError
+from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
+from ..options import (checked, close_output, decode_inputs, exits, format_option, note, note_skipped, open_output,
                        output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
@@ -36,6 +36,7 @@ def _table_cells(rec):
     return rec
 
 
+@exits({CHECK_FAILED: "a single packet given as arguments has a bad checksum"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")

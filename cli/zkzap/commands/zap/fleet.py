@@ -12,9 +12,10 @@ import click
 
 from ...api import fleet
 from ...codec import zap
-from ...errors import CheckFailed, NoReply, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, OutputPath, consent, note, resolve_format, warn, yes_option
+from ..options import (Choice, FilePath, OutputPath, consent, exits, note, plural, resolve_format, warn,
+                       zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -90,21 +91,10 @@ class RegisterList(click.ParamType):
                 if r.writable and r.name.startswith(last)]
 
 
-def _read_entries(bus, ids, *, required=True):
-    """{ID: Entry} read from the bus. ``required``: every ID must answer (else NoReply)."""
-    entries = {}
-    for ident in ids:
-        if not required and bus.ping(ident, retries=1) is None:
-            continue
-        values, error = fleet.PROCEDURES.read_map(bus, ident)
-        entry = fleet.entry_from_values(values, baud=bus.baud, error=error)
-        doc = {"format": fleet.FORMAT, "actuators": {str(ident): entry}}
-        entries[ident] = fleet.check_document(doc, f"bus ID {ident}")[ident]
-    return entries
-
-
 # -- backup --------------------------------------------------------------------------------------
 
+@exits({NO_REPLY: "a listed ID does not answer (nothing written)",
+        DEVICE_ERROR: "an actuator reports error bits (the backup is written first)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Actuators to back up, like 1,2,5-8 (each must answer); with --scan: the IDs to search.")
@@ -113,7 +103,7 @@ def _read_entries(bus, ids, *, required=True):
                    "without --ids.")
 @click.option("-o", "--output", type=OutputPath(DOC_FORMATS, default=None), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
-@click.option("-f", "--format", "fmt", type=click.Choice(DOC_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
 @link_options
 def backup(ids, scan_, output, fmt, **common):
@@ -177,16 +167,17 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               ("unit", "unit")]
 
 
+@exits({OK: "equal", CHECK_FAILED: "they differ (like diff)", USAGE: "a bad file or option"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("a", metavar="A")
 @click.argument("b", metavar="B")
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
-@click.option("--compare", type=click.Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
+@click.option("--compare", type=Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
               help="stored: the settings that survive power-off; settings: stored and volatile; all: "
                    "read-only values too.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @link_options
 def diff(a, b, ids, everything, compare, fmt, **common):
@@ -215,7 +206,7 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         other = next(iter(sides.values()))
         wanted = ids if ids is not None else sorted(other)
         with open_link(ids=wanted, probe=wanted[0], **_link_args(common)) as bus:
-            live = _read_entries(bus, wanted, required=False)
+            live = fleet.read_entries(bus, wanted, required=False)
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:
@@ -238,6 +229,10 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
               ("unit", "unit"), ("status", "status"), ("read_back", "read back"), ("errors", "errors")]
 
 
+@exits({OK: "every write reads back (or, with --plan, the plan was printed)",
+        CHECK_FAILED: "a write reads back another value",
+        USAGE: "a bad FILE or option (nothing written)", NO_REPLY: "an actuator does not answer",
+        DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", metavar="FILE", type=FilePath())
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
@@ -255,7 +250,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.option("--force", is_flag=True,
               help="Write id, baud-rate, protocol-type or feedback-return-mode named in --only; apply a file "
                    "from another model or firmware.")
-@click.option("-f", "--format", "fmt", type=click.Choice(ROW_FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options
@@ -302,25 +297,18 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
 
     with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
-        current = {}
-        writes = []
-        unchanged = 0
-        for source, target in pairs:
-            values, error = fleet.PROCEDURES.read_map(bus, target)
-            current[target] = values
-            entry = entries[source]
-            mismatch = fleet.identity_mismatch(entry, values)
-            if mismatch:
-                text = f"ID {target} is {mismatch} (ID {source} in {file})"
-                if not force:
-                    raise UsageError(f"{text}; pass --force to apply it anyway")
-                warn(text)
-            w, u = fleet.plan(entry, target, values, only=only_regs, skip=skip_regs, force=force)
-            writes += w
-            unchanged += u
+        writes, unchanged, _ = fleet.plan_bus(bus, entries, pairs, name=file, only=only_regs, skip=skip_regs,
+                                              force=force, on_mismatch=warn)
         n_act = len({w.target for w in writes})
-        summary = (f"{len(writes)} write{'s' if len(writes) != 1 else ''} on {n_act} actuator"
-                   f"{'s' if n_act != 1 else ''}; {unchanged} setting{'s' if unchanged != 1 else ''} already equal")
+        stored = sum(1 for w in writes if w.register.stored)
+        equal = plural(unchanged, "setting") + " already equal"
+        if stored and stored == len(writes):
+            kept = " (to a stored setting, which survives power-off)" if stored == 1 else \
+                " (all to stored settings, which survive power-off)"
+        else:
+            kept = f" ({stored} of them to stored settings, which survive power-off)" if stored else ""
+        to_write = f"{plural(len(writes), 'write')} on {plural(n_act, 'actuator')}{kept}"
+        summary = f"{to_write}; {equal}" if writes else f"nothing to write; {equal}"
         if plan_only:
             _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                         title=f"plan: {file}")
@@ -334,9 +322,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             if is_tty(sys.stderr):
                 _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
                             title=f"plan: {file}", stream=sys.stderr)
-            stored = sum(1 for w in writes if w.register.stored)
-            consent(f"apply {file} to {common['port']}: {summary}, {stored} of them stored settings that "
-                    "survive power-off", yes)
+            consent(f"apply {file} to {common['port']}: {summary}", yes)
         elif common["verbose"] or sys.stderr.isatty():
             note(f"applying {file}: {summary}")
         done: list = []
@@ -391,6 +377,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
 
 # -- setup ---------------------------------------------------------------------------------------
 
+@exits({OK: "every ID is done", CHECK_FAILED: "some IDs remain (stopped, skipped, or a refusal)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")

@@ -14,9 +14,9 @@ import click
 
 from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
 from ...codec import zap
-from ...errors import CheckFailed, NoReply, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (BaudList, FiniteRange, SignedCommand, consent, format_option, id_option, note,
+from ..options import (BaudList, Choice, FiniteRange, SignedCommand, consent, exits, format_option, id_option, note,
                        resolve_format, warn, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
@@ -34,22 +34,10 @@ class IdList(click.ParamType):
     def convert(self, value, param, ctx):
         if isinstance(value, list):
             return value
-        out = []
-        for part in str(value).replace(" ", ",").split(","):
-            if not part:
-                continue
-            lo, dash, hi = part.partition("-")
-            try:
-                first = zap.check_id(lo, allow_broadcast=False)
-                last = zap.check_id(hi, allow_broadcast=False) if dash else first
-            except Exception as e:  # FieldValueError: name the option
-                raise UsageError(f"--ids: {part!r}: {e}") from None
-            if last < first:
-                raise UsageError(f"--ids: {part!r} runs backwards; write {last}-{first}")
-            out.extend(i for i in range(first, last + 1) if i not in out)
-        if not out:
-            raise UsageError("--ids: none given; expected a list like 0-253 or 1,2,5-8")
-        return out
+        try:
+            return zap.parse_id_list(value)
+        except zap.FieldValueError as e:
+            raise UsageError(str(e)) from None
 
 
 def actuator_bauds():
@@ -83,6 +71,7 @@ def _consent_real(port, sim, yes, action):
 
 # -- scan ----------------------------------------------------------------------------------------
 
+@exits({NO_REPLY: "nothing answers"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default="0-253", show_default=True, metavar="RANGE",
               help="IDs to probe, like 0-253 or 1,2,5-8.")
@@ -208,6 +197,9 @@ def dump(ident, fmt, **common):
 
 # -- move ----------------------------------------------------------------------------------------
 
+@exits({CHECK_FAILED: "with --wait, the rod stopped away from the goal (beyond end-compliance-margin)",
+        NO_REPLY: "no reply; with --wait, still moving at --wait-timeout",
+        DEVICE_ERROR: "a reply carried error bits (overload: the force is cut)"})
 @click.command(cls=SignedCommand, context_settings=CONTEXT)
 @click.argument("position", type=INT, metavar="POSITION")
 @id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
@@ -301,6 +293,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
 
 # -- set-id / set-baud ---------------------------------------------------------------------------
 
+@exits({CHECK_FAILED: "NEW is taken, the read-back differs, NEW does not answer or --id still answers"})
 @click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
 @id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).")
@@ -333,8 +326,9 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
     note(f"ID {ident} is now ID {new} (verified)")
 
 
+@exits({CHECK_FAILED: "it does not answer at BAUD or reads back another rate"})
 @click.command("set-baud", cls=Command, context_settings=CONTEXT)
-@click.argument("new_baud", type=click.Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
+@click.argument("new_baud", type=Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
 @id_option(allow_broadcast=False)
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")

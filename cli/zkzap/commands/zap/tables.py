@@ -6,7 +6,7 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..options import format_option, resolve_format, write_rows
+from ..options import Choice, format_option, resolve_format, write_rows
 from .params import REGISTER
 
 COLUMNS = ["name", "address", "address_hex", "size", "access", "memory", "range", "lo", "hi", "unit", "scale",
@@ -35,7 +35,7 @@ def _table_row(reg) -> dict:
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("which", nargs=-1, metavar="[REGISTER...]", type=REGISTER)
 @click.option("-w", "--writable", is_flag=True, help="Only registers that can be written.")
-@click.option("--memory", type=click.Choice(["NV", "V"], case_sensitive=False), default=None,
+@click.option("--memory", type=Choice(["NV", "V"], case_sensitive=False), default=None,
               help="Only stored (NV, survive power off; writes wear memory) or volatile (V) registers.")
 @format_option()
 def registers(which, writable, memory, fmt):

@@ -8,9 +8,9 @@ import sys
 import click
 
 from ...codec import zap
-from ...errors import NoReply, UsageError
+from ...errors import NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import FiniteRange, close_output, note, open_output, output_options
+from ..options import Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options
 from .compose import _link_args, link_options, open_link
 from .params import REGISTER
 from .scan import IdList
@@ -18,19 +18,20 @@ from .scan import IdList
 FORMATS = ("table", "jsonl", "json", "csv")
 
 
+@exits({NO_REPLY: "an actuator never answered"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("registers", nargs=-1, required=True, type=REGISTER, metavar="REGISTER...")
 @click.option("--ids", "ids", type=IdList(), default="0", show_default=True, metavar="LIST",
               help="Actuators to poll, like 1,2,5-8.")
 @click.option("-r", "--rate", type=FiniteRange(0.01, 10000), default=None, metavar="HZ",
               help="Polls per second (default: as fast as the line allows).")
-@click.option("-c", "--count", type=click.IntRange(1, None), default=None, metavar="N", help="Stop after N polls.")
+@click.option("-c", "--count", type=IntRange(1, None), default=None, metavar="N", help="Stop after N polls.")
 @click.option("-d", "--duration", type=FiniteRange(0, None, min_open=True), default=None, metavar="SECONDS",
               help="Stop after this long.")
 @click.option("-u", "--until", "until", multiple=True, metavar="EXPR",
               help="Stop when every actuator meets EXPR, like 'moving==0' (REGISTER OP NUMBER; repeatable: all "
                    "must hold). The register is read too.")
-@click.option("-f", "--format", "fmt", type=click.Choice(FORMATS), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(FORMATS), default=None,
               help="Record format (default: the live table on a terminal, else by the suffix of -o: .csv, .json, .jsonl; "
                    "jsonl in a pipe).")
 @output_options
@@ -60,7 +61,8 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
 
     if count is not None and duration is not None:
         raise UsageError("--count and --duration: give one of them")
-    conds = [expr.parse(u, until_fields(), where="--until", allow_warn=False) for u in until]
+    conds = [expr.parse(u, until_fields(), where="--until", allow_warn=False,
+                        example="moving==0") for u in until]
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
     plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],

@@ -7,10 +7,12 @@ import sys
 import click
 
 from .. import CONTEXT, Command
+from ..batch import BATCH_EXITS
 from ..options import abort_option, consent, note, port_options, yes_option
 from .telemetry import resolve_port
 
 
+@BATCH_EXITS
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("file", required=False, default="-", metavar="[FILE|-]")
 @click.option("-k", "--keep-going", is_flag=True,

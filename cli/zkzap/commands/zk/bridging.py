@@ -12,7 +12,7 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ..options import FiniteRange, apply_options
+from ..options import FiniteRange, IntRange, apply_options
 
 _META = "zkzap.bridges"
 
@@ -87,14 +87,14 @@ def bridge_options(f):
                      help=MAVLINK_HELP),
         click.option("--mavlink-rate", type=FiniteRange(0.1, 100), default=None, metavar="HZ",
                      expose_value=False, callback=_store, help="EFI_STATUS messages per second (default 10)."),
-        click.option("--sysid", type=click.IntRange(1, 255), default=None, metavar="N", expose_value=False,
+        click.option("--sysid", type=IntRange(1, 255), default=None, metavar="N", expose_value=False,
                      callback=_store, help="MAVLink system ID (default 1: the aircraft's own)."),
-        click.option("--compid", type=click.IntRange(1, 255), default=None, metavar="N", expose_value=False,
+        click.option("--compid", type=IntRange(1, 255), default=None, metavar="N", expose_value=False,
                      callback=_store, help="MAVLink component ID (default 158, MAV_COMP_ID_PERIPHERAL)."),
-        click.option("--ecu-index", type=click.IntRange(0, 255), default=None, metavar="N", expose_value=False,
+        click.option("--ecu-index", type=IntRange(0, 255), default=None, metavar="N", expose_value=False,
                      callback=_store, help="EFI_STATUS ecu_index, for more than one engine (default 0)."),
         click.option("--mqtt", metavar="URL", default=None, expose_value=False, callback=_mqtt, help=MQTT_HELP),
-        click.option("--mqtt-qos", type=click.IntRange(0, 2), default=None, metavar="0|1|2", expose_value=False,
+        click.option("--mqtt-qos", type=IntRange(0, 2), default=None, metavar="0|1|2", expose_value=False,
                      callback=_store, help="MQTT quality of service of the records (default 0)."),
         click.option("--mqtt-optional", is_flag=True, default=False, expose_value=False, callback=_store,
                      help="Run even when the broker is unreachable at the start (records queue, then drop, "

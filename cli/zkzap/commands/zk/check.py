@@ -8,23 +8,26 @@ import sys
 
 import click
 
-from ...errors import DeviceError, UsageError, ZkzapError
+from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, OK, DeviceError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import port_options, protocol_version_option
+from ..options import Choice, IntRange, exits, port_options, protocol_version_option
 from .stand import Finite, limit_options
 from .telemetry import resolve_port, zk_timeout_help
 
-EPILOG = ("Exit status: 0 every limit held and the ECU reported no error code; 1 a limit's field never "
-          "arrived (nothing to check it on); 2 bad usage; 3 no status frame within --timeout; 4 port failed; "
-          "5 a limit was violated or the ECU reported an error code; 130 Ctrl-C; 143 SIGTERM.")
 
 COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first_warning_t", "violations",
            "warnings"]
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
+@exits({OK: "every limit held and the ECU reported no error code",
+        CHECK_FAILED: "a limit no frame carried: its field never arrived (nothing to check it on), or the ECU "
+                      "error code when no status ID 1 came",
+        NO_REPLY: "no status frame within --timeout, or none at all (a silent ECU never passes)",
+        DEVICE_ERROR: "a limit was violated or the ECU reported an error code"},
+       tail=" Each check's 'checked' counts the frames that carried its field.")
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Check N status frames (default 50 unless --duration is given).")
 @click.option("--duration", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
               help="Check for SECONDS.")
@@ -33,7 +36,7 @@ COLUMNS = ["check", "verdict", "checked", "extreme", "first_violation_t", "first
                                                  "version 5.")
 @click.option("--allow-ecu-error", is_flag=True, help="Do not fail on an ECU error code (limits only).")
 @protocol_version_option
-@click.option("-f", "--format", "fmt", type=click.Choice(["table", "json", "jsonl", "csv"]), default=None,
+@click.option("-f", "--format", "fmt", type=Choice(["table", "json", "jsonl", "csv"]), default=None,
               help="The verdict: a table on a terminal, one JSON document in a pipe; jsonl/csv give a row "
                    "per check.")
 def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_files, on_limit, keepalive, allow_ecu_error,
@@ -94,10 +97,12 @@ def check(port, baud, stop_bits, timeout, sim, count, duration, limit, limits_fi
                      "violations": s["violations"], "warnings": s["warnings"]})
     errs = tel.summary()["errors"]
     first = min((e["t"] for e in errs), default=None)
-    rows.append({"check": "ECU error code", "verdict": ("violated" if errs and not allow_ecu_error
-                                                        else "warn" if errs else "ok"),
-                 "checked": tel.frames, "extreme": ", ".join(f"{e['code']} {e['name']}"
-                                                                                  for e in errs) or 0,
+    carried = tel.frames_with("error_code")       # the frames that carry the code: ID 1's only
+    rows.append({"check": "ECU error code",
+                 "verdict": ("violated" if errs and not allow_ecu_error else "warn" if errs
+                             else "ok" if carried else "unchecked"),
+                 "checked": carried, "extreme": ", ".join(f"{e['code']} {e['name']}" for e in errs) or
+                 (0 if carried else None),
                  "first_violation_t": first, "first_warning_t": None, "violations": len(errs), "warnings": 0})
     failed = [r for r in rows if r["verdict"] == "violated"]
     unchecked = [r for r in rows if r["verdict"] == "unchecked"]

@@ -7,12 +7,12 @@ import click
 
 from ...codec import zk
 from ...codec.framing import ZkFramer
-from ...errors import UsageError
+from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, format_option, note, note_skipped, open_output,
-                       output_format, output_options, protocol_version_option)
+from ..options import (Choice, checked, close_output, decode_inputs, exits, format_option, note, note_skipped,
+                       open_output, output_format, output_options, protocol_version_option)
 
 
 def columns(accept="both", raw=False):
@@ -59,13 +59,14 @@ def summary(rec) -> str:
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_summary", "fields"), ("frame", "frame")]
 
 
+@exits({CHECK_FAILED: "a single frame given as arguments has a bad CRC"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options(formats=RECORD_FORMATS)
 @protocol_version_option
-@click.option("--accept", type=click.Choice(["both", "status", "control"]), default="both", show_default=True,
+@click.option("--accept", type=Choice(["both", "status", "control"]), default="both", show_default=True,
               help="Which frame kinds to look for (a one-direction capture: status or control).")
 @click.option("--raw", "raw", is_flag=True, help="Add <key>_raw entries with the undecoded field values.")
 def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):

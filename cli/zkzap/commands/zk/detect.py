@@ -7,9 +7,9 @@ import sys
 
 import click
 
-from ...errors import UsageError
+from ...errors import NO_REPLY, OK, UsageError
 from .. import CONTEXT, Command
-from ..options import BaudList, FiniteRange, capture_option, format_option, resolve_format
+from ..options import BaudList, Choice, FiniteRange, capture_option, exits, format_option, resolve_format
 
 DETECT_COLUMNS = ["port", "found", "baud", "stop_bits", "protocol_version", "status_rate_hz", "frames_per_s",
                   "elapsed_s", "budget_s", "tried"]
@@ -54,6 +54,7 @@ def run_detection(url, bauds, stop_bits, window, budget, probe):
         close_port(ser)
 
 
+@exits({OK: "the ECU was found", NO_REPLY: "no setting gives status frames"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("-p", "--port", envvar="ZKZAP_ZK_PORT", metavar="PORT", default=None,
               help="Serial device or pyserial URL [env ZKZAP_ZK_PORT].")
@@ -61,7 +62,7 @@ def run_detection(url, bauds, stop_bits, window, budget, probe):
 @click.option("-b", "--baud", "bauds", type=zk_bauds(), default="all", show_default=True, metavar="LIST",
               help="Baud rates to try, like 115200,9600, or all (2400, 4800, 9600, 19200, 38400, 57600, "
                    "115200; tried commonest first).")
-@click.option("--stop-bits", type=click.Choice(["1", "2", "both"]), default="both", show_default=True,
+@click.option("--stop-bits", type=Choice(["1", "2", "both"]), default="both", show_default=True,
               help="Stop-bit settings to consider.")
 @detect_options
 @capture_option("zk")

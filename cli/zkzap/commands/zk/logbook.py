@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import click
 
-from ...errors import UsageError
+from ...errors import OK, OUTPUT_ERROR, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, FiniteRange, format_option
+from ..options import FilePath, FiniteRange, IntRange, exits, format_option
 
 TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "s"),
          ("running_s", "run s"), ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"),
@@ -17,13 +17,13 @@ TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("dura
 DEFAULT_ABOVE = (80.0,)
 
 
-@click.command(cls=Command, context_settings=CONTEXT,
-               epilog="Exit status: 0 listed (or the service recorded); 2 FILE is missing or not a logbook, "
-                      "or bad usage; 7 the service could not be written.")
+@exits({OK: "listed (or the service recorded)", USAGE: "FILE is missing or not a logbook, or bad usage",
+        OUTPUT_ERROR: "the service could not be written"})
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("logbook_file", metavar="FILE", type=FilePath())
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")
-@click.option("--last", type=click.IntRange(1), default=None, metavar="N", help="Only the last N runs.")
+@click.option("--last", type=IntRange(1), default=None, metavar="N", help="Only the last N runs.")
 @click.option("--engine", default=None, metavar="NAME",
               help="One engine's book: its runs (recorded with --engine NAME), run and running hours, starts, "
                    "fuel, hours above --above, and the totals since its last service.")

@@ -12,21 +12,21 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
+from ...io import SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
-from ..options import FiniteRange, note, output_file, port_options, protocol_version_option, rate_option
+from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
-from ...io import SESSION_FORMATS, format_for_path
-from .telemetry import (EXIT_HELP, check_log_options, errors_text, log_options, port_from_env,
-                        reconnect_option, resolve_port, zk_timeout_help)
+from .telemetry import (check_log_options, errors_text, log_options, port_from_env, reconnect_option,
+                        resolve_port, session_exits, zk_timeout_help)
 
 
 class Output:
     """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    ``-o FILE`` is checked here (before any port opens) and opened by the first record (or by
-    :meth:`finish` after a run that ended well without one), so a run that fails to start —
-    no port, a silent ECU — leaves an existing file as it was."""
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record, never
+    before: a run that fails to start — no port, a silent ECU — or that writes no record
+    leaves an existing file as it was."""
 
     def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
@@ -88,11 +88,9 @@ class Output:
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
-    def finish(self, ok, sheets=None):
-        """The run ended: a file no record opened is created only when the run went well.
-        ``sheets``: a workbook's steps and summary (``(steps, summary)``)."""
-        if ok and self.file is not None and self.writer is None:
-            self._open()
+    def finish(self, sheets=None):
+        """The run ended: a workbook that got records gets its steps and summary sheets
+        (``sheets``: ``(steps, summary)``). A file no record opened stays as it was."""
         if sheets is not None and self._xlsx and self.writer is not None:
             self.writer.sheets(*sheets)
 
@@ -150,7 +148,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule", summarize=None):
+                  reconnect=None, end=None, end_label="end of schedule", summarize=None, plan=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
@@ -158,13 +156,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
     an output. ``summarize(outcome, tel, session)`` gives ``(steps, summary)`` for the sheets of
-    an ``-o FILE.xlsx`` workbook (``steps``: ``(columns, rows)`` or None).
+    an ``-o FILE.xlsx`` workbook (``steps``: ``(columns, rows)`` or None). ``plan``: the
+    :class:`~zkzap.api.prestart.Plan` of the frames ``control`` sends (checked against the ECU's
+    reported limits before the first).
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
     from ...io.outfile import OutFile, refuse_same_files
     from ...link.port import fit_note
-    from ...link.zk_port import READ_SLICE_S, ZkLink
+    from ...link.zk_port import ZkLink
     from ...link.zk_sources import LiveSource
     from .bridging import make_bridges
 
@@ -216,12 +216,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
             source = replay_source(replay, fast=fast)
         else:
-            # reads block at most half a control period, so frames go out on time up to 200 Hz
-            slice_s = min(READ_SLICE_S, 0.5 / (rate or DEFAULT_RATE)) if control else READ_SLICE_S
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, slice_s=slice_s, stop_bits=stop_bits),
-                                reconnect=reconnect)
-        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, wall0=source.wall0,
-                        wall_clock=getattr(source, "wall_clock", source.live), speed=getattr(source, "speed", 1.0))
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits), reconnect=reconnect)
+        tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
@@ -235,14 +231,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
                           stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
-                          on_update=on_update, notify=notify,
+                          on_update=on_update, notify=notify, plan=plan,
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
-            out.finish(outcome.ok, summarize(outcome, tel, session) if summarize and out.fmt == "xlsx" else None)
-            if outcome.ok and raw is not None and raw.stream is None:
-                raw.open()
+            if summarize and out.fmt == "xlsx" and outcome.reason != "refused":
+                out.finish(summarize(outcome, tel, session))
     finally:
         if stand is not None:
             stand.close()
@@ -258,6 +253,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                 note(line)
         for message in held:
             note(message)
+    if outcome.reason == "refused":
+        raise outcome.error          # the ECU's limits refuse the plan: nothing was sent or written
     if bridges:
         session.bridges = session_stats
     if tel.version_note:
@@ -267,20 +264,23 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         if told:
             note(told + "; expect fewer status frames")
     framer = source.framer
-    if framer.bad:
+    if framer.bad and getattr(source, "signal", None) is not None and not source.signal.accepted:
+        pass                         # noise, not an ECU's frames: the error says what came
+    elif framer.bad:
         note(f"{framer.bad} status frame{'s' if framer.bad > 1 else ''} with a bad CRC skipped "
              f"({framer.skipped} byte{'' if framer.skipped == 1 else 's'})")
     return outcome, tel, session
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EXIT_HELP)
+@session_exits("done (--count, --duration, end of replay)", "with --fail-on-error, an ECU error code was seen")
+@click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
 @click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")
 @log_options
-@click.option("-c", "--count", type=click.IntRange(1), default=None, metavar="N",
+@click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
               help="Stop after N records.")
 @click.option("--duration", type=FiniteRange(0, min_open=True), default=None, metavar="SECONDS",
               help="Stop after SECONDS.")

@@ -9,15 +9,14 @@ import click
 
 from ...errors import USAGE, OutputError, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
+from ..options import (Choice, FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
                        port_options, protocol_version_option, rate_option, yes_option)
 from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors)
-from .telemetry import exit_help, log_options, reconnect_option, resolve_port, zk_timeout_help
+from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
-          "a prompt on a terminal; sim:// and --sim never ask. "
-          + exit_help("the schedule ran to its end", "a new ECU error code (the abort command was sent)"))
+          "a prompt on a terminal; sim:// and --sim never ask.")
 
 
 #: The shipped examples (``--example [KIND]``).
@@ -30,18 +29,22 @@ def example_text(kind="throttle") -> str:
     return files("zkzap.data").joinpath(EXAMPLES[kind]).read_text(encoding="utf-8")
 
 
+@session_exits("the schedule ran to its end", "a new ECU error code (the abort command was sent)",
+               "bad usage or input, or a schedule the ECU's reported limits refuse (an RPM target above its max "
+               "rpm, a command newer than its protocol version): nothing was sent")
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
 @click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
-@click.option("--example", type=click.Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
+@click.option("--example", type=Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
-@click.option("--interpolate", type=click.Choice(["step", "linear"]), default="step", show_default=True,
+@click.option("--interpolate", type=Choice(["step", "linear"]), default="step", show_default=True,
               help="step: each row holds until the next; linear: the throttle ramps between rows.")
 @rate_option()
 @abort_option(default="standby",
-              help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, and at the end of a "
-                   "schedule that ends in state run: that state with throttle 0 (standby lets a hot "
-                   "engine cool); none sends nothing.")
+              help="Sent on Ctrl-C, SIGTERM, a port failure, a silent ECU, an ECU error, a violated limit, "
+                   "and at the end of a schedule that ends in state run: that state with throttle 0 "
+                   "(standby lets a hot engine cool); none sends nothing and says on stderr that the "
+                   "engine is left running.")
 @click.option("--summary-json", type=click.Path(dir_okay=False, writable=True, allow_dash=True), default=None,
               metavar="FILE", help="Also write the summary as JSON to FILE ('-': stdout).")
 @click.option("--settle", type=Finite(0, 86400), default=None, metavar="SECONDS",
@@ -78,9 +81,10 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     that throttle (0..100 %) and state (pwm, stop, standby, run; a row without one keeps the
     previous, the first defaults to run) are sent at --rate Hz as control ID 1 frames. An rpm
     target puts the ECU in RPM mode (ID 6 with the RPM factor that fits the highest target, and
-    ID 7 targets); a target above the ECU's reported max rpm stops the run (exit 5) before it is
-    sent, and the end and the abort leave RPM mode. Nothing is sent before the first row's time;
-    the schedule ends at the last row's time.
+    ID 7 targets); zk profile listens for the ECU's status ID 6 first and refuses a schedule
+    with a target above the max rpm it reports, or RPM rows for an ECU older than protocol
+    version 4, before its first frame (exit 2, nothing sent); the end and the abort leave RPM
+    mode. Nothing is sent before the first row's time; the schedule ends at the last row's time.
 
     --settle/--average/--steps-csv reduce each step to averages (and TSFC); --limit stops the run
     (the abort) when a field leaves its limit; --logbook records the run.
@@ -152,7 +156,6 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density)
-    stand.schedule = sched
     if not is_simulator(url):
         from ...codec import zk
 
@@ -178,7 +181,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stale_after=stale_after, raw_log=raw_log, protocol_version=protocol_version, timeout=timeout,
             stop_bits=stop_bits, duration=sched.length, control=sched.frame_at, rate=rate, abort=abort,
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
-            title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect,
+            title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect, plan=sched.plan_check(),
             inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv},
             summarize=summarize)
     except ZkzapError as e:
@@ -188,8 +191,6 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
                                        "error": str(e), "aborted": None, "duration_s": 0.0,
                                        "schedule_s": sched.length})
         raise
-    if sched.ends_in_rpm_mode and abort == "none":
-        note("the schedule ends in RPM mode and --abort none sends nothing: the ECU stays in RPM mode")
     steps, summary = summarize(outcome, tel, session)
     _print_summary(summary)
     report(stand, command="zk profile", port=url, schedule=name, files=(output, raw_log, steps_csv, summary_json),
@@ -216,7 +217,7 @@ def _summary(name, url, sched, outcome, tel, session) -> dict:
 
 _WHY = {"duration": "end of schedule", "interrupted": "interrupted", "terminated": "terminated",
         "port": "port failure", "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-        "limit": "limit violated", "output": "output failed"}
+        "limit": "limit violated", "output": "output failed", "refused": "refused by the ECU's limits"}
 
 
 def _print_summary(s):

@@ -8,15 +8,12 @@ import re
 
 import click
 
-from ...errors import OutputError, UsageError
+from ...errors import OK, OUTPUT_ERROR, USAGE, OutputError, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, OutputPath, note
+from ..options import Choice, FilePath, OutputPath, exits, note
 
 #: What a report is written as (named by the suffix of -o, or --format).
 REPORT_FORMATS = ("png", "svg", "pdf", "html")
-
-EPILOG = ("Exit status: 0 written; 2 bad usage, an unreadable input, or matplotlib missing (pip install "
-          "'zkzap[plot]'); 7 the report could not be written.")
 
 
 class AlignType(click.ParamType):
@@ -29,7 +26,9 @@ class AlignType(click.ParamType):
         self.fail(f"{value!r}; allowed start, running or step:N (N a step number, 1 or more)", param, ctx)
 
 
-@click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
+@exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]')",
+        OUTPUT_ERROR: "the report could not be written"})
+@click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("run_files", metavar="RUN...", nargs=-1, required=True, type=FilePath())
 @click.option("--steps", "steps_files", multiple=True, type=FilePath(), metavar="STEPS.csv",
               help="The per-step averages of 'zk profile --steps-csv': target lines, the step windows, thrust and "
@@ -49,7 +48,7 @@ class AlignType(click.ParamType):
                    "first running state) or step:N (from the start of step N of each run).")
 @click.option("-o", "--output", type=OutputPath(REPORT_FORMATS, default=None), default=None, metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
-@click.option("--format", "fmt", type=click.Choice(REPORT_FORMATS), default=None,
+@click.option("--format", "fmt", type=Choice(REPORT_FORMATS), default=None,
               help="The report's format (default: from the -o name).")
 @click.option("--title", default=None, help="Heading of the report (default: 'Run report: RUN').")
 @click.option("--meta", multiple=True, metavar="KEY=VALUE",

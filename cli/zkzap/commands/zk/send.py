@@ -14,11 +14,12 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (FINITE, FiniteRange, SignedCommand, abort_option, apply_options, consent, dry_run_option,
-                       note, port_options, protocol_version_option, rate_option, warn, yes_option)
+from ..options import (Choice, FINITE, FiniteRange, INTEGER, IntRange, SignedCommand, abort_option, apply_options,
+                       consent, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
+                       yes_option)
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
-from .telemetry import (TIMEOUT_HELP, errors_text, exit_help, log_options, reconnect_option, resolve_port,
+from .telemetry import (TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port, session_exits,
                         zk_timeout_help)
 
 #: Defaults for fields that are options; arguments are always required.
@@ -68,10 +69,11 @@ def send_options(f):
                      help="Keep sending at --rate for SECONDS (0: until Ctrl-C), writing the status "
                           "frames received meanwhile as 'zk monitor' does."),
         rate_option(help="With --for: frames per second (default 20)."),
-        abort_option(help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU or "
-                          "an ECU error when the command controls the engine (default standby: throttle "
-                          "0, a hot engine cools)."),
-        click.option("--end", type=click.Choice(["standby", "stop", "hold"]), default=None,
+        abort_option(help="With --for: what to send on Ctrl-C, SIGTERM, a port failure, a silent ECU, an "
+                          "ECU error or a violated limit when the command controls the engine (default "
+                          "standby: throttle 0, a hot engine cools); none sends nothing and says on stderr "
+                          "that the engine is left running."),
+        click.option("--end", type=Choice(["standby", "stop", "hold"]), default=None,
                      help="With --for SECONDS: what to send when the time is up, if the command controls "
                           "the engine (default standby: the abort sequence, throttle 0); hold sends nothing "
                           "more and leaves the engine at the command."),
@@ -98,10 +100,12 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
             rate=None, abort=None, end=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None,
             ids=None, stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
             summary_json=None, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
-            ambient_pressure=None, air_pressure=None, engine=None):
+            ambient_pressure=None, air_pressure=None, engine=None, rpm_factor=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
-    real port a frame that can start the engine or run hardware needs consent."""
+    real port a frame that can start the engine or run hardware needs consent; a frame that needs
+    the ECU's limits (an RPM target, a newer protocol version) is checked against what the ECU
+    reports before it is sent (``rpm_factor``: the RPM_X of an ID 7 target)."""
     given = {k: v for k, v in (("rate", rate), ("abort", abort), ("end", end), ("fmt", fmt), ("output", output),
                                ("append", append or None), ("snapshot", snapshot), ("ids", ids),
                                ("raw_log", raw_log), ("limit", limit or None),
@@ -155,8 +159,12 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     hazard = zk.control_hazard(frame)
     if hazard and not is_simulator(url):
         consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
+    from ...api.prestart import Plan
+
+    command = zk.decode_control(frame)["command"] or f"ID {frame[1] >> 4}"
+    plan = Plan([frame], rpm_factor=rpm_factor, what=command)
     if for_s is None:
-        _send_once(url, baud, frame, timeout, no_wait, stop_bits)
+        _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor)
         return
     from .monitor import run_telemetry
 
@@ -167,7 +175,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
         end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
-        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json},
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json}, plan=plan,
         summarize=summarizer(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url))
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
@@ -219,40 +227,48 @@ def describe_frame(frame) -> str:
     return " ".join(parts)
 
 
-def _send_once(url, baud, frame, timeout, no_wait, stop_bits=1):
-    """Write one frame; unless ``no_wait``, wait for a status frame to show the ECU is there."""
-    import time
-
+def _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor):
+    """Write one frame (through the API's :class:`~zkzap.Ecu`, so the pre-start check applies);
+    unless ``no_wait``, wait for a status frame to show the ECU is there. An engine left running
+    is said on stderr: a one-shot command sends no abort."""
     from ...api.session import DEFAULT_SILENCE_S
-    from ...codec.framing import ZkFramer
+    from ...api.zk import Ecu
     from ...errors import NoReply
-    from ...link.zk_port import ZkLink
 
-    link = ZkLink.open(url, baud, stop_bits=stop_bits)
-    try:
-        link.write(frame)
+    cf = zk.ControlFrame(frame)
+    with Ecu(url, baud=baud, stop_bits=stop_bits, protocol_version=protocol_version, abort="none",
+             silence=timeout if timeout is not None else DEFAULT_SILENCE_S) as ecu:
+        ecu.check(plan, listen=not no_wait)
+        ecu.send(cf, listen=not no_wait)
+        left = cf.leaves(rpm_factor)
+        if left:
+            note(f"the engine is left {left}: a one-shot command sends no abort")
         if no_wait:
             return
-        limit = timeout if timeout is not None else DEFAULT_SILENCE_S
-        framer = ZkFramer("status")
-        deadline = time.monotonic() + limit
-        while time.monotonic() < deadline:
-            if framer.feed(link.read()):
-                return
-        raise NoReply(f"sent {format_hex(frame)}, but no status frame came back from {url} within "
-                      f"{limit:g} s (check the port, baud rate and wiring; --no-wait skips this check)")
-    finally:
-        link.close()
+        try:
+            next(ecu.status(count=1))
+        except NoReply as e:
+            what = str(e) if e.facts.get("noise") else (
+                f"no status frame came back from {url} within {e.timeout:g} s (check the port, baud rate "
+                f"and wiring)")
+            raise NoReply(f"sent {format_hex(frame)}, but {what}; --no-wait skips this check", **e.facts) from None
 
 
 SEND_EPILOG = ("Once, the frame is sent and zk waits for one status frame (exit 3 if none comes within "
-               "--timeout, default 2 s). With --for it is sent at --rate and the status frames are written "
-               "as 'zk monitor' writes them; when SECONDS are up, a command that controls the engine ends "
-               "with --end (default standby). On a real port a frame that can start the engine or run ECU "
-               "hardware needs --yes (or a prompt on a terminal); sim:// and --sim never ask. "
-               + exit_help("sent and a status frame came back, or --for ran its time",
-                           "an ECU error code was seen during --for (a new one while the command controls "
-                           "the engine ends it with the abort)"))
+               "--timeout, default 2 s); a frame that leaves the engine running (state run, RPM mode, the "
+               "pump on) says so on stderr, since a one-shot command sends no abort. With --for it is sent "
+               "at --rate and the status frames are written as 'zk monitor' writes them; when SECONDS are "
+               "up, a command that controls the engine ends with --end (default standby). A frame the ECU "
+               "cannot follow (an RPM target above the max rpm it reports in status ID 6, a command newer "
+               "than its protocol version) is refused before it is sent (exit 2): zk listens for status "
+               "ID 6 first. On a real port a frame that can start the engine or run ECU hardware needs "
+               "--yes (or a prompt on a terminal); sim:// and --sim never ask.")
+#: The exit statuses of every 'zk send' command.
+SEND_EXITS = session_exits("sent and a status frame came back, or --for ran its time",
+                           "an ECU error code was seen during --for (a new one while the command controls the "
+                           "engine ends it with the abort)",
+                           "bad usage or input, or a frame the ECU's reported limits refuse (an RPM target above "
+                           "its max rpm, a command newer than its protocol version): nothing was sent")
 
 
 def _check_version(cmd, raw_param, protocol_version):
@@ -283,7 +299,7 @@ def _make(cmd):
         for n in notes:
             note(n)
         _check_version(cmd, frame[2], common["protocol_version"])
-        deliver(frame, **common, **kw)
+        deliver(frame, **common, **kw, rpm_factor=values.get("rpm_factor"))
 
     params = []
     for f in fields:
@@ -291,28 +307,28 @@ def _make(cmd):
             default = _OPTION_DEFAULTS.get((cmd.name, f.key))
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = FINITE if f.decimals else click.INT
+                ptype = FINITE if f.decimals else INTEGER
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
         else:
             if f.names is not None:
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
-                ptype = click.Choice(choices, case_sensitive=False)
+                ptype = Choice(choices, case_sensitive=False)
             else:
-                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else click.INT
+                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else INTEGER
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
-        params.append(click.Option([p.cli, p.key], type=click.IntRange(p.lo, p.hi), required=True,
+        params.append(click.Option([p.cli, p.key], type=IntRange(p.lo, p.hi), required=True,
                                    help=p.help))
     doc = _doc(cmd, fields)
     command = SignedCommand(cmd.name, callback=callback, params=params, help=doc,
                             short_help=cmd.help.split(" (")[0].rstrip("."), context_settings=CONTEXT,
                             no_args_is_help=False, epilog=SEND_EPILOG)
-    return send_options(command)
+    return SEND_EXITS(send_options(command))
 
 
 def _doc(cmd, fields):
@@ -379,8 +395,9 @@ def _make_raw():
     return send_options(raw_command)
 
 
+@SEND_EXITS
 @click.command("raw", cls=Command, context_settings=CONTEXT, epilog=SEND_EPILOG)
-@click.argument("cmd_id", metavar="ID", type=click.IntRange(0, 8))
+@click.argument("cmd_id", metavar="ID", type=IntRange(0, 8))
 @click.argument("assignments", nargs=-1, metavar="FIELD=VALUE...", shell_complete=raw_fields)
 def raw_command(cmd_id, assignments, **common):
     """Compose a control frame from raw field values, for one-off crafting.

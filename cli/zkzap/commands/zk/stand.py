@@ -11,7 +11,7 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ..options import FilePath, FiniteRange, apply_options, note
+from ..options import Choice, FilePath, FiniteRange, apply_options, note
 
 LIMIT_HELP = ("Stop when a status field leaves a limit: FIELD OP NUMBER with OP one of < <= > >= == != "
               "and an optional warning band (egt_c<=850,warn=800; power_voltage_v>=7.2; error_code==0). "
@@ -27,10 +27,10 @@ def limit_options(f):
         click.option("--limit", "limit", multiple=True, metavar="EXPR", help=LIMIT_HELP),
         click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
                      help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable."),
-        click.option("--on-limit", type=click.Choice(["abort", "exit", "warn"]), default=None,
-                     help="On a violated limit: abort (the abort command, then exit 5; default when the "
-                          "session controls the engine), exit (exit 5; the default otherwise) or warn "
-                          "(go on; the summary names it)."),
+        click.option("--on-limit", type=Choice(["abort", "exit", "warn"]), default=None,
+                     help="On a violated limit: abort or exit end the session with exit 5 (one that "
+                          "controls the engine ends with the --abort command either way, as every end "
+                          "does; abort is for such sessions only), warn goes on (the summary names it)."),
     ]
     return apply_options(f, opts)
 

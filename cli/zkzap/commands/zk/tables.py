@@ -11,7 +11,7 @@ from ...codec import zk
 from ...codec.fields import bits_text, scale_text
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import format_option, resolve_format, write_rows
+from ..options import Choice, IntRange, format_option, resolve_format, write_rows
 
 
 def _lookup(table, text, what):
@@ -162,9 +162,9 @@ def _short_range(field, full):
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.option("-k", "--kind", type=click.Choice(["both", "control", "status"]), default="both", show_default=True,
+@click.option("-k", "--kind", type=Choice(["both", "control", "status"]), default="both", show_default=True,
               help="Control (host -> ECU) or status (ECU -> host) fields.")
-@click.option("-i", "--id", "frame_id", type=click.IntRange(0, 15), default=None, metavar="ID",
+@click.option("-i", "--id", "frame_id", type=IntRange(0, 15), default=None, metavar="ID",
               help="Only the frame with this ID (control 0..8, status 1..10).")
 @format_option()
 def fields(kind, frame_id, fmt):

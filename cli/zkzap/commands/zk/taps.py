@@ -23,7 +23,6 @@ class _TappedSource:
 def tap_session(source, tel, out, bridges, on_update):
     """(source, sink, on_update) for :class:`~zkzap.api.session.Session`."""
     from ...codec import zk
-    from ...api.telemetry import iso_utc
 
     decoder = zk.ZkDecoder()
     mcap = out.writer if out.fmt == "mcap" else None
@@ -32,7 +31,7 @@ def tap_session(source, tel, out, bridges, on_update):
 
     def on_frame(frame):
         t = source.now()
-        rec = {"time": iso_utc(source.wall0 + t), "t": round(t, 3)}
+        rec = {"time": source.clock.iso(t), "t": round(t, 3)}
         rec.update(decoder.decode(frame))
         rec["frame"] = frame.hex(" ").upper()
         if mcap is not None:

@@ -10,30 +10,26 @@ from __future__ import annotations
 
 import click
 
-from ...errors import (DEVICE_ERROR, INTERRUPTED, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, TERMINATED, USAGE,
-                       UsageError, exit_status_help)
+from ...errors import DEVICE_ERROR, NO_REPLY, OK, PORT_ERROR, USAGE, UsageError
 from ...io import SESSION_FORMATS
-from ..options import FilePath, FiniteRange, OutputPath, apply_options, format_option
+from ..options import FilePath, FiniteRange, IntRange, OutputPath, apply_options, exits, format_option
 from .bridging import bridge_options
 
 
-def exit_help(done: str, device: str) -> str:
-    """The exit-status paragraph of a logging command, from the exit-code table: ``done`` is what
-    0 means for it, ``device`` when it exits 5; the other outcomes are the same for all."""
-    return exit_status_help({
-        OK: done,
-        USAGE: "bad usage (nothing sent)",
-        NO_REPLY: "no status frame within --timeout (at the start or later)",
-        PORT_ERROR: "port failed or vanished",
-        DEVICE_ERROR: device,
-        OUTPUT_ERROR: "the output could not be written (disk full)",
-        INTERRUPTED: "Ctrl-C",
-        TERMINATED: "SIGTERM",
-    }, tail=" Every record already written stays whole.")
-
-
-EXIT_HELP = exit_help("done (--count, --duration, end of replay)",
-                      "with --fail-on-error, an ECU error code was seen")
+def session_exits(done: str, device: str, usage: "str | None" = None):
+    """The exit statuses of a logging command (:func:`zkzap.commands.options.exits`): ``done`` is
+    what 0 means for it, ``device`` when it exits 5, ``usage`` when 2 means more than bad usage
+    for it; the other outcomes are the same for all."""
+    meanings = {OK: done,
+                NO_REPLY: "no status frame within --timeout (at the start or later), or none at all however short "
+                          "the run (a silent ECU never passes; bytes that are no ECU's frames, line noise or a "
+                          "wrong baud rate, count as none)",
+                PORT_ERROR: "the port failed or vanished, or the abort could not be sent (with --reconnect: a "
+                            "session that controlled the engine and lost the port, however it ends)",
+                DEVICE_ERROR: device}
+    if usage is not None:
+        meanings[USAGE] = usage
+    return exits(meanings, tail=" Every record already written stays whole.")
 
 
 def log_options(f):
@@ -54,7 +50,7 @@ def log_options(f):
                           "frame. Default: snapshot for csv, frames for jsonl/json."),
         click.option("--ids", metavar="LIST", default=None,
                      help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
-        click.option("--stale-after", type=click.IntRange(1, 1000), default=3, show_default=True,
+        click.option("--stale-after", type=IntRange(1, 1000), default=3, show_default=True,
                      metavar="N", help="An ID is stale after N of its periods without a frame."),
         click.option("--raw-log", type=FilePath(), default=None,
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
@@ -74,10 +70,10 @@ reconnect_option = click.option(
          f"device for up to S seconds (default {RECONNECT_DEFAULT:g} without a value; off without the "
          "option), write a gap record and go on writing the same files. A session that controls the "
          "engine sends the abort the moment the port is back, before anything else, and only logs "
-         "from then on (exit status 4 at the end).")
+         "from then on: it ends with exit status 4 however it ends (its time, Ctrl-C, SIGTERM).")
 
-TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s); "
-                "longer means exit 3.")
+TIMEOUT_HELP = ("Longest silence tolerated from the ECU, at the start and while running (default 2 s, on the "
+                "session's clock: model seconds on sim://zk?speed=N, as every duration); longer means exit 3.")
 
 
 def zk_timeout_help(cmd):

@@ -1,0 +1,313 @@
+/* zkzap web: what both consoles share — the WebSocket, requests and consent, who controls,
+   the activity log, toasts, plots (uPlot) and the figures a benchmark reads (window.zkzapStats). */
+"use strict";
+
+const Z = (() => {
+  const $ = (sel, root = document) => root.querySelector(sel);
+  const el = (tag, attrs = {}, ...kids) => {
+    const e = document.createElement(tag);
+    for (const [k, v] of Object.entries(attrs)) {
+      if (v === null || v === undefined || v === false) continue;
+      if (k === "class") e.className = v;
+      else if (k === "text") e.textContent = v;
+      else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+      else e.setAttribute(k, v === true ? "" : v);
+    }
+    for (const kid of kids.flat()) if (kid !== null && kid !== undefined) e.append(kid instanceof Node ? kid : String(kid));
+    return e;
+  };
+  const fmt = (v, digits = 0) => (v === null || v === undefined || Number.isNaN(v)) ? "–"
+    : Number(v).toLocaleString("en-US", { minimumFractionDigits: digits, maximumFractionDigits: digits });
+  const setText = (e, text) => { if (e.textContent !== text) e.textContent = text; };
+  const setClass = (e, cls) => { if (e.className !== cls) e.className = cls; };
+  const clock = (t) => new Date(t * 1000).toLocaleTimeString("en-GB", { hour12: false });
+
+  // -- figures for benchmarks and tests ------------------------------------------------------
+  const stats = { produced: 0, samples: 0, batches: 0, latencies: [], renderLatencies: [], serverLatencies: [], pageLatencies: [], dropped: 0, errors: 0, failures: 0, connected: false };
+  window.zkzapStats = stats;
+  stats.longest = 0;               // the longest main-thread task seen (ms)
+  try {
+    new PerformanceObserver((list) => { for (const e of list.getEntries()) stats.longest = Math.max(stats.longest, e.duration); })
+      .observe({ type: "longtask", buffered: true });
+  } catch (e) { /* not every browser has long-task timing */ }
+  const keep = (arr, v) => { arr.push(v); if (arr.length > 20000) arr.splice(0, arr.length - 20000); };
+
+  // -- the socket ----------------------------------------------------------------------------
+  let ws = null, handlers = {}, me = null, controller = null, hello = null, reqN = 0, backoff = 500;
+  const pending = new Map();
+
+  function connect(h) {
+    handlers = h;
+    open();
+  }
+  function open() {
+    const proto = location.protocol === "https:" ? "wss:" : "ws:";
+    ws = new WebSocket(`${proto}//${location.host}/ws`);
+    ws.onopen = () => { backoff = 500; stats.connected = true; setConn("connected", "ok");
+      ws.send(JSON.stringify({ op: "hello", name: localStorage.getItem("zkzap-name") || "" })); };
+    ws.onclose = (ev) => {
+      stats.connected = false;
+      for (const [, p] of pending) p.reject(new Error("disconnected"));
+      pending.clear();
+      setConn(ev.code === 1001 ? "console ended" : "disconnected — retrying", "bad");
+      controller = null; me = null; renderControl();
+      setTimeout(open, backoff); backoff = Math.min(backoff * 2, 5000);
+    };
+    ws.onmessage = (ev) => {
+      const msg = JSON.parse(ev.data);
+      if (msg.type === "samples") {
+        const now = Date.now();
+        stats.batches++;
+        for (const it of msg.items) { stats.samples++; if (it.w) keep(stats.latencies, now - it.w); }
+        if (msg.items.length && msg.items[0].w) { keep(stats.serverLatencies, msg.s - msg.items[0].w); keep(stats.pageLatencies, now - msg.s); }
+      }
+      dispatch(msg);
+    };
+  }
+  function dispatch(msg) {
+    switch (msg.type) {
+      case "ping":
+        if (stats.lastPing) stats.pingGap = Math.max(stats.pingGap || 0, Date.now() - stats.lastPing);
+        stats.lastPing = Date.now();
+        stats.dropped = msg.dropped || 0;
+        stats.produced = msg.produced || 0;
+        stats.producedAt = msg.t;         // the console's clock when it counted them
+        ws.send(JSON.stringify({ op: "pong", n: msg.n, t: msg.t }));
+        return;
+      case "hello": me = msg.you; hello = msg; $("#port").textContent = msg.port + (msg.simulated ? " (simulated)" : "");
+        $("#port").title = msg.port; break;
+      case "control": controller = msg.controller; renderControl(msg); break;
+      case "log": addLog(msg); break;
+      case "logs": $("#log").replaceChildren(); msg.items.forEach(addLog); break;
+      case "done": { const p = pending.get(msg.req); if (p) { pending.delete(msg.req); p.resolve(msg); } break; }
+      case "error": {
+        const p = pending.get(msg.req);
+        if (p) { pending.delete(msg.req); p.reject(new Error(msg.text)); }
+        else toast(msg.text);
+        break;
+      }
+      case "consent": {
+        const p = pending.get(msg.req);
+        if (p) { pending.delete(msg.req); askConsent(msg, p); }
+        break;
+      }
+      case "failed": banner(`The console stopped: ${msg.text}`, "error"); break;
+    }
+    const fn = handlers[msg.type];
+    if (fn) fn(msg);
+  }
+
+  // a request: resolves with the reply; a consent reply asks the person and sends it again
+  function request(op, fields = {}, grant = []) {
+    return new Promise((resolve, reject) => {
+      if (!ws || ws.readyState !== WebSocket.OPEN) { reject(new Error("not connected")); return; }
+      const req = ++reqN;
+      const msg = { op, req, ...fields, grant };
+      pending.set(req, { resolve, reject, msg });
+      ws.send(JSON.stringify(msg));
+    });
+  }
+  // the same, with errors shown as toasts (null on failure)
+  async function send(op, fields = {}) {
+    try { return await request(op, fields); }
+    catch (e) { if (e.message !== "cancelled") toast(e.message); return null; }
+  }
+
+  // -- consent -------------------------------------------------------------------------------
+  const TITLES = { "stored-write": "Write stored settings?", force: "Force this write?",
+                   engine: "Start the engine?", move: "Move through the full stroke?" };
+  const OK = { "stored-write": "Write", force: "Write anyway", engine: "Start", move: "Move" };
+  function askConsent(msg, p) {
+    const m = $("#modal");
+    $("#modal-title").textContent = TITLES[msg.permission] || "Confirm";
+    $("#modal-text").textContent = msg.text;
+    const force = $("#modal-force");
+    force.parentElement.style.display = msg.permission === "force" ? "" : "none";
+    force.checked = false;
+    const ok = $("#modal-ok");
+    ok.textContent = OK[msg.permission] || "Confirm";
+    ok.className = "btn " + (msg.permission === "engine" ? "go" : "danger");
+    ok.disabled = msg.permission === "force";
+    force.onchange = () => { ok.disabled = !force.checked; };
+    m.classList.add("show");
+    m.dataset.permission = msg.permission;
+    const close = () => { m.classList.remove("show"); ok.onclick = null; $("#modal-cancel").onclick = null; };
+    ok.onclick = () => {
+      close();
+      const grant = [...(p.msg.grant || []), msg.permission];
+      request(p.msg.op, Object.fromEntries(Object.entries(p.msg).filter(([k]) => !["op", "req", "grant"].includes(k))), grant)
+        .then(p.resolve, p.reject);
+    };
+    $("#modal-cancel").onclick = () => { close(); p.reject(new Error("cancelled")); addLog({ t: Date.now() / 1000, level: "info", text: "not done: confirmation refused" }); };
+    setTimeout(() => ok.disabled ? $("#modal-cancel").focus() : ok.focus(), 0);
+  }
+
+  // -- who controls --------------------------------------------------------------------------
+  function controlling() { return me !== null && controller && controller.id === me; }
+  function renderControl() {
+    const box = $("#control");
+    box.replaceChildren();
+    box.className = "control";
+    if (me === null) { box.append(el("span", { class: "dim", text: "not connected" })); }
+    else if (controlling()) {
+      box.classList.add("me");
+      box.append(el("span", {}, "You control ", el("span", { class: "dim", text: `(${controller.name})` })),
+        el("button", { class: "btn small", id: "release", onclick: () => release() }, "Release"));
+    } else if (controller) {
+      box.classList.add("other");
+      box.append(el("span", {}, "View only — ", el("b", { text: controller.label }), " controls"));
+    } else {
+      box.append(el("span", { text: "Nobody controls" }),
+        el("button", { class: "btn small primary", id: "take", onclick: () => send("take") }, "Take control"));
+    }
+    document.body.classList.toggle("viewonly", !controlling());
+    document.querySelectorAll(".ctl").forEach(e => { if ("disabled" in e) e.disabled = !controlling() || e.dataset.off === "1"; });
+    if (handlers.controlchange) handlers.controlchange({ controlling: controlling(), controller });
+  }
+  function release() {
+    const warn = hello && hello.kind === "zk" ? "Releasing control sends the engine to standby if this page runs it. " : "";
+    if (warn && !confirm(warn + "Release control?")) return;
+    send("release");
+  }
+
+  // -- status, log, toasts, banners ----------------------------------------------------------
+  function setConn(text, cls) { const c = $("#conn"); c.textContent = text; c.className = "pill " + cls; }
+  function addLog(e) {
+    const box = $("#log");
+    if (!box) return;
+    box.prepend(el("div", { class: e.level }, el("span", { class: "t num", text: clock(e.t) }), e.text));
+    while (box.childElementCount > 300) box.lastChild.remove();
+  }
+  function toast(text, kind = "") {
+    if (!kind) addLog({ t: Date.now() / 1000, level: "error", text });   // errors stay in the log
+    stats.failures += kind ? 0 : 1;
+    const t = el("div", { class: "toast " + kind, role: "alert", text });
+    $("#toasts").append(t);
+    setTimeout(() => t.remove(), 6000);
+  }
+  function banner(text, kind = "info", id = "#banner") {
+    const b = $(id);
+    if (!b) return;
+    b.className = `banner ${kind}` + (text ? " show" : "");
+    b.textContent = text || "";
+  }
+
+  // -- plots ---------------------------------------------------------------------------------
+  const PLOT_FPS = 5;
+  const allPlots = [];
+  let nextPlot = 0;
+  // at most one plot repaints per animation frame, in turn: the work is spread over the frames
+  function drawOnePlot(now) {
+    for (let k = 0; k < allPlots.length; k++) {
+      const p = allPlots[(nextPlot + k) % allPlots.length];
+      if (p.u.root.isConnected && p.due(now)) { p.draw(now); nextPlot = (nextPlot + k + 1) % allPlots.length; return; }
+    }
+  }
+  // one uPlot over a rolling time window; push() adds a point, draw() (once per frame) repaints
+  class Plot {
+    constructor(box, title, series, opts = {}) {
+      this.window = opts.window || 60;
+      this.res = opts.res ?? 0.04;
+      this.max = opts.max || 12000;
+      this.n = series.length;
+      this.data = [[], ...series.map(() => [])];
+      const key = el("span", { class: "keys" }, series.map(s => el("span", { class: "key" }, el("i", { style: `background:${s.color}` }), s.label)));
+      const wrap = el("div", { class: "plot" }, el("div", { class: "title" }, el("b", { text: title }), key));
+      const area = el("div");
+      wrap.append(area);
+      box.append(wrap);
+      const axis = { stroke: "#8b9bab", grid: { stroke: "#2c3a48", width: 1 }, ticks: { stroke: "#2c3a48" } };
+      const scales = { x: { time: true } };
+      const hhmmss = (u, v) => v.map(x => new Date(x * 1000).toLocaleTimeString("en-GB", { hour12: false }));
+      const short = (x) => Math.abs(x) >= 10000 ? `${fmt(x / 1000)}k` : fmt(x, opts.digits ?? 0);
+      const axes = [{ ...axis, values: hhmmss, space: 70 }, { ...axis, size: 56, values: (u, v) => v.map(short) }];
+      if (opts.right) {
+        scales.r = { range: opts.rightRange || undefined };
+        axes.push({ ...axis, scale: "r", side: 1, grid: { show: false }, size: 50 });
+      }
+      if (opts.range) scales.y = { range: opts.range };
+      this.u = new uPlot({
+        width: Math.max(area.clientWidth || wrap.clientWidth || 300, 200), height: opts.height || 170,
+        scales, axes, legend: { show: false },
+        cursor: { drag: { x: false, y: false } },
+        series: [{}, ...series.map(s => ({ label: s.label, stroke: s.color, width: 1.6, scale: s.scale || "y", spanGaps: true,
+                                            points: { show: false }, value: (u, v) => fmt(v, s.digits ?? opts.digits ?? 0) }))],
+      }, this.data, area);
+      this.area = area;
+      this.dirty = false;
+      this.drawn = 0;
+      allPlots.push(this);
+      new ResizeObserver(() => {
+        const w = area.clientWidth;
+        if (w > 0 && Math.abs(w - this.u.width) > 2) this.u.setSize({ width: w, height: this.u.height });
+      }).observe(area);
+    }
+    // points closer than `res` seconds share one (the newer values win): a 100 Hz stream is
+    // drawn at 25 points a second, as much as a plot's width shows
+    push(t, values) {
+      const d = this.data, last = d[0].length - 1;
+      if (last >= 0 && t - d[0][last] < this.res) {
+        for (let i = 0; i < this.n; i++) if (values[i] !== null && values[i] !== undefined) d[i + 1][last] = values[i];
+      } else {
+        d[0].push(t);
+        for (let i = 0; i < this.n; i++) d[i + 1].push(values[i] ?? null);
+      }
+      this.dirty = true;
+    }
+    // a plot repaints at most PLOT_FPS times a second: live enough, and the page stays free to
+    // take the next updates at once (software rendering on a small machine)
+    due(now) { return this.dirty && now - this.drawn >= 1 / PLOT_FPS; }
+    draw(now) {
+      this.drawn = now;
+      const d = this.data, cut = now - this.window;
+      let k = 0;
+      while (k < d[0].length && d[0][k] < cut) k++;
+      if (d[0].length - k > this.max) k = d[0].length - this.max;
+      if (k > 0) for (const col of d) col.splice(0, k);
+      this.u.setData(d, false);
+      this.u.setScale("x", { min: now - this.window, max: now });
+      this.dirty = false;
+    }
+  }
+
+  // repaint at most once per frame; record how late the newest sample is drawn
+  const painters = [];
+  const PAINT_FPS = 15;           // figures and tables repaint at most this often
+  let painted = 0;
+  let newest = 0;
+  function onFrame(fn) { painters.push(fn); }
+  function sawSample(w) { if (w > newest) newest = w; }
+  function frame() {
+    const now = Date.now();
+    drawOnePlot(now / 1000);
+    if (now - painted >= 1000 / PAINT_FPS) { painted = now; for (const fn of painters) fn(now / 1000); }
+    if (newest) { keep(stats.renderLatencies, Date.now() - newest); newest = 0; }
+    requestAnimationFrame(frame);
+  }
+  requestAnimationFrame(frame);
+
+  // a number field that sends on Enter or change, and a slider that sends while dragged (throttled)
+  function throttle(fn, ms) {
+    let last = 0, timer = null, args = null;
+    return (...a) => {
+      args = a;
+      const now = Date.now(), wait = last + ms - now;
+      if (wait <= 0) { last = now; fn(...args); }
+      else if (!timer) timer = setTimeout(() => { timer = null; last = Date.now(); fn(...args); }, wait);
+    };
+  }
+
+  function name() {
+    const n = prompt("A name for this page (shown to the other pages):", localStorage.getItem("zkzap-name") || "");
+    if (n === null) return;
+    localStorage.setItem("zkzap-name", n.trim());
+    send("hello", { name: n.trim() });
+  }
+
+  window.addEventListener("error", () => { stats.errors++; });
+  const nm = $("#name");
+  if (nm) nm.addEventListener("click", name);
+
+  return { $, el, fmt, clock, setText, setClass, connect, request, send, toast, banner, controlling, Plot, onFrame, sawSample,
+           throttle, stats, get hello() { return hello; }, renderControl };
+})();

@@ -1,0 +1,257 @@
+/* zkzap web: the mightyZAP console page. */
+"use strict";
+(() => {
+  const { $, el, fmt, setText } = Z;
+  let actuators = [];             // the scan's records
+  let busBaud = null;
+  const live = {};                // id -> latest sample
+  const rows = {};                // id -> row elements
+  let plots = null, plotIds = "";
+  let regId = null, regInfo = {};
+  let busy = null;
+  const COLORS = ["#4aa3ff", "#3fcf7a", "#f2b134", "#ff7b54", "#c59bff", "#57c7e6", "#ff5d9e", "#b5e853"];
+
+  // -- the actuator table --------------------------------------------------------------------
+  function statusTag(a, s) {
+    if (a.baud !== busBaud) return el("span", { class: "tag warn", text: `at ${a.baud} baud` });
+    if (!a.polled) return el("span", { class: "tag warn", text: a.return_mode === 0 ? "mode 0: echo only" : a.status });
+    const errs = (s && s.errors && s.errors.length) ? s.errors : a.errors;
+    if (errs && errs.length) return el("span", { class: "tag bad", text: errs.join(", ") });
+    if (s && s.status !== "ok") return el("span", { class: "tag warn", text: s.status });
+    return el("span", { class: "tag ok", text: a.status });
+  }
+  function buildTable() {
+    const tb = $("#actuators tbody");
+    tb.replaceChildren();
+    for (const k in rows) delete rows[k];
+    for (const a of actuators) {
+      const id = a.id;
+      const sync = el("input", { type: "checkbox", class: "ctl sync", "data-id": id, title: "move with Sync move" });
+      const range = el("input", { type: "range", class: "ctl grow", min: 0, max: 4095, value: 0, "aria-label": `goal of ID ${id}` });
+      const num = el("input", { type: "number", class: "ctl", min: 0, max: 4095, value: 0, "aria-label": `goal number of ID ${id}` });
+      const mover = Z.throttle((p) => Z.send("move", { id, position: p }), 60);
+      let touched = false;
+      range.addEventListener("input", () => { num.value = range.value; touched = true; mover(Number(range.value)); });
+      range.addEventListener("change", () => { touched = false; });
+      num.addEventListener("change", () => { range.value = num.value; Z.send("move", { id, position: Number(num.value) }); });
+      const pos = el("span", { class: "num big", text: "–" });
+      const bar = el("div", { class: "posbar" }, el("b"), el("i"));
+      const moving = el("span", { class: "moving", title: "moving" });
+      const cur = el("span", { class: "num", text: "–" }), volt = el("span", { class: "num", text: "–" });
+      const status = el("td");
+      const btns = el("td", {}, el("div", { class: "row" },
+        el("button", { class: "btn small ctl", onclick: () => readRegisters(id) }, "Registers"),
+        el("button", { class: "btn small ctl", onclick: () => check(id) }, "Check"),
+        el("button", { class: "btn small ctl", onclick: () => Z.send("stop", { id }) }, "Stop")));
+      const tr = el("tr", { id: `act-${id}` },
+        el("td", {}, sync), el("td", { class: "big num", text: id }),
+        el("td", { class: "mono", text: a.model === null ? "–" : "0x" + a.model.toString(16).toUpperCase().padStart(4, "0") }),
+        el("td", { class: "num", text: a.firmware ?? "–" }), el("td", { class: "num", text: a.baud }),
+        el("td", { class: "num", text: a.return_mode ?? "–" }), status,
+        el("td", { class: "pos" }, pos, moving, bar), el("td", { class: "goal" }, el("div", { class: "row" }, range, num)),
+        el("td", {}, cur, el("span", { class: "dim", text: " mA" })), el("td", {}, volt, el("span", { class: "dim", text: " V" })), btns);
+      tb.append(tr);
+      rows[id] = { a, tr, range, num, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
+      status.append(statusTag(a, null));
+    }
+    $("#act-note").textContent = actuators.length ? `${actuators.length} found · bus at ${busBaud} baud` : "none found yet: scan";
+    Z.renderControl();
+  }
+  function paintRows() {
+    for (const id in rows) {
+      const r = rows[id], s = live[id];
+      if (!s || !s.fresh) continue;
+      s.fresh = false;
+      setText(r.pos, fmt(s.pos));
+      setText(r.cur, fmt(s.cur));
+      setText(r.volt, fmt(s.volt, 1));
+      r.moving.className = "moving" + (s.moving ? " on" : "");
+      if (s.pos !== null) r.bar.lastChild.style.left = `calc(${(s.pos / 4095 * 100).toFixed(2)}% - 1px)`;
+      if (s.goal !== null) r.bar.firstChild.style.left = `${(s.goal / 4095 * 100).toFixed(2)}%`;
+      if (!r.seeded && s.goal !== null && !r.touched()) { r.range.value = s.goal; r.num.value = s.goal; r.seeded = true; }
+      const sig = `${r.a.baud}|${busBaud}|${r.a.polled}|${s.status}|${(s.errors || []).join()}`;
+      if (r.sig !== sig) { r.sig = sig; r.status.replaceChildren(statusTag(r.a, s)); }
+    }
+  }
+
+  // -- plots ---------------------------------------------------------------------------------
+  function buildPlots() {
+    const ids = actuators.filter(a => a.polled && a.baud === busBaud).map(a => a.id);
+    const key = ids.join(",");
+    if (key === plotIds && plots) return;
+    plotIds = key;
+    const box = $("#plots");
+    box.replaceChildren();
+    const series = ids.map((id, i) => ({ label: `ID ${id}`, color: COLORS[i % COLORS.length] }));
+    plots = { ids, pos: new Z.Plot(box, "Position", series, { window: 30 }),
+              cur: new Z.Plot(box, "Current (mA)", series, { window: 30 }),
+              volt: new Z.Plot(box, "Voltage (V)", series.map(s => ({ ...s, digits: 1 })), { window: 30, digits: 1 }) };
+  }
+  function plotSample(s) {
+    if (!plots) return;
+    const i = plots.ids.indexOf(s.id);
+    if (i < 0 || s.status !== "ok") return;
+    const t = s.w / 1000, n = plots.ids.length;
+    const at = (v) => { const a = new Array(n).fill(null); a[i] = v; return a; };
+    plots.pos.push(t, at(s.pos));
+    plots.cur.push(t, at(s.cur));
+    plots.volt.push(t, at(s.volt));
+  }
+  Z.onFrame(() => paintRows());
+
+  // -- registers -----------------------------------------------------------------------------
+  async function readRegisters(id) {
+    regId = id;
+    $("#reg-id").textContent = `of ID ${id}`;
+    $("#reg-refresh").dataset.off = "0";
+    Z.renderControl();
+    const r = await Z.send("registers", { id });
+    if (!r) return;
+    const tb = $("#registers tbody");
+    tb.replaceChildren();
+    for (const rec of r.records) {
+      const info = regInfo[rec.register] || {};
+      const mem = rec.memory === "NV" ? el("span", { class: "tag nv", text: "stored" })
+        : rec.memory === "V" ? el("span", { class: "tag v", text: "volatile" }) : el("span", { class: "tag", text: "read-only" });
+      let edit = el("span", { class: "dim", text: "" });
+      if (rec.access === "RW") {
+        const input = info.choices
+          ? el("select", { class: "ctl", "aria-label": rec.register, "data-register": rec.register },
+               Object.entries(info.choices).map(([k, v]) => el("option", { value: k, selected: Number(k) === rec.value }, `${k} ${v}`)))
+          : el("input", { type: "number", class: "ctl", value: rec.value, min: info.lo, max: info.hi, "aria-label": rec.register,
+                          "data-register": rec.register });
+        const btn = el("button", { class: "btn small ctl" + (info.protected ? " danger" : ""), "data-register": rec.register,
+          onclick: async () => {
+            const d = await Z.send("write", { id, register: rec.register, value: Number(input.value) });
+            if (d) { Z.toast(`${rec.register} = ${d.value} written` + (d.read_back !== undefined && d.read_back !== null ? ` (reads back ${d.read_back})` : ""), "info");
+                     readRegisters(d.id); }
+          } }, info.protected ? "Write (force)" : "Write");
+        edit = el("div", { class: "row" }, input, btn);
+      }
+      const phys = rec.physical !== undefined ? `${rec.physical} ${rec.unit}` : rec.meaning ? rec.meaning : rec.unit ? `${rec.value} ${rec.unit}` : "";
+      tb.append(el("tr", {}, el("td", { class: "mono dim", text: "0x" + rec.address.toString(16).toUpperCase().padStart(2, "0") }),
+        el("td", { class: "name", text: rec.register, title: info.help || "" }), el("td", {}, mem),
+        el("td", { class: "num", text: rec.value }), el("td", { class: "dim", text: phys }),
+        el("td", { class: "dim small", text: info.choices ? `${Object.keys(info.choices).length} choices` : info.range || "" }),
+        el("td", {}, edit)));
+    }
+    $("#registers").hidden = false;
+    $("#reg-empty").hidden = true;
+    Z.renderControl();
+  }
+
+  // -- check ---------------------------------------------------------------------------------
+  async function check(id) {
+    const r = await Z.send("check", { id, move: $("#check-move").checked });
+    if (!r) return;
+    const box = $("#check-out");
+    box.className = "";
+    box.replaceChildren(el("table", {}, el("thead", {}, el("tr", {}, ["check", "verdict", "value", "limit", "detail"].map(h => el("th", { text: h })))),
+      el("tbody", {}, r.rows.map(row => el("tr", {}, el("td", { text: row.check }),
+        el("td", { class: "verdict-" + row.verdict, text: row.verdict }), el("td", { class: "num", text: row.value ?? "–" }),
+        el("td", { class: "dim", text: row.limit ?? "" }), el("td", { class: "dim", text: row.detail }))))));
+    $("#check-note").firstChild.textContent = `ID ${id}: ${r.rows[r.rows.length - 1].verdict} · `;
+  }
+
+  // -- fleet ---------------------------------------------------------------------------------
+  function table(cols, items) {
+    return el("table", {}, el("thead", {}, el("tr", {}, cols.map(([, h]) => el("th", { text: h })))),
+      el("tbody", {}, items.map(it => el("tr", {}, cols.map(([k]) => el("td", { text: it[k] === null || it[k] === undefined ? "–" : Array.isArray(it[k]) ? it[k].join(", ") : it[k] }))))));
+  }
+  function readFile() {
+    return new Promise((resolve) => {
+      const f = $("#fleet-file").files[0];
+      if (!f) { Z.toast("choose a fleet file first (.json, .toml, .yaml)"); resolve(null); return; }
+      const rd = new FileReader();
+      rd.onload = () => resolve({ name: f.name, text: rd.result });
+      rd.readAsText(f);
+    });
+  }
+  async function backup() {
+    const r = await Z.send("backup", { format: $("#bk-format").value });
+    if (!r) return;
+    const url = URL.createObjectURL(new Blob([r.text], { type: "text/plain" }));
+    const a = el("a", { href: url, download: r.filename });
+    document.body.append(a); a.click(); a.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 10000);
+    $("#fleet-out").replaceChildren(el("p", { class: "dim", text: `${r.filename} saved by the browser.` }));
+  }
+  async function diff() {
+    const f = await readFile(); if (!f) return;
+    const r = await Z.send("diff", { ...f, compare: $("#diff-compare").value });
+    if (!r) return;
+    $("#fleet-out").replaceChildren(r.rows.length ? table([["id", "ID"], ["register", "register"], ["memory", "memory"], ["a", "file"], ["b", "bus"], ["unit", "unit"]], r.rows)
+      : el("p", { class: "okc", text: `The bus matches ${r.name}.` }));
+  }
+  async function apply(plan) {
+    const f = await readFile(); if (!f) return;
+    const r = await Z.send("apply", { ...f, plan });
+    if (!r) return;
+    const head = r.applied ? `${r.plan.length} writes made, ${r.failed} not verified; ${r.unchanged} settings already equal`
+      : r.plan.length ? `${r.plan.length} writes planned; ${r.unchanged} settings already equal — nothing written yet` : `nothing to write: ${r.unchanged} settings already equal`;
+    $("#fleet-out").replaceChildren(el("p", { class: r.failed ? "badc" : "", text: head }),
+      r.plan.length ? table([["id", "ID"], ["register", "register"], ["memory", "memory"], ["old", "bus"], ["new", "file"], ["status", "status"], ["read_back", "read back"]], r.plan) : "");
+  }
+
+  // -- messages ------------------------------------------------------------------------------
+  const pct = (arr, p) => { if (!arr.length) return null; const s = arr.slice(-400).sort((a, b) => a - b); return s[Math.min(s.length - 1, Math.floor(p * s.length))]; };
+  let polls = 0, pollT = Date.now();
+  const handlers = {
+    hello(m) {
+      busBaud = m.baud;
+      regInfo = Object.fromEntries(m.registers.map(r => [r.name, r]));
+      const box = $("#scan-bauds");
+      box.replaceChildren(...m.bauds.map(b => el("label", { class: "inline" },
+        el("input", { type: "checkbox", class: "ctl", value: b, checked: b === m.baud }), b)));
+      Z.renderControl();
+    },
+    actuators(m) { actuators = m.items; busBaud = m.baud; buildTable(); buildPlots(); },
+    samples(m) {
+      for (const s of m.items) { s.fresh = true; live[s.id] = s; plotSample(s); Z.sawSample(s.w); polls++; }
+    },
+    busy(m) {
+      busy = m.job;
+      $("#busy").classList.toggle("show", !!m.job);
+      $("#busy-text").textContent = m.job ? `${m.job}…` : "";
+      if (!m.job) $("#busy-bar").style.width = "0";
+      $("#scan").disabled = !!m.job || !Z.controlling();
+    },
+    progress(m) {
+      $("#busy-bar").style.width = `${(100 * m.done / Math.max(1, m.total)).toFixed(1)}%`;
+      $("#busy-text").textContent = `${m.job}: ${m.text}`;
+      if (m.job === "scan") $("#scan-note").textContent = `${m.done} of ${m.total} probes`;
+    },
+    controlchange(c) { $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls"; },
+  };
+  setInterval(() => {
+    const dt = (Date.now() - pollT) / 1000, n = actuators.filter(a => a.polled && a.baud === busBaud).length;
+    const l = $("#link");
+    if (n) { l.textContent = `${busBaud} baud · ${n} polled · ${fmt(polls / dt / n, 1)} polls/s each`; l.className = "pill ok"; }
+    else { l.textContent = busBaud ? `${busBaud} baud · no actuator polled` : "no actuators yet"; l.className = "pill warn"; }
+    polls = 0; pollT = Date.now();
+    const p50 = pct(Z.stats.latencies, .5), p99 = pct(Z.stats.latencies, .99);
+    $("#lat").textContent = p50 === null ? "" : `latency p50 ${fmt(p50)} ms · p99 ${fmt(p99)} ms` + (Z.stats.dropped ? ` · ${Z.stats.dropped} dropped` : "");
+  }, 1000);
+
+  $("#scan").addEventListener("click", () => {
+    const bauds = [...document.querySelectorAll("#scan-bauds input:checked")].map(i => Number(i.value));
+    Z.send("scan", { ids: $("#scan-ids").value, bauds });
+  });
+  $("#cancel").addEventListener("click", () => Z.send("cancel"));
+  $("#stopall").addEventListener("click", () => Z.send("stop"));
+  $("#sync-range").addEventListener("input", () => { $("#sync-pos").value = $("#sync-range").value; });
+  $("#sync-pos").addEventListener("change", () => { $("#sync-range").value = $("#sync-pos").value; });
+  $("#sync").addEventListener("click", () => {
+    const ids = [...document.querySelectorAll("input.sync:checked")].map(i => Number(i.dataset.id));
+    if (!ids.length) { Z.toast("tick the actuators to move together first"); return; }
+    const p = Number($("#sync-pos").value);
+    Z.send("sync", { targets: Object.fromEntries(ids.map(i => [i, p])) });
+    for (const i of ids) if (rows[i]) { rows[i].range.value = p; rows[i].num.value = p; }
+  });
+  $("#reg-refresh").addEventListener("click", () => { if (regId !== null) readRegisters(regId); });
+  $("#backup").addEventListener("click", backup);
+  $("#diff").addEventListener("click", diff);
+  $("#plan").addEventListener("click", () => apply(true));
+  $("#apply").addEventListener("click", () => apply(false));
+  Z.connect(handlers);
+})();

@@ -1,0 +1,387 @@
+"""The ZK console: an ECU's status stream to every page, and engine control for the page that
+controls, as ``zk monitor`` and ``zk send control --for`` do it.
+
+The worker runs :class:`zkzap.api.session.Session` over the :class:`~zkzap.api.zk.Ecu`'s source
+and telemetry, one after the other: a monitoring session (sends nothing) while nobody runs the
+engine, a control session (the live command at ``rate`` Hz) from a start until the engine
+command ends. A control session ends like every command's session: on a stop (it sends stop,
+throttle 0), on the abort (standby, throttle 0, out of RPM mode, pump off), and also when the
+controlling page closes or falls silent for a second (the dead-man rule: standby), on a new ECU
+error, a silent ECU, a violated limit (``--on-limit abort``) or when the console shuts down.
+
+Interlocks, as on the command line: a start needs consent on a real port; it is refused while
+the ECU is silent or a limit is violated now; RPM mode needs protocol version 4 or later and a
+target within the max rpm the ECU reports (status ID 6).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+from ..api.prestart import EcuLimits, Plan
+from ..api.schedule import RPM_MAX, rpm_factor_for
+from ..api.session import DEFAULT_SILENCE_S, Session, describe_abort
+from ..codec import zk
+from ..errors import UsageError
+from .console import Console, number
+from .server import DEADMAN_S
+
+#: Seconds of status records a page that connects gets for its plots.
+HISTORY_S = 60.0
+#: Status records kept for that (100 Hz x 60 s).
+HISTORY_MAX = 6000
+#: A page that connects gets at most one record per status ID this often (seconds).
+HISTORY_STEP_S = 0.25
+#: How often health and limits go to the pages (real seconds).
+HEALTH_S = 0.25
+#: Keys of a status record that stay on the server.
+UNSENT = ("time", "frame", "kind")
+
+
+class LiveCommand:
+    """The command a control session repeats: state run (or another), by throttle or by RPM
+    target (a multiple of 10 x ``factor``); the frames it cycles through (one or two)."""
+
+    def __init__(self, mode="throttle", throttle=0.0, rpm=None, factor=1, rpm_used=False, state="run"):
+        self.mode = mode
+        self.throttle = throttle
+        self.rpm = rpm
+        self.factor = factor
+        self.rpm_used = rpm_used or mode == "rpm"
+        self.state = state
+        if mode == "rpm":
+            self.frames = (zk.encode_control("mode", sw=state, rpm_factor=factor)[0],
+                           zk.encode_control("rpm", target_rpm=self.rpm, rpm_factor=factor)[0])
+        else:
+            id1 = zk.encode_control("control", sw=state, throttle_pct=throttle)[0]
+            # after RPM mode, ID 6 with state none hands the state back to ID 1 (ID 6 would override it)
+            self.frames = (id1, zk.encode_control("mode", sw="none", rpm_factor=0)[0]) if self.rpm_used else (id1,)
+        self._i = 0
+
+    def frame_at(self, t):
+        frames = self.frames
+        self._i = (self._i + 1) % len(frames)
+        return frames[self._i]
+
+    def describe(self) -> dict:
+        return {"mode": self.mode, "state": self.state, "throttle": self.throttle, "rpm": self.rpm,
+                "rpm_factor": self.factor if self.mode == "rpm" else None}
+
+
+class _Cuttable:
+    """A session's source that a request can end: :meth:`poll` returns None (the end) once cut."""
+
+    def __init__(self, source):
+        self._src = source
+        self.cut = False
+
+    def poll(self):
+        if self.cut:
+            return None
+        return self._src.poll()
+
+    def __getattr__(self, name):
+        return getattr(self._src, name)
+
+
+class ZkConsole(Console):
+    """The console over ``ecu`` (an open :class:`~zkzap.api.zk.Ecu`). ``conditions`` and
+    ``on_limit`` (``abort`` or ``warn``) are the limits (``--limit``/``--limits``); ``rate`` the
+    control rate (Hz); ``silence`` the longest an ECU may be silent while controlled."""
+
+    kind = "zk"
+    watch_ops = frozenset({"abort"})
+
+    def __init__(self, ecu, *, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S):
+        super().__init__(ecu.url)
+        from ..api.limits import LimitSet
+
+        self.ecu = ecu
+        self.tel = ecu.telemetry
+        self.rate = rate
+        self.silence = silence
+        self.abort_kind = ecu.abort_kind
+        self.limits = LimitSet(conditions, on_limit, notify=lambda m: self.log(m, "warn")) if conditions else None
+        if self.limits is not None:
+            self.tel.on_frame = self.limits.check
+        self.history = deque(maxlen=HISTORY_MAX)
+        self.command = None           # the LiveCommand of the running control session
+        self.controller = None        # who started it
+        self.since = None
+        self._session = None
+        self._source = None
+        self._next = None             # ("control", LiveCommand, label) to run after the session ends
+        self._oneshot = None          # ("abort"|"stop", label): frames to send between sessions
+        self._last_frame = None       # real time of the last status frame
+        self._last_t = None           # its time on the source's clock
+        self._last_health = 0.0
+        self.ended = None             # how the last control session ended (for the pages)
+
+    # -- the worker -----------------------------------------------------------------------------
+
+    def run(self):
+        while not self.closing_now:
+            self.handle_requests()
+            if self._oneshot is not None:
+                kind, label = self._oneshot
+                self._oneshot = None
+                self._send_once(kind, label)
+            nxt, self._next = self._next, None
+            if nxt is not None and not self.closing_now:
+                self._control(nxt[1], nxt[2])
+            else:
+                self._monitor()
+
+    def _session_for(self, control=None, **kw):
+        self._source = _Cuttable(self.ecu.source)
+        s = Session(self._source, self.tel, self._sink, control=control, rate=self.rate, abort=self.abort_kind,
+                    on_update=self._update, notify=self._note, update_interval=0.02, **kw)
+        # the source goes on from session to session: a session's silence counts from the last
+        # frame any of them saw, not from the source's start
+        s.last_frame_t = self._last_t
+        self._session = s
+        return s
+
+    def _monitor(self):
+        s = self._session_for(silence=None)
+        outcome = s.run()
+        self._session = None
+        if outcome.reason not in ("end", "duration", "count"):
+            outcome.raise_for_status()
+
+    def _control(self, command, label):
+        if self.limits is not None:
+            self.limits.tripped = None          # a violation seen before this start is not this run's
+        self.tel.new_error = None               # an error before the start is not a new one
+        self.command, self.controller, self.since = command, label, time.time()
+        self.ended = None
+        s = self._session_for(control=lambda t: self.command.frame_at(t), silence=self.silence,
+                              stop_on_error=True, limits=self.limits, end=self.abort_kind,
+                              end_label="end of control")
+        self._engine_message()
+        self.log(f"{label} starts the engine: {self._describe(command)}")
+        outcome = s.run()
+        self._session = None
+        self.command = None
+        sent = outcome.aborted
+        if outcome.ok:
+            why = s.end_label
+        else:
+            why = str(outcome.error) if outcome.error is not None else outcome.reason
+        self.ended = {"t": round(time.time(), 3), "reason": outcome.reason, "why": why,
+                      "sent": describe_abort(sent) if sent and sent not in ("hold", "failed") else sent}
+        self._engine_message()
+        if not outcome.ok:
+            self.log(f"engine control ended: {why}", "error")
+            if outcome.reason in ("port", "output", "error"):
+                outcome.raise_for_status()
+
+    def _cut(self, end=None, label=None):
+        """End the running session (on the worker); a control session sends ``end`` (stop,
+        standby) as it ends."""
+        s = self._session
+        if s is None:
+            return False
+        if end is not None and s.control is not None:
+            s.end = end
+            s.end_label = label or s.end_label
+        self._source.cut = True
+        return True
+
+    def _send_once(self, kind, label):
+        """Send the abort (standby) or stop frames while no session runs (nobody controls)."""
+        from ..api.session import abort_frames
+
+        frames = abort_frames(kind, self.tel.decoder.known)
+        for f in frames:
+            self.ecu.link.write(f)
+        time.sleep(0.02)
+        self.ecu.link.write(frames[0])
+        self.log(f"{label}: sent {describe_abort(kind)}", "warn" if kind == self.abort_kind else "info")
+
+    def closing(self):
+        with self._wake:
+            self._wake.notify_all()
+        # the worker takes it from here: _update sees closing_now and ends the session
+
+    def shutdown(self):
+        self.ecu.close()
+
+    # -- session hooks (on the worker) ----------------------------------------------------------
+
+    def _sink(self, rec):
+        now = time.time()
+        self._last_frame = now
+        self._last_t = rec["t"]
+        item = {k: v for k, v in rec.items() if k not in UNSENT}
+        item["w"] = round(now * 1000, 1)
+        self.history.append(item)
+        if self.hub is not None:
+            self.hub.sample(item)
+
+    def _note(self, message):
+        level = "warn" if ("sent" in message or "error" in message or "limit" in message) else "info"
+        self.log(message, level)
+
+    def _update(self, snapshot, health):
+        if self.closing_now:
+            self._cut(self.abort_kind, "the console is shutting down")
+            return
+        self.handle_requests()
+        now = time.time()
+        if now - self._last_health >= HEALTH_S:
+            self._last_health = now
+            self.broadcast(self._health(health))
+
+    def _health(self, health=None) -> dict:
+        h = dict(health or {})
+        h.pop("stale_ids", None)
+        silent = None if self._last_frame is None else round(time.time() - self._last_frame, 3)
+        msg = {"type": "health", **h, "silent_s": silent, "stale_ids": self.tel.stale_ids(self.ecu.source.now()),
+               "version_note": self.tel.version_note}
+        if self.limits is not None:
+            msg["limits"] = self.limits.summary()
+        return msg
+
+    def _engine_message(self):
+        self.broadcast(self._engine())
+
+    def _engine(self) -> dict:
+        cmd = self.command
+        return {"type": "engine", "controlling": cmd is not None, "by": self.controller if cmd else None,
+                "since": self.since if cmd else None, "command": cmd.describe() if cmd else None,
+                "ended": self.ended}
+
+    @staticmethod
+    def _describe(cmd) -> str:
+        if cmd.mode == "rpm":
+            return f"state {cmd.state}, RPM mode, target {cmd.rpm:,} rpm (RPM_X {cmd.factor})"
+        return f"state {cmd.state}, throttle {cmd.throttle:g} %"
+
+    # -- for the pages --------------------------------------------------------------------------
+
+    def hello(self) -> dict:
+        out = super().hello()
+        out.update({
+            "rate": self.rate, "abort": self.abort_kind, "abort_text": describe_abort(self.abort_kind),
+            "deadman_s": DEADMAN_S, "silence_s": self.silence, "rpm_max": RPM_MAX,
+            "limits": [{"text": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn}
+                       for c in (self.limits.conditions if self.limits else ())],
+            "on_limit": self.limits.on_limit if self.limits else None,
+            "states": zk.ENGINE_STATES, "errors": zk.ERRORS,
+        })
+        return out
+
+    def snapshot(self) -> list:
+        return super().snapshot() + [self._engine(), {"type": "history", "items": self._history()}, self._health()]
+
+    def _history(self) -> list:
+        """The last :data:`HISTORY_S` of records for a page's plots, at most one per status ID
+        every :data:`HISTORY_STEP_S` (a plot shows no more; a page that connects has little to
+        take in)."""
+        cutoff = time.time() * 1000 - HISTORY_S * 1000
+        last = {}
+        out = []
+        for r in list(self.history):
+            w = r["w"]
+            if w < cutoff or w - last.get(r["id"], -1e18) < HISTORY_STEP_S * 1000:
+                continue
+            last[r["id"]] = w
+            out.append(r)
+        return out
+
+    def deadman(self):
+        return self.command is not None
+
+    def control_lost(self, label, reason):
+        super().control_lost(label, reason)
+        self.request(None, label, {"op": "_lost", "reason": reason})
+
+    # -- requests (on the worker) ---------------------------------------------------------------
+
+    def _ready(self):
+        """Refuse a start while the ECU is silent."""
+        if self._last_frame is None:
+            raise UsageError("start: no status frame from the ECU yet; check the port, baud rate and wiring")
+        silent = time.time() - self._last_frame
+        if silent > self.silence:
+            raise UsageError(f"start: the ECU is silent (no status frame for {silent:.1f} s)")
+
+    def _limits_hold(self):
+        """Refuse a start while a limit is violated now."""
+        if self.limits is None:
+            return
+        latest = self.tel.latest
+        for c in self.limits.conditions:
+            value = latest.get(c.field)
+            if value is not None and c.check(value) == "violated":
+                raise UsageError(f"start: limit {c.text} is violated now ({c.field}={value:g}); not started")
+
+    def _command_from(self, msg, rpm_used=False) -> LiveCommand:
+        mode = msg.get("mode", "throttle")
+        if mode == "throttle":
+            pct = number(msg, "throttle", float, 0, 100, "throttle")
+            return LiveCommand("throttle", throttle=round(pct, 1), rpm_used=rpm_used)
+        if mode != "rpm":
+            raise ValueError(f"mode: {mode!r}; allowed throttle, rpm")
+        target = number(msg, "rpm", float, 0, RPM_MAX, "rpm")
+        latest = self.tel.latest
+        max_rpm = latest.get("max_rpm")
+        version = self.tel.decoder.known
+        if max_rpm is None:
+            raise UsageError("rpm: the ECU's max rpm is not known yet (status ID 6); wait for it")
+        Plan([zk.encode_control("mode", sw="none", rpm_factor=1)[0]], targets=[(target, "rpm")],
+             what="rpm target").check(EcuLimits.reported(max_rpm, version))
+        factor = rpm_factor_for(max_rpm)
+        step = 10 * factor
+        value = round(target / step) * step
+        if value > max_rpm:
+            value -= step
+        return LiveCommand("rpm", rpm=value, factor=factor)
+
+    def op_start(self, ctx, msg):
+        if self.command is not None:
+            raise UsageError("start: the engine is already running under this console; change the throttle "
+                             "or target instead")
+        cmd = self._command_from(msg)
+        self._ready()
+        self._limits_hold()
+        self.policy.zk_frames(cmd.frames, ctx.granted)
+        self._next = ("control", cmd, ctx.label)
+        self._cut()
+        self.reply(ctx, command=cmd.describe())
+
+    def op_set(self, ctx, msg):
+        """A new throttle or RPM target for the running engine (no new consent: same start)."""
+        if self.command is None:
+            raise UsageError("the engine is not running under this console; start it first")
+        cmd = self._command_from(msg, rpm_used=self.command.rpm_used)
+        was = self.command
+        self.command = cmd
+        if (cmd.mode, cmd.throttle, cmd.rpm) != (was.mode, was.throttle, was.rpm):
+            self._engine_message()
+            if cmd.mode != was.mode:
+                self.log(f"{ctx.label}: {self._describe(cmd)}")
+        self.reply(ctx, command=cmd.describe())
+
+    def op_stop(self, ctx, msg):
+        self._end_or_send("stop", f"stop from {ctx.label}")
+        self.reply(ctx)
+
+    def op_abort(self, ctx, msg):
+        self._end_or_send(self.abort_kind, f"abort from {ctx.label}")
+        self.reply(ctx)
+
+    def _end_or_send(self, kind, label):
+        """End the control session with ``kind`` (stop, standby), or, while nobody runs the engine
+        from here, send it once."""
+        if self.command is not None:
+            self._cut(kind, label)
+        else:
+            self._oneshot = (kind, label)
+            self._cut()
+
+    def op__lost(self, ctx, msg):
+        if self.command is not None:
+            self._cut(self.abort_kind, f"dead-man: {ctx.label} lost control ({msg.get('reason')})")

@@ -1,0 +1,121 @@
+"""Make the screenshots of docs/web.md: the consoles on the simulators, in headless Chromium.
+
+    python docs/img/make.py            # writes docs/img/web-*.png
+
+Needs the extra 'web', selenium, and Debian's chromium and chromium-driver (the test suite's
+setup). Each picture is a console after a few real actions (a scan and moves, a start).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.join(ROOT, "cli"))
+
+from zkzap.sim import start_zap, start_zk  # noqa: E402
+
+
+def console(*args):
+    exe = os.path.join(os.path.dirname(sys.executable), "zkzap")
+    p = subprocess.Popen([exe, "web", *args, "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
+                         stderr=subprocess.DEVNULL, text=True)
+    return p, p.stdout.readline().strip()
+
+
+def browser(width, height):
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    o = webdriver.ChromeOptions()
+    o.binary_location = "/usr/bin/chromium"
+    for a in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+              "--disable-background-networking", "--disable-component-update", "--disable-sync",
+              "--hide-scrollbars", f"--user-data-dir={tempfile.mkdtemp(prefix='zkzap-shots-')}",
+              f"--window-size={width},{height}"):
+        o.add_argument(a)
+    return webdriver.Chrome(service=Service(executable_path="/usr/bin/chromedriver"), options=o)
+
+
+def wait(d, script, timeout=30):
+    end = time.monotonic() + timeout
+    while not d.execute_script(script):
+        if time.monotonic() > end:
+            raise SystemExit(f"timed out: {script}")
+        time.sleep(0.1)
+
+
+def move(d, ident, position):
+    d.execute_script("const r = document.querySelector(`#act-${arguments[0]} input[type=range]`);"
+                     "r.value = arguments[1]; r.dispatchEvent(new Event('input'));", ident, position)
+
+
+def shoot(d, name):
+    path = os.path.join(HERE, name)
+    d.save_screenshot(path)
+    print(path)
+
+
+def zap_shots():
+    with start_zap(ids=[1, 2, 3, 4], transport="tcp") as sim:
+        p, url = console("zap", "-p", sim.url, "--scan-ids", "0-10")
+        d = browser(1440, 1350)
+        try:
+            d.get(url)
+            wait(d, "return document.querySelectorAll('#actuators tbody tr').length === 4")
+            for ident, pos in ((1, 3000), (2, 1200), (3, 2500), (4, 600)):
+                move(d, ident, pos)
+            time.sleep(1.5)
+            for ident, pos in ((1, 900), (3, 3600), (4, 2000)):
+                move(d, ident, pos)
+            time.sleep(1.0)
+            d.execute_script("document.querySelector('#act-2 .btn').click();"
+                             "for (const i of [3, 4]) document.querySelector(`#act-${i} input.sync`).click();")
+            wait(d, "return document.querySelector('#registers') && !document.querySelector('#registers').hidden")
+            time.sleep(1.0)
+            shoot(d, "web-zap.png")
+        finally:
+            d.quit()
+            p.terminate()
+            p.wait()
+
+
+def zk_shots():
+    with start_zk(speed=1, transport="tcp") as sim:
+        p, url = console("zk", "-p", sim.url, "--limit", "egt_c<=900,warn=700", "--limit", "power_voltage_v>=11")
+        d = browser(1440, 900)
+        tablet = None
+        try:
+            d.get(url)
+            wait(d, "return window.zkzapStats.samples > 20")
+            time.sleep(2)
+            d.execute_script("const t = document.querySelector('#throttle'); t.value = 55;"
+                             "t.dispatchEvent(new Event('change')); document.querySelector('#start').click();")
+            wait(d, "return document.querySelector('#modal.show') !== null")
+            d.execute_script("document.querySelector('#modal-ok').click()")
+            wait(d, "return document.querySelector('#state').textContent === 'running'", 60)
+            time.sleep(6)
+            tablet = browser(820, 1180)
+            tablet.get(url.split("/?")[0] + "/?" + url.split("/?")[1])
+            wait(tablet, "return window.zkzapStats.samples > 20")
+            time.sleep(3)
+            shoot(d, "web-zk.png")
+            shoot(tablet, "web-zk-tablet.png")
+        finally:
+            if tablet is not None:
+                tablet.quit()
+            d.execute_script("document.querySelector('#abort').click()")
+            time.sleep(0.5)
+            d.quit()
+            p.terminate()
+            p.wait()
+
+
+if __name__ == "__main__":
+    zap_shots()
+    zk_shots()

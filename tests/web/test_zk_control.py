@@ -1,0 +1,114 @@
+"""The ZK console's engine control, through its WebSocket (no browser): RPM mode and its
+interlocks, stop, a violated limit ending the run with the abort, and the consent rule of the
+in-process simulator (sim:// never asks)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from zkzap.sim import start_zk
+
+from webpage import WebConsole, open_page, wait
+
+aiohttp = pytest.importorskip("aiohttp")
+
+
+@pytest.fixture(scope="session")
+def ecu():
+    with start_zk(speed=10, transport="tcp") as sim:
+        yield sim
+
+
+@pytest.fixture(scope="session")
+def console(ecu):
+    c = WebConsole("zk", "-p", ecu.url, "--limit", "rpm<=120000")
+    yield c
+    c.close()
+
+
+def device(ecu, fn):
+    with ecu.lock:
+        return fn(ecu.device)
+
+
+def scenario(console, steps):
+    async def run():
+        async with aiohttp.ClientSession() as s:
+            page = await open_page(s, console)
+            await wait(lambda: any(m.get("max_rpm") for m in page.seen("samples") for m in m["items"]),
+                       "status ID 6 (max rpm)")
+            try:
+                await steps(page)
+            finally:
+                await page.ws.close()
+
+    asyncio.run(asyncio.wait_for(run(), 120))
+
+
+async def idle(page, ecu):
+    """Nothing runs: abort anything left, and wait for the engine to leave run."""
+    await page.request("abort")
+    await wait(lambda: device(ecu, lambda d: d.effective_sw()) != "run", "the engine out of run")
+
+
+def test_rpm_mode_and_its_interlocks(console, ecu):
+    async def steps(page):
+        await idle(page, ecu)
+        over = await page.request("start", mode="rpm", rpm=200000, grant=["engine"])
+        assert over["type"] == "error" and "above the ECU's max rpm 160000" in over["text"]
+        started = await page.request("start", mode="rpm", rpm=90005, grant=["engine"])
+        assert started["type"] == "done" and started["command"]["rpm"] == 90000       # steps of 40 rpm (RPM_X 4)
+        assert started["command"]["rpm_factor"] == 4
+        await wait(lambda: device(ecu, lambda d: d.rpm_mode and d.effective_sw() == "run"), "RPM mode at the ECU")
+        assert device(ecu, lambda d: d.rpm_value * 10 * d.rpm_factor) == 90000
+        again = await page.request("start", mode="throttle", throttle=10, grant=["engine"])
+        assert again["type"] == "error" and "already running" in again["text"]
+        back = await page.request("set", mode="throttle", throttle=20)
+        assert back["type"] == "done"
+        await wait(lambda: device(ecu, lambda d: not d.rpm_mode and d.throttle == 20), "back to throttle at the ECU")
+        stop = await page.request("stop")
+        assert stop["type"] == "done"
+        await wait(lambda: device(ecu, lambda d: d.effective_sw()) == "stop", "stop at the ECU")
+        await wait(lambda: not page.seen("engine")[-1]["controlling"], "the run's end on the page")
+        engine = page.seen("engine")[-1]
+        assert not engine["controlling"] and "stop from page" in engine["ended"]["why"]
+        assert engine["ended"]["sent"] == "stop, throttle 0"
+
+    scenario(console, steps)
+
+
+def test_a_violated_limit_ends_the_run_with_the_abort(console, ecu):
+    async def steps(page):
+        await idle(page, ecu)
+        await wait(lambda: device(ecu, lambda d: d.rpm) < 100000, "a slow engine")
+        r = await page.request("start", mode="throttle", throttle=100, grant=["engine"])
+        assert r["type"] == "done", r
+        await wait(lambda: page.seen("engine")[-1]["controlling"], "the run")
+        await wait(lambda: not page.seen("engine")[-1]["controlling"], "the run's end", timeout=60)
+        ended = page.seen("engine")[-1]["ended"]
+        assert ended["reason"] == "limit" and "rpm<=120000" in ended["why"] and ended["sent"] == "standby, throttle 0"
+        assert device(ecu, lambda d: d.effective_sw()) == "standby"
+        await wait(lambda: any(m.get("limits") and m["limits"][0]["verdict"] == "violated" for m in page.seen("health")),
+                   "the limit's verdict on the page")
+        refused = await page.request("start", mode="throttle", throttle=10, grant=["engine"])
+        if device(ecu, lambda d: d.rpm) > 120000:        # still above the limit: no start
+            assert refused["type"] == "error" and "violated now" in refused["text"]
+
+    scenario(console, steps)
+
+
+def test_the_in_process_simulator_never_asks():
+    c = WebConsole("zk", "-p", "sim://zk?speed=10")
+
+    async def steps(page):
+        r = await page.request("start", mode="throttle", throttle=10)
+        assert r["type"] == "done", r
+        await wait(lambda: page.seen("engine") and page.seen("engine")[-1]["controlling"], "the run")
+        await page.request("abort")
+
+    try:
+        scenario(c, steps)
+    finally:
+        c.close()
