@@ -87,6 +87,17 @@ def _hexdump_c(data: bytes) -> bytes:
     return ("\n".join(out) + "\n").encode()
 
 
+def _od(data: bytes) -> bytes:
+    """``od -A x -t x1z``: offsets, bytes and the >printable< column."""
+    out = []
+    for off in range(0, len(data), 16):
+        row = data[off:off + 16]
+        text = "".join(chr(b) if 32 <= b < 127 else "." for b in row)
+        out.append(f"{off:06x} " + " ".join(f"{b:02x}" for b in row).ljust(47) + f"  >{text}<")
+    out.append(f"{len(data):06x}")
+    return ("\n".join(out) + "\n").encode()
+
+
 def _saleae(data: bytes) -> bytes:
     return ("Time [s],Value\n" + "".join(f"{i * 8.68e-5:.8f},0x{b:02X}\n" for i, b in enumerate(data))).encode()
 
@@ -166,6 +177,7 @@ def make_seeds(d: str) -> dict:
     seeds["zk.xxd"] = _xxd(zk_bytes)
     seeds["zk.hexdump"] = _hexdump_c(zk_bytes)
     seeds["zk.saleae.csv"] = _saleae(zk_bytes[:200])
+    seeds["zk.od"] = _od(zk_bytes)
     seeds["zap.xxd"] = _xxd(seeds["zap.bin"][:600])
     return seeds
 
@@ -302,10 +314,17 @@ def kinds(seeds: dict, d: str) -> list:
         Kind("hex-zk", ["zk.hex", "zk.xxd", "zk.hexdump", "zk.saleae.csv"], "-",
              cli("zk", "decode", "-", stdin=True)),
         Kind("hex-zap", ["zap.xxd"], "-", cli("zap", "decode", "-", stdin=True)),
+        # hex text files as the decoders' arguments (zk decode dump.hex): the file's bytes as found
+        Kind("hex-file-zk", ["zk.hex", "zk.xxd", "zk.od"], "dump.hex", cli("zk", "decode", "{}", "-f", "csv"),
+             binary=True),
+        Kind("hex-file-zap", ["zap.xxd"], "dump.hex", cli("zap", "decode", "{}", "-f", "csv"), binary=True),
         Kind("hex-crc", ["zk.hex"], "-", cli("crc", "zk", "-", stdin=True)),
         Kind("report-run", ["tel.csv", "tel.jsonl", "tel.json", "raw.bin"], "run.txt", report("run")),
         Kind("report-stdin", ["tel.csv", "tel.jsonl", "raw.bin"], "-", cli("zk", "report", "-", "--terminal", stdin=True)),
         Kind("report-steps", ["steps.csv"], "steps.csv", report("steps")),
+        # runs compared: a good run and a damaged one
+        Kind("report-runs", ["tel.csv", "tel.jsonl", "raw.bin"], "run.txt",
+             cli("zk", "report", os.path.join(d, "tel.csv"), "{}", "--terminal")),
         Kind("report-summary", ["summary.json"], "summary.json", report("summary")),
         Kind("report-svg", ["tel.csv", "tel.json"], "run.txt", report_svg, weight=0.05, needs="matplotlib"),
         Kind("logbook", ["lb.db"], "lb.db", cli("zk", "logbook", "{}"), binary=True),

@@ -31,7 +31,8 @@ def test_a_short_seeded_run_over_every_input_kind_finds_nothing():
     names = set(tallies)
     for kind in ("fleet-json", "fleet-toml", "fleet-yaml", "schedule", "limits", "zap-batch", "zk-batch",
                  "capture-zk", "capture-zap", "replay-capture", "sim-replay-zk", "sim-replay-zap", "raw-log-replay",
-                 "raw-zk-decode", "hex-zk", "hex-crc", "report-run", "report-steps", "report-summary", "logbook",
+                 "raw-zk-decode", "hex-zk", "hex-file-zk", "hex-file-zap", "hex-crc", "report-run", "report-runs",
+                 "report-steps", "report-summary", "logbook", "aux-lines",
                  "setup-state", "sim-state"):
         assert kind in names, kind
     assert all(t.cases == CASES for t in tallies.values()), report

@@ -86,8 +86,25 @@ class HexText:
         self.paths = paths
         self.what = "stdin"              # the input the first skipped line came from
         self.skipped = None if strict else HexSkips()
+        self._started = None
+
+    def start(self) -> None:
+        """Read up to the first bytes now: text refused at its first line is refused before
+        any output is opened (no CSV header, no ``[`` on stdout). Iterating yields them first."""
+        it = self._chunks()
+        first = next(it, None)
+        self._started = ([] if first is None else [first], it)
 
     def __iter__(self):
+        if self._started is None:
+            yield from self._chunks()
+            return
+        first, it = self._started
+        self._started = None
+        yield from first
+        yield from it
+
+    def _chunks(self):
         if self.paths is None:
             yield from self._stdin()
         else:
@@ -125,6 +142,12 @@ class HexText:
     def note(self):
         text = self.skipped.note() if self.skipped is not None else None
         return f"{self.what}: {text}" if text else None
+
+
+def start(chunks) -> None:
+    """Read a hex source up to its first bytes before the output opens (see :meth:`HexText.start`)."""
+    if isinstance(chunks, HexText):
+        chunks.start()
 
 
 def hex_note(chunks):

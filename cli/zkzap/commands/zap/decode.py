@@ -65,7 +65,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode bus.pcapng -f json -o bus.json
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode
+    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode, start
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -84,6 +84,7 @@ def decode(inputs, binary, fmt, output, append):
         probe = ZapFramer()
         if not probe.feed(chunks[0]):
             _explain_single(chunks[0])
+    start(chunks)
     stream, had = open_output(output, append, fmt=fmt, columns=COLUMNS,
                               inputs=decode_inputs(inputs, binary, explicit))
     writer = make_writer(fmt, stream, COLUMNS, table_columns=TABLE_COLUMNS, header=not had)
