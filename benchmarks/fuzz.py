@@ -344,8 +344,10 @@ def main(argv=None):
     args = argparse.ArgumentParser(add_help=False)
     args.add_argument("--seed", default="1")
     args.add_argument("--jobs", default=str(os.cpu_count() or 1))
+    args.add_argument("--quick", action="store_true")
     known, _ = args.parse_known_args(argv)
-    return fuzz_inputs.main(["--seed", known.seed, "--jobs", known.jobs]) or status
+    sized = ["--quick"] if known.quick else ["--jobs", known.jobs]
+    return fuzz_inputs.main([*sized, "--seed", known.seed]) or status
 
 
 def framers(argv=None):

@@ -453,7 +453,22 @@ def _vsize() -> int:
         return 0
 
 
-def _worker(conn, seeds, d, table):
+def _die_with_parent():
+    """A worker ends with the fuzzer, however that ends (a deadline's kill, Ctrl-C): on Linux by
+    the kernel; elsewhere a worker's next read finds the pipe closed."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+
+def _worker(conn, parent_end, seeds, d, table):
+    parent_end.close()               # forked with it: without this, a dead fuzzer's pipe never closes
+    _die_with_parent()
     os.environ["NO_COLOR"] = "1"
     for var in [v for v in os.environ if v.startswith("ZKZAP_")]:
         del os.environ[var]
@@ -477,7 +492,10 @@ def _worker(conn, seeds, d, table):
         pass
     conn.send(("ready", _maxrss_mib()))
     while True:
-        msg = conn.recv()
+        try:
+            msg = conn.recv()
+        except EOFError:             # the fuzzer is gone
+            break
         if msg is None:
             break
         index, name, data = msg
@@ -601,7 +619,8 @@ def _dispatch(work, by_name, tallies, seeds, d, jobs, timeout, memory_mib):
         def __init__(self):
             self.conn, child = ctx.Pipe()
             # forked: the kinds (closures) are inherited, not pickled
-            self.proc = ctx.Process(target=_worker, args=(child, seeds, d, list(by_name.values())), daemon=True)
+            self.proc = ctx.Process(target=_worker, args=(child, self.conn, seeds, d, list(by_name.values())),
+                                    daemon=True)
             self.proc.start()
             child.close()
             msg = self.conn.recv()
@@ -741,6 +760,9 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds a case may take (default 60)")
     ap.add_argument("--memory", type=float, default=64.0, help="MiB of RSS growth a case may cause (default 64)")
     ap.add_argument("--keep", metavar="DIR", help="write the inputs of the findings to DIR")
+    from common import add_quick
+
+    add_quick(ap, cases=1, jobs=1)
     a = ap.parse_args(argv)
     tallies = run(a.seed, a.cases, a.jobs, a.kind, a.timeout, a.memory, keep=a.keep)
     return 1 if any(t.findings for t in tallies.values()) else 0

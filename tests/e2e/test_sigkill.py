@@ -1,5 +1,6 @@
 """SIGKILL (a power cut, the OOM killer, kill -9): no handler runs, nothing is finished or
-closed, and still every output format keeps what was written before the last second, readable.
+closed, and still every output format keeps what was written before the last second, readable
+(a workbook, assembled only at the end, in the CSV journal beside it).
 
 Each case is a real ``zk monitor`` logging the in-process simulator to ``-o`` in one format,
 with ``--raw-log`` and ``--capture`` beside it, killed once its capture spans a few seconds.
@@ -79,7 +80,14 @@ def _mcap(path):
     return times
 
 
-FORMATS = {"csv": _csv, "jsonl": _jsonl, "json": _json, "lp": _influx, "mcap": _mcap}
+def _xlsx(path):
+    """A killed run writes no workbook: its rows are in the journal beside it, as CSV."""
+    pytest.importorskip("openpyxl")
+    assert not path.exists()
+    return _csv(path.with_name(path.name + ".partial.csv"))
+
+
+FORMATS = {"csv": _csv, "jsonl": _jsonl, "json": _json, "lp": _influx, "mcap": _mcap, "xlsx": _xlsx}
 
 
 @pytest.fixture(scope="module")
