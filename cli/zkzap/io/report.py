@@ -385,10 +385,14 @@ def summary_limits(summary) -> list:
 
 
 def align(runs, how="start") -> None:
-    """Put each run's time on a common axis: ``start`` (each from its first record), ``running``
-    (from the engine's first running state) or ``step:N`` (from the start of step N)."""
+    """Put each run's time on a common axis: ``start`` (each from its session's start, t = 0:
+    where its schedule started, however late its first status frame came), ``first`` (each from
+    its first record), ``running`` (from the engine's first running state) or ``step:N`` (from
+    the start of step N)."""
     for run in runs:
         if how == "start":
+            run.offset = 0.0
+        elif how == "first":
             run.offset = run.t[0] if len(run.t) else 0.0
         elif how == "running":
             t = run.running_t()
