@@ -184,14 +184,19 @@ def make_seeds(d: str) -> dict:
 
 # --- the kinds: which seeds, how a case is run, which exit statuses are allowed ------------------
 
+#: CPU seconds a case of a kind may take by default (the inputs are at most a few hundred KiB).
+CPU_S = 2.0
+
+
 class Kind:
     """An input kind: its seeds, the file name a case is written to, and ``run(path, data)``
     returning (exit status, stdout bytes, stderr text). ``named``: a refusal must name the
-    input (its file name, or ``stdin`` for standard input)."""
+    input (its file name, or ``stdin`` for standard input). ``cpu``: the CPU seconds a case may
+    take before it is a finding (a reader that is quadratic in some input)."""
 
     def __init__(self, name, seeds, filename, run, allowed=(0, 2), binary=False, named=True, weight=1.0,
-                 needs=None, warm=True):
-        self.name, self.seeds, self.filename, self.run = name, seeds, filename, run
+                 needs=None, warm=True, cpu=CPU_S):
+        self.name, self.seeds, self.filename, self.run, self.cpu = name, seeds, filename, run, cpu
         self.allowed, self.binary, self.named, self.weight, self.needs = set(allowed), binary, named, weight, needs
         #: run once on a seed when a worker starts, so the modules it imports are not counted as
         #: a case's memory
@@ -326,7 +331,8 @@ def kinds(seeds: dict, d: str) -> list:
         Kind("report-runs", ["tel.csv", "tel.jsonl", "raw.bin"], "run.txt",
              cli("zk", "report", os.path.join(d, "tel.csv"), "{}", "--terminal")),
         Kind("report-summary", ["summary.json"], "summary.json", report("summary")),
-        Kind("report-svg", ["tel.csv", "tel.json"], "run.txt", report_svg, weight=0.05, needs="matplotlib"),
+        Kind("report-svg", ["tel.csv", "tel.json"], "run.txt", report_svg, weight=0.05, needs="matplotlib",
+             cpu=30.0),
         Kind("logbook", ["lb.db"], "lb.db", cli("zk", "logbook", "{}"), binary=True),
     ]
     return [x for x in k if x.needs is None or _importable(x.needs)]
@@ -540,8 +546,10 @@ class Finding:
 
 def judge(kind: Kind, result, data) -> list:
     """The findings of one case's result."""
-    _index, _name, code, out_len, err, exc, _dt, grew, _rss = result
+    _index, _name, code, out_len, err, exc, cpu, grew, _rss = result
     found = []
+    if cpu > kind.cpu:
+        found.append(("cpu", f"{cpu:.1f} s of CPU time (more than {kind.cpu:g} s)"))
     if exc is not None:
         found.append(("traceback", exc.strip().splitlines()[-1] + "\n" + exc))
         return found

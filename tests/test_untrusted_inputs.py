@@ -61,14 +61,23 @@ def test_the_fuzzer_reports_tracebacks_hangs_and_memory():
     def lies(path, data):                                   # a refusal of two lines, with stdout
         return 2, b"partial", "zkzap: error: x\nmore\n"
 
-    extra = [fuzz.Kind(name, ["profile.csv"], "stand.csv", run, warm=False) for name, run in
-             (("t-raises", raises), ("t-hangs", hangs), ("t-hogs", hogs), ("t-lies", lies))]
+    def spins(path, data):                                  # quadratic in some input
+        import time
+
+        t0 = time.process_time()
+        while time.process_time() - t0 < 0.3:
+            pass
+        return 0, b"", ""
+
+    extra = [fuzz.Kind(name, ["profile.csv"], "stand.csv", run, warm=False, cpu=0.2 if run is spins else 10)
+             for name, run in (("t-raises", raises), ("t-hangs", hangs), ("t-hogs", hogs), ("t-lies", lies),
+                               ("t-spins", spins))]
     out = io.StringIO()
     tallies = fuzz.run(seed=1, count=1, jobs=2, only={k.name for k in extra}, extra=extra, timeout=3,
                        memory_mib=64, out=out)
     found = {name: {f.what for f in t.findings} for name, t in tallies.items()}
     assert found == {"t-raises": {"traceback"}, "t-hangs": {"hang"}, "t-hogs": {"memory"},
-                     "t-lies": {"lines", "stdout"}}, out.getvalue()
+                     "t-lies": {"lines", "stdout"}, "t-spins": {"cpu"}}, out.getvalue()
     assert "KeyError: 'missing'" in out.getvalue()
 
 
