@@ -30,6 +30,7 @@ _LAZY = {
     "ZkzapError": "zkzap.errors",
     "UsageError": "zkzap.errors",
     "InvalidValue": "zkzap.errors",
+    "MissingExtra": "zkzap.errors",
     "CheckFailed": "zkzap.errors",
     "NoReply": "zkzap.errors",
     "PortError": "zkzap.errors",
@@ -74,9 +75,9 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError
     from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
-                         Interrupted as Interrupted, InvalidValue as InvalidValue, NoReply as NoReply,
-                         OutputError as OutputError, PortError as PortError, UsageError as UsageError,
-                         ZkzapError as ZkzapError)
+                         Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
+                         NoReply as NoReply, OutputError as OutputError, PortError as PortError,
+                         UsageError as UsageError, ZkzapError as ZkzapError)
     from .link.pcapng import CaptureError as CaptureError
     from .sim.serve import PtyUnsupported as PtyUnsupported
     from .sim.zap_actuators import NoActuator as NoActuator

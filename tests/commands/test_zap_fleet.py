@@ -147,7 +147,7 @@ def _bad_file(tmp, text, name="bad.json"):
      "bad.toml: actuators.1.stored.speed-limit: -1 is out of range"),
     ('format: "zkzap-fleet/1"\nactuators:\n  "1":\n    stored:\n      acceleration: 300\n', "bad.yaml",
      "bad.yaml: actuators.1.stored.acceleration: 300 is out of range"),
-    ("{not json", "bad.json", "bad.json: not valid JSON"),
+    ("{not json", "bad.json", "bad.json:1: not valid JSON"),
 ])
 def test_bad_files_are_refused_before_any_write(cli, buses, content, name, message):
     _, b, tmp = buses

@@ -164,7 +164,7 @@ class CaptureReplaySource(PacedReplay):
 
     def close(self):
         self.frames.reader.close()
-        note = self.frames.truncation_note()
+        note, self._noted = (None if getattr(self, "_noted", False) else self.frames.reading_note()), True
         if note:
             import sys
 

@@ -57,15 +57,22 @@ class Line:
         self.leaf = None
 
 
+#: The longest batch line (characters): a real one is a command and its options, and the
+#: shell-like splitting takes time that grows with the square of a line's length.
+MAX_LINE = 16384
+
+
 def read_lines(source, name):
-    """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split
-    is refused naming ``NAME:LINE``."""
+    """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split,
+    or is longer than :data:`MAX_LINE`, is refused naming ``NAME:LINE``."""
     out = []
     for number, raw in enumerate(source, 1):
         text = raw.strip()
         if not text or text.startswith("#"):
             continue
         where = f"{name}:{number}"
+        if len(text) > MAX_LINE:
+            raise UsageError(f"{where}: a line of {len(text)} characters; a batch line has at most {MAX_LINE}")
         try:
             tokens = shlex.split(text, comments=True)
         except ValueError as e:

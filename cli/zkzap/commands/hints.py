@@ -7,7 +7,7 @@ never names a command.
 
 from __future__ import annotations
 
-from ..errors import CheckFailed, InvalidValue, NoReply, UsageError
+from ..errors import CheckFailed, InvalidValue, NoReply, PortError, UsageError
 
 
 def hint(e) -> str:
@@ -29,6 +29,14 @@ def hint(e) -> str:
             return "; give --return-mode 1 or 2 if the actuator is set so"
         if facts.get("no_port") == "zap":
             return ": give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet"
+    if isinstance(e, PortError) and facts.get("busy"):
+        import os
+
+        if facts.get("holders"):
+            return "; stop it, or use another port"
+        if os.name == "posix" and str(facts.get("url", "")).startswith("/"):
+            return f"; 'fuser -v {facts['url']}' names it (as root for another user's programs)"
+        return "; close the other program"
     if isinstance(e, CheckFailed):
         if facts.get("taken"):
             return "; choose a free ID ('zap scan') or pass --force"

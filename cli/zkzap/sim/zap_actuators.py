@@ -770,16 +770,16 @@ class ActuatorBus:
 
     def load_state(self) -> bool:
         """Restore actuators from the state file; False when the file does not exist."""
+        from ..api.documents import read
+        from ..errors import UsageError
+
         path = self.state_path
-        try:
-            with open(path, encoding="utf-8") as f:
-                doc = json.load(f)
-        except FileNotFoundError:
+        if not os.path.exists(path):
             return False
-        except OSError as e:
-            raise InvalidValue(f"state {path}: cannot read: {e.strerror or e}") from None
-        except ValueError as e:
-            raise InvalidValue(f"state {path}: cannot read: {e}") from None
+        try:
+            doc, _ = read(path, "state")
+        except UsageError as e:            # unreadable, not UTF-8, not JSON: FILE:LINE: what
+            raise InvalidValue(str(e) if str(e).startswith("state: ") else f"state: {e}") from None
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
             raise InvalidValue(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")

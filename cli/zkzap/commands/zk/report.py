@@ -126,6 +126,8 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
     runs = []
     for path, st, sm in zip(run_files, steps, summaries):
         run = R.load_run(path, extra=sorted(fields))
+        for text in run.notes:
+            note(text)
         run.steps = st if st is not None else ((sm or {}).get("steps") or None)
         run.summary = sm
         runs.append(run)
