@@ -55,7 +55,7 @@ def serve_options(f):
 
 
 def _serve(device, speed, use_pty, listen, link):
-    from ..sim.base import Clock
+    from ..sim.base import Clock, keep_wire_time
     from ..sim.serve import PtyUnsupported, serve_pty, serve_tcp
 
     if use_pty and listen:
@@ -63,6 +63,7 @@ def _serve(device, speed, use_pty, listen, link):
     if link and listen:
         raise UsageError("--link works with --pty only")
     clock = Clock(speed)
+    keep_wire_time(device, clock)
     if listen:
         host, port = listen
         try:

@@ -558,6 +558,10 @@ class ActuatorBus:
         self.echo = echo
         self.turnaround = turnaround      # every actuator's reply turnaround (model seconds)
         self.gap = gap                    # pause between two reply bytes (model seconds)
+        # model seconds per real second (the simulator's speed): a byte takes its real time on
+        # the wire whatever the speed, so in model time it takes this many times longer; a reply
+        # can never come sooner than the line can carry it
+        self.wire_scale = 1.0
         self._rx_free = 0.0               # when the host's bytes written so far have crossed the line
         self.restored = False
         self.received = deque(maxlen=1000)
@@ -628,7 +632,7 @@ class ActuatorBus:
         # the host's bytes take their time on the line: a command is heard when its last byte
         # is in; a byte that meets an actuator's reply on the line garbles both (wired-AND)
         line = baud or (self.actuators[0].baud if self.actuators else 57600)
-        byte = wire_time(1, line)
+        byte = wire_time(1, line) * self.wire_scale
         start = max(now, self._rx_free)
         arrived = start + byte * len(data)
         self._rx_free = arrived
@@ -689,7 +693,7 @@ class ActuatorBus:
         replies.sort(key=lambda r: r[0])
         starts = []
         for t, data, rbaud, a in replies:
-            byte = wire_time(1, rbaud)
+            byte = wire_time(1, rbaud) * self.wire_scale
             start = max(t, a.tx_free)     # one actuator sends one reply at a time
             # two transmitters are never in step: a reply that starts with another is a byte behind
             if any(abs(start - s) < byte for s in starts):
@@ -702,7 +706,7 @@ class ActuatorBus:
         """An actuator's reply on the line from ``start``: the host's UART delivers its first
         byte when that has crossed, the rest when the reply has (a receive FIFO); with ``gap``
         every byte on its own. A byte that meets another reply's garbles both."""
-        byte = wire_time(1, baud)
+        byte = wire_time(1, baud) * self.wire_scale
         step = byte + self.gap
         n = len(data)
         last_end = start + (n - 1) * step + byte
