@@ -52,6 +52,7 @@ _LAZY = {
     "DocumentError": "zkzap.api.fleet",
     "NotFound": "zkzap.api.fleet",
     "TwoAnswer": "zkzap.api.fleet",
+    "SharedId": "zkzap.api.fleet",
     "CaptureError": "zkzap.link.pcapng",
     "NoActuator": "zkzap.sim.zap_actuators",
     "PtyUnsupported": "zkzap.sim.serve",
@@ -62,7 +63,8 @@ __all__ = ["__version__", *_LAZY]
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time, imported on first use
     from .api.expr import ExpressionError as ExpressionError
-    from .api.fleet import DocumentError as DocumentError, NotFound as NotFound, TwoAnswer as TwoAnswer
+    from .api.fleet import (DocumentError as DocumentError, NotFound as NotFound, SharedId as SharedId,
+                            TwoAnswer as TwoAnswer)
     from .api.limits import LimitViolation as LimitViolation
     from .api.prestart import EcuLimitError as EcuLimitError
     from .api.schedule import ScheduleError as ScheduleError, ScheduleTargetError as ScheduleTargetError

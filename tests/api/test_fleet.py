@@ -52,7 +52,7 @@ def test_backup_document_sections_and_identity(bus_of):
     doc = fleet.read_bus(bus, [1, 2, 3])
     assert doc["format"] == fleet.FORMAT and doc["zkzap"] and doc["time"].endswith("Z")
     e1 = doc["actuators"]["1"]
-    assert e1["model"] == 0x0C4C and e1["firmware"] == 20 and e1["baud"] == 57600
+    assert e1["model"] == 0xA112 and e1["firmware"] == 21 and e1["baud"] == 57600
     assert e1["stored"]["speed-limit"] == 500 and e1["stored"]["id"] == 1
     assert "goal-speed" in e1["volatile"] and "present-voltage" in e1["read-only"]
     # every register of the map, each in the section of its memory

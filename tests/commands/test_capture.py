@@ -8,6 +8,7 @@ import json
 import pytest
 
 from zkzap.codec import zap, zk
+from zkzap.codec.framing import ZapFramer
 from zkzap.link.pcapng import INBOUND, OUTBOUND, Reader, Writer
 
 
@@ -64,9 +65,10 @@ def test_a_dry_run_writes_no_capture_and_a_port_gets_an_interface(cli, tmp_path)
     rd = Reader(str(cap), "zap")
     pkts = list(rd)
     assert rd.interfaces == [("zap", "sim://zap?ids=3&baud=57600", 1_000_000)]
-    replies = [p.data for p in pkts if p.direction == INBOUND]
+    replies = ZapFramer().feed(b"".join(p.data for p in pkts if p.direction == INBOUND))
+    requests = ZapFramer().feed(b"".join(p.data for p in pkts if p.direction != INBOUND))
     assert replies and all(d[3] == 3 for d in replies)
-    assert len(pkts) == 2 * len(replies)
+    assert len(requests) == len(replies)
 
 
 def test_capture_that_cannot_be_opened_is_a_usage_error(cli, tmp_path):

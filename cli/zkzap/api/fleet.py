@@ -83,20 +83,25 @@ class Procedures:
     operation touches these procedures, so they can be pointed at another implementation."""
 
     @staticmethod
-    def find(bus, ids, *, retries=0):
-        """IDs of ``ids`` that answer an Echo at the bus's baud rate, and those whose reply was
-        garbled (two actuators answering at once): ``(found, garbled)``."""
-        from ..errors import BadReply
+    def discover(bus, ids, bauds=None, *, retries=2):
+        """Scan records (``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status``,
+        ``errors``) of the actuators among ``ids`` at each of ``bauds`` (default: the bus's),
+        found as ``zap scan`` finds them (:mod:`zkzap.link.zap_scan`): a fast first pass that
+        asks again, with the whole window, wherever something came late or garbled. Two
+        actuators sharing an ID give status ``duplicate`` or ``garbled``. The bus is left at the
+        last baud rate."""
+        from ..link.zap_scan import scan
 
+        return [ev[1] for ev in scan(bus, list(ids), list(bauds or [bus.baud]), retries=retries)
+                if ev[0] == "record"]
+
+    @staticmethod
+    def find(bus, ids, *, retries=2):
+        """IDs of ``ids`` that answer at the bus's baud rate (see :meth:`discover`), and those
+        whose replies collide (two actuators answering to one ID): ``(found, garbled)``."""
         found, garbled = [], []
-        for ident in ids:
-            try:
-                r = bus.ping(ident, retries=retries)
-            except BadReply:
-                garbled.append(ident)
-                continue
-            if r is not None:
-                found.append(ident)
+        for rec in Procedures.discover(bus, ids, retries=retries):
+            (garbled if rec["status"] in SHARED else found).append(rec["id"])
         return found, garbled
 
     @staticmethod
@@ -112,7 +117,47 @@ class Procedures:
         return values, error
 
 
+#: Scan statuses of an ID that two actuators answer to.
+SHARED = ("duplicate", "garbled")
+
 PROCEDURES = Procedures()
+
+
+class SharedId(CheckFailed):
+    """Two actuators answer to one ID (exit status 1): a fleet operation refuses the bus."""
+
+
+def refuse_shared(records) -> None:
+    """Raise :class:`SharedId` naming every ID (and baud rate) of ``records`` (scan records) that
+    two actuators answer to."""
+    shared = [r for r in records if r["status"] in SHARED]
+    bauds = {}
+    for r in records:
+        bauds.setdefault(r["id"], []).append(r["baud"])
+    twice = {i: b for i, b in bauds.items() if len(b) > 1}
+    if twice:
+        where = "; ".join(f"ID {i} answers at {' and '.join(map(str, b))} baud" for i, b in sorted(twice.items()))
+        raise SharedId(f"{where}: two actuators with one ID", ids=sorted(twice), shared=True)
+    if shared:
+        where = ", ".join(f"ID {r['id']} at {r['baud']} baud" for r in shared)
+        raise SharedId(f"{where}: two actuators answer to {'this ID' if len(shared) == 1 else 'these IDs'} "
+                       "(their replies collide)", ids=[r["id"] for r in shared], shared=True)
+
+
+def read_fleet(bus, records, *, procedures=PROCEDURES, on_actuator=None) -> dict:
+    """A backup document of the actuators of ``records`` (as :meth:`Procedures.discover` gives
+    them), each read at the baud rate it answered at."""
+    doc = None
+    for baud in dict.fromkeys(r["baud"] for r in records):
+        if bus.baud != baud:
+            bus.set_baud(baud)
+        part = read_bus(bus, [r["id"] for r in records if r["baud"] == baud], procedures=procedures,
+                        on_actuator=on_actuator)
+        if doc is None:
+            doc = part
+        else:
+            doc["actuators"].update(part["actuators"])
+    return doc
 
 
 def now_iso() -> str:
@@ -501,17 +546,45 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
 
 
 def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
-    """{ID: Entry} read from the bus (every register of each actuator). ``required``: every ID
-    must answer (else NoReply); otherwise IDs that do not answer an Echo are left out."""
+    """{ID: Entry} read from the bus (every register of each actuator). ``ids``: IDs, or scan
+    records (``id``, ``baud``, as :func:`survey` gives them), each then read at the baud rate it
+    answered at. ``required``: every ID must answer (else NoReply); otherwise IDs that do not
+    answer an Echo are left out (records were found: they are read)."""
     entries = {}
-    for ident in ids:
-        if not required and bus.ping(ident, retries=1) is None:
-            continue
+    for item in ids:
+        if isinstance(item, dict):
+            ident = item["id"]
+            if bus.baud != item["baud"]:
+                bus.set_baud(item["baud"])
+        else:
+            ident = item
+            if not required and bus.ping(ident, retries=1) is None:
+                continue
         values, error = procedures.read_map(bus, ident)
         entry = entry_from_values(values, baud=bus.baud, error=error)
         doc = {"format": FORMAT, "actuators": {str(ident): entry}}
         entries[ident] = check_document(doc, f"bus ID {ident}")[ident]
     return entries
+
+
+def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> list:
+    """Scan records (``id``, ``baud``, ...) of the live bus's actuators, as a fleet operation
+    compares or backs them up. Without ``ids`` (every ID 0..253), at several ``bauds``, or with
+    ``scan``, the actuators are found as ``zap scan`` finds them (:meth:`Procedures.discover`),
+    and a bus where two actuators answer to one ID is refused (:class:`SharedId`, naming it),
+    never read without one of them; otherwise ``ids`` are asked for one by one, an ordinary Echo
+    each (one that does not answer is absent)."""
+    bauds = list(bauds or [bus.baud])
+    if scan is None:
+        scan = ids is None or len(bauds) > 1
+    if not scan:
+        if bus.baud != bauds[0]:
+            bus.set_baud(bauds[0])
+        return [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=retries) is not None]
+    wanted = list(ids) if ids is not None else list(range(zap.MAX_ID + 1))
+    records = procedures.discover(bus, wanted, bauds, retries=retries)
+    refuse_shared(records)
+    return records
 
 
 def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), force=False, on_mismatch=None,

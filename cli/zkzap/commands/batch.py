@@ -27,7 +27,7 @@ from ..errors import INTERRUPTED, OK, TERMINATED, USAGE, UsageError, ZkzapError
 from .options import consent, exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
-PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture")
+PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture", "--low-latency")
 #: Port options a command takes as its own argument: the baud rates a scan tries.
 OWN_TOKENS = {"scan": ("-b", "--baud")}
 
