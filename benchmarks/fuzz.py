@@ -1,7 +1,16 @@
-"""Fuzz the streaming framers and the record decoders with random and mutated byte streams.
+"""Fuzz what zkzap reads: the streaming framers, and every kind of input file or stream.
 
-    python benchmarks/fuzz.py                       # 10^6 streams per decoder, seed 1
-    python benchmarks/fuzz.py --seed 7 --count 200000 --proto zap --jobs 2
+    python benchmarks/fuzz.py                       # both: the framers, then the inputs
+    python benchmarks/fuzz.py framers --seed 7 --count 200000 --proto zap --jobs 2
+    python benchmarks/fuzz.py inputs --cases 500 --kind capture-zk   # see benchmarks/fuzz_inputs.py
+
+``inputs`` mutates valid files of every kind (fleet files, schedules, limits, batches,
+captures, raw logs, hex dumps, report inputs, replay files, logbooks, state files) and runs
+each case in a worker process under a deadline and an address-space limit, reporting
+tracebacks, hangs, exit statuses and peak memory (:mod:`fuzz_inputs`). The rest of this
+description is the framers' part.
+
+The framer fuzzer, by default 10^6 streams per decoder with seed 1:
 
 Each stream is built from pieces: valid frames (status and control for ZK, commands and
 feedback for mightyZAP), random garbage, garbage rich in head bytes, false heads (a head byte
@@ -37,6 +46,7 @@ import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
+sys.path.insert(0, HERE)
 
 from zkzap.codec import zap, zk  # noqa: E402
 from zkzap.codec.framing import ZapFramer, ZkFramer  # noqa: E402
@@ -323,7 +333,25 @@ def describe(case):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    argv = list(sys.argv[1:] if argv is None else argv)
+    import fuzz_inputs
+
+    if argv[:1] == ["inputs"]:
+        return fuzz_inputs.main(argv[1:])
+    if argv[:1] == ["framers"]:
+        return framers(argv[1:])
+    status = framers(argv)
+    args = argparse.ArgumentParser(add_help=False)
+    args.add_argument("--seed", default="1")
+    args.add_argument("--jobs", default=str(os.cpu_count() or 1))
+    args.add_argument("--quick", action="store_true")
+    known, _ = args.parse_known_args(argv)
+    sized = ["--quick"] if known.quick else ["--jobs", known.jobs]
+    return fuzz_inputs.main([*sized, "--seed", known.seed]) or status
+
+
+def framers(argv=None):
+    ap = argparse.ArgumentParser(prog="fuzz.py framers", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--count", type=int, default=1_000_000, help="streams per decoder (default 10^6)")
     ap.add_argument("--proto", choices=["zk", "zap", "both"], default="both")

@@ -32,6 +32,10 @@ def hermetic(monkeypatch):
     for var in list(os.environ):
         if var.startswith("ZKZAP_") or var in LEAKY:
             monkeypatch.delenv(var, raising=False)
+    # what one test's buses learned of a port's latencies is not the next test's (pty paths repeat)
+    from zkzap.link import zap_timing
+
+    monkeypatch.setattr(zap_timing, "_POLICIES", {})
 
 
 class Result:

@@ -30,6 +30,8 @@ REGISTERS = [r.name for r in zap.REGISTERS]
     ("xyzzy", REGISTERS, []),                                             # nothing close: nothing
     ("", REGISTERS, []),
     ("egt", ["rpm", "egt_c", "sw_state"], ["egt_c"]),
+    ("goal-speedd" * 20000, REGISTERS, []),          # a key of a damaged file: too long to be close
+    ("goal-speedd", ["goal-speed"], ["goal-speed"]),
 ])
 def test_close_names(word, choices, expected):
     assert close_names(word, choices) == expected

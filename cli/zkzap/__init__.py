@@ -32,6 +32,7 @@ _LAZY = {
     "ZkzapError": "zkzap.errors",
     "UsageError": "zkzap.errors",
     "InvalidValue": "zkzap.errors",
+    "MissingExtra": "zkzap.errors",
     "CheckFailed": "zkzap.errors",
     "NoReply": "zkzap.errors",
     "PortError": "zkzap.errors",
@@ -56,6 +57,7 @@ _LAZY = {
     "DocumentError": "zkzap.api.fleet",
     "NotFound": "zkzap.api.fleet",
     "TwoAnswer": "zkzap.api.fleet",
+    "SharedId": "zkzap.api.fleet",
     "CaptureError": "zkzap.link.pcapng",
     "NoActuator": "zkzap.sim.zap_actuators",
     "PtyUnsupported": "zkzap.sim.serve",
@@ -66,7 +68,8 @@ __all__ = ["__version__", *_LAZY]
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time, imported on first use
     from .api.expr import ExpressionError as ExpressionError
-    from .api.fleet import DocumentError as DocumentError, NotFound as NotFound, TwoAnswer as TwoAnswer
+    from .api.fleet import (DocumentError as DocumentError, NotFound as NotFound, SharedId as SharedId,
+                            TwoAnswer as TwoAnswer)
     from .api.limits import LimitViolation as LimitViolation
     from .api.prestart import EcuLimitError as EcuLimitError
     from .api.schedule import ScheduleError as ScheduleError, ScheduleTargetError as ScheduleTargetError
@@ -78,9 +81,10 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError
     from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
-                         Interrupted as Interrupted, InvalidValue as InvalidValue, MoreToDo as MoreToDo,
-                         NoReply as NoReply, OutputError as OutputError, PermissionNeeded as PermissionNeeded,
-                         PortError as PortError, UsageError as UsageError, ZkzapError as ZkzapError)
+                         Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
+                         MoreToDo as MoreToDo, NoReply as NoReply, OutputError as OutputError,
+                         PermissionNeeded as PermissionNeeded, PortError as PortError, UsageError as UsageError,
+                         ZkzapError as ZkzapError)
     from .link.pcapng import CaptureError as CaptureError
     from .sim.serve import PtyUnsupported as PtyUnsupported
     from .sim.zap_actuators import NoActuator as NoActuator

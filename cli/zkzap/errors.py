@@ -100,6 +100,15 @@ class UsageError(ZkzapError):
     code = USAGE
 
 
+class MissingExtra(UsageError):
+    """An optional library that ``what`` needs is not installed: the message names the extra
+    that provides it (``pip install 'zkzap[mqtt]'``)."""
+
+    def __init__(self, what: str, module: str, extra: str) -> None:
+        super().__init__(f"{what}: needs the {module} library; install it with pip install 'zkzap[{extra}]'",
+                         module=module, extra=extra)
+
+
 class InvalidValue(UsageError, ValueError):
     """A value outside what is allowed (a range, a grid, a set of names) or malformed text; the
     message names the field and what is allowed. Also a ``ValueError``. An unknown name carries
@@ -193,7 +202,10 @@ def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list[
     contains = [name for f, name in folded.items() if len(key) >= 3 and key in f]
     if contains:         # in the order given (a table's), those that start like the word first
         return sorted(contains, key=lambda name: not _fold(name).startswith(key))[:n]
-    scored = sorted(((difflib.SequenceMatcher(None, key, f).ratio(), f) for f in folded), reverse=True)
+    # a ratio is at most 2*min/(sum) of the lengths: names that cannot reach 0.6 are not compared
+    # (a 200 000-character key in a damaged file would take seconds of difflib for nothing)
+    within = [f for f in folded if 2 * min(len(key), len(f)) >= 0.6 * (len(key) + len(f))]
+    scored = sorted(((difflib.SequenceMatcher(None, key, f).ratio(), f) for f in within), reverse=True)
     best = scored[0][0] if scored else 0.0
     return [folded[f] for ratio, f in scored[:n] if ratio >= max(0.6, best - 0.1)]
 

@@ -52,7 +52,7 @@ def test_backup_document_sections_and_identity(bus_of):
     doc = fleet.read_bus(bus, [1, 2, 3])
     assert doc["format"] == fleet.FORMAT and doc["zkzap"] and doc["time"].endswith("Z")
     e1 = doc["actuators"]["1"]
-    assert e1["model"] == 0x0C4C and e1["firmware"] == 20 and e1["baud"] == 57600
+    assert e1["model"] == 0xA112 and e1["firmware"] == 21 and e1["baud"] == 57600
     assert e1["stored"]["speed-limit"] == 500 and e1["stored"]["id"] == 1
     assert "goal-speed" in e1["volatile"] and "present-voltage" in e1["read-only"]
     # every register of the map, each in the section of its memory
@@ -75,18 +75,20 @@ def test_yaml_is_read_by_pyyaml_too(bus_of):
     assert yaml.safe_load(fleet.dumps(doc, "yaml")) == doc
 
 
-def test_yaml_reader_takes_hand_edits_and_refuses_the_rest():
+def test_yaml_hand_edits_are_read_by_the_safe_loader():
+    pytest.importorskip("yaml")
     text = ("# hand edited\n---\nformat: zkzap-fleet/1\nactuators:\n  '7':   # the gripper\n"
             "    model: 0x0C4C\n    stored:\n      speed-limit: 600  # slower\n      led-unused: ~\n")
-    doc = fleet.yaml_loads(text, "f.yaml")
+    doc = fleet.loads(text, "yaml", "f.yaml")
     assert doc["actuators"]["7"]["model"] == 0x0C4C
     assert doc["actuators"]["7"]["stored"] == {"speed-limit": 600, "led-unused": None}
-    with pytest.raises(fleet.DocumentError, match=r"f.yaml:2: .*block lists"):
-        fleet.yaml_loads("a:\n  - 1\n", "f.yaml")
-    with pytest.raises(fleet.DocumentError, match=r"f.yaml:3: indentation"):
-        fleet.yaml_loads("a:\n    b: 1\n  c: 2\n", "f.yaml")
-    with pytest.raises(fleet.DocumentError, match="given twice"):
-        fleet.yaml_loads("a: 1\na: 2\n", "f.yaml")
+    with pytest.raises(fleet.DocumentError, match=r"^f.yaml:2: mapping values are not allowed here"):
+        fleet.loads("a:\n  b: c: 2\n", "yaml", "f.yaml")
+    with pytest.raises(fleet.DocumentError, match=r"^f.yaml:2: key 'a' is given twice"):
+        fleet.loads("a: 1\na: 2\n", "yaml", "f.yaml")
+    with pytest.raises(fleet.DocumentError, match=r"^f.yaml: actuators.7.stored: expected an object"):
+        fleet.check_document(fleet.loads("format: zkzap-fleet/1\nactuators:\n  7:\n    stored:\n      - 1\n",
+                                         "yaml", "f.yaml"), "f.yaml")
 
 
 def _doc(entry, key="1"):

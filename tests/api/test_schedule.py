@@ -158,6 +158,7 @@ def test_linear_ramps_and_nothing_before_the_first_row():
     ("x,10\n", "s.csv:1: header 'x,10'"),
     ("0\n", "s.csv:1: 1 cells"),
     ("-1,0\n", "s.csv:1: time_s: -1 is out of range"),
+    ("0,10\n1e308,20\n", "s.csv:2: time_s: 1e308 is out of range; allowed 0..1000000000 s"),
     ("0,ten\n", "s.csv:1: throttle_pct: 'ten' is not a number"),
 ])
 def test_more_bad_rows_name_file_and_line(text, msg):
@@ -180,5 +181,5 @@ def test_load_reads_a_file_and_names_it(tmp_path):
     with pytest.raises(UsageError, match=r"schedule: cannot read .*none\.csv: No such file"):
         Schedule.load(str(tmp_path / "none.csv"))
     path.write_bytes(b"0,10\n\xff\xfe\n")
-    with pytest.raises(UsageError, match="is not UTF-8 text"):
+    with pytest.raises(UsageError, match=r"run\.csv:2: not UTF-8 text \(byte 0xFF at byte 5\)"):
         Schedule.load(str(path))

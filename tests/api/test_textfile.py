@@ -25,6 +25,10 @@ def test_unreadable_and_not_utf8_name_the_input(tmp_path, what, expected):
     with pytest.raises(UsageError, match=rf"^{what}: cannot read .*missing: No such file"):
         read_text(tmp_path / "missing", what)
     bad = tmp_path / "bad"
-    bad.write_bytes(b"\xff\xfe\x00")
-    with pytest.raises(UsageError, match=rf"^{what}: .*bad is not UTF-8 text \(expected {expected}"):
+    bad.write_bytes(b"# ok\nbad \xff\xfe\x00")
+    with pytest.raises(UsageError, match=rf"^{what}: .*bad:2: not UTF-8 text \(byte 0xFF at byte 9\); "
+                                         rf"expected {expected}"):
         read_text(bad, what, expected + " ...")
+    bad.write_bytes(b"\xff\xfe#\x00 \x00o\x00k\x00")             # as Windows' Notepad saves "Unicode"
+    with pytest.raises(UsageError, match=rf"^{what}: .*bad: UTF-16 text .*; save it as UTF-8"):
+        read_text(bad, what)

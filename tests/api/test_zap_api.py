@@ -165,3 +165,31 @@ def test_lazy_top_level_names():
     assert zkzap.Bus is Bus
     with pytest.raises(AttributeError):
         zkzap.Nothing  # noqa: B018
+
+
+@pytest.mark.zap_sim(ids=[1, 2], turnaround=25)
+def test_latencies_are_learned_per_actuator_and_shared_by_every_bus_on_the_port(zap_sim):
+    with Bus(zap_sim.url) as bus:
+        for _ in range(3):
+            bus.echo(1)
+        learned = bus.latencies
+        assert learned[1]["samples"] == 3 and learned[1]["latency_ms"] >= 25 and 2 not in learned
+    with Bus(zap_sim.url) as again:                   # the same port in this process: what was learned
+        assert again.latencies[1]["samples"] == 3
+        r = again.echo(2)
+        assert r.rtt * 1000 >= 25 and r.latency * 1000 >= 25
+        assert again.latencies[2]["samples"] == 1
+
+
+def test_the_late_window_and_the_latency_hint_from_python():
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[1], turnaround=300) as sim:
+        with Bus(sim.url, retries=0, latency=0.3) as bus:                  # a known slow setup
+            assert bus.echo(1).rtt >= 0.3
+        with Bus(sim.url, retries=0, timeout=0.5) as bus:                  # or a wider window
+            assert bus.echo(1).rtt >= 0.3
+        with Bus(sim.url, retries=0) as bus:                               # the default window: 150 ms
+            with pytest.raises(NoReply) as e:
+                bus.echo(1)
+            assert e.value.window == pytest.approx(0.15)

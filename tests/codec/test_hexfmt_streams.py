@@ -140,3 +140,26 @@ def test_a_long_line_with_bad_hex_names_its_line(monkeypatch):
     monkeypatch.setattr(hexfmt, "PIECE", 8)
     with pytest.raises(HexError, match="line 2"):
         list(iter_hex_stream(io.StringIO("ff\n" + "ff" * 20 + "zz" + "ff" * 20 + "\n")))
+
+
+def test_a_stream_that_has_given_bytes_skips_and_counts_its_damaged_lines():
+    text = "FF 14 64 D3\n# ok\nxx yy\nF1 00 00 00 00 4C A0\n0\n" + "Z" * (3 * hexfmt.PIECE) + "\nFF 1D F4 70\n"
+    skipped = hexfmt.HexSkips()
+    got = b"".join(iter_hex_stream(io.StringIO(text), skipped=skipped))
+    assert got == bytes.fromhex("FF1464D3 F1000000004CA0 FF1DF470")
+    assert skipped.lines == 3 and skipped.note() == "3 lines that are not hex skipped (the first: 'xx' is not hex (line 3))"
+    with pytest.raises(HexError, match=r"'xx' is not hex \(line 3\)"):      # without a tally: an error, as before
+        b"".join(iter_hex_stream(io.StringIO(text)))
+    with pytest.raises(HexError, match=r"'xx' is not hex \(line 1\)"):      # a stream that starts so is refused
+        b"".join(iter_hex_stream(io.StringIO("xx\nFF 14\n"), skipped=hexfmt.HexSkips()))
+
+
+@pytest.mark.parametrize("cmd", ["zk", "zap"])
+def test_decode_of_a_damaged_hex_stream_gives_the_whole_lines_and_a_note(sh, cmd):
+    frame = "F1 00 00 00 00 4C A0" if cmd == "zk" else "FF FF FF 00 04 00 FF 07 F5"
+    data = (f"{frame}\n".encode() + b"\xff\xfe garbage\n" + b"zz\n" + f"{frame}\n".encode())
+    r = sh(cmd, "decode", "-f", "jsonl", input=data)
+    assert r.exit_code == 0 and len(r.stdout.splitlines()) == 2, r
+    assert b"note: stdin: 2 lines that are not hex skipped (the first: binary input (line 2))" in r.stderr
+    r = sh(cmd, "decode", "-f", "jsonl", input=b"\xff\xfe\n" + data)
+    assert (r.exit_code, r.stdout) == (2, b"") and b"stdin: binary input (line 1): use --binary" in r.stderr

@@ -28,7 +28,8 @@ class Bad:
 
 
 CRC = [
-    Bad("crc zk", "hex input: no bytes given", input=""),
+    Bad("crc zk", "stdin: no bytes given", input=""),
+    Bad("crc zk -", "stdin: no bytes given", input="# only a comment\n"),
     Bad("crc zk 1", "hex input: '1' has an odd number of hex digits"),
     Bad("crc zk 14 6", "hex input: '6' has an odd number of hex digits"),
     Bad("crc zk XY", "hex input: 'XY' is not hex"),
@@ -111,6 +112,9 @@ ZK_DECODE = [
     Bad("zk decode F", "hex input: 'F' has an odd number of hex digits"),
     Bad(["zk", "decode", ""], "hex input: no bytes given"),
     Bad("zk decode", "stdin: 'nothex' is not hex (line 1)", input="nothex\nFF 1D F4 70\n"),
+    # refused before the output opens: no CSV header, no JSON array on stdout
+    Bad("zk decode -f csv", "stdin: 'nothex' is not hex (line 1)", input="nothex\n"),
+    Bad("zk decode - -f json", "stdin: 'nothex' is not hex (line 1)", input="nothex\n"),
     Bad("zk decode FF 1D F4", "ZK frame: 3 bytes; a control frame has 4, a status frame 7"),
     Bad("zk decode 12 34 56 78 90", "ZK frame: 5 bytes"),
     Bad("zk decode FF 1D F4 71", "control frame: CRC mismatch: expected 70, found 71", code=1),
@@ -182,6 +186,7 @@ ZAP_DECODE = [
     Bad("zap decode XYZ", "hex input: 'XYZ' is not hex"),
     Bad("zap decode FFF", "hex input: 'FFF' has an odd number of hex digits"),
     Bad(["zap", "decode", ""], "hex input: no bytes given"),
+    Bad("zap decode -f csv", "stdin: 'nothex' is not hex (line 1)", input="nothex\n"),
     Bad("zap decode FF FF FF 00 02 F1 0D", "mightyZAP packet: checksum mismatch: expected 0C, found 0D", code=1),
     Bad("zap decode FF FF FF 00 05 F1 0D", "mightyZAP packet: SIZE 5 says 10 bytes, got 7"),
     Bad("zap decode FF FF FF 00", "mightyZAP packet: 4 bytes starting FF FF FF"),

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from zkzap.codec import zap, zk
+from zkzap.codec.framing import ZapFramer
 from zkzap.link.pcapng import INBOUND, OUTBOUND, Reader, Writer
 
 
@@ -64,9 +65,10 @@ def test_a_dry_run_writes_no_capture_and_a_port_gets_an_interface(cli, tmp_path)
     rd = Reader(str(cap), "zap")
     pkts = list(rd)
     assert rd.interfaces == [("zap", "sim://zap?ids=3&baud=57600", 1_000_000)]
-    replies = [p.data for p in pkts if p.direction == INBOUND]
+    replies = ZapFramer().feed(b"".join(p.data for p in pkts if p.direction == INBOUND))
+    requests = ZapFramer().feed(b"".join(p.data for p in pkts if p.direction != INBOUND))
     assert replies and all(d[3] == 3 for d in replies)
-    assert len(pkts) == 2 * len(replies)
+    assert len(requests) == len(replies)
 
 
 def test_capture_that_cannot_be_opened_is_a_usage_error(cli, tmp_path):
@@ -115,6 +117,73 @@ def test_a_truncated_capture_decodes_to_its_last_whole_block_and_says_so(cli, tm
     assert r.exit_code == 0
     assert len(jsonl(r.stdout)) == 4
     assert f"{cap}: the capture is truncated: decoded up to its last whole block (4 chunks)" in r.stderr
+
+
+def _lying(path, protocol, frames, length, dirs=None):
+    """A capture of ``frames`` whose third packet block claims ``length`` bytes (0: its body is
+    cut to two of its five fields, consistently framed)."""
+    import struct
+
+    dirs = dirs or [INBOUND] * len(frames)
+    _synthetic(path, protocol, [(1.0 + i, f, d) for i, (f, d) in enumerate(zip(frames, dirs))])
+    raw = bytearray(path.read_bytes())
+    off, n = 0, []
+    while off < len(raw):
+        btype, blen = struct.unpack("<II", raw[off:off + 8])
+        if btype == 6:
+            n.append((off, blen))
+        off += blen
+    off, blen = n[2]
+    if length:
+        raw[off + 4:off + 8] = struct.pack("<I", length)
+    else:
+        raw[off:off + blen] = struct.pack("<II", 6, 20) + bytes(8) + struct.pack("<I", 20)
+    path.write_bytes(bytes(raw))
+
+
+def _limited(limit):
+    """A subprocess's address space at most ``limit`` bytes (a 4 GiB allocation fails)."""
+    def pre():
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    return pre
+
+
+@pytest.mark.parametrize("length,said", [(0, "1 malformed block skipped (the first at byte"),
+                                         (0xFFFFFFFF, "damaged at byte"), (0xFFFFFFF0, "damaged at byte")])
+@pytest.mark.parametrize("cmd", [("zk", "decode"), ("zap", "decode"), ("zk", "monitor", "--fast", "--replay")])
+def test_a_capture_that_lies_about_a_block_decodes_the_rest_in_bounded_memory(tmp_path, cmd, length, said):
+    import subprocess
+    import sys
+
+    cap = tmp_path / "lie.pcapng"
+    if cmd[0] == "zap":
+        frames = [zap.packet(1, 0, bytes([i])) for i in range(6)]
+    else:
+        frames = [zk.encode_status(1, 6, rpm=10 * i) for i in range(6)]
+    _lying(cap, cmd[0], frames, length)
+    code = "import sys; from zkzap.commands import run, root; sys.exit(run(root, 'zkzap', sys.argv[1:]))"
+    p = subprocess.run([sys.executable, "-c", code, *cmd, str(cap), "-f", "jsonl"], capture_output=True, text=True,
+                       timeout=60, preexec_fn=_limited(1 << 30), env={**__import__("os").environ, "NO_COLOR": "1"})
+    assert p.returncode == 0, p.stderr
+    assert "Traceback" not in p.stderr and said in p.stderr
+    assert len(jsonl(p.stdout)) == (5 if length == 0 else 2)
+
+
+def test_a_replay_simulator_plays_what_is_whole_of_a_lying_capture(tmp_path):
+    from zkzap.sim.replay import ZkReplay, recorded_replies
+
+    cap = tmp_path / "zk.pcapng"
+    _lying(cap, "zk", [zk.encode_status(1, 6, rpm=10 * i) for i in range(6)], 0)
+    sent = ZkReplay(str(cap)).poll(1e9)
+    assert sent == b"".join(zk.encode_status(1, 6, rpm=10 * i) for i in range(6) if i != 2)
+    cap = tmp_path / "zap.pcapng"
+    req = zap.packet(1, 0xF1, b"")
+    _lying(cap, "zap", [req, zap.packet(1, 0, b""), req, zap.packet(1, 0x20, b""), req, zap.packet(1, 1, b"")],
+           0xFFFFFFFF, [OUTBOUND, INBOUND] * 3)
+    table, ids = recorded_replies(str(cap))
+    assert table == {req: [(zap.packet(1, 0, b""), 1.0)]} and ids == {1}      # read up to the damage
 
 
 @pytest.mark.parametrize("cmd", [("zk", "decode"), ("zap", "decode"), ("zk", "monitor", "--fast", "--replay")])

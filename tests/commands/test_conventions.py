@@ -150,3 +150,14 @@ def test_help_documents_every_exit_code(prog):
     epilog = text[text.index("Exit status:"):]
     for code, meaning in EXIT_CODES:
         assert f"{code} {meaning}" in " ".join(epilog.split())
+
+
+def test_an_error_quoting_an_input_is_one_line_without_its_control_characters(cli, tmp_path):
+    batch = tmp_path / "b.txt"
+    batch.write_bytes(b"echo --id 1\n" + b"frob\x1b[2J\x07" + b"x" * 3000 + b"\n")
+    r = cli("zap", "batch", str(batch), "-p", "/nonexistent/port")
+    assert r.exit_code == 2 and r.stdout == ""
+    line = r.stderr
+    assert line.count("\n") == 1 and len(line.splitlines()) == 1, repr(line)
+    assert "\x1b" not in line and "\x07" not in line and "frob\\x1b[2J\\x07xxx" in line
+    assert f"{batch}:2:" in line and " [...] " in line and len(line) < 1100

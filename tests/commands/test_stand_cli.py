@@ -128,6 +128,34 @@ def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
     assert jsonl(r.stdout)[0]["runs"] == 2
 
 
+@pytest.mark.parametrize("damage,msg", [
+    ("UPDATE runs SET errors = '{' WHERE id = 1", "run 1: errors: not a JSON list"),
+    ("UPDATE runs SET files = '7' WHERE id = 1", "run 1: files: not a JSON list"),
+    ("UPDATE runs SET running_s = 'abc' WHERE id = 1", "run 1: running_s: 'abc' is not a number"),
+    ("UPDATE runs SET max_rpm = x'00ff' WHERE id = 1", "run 1: max_rpm: b'\\x00\\xff' is not a number"),
+    (None, "database disk image is malformed"),
+])
+def test_a_damaged_logbook_is_one_line_naming_the_run(cli, tmp_path, damage, msg):
+    import sqlite3
+
+    book = tmp_path / "engine.db"
+    for _ in range(2):
+        assert cli("zk", "monitor", "-p", SIM, "--count", "3", "-f", "jsonl", "--logbook", str(book)).exit_code == 0
+    if damage:
+        with sqlite3.connect(book) as db:
+            db.execute(damage)
+        db.close()
+    else:
+        with sqlite3.connect(book) as db:
+            db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        db.close()
+        data = book.read_bytes()
+        book.write_bytes(data[:len(data) // 2 + 100])
+    r = cli("zk", "logbook", str(book))
+    assert (r.exit_code, r.stdout) == (2, ""), r
+    assert f"logbook: {book}: {msg}" in r.stderr and "Traceback" not in r.stderr
+
+
 # --- bad input: exit 2, nothing sent, nothing on stdout, no file touched ------------------------
 
 @pytest.mark.parametrize("args,msg", [

@@ -133,3 +133,37 @@ def test_a_full_disk_while_controlling_the_engine_sends_the_abort(where):
     assert code == 7, err
     assert "note: output failed: sent standby, throttle 0" in err
     assert "cannot write /dev/full: No space left on device" in err and "Traceback" not in err
+
+
+@pytest.fixture
+def locked_pty():
+    """A pty whose device another open file holds with an exclusive lock (as a running zkzap does)."""
+    import fcntl
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    path = os.ttyname(slave)
+    held = os.open(path, os.O_RDWR | os.O_NOCTTY)
+    fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    yield path
+    for fd in (held, slave, master):
+        os.close(fd)
+
+
+def test_a_port_in_use_says_so_and_by_whom(locked_pty):
+    import os
+
+    code, err = _run(["zk", "monitor", "-p", locked_pty, "--count", "1"])
+    assert code == 4, err
+    line = _one_line(err)
+    assert f"port {locked_pty}: in use by another program: " in line and f"(PID {os.getpid()})" in line, line
+    assert "Resource temporarily unavailable" not in line and "; stop it, or use another port" in line
+
+
+def test_a_port_in_use_by_an_unseen_program_says_how_to_find_it(cli, locked_pty, monkeypatch):
+    monkeypatch.setattr("zkzap.link.port.holders", lambda device: [])
+    r = cli("zap", "echo", "-p", locked_pty)
+    assert r.exit_code == 4, r
+    assert r.stderr.strip() == (f"zkzap: error: port {locked_pty}: in use by another program; 'fuser -v {locked_pty}' "
+                                "names it (as root for another user's programs)")

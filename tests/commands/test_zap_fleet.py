@@ -148,7 +148,7 @@ def _bad_file(tmp, text, name="bad.json"):
      "bad.toml: actuators.1.stored.speed-limit: -1 is out of range"),
     ('format: "zkzap-fleet/1"\nactuators:\n  "1":\n    stored:\n      acceleration: 300\n', "bad.yaml",
      "bad.yaml: actuators.1.stored.acceleration: 300 is out of range"),
-    ("{not json", "bad.json", "bad.json: not valid JSON"),
+    ("{not json", "bad.json", "bad.json:1: not valid JSON"),
 ])
 def test_bad_files_are_refused_before_any_write(cli, buses, content, name, message):
     _, b, tmp = buses
@@ -166,11 +166,11 @@ def test_another_model_is_refused_unless_forced(cli, buses):
     f = tmp / "fleet.json"
     cli("zap", "backup", "--ids", "1", "-p", a, "-o", str(f))
     doc = json.loads(f.read_text())
-    doc["actuators"]["1"]["model"] = 0xA112
+    doc["actuators"]["1"]["model"] = 0x0C4C
     f.write_text(json.dumps(doc))
     before = (tmp / "b.json").read_bytes()
     r = cli("zap", "apply", str(f), "-p", b)
-    assert (r.exit_code, r.stdout) == (2, "") and "model 0x0C4C, the file's 0xA112" in r.stderr
+    assert (r.exit_code, r.stdout) == (2, "") and "model 0xA112, the file's 0x0C4C" in r.stderr
     assert (tmp / "b.json").read_bytes() == before
     r = cli("zap", "apply", str(f), "--force", "-p", b)
     assert r.exit_code == 0 and "warning:" in r.stderr and len(jsonl(r.stdout)) == 2
@@ -352,7 +352,7 @@ def test_apply_through_line_faults(cli, buses):
     assert [x["status"] for x in jsonl(r.stdout)] == ["verified"] * 5
     # a reply that stays corrupted after the retries: exit 6 before any write
     r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
-    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: corrupted reply" in r.stderr
+    assert (r.exit_code, r.stdout) == (6, "") and "ID 3: garbled reply" in r.stderr
 
 
 # -- summaries that say what they left out ------------------------------------------------------
@@ -388,3 +388,35 @@ def test_setup_no_wait_has_its_own_status_for_more_to_do(cli, tmp_path):
     assert r.exit_code == 0 and "every ID of 1-3 is done" in r.stderr
     r = cli(*args, "-p", make_bus(tmp_path / "empty.json", ids="9"), "--redo", "2", "--find-ids", "0")
     assert r.exit_code == 1 and "no actuator answers" in r.stderr  # a failure is not "more to do"
+
+
+def test_backup_and_diff_find_what_scan_finds_at_every_baud(cli, tmp_path):
+    bus = "sim://zap?ids=1,2@115200"
+    out = tmp_path / "fleet.json"
+    r = cli("zap", "backup", "--scan", "--ids", "0-9", "-b", "57600,115200", "-p", bus, "-o", str(out))
+    assert r.exit_code == 0, r
+    doc = json.loads(out.read_text())
+    assert {k: v["baud"] for k, v in doc["actuators"].items()} == {"1": 57600, "2": 115200}
+    r = cli("zap", "backup", "-p", bus)                              # 57600 only, as scan
+    assert r.exit_code == 0 and sorted(json.loads(r.stdout)["actuators"]) == ["1"]
+    r = cli("zap", "backup", "--scan", "--ids", "0-3", "-b", "all", "-p", bus)      # -b all, as scan
+    assert r.exit_code == 0 and sorted(json.loads(r.stdout)["actuators"]) == ["1", "2"]
+    r = cli("zap", "diff", str(out), "bus", "--ids", "1,2", "-b", "57600,115200", "-p", bus)
+    assert (r.exit_code, r.stdout) == (0, ""), r
+
+
+@pytest.mark.parametrize("args", [["backup", "-o", "{tmp}/x.json"], ["diff", "{tmp}/f.json", "bus"]],
+                         ids=["backup", "diff"])
+def test_a_bus_where_two_actuators_share_an_id_is_refused(cli, tmp_path, args):
+    (tmp_path / "f.json").write_text(cli("zap", "backup", "--ids", "1", "--sim").stdout)
+    r = cli("zap", *[a.format(tmp=tmp_path) for a in args], "-p", "sim://zap?ids=1,4,4")
+    assert (r.exit_code, r.stdout) == (1, "")
+    assert "ID 4 at 57600 baud: two actuators answer to this ID" in r.stderr and "set-id" in r.stderr
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_watch_names_the_collision_of_two_actuators_with_one_id(cli):
+    r = cli("zap", "watch", "present-position", "--ids", "1,4", "--count", "1", "-p", "sim://zap?ids=1,4,4")
+    assert r.exit_code == 6 and "every reply was garbled" in r.stderr and "collision" in r.stderr
+    rows = jsonl(r.stdout)
+    assert [(x["id"], x["status"]) for x in rows] == [(1, "ok"), (4, "bad-reply")]

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from zkzap.sim.zap_actuators import MODEL_NUMBER
+from zkzap.sim.zap_actuators import FIRMWARE_VERSION, MODEL_NUMBER
 
 
 def url(ids="1,2", **opts):
@@ -42,7 +42,7 @@ def test_load_records(cli):
 def test_load_several_registers(cli):
     r = cli("zap", "load", "model-number", "--length", "4", "--id", "1", "-p", url())
     assert r.exit_code == 0, r
-    assert r.stdout.splitlines() == [f"model-number={MODEL_NUMBER}", "firmware-version=20", "id=1"]
+    assert r.stdout.splitlines() == [f"model-number={MODEL_NUMBER}", "firmware-version=21", "id=1"]
     r = cli("zap", "load", "model-number", "--length", "4", "--id", "1", "-p", url(), "-f", "jsonl")
     assert [rec["register"] for rec in jsonl(r.stdout)] == ["model-number", "firmware-version", "id"]
 
@@ -90,7 +90,7 @@ def test_overload_exit_5_after_the_value(cli):
 def test_corrupted_reply_exit_6(cli):
     r = cli("zap", "echo", "--id", "2", "-p", url(faults="2:corrupt"))
     assert r.exit_code == 6
-    assert "corrupted reply (checksum mismatch) after 3 tries" in r.stderr
+    assert "garbled reply (checksum mismatch: a collision, two actuators answering at once, or a line fault) after 3 tries" in r.stderr
     r = cli("zap", "echo", "--id", "2", "--retries", "0", "-p", url(faults="2:corrupt/1"))
     assert r.exit_code == 6 and "after 1 try" in r.stderr
     r = cli("zap", "echo", "--id", "2", "-p", url(faults="2:corrupt/1"))
@@ -159,7 +159,7 @@ def test_stored_value_survives_in_a_state_file(cli, tmp_path):
 def test_raw_prints_the_reply(cli):
     r = cli("zap", "raw", "load", "00", "03", "--id", "1", "-p", url())
     assert r.exit_code == 0
-    assert r.stdout == "FF FF FF 01 05 00 4C 0C 14 8D\n"
+    assert r.stdout == "FF FF FF 01 05 00 12 A1 15 31\n"
     r = cli("zap", "raw", "0x99", "--id", "1", "-p", url())               # undocumented: a deliberate act
     assert r.exit_code == 2 and "needs permission UNDOCUMENTED" in r.stderr and "pass --force" in r.stderr
     r = cli("zap", "raw", "0x99", "--id", "1", "-p", url(), "--force")    # unknown: no reply, no error
@@ -199,7 +199,7 @@ def test_scan_finds_every_actuator(cli):
     assert r.exit_code == 0, r
     recs = jsonl(r.stdout)
     assert [(x["id"], x["baud"], x["model"], x["firmware"], x["return_mode"], x["status"]) for x in recs] == \
-        [(i, 57600, MODEL_NUMBER, 20, 1, "ok") for i in (1, 2, 7)]
+        [(i, 57600, MODEL_NUMBER, FIRMWARE_VERSION, 1, "ok") for i in (1, 2, 7)]
 
 
 def test_scan_over_bauds_errors_and_formats(cli):

@@ -34,7 +34,8 @@ def executable(name: str) -> str:
 
 def clean_env(**extra) -> dict:
     env = dict(os.environ, NO_COLOR="1", **extra)
-    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD", "ZKZAP_ZAP_RETURN_MODE"):
+    for var in ("ZKZAP_ZK_PORT", "ZKZAP_ZAP_PORT", "ZKZAP_ZK_BAUD", "ZKZAP_ZAP_BAUD", "ZKZAP_ZAP_RETURN_MODE",
+                "ZKZAP_ZAP_LATENCY"):
         env.pop(var, None)
     return env
 

@@ -199,6 +199,12 @@ def test_live_summary_on_a_terminal_and_records_in_the_pipe(tmp_path):
                           "--stats"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave,
                          env=clean_env(TERM="xterm", COLUMNS="100"))
     os.close(slave)
+    # stdout is read while the terminal is: a pipe that nobody reads fills up and holds the sniffer
+    import threading
+
+    got = []
+    reader = threading.Thread(target=lambda: got.append(p.stdout.read()), daemon=True)
+    reader.start()
     shown = b""
     while True:
         try:
@@ -208,7 +214,9 @@ def test_live_summary_on_a_terminal_and_records_in_the_pipe(tmp_path):
         if not chunk:
             break
         shown += chunk
-    out, _ = p.communicate(timeout=15)
+    p.wait(timeout=15)
+    reader.join(15)
+    out = got[0] if got else b""
     os.close(master)
     assert p.returncode == 0
     recs = [json.loads(x) for x in out.decode().splitlines()]

@@ -71,7 +71,7 @@ def test_corrupted_reply_exit_6_after_retries(start_sim, sh):
     url, _ = start_sim(["zap", "--ids", "2", "--listen", "127.0.0.1:0", "--fault", "2:corrupt", *FAST])
     r = sh("zap", "echo", "--id", "2", "-p", url)
     assert r.exit_code == 6
-    assert "corrupted reply (checksum mismatch) after 3 tries" in r.stderr
+    assert "garbled reply (checksum mismatch: a collision, two actuators answering at once, or a line fault) after 3 tries" in r.stderr
 
 
 def test_echoing_adapter(start_sim, sh):

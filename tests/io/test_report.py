@@ -211,3 +211,17 @@ def test_a_run_on_stdin(sh, run, tmp_path):
     assert r.exit_code == 0 and out.read_bytes()[:4] == b"\x89PNG", r
     r = sh("zk", "report", "-", "--terminal", input="not a run\n")
     assert r.exit_code == 2 and "run: stdin: expected the CSV" in r.stderr
+
+
+def test_runs_aligned_at_start_keep_their_session_time_and_first_at_their_first_record():
+    from zkzap.io import report as R
+
+    early, late = R.Run("early"), R.Run("late")
+    for t in (0.5, 1.0, 1.5):
+        early.add({"t": t, "rpm": 1000})
+    for t in (4.0, 4.5):
+        late.add({"t": t, "rpm": 1000})
+    R.align([early, late], "start")
+    assert (early.offset, late.offset) == (0.0, 0.0)
+    R.align([early, late], "first")
+    assert (early.offset, late.offset) == (0.5, 4.0)

@@ -42,6 +42,16 @@ def test_monitor_workbook_and_a_failed_start_leaves_the_old_file(cli, tmp_path):
     assert r.exit_code == 0, r
     wb = openpyxl.load_workbook(book)
     assert wb["records"].max_row == 2 + 12 and wb["summary"]["A2"].value == "command"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.xlsx"]       # the journal is gone
     before = book.read_bytes()
     r = cli("zk", "monitor", "-p", "sim://zk?silent_after=0", "--timeout", "0.1", "-o", str(book))
     assert r.exit_code == 3 and book.read_bytes() == before
+
+
+def test_a_killed_runs_journal_is_never_overwritten(cli, tmp_path):
+    book = tmp_path / "m.xlsx"
+    journal = tmp_path / "m.xlsx.partial.csv"
+    journal.write_text("time,t\n")                   # what a run killed with SIGKILL leaves
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=20", "--count", "3", "-o", str(book))
+    assert r.exit_code == 2 and "m.xlsx.partial.csv holds the rows of a run killed" in r.stderr
+    assert journal.read_text() == "time,t\n" and not book.exists() and r.stdout == ""

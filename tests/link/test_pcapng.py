@@ -116,3 +116,93 @@ def test_a_failed_write_leaves_whole_blocks_and_raises_output_error(tmp_path, mo
     w.close()
     r = Reader(str(p))
     assert [k.data for k in r] == [b"\xf1" * 7] and not r.truncated
+
+
+# --- captures that lie about their blocks -------------------------------------------------------
+
+def _blocks(raw):
+    """[(offset, type, length)] of a little-endian capture written by Writer."""
+    out, off = [], 0
+    while off < len(raw):
+        btype, length = struct.unpack("<II", raw[off:off + 8])
+        out.append((off, btype, length))
+        off += length
+    return out
+
+
+def _packet_block(body_len_fields):
+    body = struct.pack("<I", 0) * body_len_fields
+    n = 12 + len(body)
+    return struct.pack("<II", pcapng.EPB, n) + body + struct.pack("<I", n)
+
+
+def _lie(raw, how):
+    """``raw`` with its third packet block made to lie as ``how`` says."""
+    off, _, length = [b for b in _blocks(raw) if b[1] == pcapng.EPB][2]
+    b = bytearray(raw)
+    if how == "short body":                  # a packet block shorter than its five fields
+        b[off:off + length] = _packet_block(2)
+    elif how == "caplen beyond the body":
+        b[off + 20:off + 24] = struct.pack("<I", 1000)
+    elif how == "undescribed interface":
+        b[off + 8:off + 12] = struct.pack("<I", 7)
+    elif how == "time after 9999":
+        b[off + 12:off + 20] = b"\xff" * 8
+    elif how == "length 0xFFFFFFFF":
+        b[off + 4:off + 8] = b"\xff" * 4
+    elif how == "length 8":
+        b[off + 4:off + 8] = struct.pack("<I", 8)
+    elif how == "closing length differs":
+        b[off + length - 4:off + length] = struct.pack("<I", length + 4)
+    elif how == "length beyond the file":
+        b[off + 4:off + 8] = struct.pack("<I", len(raw) * 4)
+    return bytes(b)
+
+
+#: how -> (packets read of the 10, what problems() says)
+LIES = {
+    "short body": (9, r"1 malformed block skipped \(the first at byte \d+: a packet block of 20 bytes"),
+    "caplen beyond the body": (9, r"1 malformed block skipped .*a packet of 1000 bytes in a block of"),
+    "undescribed interface": (9, r"1 malformed block skipped .*interface 7, which was never described"),
+    "time after 9999": (9, r"1 malformed block skipped .*after the year 9999"),
+    "length 0xFFFFFFFF": (2, r"damaged at byte \d+ \(a block of length 4294967295 \(at most 16777216 bytes\)\): "
+                             r"decoded up to there \(2 chunks\)"),
+    "length 8": (2, r"damaged at byte \d+ \(a block of length 8 \(at least 12"),
+    "closing length differs": (2, r"damaged at byte \d+ \(a block whose closing length \d+ differs"),
+    "length beyond the file": (2, r"the capture is truncated: decoded up to its last whole block \(2 chunks\)"),
+}
+
+
+@pytest.mark.parametrize("how", list(LIES))
+def test_a_capture_that_lies_about_a_block_gives_what_is_whole_and_says_what_is_not(tmp_path, how):
+    p = tmp_path / "c.pcapng"
+    write(p, [(1.0 + i, bytes([i]) * 7, INBOUND) for i in range(10)])
+    p.write_bytes(_lie(p.read_bytes(), how))
+    count, said = LIES[how]
+    r = Reader(str(p))
+    got = list(r)
+    assert len(got) == r.packets == count
+    assert [k.data[0] for k in got] == [i for i in range(10) if i != 2][:count]
+    assert len(r.problems()) == 1
+    assert pytest.importorskip("re").search(said, r.problems()[0]), r.problems()
+
+
+def test_a_later_interface_of_another_link_type_is_skipped_and_counted(tmp_path):
+    p = tmp_path / "c.pcapng"
+    w = Writer(str(p))
+    zk_if = w.interface("zk", "/dev/ttyUSB0")
+    w.packet(zk_if, 1.0, b"\x01", INBOUND)
+    w.close()
+    raw = p.read_bytes() + pcapng.interface_block(1, "eth0", "") + pcapng.packet_block(1, 2, b"\x02") \
+        + pcapng.packet_block(0, 3, b"\x03", INBOUND)
+    p.write_bytes(raw)
+    r = Reader(str(p), "zk")
+    assert [k.data for k in r] == [b"\x01", b"\x03"] and r.foreign == 1
+    assert r.problems() == ["1 chunk of interfaces of another link type skipped"]
+
+
+def test_a_broken_section_header_is_not_a_capture(tmp_path):
+    p = tmp_path / "c.pcapng"
+    p.write_bytes(pcapng.MAGIC + b"\xff\xff\xff\xff" + struct.pack("<I", 0x1A2B3C4D) + bytes(16))
+    with pytest.raises(CaptureError, match=r"not a pcapng capture: a block of length 4294967295 .* at byte 0"):
+        list(Reader(str(p)))

@@ -8,7 +8,7 @@ from zkzap.codec import zap
 from zkzap.codec.permissions import Permission
 from zkzap.errors import BadReply, DeviceError, NoReply, PortError, UsageError
 from zkzap.link.port import open_port, sim_url
-from zkzap.link.zap_bus import (MARGIN, MAX_TURNAROUND, NETWORK_MARGIN, ZapBus, host_margin, is_simulated,
+from zkzap.link.zap_bus import (LATE_WINDOW, MARGIN, NETWORK_MARGIN, ZapBus, host_margin, is_simulated,
                                 leaves_protocol, open_bus, stored_writes, wire_time)
 
 
@@ -24,17 +24,19 @@ def bus():
     b.close()
 
 
-def test_timeout_is_derived_from_the_baud_rate():
+def test_the_wait_is_the_late_window_plus_the_wire():
     b = make()
     assert wire_time(10, 57600) == pytest.approx(10 * 10 / 57600)
     assert b.margin == MARGIN
     t57 = b.reply_timeout(7, 7)
-    assert t57 == pytest.approx(14 * 10 / 57600 + MAX_TURNAROUND + MARGIN)
+    assert t57 == pytest.approx(14 * 10 / 57600 + LATE_WINDOW + MARGIN)
     b.set_baud(115200)
-    assert b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + MAX_TURNAROUND + MARGIN)
+    assert b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + LATE_WINDOW + MARGIN)
     assert b.reply_timeout(7, 7) < t57
-    b.timeout = 0.5
-    assert b.reply_timeout(7, 7) == 0.5
+    b.timeout = 0.5                                              # --timeout: the window
+    assert b.window == 0.5 and b.reply_timeout(7, 7) == pytest.approx(14 * 10 / 115200 + 0.5 + MARGIN)
+    b.timeout, b.latency = None, 0.3                             # --latency: the window it needs
+    assert b.window == pytest.approx(0.3 * 1.25 + MARGIN)
 
 
 def test_margin_by_port_kind():
@@ -51,7 +53,7 @@ def test_echo_load_and_blocks(bus):
     assert 0 < r.rtt < 0.05
     assert bus.read(2, "present-voltage") == 120
     reply, values = bus.read_registers(1, 0x00, 5)
-    assert [(reg.name, v) for reg, v in values][:4] == [("model-number", 0x0C4C), ("firmware-version", 20),
+    assert [(reg.name, v) for reg, v in values][:4] == [("model-number", 0xA112), ("firmware-version", 21),
                                                        ("id", 1), ("baud-rate", 32)]
 
 
@@ -98,7 +100,7 @@ def test_error_bits_raise_device_error_with_the_reply(bus):
 
 
 @pytest.mark.parametrize("kind,code,needle", [
-    ("corrupt", 6, "corrupted reply (checksum mismatch) after 3 tries"),
+    ("corrupt", 6, "garbled reply (checksum mismatch: a collision, two actuators answering at once, or a line fault) after 3 tries"),
     ("truncate", 6, "truncated reply"),
     ("wrong-id", 6, "reply from ID 3, expected ID 2"),
     ("silent", 3, "no reply from ID 2 at 57600 baud"),

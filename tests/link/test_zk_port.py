@@ -58,3 +58,45 @@ def test_a_failed_port_is_port_error_naming_it():
 def test_only_sim_urls_are_the_simulator():
     assert is_simulator("sim://zk?speed=10")
     assert not is_simulator("/dev/ttyUSB0") and not is_simulator("socket://localhost:7000")
+
+
+class Vanished(Broken):
+    """An unplugged USB adapter under pyserial: tcdrain in flush() raises termios.error, which
+    prints as a tuple, and reads see pyserial's own words for a device that went away."""
+
+    def read(self, n=1):
+        raise serial.SerialException("device reports readiness to read but returned no data (device "
+                                     "disconnected or multiple access on port?)")
+
+    def write(self, data):
+        return len(data)
+
+    def flush(self):
+        import termios
+
+        raise termios.error(5, "Input/output error")
+
+
+def test_a_vanished_port_is_one_plain_line_without_a_python_tuple():
+    link = ZkLink(Vanished(), "/dev/ttyUSB7")
+    with pytest.raises(PortError) as e:
+        link.write(b"\xff\x00\x00\x00")
+    assert str(e.value) == "port /dev/ttyUSB7 failed: Input/output error"
+    with pytest.raises(PortError) as e:
+        link.read()
+    assert str(e.value) == ("port /dev/ttyUSB7 failed: the device went away (it reports data to read but returns "
+                            "none: unplugged, or another program reads it)")
+
+
+@pytest.mark.parametrize("error,said", [
+    (OSError(5, "Input/output error"), "Input/output error"),
+    (serial.SerialException("Could not configure port: (25, 'Inappropriate ioctl for device')"),
+     "Could not configure port: Inappropriate ioctl for device"),
+    (serial.SerialException("could not open port 'COM3': PermissionError(13, 'Access is denied.', None, 5)"),
+     "could not open port 'COM3': Access is denied."),
+    (serial.SerialException("write failed: [Errno 5] Input/output error"), "write failed: Input/output error"),
+])
+def test_reasons_are_the_os_words(error, said):
+    from zkzap.link.port import reason
+
+    assert reason(error) == said

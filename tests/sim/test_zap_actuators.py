@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from zkzap.codec import zap
 from zkzap.codec.framing import ZapFramer
 from zkzap.sim import make_device
-from zkzap.sim.zap_actuators import (BOOT_TIME, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
+from zkzap.sim.zap_actuators import (BOOT_TIME, FIRMWARE_VERSION, FULL_SPEED, MODEL_NUMBER, NV_WRITE_TIME, TURNAROUND, ActuatorBus,
                                from_options, parse_fault, parse_ids)
 
 
@@ -63,10 +63,14 @@ def test_echo_reply_is_the_documented_feedback():
 
 def test_reply_waits_for_the_request_turnaround_and_wire_time(bus):
     bus.receive(zap.echo(1), 1.0, 57600)
-    wire = 7 * 10 / 57600                                   # the request's and the reply's time on the line
+    byte = 10 / 57600
+    wire = 7 * byte                                         # the request's and the reply's time on the line
+    # the host's UART delivers the first byte once it has crossed, the rest with the last one
+    assert bus.poll(1.0 + wire + TURNAROUND + byte - 1e-4) == b""
+    assert bus.next_wakeup(1.0) == pytest.approx(1.0 + wire + TURNAROUND + byte)
+    assert bus.poll(1.0 + wire + TURNAROUND + byte + 1e-6) == b"\xff"
     assert bus.poll(1.0 + wire + TURNAROUND + wire - 1e-4) == b""
-    assert bus.next_wakeup(1.0) == pytest.approx(1.0 + wire + TURNAROUND + wire)
-    assert bus.poll(1.0 + wire + TURNAROUND + wire + 1e-6) == zap.packet(1, 0)
+    assert bus.poll(1.0 + wire + TURNAROUND + wire + 1e-6) == zap.packet(1, 0)[1:]
     assert bus.next_wakeup(2.0) is None
 
 
@@ -110,7 +114,7 @@ def test_defaults_follow_the_register_map(host):
 
 def test_load_reads_a_block_as_consecutive_registers(host):
     (reply,) = host.ask(zap.load(1, 0x00, 5))
-    assert reply[6:-1] == bytes([MODEL_NUMBER & 0xFF, MODEL_NUMBER >> 8, 20, 1, 32])
+    assert reply[6:-1] == bytes([MODEL_NUMBER & 0xFF, MODEL_NUMBER >> 8, FIRMWARE_VERSION, 1, 32])
 
 
 @pytest.mark.parametrize("mode,answered", [
@@ -441,3 +445,40 @@ def test_store_then_load_round_trips(reg, data):
         assert got == min(value, 3686)
     else:
         assert got == value
+
+
+def test_a_host_transmitting_while_an_actuator_replies_garbles_both():
+    """The line is half-duplex: the host's bytes meet the reply's on the wire (wired-AND)."""
+    bus = from_options(ids="1,2", turnaround="20", echo="1")
+    seen = []
+    bus.on_collision = seen.append
+    byte = 10 / 57600
+    bus.receive(zap.echo(1), 0.0, 57600)
+    reply_starts = 7 * byte + 0.020
+    bus.receive(zap.echo(2), reply_starts + 2 * byte, 57600)       # the host does not wait
+    out = bus.poll(1.0)
+    assert bus.collisions == seen == [{"t": pytest.approx(reply_starts + 2 * byte, abs=1e-6), "kind": "host",
+                                       "ids": [1]}]
+    packets = ZapFramer().feed(out)
+    assert zap.packet(1, 0) not in packets                          # ID 1's reply garbled
+    assert zap.echo(2) not in packets and zap.packet(2, 0) not in packets   # ID 2 heard no command
+    assert [p[3] for p in bus.received] == [1]
+
+
+def test_a_host_that_waits_for_the_reply_meets_nothing():
+    bus = from_options(ids="1,2", turnaround="20", gap="1", echo="1")
+    bus.receive(zap.echo(1), 0.0, 57600)
+    first = bus.poll(1.0)
+    bus.receive(zap.echo(2), 1.0, 57600)
+    second = bus.poll(2.0)
+    assert first == zap.echo(1) + zap.packet(1, 0) and second == zap.echo(2) + zap.packet(2, 0)
+    assert bus.collisions == []
+
+
+def test_replies_of_two_actuators_that_overlap_collide():
+    bus = from_options(ids="1,2", faults="1:delay=3")
+    bus.receive(zap.echo(1), 0.0, 57600)                            # answered 3 ms late ...
+    bus.receive(zap.echo(2), 7 * 10 / 57600 + 0.0015, 57600)        # ... just as ID 2 answers
+    out = bus.poll(1.0)
+    assert [c["kind"] for c in bus.collisions] == ["actuators"] and bus.collisions[0]["ids"] == [1, 2]
+    assert ZapFramer().feed(out) == []

@@ -171,3 +171,26 @@ def _end_while_running(ecu):
         assert "the console is shutting down: sent standby, throttle 0" in c.stderr()
     finally:
         c.close()
+
+
+def test_a_silent_ecu_is_shown_as_silent_and_never_started():
+    """The console serves until it is stopped, so the command tree's silent-device walk leaves
+    it out; here is its side of that promise: no frame is no telemetry, and no start."""
+    c = WebConsole("zk", "-p", "sim://zk?silent_after=0&speed=10")
+
+    async def scenario():
+        async with aiohttp.ClientSession() as s:
+            a = await open_page(s, c)
+            await wait(lambda: [h for h in a.seen("health") if "frames" in h], "the link's health")
+            health = [h for h in a.seen("health") if "frames" in h][-1]
+            assert health["frames"] == 0 and health["silent_s"] is None
+            r = await a.request("start", mode="throttle", throttle=20, grant=["engine"])
+            assert r["type"] == "error" and "no status frame from the ECU yet" in r["text"]
+            await a.ws.close()
+
+    try:
+        run(scenario())
+        assert c.stop(signal.SIGTERM) == 143
+        assert "stopped: no status frame from the ECU" in c.stderr()
+    finally:
+        c.close()

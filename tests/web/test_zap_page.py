@@ -64,7 +64,7 @@ def register(bus, ident, name):
 
 def test_the_first_scan_lists_the_actuators_and_a_new_scan_shows_progress(page, console):
     assert [r.get_attribute("id") for r in css(page, "#actuators tbody tr")] == ["act-1", "act-2", "act-3"]
-    assert "0x0C4C" in text_of(page, "#act-1") and "You control" in text_of(page, "#control")
+    assert "0xA112" in text_of(page, "#act-1") and "You control" in text_of(page, "#control")
     set_value(page, "#scan-ids", "0-20")
     click(page, "#scan")
     until(lambda: "probes" in text_of(page, "#scan-note"), "the scan's progress")

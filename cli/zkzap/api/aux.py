@@ -95,7 +95,10 @@ class LineParser:
             else:
                 self.shape = "csv"
                 self.sep = next((s for s in (";", "\t") if s in line), ",")
-                cells = next(csv.reader([line], delimiter=self.sep))
+                try:
+                    cells = next(csv.reader([line], delimiter=self.sep))
+                except csv.Error as e:           # a stray carriage return, a field beyond csv's limit
+                    raise UsageError(f"a first line that is not CSV ({line[:40]!r}): {e}") from None
                 if any(isinstance(_value(c), (int, float)) for c in cells):
                     raise UsageError(f"a first line of numbers ({line[:40]!r}); a CSV source starts with its "
                                      f"header (the field names)")
@@ -104,7 +107,7 @@ class LineParser:
         if self.shape == "json":
             try:
                 obj = json.loads(line)
-            except ValueError:
+            except (ValueError, RecursionError):       # not JSON, or nested beyond the parser's depth
                 return None
             if not isinstance(obj, dict):
                 return None
@@ -117,7 +120,10 @@ class LineParser:
                 if eq and k:
                     out[self._key(k)] = _value(v)
             return out or None
-        cells = next(csv.reader([line], delimiter=self.sep), [])
+        try:
+            cells = next(csv.reader([line], delimiter=self.sep), [])
+        except csv.Error:
+            return None                          # not a reading (a damaged line)
         if len(cells) != len(self.header):
             return None
         return {k: _value(v) for k, v in zip(self.header, cells)}

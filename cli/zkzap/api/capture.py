@@ -38,20 +38,24 @@ def zk_records(frames: CaptureFrames, decoder: zk.ZkDecoder, decode=None):
 
 
 class ZapPairing:
-    """Pairs mightyZAP feedback with the request it answers, for latencies: a command (not the
-    echo a half-duplex adapter returns) opens a request to its ID, the next feedback from that
-    ID closes it."""
+    """Pairs mightyZAP feedback with the request it answers, for latencies, under the bus's
+    timing policy (:class:`zkzap.link.zap_timing.Pairing`): a command (not the echo a
+    half-duplex adapter returns) opens a request to its ID, the next feedback from that ID
+    closes it, whatever was sent meanwhile. A capture does not say what window its host used,
+    so none is assumed: a reply later than the default window still gets its latency."""
 
     def __init__(self):
-        self.pending = {}
+        from ..link.zap_timing import Pairing
+
+        self.pairing = Pairing(window=float("inf"), margin=0.0)
 
     def command(self, ident, ts, direction):
         if direction != INBOUND and ident != zap.BROADCAST:
-            self.pending[ident] = ts
+            self.pairing.command(ident, ts)
 
     def feedback(self, ident, ts):
-        sent = self.pending.pop(ident, None)
-        return None if sent is None else round((ts - sent) * 1000.0, 3)
+        got = self.pairing.feedback(ident, ts)
+        return None if got is None else round(got[2] * 1000.0, 3)
 
 
 def zap_records(frames: CaptureFrames, decoder: zap.ZapDecoder | None = None, decode=None):
@@ -160,7 +164,7 @@ class CaptureReplaySource(PacedReplay):
 
     def close(self):
         self.frames.reader.close()
-        note = self.frames.truncation_note()
+        note, self._noted = (None if getattr(self, "_noted", False) else self.frames.reading_note()), True
         if note:
             import sys
 

@@ -14,12 +14,15 @@ table, :data:`zkzap.codec.zap.REGISTERS`): ``stored`` (NV: survives power-off), 
 
 Values are raw register values (the units of ``zap registers``). The same document is written
 as JSON, TOML or YAML, chosen by the file's suffix (:func:`dump_document`,
-:func:`read_document`); TOML and YAML are written by this module, TOML is read by the
-standard library's ``tomllib`` (``tomli`` before Python 3.11), YAML by this module's reader of
-the block subset it writes (mappings, scalars, comments).
+:func:`read_document`); TOML and YAML are written by this module (the block mappings of
+scalars a person edits), and every file is read by :mod:`zkzap.api.documents`: JSON by the
+standard library, TOML by ``tomllib`` (``tomli`` before Python 3.11), YAML by PyYAML's safe
+loader (the ``yaml`` extra), a key given twice refused in all three.
 
-Every check of a document is strict and names ``FILE`` and the key (``fleet.json:
-actuators.1.stored.speed-limt: unknown register``): :class:`DocumentError`, a usage error.
+A file that cannot be parsed is refused naming ``FILE:LINE`` (``fleet.yaml:7: key 'acceleration'
+is given twice``); every check of a parsed document is strict and names ``FILE`` and the key
+(``fleet.json: actuators.1.stored.speed-limt: unknown register``): :class:`DocumentError`, a
+usage error.
 
 :func:`plan` computes the writes that make an actuator match a document entry, skipping
 every write that would change nothing (stored writes wear the actuator's memory), and
@@ -40,6 +43,8 @@ import time
 from ..codec import zap
 from ..codec.fields import FieldValueError
 from ..errors import CheckFailed, UsageError, did_you_mean
+from . import documents
+from .documents import DocumentError
 
 FORMAT = "zkzap-fleet/1"
 SETUP_FORMAT = "zkzap-setup/1"
@@ -50,13 +55,9 @@ META_KEYS = ("model", "firmware", "baud", "time", "errors")
 #: (or whether) the actuator can be reached and answers.
 PROTECTED = ("id", "baud-rate", "protocol-type", "feedback-return-mode")
 #: File suffixes and their formats.
-SUFFIXES = {".json": "json", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml"}
+SUFFIXES = documents.SUFFIXES
 
 REG = zap.REGISTER_BY_NAME
-
-
-class DocumentError(UsageError):
-    """A backup document that cannot be used; the message names the file and the key."""
 
 
 def section_of(reg) -> str:
@@ -82,20 +83,25 @@ class Procedures:
     operation touches these procedures, so they can be pointed at another implementation."""
 
     @staticmethod
-    def find(bus, ids, *, retries=0):
-        """IDs of ``ids`` that answer an Echo at the bus's baud rate, and those whose reply was
-        garbled (two actuators answering at once): ``(found, garbled)``."""
-        from ..errors import BadReply
+    def discover(bus, ids, bauds=None, *, retries=2):
+        """Scan records (``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status``,
+        ``errors``) of the actuators among ``ids`` at each of ``bauds`` (default: the bus's),
+        found as ``zap scan`` finds them (:mod:`zkzap.link.zap_scan`): a fast first pass that
+        asks again, with the whole window, wherever something came late or garbled. Two
+        actuators sharing an ID give status ``duplicate`` or ``garbled``. The bus is left at the
+        last baud rate."""
+        from ..link.zap_scan import scan
 
+        return [ev[1] for ev in scan(bus, list(ids), list(bauds or [bus.baud]), retries=retries)
+                if ev[0] == "record"]
+
+    @staticmethod
+    def find(bus, ids, *, retries=2):
+        """IDs of ``ids`` that answer at the bus's baud rate (see :meth:`discover`), and those
+        whose replies collide (two actuators answering to one ID): ``(found, garbled)``."""
         found, garbled = [], []
-        for ident in ids:
-            try:
-                r = bus.ping(ident, retries=retries)
-            except BadReply:
-                garbled.append(ident)
-                continue
-            if r is not None:
-                found.append(ident)
+        for rec in Procedures.discover(bus, ids, retries=retries):
+            (garbled if rec["status"] in SHARED else found).append(rec["id"])
         return found, garbled
 
     @staticmethod
@@ -111,7 +117,47 @@ class Procedures:
         return values, error
 
 
+#: Scan statuses of an ID that two actuators answer to.
+SHARED = ("duplicate", "garbled")
+
 PROCEDURES = Procedures()
+
+
+class SharedId(CheckFailed):
+    """Two actuators answer to one ID (exit status 1): a fleet operation refuses the bus."""
+
+
+def refuse_shared(records) -> None:
+    """Raise :class:`SharedId` naming every ID (and baud rate) of ``records`` (scan records) that
+    two actuators answer to."""
+    shared = [r for r in records if r["status"] in SHARED]
+    bauds = {}
+    for r in records:
+        bauds.setdefault(r["id"], []).append(r["baud"])
+    twice = {i: b for i, b in bauds.items() if len(b) > 1}
+    if twice:
+        where = "; ".join(f"ID {i} answers at {' and '.join(map(str, b))} baud" for i, b in sorted(twice.items()))
+        raise SharedId(f"{where}: two actuators with one ID", ids=sorted(twice), shared=True)
+    if shared:
+        where = ", ".join(f"ID {r['id']} at {r['baud']} baud" for r in shared)
+        raise SharedId(f"{where}: two actuators answer to {'this ID' if len(shared) == 1 else 'these IDs'} "
+                       "(their replies collide)", ids=[r["id"] for r in shared], shared=True)
+
+
+def read_fleet(bus, records, *, procedures=PROCEDURES, on_actuator=None) -> dict:
+    """A backup document of the actuators of ``records`` (as :meth:`Procedures.discover` gives
+    them), each read at the baud rate it answered at."""
+    doc = None
+    for baud in dict.fromkeys(r["baud"] for r in records):
+        if bus.baud != baud:
+            bus.set_baud(baud)
+        part = read_bus(bus, [r["id"] for r in records if r["baud"] == baud], procedures=procedures,
+                        on_actuator=on_actuator)
+        if doc is None:
+            doc = part
+        else:
+            doc["actuators"].update(part["actuators"])
+    return doc
 
 
 def now_iso() -> str:
@@ -266,42 +312,16 @@ def dump_document(doc: dict, path: str, fmt=None) -> None:
 
 
 def loads(text: str, fmt: str, name: str):
-    if fmt == "json":
-        try:
-            return json.loads(text)
-        except ValueError as e:
-            raise DocumentError(f"{name}: not valid JSON: {e}") from None
-    if fmt == "toml":
-        try:
-            import tomllib
-        except ImportError:  # Python 3.10
-            try:
-                import tomli as tomllib
-            except ImportError:
-                raise UsageError(f"{name}: reading TOML on Python 3.10 needs tomli: "
-                                 "pip install 'zkzap[toml]'") from None
-        try:
-            return tomllib.loads(text)
-        except ValueError as e:
-            raise DocumentError(f"{name}: not valid TOML: {e}") from None
-    return yaml_loads(text, name)
+    """The parsed document ``text`` in ``fmt`` (json, toml, yaml); DocumentError naming
+    ``name`` and the line."""
+    return documents.loads(text, fmt, name)
 
 
 def read_document(path: str) -> dict:
     """{ID: Entry} from a backup file (``-``: JSON on stdin)."""
-    import sys
-
-    if path == "-":
-        text, fmt, name = sys.stdin.read(), "json", "stdin"
-    else:
-        fmt = format_of(path)
-        name = path
-        try:
-            with open(path, encoding="utf-8") as f:
-                text = f.read()
-        except OSError as e:
-            raise UsageError(f"{path}: cannot read: {e.strerror or e}") from None
-    return check_document(loads(text, fmt, name), name)
+    fmt = "json" if path == "-" else format_of(path)
+    doc, name = documents.read(path, "fleet", fmt)
+    return check_document(doc, name)
 
 
 _BARE = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -360,110 +380,6 @@ def _yaml(doc, indent=0) -> str:
         else:
             out.append(f"{pad}{key}: {_yaml_scalar(v)}")
     return "\n".join(out) + "\n"
-
-
-_YAML_LINE = re.compile(r'^(?P<key>"(?:[^"\\]|\\.)*"|\'[^\']*\'|[^:#\s][^:#]*?)\s*:(?:\s+(?P<value>.*?))?\s*$')
-
-
-def _yaml_value(text, name, lineno):
-    t = text.strip()
-    if t in ("", "~", "null", "Null", "NULL"):
-        return None
-    if t in ("true", "True", "TRUE"):
-        return True
-    if t in ("false", "False", "FALSE"):
-        return False
-    if t == "{}":
-        return {}
-    if t.startswith("[") and t.endswith("]"):
-        inner = t[1:-1].strip()
-        return [_yaml_value(x, name, lineno) for x in inner.split(",")] if inner else []
-    if t.startswith('"'):
-        try:
-            return json.loads(t)
-        except ValueError:
-            raise DocumentError(f"{name}:{lineno}: bad quoted string {t}") from None
-    if t.startswith("'") and t.endswith("'") and len(t) >= 2:
-        return t[1:-1].replace("''", "'")
-    if re.fullmatch(r"[-+]?(0x[0-9A-Fa-f]+|0o[0-7]+|\d+)", t):
-        return int(t, 0) if not re.fullmatch(r"[-+]?0\d+", t) else int(t, 10)
-    if re.fullmatch(r"[-+]?(\d+\.\d*|\.\d+|\d+)([eE][-+]?\d+)?", t):
-        return float(t)
-    if t[0] in "&*!|>{[%@`":
-        raise DocumentError(f"{name}:{lineno}: {t!r}: this YAML construct is not supported in a fleet "
-                            "file (block mappings of plain or quoted scalars only)")
-    return t
-
-
-def _strip_comment(text: str) -> str:
-    """``text`` without a trailing ``# comment`` (a ``#`` after a blank, outside quotes)."""
-    quote = None
-    prev = " "
-    for i, ch in enumerate(text):
-        if quote:
-            if ch == quote and (quote == "'" or prev != "\\"):
-                quote = None
-        elif ch in "\"'" and prev in " :[,":
-            quote = ch
-        elif ch == "#" and prev in " \t":
-            return text[:i].rstrip()
-        prev = ch
-    return text
-
-
-def yaml_loads(text: str, name: str = "document"):
-    """The block subset of YAML that :func:`dumps` writes (and a person edits): nested mappings
-    by indentation, scalars (integers, ``0x`` hex, null, true/false, quoted or plain strings,
-    ``[a, b]`` lists), ``#`` comments, an optional ``---``. Anything else is refused, naming
-    ``FILE:LINE``."""
-    root: dict = {}
-    stack = [(-1, root)]
-    pending = None                      # (indent, parent, key): a key that opened a mapping
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.rstrip()
-        stripped = line.lstrip()
-        if not stripped or stripped.startswith("#") or stripped in ("---", "..."):
-            continue
-        if "\t" in line[:len(line) - len(stripped)]:
-            raise DocumentError(f"{name}:{lineno}: tabs are not allowed for indentation in YAML")
-        if stripped.startswith("- "):
-            raise DocumentError(f"{name}:{lineno}: block lists are not used in a fleet file")
-        # a comment after a value, outside quotes
-        body = _strip_comment(stripped)
-        m = _YAML_LINE.match(body)
-        if not m:
-            raise DocumentError(f"{name}:{lineno}: expected 'key: value' (got {stripped!r})")
-        indent = len(line) - len(stripped)
-        if pending is not None:
-            p_indent, p_parent, p_key = pending
-            if indent > p_indent:
-                child: dict = {}
-                p_parent[p_key] = child
-                stack.append((indent, child))
-            else:
-                p_parent[p_key] = None
-            pending = None
-        while stack and indent < stack[-1][0]:
-            stack.pop()
-        if not stack or indent != stack[-1][0]:
-            if stack and stack[-1][0] == -1 and not stack[-1][1]:
-                stack[-1] = (indent, root)
-            else:
-                raise DocumentError(f"{name}:{lineno}: indentation does not match any mapping above")
-        parent = stack[-1][1]
-        key = m.group("key")
-        if key[0] in "\"'":
-            key = _yaml_value(key, name, lineno)
-        key = str(key).strip()
-        if key in parent:
-            raise DocumentError(f"{name}:{lineno}: key {key!r} is given twice")
-        value = m.group("value")
-        if value is None or value == "":
-            parent[key] = None
-            pending = (indent, parent, key)
-        else:
-            parent[key] = _yaml_value(value, name, lineno)
-    return root
 
 
 # -- diff ------------------------------------------------------------------------------------
@@ -674,17 +590,45 @@ def describe_left_out(items) -> str:
 
 
 def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
-    """{ID: Entry} read from the bus (every register of each actuator). ``required``: every ID
-    must answer (else NoReply); otherwise IDs that do not answer an Echo are left out."""
+    """{ID: Entry} read from the bus (every register of each actuator). ``ids``: IDs, or scan
+    records (``id``, ``baud``, as :func:`survey` gives them), each then read at the baud rate it
+    answered at. ``required``: every ID must answer (else NoReply); otherwise IDs that do not
+    answer an Echo are left out (records were found: they are read)."""
     entries = {}
-    for ident in ids:
-        if not required and bus.ping(ident, retries=1) is None:
-            continue
+    for item in ids:
+        if isinstance(item, dict):
+            ident = item["id"]
+            if bus.baud != item["baud"]:
+                bus.set_baud(item["baud"])
+        else:
+            ident = item
+            if not required and bus.ping(ident, retries=1) is None:
+                continue
         values, error = procedures.read_map(bus, ident)
         entry = entry_from_values(values, baud=bus.baud, error=error)
         doc = {"format": FORMAT, "actuators": {str(ident): entry}}
         entries[ident] = check_document(doc, f"bus ID {ident}")[ident]
     return entries
+
+
+def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> list:
+    """Scan records (``id``, ``baud``, ...) of the live bus's actuators, as a fleet operation
+    compares or backs them up. Without ``ids`` (every ID 0..253), at several ``bauds``, or with
+    ``scan``, the actuators are found as ``zap scan`` finds them (:meth:`Procedures.discover`),
+    and a bus where two actuators answer to one ID is refused (:class:`SharedId`, naming it),
+    never read without one of them; otherwise ``ids`` are asked for one by one, an ordinary Echo
+    each (one that does not answer is absent)."""
+    bauds = list(bauds or [bus.baud])
+    if scan is None:
+        scan = ids is None or len(bauds) > 1
+    if not scan:
+        if bus.baud != bauds[0]:
+            bus.set_baud(bauds[0])
+        return [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=retries) is not None]
+    wanted = list(ids) if ids is not None else list(range(zap.MAX_ID + 1))
+    records = procedures.discover(bus, wanted, bauds, retries=retries)
+    refuse_shared(records)
+    return records
 
 
 def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), force=False, on_mismatch=None,
@@ -793,11 +737,7 @@ class SetupState:
         st = cls(path, ids)
         if not path or not os.path.exists(path):
             return st
-        try:
-            with open(path, encoding="utf-8") as f:
-                doc = json.load(f)
-        except (OSError, ValueError) as e:
-            raise UsageError(f"{path}: cannot read the setup state: {e}") from None
+        doc, _ = documents.read(path, "setup state")
         if not isinstance(doc, dict) or doc.get("format") != SETUP_FORMAT or not isinstance(doc.get("done"), dict):
             raise UsageError(f"{path}: not a zkzap setup state file (format {SETUP_FORMAT})")
         for key, rec in doc["done"].items():

@@ -114,6 +114,8 @@ def connect(path, *, create=True):
         checking.effect("file", path=path)
     try:
         db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+        # text a damaged file holds reads with replacement characters instead of failing the listing
+        db.text_factory = lambda b: b.decode("utf-8", "replace")
         db.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
         if create:
             db.execute("PRAGMA journal_mode = WAL")
@@ -127,8 +129,11 @@ def connect(path, *, create=True):
                 db.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
         if not create:
             db.execute(SERVICES)
-    except sqlite3.DatabaseError as e:
-        what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as e:
+        if isinstance(e, UnicodeDecodeError):       # sqlite's own message quotes a damaged schema
+            what = "a damaged database (its schema is not text)"
+        else:
+            what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
         raise (OutputError if create else UsageError)(f"logbook: {path}: {what}") from None
     return db
 
@@ -179,20 +184,70 @@ def record(path, run: dict) -> int:
         raise OutputError(f"logbook: cannot write {path}: {e}") from None
 
 
+#: Columns that must hold a number (None where the column allows NULL), as :func:`totals` adds them.
+_NUMBERS = {"duration_s": False, "running_s": False, "starts": False, "max_rpm": True, "max_egt_c": True,
+            "fuel_used_l": True, "exit_status": False}
+
+
 def runs(path) -> list:
+    """Every run of the logbook at ``path``, in order. A damaged file (or one edited by hand:
+    a list column that is not a JSON list, text where a number belongs) is a UsageError
+    naming the file, the run and the column."""
+    import sqlite3
+
     db = connect(path, create=False)
     try:
         cur = db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs ORDER BY id")
         out = []
         for values in cur:
-            rec = dict(zip(COLUMNS, values))
-            for k in _LISTS:
-                rec[k] = json.loads(rec[k] or "[]")
-            rec["throttle_s"] = json.loads(rec["throttle_s"] or "{}")
-            out.append(rec)
+            out.append(_run(path, dict(zip(COLUMNS, values))))
         return out
+    except (sqlite3.DatabaseError, ValueError) as e:      # a damaged file: its pages, its encoding
+        raise UsageError(f"logbook: {path}: {e}") from None
     finally:
         db.close()
+
+
+def _run(path, rec) -> dict:
+    def bad(column, what):
+        raise UsageError(f"logbook: {path}: run {rec.get('id')}: {column}: {what}")
+
+    for k in _LISTS:
+        text = rec[k]
+        try:
+            value = json.loads(text or "[]") if isinstance(text, (str, bytes)) or text is None else None
+        except (ValueError, RecursionError):
+            value = None
+        if not isinstance(value, list):
+            bad(k, "not a JSON list")
+        rec[k] = value
+    text = rec["throttle_s"]
+    try:
+        value = json.loads(text or "{}") if isinstance(text, (str, bytes)) or text is None else None
+    except (ValueError, RecursionError):
+        value = None
+    if not isinstance(value, dict) or not all(_number(v) and _integer_text(k) for k, v in value.items()):
+        bad("throttle_s", "not a JSON object of seconds by throttle percentage")
+    rec["throttle_s"] = value
+    for k, nullable in _NUMBERS.items():
+        v = rec[k]
+        if v is None and nullable:
+            continue
+        if not _number(v):
+            bad(k, f"{v!r} is not a number")
+    return rec
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _integer_text(k) -> bool:
+    try:
+        int(k)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def totals(recs, above=()) -> dict:
@@ -239,14 +294,22 @@ def record_service(path, engine, note=None, at=None) -> dict:
 
 
 def services(path, engine=None) -> list:
+    import sqlite3
+
     db = connect(path, create=False)
     try:
         q = "SELECT id, engine, at, note, after_run FROM services" + (" WHERE engine = ?" if engine is not None
                                                                        else "")
-        return [dict(zip(("id", "engine", "at", "note", "after_run"), row))
-                for row in db.execute(q + " ORDER BY id", (engine,) if engine is not None else ())]
+        out = [dict(zip(("id", "engine", "at", "note", "after_run"), row))
+               for row in db.execute(q + " ORDER BY id", (engine,) if engine is not None else ())]
+    except sqlite3.DatabaseError as e:
+        raise UsageError(f"logbook: {path}: {e}") from None
     finally:
         db.close()
+    for svc in out:
+        if not isinstance(svc["after_run"], int) or isinstance(svc["after_run"], bool):
+            raise UsageError(f"logbook: {path}: service {svc['id']}: after_run: {svc['after_run']!r} is not a run ID")
+    return out
 
 
 def engine_report(path, engine, above=(80,)) -> dict:

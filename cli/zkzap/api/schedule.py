@@ -7,7 +7,7 @@ A schedule is CSV text, one row per step: ``time_s,throttle_pct[,state]``, or an
 refused, naming both lines: only the second would ever be sent). The file may come
 from a spreadsheet: a UTF-8 byte order mark, quoted cells, ``;`` or tab separators (with a
 decimal comma when the separator is ``;``) are read as such. Every number must be finite and in
-range; a bad cell is refused naming ``FILE:LINE``.
+range (times 0..:data:`MAX_TIME_S`); a bad cell is refused naming ``FILE:LINE``.
 
 Throttle rows send control ID 1 (state, throttle). RPM rows put the ECU in RPM mode: ID 6 with
 the row's state and the RPM factor ``RPM_X`` (the smallest factor whose range, 40 950 x RPM_X
@@ -45,6 +45,9 @@ _RPM_VALUE_MAX = zk.CONTROL_BY_NAME["rpm"].layout.by_key["target_rpm"].hi       
 _FACTOR_MAX = zk.RPM_FACTOR.hi                                                  # 6
 #: Highest target the protocol can express: 4095 x 10 x 6 rpm.
 RPM_MAX = _RPM_VALUE_MAX * 10 * _FACTOR_MAX
+#: The latest time a row may have (s, about 31.7 years): beyond it a control period (at most
+#: 1 s) is no longer representable as a step of the row times' floating-point resolution.
+MAX_TIME_S = 1e9
 COLUMNS = ("time_s", "throttle_pct", "rpm", "state")
 SHAPE = "time_s,throttle_pct[,state] or time_s,rpm=N[,state]"
 
@@ -158,10 +161,13 @@ class Schedule:
             if sep is None:
                 sep = _separator(line)
             comma = sep == ";"
-            cells = _cells(line, sep)
+            where = f"{name}:{lineno}"
+            try:
+                cells = _cells(line, sep)
+            except csv.Error as e:            # a cell beyond the csv module's field limit, a stray quote
+                raise ScheduleError(f"{where}: not a CSV row: {e}") from None
             while cells and not cells[-1]:            # spreadsheets pad rows with empty cells
                 cells.pop()
-            where = f"{name}:{lineno}"
             if not cells:
                 continue
             if cols is None:
@@ -227,8 +233,9 @@ class Schedule:
             else:
                 thr_cell, rpm_cell = target, ""
         t = _number(t_cell, "time_s", where, comma)
-        if t < 0:
-            raise ScheduleError(f"{where}: time_s: {t_cell} is out of range; allowed 0 or more")
+        if not 0 <= t <= MAX_TIME_S:
+            raise ScheduleError(f"{where}: time_s: {t_cell} is out of range; allowed 0..{MAX_TIME_S:.0f} s "
+                                "(about 31 years)")
         if st_cell:
             state = st_cell.lower()
         throttle = rpm = None

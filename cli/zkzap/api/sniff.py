@@ -5,9 +5,12 @@
   per direction (the host's TX line, the ECU's TX line), merged by time into one stream with a
   ``dir`` field; status frames decode version-aware (the protocol version from status ID 6).
 - mightyZAP (:class:`ZapSniffer`): one adapter on the half-duplex bus sees both directions;
-  every feedback is paired with the request it answers (``latency_ms``), a request that expects
-  an answer and gets none within ``reply_timeout`` becomes a ``missing`` record, and a feedback
-  from another ID than the one asked (``pairing: unexpected-id``) or with no request
+  every feedback is paired with the request it answers under the bus's timing policy
+  (:class:`zkzap.link.zap_timing.Pairing`: the latest request to its ID whose late window,
+  ``reply_timeout``, is still open, even when the host has sent others since), with its
+  ``latency_ms``; a request that expects an answer and gets none within ``reply_timeout``
+  becomes a ``missing`` record, and a feedback from an ID nobody asked (``pairing:
+  unexpected-id``, with the ``expected_id`` still open) or with no request at all
   (``unsolicited``) is marked.
 
 Records carry ``time`` (ISO 8601 UTC), ``t`` (seconds since the sniffer started), ``dir``
@@ -34,9 +37,9 @@ from .capture import iso_utc
 MERGE_WINDOW_S = 0.03
 #: Read timeout of each port's reader thread.
 READ_SLICE_S = 0.02
-#: A mightyZAP request unanswered after this long is a missing reply (the manual's guidance is
-#: ~10 ms; real actuators and USB adapters are seen up to ~20 ms late).
-DEFAULT_REPLY_TIMEOUT_S = 0.1
+#: A mightyZAP request unanswered after this long is a missing reply: the bus's late window
+#: (:mod:`zkzap.link.zap_timing`), the same a host waits.
+from ..link.zap_timing import LATE_WINDOW as DEFAULT_REPLY_TIMEOUT_S  # noqa: E402
 #: A gap in the ECU's status stream: longer than this many status periods without a frame.
 GAP_PERIODS = 3
 #: How many of the slowest replies the summary keeps.
@@ -411,10 +414,12 @@ class ZapSniffer(Sniffer):
     protocol = "zap"
 
     def __init__(self, ports, baud, *, capture=None, reply_timeout=DEFAULT_REPLY_TIMEOUT_S, stop_bits=1):
+        from ..link.zap_timing import Pairing
+
         super().__init__(ports, baud, capture=capture, stop_bits=stop_bits)
         self.decoder = zap.ZapDecoder()
         self.reply_timeout = reply_timeout
-        self.pending = None                 # (ts, id, instruction, expected)
+        self.pairing = Pairing(window=reply_timeout, margin=0.0)   # ID -> (ts, (instruction, expected))
         self.acks = set()                   # IDs seen acknowledging writes (return mode 2)
 
     def _framer(self, role):
@@ -432,62 +437,65 @@ class ZapSniffer(Sniffer):
         out = []
         rec = self.decoder.decode(pkt)
         if rec["kind"] == "command":
-            out += self._close_pending(ts)
+            out += self._missing(self.pairing.expired(ts), ts)
             base = self._base(ts, OUTBOUND)
             base.update(rec)
             base["frame"] = pkt.hex(" ").upper()
             self.stats.frame(base["t"], "h2d", rec["id"])
-            self.pending = (ts, pkt[3], rec["instruction"], self._expects(pkt))
+            if pkt[3] != zap.BROADCAST:
+                out += self._missing(self.pairing.command(pkt[3], ts, (rec["instruction"], self._expects(pkt))), ts)
             out.append(base)
             return out
         base = self._base(ts, INBOUND)
         base.update(rec)
         base["frame"] = pkt.hex(" ").upper()
         self.stats.frame(base["t"], "d2h", rec["id"])
-        p = self.pending
-        if p is None:
-            base["pairing"] = "unsolicited"
-            self.stats.unsolicited += 1
-        elif p[1] != pkt[3]:
-            base["pairing"] = "unexpected-id"
-            base["request"] = p[2]
-            base["expected_id"] = p[1]
-            self.stats.unexpected += 1
-            self.pending = None
-        else:
-            latency = round((ts - p[0]) * 1000.0, 3)
+        got = self.pairing.feedback(pkt[3], ts)
+        if got is not None:
+            _, (instruction, _), latency = got
+            latency = round(latency * 1000.0, 3)
             base["pairing"] = "ok"
-            base["request"] = p[2]
+            base["request"] = instruction
             base["latency_ms"] = latency
-            self.stats.reply(base["t"], pkt[3], p[2], latency)
-            if p[2] not in ("echo", "load"):
+            self.stats.reply(base["t"], pkt[3], instruction, latency)
+            if instruction not in ("echo", "load"):
                 self.acks.add(pkt[3])
-            self.pending = None
+        else:
+            others = self.pairing.others(pkt[3])
+            if others:
+                latest = max(others, key=lambda i: self.pairing.pending[i][0])
+                base["pairing"] = "unexpected-id"
+                base["request"] = self.pairing.pending[latest][1][0]
+                base["expected_id"] = latest
+                self.stats.unexpected += 1
+            else:
+                base["pairing"] = "unsolicited"
+                self.stats.unsolicited += 1
         out.append(base)
         return out
 
-    def _close_pending(self, now):
-        p = self.pending
-        self.pending = None
-        if p is None or not p[3]:
-            return []
-        self.stats.missing += 1
-        rec = self._base(p[0], OUTBOUND)
-        rec.update({"kind": "missing", "id": p[1], "request": p[2],
-                    "waited_ms": round((now - p[0]) * 1000.0, 3)})
-        return [rec]
+    def _missing(self, requests, now):
+        """``missing`` records of the requests whose window closed unanswered (those that
+        expected an answer)."""
+        out = []
+        for ident, ts, (instruction, expected) in requests:
+            if not expected:
+                continue
+            self.stats.missing += 1
+            rec = self._base(ts, OUTBOUND)
+            rec.update({"kind": "missing", "id": ident, "request": instruction,
+                        "waited_ms": round((now - ts) * 1000.0, 3)})
+            out.append(rec)
+        return out
 
     def tick(self, now):
-        p = self.pending
-        if p is not None and now - p[0] > self.reply_timeout and not self._held:
-            return self._close_pending(now)
-        return []
+        if self._held:
+            return []
+        busy = any(f.pending for f in self.framers)          # a reply is arriving: not missing yet
+        return self._missing(self.pairing.expired(now, busy), now)
 
     def finish(self, now):
-        p = self.pending
-        if p is not None and now - p[0] > self.reply_timeout:
-            return self._close_pending(now)
-        return []
+        return self._missing(self.pairing.expired(now), now)
 
 
 def check_ports(protocol: str, ports) -> list:

@@ -13,7 +13,8 @@ read gives a row with null values and the watch goes on; per-ID link health is k
 :attr:`Watcher.health`.
 
 :func:`wire_limit` is the fastest poll rate the line allows: every Load and reply on the wire
-at 10 bits a byte, plus the actuators' turnaround per transaction.
+at 10 bits a byte, plus a 12Lf's own turnaround per transaction. A read that fails is ``no-reply`` only when nothing came back;
+garbled replies (a collision: two actuators with one ID; or a line fault) are ``bad-reply``.
 
 Nothing here imports click or rich.
 """
@@ -28,8 +29,8 @@ from ..errors import BadReply, NoReply, UsageError
 from ..link.port import wire_time
 from ..link.stop import pause
 
-#: The actuator's processing time before it answers (seconds), as the link assumes it.
-TURNAROUND = 0.002
+#: The actuator's processing time before it answers (seconds): a 12Lf's own, the policy's floor.
+from ..link.zap_timing import FLOOR as TURNAROUND  # noqa: E402
 #: Bytes of a Load Data command and of a reply without data.
 LOAD_BYTES = 9
 REPLY_BYTES = 7
@@ -73,13 +74,14 @@ def wire_limit(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> 
 
 
 class Health:
-    """Link health of one actuator, counted in polls (one row each): asked, answered, failed,
-    the last round trip, the time of the last good read, and the error bits seen."""
+    """Link health of one actuator, counted in polls (one row each): asked, answered, failed
+    (of which garbled), the last round trip, the time of the last good read, and the error bits
+    seen."""
 
-    __slots__ = ("asked", "answered", "failed", "last_rtt", "last_ok", "errors", "last_status")
+    __slots__ = ("asked", "answered", "failed", "garbled", "last_rtt", "last_ok", "errors", "last_status")
 
     def __init__(self):
-        self.asked = self.answered = self.failed = 0
+        self.asked = self.answered = self.failed = self.garbled = 0
         self.last_rtt = None
         self.last_ok = None
         self.errors = set()
@@ -158,6 +160,8 @@ class Watcher:
         h.asked += 1
         if status != "ok":
             h.failed += 1
+        if status == "bad-reply":
+            h.garbled += 1
         now = self._clock()
         row["time"] = _iso(time.time())
         row["t"] = round(now - self.started, 4)

@@ -145,16 +145,21 @@ class Bus:
     ``port`` is a device path, any pyserial URL, ``sim://zap?ids=1,2`` or a simulator started
     with :func:`zkzap.sim.start`; ``baud`` the line speed; ``return_mode`` the actuators'
     feedback-return-mode (0 answers Echo only, 1 Load Data and Echo, 2 every command; ``"auto"``
-    asks the first actuator addressed); ``timeout`` overrides the reply timeout derived from
-    the baud rate; ``retries`` after a failed attempt; ``allow`` the permissions every write is
-    given (a :class:`~zkzap.codec.permissions.Permission`, names like ``["stored"]``, or True for
-    all; see the module's description). A started simulator (:func:`zkzap.sim.start_zap`), whatever
-    its transport, or a ``sim://``/``loop://`` URL waives the consent permissions.
+    asks the first actuator addressed); ``timeout`` (seconds) is the late window, how long after
+    a request its reply may still begin (default 0.15: nothing is sent before it has closed, see
+    :mod:`zkzap.link.zap_timing`); ``retries`` after a failed attempt; ``latency`` (seconds) what
+    the actuators are known to take before any reply is measured; ``low_latency`` asks the serial
+    driver for its low-latency mode; ``allow`` the permissions every write is given (a
+    :class:`~zkzap.codec.permissions.Permission`, names like ``["stored"]``, or True for all; see
+    the module's description). A started simulator (:func:`zkzap.sim.start_zap`), whatever its
+    transport, or a ``sim://``/``loop://`` URL waives the consent permissions. Every Bus on one
+    port in this process shares what was learned of the actuators' latencies (:attr:`latencies`).
     """
 
     def __init__(self, port: Union[str, Simulator, None] = None, *, baud: int = 57600,
                  return_mode: Union[int, Literal["auto"]] = 1, timeout: Optional[float] = None,
-                 retries: int = 2, allow: AllowSpec = None, _link: Optional[ZapBus] = None) -> None:
+                 retries: int = 2, latency: Optional[float] = None, low_latency: bool = False,
+                 allow: AllowSpec = None, _link: Optional[ZapBus] = None) -> None:
         if _link is None:
             from ..link.zap_bus import RETRIES, open_bus
 
@@ -163,7 +168,8 @@ class Bus:
                 raise UsageError("no port given", baud=baud)
             mode = 1 if return_mode == "auto" else int(return_mode)
             _link = open_bus(url, baud, timeout=timeout, return_mode=mode,
-                             retries=RETRIES if retries is None else retries)
+                             retries=RETRIES if retries is None else retries, latency=latency,
+                             low_latency=low_latency)
             if getattr(port, "kind", None) == "zap" and getattr(port, "device", None) is not None:
                 _link.simulated = True             # a simulator started here, over a pty or TCP too
             self._auto = return_mode == "auto"
@@ -212,6 +218,14 @@ class Bus:
     @allow.setter
     def allow(self, value: AllowSpec) -> None:
         self.link.allow = as_permission(value)
+
+    @property
+    def latencies(self) -> dict:
+        """What was learned of each actuator's latency on this port: ``{ID: {"latency_ms",
+        "variation_ms", "samples", "late"}}`` (the time from a request's last byte to the first
+        reply byte, smoothed; its variation; answers measured; answers after the learned
+        timeout)."""
+        return self.link.latencies()
 
     def close(self) -> None:
         """Close the port."""

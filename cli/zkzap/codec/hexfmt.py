@@ -15,7 +15,8 @@ offset) are expanded, in blocks, whatever the length they stand for; the radix o
 offsets (hex, octal, decimal) is read from two consecutive offsets, else hex for 6 or 8
 digits and octal (od's default) for 7. Text with control characters or invalid UTF-8 is
 binary: refused with a pointer to ``--binary``. A stream is read in pieces of at most
-64 Ki characters, so one line of any length decodes in constant memory.
+64 Ki characters, so one line of any length decodes in constant memory; once it has given
+bytes, a line that is not hex is damage, skipped and counted (:class:`HexSkips`).
 Output is uppercase hex bytes separated by single spaces.
 """
 
@@ -40,7 +41,8 @@ _PATTERNS = {
     "end_offset": r"^\s*([0-9A-Fa-f]{6,8})\s*$",
     "od6_offset": r"^\s*([0-9A-Fa-f]{6})(?= [0-9A-Fa-f]{2}(?: [0-9A-Fa-f]{2})*\s*$)",
     "csv_cell_byte": r'"?0[xX]([0-9A-Fa-f]{1,2})"?',
-    "binary": "[\x00-\x08\x0e-\x1f\x7f\ufffd]",
+    # control characters, and what is not UTF-8 (U+FFFD, or surrogate escapes of raw bytes)
+    "binary": "[\x00-\x08\x0e-\x1f\x7f\ufffd\udc80-\udcff]",
     "separator": r"[\s,:;\-\\]",
     "split": r"[\s,:;\-]+",
     "wide_gap": r"\s{2,}",
@@ -272,31 +274,86 @@ def parse_hex(text: str, *, what: str = "hex input") -> bytes:
 PIECE = 1 << 16
 
 
-def iter_hex_stream(stream: TextIO, *, what: str = "stdin") -> Iterator[bytes]:
+class HexSkips:
+    """Lines of a hex stream that were not hex after the stream had given bytes (damage in a
+    long dump or capture, not a wrong input): how many, and the first one's message."""
+
+    __slots__ = ("lines", "first")
+
+    def __init__(self):
+        self.lines = 0
+        self.first = None
+
+    def add(self, error) -> None:
+        self.lines += 1
+        if self.first is None:
+            text = str(error)
+            text = text.split(": ", 1)[-1]            # without the input's name: the note gives it
+            for tail in ("; expected", "; every byte", ": use --binary"):
+                text = text.split(tail, 1)[0]
+            self.first = text
+
+    def note(self):
+        """One sentence, or None when no line was skipped."""
+        if not self.lines:
+            return None
+        return (f"{self.lines} line{'s' if self.lines > 1 else ''} that {'are' if self.lines > 1 else 'is'} "
+                f"not hex skipped (the first: {self.first})")
+
+
+def iter_hex_stream(stream: TextIO, *, what: str = "stdin",
+                    skipped: HexSkips | None = None) -> Iterator[bytes]:
     """Yield the bytes of a text stream's lines as they are read, in constant memory: a line
     longer than :data:`PIECE` characters (one long hex string, as some tools write) is taken
-    in pieces cut at a separator or between two hex digits."""
+    in pieces cut at a separator or between two hex digits.
+
+    A line that is not hex raises :class:`HexError`; with ``skipped``, once the stream has
+    given bytes such a line is counted there and skipped instead (a stream that starts with
+    something else is still refused)."""
     state = {}
     lineno = 0
     carry = ""                      # the start of a token cut by a piece boundary
     long_line = False               # inside a line longer than one piece
-    comment = False                 # the rest of a long line is a comment
+    comment = False                 # the rest of a long line is a comment (or skipped)
+    given = False                   # bytes were yielded: later bad lines are damage
+
+    def bad(e):
+        if skipped is None or not given:
+            raise e
+        skipped.add(e)
+
     while True:
         try:
             piece = stream.readline(PIECE)
         except UnicodeDecodeError:
-            raise _binary(what, lineno + 1) from None
+            bad(_binary(what, lineno + 1))
+            lineno += 1
+            continue
         except OSError as e:
             raise HexError(f"{what}: cannot read: {e.strerror or e}") from None
         if not piece:
             if carry and not comment:
-                yield _tokens(carry, what, lineno)
+                try:
+                    data = _tokens(carry, what, lineno)
+                except HexError as e:
+                    bad(e)
+                    return
+                yield data
             return
         ends = piece.endswith("\n")
         if not long_line and (ends or len(piece) < PIECE):
             lineno += 1
-            for data in _line_pieces(piece, what, lineno, state):
+            pieces = _line_pieces(piece, what, lineno, state)
+            while True:
+                try:
+                    data = next(pieces)
+                except StopIteration:
+                    break
+                except HexError as e:
+                    bad(e)
+                    break
                 if data:
+                    given = True
                     yield data
             continue
         if not long_line:
@@ -308,14 +365,19 @@ def iter_hex_stream(stream: TextIO, *, what: str = "stdin") -> Iterator[bytes]:
         text = carry + piece
         if "#" in text:
             text, comment = text.split("#", 1)[0], True
-        if _rx.binary.search(text):
-            raise _binary(what, lineno)
-        if ends or comment:
-            head, carry = text, ""
-        else:
-            head, carry = _cut(text)
-        data = _tokens(head, what, lineno)
+        try:
+            if _rx.binary.search(text):
+                raise _binary(what, lineno)
+            if ends or comment:
+                head, carry = text, ""
+            else:
+                head, carry = _cut(text)
+            data = _tokens(head, what, lineno)
+        except HexError as e:
+            bad(e)
+            data, carry, comment = b"", "", True       # the rest of this line is skipped
         if data:
+            given = True
             yield data
         if ends:
             long_line = False

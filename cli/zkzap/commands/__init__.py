@@ -332,10 +332,36 @@ def _stdout_closed() -> bool:
         return True
 
 
+#: The longest error message printed whole (characters); a longer one (it quotes a line of
+#: some input at length) keeps its start and its end.
+MAX_MESSAGE = 1000
+
+
+#: Control characters a message may quote from an input, shown escaped (a crafted file must not
+#: move the cursor or colour the terminal through an error message).
+_CONTROLS = {c: f"\\x{c:02x}" for c in (*range(0x20), 0x7f, *range(0x80, 0xa0)) if c not in (9, 10, 13)}
+_CONTROLS.update({0x2028: "\\u2028", 0x2029: "\\u2029"})
+
+
+def one_line(message: str) -> str:
+    """``message`` as one line of reasonable length: line breaks (a database's or a library's
+    text) become spaces, other control characters are escaped, and the middle of an over-long
+    message is cut."""
+    if "\n" in message or "\r" in message:
+        import re
+
+        message = re.sub(r"\s*[\r\n]+\s*", " ", message).strip()
+    if not message.isprintable():
+        message = message.translate(_CONTROLS)
+    if len(message) > MAX_MESSAGE:
+        message = message[:MAX_MESSAGE * 2 // 3] + " [...] " + message[-MAX_MESSAGE // 4:]
+    return message
+
+
 def _error(message: str, prog: str = "zkzap") -> None:
     from ..io.term import color_enabled, style
 
-    click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {message}", err=True,
+    click.echo(f"{prog}: {style('error:', sys.stderr, fg='red', bold=True)} {one_line(message)}", err=True,
                color=color_enabled(sys.stderr))
 
 

@@ -28,7 +28,7 @@ from ..errors import INTERRUPTED, MORE_TO_DO, OK, TERMINATED, USAGE, UsageError,
 from .options import exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
-PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture")
+PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture", "--low-latency")
 #: Port options a command takes as its own argument: the baud rates a scan tries.
 OWN_TOKENS = {"scan": ("-b", "--baud")}
 
@@ -58,15 +58,22 @@ class Line:
         self.leaf = None
 
 
+#: The longest batch line (characters): a real one is a command and its options, and the
+#: shell-like splitting takes time that grows with the square of a line's length.
+MAX_LINE = 16384
+
+
 def read_lines(source, name):
-    """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split
-    is refused naming ``NAME:LINE``."""
+    """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split,
+    or is longer than :data:`MAX_LINE`, is refused naming ``NAME:LINE``."""
     out = []
     for number, raw in enumerate(source, 1):
         text = raw.strip()
         if not text or text.startswith("#"):
             continue
         where = f"{name}:{number}"
+        if len(text) > MAX_LINE:
+            raise UsageError(f"{where}: a line of {len(text)} characters; a batch line has at most {MAX_LINE}")
         try:
             tokens = shlex.split(text, comments=True)
         except ValueError as e:

@@ -98,6 +98,6 @@ def _notes(done, what, check):
         if frames.bad or frames.skipped:
             note(f"{frames.path}: {frames.frames} {what} decoded; {frames.bad} bad ({check}), "
                  f"{frames.skipped} bytes skipped")
-        text = frames.truncation_note()
+        text = frames.reading_note()
         if text:
             note(text)

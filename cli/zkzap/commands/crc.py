@@ -48,7 +48,8 @@ def _run(hex_bytes, append, check, compute):
         click.echo(check_any(data), err=True)
         return
     if not data:
-        raise UsageError("hex input: no bytes given")
+        source = "stdin" if not hex_bytes or list(hex_bytes) == ["-"] else "hex input"
+        raise UsageError(f"{source}: no bytes given")
     value = compute(data)
     click.echo(format_hex(data + bytes((value,))) if append else f"{value:02X}")
 

@@ -7,7 +7,7 @@ never names a command.
 
 from __future__ import annotations
 
-from ..errors import CheckFailed, InvalidValue, NoReply, PermissionNeeded, UsageError
+from ..errors import CheckFailed, InvalidValue, NoReply, PermissionNeeded, PortError, UsageError
 
 
 def hint(e) -> str:
@@ -31,9 +31,19 @@ def hint(e) -> str:
             return "; give --return-mode 1 or 2 if the actuator is set so"
         if facts.get("no_port") == "zap":
             return ": give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet"
+    if isinstance(e, PortError) and facts.get("busy"):
+        import os
+
+        if facts.get("holders"):
+            return "; stop it, or use another port"
+        if os.name == "posix" and str(facts.get("url", "")).startswith("/"):
+            return f"; 'fuser -v {facts['url']}' names it (as root for another user's programs)"
+        return "; close the other program"
     if isinstance(e, CheckFailed):
         if facts.get("taken"):
             return "; choose a free ID ('zap scan') or pass --force"
+        if facts.get("shared"):
+            return "; connect one of them alone and give it a free ID ('zap set-id'), then run this again"
         if facts.get("duplicate"):
             return "; connect the one to change alone and check with 'zap scan'"
         if facts.get("after_change") == "id":
@@ -65,6 +75,33 @@ def _permission_hint(e) -> str:
         parts.append(("or " if parts else "") + f"pass {' and '.join(flags)} to do it anyway"
                      if parts else f"pass {' and '.join(flags)} to do it")
     return "".join(f"; {p}" for p in parts)
+def adapter_notes(bus) -> None:
+    """Notes about a mightyZAP bus's USB adapter, on stderr: at once, when ``--low-latency``
+    could not be had; when the command ends (once per process), how to lower an FTDI adapter's
+    latency timer when the measured latency shows it."""
+    import click
+
+    from .options import note
+
+    if bus.low_latency is False:
+        note(f"--low-latency: {bus.url}: not available ({bus.low_latency_reason})")
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None:
+        ctx.call_on_close(lambda: _latency_timer_note(bus))
+
+
+def _latency_timer_note(bus) -> None:
+    policy = bus.policy
+    effect = policy.adapter_effect()
+    if effect is None or policy.hinted:
+        return
+    policy.hinted = True
+    from ..link.adapters import latency_timer_hint
+    from .options import note
+
+    typical, timer, device = effect
+    note(f"replies take {typical * 1000:.1f} ms, most of it in the USB adapter: "
+         + latency_timer_hint(device, round(timer * 1000)))
 
 
 def with_hint(e) -> str:

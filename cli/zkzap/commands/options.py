@@ -690,6 +690,10 @@ def _complete_ports(ctx, param, incomplete, group=None):
     return [i for i in items if i.value.startswith(incomplete)]
 
 
+#: The most bytes a command that takes hex whole (zkzap crc) reads from stdin.
+MAX_HEX_INPUT = 16 << 20
+
+
 def read_hex_input(args, *, what="hex input") -> bytes:
     """Hex bytes from the arguments (joined), or from stdin when there are none or one is ``-``."""
     from ..codec.hexfmt import parse_hex
@@ -697,7 +701,16 @@ def read_hex_input(args, *, what="hex input") -> bytes:
     if not args or list(args) == ["-"]:
         if sys.stdin is None or (sys.stdin.isatty() and not args):
             raise UsageError(f"{what}: none given; pass hex bytes as arguments or on stdin")
-        return parse_hex(sys.stdin.read(), what="stdin")
+        from ..io.sources import HexText
+
+        parts, size = [], 0
+        for block in HexText(strict=True):
+            parts.append(block)
+            size += len(block)
+            if size > MAX_HEX_INPUT:
+                raise UsageError(f"stdin: more than {MAX_HEX_INPUT >> 20} MiB of bytes; give a frame or a "
+                                 "capture's bytes (zk decode, zap decode) instead")
+        return b"".join(parts)
     return parse_hex(" ".join(a for a in args), what=what)
 
 

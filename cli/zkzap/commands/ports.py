@@ -10,7 +10,7 @@ from .options import format_option, note, resolve_format, write_rows
 COLUMNS = ["device", "name", "description", "vid_pid", "vid", "pid", "serial_number", "manufacturer", "product",
            "location", "chip", "by_id", "latency_timer_ms", "permission", "group", "hints"]
 TABLE_COLUMNS = [("device", "device"), ("description", "description"), ("vid_pid", "VID:PID"),
-                 ("serial_number", "serial number"), ("_hints", "hints")]
+                 ("serial_number", "serial number"), ("latency_timer_ms", "latency timer (ms)"), ("_hints", "hints")]
 
 
 @click.command(cls=Command, context_settings=CONTEXT)

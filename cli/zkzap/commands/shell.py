@@ -16,7 +16,7 @@ import click
 
 from ..errors import MORE_TO_DO, OK
 from . import CONTEXT, Command, Group
-from .batch import EXCLUDED, PORT_TOKENS, port_tokens
+from .batch import EXCLUDED, PORT_TOKENS, _batch_capture, port_tokens
 from .options import exits, port_options
 
 BUILTINS = ("help", "exit", "quit")
@@ -247,15 +247,15 @@ Examples:
     def zap_shell(**common):
         from ..link.shared import sharing
         from .zap import zap as group
-        from .zap.compose import open_link
+        from .zap.compose import _link_args, open_link
 
         defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                           "verbose")}
+                                           "verbose", "latency")}
         ids = common["sim_ids"] or "0"
-        args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "retries", "stop_bits")}
+        args = _link_args(common)
         args["sim_ids"] = ids if common["sim"] else None
         args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
-        with open_link(ids=[0], **args) as bus, sharing("zap", bus):
+        with open_link(ids=[0], **args) as bus, sharing("zap", bus), _batch_capture():
             code = loop(group, "zap", defaults, interactive=_interactive())
         if code:
             raise click.exceptions.Exit(code)
@@ -284,7 +284,7 @@ Examples:
             defaults["timeout"] = timeout
         link = ZkLink.open(url, baud, stop_bits=stop_bits)
         try:
-            with sharing("zk", link):
+            with sharing("zk", link), _batch_capture():
                 code = loop(group, "zk", defaults, interactive=_interactive())
         finally:
             link.close()

@@ -65,7 +65,7 @@ def serve_options(f):
 
 def _serve(device, speed, use_pty, listen, link):
     from .. import checking
-    from ..sim.base import Clock
+    from ..sim.base import Clock, keep_wire_time
 
     checking.effect("serve")
     from ..sim.serve import PtyUnsupported, serve_pty, serve_tcp
@@ -75,6 +75,7 @@ def _serve(device, speed, use_pty, listen, link):
     if link and listen:
         raise UsageError("--link works with --pty only")
     clock = Clock(speed)
+    keep_wire_time(device, clock)
     if listen:
         host, port = listen
         try:
@@ -223,6 +224,16 @@ def _host_log(output):
     return writer.write, close
 
 
+def _say_collision(event) -> None:
+    """One line on stderr for each collision on the simulated line."""
+    who = " and ".join(f"ID {i}" for i in event["ids"]) or "an actuator"
+    if event["kind"] == "host":
+        what = f"the host transmitted while {who} {'was' if len(event['ids']) == 1 else 'were'} replying"
+    else:
+        what = f"{who} replied at once"
+    click.echo(f"collision at {event['t']:.6f} s: {what} (both garbled)", err=True)
+
+
 @SIM_EXITS
 @sim.command("zap", context_settings=CONTEXT)
 @click.option("--ids", default="0", show_default=True, metavar="LIST",
@@ -239,8 +250,8 @@ def _host_log(output):
               help="Supply voltage (default 12.0; outside 7.0..13.0 sets the voltage error bit).")
 @click.option("--echo", is_flag=True, help="Echo the host's bytes back, like a half-duplex adapter.")
 @click.option("--turnaround", type=FiniteRange(0, 1000), default=None, metavar="MS",
-              help="Milliseconds from a command's last byte to the reply's first (default 2; real "
-                   "actuators and adapters: up to about 20).")
+              help="Milliseconds from a command's last byte to the reply's first (default 2, a 12Lf's "
+                   "own; with a USB adapter's buffering 20-40 are ordinary).")
 @click.option("--gap", type=FiniteRange(0, 100), default=None, metavar="MS",
               help="Milliseconds between two reply bytes, like a device or USB adapter that "
                    "trickles its bytes (default 0).")
@@ -273,8 +284,10 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
       zkzap sim zap --replay field.pcapng        # a recorded bus, answered as recorded
 
     Timing: a command is heard once its last byte has crossed the line at the host's baud
-    rate; the reply starts --turnaround ms later (5 ms more after a stored write), takes its
-    time on the wire plus --gap ms between bytes, and replies never overlap.
+    rate; the reply starts --turnaround ms later (5 ms more after a stored write) and takes its
+    time on the wire plus --gap ms between bytes. The line is half-duplex: a host that
+    transmits while an actuator is replying garbles both, as do two actuators replying at
+    once; each such collision is reported on stderr.
 
     With --replay CAPTURE, a request recorded in the capture (the same ID, instruction and
     parameters) gets the reply recorded for it, after the recorded latency (several replies to
@@ -306,6 +319,7 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
         from ..sim.replay import ZapReplay
 
         device = ZapReplay(replay, device, recorded)
+    getattr(device, "model", device).on_collision = _say_collision
     if state and getattr(device, "restored", False):
         shown = ", ".join(str(a.ident) for a in device.actuators)
         click.echo(f"note: {state}: {len(device.actuators)} actuator(s) restored (IDs {shown}); "

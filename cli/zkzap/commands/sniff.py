@@ -114,13 +114,14 @@ def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats,
 @SNIFF_EXITS
 @sniff.command("zap", cls=Command, context_settings=CONTEXT)
 @_common("zap")
-@click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.1, show_default=True,
-              metavar="SECONDS", help="A request that expects an answer and gets none for this long is a "
-                                      "missing reply.")
+@click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.15, show_default=True,
+              metavar="SECONDS", help="The late window: a request that expects an answer and gets none for "
+                                      "this long is a missing reply (the window a host waits).")
 def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout):
     """Sniff a mightyZAP bus (one adapter sees both directions; nothing is sent).
 
-    Every feedback is paired with the request it answers: 'latency_ms', 'request' and 'pairing'
+    Every feedback is paired with the request it answers (the latest one to its ID whose late
+    window is open, even when the host has moved on): 'latency_ms', 'request' and 'pairing'
     (ok, unexpected-id with 'expected_id', or unsolicited: an answer nobody asked for, like the
     acknowledgements official libraries leave unread in return mode 2). A request that expects
     an answer (Echo, Load Data, and anything to an ID seen acknowledging writes) and gets none

@@ -8,11 +8,19 @@ sequence the channel's message count. The file is chunked (zstd or lz4 when avai
 indexed, so large runs open quickly; :meth:`McapWriter.close` writes the summary and the
 indexes, which a session does on every end it can see (count, duration, Ctrl-C, SIGTERM, a port
 failure).
+
+A chunk is closed by time as well as by size: every :data:`FLUSH_S` seconds the chunk in
+progress is written out with its message indexes and the stream flushed (by a thread of the
+writer's own, so a silent ECU does not hold the last records back), so a process killed
+without a word (SIGKILL, a power cut) leaves a file whose records up to the last half second
+are readable — it only lacks the summary and footer, which readers that scan the file
+(``mcap.reader.NonSeekingReader``, ``mcap recover``) do without.
 """
 
 from __future__ import annotations
 
 import json
+import threading
 
 from ..codec import zk
 from .writers import IsoNs
@@ -20,6 +28,8 @@ from .writers import IsoNs
 #: The extra that provides this module's library.
 EXTRA = "mcap"
 CHUNK_SIZE = 256 * 1024
+#: The longest a record waits in memory before its chunk is written out (seconds).
+FLUSH_S = 0.5
 
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
 
@@ -91,7 +101,7 @@ def control_schema(name: str) -> dict:
 class McapWriter:
     """Records (status and control, as dicts) into an MCAP file on a binary ``stream``."""
 
-    def __init__(self, stream, *, library="zkzap"):
+    def __init__(self, stream, *, library="zkzap", flush_s=FLUSH_S):
         from mcap.writer import CompressionType, IndexType, Writer
 
         compression = CompressionType.NONE
@@ -114,6 +124,27 @@ class McapWriter:
         self.count = 0
         self._closed = False
         self._ns = IsoNs()
+        self._lock = threading.Lock()
+        self._pending = False             # messages not yet written out
+        self._error = None                # an OSError of the flushing thread, raised by the next write
+        self._stop = threading.Event()
+        self._thread = None
+        if flush_s:
+            self._thread = threading.Thread(target=self._flusher, args=(flush_s,), name="zkzap-mcap-flush",
+                                            daemon=True)
+            self._thread.start()
+
+    def _flusher(self, period):
+        while not self._stop.wait(period):
+            with self._lock:
+                if self._closed or not self._pending or self._w is None:
+                    continue
+                try:
+                    self._w.flush()       # the chunk in progress, its message indexes, then the stream
+                except (OSError, ValueError) as e:
+                    self._error = e
+                    return
+                self._pending = False
 
     def _start(self):
         from .. import __version__
@@ -121,6 +152,7 @@ class McapWriter:
         self._w = self._make()
         try:
             self._w.start(profile="", library=f"{self._library} {__version__}")
+            self.stream.flush()           # the header is on disk before the first record
         except OSError as e:
             self._fail(e)
 
@@ -158,42 +190,53 @@ class McapWriter:
     def write(self, rec):
         if self._closed:
             return
-        ch = self._channel(rec)
-        seq = self._seq[ch]
-        self._seq[ch] = seq + 1
-        ns = self._time_ns(rec)
+        if self._error is not None:
+            self._fail(self._error)
         data = _dumps({k: v for k, v in rec.items() if k[:1] != "_"}).encode("utf-8")
-        try:
-            self._w.add_message(channel_id=ch, log_time=ns, data=data, publish_time=ns, sequence=seq)
-        except OSError as e:
-            self._fail(e)
+        with self._lock:
+            try:
+                ch = self._channel(rec)
+                seq = self._seq[ch]
+                self._seq[ch] = seq + 1
+                ns = self._time_ns(rec)
+                self._w.add_message(channel_id=ch, log_time=ns, data=data, publish_time=ns, sequence=seq)
+            except OSError as e:
+                self._fail(e)
+            self._pending = True
         self.count += 1
 
     def _fail(self, e):
         from ..errors import OutputError
 
         self._closed = True
+        self._stop.set()
         name = getattr(self.stream, "name", None)
         name = "stdout" if not isinstance(name, str) or name == "<stdout>" else name
-        raise OutputError(f"output: cannot write {name}: {e.strerror or e}") from None
+        raise OutputError(f"output: cannot write {name}: {getattr(e, 'strerror', None) or e}") from None
 
     def write_many(self, recs):
         for rec in recs:
             self.write(rec)
 
     def close(self):
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
         if self._closed:
             return
-        if self._w is None:
-            if getattr(self.stream, "lazy", False):
+        if self._error is not None:
+            self._fail(self._error)
+        with self._lock:
+            if self._w is None:
+                if getattr(self.stream, "lazy", False):
+                    self._closed = True
+                    return                 # a file no record opened: left as it was
+                self._start()              # stdout: an empty, valid MCAP stream
+            try:
+                self._w.finish()
+                self.stream.flush()
+            except BrokenPipeError:
                 self._closed = True
-                return                     # a file no record opened: left as it was
-            self._start()                  # stdout: an empty, valid MCAP stream
-        try:
-            self._w.finish()
-            self.stream.flush()
-        except BrokenPipeError:
+            except OSError as e:
+                self._fail(e)
             self._closed = True
-        except OSError as e:
-            self._fail(e)
-        self._closed = True

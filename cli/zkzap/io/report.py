@@ -67,6 +67,7 @@ class Run:
         self.limit_events = {}
         self.warn_events = {}
         self.columns = set()         # the columns (keys) the input has
+        self.notes = []              # what reading the input left out (a cut JSON array)
         self.steps = None            # rows of its steps file (or its summary's steps)
         self.summary = None
         self.offset = 0.0            # subtracted from t on a comparison's common axis
@@ -85,7 +86,7 @@ class Run:
             if v is not None:
                 self.present.add(c)
         name = rec.get("engine_state_name")
-        if name and (not self.states or self.states[-1][1] != name):
+        if name and isinstance(name, str) and (not self.states or self.states[-1][1] != name):
             self.states.append((t, name))
         for key, events in (("limit", self.limit_events), ("warnings", self.warn_events)):
             for text in _texts(rec.get(key)):
@@ -125,19 +126,29 @@ def _texts(v):
 def _is_binary(head: bytes) -> bool:
     if not head:
         return False
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff") and 0 in head[2:4]:
+        return False                            # UTF-16 text: the text reader says so
     if b"\0" in head or head[0] in (0xF1, 0xF2, 0xF3, 0xF4, 0xF5, 0xF6, 0xF7, 0xF8, 0xF9, 0xFA):
         return True
+    # the first line decides: text whose first line is text (a stray byte further on is named
+    # by the text reader, with its line), bytes otherwise
+    first, newline, _ = head.partition(b"\n")
     try:
-        head.decode("utf-8")
+        first.decode("utf-8")
     except UnicodeDecodeError as e:
-        return e.start < len(head) - 4          # not just a character cut at the block's end
+        return bool(newline) or e.start < len(first) - 4     # not just a character cut at the block's end
     return False
 
 
 def load_run(path, extra=()) -> Run:
     """Read a telemetry CSV / JSON Lines / JSON file, a raw log or a pcapng capture into a
     :class:`Run` (``-``: standard input, spooled to a temporary file so that it is read in
-    constant memory like any file)."""
+    constant memory like any file).
+
+    The text formats are read line by line in constant memory (a JSON array too, so a run
+    killed before its closing bracket reads up to its last whole record, noted in
+    :attr:`Run.notes`); text that is not UTF-8, a line that is not a record and a CSV row the
+    csv module refuses are a UsageError naming ``FILE:LINE``."""
     if path == "-":
         return _load_stdin(extra)
     try:
@@ -149,37 +160,112 @@ def load_run(path, extra=()) -> Run:
     if _is_binary(head):
         _load_raw(path, run)
     else:
+        from ..api.textfile import iter_lines
+
         text = head.lstrip(b"\xef\xbb\xbf").lstrip()
-        with open(path, encoding="utf-8-sig", newline="") as f:
-            if text.startswith(b"{"):
-                for n, line in enumerate(f, 1):
-                    if line.strip():
-                        try:
-                            rec = json.loads(line)
-                            if n <= 100:
-                                run.columns.update(rec)
-                            run.add(rec)
-                        except ValueError:
-                            raise UsageError(f"run: {path}:{n}: not a JSON record") from None
-            elif text.startswith(b"["):
-                try:
-                    for n, rec in enumerate(json.load(f)):
-                        if n <= 100:
-                            run.columns.update(rec)
-                        run.add(rec)
-                except ValueError:
-                    raise UsageError(f"run: {path}: not a JSON array of records") from None
-            else:
-                reader = csv.DictReader(f)
-                if not reader.fieldnames or "t" not in reader.fieldnames:
-                    raise UsageError(f"run: {path}: expected the CSV that 'zk monitor' or 'zk profile' writes "
-                                     f"(a header with a 't' column), JSON records or a raw log")
-                run.columns.update(reader.fieldnames)
-                for rec in reader:
-                    run.add(rec)
+        lines = iter_lines(path, "run")
+        if text.startswith(b"{"):
+            _json_lines(lines, path, run)
+        elif text.startswith(b"["):
+            _json_array(lines, path, run)
+        else:
+            _csv_rows(lines, path, run)
     if not len(run.t):
         raise UsageError(f"run: {path}: no records")
     return run
+
+
+def _record(value, path, n):
+    if not isinstance(value, dict):
+        raise UsageError(f"run: {path}:{n}: not a JSON record (an object)")
+    return value
+
+
+def _json_lines(lines, path, run):
+    for n, line in lines:
+        if not line.strip():
+            continue
+        try:
+            rec = _record(json.loads(line), path, n)
+        except (ValueError, RecursionError):
+            raise UsageError(f"run: {path}:{n}: not a JSON record") from None
+        if n <= 100:
+            run.columns.update(rec)
+        run.add(rec)
+
+
+#: The longest record of a JSON array read (characters, over however many lines it spans).
+MAX_RECORD = 1 << 20
+
+
+def _json_array(lines, path, run):
+    """The records of a JSON array, one at a time (however its lines are laid out)."""
+    decoder = json.JSONDecoder()
+    buf, opened, closed, count, start = "", False, False, 0, 1
+    for n, line in lines:
+        if not buf.strip():
+            start = n
+        buf += line
+        while True:
+            rest = buf.lstrip(" \t\r\n,") if opened else buf.lstrip()
+            if not rest:
+                buf = ""
+                break
+            if closed:
+                raise UsageError(f"run: {path}:{n}: text after the JSON array's closing bracket")
+            if not opened:
+                if rest[0] != "[":
+                    raise UsageError(f"run: {path}:{n}: not a JSON array of records")
+                opened, buf = True, rest[1:]
+                continue
+            if rest[0] == "]":
+                closed, buf = True, rest[1:]
+                continue
+            try:
+                rec, end = decoder.raw_decode(rest)
+            except RecursionError:
+                raise UsageError(f"run: {path}:{start}: not a JSON record") from None
+            except ValueError:
+                if len(rest) > MAX_RECORD:
+                    raise UsageError(f"run: {path}:{start}: not a JSON record") from None
+                buf = rest                     # the record goes on on the next line
+                break
+            _record(rec, path, start)
+            if count < 100:
+                run.columns.update(rec)
+            run.add(rec)
+            count += 1
+            buf, start = rest[end:], n
+    if not closed:
+        cut = " and its last record is cut" if buf.strip() else ""
+        run.notes.append(f"{path}: the JSON array is not closed{cut} (a run that was stopped by force?): "
+                         f"read its {count} whole records")
+
+
+class _Numbered:
+    """The text of ``(line number, text)`` pairs, remembering the number of the last one
+    (the csv module's own count lags a row it refuses)."""
+
+    def __init__(self, lines):
+        self.lines, self.n = lines, 0
+
+    def __iter__(self):
+        for self.n, text in self.lines:
+            yield text
+
+
+def _csv_rows(lines, path, run):
+    lines = _Numbered(lines)
+    reader = csv.DictReader(lines)
+    try:
+        if not reader.fieldnames or "t" not in reader.fieldnames:
+            raise UsageError(f"run: {path}: expected the CSV that 'zk monitor' or 'zk profile' writes "
+                             f"(a header with a 't' column), JSON records or a raw log")
+        run.columns.update(reader.fieldnames)
+        for rec in reader:
+            run.add(rec)
+    except csv.Error as e:
+        raise UsageError(f"run: {path}:{lines.n}: not a CSV row: {e}") from None
 
 
 def _load_stdin(extra):
@@ -223,27 +309,69 @@ def _load_raw(path, run):
 
 
 def load_steps(path) -> list:
+    """The rows of a ``zk profile --steps-csv`` file (UsageError naming ``FILE:LINE`` for text
+    that is not UTF-8 or not CSV)."""
+    from ..api.textfile import iter_lines
+
+    lines = _Numbered(iter_lines(path, "steps"))
     try:
-        with open(path, encoding="utf-8-sig", newline="") as f:
-            rows = list(csv.DictReader(f))
-    except OSError as e:
-        raise UsageError(f"steps: cannot read {path}: {e.strerror}") from None
+        rows = list(csv.DictReader(lines))
+    except csv.Error as e:
+        raise UsageError(f"steps: {path}:{lines.n}: not a CSV row: {e}") from None
     if rows and "step" not in rows[0]:
         raise UsageError(f"steps: {path}: expected the CSV that 'zk profile --steps-csv' writes")
     return rows
 
 
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _number_or_null(v):
+    return v is None or _is_number(v)
+
+
+#: The lists of a summary the report reads: key -> (check of an item, the item in words, the
+#: list in words). Everything the report reads of a summary is checked here, so a hand-edited or
+#: damaged summary is refused naming the key instead of failing while the report is drawn.
+_SUMMARY_LISTS = {
+    "states": (lambda x: isinstance(x, str), "a state name (a string)", "state names"),
+    "errors": (lambda x: isinstance(x, dict) and _is_number(x.get("code")) and isinstance(x.get("name"), str)
+               and _is_number(x.get("t")), "an ECU error: an object with code, name and t", "ECU errors"),
+    "limits": (lambda x: isinstance(x, dict) and isinstance(x.get("limit"), str)
+               and isinstance(x.get("verdict", ""), str) and _number_or_null(x.get("first_violation_t")),
+               "a limit: an object with limit, verdict and first_violation_t", "limits"),
+    "steps": (lambda x: isinstance(x, dict) and isinstance(x.get("step"), (str, int, float, type(None))),
+              "a step: an object with a step number", "steps"),
+}
+
+
 def load_summary(path) -> dict:
+    """A ``zk profile --summary-json`` document, its lists checked (UsageError naming the file
+    and the key: ``summary: sum.json: states[2]: 5 is not a state name (a string)``)."""
+    from ..api.documents import DocumentError, read
+
     try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except OSError as e:
-        raise UsageError(f"summary: cannot read {path}: {e.strerror}") from None
-    except ValueError:
-        raise UsageError(f"summary: {path}: not JSON (expected 'zk profile --summary-json' output)") from None
+        doc, name = read(path, "summary", finite=False)
+    except DocumentError as e:
+        raise UsageError(f"summary: {e} (expected 'zk profile --summary-json' output)") from None
     if not isinstance(doc, dict):
         raise UsageError(f"summary: {path}: expected a JSON object")
+    for key, (ok, shape, plural) in _SUMMARY_LISTS.items():
+        value = doc.get(key)
+        if value is None:
+            continue
+        if not isinstance(value, list):
+            raise UsageError(f"summary: {path}: {key}: {_short(value)} is not a list of {plural}")
+        for i, item in enumerate(value):
+            if not ok(item):
+                raise UsageError(f"summary: {path}: {key}[{i}]: {_short(item)} is not {shape}")
     return doc
+
+
+def _short(value, width=40):
+    text = json.dumps(value, ensure_ascii=False, default=str)
+    return text if len(text) <= width else text[:width - 3] + "..."
 
 
 def summary_limits(summary) -> list:
@@ -257,10 +385,14 @@ def summary_limits(summary) -> list:
 
 
 def align(runs, how="start") -> None:
-    """Put each run's time on a common axis: ``start`` (each from its first record), ``running``
-    (from the engine's first running state) or ``step:N`` (from the start of step N)."""
+    """Put each run's time on a common axis: ``start`` (each from its session's start, t = 0:
+    where its schedule started, however late its first status frame came), ``first`` (each from
+    its first record), ``running`` (from the engine's first running state) or ``step:N`` (from
+    the start of step N)."""
     for run in runs:
         if how == "start":
+            run.offset = 0.0
+        elif how == "first":
             run.offset = run.t[0] if len(run.t) else 0.0
         elif how == "running":
             t = run.running_t()
@@ -820,8 +952,9 @@ def terminal(runs, console, width=None, height=6):
             if c is None:
                 continue
             t = run.t
-            t0 = t[0] if len(t) else 0.0
-            t_end = t[-1] if len(t) else 0.0
+            # a file appended to by two runs starts its t again: the panel spans every t it holds
+            t0 = min(t) if len(t) else 0.0
+            t_end = max(t) if len(t) else 0.0
             span = (t_end - t0) or 1.0
             col = [math.nan] * width
             s = run.series[c]

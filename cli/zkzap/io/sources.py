@@ -10,7 +10,7 @@ import gc
 import os
 import sys
 
-from ..codec.hexfmt import HexError, iter_hex_stream, parse_hex
+from ..codec.hexfmt import HexError, HexSkips, iter_hex_stream, parse_hex
 from ..errors import UsageError
 
 CHUNK = 1 << 16
@@ -70,10 +70,89 @@ def hex_chunks(args):
                 if named:
                     raise HexError(f"{e} (nor a file: {named[0]} does not exist)") from None
                 raise
-        return _hex_files(list(args)), False
+        return HexText(list(args)), False
     if sys.stdin is None or sys.stdin.isatty() and not args:
         raise UsageError("input: none given; pass hex as arguments, pipe hex or bytes (--binary) to stdin")
-    return iter_hex_stream(sys.stdin, what="stdin"), False
+    return HexText(), False
+
+
+class HexText:
+    """The bytes of hex text, line by line: stdin, or the text files ``paths`` in turn. Bytes
+    that are not UTF-8 are read as what they are (binary input, refused or, once a stream has
+    given bytes, a damaged line skipped), never as a decoding error that would end the stream:
+    :meth:`note` counts the lines skipped. ``strict``: every line that is not hex is an error."""
+
+    def __init__(self, paths=None, strict: bool = False):
+        self.paths = paths
+        self.what = "stdin"              # the input the first skipped line came from
+        self.skipped = None if strict else HexSkips()
+        self._started = None
+
+    def start(self) -> None:
+        """Read up to the first bytes now: text refused at its first line is refused before
+        any output is opened (no CSV header, no ``[`` on stdout). Iterating yields them first."""
+        it = self._chunks()
+        first = next(it, None)
+        self._started = ([] if first is None else [first], it)
+
+    def __iter__(self):
+        if self._started is None:
+            yield from self._chunks()
+            return
+        first, it = self._started
+        self._started = None
+        yield from first
+        yield from it
+
+    def _chunks(self):
+        if self.paths is None:
+            yield from self._stdin()
+        else:
+            for path in self.paths:
+                yield from self._file(path)
+
+    def _stdin(self):
+        import io
+
+        raw = getattr(sys.stdin, "buffer", None)
+        stream = sys.stdin if raw is None else io.TextIOWrapper(raw, encoding="utf-8", errors="surrogateescape")
+        try:
+            yield from iter_hex_stream(stream, what="stdin", skipped=self.skipped)
+        finally:
+            if raw is not None:
+                stream.detach()           # leave stdin's buffer open for whoever owns it
+
+    def _file(self, path):
+        try:
+            stream = open(path, encoding="utf-8", errors="surrogateescape", newline=None)
+        except OSError as e:
+            raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
+        before = self.skipped.lines if self.skipped is not None else 0
+        with stream:
+            try:
+                yield from iter_hex_stream(stream, what=path, skipped=self.skipped)
+            except HexError as e:
+                if "binary input" in str(e):
+                    raise HexError(f"{path}: raw bytes, not hex text: give --binary to decode them "
+                                   f"({' '.join(['--binary', *self.paths])})", path=path) from None
+                raise
+        if self.skipped is not None and not before and self.skipped.lines:
+            self.what = path
+
+    def note(self):
+        text = self.skipped.note() if self.skipped is not None else None
+        return f"{self.what}: {text}" if text else None
+
+
+def start(chunks) -> None:
+    """Read a hex source up to its first bytes before the output opens (see :meth:`HexText.start`)."""
+    if isinstance(chunks, HexText):
+        chunks.start()
+
+
+def hex_note(chunks):
+    """The note on the damaged lines a hex stream skipped, or None."""
+    return chunks.note() if isinstance(chunks, HexText) else None
 
 
 def hex_file_inputs(args) -> bool:
@@ -85,22 +164,6 @@ def hex_file_inputs(args) -> bool:
     except HexError:
         return True
     return False
-
-
-def _hex_files(paths):
-    for path in paths:
-        try:
-            stream = open(path, encoding="utf-8", errors="surrogateescape", newline=None)
-        except OSError as e:
-            raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
-        with stream:
-            try:
-                yield from iter_hex_stream(stream, what=path)
-            except HexError as e:
-                if "binary input" in str(e):
-                    raise HexError(f"{path}: raw bytes, not hex text: give --binary to decode them "
-                                   f"({' '.join(['--binary', *paths])})", path=path) from None
-                raise
 
 
 class _CollectorPaused:

@@ -10,8 +10,10 @@ openpyxl's write-only mode streams the rows to a temporary file, so memory stays
 the run's length; the workbook is assembled when the session ends and renamed over ``-o FILE``
 whole (a zip has no end to append to: ``--append`` is refused, and a run that fails to start
 leaves an existing file as it was). Ctrl-C and SIGTERM end the session first, so the workbook
-is written; a process killed with SIGKILL leaves none (use ``--raw-log`` or CSV beside it when
-that matters).
+is written. A process killed with SIGKILL (or a power cut) writes no workbook, so the rows are
+also kept as they are written in ``FILE.xlsx.partial.csv`` (the CSV's columns, flushed per
+row), removed once the workbook is saved: after a kill it holds every row up to the kill, and a
+session refuses to start while it exists (it would be the only copy of a killed run).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import os
 
 from ..errors import OutputError, UsageError
 
+#: The journal of a workbook's rows beside it, until the workbook is saved.
+PARTIAL = ".partial.csv"
 #: The extra that provides openpyxl.
 EXTRA = "xlsx"
 #: Rows of a sheet (Excel's limit).
@@ -105,8 +109,16 @@ class XlsxWriter:
     def __init__(self, path, columns):
         from openpyxl import Workbook
 
+        from .writers import CsvWriter
+
         self.path = path
         self.columns = list(columns)
+        self.partial = path + PARTIAL
+        try:
+            stream = open(self.partial, "x", encoding="utf-8", newline="")
+        except OSError as e:
+            raise OutputError(f"output: cannot write {self.partial}: {e.strerror or e}") from None
+        self._journal = CsvWriter(stream, self.columns)
         self.book = Workbook(write_only=True)
         self._sheet = None
         self._n = 0
@@ -127,6 +139,7 @@ class XlsxWriter:
             self._new_sheet()
         self._sheet.append([cell(rec.get(c), c) for c in self.columns])
         self._rows += 1
+        self._journal.write(rec)
 
     def sheets(self, steps=None, summary=None) -> None:
         """The steps (``(columns, rows)``) and the summary of the run, written at the close."""
@@ -157,7 +170,14 @@ class XlsxWriter:
                 os.unlink(tmp)
             except OSError:
                 pass
-            raise OutputError(f"output: cannot write {self.path}: {e.strerror or e}") from None
+            self._journal.stream.close()
+            raise OutputError(f"output: cannot write {self.path}: {e.strerror or e} "
+                              f"(the rows are in {self.partial})") from None
+        self._journal.stream.close()
+        try:
+            os.unlink(self.partial)
+        except OSError:
+            pass
 
 
 def _summary_rows(sheet, summary):
@@ -195,3 +215,6 @@ def check(output, append) -> None:
         raise UsageError("append: a workbook cannot be appended to; give a new -o FILE.xlsx")
     if not output or output == "-":
         raise UsageError("format xlsx: a workbook needs a file; give -o FILE.xlsx")
+    if os.path.lexists(output + PARTIAL):
+        raise UsageError(f"output: {output + PARTIAL} holds the rows of a run killed before its workbook "
+                         "was written; move or delete it first")

@@ -69,6 +69,18 @@ MACOS_CH34X = ("CH34x adapter (the chip of IR Robot's own USB adapter): macOS 11
                "(CH34xVCPDriver)")
 
 
+def _set_timer(path) -> str:
+    return (f"set 1 ms: echo 1 | sudo tee {path} (until unplugged; to keep it, add the udev rule "
+            f"{UDEV_RULE} to /etc/udev/rules.d/99-ftdi-latency.rules), or pass --low-latency")
+
+
+def latency_timer_hint(device, timer_ms, sysfs=None) -> str:
+    """How to lower the latency timer of the FTDI adapter behind ``device`` (one line)."""
+    name = os.path.basename(os.path.realpath(str(device)))
+    path = os.path.join(SYSFS_USB_SERIAL if sysfs is None else sysfs, name, "latency_timer")
+    return f"its latency timer is {timer_ms} ms; " + _set_timer(path)
+
+
 def hints_for(rec, sysfs=SYSFS_USB_SERIAL, platform=None):
     """Advice for one port record (a list of one-line strings). ``platform`` is a
     ``sys.platform`` value (default: this machine's): the advice differs on Windows and macOS."""
@@ -89,8 +101,7 @@ def hints_for(rec, sysfs=SYSFS_USB_SERIAL, platform=None):
                          "(the default 16 ms delays every reply)")
         elif lt > 1:
             hints.append(f"FTDI latency timer is {lt} ms, so every reply waits up to {lt} ms in the adapter; "
-                         f"set 1 ms: echo 1 | sudo tee {path} (until unplugged; to keep it, add the udev rule "
-                         f"{UDEV_RULE} to /etc/udev/rules.d/99-ftdi-latency.rules)")
+                         + _set_timer(path))
         else:
             hints.append(f"FTDI latency timer is {lt} ms (fastest)")
     elif rec["vid"] == WCH_VID:

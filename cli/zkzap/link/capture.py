@@ -136,7 +136,8 @@ class CaptureFrames:
 
     ``accept`` (ZK only): ``both``, ``status`` or ``control``; a ZK stream of known direction
     takes only its own kind (host -> ECU: control frames, ECU -> host: status frames).
-    Afterwards: :attr:`truncated`, :attr:`frames`, :attr:`bad`, :attr:`skipped`, :attr:`t0`.
+    Afterwards: :attr:`truncated`, :attr:`frames`, :attr:`bad`, :attr:`skipped`, :attr:`t0`, and
+    :meth:`reading_note` on what the capture held that could not be read.
     """
 
     def __init__(self, path: str, protocol: str, accept: str = "both"):
@@ -207,8 +208,8 @@ class CaptureFrames:
     def skipped(self):
         return self._sum("skipped")
 
-    def truncation_note(self) -> str | None:
-        if not self.truncated:
-            return None
-        return (f"{self.path}: the capture is truncated: decoded up to its last whole block "
-                f"({self.reader.packets} chunks)")
+    def reading_note(self) -> str | None:
+        """One line on what the capture held that was not read (a truncated end, a damaged or
+        malformed block), or None when it was all whole."""
+        problems = self.reader.problems()
+        return f"{self.path}: {'; '.join(problems)}" if problems else None

@@ -14,8 +14,11 @@ Layout (pcapng, little-endian, as written here):
 
 Each block is written with one ``write`` loop that SIGINT/SIGTERM cannot cut and flushed at
 once, so a killed process leaves a whole capture; when a write fails (disk full) a regular file
-is cut back to its last whole block and :class:`~zkzap.errors.OutputError` is raised. The
-reader stops at the last whole block of a truncated file and says so (:attr:`Reader.truncated`).
+is cut back to its last whole block and :class:`~zkzap.errors.OutputError` is raised.
+
+The reader trusts no length field: it stops at the last whole block of a truncated file, at a
+block whose framing is broken, and skips blocks whose bodies are shorter than their fields,
+saying so (:meth:`Reader.problems`); memory stays one block, whatever a length claims.
 """
 
 from __future__ import annotations
@@ -245,25 +248,55 @@ def describe_start(head: bytes) -> str:
     return f"data starting with {shown}"
 
 
+#: The longest block read (bytes; Wireshark's own bound): a longer length field is damage.
+MAX_BLOCK = 16 << 20
+#: Pieces in which a block body is read, so memory follows the bytes that are really there.
+_PIECE = 1 << 16
+#: The latest time a packet may carry (9999-12-31T23:59:59Z): later is a damaged timestamp.
+MAX_TS = 253402300799.0
+
+
 class Reader:
     """Iterate the packets of a pcapng file in file order.
 
-    ``protocol`` ('zk'/'zap'/None) refuses interfaces of another link type (CaptureError naming
-    the file and what was found). After iterating, :attr:`truncated` tells whether the file
-    ended inside a block (everything before it was read) and :attr:`packets` how many there
-    were. Memory is constant: one block at a time."""
+    ``protocol`` ('zk'/'zap'/None) refuses a capture whose first interface is of another link
+    type (CaptureError naming the file and what was found). A capture is read whatever its
+    blocks claim: no length field is trusted before it is checked against the file (and
+    against :data:`MAX_BLOCK`), and bodies are read in bounded pieces, so memory stays one
+    block of what is really there. After iterating:
+
+    - :attr:`truncated`: the file ended inside a block (everything before it was read);
+    - :attr:`damaged`: ``(byte offset, what)`` of a block whose framing is broken (a length
+      field that cannot be, opening and closing lengths that differ); reading stopped there,
+      since nothing after it can be found;
+    - :attr:`malformed`: blocks whose framing is sound but whose body is not (shorter than its
+      fields, a packet of an interface never described, a time beyond the year 9999), skipped
+      (:attr:`first_malformed`: ``(byte offset, what)`` of the first);
+    - :attr:`foreign`: packets of a later interface of another link type or protocol, skipped;
+    - :attr:`packets`: the packets read.
+    """
 
     def __init__(self, path: str, protocol: str | None = None):
         self.path = path
         self.protocol = protocol
         self.truncated = False
+        self.damaged = None
+        self.malformed = 0
+        self.first_malformed = None
+        self.foreign = 0
         self.packets = 0
-        self.interfaces = []          # (protocol, name, tsresol divisor)
+        self.interfaces = []          # (protocol, name, tsresol divisor), or None: skipped
         try:
             self._f = open(path, "rb")
         except OSError as e:
             raise UsageError(f"capture: cannot read {path}: {e.strerror}") from None
-        head = self._f.read(12)
+        try:
+            st = os.fstat(self._f.fileno())
+            self._size = st.st_size if stat.S_ISREG(st.st_mode) else None
+            head = self._f.read(12)
+        except OSError as e:
+            self._f.close()
+            raise UsageError(f"capture: cannot read {path}: {e.strerror or e}") from None
         if head[:4] != MAGIC:
             self._f.close()
             raise CaptureError(f"{path}: not a pcapng capture: {describe_start(head)}")
@@ -278,11 +311,35 @@ class Reader:
     def __exit__(self, *exc):
         self.close()
 
-    def __iter__(self):
+    def _read(self, n: int) -> bytes:
+        """Up to ``n`` bytes, read in bounded pieces (short only at the end of the file)."""
         f = self._f
+        if n <= _PIECE:
+            return f.read(n)
+        parts, got = [], 0
+        while got < n:
+            piece = f.read(min(_PIECE, n - got))
+            if not piece:
+                break
+            parts.append(piece)
+            got += len(piece)
+        return b"".join(parts)
+
+    def _damage(self, offset: int, what: str):
+        if offset == 0:
+            raise CaptureError(f"{self.path}: not a pcapng capture: {what} at byte 0")
+        self.damaged = (offset, what)
+
+    def _skip(self, offset: int, what: str):
+        self.malformed += 1
+        if self.first_malformed is None:
+            self.first_malformed = (offset, what)
+
+    def __iter__(self):
         endian = "<"
+        offset = 0
         while True:
-            head = f.read(8)
+            head = self._read(8)
             if not head:
                 return
             if len(head) < 8:
@@ -290,50 +347,78 @@ class Reader:
                 return
             if head[:4] == MAGIC:
                 # a new section: its byte order comes from the byte-order magic
-                bom = f.read(4)
+                bom = self._read(4)
                 if len(bom) < 4:
                     self.truncated = True
                     return
-                endian = "<" if struct.unpack("<I", bom)[0] == _BOM else ">"
+                if struct.unpack("<I", bom)[0] == _BOM:
+                    endian = "<"
+                elif struct.unpack(">I", bom)[0] == _BOM:
+                    endian = ">"
+                else:
+                    self._damage(offset, f"a section header without the byte-order magic ({bom.hex(' ')})")
+                    return
                 btype, length = SHB, struct.unpack(endian + "I", head[4:])[0]
-                body = bom + f.read(max(0, length - 16))
-                self.interfaces = []
+                lead = bom
             else:
                 btype, length = struct.unpack(endian + "II", head)
-                body = f.read(max(0, length - 12))
-            if length < 12 or length % 4:
-                raise CaptureError(f"{self.path}: not a pcapng capture: a block of length {length} "
-                                   f"at byte {f.tell() - len(body) - 8}")
-            tail = f.read(4)
-            if len(body) < length - 12 or len(tail) < 4:
+                lead = b""
+            if length < 12 + len(lead) or length % 4 or length > MAX_BLOCK:
+                self._damage(offset, f"a block of length {length}" + (
+                    f" (at most {MAX_BLOCK} bytes)" if length > MAX_BLOCK else
+                    " (at least 12 and a multiple of 4)"))
+                return
+            if self._size is not None and offset + length > self._size:
+                self.truncated = True          # the file ends inside this block: nothing is read
+                return
+            rest = self._read(length - 8 - len(lead))
+            if len(rest) < length - 8 - len(lead):
                 self.truncated = True
                 return
-            if btype == IDB:
-                self._interface(body, endian)
+            body, tail = lead + rest[:-4], rest[-4:]
+            closing = struct.unpack(endian + "I", tail)[0]
+            if closing != length:
+                self._damage(offset, f"a block whose closing length {closing} differs from its opening "
+                                     f"length {length}")
+                return
+            at, offset = offset, offset + length
+            if btype == SHB:
+                self.interfaces = []
+            elif btype == IDB:
+                self._interface(body, endian, at)
             elif btype == EPB:
-                pkt = self._packet(body, endian)
+                pkt = self._packet(body, endian, at)
                 if pkt is not None:
                     self.packets += 1
                     yield pkt
             elif btype == SPB and self.interfaces:
-                n = struct.unpack(endian + "I", body[:4])[0]
-                proto, name, div = self.interfaces[0]
-                self.packets += 1
-                yield Packet(0, 0.0, bytes(body[4:4 + n]), UNKNOWN, proto, name)
+                pkt = self._simple(body, endian, at)
+                if pkt is not None:
+                    self.packets += 1
+                    yield pkt
 
-    def _interface(self, body, endian):
+    def _interface(self, body, endian, at):
+        n = len(self.interfaces)
+        if len(body) < 8:
+            self.interfaces.append(None)
+            self._skip(at, f"interface {n} described in {len(body)} bytes (8 at least)")
+            return
         linktype = struct.unpack(endian + "H", body[:2])[0]
         proto = PROTOCOL_BY_LINKTYPE.get(linktype)
-        n = len(self.interfaces)
+        wrong = None
         if proto is None:
             shown = _KNOWN_LINKTYPES.get(linktype)
-            raise CaptureError(f"{self.path}: interface {n} has link type {linktype}"
-                               f"{f' ({shown})' if shown else ''}; zkzap captures use {LINKTYPE_ZK} "
-                               f"(USER0, ZK) and {LINKTYPE_ZAP} (USER1, mightyZAP)")
-        if self.protocol is not None and proto != self.protocol:
-            raise CaptureError(f"{self.path}: a {PROTOCOL_NAMES[proto]} capture (link type {linktype}); "
-                               f"expected {PROTOCOL_NAMES[self.protocol]} "
-                               f"(link type {LINKTYPES[self.protocol]})")
+            wrong = (f"{self.path}: interface {n} has link type {linktype}"
+                     f"{f' ({shown})' if shown else ''}; zkzap captures use {LINKTYPE_ZK} "
+                     f"(USER0, ZK) and {LINKTYPE_ZAP} (USER1, mightyZAP)")
+        elif self.protocol is not None and proto != self.protocol:
+            wrong = (f"{self.path}: a {PROTOCOL_NAMES[proto]} capture (link type {linktype}); "
+                     f"expected {PROTOCOL_NAMES[self.protocol]} (link type {LINKTYPES[self.protocol]})")
+        if wrong is not None:
+            if not self.packets and not any(self.interfaces):
+                raise CaptureError(wrong)      # the capture's own first interface: not ours
+            self.interfaces.append(None)       # a later one: its packets are skipped and counted
+            return
         name, div = "", 1_000_000
         for code, value in _iter_options(body[8:], endian):
             if code == _IF_NAME:
@@ -343,17 +428,66 @@ class Reader:
                 div = 2 ** (r & 0x7F) if r & 0x80 else 10 ** r
         self.interfaces.append((proto, name, div))
 
-    def _packet(self, body, endian):
-        if_id, hi, lo, caplen = struct.unpack(endian + "IIII", body[:16])
+    def _described(self, if_id, at):
+        """The interface of a packet: (proto, name, div), or None (the packet is skipped)."""
         if if_id >= len(self.interfaces):
-            raise CaptureError(f"{self.path}: a packet of interface {if_id}, which was never described")
-        proto, name, div = self.interfaces[if_id]
+            self._skip(at, f"a packet of interface {if_id}, which was never described")
+            return None
+        iface = self.interfaces[if_id]
+        if iface is None:
+            self.foreign += 1
+        return iface
+
+    def _packet(self, body, endian, at):
+        if len(body) < 20:
+            self._skip(at, f"a packet block of {len(body) + 12} bytes (32 at least)")
+            return None
+        if_id, hi, lo, caplen = struct.unpack(endian + "IIII", body[:16])
+        if 20 + caplen > len(body):
+            self._skip(at, f"a packet of {caplen} bytes in a block of {len(body) + 12}")
+            return None
+        iface = self._described(if_id, at)
+        if iface is None:
+            return None
+        proto, name, div = iface
+        ts = ((hi << 32) | lo) / div
+        if ts > MAX_TS:
+            self._skip(at, f"a packet time of {ts:.0f} s, after the year 9999")
+            return None
         data = bytes(body[20:20 + caplen])
         direction = UNKNOWN
         for code, value in _iter_options(body[20 + caplen + _pad(caplen):], endian):
             if code == _EPB_FLAGS and len(value) >= 4:
                 direction = struct.unpack(endian + "I", value[:4])[0] & 3
-        return Packet(if_id, ((hi << 32) | lo) / div, data, direction, proto, name)
+        return Packet(if_id, ts, data, direction, proto, name)
+
+    def _simple(self, body, endian, at):
+        if len(body) < 4:
+            self._skip(at, f"a simple packet block of {len(body) + 12} bytes (16 at least)")
+            return None
+        iface = self._described(0, at)
+        if iface is None:
+            return None
+        n = struct.unpack(endian + "I", body[:4])[0]
+        proto, name, div = iface
+        return Packet(0, 0.0, bytes(body[4:4 + n]), UNKNOWN, proto, name)
+
+    def problems(self) -> list:
+        """What the capture holds that was not read, as phrases (empty when it was all whole)."""
+        out = []
+        if self.malformed:
+            offset, what = self.first_malformed
+            out.append(f"{self.malformed} malformed block{'s' if self.malformed > 1 else ''} skipped "
+                       f"(the first at byte {offset}: {what})")
+        if self.foreign:
+            out.append(f"{self.foreign} chunk{'s' if self.foreign > 1 else ''} of interfaces of another "
+                       "link type skipped")
+        if self.damaged is not None:
+            offset, what = self.damaged
+            out.append(f"damaged at byte {offset} ({what}): decoded up to there ({self.packets} chunks)")
+        elif self.truncated:
+            out.append(f"the capture is truncated: decoded up to its last whole block ({self.packets} chunks)")
+        return out
 
 
 def _iter_options(buf, endian):

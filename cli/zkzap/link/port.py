@@ -75,10 +75,110 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
     except ValueError as e:
         raise UsageError(f"port: {url}: {e}") from None
     except (serial.SerialException, OSError) as e:
+        if _busy(e):
+            raise in_use(url) from None
         text = str(e)
         if "could not open port" in text or "No such file" in text or "Errno" in text:
             raise PortError(f"port {url}: cannot open: {_short(e)}") from None
         raise PortError(f"port {url}: {_short(e)}") from None
+
+
+def _busy(e) -> bool:
+    """Whether an open failed because another program holds the device (its exclusive lock,
+    which pyserial reports as "Resource temporarily unavailable", or the tty's own TIOCEXCL)."""
+    import errno
+
+    return getattr(e, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY) \
+        or "exclusively lock" in str(e)
+
+
+def in_use(url: str) -> PortError:
+    """The PortError of a device another program holds, naming the programs where the OS tells
+    (``holders``: [(pid, command)])."""
+    found = holders(url)
+    by = ", ".join(f"{cmd} (PID {pid})" for pid, cmd in found)
+    return PortError(f"port {url}: in use by another program" + (f": {by}" if by else ""), busy=True,
+                     holders=found, url=url)
+
+
+def holders(device: str) -> list:
+    """``[(pid, command line)]`` of the other processes holding ``device``: the holder of its
+    lock (``/proc/locks``), else every process that has it open, as far as ``/proc`` shows this
+    user (Linux; an empty list elsewhere, or when nothing can be seen). Best effort, for
+    messages only."""
+    import os
+    import stat
+
+    try:
+        st = os.stat(device)
+    except OSError:
+        return []
+    locked = _lock_holders(st)
+    if locked:
+        return [(pid, _command(pid)) for pid in locked]
+    char = stat.S_ISCHR(st.st_mode)
+    want = st.st_rdev if char else (st.st_dev, st.st_ino)
+    me = os.getpid()
+    out = []
+    try:
+        pids = [int(p) for p in os.listdir("/proc") if p.isdigit()]
+    except OSError:
+        return []
+    for pid in sorted(pids):
+        if pid == me:
+            continue
+        fd_dir = f"/proc/{pid}/fd"
+        try:
+            fds = os.listdir(fd_dir)
+        except OSError:
+            continue                    # another user's process, or gone
+        for fd in fds:
+            try:
+                fst = os.stat(os.path.join(fd_dir, fd))
+            except OSError:
+                continue
+            if (fst.st_rdev if char and stat.S_ISCHR(fst.st_mode) else (fst.st_dev, fst.st_ino)) == want:
+                out.append((pid, _command(pid)))
+                break
+    return out
+
+
+def _lock_holders(st) -> list:
+    """PIDs holding a lock on the file of ``st`` (``/proc/locks``: ``... PID MAJ:MIN:INODE ...``)."""
+    import os
+
+    key = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    pids = []
+    try:
+        with open("/proc/locks", encoding="ascii", errors="replace") as f:
+            for line in f:
+                words = line.split()
+                if key in words and "->" not in words:
+                    pid = words[words.index(key) - 1]
+                    if pid.isdigit() and int(pid) != os.getpid() and int(pid) not in pids:
+                        pids.append(int(pid))
+    except (OSError, ValueError):
+        return []
+    return pids
+
+
+def _command(pid: int) -> str:
+    """A process's command line, shortened: ``zk monitor -p /dev/ttyUSB0`` (not the interpreter)."""
+    import os
+
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            words = f.read(4096).decode("utf-8", "replace").split("\0")
+    except OSError:
+        words = []
+    words = [w for w in words if w]
+    if not words:
+        return "?"
+    words[0] = os.path.basename(words[0])
+    if words[0].startswith("python") and len(words) > 1 and not words[1].startswith("-"):
+        words = [os.path.basename(words[1])] + words[2:]
+    text = " ".join(words)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 #: URL schemes that need HOST:PORT (pyserial's own check fails with a TypeError's text).
@@ -161,20 +261,45 @@ def sim_url(kind: str, **options) -> str:
 
 def port_failed(url: str, e) -> PortError:
     """The one wording of a port that failed or vanished in use, for every protocol:
-    ``port URL failed: REASON`` (the OS's reason without its ``[Errno N]`` prefix)."""
+    ``port URL failed: REASON`` — the OS's reason in words, without pyserial's ``[Errno N]``
+    prefix or a Python tuple (``(5, 'Input/output error')``, as termios errors print)."""
+    return PortError(f"port {url} failed: {reason(e)}", url=url)
+
+
+#: pyserial's words for a device that went away under a read, and plainer ones.
+_VANISHED = ("device reports readiness to read but returned no data",
+             "the device went away (it reports data to read but returns none: unplugged, or another program "
+             "reads it)")
+
+
+def reason(e, os_part: bool = False) -> str:
+    """What went wrong, in the OS's words: ``Input/output error`` for ``OSError(5, ...)`` and
+    ``termios.error(5, 'Input/output error')``, ``read failed: Input/output error`` for
+    pyserial's ``read failed: [Errno 5] Input/output error`` (``os_part``: only the OS's part
+    of such a text)."""
     import re
 
-    text = re.sub(r"\[Errno \d+\] ", "", str(e)) or type(e).__name__
-    return PortError(f"port {url} failed: {text}")
+    if isinstance(e, OSError) and isinstance(e.strerror, str) and e.strerror and not e.strerror.startswith("["):
+        text = e.strerror
+    else:
+        args = getattr(e, "args", ())
+        if len(args) >= 2 and isinstance(args[0], int) and isinstance(args[1], str):
+            text = args[1]                              # termios.error, select.error: (errno, text)
+        elif len(args) == 1 and isinstance(args[0], BaseException):
+            return reason(args[0])
+        else:
+            text = str(e)
+    m = None
+    for m in re.finditer(r"\[Errno \d+\] ", text):
+        pass
+    if m is not None:                   # "could not open port X: [Errno 2] No such file ..."
+        text = text[m.end():] if os_part else text[:m.start()] + text[m.end():]
+    # an error's tuple inside pyserial's text: "(5, 'Input/output error')", "PermissionError(13, '...', ...)"
+    text = re.sub(r"(?:\b\w+)?\((\d+), '([^']*)'[^)]*\)", r"\2", text)
+    if text.startswith(_VANISHED[0]):
+        text = _VANISHED[1]
+    return text or type(e).__name__
 
 
 def _short(e) -> str:
-    import re
-
-    text = e.strerror if isinstance(e, OSError) and isinstance(e.strerror, str) and e.strerror else str(e)
-    m = re.search(r"\((\d+), '([^']*)'\)", text)    # pyserial: "Could not configure port: (25, '...')"
-    if m:
-        return text[:m.start()] + m.group(2)
-    if "[Errno" in text:            # "Could not open port X: [Errno 111] Connection refused"
-        return text[text.rindex("[Errno"):].split("] ", 1)[-1]
-    return text
+    return reason(e, os_part=True)

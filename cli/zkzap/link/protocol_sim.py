@@ -17,7 +17,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..sim import make_device
 from ..errors import InvalidValue
-from ..sim.base import Clock, parse_number
+from ..sim.base import Clock, keep_wire_time, parse_number
 
 
 class Serial(SerialBase):
@@ -40,7 +40,7 @@ class Serial(SerialBase):
         else:
             try:
                 self._clock = Clock(parse_number("speed", options.pop("speed", "1"), 0.001, 10000))
-                self._device = make_device(kind, **options)
+                self._device = keep_wire_time(make_device(kind, **options), self._clock)
             except (TypeError, ValueError) as e:
                 # bad input (exit 2 naming the option), not a port failure
                 raise InvalidValue(f"sim://{kind}: {e}") from None

@@ -5,37 +5,39 @@ Which commands are answered depends on the actuator's feedback-return mode (regi
 never. :class:`ZapBus` is told the mode (``return_mode``, default 1, or :meth:`detect_return_mode`)
 and waits only when a reply will come.
 
-Timing policy (every figure in seconds, derived from the baud rate at 10 bits per byte):
+Every transaction follows the bus's one timing policy (:mod:`zkzap.link.zap_timing`):
 
-- **Deadline for a reply**: both packets on the wire, plus the turnaround allowance
-  (:data:`MAX_TURNAROUND`, 20 ms: real actuators and USB adapters answer up to that late), plus
-  a host margin (:data:`MARGIN`, plus the USB adapter's latency timer when the port is a
-  ``/dev/ttyUSB*`` with one, plus :data:`NETWORK_MARGIN` for a ``socket://``/``rfc2217://``
-  port on another host), plus the memory pause after a write to stored registers. A reply
-  that comes at once ends the wait at once: the allowance costs time only when nothing comes.
-  ``timeout=`` replaces the whole figure.
-- **Trickling bytes**: once reply bytes arrive, the deadline extends to :data:`INTER_BYTE`
-  (plus one byte time and the margin) after the latest byte, as long as a packet is
-  incomplete, so a device or adapter that sends its bytes 1 ms apart is read whole.
-- **Learned turnaround**: every answered attempt gives a turnaround estimate (round trip
-  minus both packets' wire time). Probes where silence is the expected answer (:meth:`ZapBus.ping`
-  with ``quick=True``, used by scans) wait only for the first byte within the bus's typical
-  turnaround (the median estimate, x1.25, at least :data:`TURNAROUND`), so a bus whose
-  actuators answer in 2 ms is scanned at wire speed; a slower reply is caught as late.
-- **Attribution**: before each attempt the bytes already received are read and examined
-  (never thrown away unseen); every attempt that went unanswered is remembered for
-  :data:`LATE_WINDOW` as owing a reply (its ID and the reply's data length). A reply that
-  matches an owed attempt of another request is counted as late (:attr:`ZapBus.late`, and an
-  event for scans) and never taken as the answer to the request in hand; a reply to an
-  earlier attempt of the same request answers it, with the round trip measured from that
-  attempt.
+- **Nothing is transmitted while a reply may still be due.** Before every write the bus
+  listens until the late window of everything sent before has closed (and the memory pause
+  after a stored write, the quiet time after a restart, have passed); a write that an actuator
+  in another return mode might acknowledge anyway keeps the line for that actuator's learned
+  latency. Only a scan's first pass moves on early (``early=True``).
+- **One attempt, one window.** An attempt waits for its reply until the late window
+  (:data:`~zkzap.link.zap_timing.LATE_WINDOW`, 150 ms; ``timeout`` replaces it) has closed
+  after the request's last byte, plus the reply's time on the wire and the host margin. A
+  reply that comes ends the wait at once: the window costs time only when nothing comes. Once
+  reply bytes arrive the wait extends to :data:`~zkzap.link.zap_timing.INTER_BYTE` (or 4x the
+  variation learned of the actuator's latency, when larger: a jittery adapter) after the
+  latest one while a packet is incomplete (devices and adapters that trickle their bytes). A
+  retry goes out only after the window of the attempt before it has closed, so a late reply is
+  always the answer to the attempt it answers, and its round trip (:attr:`Reply.rtt`) is true.
+- **Learned latency.** Every answer is a latency sample of its actuator (the time from the
+  request's last byte leaving to the first reply byte, as the host sees it); the estimators
+  live in the port's :class:`~zkzap.link.zap_timing.Policy`, shared by every bus on that port
+  in this process. A reply after its actuator's learned timeout is counted late.
+- **Attribution.** Bytes that arrive between transactions are read and examined, never thrown
+  away unseen: a reply to an attempt whose window is open (a scan's quick probe) or closed
+  only lately is that attempt's, counted late and reported as an event (for scans), never the
+  answer to another request; acknowledgements nobody waited for are skipped; bytes that make no
+  packet are reported as garbled (a collision or a line fault).
 
 Every reply is checked: checksum (through :class:`~zkzap.codec.framing.ZapFramer`), ID, data
 length. A half-duplex adapter that echoes our own bytes is recognised (a copy of what we sent)
 and the copy skipped. A failed attempt is retried ``retries`` times; then the failure is raised
-as :class:`~zkzap.errors.NoReply` (exit 3), :class:`~zkzap.errors.BadReply` (exit 6); error bits
-in a reply as :class:`~zkzap.errors.DeviceError` (exit 5, the reply attached as ``.reply``); a
-port that fails or vanishes as :class:`~zkzap.errors.PortError` (exit 4).
+as :class:`~zkzap.errors.NoReply` (exit 3), :class:`~zkzap.errors.BadReply` (exit 6; a garbled
+reply is named a collision or line fault); error bits in a reply as
+:class:`~zkzap.errors.DeviceError` (exit 5, the reply attached as ``.reply``); a port that fails
+or vanishes as :class:`~zkzap.errors.PortError` (exit 4).
 
 Permissions: every command packet goes through :meth:`ZapBus.command`, which sends it only when
 the permissions it needs (:meth:`zkzap.codec.zap.Command.needs`) are given: the bus's
@@ -46,11 +48,13 @@ nothing is sent.
 
 from __future__ import annotations
 
-import os
 import select
 import time
 from collections import deque
-from urllib.parse import urlsplit
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from typing import Optional
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
@@ -58,32 +62,22 @@ from ..codec.permissions import Permission, as_permission, require
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from . import stop
 from .port import close_port, wire_time
+from .zap_timing import (FLOOR, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE, QUICK_MARGIN,
+                         RESTART_PAUSE, RETRIES, host_margin, policy_for, usb_latency, window_for)
 
-#: The typical actuator turnaround (a 12Lf answers in about 2 ms): the floor of the quick
-#: probes' allowance before any reply has been seen.
-TURNAROUND = 0.002
-#: The default allowance for the actuator's turnaround before its first reply byte.
-MAX_TURNAROUND = 0.020
-#: Allowance between two reply bytes (on top of one byte time and the margin).
-INTER_BYTE = 0.010
-#: Host allowance of a quick probe (a late reply is still recognised afterwards).
-QUICK_MARGIN = 0.0005
-#: How long an unanswered attempt may still be answered: its reply is then recognised as late.
-LATE_WINDOW = 0.15
+__all__ = ["ZapBus", "Reply", "open_bus", "device_error", "error_message", "stored_writes", "leaves_protocol",
+           "writes_id", "is_simulated", "host_margin", "usb_latency", "wire_time", "FLOOR", "INTER_BYTE",
+           "LATE_WINDOW", "MARGIN", "NETWORK_MARGIN", "NV_PAUSE", "QUICK_MARGIN", "RESTART_PAUSE", "RETRIES"]
+
 #: Read granularity on ports without a file descriptor (URL ports).
 QUANTUM = 0.001
-#: Host-side allowance: scheduling, pty/USB transfer.
-MARGIN = 0.0025
-#: Extra allowance for a socket:// or rfc2217:// port on another host.
-NETWORK_MARGIN = 0.02
-#: Allowance for the memory pause after a write to stored (NV) registers.
-NV_PAUSE = 0.008
-#: Quiet time after Restart / Factory Reset before the next command in the same run.
-RESTART_PAUSE = 0.1
-#: Default number of retries after a failed attempt.
-RETRIES = 2
-
-_LOOPBACK = ("localhost", "127.0.0.1", "::1", "")
+#: How long after its window closed a reply is still recognised as the answer of an old attempt
+#: (and never taken for another's), as a multiple of the window.
+MEMORY = 2.0
+#: Garbled bytes and collisions kept for scans (events), at most.
+MAX_EVENTS = 4096
+#: Instructions that write nothing.
+_READS = (zap.ECHO, zap.LOAD_DATA)
 
 
 #: Instructions that never need a permission (they write nothing by themselves).
@@ -95,40 +89,19 @@ def is_simulated(url) -> bool:
     return bool(url) and str(url).startswith(("sim://", "loop://"))
 
 
-def host_margin(url) -> float:
-    """The host margin for ``url``: :data:`MARGIN`, plus a USB adapter's latency timer, plus
-    :data:`NETWORK_MARGIN` for a remote network port."""
-    margin = MARGIN
-    if not url:
-        return margin
-    url = str(url)
-    if "://" in url:
-        parts = urlsplit(url)
-        if parts.scheme in ("socket", "rfc2217") and (parts.hostname or "") not in _LOOPBACK:
-            margin += NETWORK_MARGIN
-        return margin
-    latency = usb_latency(url)
-    return margin + (latency or 0.0)
-
-
-def usb_latency(device: str):
-    """The latency timer (seconds) of a USB serial adapter (FTDI: 16 ms by default), or None."""
-    try:
-        name = os.path.basename(os.path.realpath(device))
-        with open(f"/sys/bus/usb-serial/devices/{name}/latency_timer", encoding="ascii") as f:
-            return int(f.read().strip()) / 1000.0
-    except (OSError, ValueError):
-        return None
-
-
 class Reply:
     """A checked feedback packet: ``ident``, ``error`` (bits), ``data`` (parameter bytes),
-    ``packet`` (the whole packet) and ``rtt`` (seconds from the end of our write)."""
+    ``packet`` (the whole packet), ``rtt`` (seconds from just before the write of the attempt it
+    answers to the reply's last byte read) and ``latency`` (seconds from the request's last byte
+    leaving to the reply's first byte read: what the actuator and the adapter took; None when
+    not measured)."""
 
-    __slots__ = ("ident", "error", "data", "packet", "rtt")
+    __slots__ = ("ident", "error", "data", "packet", "rtt", "latency")
 
-    def __init__(self, ident: int, error: int, data: bytes, packet: bytes, rtt: float = 0.0) -> None:
+    def __init__(self, ident: int, error: int, data: bytes, packet: bytes, rtt: float = 0.0,
+                 latency: Optional[float] = None) -> None:
         self.ident, self.error, self.data, self.packet, self.rtt = ident, error, data, packet, rtt
+        self.latency = latency
 
     @property
     def errors(self) -> list[str]:
@@ -165,26 +138,47 @@ def leaves_protocol(pkt: bytes) -> bool:
 
 
 class _Owed:
-    """An attempt that went unanswered: its reply may still come (late)."""
+    """An attempt whose reply has not come: it may still come until ``until`` (its window),
+    and is recognised as that attempt's until ``keep``. ``kind`` is ``reply`` (an expected
+    reply) or ``ack`` (a write an actuator in another return mode may acknowledge)."""
 
-    __slots__ = ("token", "ids", "data_len", "t0", "until", "due")
+    __slots__ = ("token", "ids", "data_len", "t0", "sent", "until", "keep", "kind")
 
-    def __init__(self, token, ids, data_len, t0, until, due=None):
-        self.token, self.ids, self.data_len, self.t0, self.until = token, ids, data_len, t0, until
-        self.due = t0 if due is None else due     # by when the full allowance expected the reply
+    def __init__(self, token, ids, data_len, t0, sent, until, keep, kind="reply"):
+        self.token, self.ids, self.data_len, self.t0, self.sent = token, ids, data_len, t0, sent
+        self.until, self.keep, self.kind = until, keep, kind
 
     def matches(self, p) -> bool:
         return p[3] in self.ids and (self.data_len is None or len(p) - 7 == self.data_len)
 
 
+class Event:
+    """Something the bus heard that was not the answer in hand, for scans: ``kind`` ``late`` (a
+    reply to an earlier attempt: ``ident``, ``t0`` of that attempt, ``packet``), ``stray`` (a
+    reply nobody asked for), ``garbled`` (bytes that made no packet: a collision or a line
+    fault; ``packet`` holds the bytes read with them); ``lo`` .. ``hi`` is when it arrived (from
+    the last time nothing was waiting to the read)."""
+
+    __slots__ = ("kind", "ident", "lo", "hi", "t0", "packet")
+
+    def __init__(self, kind, ident, lo, hi, t0=None, packet=None):
+        self.kind, self.ident, self.lo, self.hi, self.t0, self.packet = kind, ident, lo, hi, t0, packet
+
+    def __iter__(self):                   # (kind, ident, time), as scans unpacked them
+        return iter((self.kind, self.ident, self.hi))
+
+    def __repr__(self):
+        return f"Event({self.kind}, id={self.ident}, {self.lo:.4f}..{self.hi:.4f})"
+
+
 class ZapBus:
     """Transactions on one port. ``return_mode`` is the bus's feedback-return mode (0, 1, 2);
-    ``timeout`` (seconds) overrides the derived reply timeout; ``retries`` after a failure;
-    ``turnaround`` (seconds) is the allowance for the actuator's turnaround (default
-    :data:`MAX_TURNAROUND`)."""
+    ``timeout`` (seconds) replaces the late window; ``retries`` after a failure; ``latency``
+    (seconds) is what the actuators are known to take before any was measured (``--latency``);
+    ``margin`` replaces the host margin derived from the port."""
 
     def __init__(self, port, *, return_mode: int = 1, timeout=None, retries: int = RETRIES, margin=None,
-                 url=None, turnaround=None):
+                 url=None, latency=None, policy=None):
         self.port = port
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
         self.allow = Permission.NONE       # the permissions given to every command (see command())
@@ -192,23 +186,28 @@ class ZapBus:
         self.return_mode = return_mode
         self.timeout = timeout
         self.retries = retries
-        self.margin = host_margin(self.url) if margin is None else margin
-        self.turnaround = MAX_TURNAROUND if turnaround is None else turnaround
+        self.latency = latency
+        self.policy = policy if policy is not None else policy_for(self.url, margin)
         self.adapter_echo = False          # learned: the adapter echoes what we send
+        self.low_latency = None            # True/False: what --low-latency achieved (None: not asked)
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
-        self._owed = deque()               # unanswered attempts whose reply may still come
-        self._turnarounds = deque(maxlen=32)   # turnaround estimates of answered attempts
-        self.lateness = 0.0                # how far past the full allowance the slowest late reply came (s)
+        self._unechoed = {}                # write time -> packet, until its clean echo came back
+        self._owed = deque()               # attempts whose reply may still come
+        self._framer = ZapFramer()         # bytes read between transactions
         self._quiet_until = 0.0
+        self._seen_empty = time.monotonic()
         self._port_timeout = object()
+        self._line = (None, 0.0)           # (baud, one byte's time on the line)
         fd = getattr(port, "fd", None)
         self._fd = fd if isinstance(fd, int) and hasattr(port, "in_waiting") else None
-        self.events = []                   # ("late", ID, time) / ("garbled", None, time), for scans
+        self.events = []                   # Event: late, stray and garbled, for scans
+        self.last_sent = 0.0               # when the last write began
         self.sent = 0
         self.replies = 0
         self.retried = 0
-        self.late = 0                      # replies recognised as late (answers to earlier attempts)
-        self.stale = 0                     # other stray packets skipped (acks nobody waited for)
+        self.late = 0                      # replies after their actuator's timeout, or to earlier attempts
+        self.stale = 0                     # stray packets skipped (acknowledgements nobody waited for)
+        self.garbled = 0                   # bursts of bytes that made no packet (collisions, line faults)
 
     # -- line -----------------------------------------------------------------------------------
 
@@ -220,8 +219,28 @@ class ZapBus:
     def stop_bits(self) -> int:
         return int(getattr(self.port, "stopbits", 1) or 1)
 
+    @property
+    def margin(self) -> float:
+        """The host margin added to every deadline (see :class:`~zkzap.link.zap_timing.Policy`)."""
+        return self.policy.margin
+
+    @property
+    def window(self) -> float:
+        """The late window: how long after a request's last byte its reply may begin (``timeout``,
+        else :data:`~zkzap.link.zap_timing.LATE_WINDOW`, widened for a ``latency`` hint)."""
+        return window_for(self.timeout, self.latency)
+
+    def wire(self, nbytes: int) -> float:
+        """Seconds ``nbytes`` take on the line at the port's baud rate and stop bits."""
+        baud = self.port.baudrate
+        if baud != self._line[0]:
+            self._line = (baud, wire_time(1, baud, self.stop_bits))
+        return nbytes * self._line[1]
+
     def set_baud(self, baud: int) -> None:
-        """Switch the port's line speed, once what was sent has left at the old speed."""
+        """Switch the port's line speed, once nothing said at the old one may still be answered
+        and what was sent has left."""
+        self.quiet()
         try:
             self.port.flush()
         except Exception:  # noqa: BLE001 - a port without tcdrain; the pause below covers it
@@ -234,6 +253,7 @@ class ZapBus:
         except Exception as e:  # serial.SerialException
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
         self._owed.clear()                 # nothing said at the old speed is heard at the new one
+        self._framer = ZapFramer()
 
     def close(self) -> None:
         close_port(self.port)
@@ -245,71 +265,38 @@ class ZapBus:
         self.close()
 
     def reply_timeout(self, tx_bytes: int, rx_bytes: int, extra: float = 0.0) -> float:
-        """The derived timeout: both packets on the wire + turnaround allowance + margin +
-        ``extra`` (or ``timeout`` when given)."""
-        if self.timeout is not None:
-            return self.timeout
-        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + self.turnaround + self.margin + extra
-
-    def reply_timeout_derived(self, tx_bytes: int, rx_bytes: int, extra: float = 0.0) -> float:
-        """The derived timeout, whatever ``timeout`` says."""
-        return wire_time(tx_bytes + rx_bytes, self.baud, self.stop_bits) + self.turnaround + self.margin + extra
-
-    def linger(self, seconds: float) -> None:
-        """Keep reading for ``seconds`` (late replies are accounted for; see :attr:`events`)."""
-        end = time.monotonic() + seconds
-        while True:
-            self._drain()
-            left = end - time.monotonic()
-            if left <= 0:
-                break
-            time.sleep(min(0.002, left))
-        self._drain()
-
-    @property
-    def typical_turnaround(self):
-        """The median turnaround estimate of the answered attempts so far (None before any)."""
-        if not self._turnarounds:
-            return None
-        values = sorted(self._turnarounds)
-        return values[len(values) // 2]
+        """How long an attempt waits for its reply at most (from just before its write): both
+        packets on the wire + the late window + the host margin + ``extra``."""
+        return self.wire(tx_bytes + rx_bytes) + self.window + self.margin + extra
 
     def quick_timeout(self, tx_bytes: int) -> float:
-        """A probe's wait when silence is the expected answer: our packet and the reply's first
-        byte on the wire, plus the typical turnaround x1.25 (at least :data:`TURNAROUND` plus the
-        adapter's latency), plus :data:`QUICK_MARGIN`. A slower reply is caught as late."""
-        if self.timeout is not None:
-            return self.timeout
-        floor = TURNAROUND + max(0.0, self.margin - MARGIN)
-        typical = self.typical_turnaround
-        allowance = floor if typical is None else max(floor, typical * 1.25)
-        allowance = min(allowance, self.turnaround + self.margin)
-        return wire_time(tx_bytes + 1, self.baud, self.stop_bits) + allowance + QUICK_MARGIN
+        """A scan's first-pass wait for an unknown ID: our packet and the reply's first byte on
+        the wire, plus the bus-typical latency (see :meth:`zap_timing.Policy.quick`) and
+        :data:`~zkzap.link.zap_timing.QUICK_MARGIN`."""
+        return self.wire(tx_bytes + 1) + self.policy.quick(self.latency, self.window) + QUICK_MARGIN
+
+    def courtesy(self, ident: int, window=None) -> float:
+        """How long the line stays quiet after a write the return mode does not answer: what
+        ``ident`` was measured to take (its timeout), else the bus-typical allowance of a
+        scan's first pass (an acknowledgement that an actuator set to another mode gives
+        anyway must not meet the next request)."""
+        window = self.window if window is None else window
+        est = self.policy.estimators.get(ident)
+        if est is not None and est.samples:
+            return est.timeout(FLOOR, window)
+        return self.policy.quick(self.latency, window)
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
         mode = self.return_mode if return_mode is None else return_mode
         return ins is not None and ins.answered(mode, pkt[3])
 
+    # -- reading ----------------------------------------------------------------------------------
+
     def _port_error(self, e) -> PortError:
         from .port import port_failed
 
         return port_failed(self.url, e)
-
-    def _write(self, pkt: bytes) -> float:
-        """Drain, then write ``pkt``; returns the time just before the write (round trips are
-        measured from there, so a host that is preempted after writing never shortens them)."""
-        self._drain()
-        t0 = time.monotonic()
-        try:
-            self.port.write(pkt)
-        except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
-            if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):
-                raise
-            raise self._port_error(e) from None
-        self.sent += 1
-        self._recent.append(bytes(pkt))
-        return t0
 
     def _set_timeout(self, value) -> None:
         if self._port_timeout != value:
@@ -319,247 +306,357 @@ class ZapBus:
     def _read(self, n: int, deadline: float) -> bytes:
         """Bytes received by ``deadline`` (returns as soon as some are there; at most ``n`` on
         ports read by size). Past the deadline it still returns what is already waiting: a host
-        held up (a loaded machine) must not take a reply that arrived meanwhile for silence."""
+        held up (a loaded machine) must not take a reply that arrived meanwhile for silence.
+        Keeps :attr:`_seen_empty`, the last time nothing was waiting."""
         try:
             if self._fd is not None:
                 self._set_timeout(0)
                 left = deadline - time.monotonic()
-                if left > 0:
-                    ready, _, _ = select.select([self._fd], [], [], left)
-                    if not ready:
-                        return b""
-                return self.port.read(max(1, self.port.in_waiting))
-            left = deadline - time.monotonic()
-            # past the deadline (the host was held up): still take what has arrived meanwhile
-            self._set_timeout(QUANTUM if left > 0 else 0)
-            return self.port.read(n)
+                ready, _, _ = select.select([self._fd], [], [], max(0.0, left))
+                if not ready:
+                    self._seen_empty = time.monotonic()
+                    return b""
+                data = self.port.read(max(1, self.port.in_waiting))
+            else:
+                left = deadline - time.monotonic()
+                before = time.monotonic()
+                self._set_timeout(QUANTUM if left > 0 else 0)
+                data = self.port.read(n)
+                if not data:
+                    self._seen_empty = before
+            return data
         except Exception as e:
             if isinstance(e, (KeyboardInterrupt, PortError)):
                 raise
             raise self._port_error(e) from None
 
-    def _drain(self, until=None, ids=None, token=None):
-        """Read what has arrived since the last transaction and account for it: late replies to
-        unanswered attempts are counted (and reported as events), the rest skipped as stale. A
-        packet caught half-way is read to its end. With ``until``/``ids``: also wait (at most
-        until ``until``) for the owed replies of those IDs. With ``token``: a late reply to an
-        earlier attempt of that request is returned (as its :class:`Reply`), not counted."""
-        framer = ZapFramer()
-        answer = None
-        while True:
-            now = time.monotonic()
-            while self._owed and self._owed[0].until < now:
-                self._owed.popleft()
-            try:
-                waiting = self.port.in_waiting
-            except Exception:  # noqa: BLE001 - a port without in_waiting (or a vanished one)
-                waiting = None
-            if waiting is None:
-                try:
-                    self.port.reset_input_buffer()
-                except Exception as e:
-                    if isinstance(e, KeyboardInterrupt):
-                        raise
-                    raise self._port_error(e) from None
-                return None
-            owed = ids is not None and any(o.token is not None and o.ids & ids for o in self._owed)
-            if waiting:
-                data = self._read(waiting, now) if self._fd is not None else self._read_waiting(waiting)
-            elif framer.pending or owed:
-                limit = now + wire_time(1, self.baud, self.stop_bits) + INTER_BYTE + self.margin
-                if owed and not framer.pending:
-                    limit = min(until, min(o.until for o in self._owed if o.token is not None and o.ids & ids))
-                if now >= limit:
-                    break
-                data = self._read(64, limit)
-                if not data and framer.pending and time.monotonic() >= limit:
-                    break
-            else:
-                break
-            for p in framer.feed(data) if data else ():
-                answer = self._stray(bytes(p), token) or answer
-        for p in framer.flush():
-            answer = self._stray(bytes(p), token) or answer
-        if framer.bad or framer.skipped:
-            self.events.append(("garbled", None, time.monotonic()))
-        return answer
-
-    def _read_waiting(self, n: int) -> bytes:
+    def _waiting(self):
+        """Bytes waiting to be read (None on a port that cannot tell)."""
         try:
-            self._set_timeout(0)
-            return self.port.read(n)
+            n = self.port.in_waiting
+        except Exception:  # noqa: BLE001 - a port without in_waiting (or a vanished one)
+            return None
+        if not n:
+            self._seen_empty = time.monotonic()
+        return n
+
+    def _event(self, kind, ident, lo, hi, t0=None, packet=None) -> None:
+        if kind == "garbled":
+            self.garbled += 1
+        if len(self.events) < MAX_EVENTS:
+            self.events.append(Event(kind, ident, lo, hi, t0, packet))
+
+    def take_events(self) -> list:
+        """The late, stray and garbled :class:`Event` s seen since the last call (for scans)."""
+        out, self.events = self.events, []
+        return out
+
+    def _expire(self, now) -> None:
+        while self._owed and self._owed[0].keep < now:
+            self._owed.popleft()
+
+    def _open_windows(self, now):
+        return [o for o in self._owed if o.until > now]
+
+    def _echoed(self, p) -> bool:
+        """``p`` is a copy of a packet we sent lately (the adapter's echo): note it."""
+        if p not in self._recent:
+            return False
+        for t, sent in self._unechoed.items():
+            if sent == p:
+                del self._unechoed[t]
+                break
+        return True
+
+    def _stray(self, p: bytes, lo: float, hi: float, token=None):
+        """Account for a packet that is not the answer in hand: our own echo, another master's
+        command, a reply to an earlier attempt (late: counted, an event; for ``token``, an earlier
+        attempt of the same request, returned as ``(owed, p)``), an acknowledgement nobody waited
+        for, or a reply nobody asked for (stray)."""
+        if self._echoed(p):
+            self.adapter_echo = True
+            return None
+        if zap.is_command(p[5]):
+            return None                    # another master's command
+        owed = self._take_owed(p, hi)
+        if owed is None:
+            self.stale += 1
+            self._event("stray", p[3], lo, hi, None, p)
+            return None
+        if owed.kind == "ack":
+            self.stale += 1                # an acknowledgement nobody waited for
+            return None
+        if token is not None and owed.token is token:
+            return owed, p
+        self.late += 1
+        self._event("late", p[3], lo, hi, owed.t0, p)
+        return None
+
+    def _take_owed(self, p, now):
+        """The attempt a stray packet answers: one whose window is open first, else the oldest
+        one still recognised."""
+        found = [o for o in self._owed if o.keep >= now and o.matches(p)]
+        if not found:
+            return None
+        owed = next((o for o in found if o.until > now), found[0])
+        self._owed.remove(owed)
+        return owed
+
+    def _account(self, data: bytes, lo: float, hi: float) -> None:
+        """Bytes read between transactions, through the idle framer."""
+        framer = self._framer
+        bad, skipped = framer.bad, framer.skipped
+        for p in framer.feed(data):
+            self._stray(bytes(p), lo, hi)
+        if framer.bad != bad or framer.skipped != skipped:
+            self._event("garbled", None, lo, hi, None, bytes(data))
+
+    def _listen(self, until: float) -> bool:
+        """Read until ``until`` or the next bytes; account for them. False when nothing came."""
+        if self._waiting() is None:
+            self._reset_input()
+            return False
+        data = self._read(64, until)
+        if not data:
+            if self._framer.pending and time.monotonic() >= until:
+                self._flush_idle()
+            return False
+        self._account(data, self._seen_empty, time.monotonic())
+        return True
+
+    def _flush_idle(self) -> None:
+        framer = self._framer
+        if not framer.pending:
+            return
+        now = time.monotonic()
+        bad, skipped = framer.bad, framer.skipped
+        for p in framer.flush():
+            self._stray(bytes(p), self._seen_empty, now)
+        if framer.bad != bad or framer.skipped != skipped:
+            self._event("garbled", None, self._seen_empty, now, None, b"")
+
+    def _reset_input(self) -> None:
+        try:
+            self.port.reset_input_buffer()
         except Exception as e:
-            if isinstance(e, (KeyboardInterrupt, OutputError)):
+            if isinstance(e, KeyboardInterrupt):
                 raise
             raise self._port_error(e) from None
 
-    def _stray(self, p: bytes, token=None):
-        """Account for a packet read between attempts: a late reply to an earlier attempt of
-        request ``token`` is returned as its Reply; other late replies are counted."""
-        if p in self._recent or zap.is_command(p[5]):
-            return None                    # our own echo, or another master's command
-        if token is not None:
-            owed = self._take_owed(p, token)
-            if owed is not None:
-                return self._reply(p, time.monotonic() - owed.t0)
-        owed = self._take_owed(p)
-        if owed is not None and owed.token is not None:
-            self._late(p, owed, time.monotonic())
-            return None
-        self.stale += 1
-        return None
-
-    def _late(self, p, owed, now) -> None:
-        """Account for ``p``, the late reply to the unanswered attempt ``owed``: counted, reported
-        to scans, and how far past its wait it came kept (:attr:`lateness`). Its round trip is
-        not learned as a turnaround: quick probes stay quick, and a scan asks again around it."""
-        self.late += 1
-        self.events.append(("late", p[3], now))
-        # how far past the full allowance its first byte came (a quick probe's shorter wait
-        # says nothing of the actuator's speed)
-        past = now - wire_time(len(p), self.baud, self.stop_bits) - owed.due
-        self.lateness = min(LATE_WINDOW, max(self.lateness, past))
-
-    def _take_owed(self, p, token=None):
-        now = time.monotonic()
-        for owed in self._owed:
-            if owed.until >= now and owed.matches(p) and (token is None or owed.token is token):
-                self._owed.remove(owed)
-                return owed
-        return None
-
-    def take_events(self) -> list:
-        """The late/garbled events seen since the last call (for scans)."""
-        out, self.events = self.events, []
-        return out
+    def _drain(self) -> None:
+        """Read and account for whatever has arrived; a packet caught half-way is read to its end."""
+        while True:
+            waiting = self._waiting()
+            if waiting is None:
+                self._reset_input()
+                return
+            now = time.monotonic()
+            if waiting:
+                data = self._read(waiting, now)
+                if data:
+                    self._account(data, self._seen_empty, time.monotonic())
+                continue
+            if self._framer.pending:
+                end = now + self.wire(1) + INTER_BYTE + self.margin
+                if self._listen(end):
+                    continue
+                self._flush_idle()
+            return
 
     def _settle(self) -> None:
         wait = self._quiet_until - time.monotonic()
         if wait > 0:
             time.sleep(wait)
 
-    def _learn(self, rtt: float, tx: int, rx: int) -> None:
-        self._turnarounds.append(max(0.0, rtt - wire_time(tx + rx, self.baud, self.stop_bits)))
+    def quiet(self) -> None:
+        """Listen until no reply may still come: every open window closed (replies that come
+        meanwhile are accounted for), then the quiet time after a stored write or a restart."""
+        while True:
+            now = time.monotonic()
+            self._expire(now)
+            open_ = self._open_windows(now)
+            if not open_:
+                break
+            self._listen(min(o.until for o in open_))
+        self._drain()
+        self._settle()
+
+    def linger(self, seconds: float) -> None:
+        """Keep listening for ``seconds`` (late replies are accounted for; see :attr:`events`)."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self._listen(end)
+        self._drain()
+
+    def echo_clean(self, t0: float):
+        """Whether the packet written at ``t0`` came back clean through the adapter's echo (its
+        bytes crossed the line undisturbed); None when the adapter does not echo."""
+        if not self.adapter_echo:
+            return None
+        return t0 not in self._unechoed
+
+    # -- writing ----------------------------------------------------------------------------------
+
+    def _write(self, pkt: bytes) -> float:
+        """Read what has arrived, then write ``pkt``; returns the time just before the write
+        (round trips are measured from there, so a host that is preempted after writing never
+        shortens them)."""
+        self._drain()
+        t0 = time.monotonic()
+        try:
+            self.port.write(pkt)
+        except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
+            if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):
+                raise
+            raise self._port_error(e) from None
+        self.sent += 1
+        self.last_sent = t0
+        self._recent.append(bytes(pkt))
+        if len(self._unechoed) > 512:
+            self._unechoed.pop(next(iter(self._unechoed)))
+        self._unechoed[t0] = bytes(pkt)
+        return t0
 
     # -- one transaction ----------------------------------------------------------------------
 
     def transact(self, pkt: bytes, *, reply=None, data_len=None, extra=0.0, timeout=None, retries=None,
-                 accept_ids=None, check=True, optional=False, quick=False):
+                 accept_ids=None, check=True, optional=False, quick=False, early=False, window=None):
         """Send ``pkt``; return its checked :class:`Reply`, or None when none is expected.
 
         ``reply``: whether a reply comes (default: from the instruction and ``return_mode``);
         ``data_len``: data bytes the reply must carry (None: any); ``extra``: seconds added to
-        the derived timeout; ``accept_ids``: IDs a reply may carry (default: the packet's);
+        the wait; ``timeout`` or ``window``: this transaction's late window (default
+        :attr:`window`); ``accept_ids``: IDs a reply may carry (default: the packet's);
         ``check``: raise DeviceError for error bits; ``optional``: no reply is not an error
-        (returns None at once, without a retry: the command may have been carried out);
-        ``quick``: wait only the quick probe's time (:meth:`quick_timeout`) for a first byte.
+        (None, without a retry: the command may have been carried out); ``quick``: wait only a
+        scan's first-pass time for the first byte (:meth:`quick_timeout`; the window stays open
+        and a later reply is an event); ``early``: transmit without waiting for earlier windows
+        to close (a scan's first pass only).
         """
         stop.check()                       # a stop requested (a batch's Ctrl-C) ends the command here
         pkt = bytes(pkt)
         ident = pkt[3]
         if reply is None:
             reply = self.expects_reply(pkt)
-        stored = stored_writes(pkt)
+        stored = pkt[5] not in _READS and bool(stored_writes(pkt))
         restart = pkt[5] in zap.RESTART_CODES
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
         accept = set(accept_ids) if accept_ids else {ident}
+        win = timeout if timeout is not None else (window if window is not None else self.window)
+        tx = self.wire(len(pkt))
         if not reply:
-            self._settle()
-            self._write(pkt)
-            gap = wire_time(len(pkt), self.baud, self.stop_bits)
-            gap += RESTART_PAUSE if restart else (NV_PAUSE if stored else 0.0)
-            self._quiet_until = time.monotonic() + gap
+            if not early:
+                self.quiet()
+            t0 = self._write(pkt)
+            pause = RESTART_PAUSE if restart else (NV_PAUSE if stored else 0.0)
+            self._quiet_until = t0 + tx + pause
             if ident != zap.BROADCAST:
-                # an actuator in another return mode may acknowledge anyway: skip that ack later
-                now = time.monotonic()
-                self._owed.append(_Owed(None, accept, None, now, now + LATE_WINDOW))
+                # an actuator in another return mode acknowledges anyway: the line stays quiet for
+                # its learned latency (the bus-typical one before it was measured), and that
+                # acknowledgement is skipped when it comes
+                until = t0 + tx + self.courtesy(ident, win) + self.wire(7) + self.margin
+                self._owed.append(_Owed(None, accept, None, t0, t0 + tx, until + pause, until + win, "ack"))
             return None
         rx_len = 7 + (data_len or 0)
-        if timeout is not None:
-            limit = timeout
-        elif quick:
-            limit = self.quick_timeout(len(pkt)) + extra
-        else:
-            limit = self.reply_timeout(len(pkt), rx_len, extra)
-        # by when the full allowance expects a reply (a quick probe's own wait is shorter)
-        full = self.reply_timeout(len(pkt), rx_len, extra) if quick and timeout is None else limit
+        span = tx + win + self.wire(rx_len) + self.margin + extra      # the whole window of an attempt
         token = object()
         problems = []
-        if any(o.token is not None and o.ids & accept for o in self._owed):
-            # a reply to an earlier request to this actuator may still come: let it come (or its
-            # window pass) so that it cannot be taken for the answer to this one
-            self._drain(time.monotonic() + LATE_WINDOW, accept)
+        limit = span
         for attempt in range(tries):
-            got = None
             if attempt:
                 self.retried += 1
-                got = self._drain(token=token)     # the last attempt's reply, come just too late?
-            if got is None:
-                self._settle()
-                t0 = self._write(pkt)
-                got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token, full)
+                self._idle()
+            if not early:
+                self.quiet()
+            t0 = self._write(pkt)
+            limit = (self.quick_timeout(len(pkt)) + extra) if quick else span
+            got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
             if isinstance(got, Reply):
-                self.replies += 1
-                self._learn(got.rtt, len(pkt), rx_len)
-                if restart:
-                    self._quiet_until = time.monotonic() + RESTART_PAUSE
-                elif stored:
-                    self._quiet_until = time.monotonic() + NV_PAUSE
-                if check and got.error:
-                    raise device_error(got)
-                return got
-            problems.append(got)
+                return self._answered(got, pkt, restart, stored, check, win)
             if got[0] == "none":
-                self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, t0 + full))
-                if optional:
+                # its window (still open after a quick probe) and then some: a reply that comes
+                # is this attempt's, never the answer to another request
+                self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, t0 + span, t0 + span * (1 + MEMORY)))
+                if quick or optional:
                     return None            # silence is a legitimate answer: do not repeat the command
+            problems.append(got)
         return self._fail(pkt, problems, limit, tries, optional)
 
-    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token, full):
-        """Read until a valid reply or the deadline (``limit`` after ``t0``; ``full`` is the
-        full allowance, which a quick probe's ``limit`` is shorter than). Returns a Reply (``rtt``
-        from the attempt that was answered) or a problem tuple (kind, detail, received bytes)."""
+    def _answered(self, got, pkt, restart, stored, check, win):
+        self.replies += 1
+        if got.latency is not None and self.policy.learn(got.ident, got.latency, win):
+            self.late += 1                 # after its actuator's learned timeout: still the answer
+        if restart:
+            self._quiet_until = time.monotonic() + RESTART_PAUSE
+        elif stored:
+            self._quiet_until = time.monotonic() + NV_PAUSE
+        if check and got.error:
+            raise device_error(got)
+        return got
+
+    def _idle(self) -> None:
+        """Before a retry after a garbled reply: listen until the line has been idle for one
+        inter-byte allowance (the rest of a collision has passed)."""
+        while self._listen(time.monotonic() + self.wire(1) + INTER_BYTE + self.margin):
+            pass
+        self._flush_idle()
+
+    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token):
+        """Read until a valid reply or the deadline (``limit`` after ``t0``, for the first reply
+        byte; extended while reply bytes trickle in). Returns a Reply (``rtt`` from the attempt
+        that was answered, ``latency`` its first byte after the request left) or a problem tuple
+        (kind, detail, received bytes)."""
         framer = ZapFramer()
         received = bytearray()
         echo_known = self.adapter_echo
         state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
-                 "explained": 0}
+                 "explained": 0, "first": None, "lo": self._seen_empty}
         wrong = []
-        deadline = t0 + limit
-        physical = wire_time(len(pkt) + rx_len, self.baud, self.stop_bits)
+        deadline = base = t0 + limit
+        tx = self.wire(len(pkt))
+        gap = self.policy.inter_byte(pkt[3], self.window)
+        physical = self.wire(len(pkt) + rx_len)
 
-        def examine(packets):
+        def examine(packets, lo, hi):
             for p in packets:
                 p = bytes(p)
                 state["explained"] += len(p)
                 if p == pkt:
                     state["copies"] += 1
                     self.adapter_echo = True
+                    self._echoed(p)
                     state["want"] = max(state["want"], len(received) + rx_len)
                     continue
                 if p in self._recent or zap.is_command(p[5]):
+                    self._echoed(p)
                     continue                      # a late echo of an earlier packet, another master
                 now = time.monotonic()
-                owed = self._take_owed(p)
-                if owed is not None and owed.token is None and p[3] in accept and data_len is not None:
-                    self._owed.appendleft(owed)   # maybe an unasked ack; judged by its length below
-                elif owed is not None and owed.token is None:
-                    self.stale += 1               # an acknowledgement nobody waited for
-                    continue
-                elif owed is not None:
-                    if owed.token is token and token is not None:
-                        if now - t0 < physical:
-                            # too early for this attempt: an earlier attempt's reply answers it
-                            self._owed.append(_Owed(token, accept, data_len, t0, t0 + limit + LATE_WINDOW, t0 + full))
-                            return self._reply(p, now - owed.t0)
-                        self._owed.appendleft(owed)      # this attempt's; the earlier one stays owed
+                # an earlier attempt's: its window was still open when this one went out (a
+                # scan's first pass), or it came too early to be this attempt's reply
+                # (a reply that cannot be this one's answer is any recognised earlier attempt's)
+                ours = p[3] in accept and (data_len is None or len(p) - 7 == data_len)
+                owed = next((o for o in self._owed if o.matches(p) and o.keep >= now
+                             and (not ours or o.until > t0 or now - t0 < physical)), None) if self._owed else None
+                if owed is not None:
+                    self._owed.remove(owed)
+                    if owed.kind == "ack":
+                        self.stale += 1           # the acknowledgement of an earlier write
+                    elif owed.token is token:
+                        # the earlier attempt's late reply answers this request (this attempt's
+                        # reply, when it comes, is recognised as late)
+                        span = deadline - t0
+                        self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
+                                                deadline + span * MEMORY))
+                        return self._reply(p, hi - owed.t0, None)
                     else:
-                        self._late(p, owed, now)
-                        state["want"] = len(received) + rx_len
-                        continue
+                        self.late += 1
+                        self._event("late", p[3], lo, hi, owed.t0, p)
+                    state["want"] = len(received) + rx_len
+                    continue
                 if p[3] not in accept:
                     wrong.append(p)
+                    self._event("stray", p[3], lo, hi, None, p)
                     state["want"] = len(received) + rx_len
                     continue
                 data = p[6:-1]
@@ -569,37 +666,48 @@ class ZapBus:
                     state["want"] = len(received) + rx_len
                     continue
                 if framer.bad or framer.skipped:
-                    # bytes that made no packet came first: a collision (two actuators with one
-                    # ID answering a probe that already gave up), for scans
-                    self.events.append(("garbled", None, now))
-                return self._reply(p, now - t0)
+                    # bytes that made no packet came first: a collision, for scans
+                    self._event("garbled", None, state["lo"], hi, None, bytes(received))
+                first = state["first"] if state["first"] is not None else hi
+                if any(o.token is token for o in self._owed):
+                    # an earlier attempt of this request is still owed: this may be its reply, so
+                    # this attempt's may still come; the line stays quiet for its window
+                    self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
+                                            deadline + (deadline - t0) * MEMORY))
+                    return self._reply(p, hi - t0, None)
+                return self._reply(p, hi - t0, first - t0 - tx - self.wire(1))
             return None
 
         while True:
+            lo = self._seen_empty
             chunk = self._read(max(1, state["want"] - len(received)), deadline)
             if not chunk:
                 if time.monotonic() >= deadline:
                     break
                 continue
+            hi = time.monotonic()
+            if state["first"] is None and not (echo_known and len(received) + len(chunk) <= len(pkt)
+                                               and pkt.startswith(bytes(received) + chunk)):
+                state["first"] = hi               # the first byte that is not our own echo
+                state["lo"] = lo
             received += chunk
-            got = examine(framer.feed(chunk))
+            got = examine(framer.feed(chunk), lo, hi)
             if got is not None:
                 return got
-            if framer.pending:
-                # bytes of an incomplete packet: give the rest time to trickle in
-                more = time.monotonic() + wire_time(1, self.baud, self.stop_bits) + INTER_BYTE + self.margin
-                deadline = max(deadline, more)
+            # bytes of an incomplete packet: give the rest time to trickle in (only while they do)
+            deadline = max(base, time.monotonic() + self.wire(1) + gap + self.margin) if framer.pending else base
         pending, bad_before = framer.pending, framer.bad
-        got = examine(framer.flush())               # a packet held back to rule out a rival
+        now = time.monotonic()
+        got = examine(framer.flush(), self._seen_empty, now)   # a packet held back to rule out a rival
         if framer.bad or len(received) > state["explained"]:
-            self.events.append(("garbled", None, time.monotonic()))   # a collision, for scans
+            self._event("garbled", None, state["lo"], now, None, bytes(received))   # a collision or a line fault
         if got is not None:
             return got
         copies = state["copies"]
         # The documented Restart feedback is a copy of the command itself: accept a copy that
         # is more than the adapter's known echo.
         if restart and not wrong and copies >= (2 if echo_known else 1):
-            return self._reply(pkt, time.monotonic() - t0, copy=True)
+            return self._reply(pkt, time.monotonic() - t0, None, copy=True)
         if wrong:
             ids = ", ".join(str(p[3]) for p in wrong)
             return ("wrong-id", f"reply from ID {ids}, expected ID {min(accept)}", bytes(received))
@@ -607,19 +715,21 @@ class ZapBus:
             n = state["mismatch"][0]
             return ("length", f"reply carries {n} data bytes, expected {data_len}", bytes(received))
         if pending and not bad_before and bytes(received[-pending:]).startswith(b"\xff"):
-            return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet)",
-                    bytes(received))
+            return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet: a collision "
+                                 "or a line fault)", bytes(received))
         if framer.bad:
-            return ("checksum", "corrupted reply (checksum mismatch)", bytes(received))
+            return ("checksum", "garbled reply (checksum mismatch: a collision, two actuators answering at "
+                                "once, or a line fault)", bytes(received))
         if len(received) > state["explained"]:
-            return ("garbage", "unreadable bytes instead of a reply (wrong baud rate?)", bytes(received))
+            return ("garbage", "unreadable bytes instead of a reply (a collision, a line fault or a wrong "
+                               "baud rate)", bytes(received))
         return ("none", "echo only" if copies else "", bytes(received))
 
     @staticmethod
-    def _reply(p, rtt, copy=False):
+    def _reply(p, rtt, latency, copy=False):
         if copy:
-            return Reply(p[3], 0, b"", p, rtt)
-        return Reply(p[3], p[5], p[6:-1], p, rtt)
+            return Reply(p[3], 0, b"", p, rtt, latency)
+        return Reply(p[3], p[5], p[6:-1], p, rtt, latency)
 
     def _fail(self, pkt, problems, limit, tries, optional):
         ident = pkt[3]
@@ -627,21 +737,22 @@ class ZapBus:
         if all(k == "none" for k in kinds):
             if optional:
                 return None
-            ms = limit * 1000
+            ms = self.window * 1000
             echo = any(p[1] == "echo only" for p in problems)
             note = " (only our own bytes came back: the adapter echoes)" if echo else ""
             ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
             raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {ms:.1f} ms "
                           f"({tries} {'try' if tries == 1 else 'tries'}){note}",
-                          ident=ident, baud=self.baud, timeout=limit, tries=tries, echo_only=echo,
-                          mode_dependent=ins is not None and ins.reply != "always", protocol="zap")
+                          ident=ident, baud=self.baud, timeout=limit, window=self.window, tries=tries,
+                          echo_only=echo, mode_dependent=ins is not None and ins.reply != "always",
+                          protocol="zap")
         bad = [p for p in problems if p[0] != "none"][-1]
         seen = bad[2].hex(" ").upper() if bad[2] else "nothing"
         if len(seen) > 120:
             seen = seen[:117] + "..."
         raise BadReply(f"ID {ident}: {bad[1]} after {tries} {'try' if tries == 1 else 'tries'}; received {seen}",
                        kind=bad[0], ident=ident, baud=self.baud, timeout=limit, tries=tries, received=bad[2],
-                       protocol="zap")
+                       collision=bad[0] in ("checksum", "garbage", "truncated"), protocol="zap")
 
     # -- instructions -------------------------------------------------------------------------
 
@@ -683,12 +794,14 @@ class ZapBus:
         if (ins is None or not ins.documented) and pkt[3] != zap.BROADCAST:
             kw["reply"] = True
             kw["optional"] = True
+        elif code != zap.LOAD_DATA and "data_len" not in kw:
+            kw["data_len"] = 0             # an acknowledgement carries no data
         if optional is not None:
             kw["optional"] = optional
         return self.transact(pkt, check=check, **kw)
 
     def echo(self, ident: int, **kw) -> Reply:
-        return self.transact(zap.echo(ident), reply=True, **kw)
+        return self.transact(zap.echo(ident), reply=True, data_len=0, **kw)
 
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
         """Load Data: ``length`` bytes from ``address``."""
@@ -728,26 +841,17 @@ class ZapBus:
         for pkt in packets:
             self.command(pkt, **kw)
 
-    def ping(self, ident: int, *, timeout=None, retries=0, quick=False, extra=0.0):
+    def ping(self, ident: int, *, timeout=None, retries=0, quick=False, early=False, window=None):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
-        retried ``retries`` times and then raised as BadReply. ``quick``: wait only the quick
-        probe's time (a slower reply is recognised as late later: see :attr:`events`);
-        ``extra``: seconds added to the wait (see :meth:`patience`)."""
-        return self.transact(zap.echo(ident), reply=True, timeout=timeout, retries=retries, optional=True,
-                             check=False, quick=quick, extra=extra)
-
-    def patience(self) -> float:
-        """What to add to the wait when asking again where replies came late: 1.5x how far past
-        the full allowance the slowest late reply came (:attr:`lateness`), at most :data:`LATE_WINDOW`;
-        0.0 when every reply so far came in time. An actuator slower than the allowance (or one
-        held up, like a simulator on a loaded machine) is then heard instead of colliding with
-        the next request. An explicit ``timeout`` is never widened."""
-        return min(LATE_WINDOW, 1.5 * self.lateness)
+        retried ``retries`` times and then raised as BadReply. ``quick``/``early``: a scan's
+        first-pass probe (see :meth:`transact`); ``window``: this probe's late window."""
+        return self.transact(zap.echo(ident), reply=True, data_len=0, timeout=timeout, retries=retries,
+                             optional=True, check=False, quick=quick, early=early, window=window)
 
     def answers(self, ident: int, *, tries: int = 3) -> bool:
-        """Whether any actuator answers to ``ident``: Echo with the full allowance up to
-        ``tries`` times; a reply with error bits, a garbled reply or a late reply from
-        ``ident`` all count as an answer. Only ``tries`` silences in a row say it is free."""
+        """Whether any actuator answers to ``ident``: Echo with the whole window up to ``tries``
+        times; a reply with error bits, a garbled reply or a late reply from ``ident`` all count
+        as an answer. Only ``tries`` silences in a row say it is free."""
         self.take_events()
         for _ in range(tries):
             try:
@@ -755,14 +859,10 @@ class ZapBus:
                     return True
             except BadReply:
                 return True
-            if any(kind == "late" and who == ident for kind, who, _ in self.events):
+            if any(e.kind == "late" and e.ident == ident for e in self.events):
                 return True
-        self._settle()
-        end = time.monotonic() + self.turnaround + self.margin + self.patience()
-        while time.monotonic() < end:               # a reply slower than every wait above
-            time.sleep(min(0.005, max(0.0, end - time.monotonic())))
-        self._drain()
-        return any(kind == "late" and who == ident for kind, who, _ in self.take_events())
+        self.quiet()
+        return any(e.kind == "late" and e.ident == ident for e in self.take_events())
 
     def detect_return_mode(self, ident: int) -> int:
         """Ask the actuator: Load feedback-return-mode (answered in modes 1 and 2); no answer
@@ -778,10 +878,9 @@ class ZapBus:
 
     def wait_ready(self, ident: int, within: float = 2.0, check=False) -> Reply:
         """Echo ``ident`` until it answers (after a restart or a baud change) or ``within``
-        seconds pass (NoReply)."""
+        seconds pass (NoReply). Every Echo waits its whole window."""
         end = time.monotonic() + within
         while True:
-            self._settle()
             r = self.ping(ident, retries=1)
             if r is not None:
                 if check and r.error:
@@ -790,13 +889,35 @@ class ZapBus:
             if time.monotonic() >= end:
                 raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s",
                               ident=ident, baud=self.baud, timeout=within, protocol="zap")
-            time.sleep(0.005)
+
+    def latencies(self) -> dict:
+        """What the bus learned: {ID: {"latency_ms", "variation_ms", "samples", "late"}}."""
+        return self.policy.summary()
+
+
+def set_low_latency(port):
+    """Ask the serial driver for low-latency mode (Linux ``ASYNC_LOW_LATENCY``: an FTDI adapter
+    then uses a 1 ms latency timer). ``(True, None)`` when done, ``(False, reason)`` where the
+    platform or the port has no such mode."""
+    setter = getattr(port, "set_low_latency_mode", None)
+    if setter is None:
+        return False, "this port has no low-latency mode"
+    try:
+        setter(True)
+    except (ValueError, OSError, NotImplementedError) as e:
+        return False, str(e) or type(e).__name__
+    except Exception as e:  # noqa: BLE001 - serial.SerialException from the ioctl
+        return False, str(e) or type(e).__name__
+    return True, None
 
 
 def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, return_mode=1,
-             retries=RETRIES, sim_options=None, stop_bits=1, allow=None) -> ZapBus:
+             retries=RETRIES, sim_options=None, stop_bits=1, latency=None, low_latency=False,
+             allow=None) -> ZapBus:
     """Open ``port`` (any pyserial URL or device, or the in-process simulator with ``sim``;
-    ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`."""
+    ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`. ``latency``
+    (seconds) is the actuators' known latency before any is measured; ``low_latency`` asks the
+    driver for its low-latency mode (:attr:`ZapBus.low_latency` says whether it could)."""
     from .port import open_port, sim_url
 
     if sim:
@@ -810,6 +931,8 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
             raise UsageError("no port", no_port="zap")
         url = port
     p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
-    bus = ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url)
+    bus = ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url, latency=latency)
     bus.allow = as_permission(allow)
+    if low_latency:
+        bus.low_latency, bus.low_latency_reason = set_low_latency(p)
     return bus

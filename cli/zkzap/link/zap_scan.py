@@ -1,32 +1,46 @@
 """Find the actuators on a mightyZAP bus: every ID at every baud rate, fast and complete.
 
 :func:`scan` is the procedure behind ``zap scan`` (click-free: it yields what it finds and the
-command renders it):
+command renders it). It keeps the bus's timing policy (:mod:`zkzap.link.zap_timing`) with the
+one exception the policy allows:
 
-1. **Quick pass.** Echo to each ID with the quick probe's wait (:meth:`ZapBus.ping` with
-   ``quick=True``: our packet and one reply byte on the wire plus the bus's typical
-   turnaround), so a bus of 2 ms actuators is scanned at about wire speed.
-2. **Late and garbled replies.** A reply that comes after its probe's wait is recognised by
-   its ID while later IDs are probed (the bus counts it as late). Its ID is probed again with
-   the full allowance, and so are the IDs probed while that reply was on its way (on a real
-   half-duplex line their probes may have collided with it). Bytes that make no packet
-   (a collision) put every ID probed within one full allowance (plus :data:`GARBLED_WINDOW`)
-   before them up for another probe. After the last ID the scan waits one full allowance for stragglers.
-   Where replies came late, the second probes (and what follows them) wait that much longer
-   (:meth:`ZapBus.patience`): a bus slower than the allowance is heard, not collided with.
-   Records come out in ID order: one is held while a lower ID may still turn out to be there.
+1. **First pass.** Echo to each ID, waiting only for the bus-typical latency
+   (:meth:`ZapBus.quick_timeout`), then moving on: the first pass does not wait for the late
+   window of an ID that stays silent, but the bus keeps listening through every window it cut
+   short, and the scan judges what it hears. A reply that comes after its probe's wait is
+   recognised by its ID: that actuator is found. Bytes that make no packet (a late reply that
+   met a later probe on the line, replies of two actuators at once) are kept with the time they
+   arrived. The actuators found are identified at once
+   (step 3); after the last ID the scan listens until the last window has closed.
+2. **Asking again**, with the whole late window and the retries of an ordinary transaction
+   (nothing else is sent until its window has closed), every ID whose window the first pass
+   cut short while something was on the line:
+
+   - every ID whose probe may have met bytes on the line (its echo came back broken, or it
+     went out while they were arriving: a late reply can come through clean and still have
+     broken the probe, since the probe's header of FF bytes leaves it as it was): its actuator
+     may not have heard it;
+   - for garbled bytes, every ID whose window they fell in: one of them may have sent them
+     (a late reply that met a probe, or replies of two actuators that met each other).
+
+   What the second probes hear is judged the same way, until nothing is in doubt (every ID is
+   asked again at most once). Records come out in ID order: one is held while a lower ID may
+   still turn out to be there. A quiet line is never asked again: an ID whose whole window
+   passed with nothing on the line has no actuator.
 3. **Identify.** Each actuator found is asked for model number .. feedback-return-mode in one
-   Load Data (full allowance, retries). No reply at all, with the full derived wait, and an
-   Echo answered: return mode 0 (Echo only). A read that fails otherwise leaves ``model``,
-   ``firmware`` and ``return_mode`` null with status ``unidentified`` -- never a guess.
+   Load Data (retries). No reply at all, with the whole window, and an Echo answered: return
+   mode 0 (Echo only). A read that fails otherwise leaves ``model``, ``firmware`` and
+   ``return_mode`` null with status ``unidentified`` -- never a guess. What the first pass
+   identified while other windows were open is identified again, on a quiet line, when it
+   failed or something garbled came meanwhile.
 4. **Duplicates.** Two actuators with one ID answer together and garble each other's
    replies, except where their bytes happen to be equal (an Echo, the same settings). The
    scan reads the live registers (present-position .. present-voltage), which differ between
    two units; replies that stay garbled give status ``duplicate`` (or ``garbled`` when even
    the Echo is) and a warning.
 
-An ID whose replies only ever come late (a ``--timeout`` shorter than its turnaround) is
-reported with status ``unidentified`` and the reason, not left out.
+An ID whose replies only ever come after the window (a ``--timeout`` shorter than its
+latency) is reported with status ``unidentified`` and the reason, not left out.
 
 Records: ``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status`` (``ok``,
 ``error``, ``garbled``, ``duplicate``, ``unidentified``) and ``errors``.
@@ -47,11 +61,10 @@ INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
 #: Live registers read to reveal two actuators sharing an ID: present-position .. present-voltage.
 LIVE_FIRST = zap.REGISTER_BY_NAME["present-position"]
 LIVE_LAST = zap.REGISTER_BY_NAME["present-voltage"]
-#: How far back (beyond one full allowance) bytes that make no packet put IDs up for another probe.
-GARBLED_WINDOW = 0.03
-#: ... and at least this many of the probes before them.
-GARBLED_PROBES = 8
+#: How far before garbled bytes arrived (beyond the adapter's timer) a probe may have met them.
+GARBLED_SLACK = 0.01
 STATUSES = ("ok", "error", "garbled", "duplicate", "unidentified")
+ECHO_LEN = 7
 
 
 def duplicate_warning(ident: int, baud: int) -> str:
@@ -71,89 +84,216 @@ def scan(bus, ids, bauds, *, retries: int = 2):
     ``first`` is False for the second probes of step 2),
     ``("record", rec)`` for every actuator found (as found) and ``("warning", text)``.
     """
-    found = 0
+    found = [0]
     for baud in bauds:
         bus.set_baud(baud)
         bus.take_events()
-        wanted = set(ids)
-        done = set()                          # IDs with a record at this baud
-        sent_at = []                          # (time, ID) of every quick probe, in order
-        recheck = set()
-        late_seen = set()
+        yield from _Scan(bus, baud, list(ids), retries, found).run()
 
-        def account(now_events):
-            for kind, who, t in now_events:
-                if kind == "late" and who in wanted and who not in done:
-                    late_seen.add(who)
-                    recheck.add(who)
-                    since = next((ts for ts, i in reversed(sent_at) if i == who), None)
-                    if since is not None:
-                        recheck.update(i for ts, i in sent_at if since <= ts <= t and i not in done)
-                elif kind == "garbled":
-                    # the colliding reply may have been asked for a full allowance earlier, and
-                    # have trickled for a while before the probe that saw it ended
-                    window = bus.turnaround + bus.margin + GARBLED_WINDOW
-                    recheck.update(i for ts, i in sent_at if t - window <= ts <= t and i not in done)
-                    # a host that was held up stretches time: the last few probes, whatever the clock
-                    before = [i for ts, i in sent_at if ts <= t][-GARBLED_PROBES:]
-                    recheck.update(i for i in before if i not in done)
 
-        held = []                             # found, not yet released: (ID, time, events)
+class _Probe:
+    __slots__ = ("ident", "t0", "tx_end", "span")
 
-        def release(final=False):
-            # in ID order: a record waits while a lower ID may still turn out to be there
-            held.sort(key=lambda h: h[0])
-            settle = bus.turnaround + bus.margin + 0.005
-            now = time.monotonic()
-            while held:
-                ident, t, events = held[0]
-                if not final and (now - t < settle or any(i < ident for i in recheck - done)):
-                    break
-                held.pop(0)
-                yield from events
+    def __init__(self, ident, t0, tx_end, span):
+        self.ident, self.t0, self.tx_end, self.span = ident, t0, tx_end, span
 
-        def ask(ident, first):
-            # one probe (quick on the first pass); what answers is identified and held
-            nonlocal found
-            if first:
-                sent_at.append((time.monotonic(), ident))
-            rec = _probe(bus, ident, baud, retries, quick=first)
-            account(bus.take_events())
-            if rec is not None:
-                done.add(ident)
-                found += 1
-                held.append((ident, time.monotonic(), list(_finish(bus, rec, retries))))
-                account(bus.take_events())
 
-        def stragglers():
-            # a reply to one of the last probes may still be on its way
-            bus.linger(bus.turnaround + bus.margin + bus.patience())
-            account(bus.take_events())
+class _Scan:
+    """One baud rate of a scan."""
 
-        for ident in ids:
-            yield ("probe", baud, ident, found, True)
-            ask(ident, True)
-            yield from release()
-        stragglers()
-        rounds = 0
-        while recheck - done and rounds < 3:
-            rounds += 1
-            todo = sorted(recheck - done)
-            recheck.clear()
+    def __init__(self, bus, baud, ids, retries, found):
+        self.bus, self.baud, self.ids, self.retries, self.found = bus, baud, ids, retries, found
+        self.records = {}              # ID -> record (found)
+        self.identified = set()        # IDs whose identification is final
+        self.provisional = set()       # identified while windows were open: to be done again
+        self.late_seen = set()         # IDs heard only after a window
+        self.probes = {}               # ID -> its first-pass _Probe (the windows the events fall in)
+        self.doubt = set()             # IDs to ask again with the whole window
+        self.asked = set()             # IDs asked again with the whole window
+        self.held = []                 # (ID, [events]) found, not yet released
+        self.echo_errors = {}          # ID -> the error bits of the Echo that found it
+
+    # -- steps ------------------------------------------------------------------------------
+
+    def run(self):
+        bus = self.bus
+        for ident in self.ids:
+            yield ("probe", self.baud, ident, self.found[0], True)
+            r = self._probe(ident)
+            if r is not None:
+                self._found(ident, r)
+            self._judge()
+            yield from self._release()
+        # the actuators found are identified while the last windows close
+        for ident in sorted(self.records):
+            if ident not in self.identified:
+                self._identify(ident, early=True)
+        bus.quiet()
+        self._judge()
+        while True:                    # every ID is asked again at most once: this ends
+            todo = sorted(self.doubt - set(self.records) - self.asked)
+            redo = sorted(i for i in self.records if i not in self.identified or i in self.provisional)
+            if not todo and not redo:
+                break
             for ident in todo:
-                yield ("probe", baud, ident, found, False)
-                ask(ident, False)
-            stragglers()
-        for ident in sorted(late_seen - done):
-            # it answers, but never within the wait (a --timeout shorter than its turnaround)
-            rec = _record(ident, baud)
+                yield ("probe", self.baud, ident, self.found[0], False)
+                self._ask(ident)
+                self._judge()
+            for ident in sorted(i for i in self.records if i not in self.identified or i in self.provisional):
+                self.provisional.discard(ident)
+                self._identify(ident, early=False)
+            bus.quiet()
+            self._judge()
+            yield from self._release()
+        for ident in sorted(self.late_seen - set(self.records)):
+            # it answers, but never within the window (a --timeout shorter than its latency)
+            rec = _record(ident, self.baud)
             rec["status"] = "unidentified"
-            wait = bus.reply_timeout(7, 7, bus.patience()) * 1000
-            rec["errors"] = [f"ID {ident} answers only after the wait ({wait:.1f} ms): its replies came late; "
-                             "give a longer --timeout"]
-            found += 1
-            held.append((ident, 0.0, [("record", rec)]))
-        yield from release(final=True)
+            rec["errors"] = [_late_text(bus, ident)]
+            self._final(ident, [("record", rec)])
+        yield from self._release(final=True)
+
+    def _probe(self, ident):
+        """A first-pass Echo: the reply, or None (garbled bytes are an event like the others)."""
+        bus = self.bus
+        try:
+            return bus.ping(ident, quick=True, early=True)
+        except BadReply:
+            return None
+        finally:
+            t0 = bus.last_sent
+            tx = bus.wire(ECHO_LEN)
+            self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(ECHO_LEN) + bus.margin)
+
+    def _ask(self, ident):
+        """Ask again, with the whole window and the retries: a record, found, or absent."""
+        self.asked.add(ident)
+        self.doubt.discard(ident)
+        try:
+            r = self.bus.ping(ident, retries=self.retries)
+        except BadReply as e:
+            rec = _record(ident, self.baud)
+            rec["status"] = "garbled"
+            rec["errors"] = [str(e)]
+            self.records[ident] = rec
+            self._final(ident, [("record", rec), ("warning", garbled_warning(ident, self.baud))])
+            return
+        if r is not None:
+            self._found(ident, r)
+
+    def _found(self, ident, reply):
+        if ident in self.records:
+            return
+        rec = _record(ident, self.baud)
+        rec["errors"] = list(reply.errors)
+        self.echo_errors[ident] = list(reply.errors)
+        if reply.error:
+            rec["status"] = "error"
+        self.records[ident] = rec
+        self.doubt.discard(ident)
+
+    def _final(self, ident, events):
+        """A record is final: held for release in ID order."""
+        self.identified.add(ident)
+        self.found[0] += 1
+        self.held.append((ident, events))
+
+    def _identify(self, ident, *, early):
+        bus = self.bus
+        rec = self.records[ident]
+        garbled_before = bus.garbled
+        events = list(_finish(bus, rec, self.retries, early=early))
+        self._judge()
+        if rec["status"] == "unidentified" and ident in self.late_seen:
+            rec["errors"] = [_late_text(bus, ident)]
+        if early and (rec["status"] in ("unidentified", "duplicate") or bus.garbled != garbled_before):
+            # identified while other windows were open: say nothing yet, ask again on a quiet line
+            fresh = _record(ident, self.baud)
+            fresh["errors"] = list(self.echo_errors.get(ident, []))
+            if fresh["errors"]:
+                fresh["status"] = "error"
+            self.records[ident] = fresh
+            self.provisional.add(ident)
+            return
+        self._final(ident, events)
+
+    # -- judging what was heard --------------------------------------------------------------
+
+    def _slack(self):
+        return GARBLED_SLACK + (self.bus.policy.adapter or 0.0) + self.bus.margin
+
+    def _collided(self, lo, hi, skip=None):
+        """Put up the probes that may have met bytes on the line between ``lo`` and ``hi`` (their
+        echo came back broken, or they went out meanwhile): their actuators may not have heard
+        them."""
+        bus = self.bus
+        for p in self.probes.values():
+            if p.ident in self.records or p.ident == skip:
+                continue
+            clean = bus.echo_clean(p.t0)
+            if clean is False or (clean is None and p.tx_end >= lo and p.t0 <= hi):
+                self.doubt.add(p.ident)
+
+    def _judge(self):
+        """Account for the bus's events: late replies are actuators found; a probe that may have
+        met them on the line is asked again; garbled bytes are kept to be explained."""
+        bus = self.bus
+        slack = self._slack()
+        for ev in bus.take_events():
+            if ev.kind in ("late", "stray") and ev.packet is not None:
+                ident = ev.ident
+                if ident not in self.records and (ev.kind == "late" or ident in self.probes):
+                    if ev.packet[4] == 2:             # an Echo reply (no data): the actuator is there
+                        self._found(ident, _AsReply(ev.packet))
+                    self.late_seen.add(ident)
+                # a late reply can come through clean and still have broken a probe sent while
+                # it was on the line (the probe's header of FF bytes leaves it as it was, while
+                # its bytes garble the probe)
+                self._collided(ev.lo - slack - bus.wire(len(ev.packet)), ev.hi, skip=ident)
+                continue
+            if ev.kind != "garbled":
+                continue
+            lo, hi = ev.lo - slack - bus.wire(ECHO_LEN), ev.hi
+            self._collided(lo, hi)
+            # whoever sent them may be any ID whose window they fell in
+            self.doubt |= {p.ident for p in self.probes.values()
+                           if p.ident not in self.records and p.t0 <= hi and p.t0 + p.span >= ev.lo}
+
+    def _release(self, final=False):
+        # in ID order: a record waits while a lower ID may still turn out to be there
+        self.held.sort(key=lambda h: h[0])
+        now = time.monotonic()
+        while self.held:
+            ident, events = self.held[0]
+            if not final and any(self._open(i, now) for i in self.ids if i < ident):
+                break
+            self.held.pop(0)
+            yield from events
+
+    def _open(self, i, now) -> bool:
+        """Whether ID ``i`` may still turn out to be there (or its record is not out yet)."""
+        if i in self.records:
+            return i not in self.identified or i in self.provisional
+        if i in self.doubt:
+            return True
+        p = self.probes.get(i)
+        return p is None or p.t0 + p.span > now
+
+
+class _AsReply:
+    """A late Echo reply heard between transactions, as the record needs it."""
+
+    def __init__(self, packet):
+        self.ident, self.error = packet[3], packet[5]
+
+    @property
+    def errors(self):
+        return zap.error_names(self.error)
+
+
+def _late_text(bus, ident) -> str:
+    return (f"ID {ident} answers only after the window ({bus.window * 1000:.1f} ms): its replies came late; "
+            "give a longer --timeout")
 
 
 def _record(ident, baud):
@@ -161,54 +301,30 @@ def _record(ident, baud):
             "status": "ok", "errors": []}
 
 
-def _probe(bus, ident, baud, retries, quick):
-    """An Echo probe: a record when something answered (garbled included), else None."""
-    rec = _record(ident, baud)
-    try:
-        # asked again: as long as the replies seen late need
-        r = bus.ping(ident, retries=retries, quick=quick, extra=0.0 if quick else bus.patience())
-    except BadReply as e:
-        rec["status"] = "garbled"
-        rec["errors"] = [str(e)]
-        return rec
-    if r is None:
-        return None
-    rec["errors"] = list(r.errors)
-    if r.error:
-        rec["status"] = "error"
-    return rec
-
-
-def _finish(bus, rec, retries):
+def _finish(bus, rec, retries, early=False):
     """Identify a found actuator and check for a duplicate; yields the record and warnings."""
     ident, baud = rec["id"], rec["baud"]
     if rec["status"] == "garbled":
         yield ("record", rec)
         yield ("warning", garbled_warning(ident, baud))
         return
-    identify(bus, rec, retries)
+    identify(bus, rec, retries, early=early)
     if rec["status"] in ("ok", "error") and rec["return_mode"] != 0:
-        length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
-        try:
-            bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
-                         retries=retries, check=False, extra=bus.patience())
-        except BadReply as e:
+        if collides(bus, ident, retries, early=early):
             rec["status"] = "duplicate"
-            rec["errors"] = rec["errors"] + [str(e)]
-        except NoReply:
-            pass
+            rec["errors"] = rec["errors"] + [f"ID {ident}: the live registers come back garbled"]
     yield ("record", rec)
     if rec["status"] == "duplicate":
         yield ("warning", duplicate_warning(ident, baud))
 
 
-def collides(bus, ident: int, retries: int = 2) -> bool:
+def collides(bus, ident: int, retries: int = 2, early=False) -> bool:
     """Whether two actuators seem to answer to ``ident``: its live registers (which differ
     between two units) come back garbled on every try."""
     length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
     try:
         bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
-                     retries=retries, check=False, extra=bus.patience())
+                     retries=retries, check=False, early=early)
     except BadReply:
         return True
     except NoReply:
@@ -216,7 +332,7 @@ def collides(bus, ident: int, retries: int = 2) -> bool:
     return False
 
 
-def identify(bus, rec, retries=2) -> None:
+def identify(bus, rec, retries=2, early=False) -> None:
     """Fill ``model``, ``firmware`` and ``return_mode`` of ``rec`` from one Load Data, or leave
     them null with status ``unidentified`` (or ``duplicate`` when the reply is garbled) and the
     reason in ``errors``."""
@@ -224,18 +340,18 @@ def identify(bus, rec, retries=2) -> None:
     length = INFO_LAST.address + INFO_LAST.size - INFO_FIRST.address
     pkt = zap.load(ident, INFO_FIRST.address, length)
     try:
-        r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, extra=bus.patience())
+        r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, early=early)
     except BadReply as e:
         rec["status"] = "duplicate"
         rec["errors"] = rec["errors"] + [str(e)]
         return
     except NoReply as e:
-        full = bus.timeout is None or bus.timeout >= bus.reply_timeout_derived(len(pkt), 7 + length)
-        if full and _echo_answers(bus, ident, retries):
+        if _echo_answers(bus, ident, retries, early):
             rec["return_mode"] = 0                 # answers Echo, never Load Data: Echo only
             return
         rec["status"] = "unidentified"
-        rec["errors"] = rec["errors"] + [f"identify: {e}"]
+        late = any(ev.kind == "late" and ev.ident == ident for ev in bus.events)
+        rec["errors"] = rec["errors"] + [_late_text(bus, ident) if late else f"identify: {e}"]
         return
     values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
     rec["model"] = values.get("model-number")
@@ -243,8 +359,8 @@ def identify(bus, rec, retries=2) -> None:
     rec["return_mode"] = values.get("feedback-return-mode")
 
 
-def _echo_answers(bus, ident, retries) -> bool:
+def _echo_answers(bus, ident, retries, early=False) -> bool:
     try:
-        return bus.ping(ident, retries=retries, extra=bus.patience()) is not None
+        return bus.ping(ident, retries=retries, early=early) is not None
     except BadReply:
         return False

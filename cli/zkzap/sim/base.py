@@ -54,6 +54,16 @@ class Clock:
         return max(0.0, model_seconds / self.speed)
 
 
+
+def keep_wire_time(device, clock: "Clock"):
+    """Serve ``device`` on ``clock``: whatever the clock's speed, a byte takes its real time on
+    the wire (a faster model time shortens turnarounds and moves, never the line: a reply cannot
+    come sooner than the baud rate carries it). Returns ``device``."""
+    line = getattr(device, "model", device)       # a replay's modelled bus
+    if hasattr(line, "wire_scale"):
+        line.wire_scale = clock.speed
+    return device
+
 class Device:
     """A virtual device on a serial line. All times are model seconds from a :class:`Clock`.
 

@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 
 from . import INSTANCES
 from ..errors import InvalidValue
-from .base import Clock
+from .base import Clock, keep_wire_time
 
 __all__ = ["Simulator", "start", "start_zk", "start_zap"]
 
@@ -247,8 +247,11 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
     if recorded is not None:
         from .replay import ZapReplay
 
-        return Simulator("zap", ZapReplay(replay, bus, recorded), Clock(speed), transport, host, port)
-    return Simulator("zap", bus, Clock(speed), transport, host, port)
+        clock = Clock(speed)
+        return Simulator("zap", keep_wire_time(ZapReplay(replay, bus, recorded), clock), clock, transport, host,
+                         port)
+    clock = Clock(speed)
+    return Simulator("zap", keep_wire_time(bus, clock), clock, transport, host, port)
 
 
 def start(kind: Literal["zk", "zap"], **options: Any) -> Simulator:

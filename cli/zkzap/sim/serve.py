@@ -87,6 +87,15 @@ def _timeout(device, clock):
     return min(0.5, clock.real_delay(wake - clock.now()))
 
 
+def _selector():
+    """A selector that wakes when a reply is due to the microsecond: select(2) takes its timeout
+    in microseconds, where epoll and poll round it up to the next millisecond (every reply up to
+    a millisecond late)."""
+    if hasattr(selectors, "SelectSelector"):
+        return selectors.SelectSelector()
+    return selectors.DefaultSelector()
+
+
 class _NoLock:
     def __enter__(self):
         return self
@@ -111,7 +120,7 @@ def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) 
             from ..outfile import make_link
 
             make_link(path, link)           # only an old symlink is replaced, never a file or device
-        sel = selectors.DefaultSelector()
+        sel = _selector()
         sel.register(master, selectors.EVENT_READ, "data")
         if stop_fd is not None:
             sel.register(stop_fd, selectors.EVENT_READ, "stop")
@@ -184,7 +193,7 @@ def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=No
     lock = lock or _NoLock()
     srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
     client = None
-    sel = selectors.DefaultSelector()
+    sel = _selector()
     try:
         srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         srv.bind((host, port))
@@ -205,7 +214,8 @@ def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=No
         while True:
             with lock:
                 wait = _timeout(device, clock)
-            for key, _ in sel.select(wait):
+            # a client's bytes (or its going) first: one that leaves frees the line for the next
+            for key, _ in sorted(sel.select(wait), key=lambda e: e[0].data != "client"):
                 if key.data == "stop":
                     return
                 if key.data == "accept":

@@ -62,12 +62,16 @@ NV_WRITE_TIME = 0.005
 BOOT_TIME = 0.02
 #: Rod speed at goal-speed 1023, in position units per model second (full stroke in ~0.4 s).
 FULL_SPEED = 10000.0
-#: The simulator's identity (the e-manual gives no model number; this one is the simulator's).
-MODEL_NUMBER = 0x0C4C
-FIRMWARE_VERSION = 20
+#: A real 12Lf's identity, as logged from one by a community control app (the e-manual gives no
+#: model number): model 41234 (0xA112), firmware-version 21 (which IR Robot's Arduino examples
+#: print as raw x 0.1, "2.10"), present-temperature (undocumented, 0x93) 245.
+MODEL_NUMBER = 0xA112
+FIRMWARE_VERSION = 21
+PRESENT_TEMPERATURE = 245
 SUPPLY_VOLTAGE = 12.0
 
-#: Values for registers the data map gives no default (simulator choices, plausible for a 12Lf).
+#: Values for registers the data map gives no default: a real 12Lf's where known (acceleration
+#: 20, deceleration 64), else simulator choices, plausible for a 12Lf.
 SIM_DEFAULTS = {
     "model-number": MODEL_NUMBER,
     "firmware-version": FIRMWARE_VERSION,
@@ -78,7 +82,7 @@ SIM_DEFAULTS = {
     "calibration-short-stroke": 0,
     "calibration-long-stroke": 4095,
     "acceleration": 20,
-    "deceleration": 20,
+    "deceleration": 64,
     "current-i-gain": 20,
     "current-p-gain": 30,
     "speed-d-gain": 0,
@@ -228,6 +232,7 @@ class Actuator:
             self._poke(reg, default or 0)
         self._poke(R["id"], ident)
         self._poke(R["baud-rate"], zap.BAUD_TO_CODE[baud])
+        self.mem[zap.UNDOCUMENTED_BY_NAME["present-temperature"].address] = PRESENT_TEMPERATURE
         self.baud = baud                  # the line speed in effect (baud-rate applies at restart)
         self.pos = 0.0                    # rod position (float, position units)
         self.t = 0.0                      # model time of the last update
@@ -236,6 +241,7 @@ class Actuator:
         self.stuck = False
         self.staged = None                # (address, data) from Send Data
         self.busy_until = 0.0
+        self.tx_free = 0.0                # when its last reply has left (it sends one at a time)
         self.deaf_until = 0.0
         self.faults = {}                  # kind -> Fault (reply faults)
         self.nv_dirty = False             # stored registers changed since the last save
@@ -524,24 +530,26 @@ for _r in zap.REGISTERS:
         _REG_AT[_a] = _r
 
 
-def _collide(first, second):
-    """Two replies on the line at once (duplicate IDs): the wired-AND of their bits, the second
-    at least one byte behind the first (two transmitters are never in step), so even identical
-    replies come out garbled, as on a real bus."""
-    t, a, baud = first
-    offset = max(1, round((second[0] - t) / wire_time(1, baud)))
-    b = b"\xff" * offset + second[1]
-    n = max(len(a), len(b))
-    a, b = a.ljust(n, b"\xff"), b.ljust(n, b"\xff")
-    return (t, bytes(x & y for x, y in zip(a, b)), baud)
+class _Byte:
+    """One byte on the line: its wire time, value, who sent it, when the host's UART delivers
+    it, and the line speed it was sent at."""
+
+    __slots__ = ("start", "end", "value", "host", "reply", "due", "baud", "ids")
+
+    def __init__(self, start, end, value, due, baud, host=False, reply=False, ids=()):
+        self.start, self.end, self.value, self.due, self.baud = start, end, value, due, baud
+        self.host, self.reply, self.ids = host, reply, set(ids)
 
 
 class ActuatorBus:
     """The bus: actuators, the line between them and the host, fault injection, persistence.
 
     For tests (``port.device`` behind ``sim://zap``): :meth:`actuator`, :meth:`inject`,
-    :meth:`clear_faults`, the ``echo`` attribute (adapter echo) and ``received`` (the last
-    packets the actuators heard).
+    :meth:`clear_faults`, the ``echo`` attribute (adapter echo), ``received`` (the last
+    packets the actuators heard) and ``collisions`` (every time two transmissions met on the
+    line: ``{"t", "kind", "ids"}``, kind ``host`` when the host transmitted while an actuator
+    was replying, ``actuators`` when two actuators replied at once); ``on_collision`` is called
+    with each.
     """
 
     def __init__(self, actuators, *, state_path=None, echo=False, turnaround=TURNAROUND, gap=0.0):
@@ -550,13 +558,17 @@ class ActuatorBus:
         self.echo = echo
         self.turnaround = turnaround      # every actuator's reply turnaround (model seconds)
         self.gap = gap                    # pause between two reply bytes (model seconds)
+        # model seconds per real second (the simulator's speed): a byte takes its real time on
+        # the wire whatever the speed, so in model time it takes this many times longer; a reply
+        # can never come sooner than the line can carry it
+        self.wire_scale = 1.0
         self._rx_free = 0.0               # when the host's bytes written so far have crossed the line
         self.restored = False
         self.received = deque(maxlen=1000)
+        self.collisions = []
+        self.on_collision = None
         self._framers = {}
-        self._queue = []                  # (ready_time, seq, bytes), kept sorted
-        self._seq = 0
-        self._bus_free = 0.0
+        self._line = []                   # _Byte not yet delivered to the host, by due time
 
     # -- Python API for tests -----------------------------------------------------------------
 
@@ -617,18 +629,43 @@ class ActuatorBus:
     def receive(self, data: bytes, now: float, baud=None) -> None:
         if not data:
             return
-        # the host's bytes take their time on the line: a command is heard when its last byte is in
+        # the host's bytes take their time on the line: a command is heard when its last byte
+        # is in; a byte that meets an actuator's reply on the line garbles both (wired-AND)
         line = baud or (self.actuators[0].baud if self.actuators else 57600)
-        arrived = max(now, self._rx_free) + wire_time(len(data), line)
+        byte = wire_time(1, line) * self.wire_scale
+        start = max(now, self._rx_free)
+        arrived = start + byte * len(data)
         self._rx_free = arrived
-        if self.echo:
-            self._emit(arrived, bytes(data))
+        heard = bytearray(data)
+        met = set()
+        echoed = []
+        for i, value in enumerate(data):
+            b = _Byte(start + i * byte, start + (i + 1) * byte, value, arrived, baud, host=True)
+            hit = self._meets(b.start, b.end)
+            for x in hit:
+                heard[i] &= x.value
+                x.value &= value
+                x.host = True
+                met |= x.ids
+            if not hit and self.echo:
+                echoed.append((i, b))
+        if met:
+            self._collided(start, "host", met)
+        for i, b in echoed:               # the adapter's echo: what crossed the line
+            b.value = heard[i]
+            self._queue(b)
         framer = self._framers.get(baud)
         if framer is None:
             framer = self._framers[baud] = ZapFramer()
-        for pkt in framer.feed(data):
+        for pkt in framer.feed(bytes(heard)):
             self.received.append(bytes(pkt))
             self._dispatch(bytes(pkt), arrived, baud)
+
+    def _collided(self, t, kind, ids) -> None:
+        event = {"t": round(t, 6), "kind": kind, "ids": sorted(ids)}
+        self.collisions.append(event)
+        if self.on_collision is not None:
+            self.on_collision(event)
 
     def _dispatch(self, pkt: bytes, now: float, baud) -> None:
         ident, code = pkt[3], pkt[5]
@@ -650,34 +687,53 @@ class ActuatorBus:
             if r is not None:
                 faulted = a.apply_faults(r[0], r[1])
                 if faulted is not None and faulted[1]:
-                    replies.append((faulted[0], faulted[1], r[2]))
+                    replies.append((faulted[0], faulted[1], r[2], a))
         if stored:
             self.save()
-        if not replies:
-            return
         replies.sort(key=lambda r: r[0])
-        merged = []
-        for t, data, rbaud in replies:
-            if merged and t < merged[-1][0] + wire_time(len(merged[-1][1]), merged[-1][2]):
-                merged[-1] = _collide(merged[-1], (t, data, rbaud))
-            else:
-                merged.append((t, data, rbaud))
-        for t, data, rbaud in merged:
-            start = max(t, self._bus_free)
-            if self.gap > 0:
-                byte = wire_time(1, rbaud)
-                end = start
-                for i in range(len(data)):
-                    end = start + (i + 1) * byte + i * self.gap
-                    self._emit(end, data[i:i + 1], rbaud)
-            else:
-                end = start + wire_time(len(data), rbaud)
-                self._emit(end, data, rbaud)
-            self._bus_free = end
+        starts = []
+        for t, data, rbaud, a in replies:
+            byte = wire_time(1, rbaud) * self.wire_scale
+            start = max(t, a.tx_free)     # one actuator sends one reply at a time
+            # two transmitters are never in step: a reply that starts with another is a byte behind
+            if any(abs(start - s) < byte for s in starts):
+                start = max(starts) + byte
+            starts.append(start)
+            self._send(start, data, rbaud, a.ident)
+            a.tx_free = start + len(data) * (byte + self.gap)
 
-    def _emit(self, t: float, data: bytes, baud=None) -> None:
-        self._seq += 1
-        bisect.insort(self._queue, (t, self._seq, data, baud))
+    def _send(self, start, data, baud, ident) -> None:
+        """An actuator's reply on the line from ``start``: the host's UART delivers its first
+        byte when that has crossed, the rest when the reply has (a receive FIFO); with ``gap``
+        every byte on its own. A byte that meets another reply's garbles both."""
+        byte = wire_time(1, baud) * self.wire_scale
+        step = byte + self.gap
+        n = len(data)
+        last_end = start + (n - 1) * step + byte
+        met = set()
+        for i, value in enumerate(data):
+            b_start = start + i * step
+            b_end = b_start + byte
+            due = b_end if (self.gap > 0 or i == 0) else last_end
+            hit = self._meets(b_start, b_end)
+            if hit:
+                for x in hit:
+                    x.value &= value
+                    met |= x.ids - {ident}
+                    x.ids.add(ident)
+                continue
+            self._queue(_Byte(b_start, b_end, value, due, baud, reply=True, ids=(ident,)))
+        if met:
+            self._collided(start, "actuators", met | {ident})
+
+    def _meets(self, start, end) -> list:
+        """The reply bytes on the line between ``start`` and ``end`` (by more than a hair)."""
+        eps = (end - start) * 0.05
+        return [x for x in self._line if x.reply and x.end > start + eps and x.start < end - eps]
+
+    def _queue(self, b) -> None:
+        keys = [x.due for x in self._line]
+        self._line.insert(bisect.bisect_right(keys, b.due), b)
 
     def poll(self, now: float) -> bytes:
         return self.poll_line(now, None)
@@ -685,17 +741,18 @@ class ActuatorBus:
     def poll_line(self, now: float, baud=None) -> bytes:
         """What a host listening at ``baud`` hears by ``now``: replies sent at another baud rate
         (the host switched after asking) are lost on the line, not delivered late and clean."""
-        if not self._queue or self._queue[0][0] > now:
+        line = self._line
+        if not line or line[0].due > now:
             return b""
         out = bytearray()
-        while self._queue and self._queue[0][0] <= now:
-            _, _, data, sent_at = self._queue.pop(0)
-            if baud is None or sent_at is None or sent_at == baud:
-                out += data
+        while line and line[0].due <= now:
+            b = line.pop(0)
+            if baud is None or b.baud is None or b.baud == baud:
+                out.append(b.value)
         return bytes(out)
 
     def next_wakeup(self, now: float):
-        return self._queue[0][0] if self._queue else None
+        return self._line[0].due if self._line else None
 
     def close(self) -> None:
         for a in self.actuators:
@@ -716,18 +773,18 @@ class ActuatorBus:
 
     def load_state(self) -> bool:
         """Restore actuators from the state file; False when the file does not exist."""
+        from ..api.documents import read
+        from ..errors import UsageError
+
         path = self.state_path
         if os.path.exists(path) and not os.path.isfile(path):
             raise InvalidValue(f"state {path}: not a regular file; a state file is read and rewritten whole")
-        try:
-            with open(path, encoding="utf-8") as f:
-                doc = json.load(f)
-        except FileNotFoundError:
+        if not os.path.exists(path):
             return False
-        except OSError as e:
-            raise InvalidValue(f"state {path}: cannot read: {e.strerror or e}") from None
-        except ValueError as e:
-            raise InvalidValue(f"state {path}: cannot read: {e}") from None
+        try:
+            doc, _ = read(path, "state")
+        except UsageError as e:            # unreadable, not UTF-8, not JSON: FILE:LINE: what
+            raise InvalidValue(str(e) if str(e).startswith("state: ") else f"state: {e}") from None
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
             raise InvalidValue(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")

@@ -220,6 +220,15 @@ def test_url_parts_and_the_password_from_the_environment():
     assert "s3cret" not in str(e.value)
 
 
+def test_a_password_in_the_url_is_warned_about_and_never_printed(cli):
+    r = cli("zk", "monitor", "-p", "/dev/nonexistent-zkzap", "--mqtt", "mqtt://pilot:s3cret@127.0.0.1:1/a")
+    assert r.exit_code == 4 and "s3cret" not in r.stderr, r
+    assert "warning: mqtt: the password in the URL can be read by every user of this computer in the process " \
+           "list (ps); give it in ZKZAP_MQTT_PASSWORD instead" in r.stderr
+    r = cli("zk", "monitor", "-p", "/dev/nonexistent-zkzap", "--mqtt", "mqtt://pilot@127.0.0.1:1/a")
+    assert r.exit_code == 4 and "warning" not in r.stderr, r
+
+
 def test_a_password_from_the_environment_logs_in(cli, broker, subscriber, monkeypatch, tmp_path):
     passwd = tmp_path / "passwd"
     subprocess.run(["mosquitto_passwd", "-b", "-c", str(passwd), "pilot", "s3cret"], check=True,

@@ -10,7 +10,7 @@ from ...codec import zap
 from .. import CONTEXT, Command
 from ..batch import ZAP_BATCH_EXITS
 from ..options import InputPath, consent, zap_yes_option as yes_option
-from .compose import link_options, open_link
+from .compose import _link_args, link_options, open_link
 
 
 @ZAP_BATCH_EXITS
@@ -58,7 +58,7 @@ def batch(file, keep_going, yes, **common):
     text, name = read_source(file)
     lines = read_lines(text, name)
     defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                       "verbose")}
+                                       "verbose", "latency")}
     defaults["yes"] = True
     check_lines(group, lines, "zap", defaults)
     if not lines:
@@ -69,7 +69,7 @@ def batch(file, keep_going, yes, **common):
             consent(f"this batch writes stored settings on {common['port']}; they survive power-off: "
                     + "; ".join(items), yes)
     ids = {i for line in lines for i in line_ids(line) if i != zap.BROADCAST}
-    args = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "retries", "stop_bits")}
+    args = _link_args(common)
     args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
     with open_link(ids=sorted(ids) or [0], **args) as bus, sharing("zap", bus):
         code = run_lines(group, "zap", lines, defaults, sys.stdout, keep_going=keep_going,

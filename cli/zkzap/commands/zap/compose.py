@@ -49,12 +49,24 @@ def link_options(f=None, *, baud_type=None, baud_help=None):
                           "(default: the IDs the command addresses).")(f)
     f = click.option("--retries", type=IntRange(0, 20), default=2, show_default=True,
                      help="Retries after no reply or a corrupted reply.")(f)
+    f = click.option("--low-latency", "low_latency", is_flag=True,
+                     help="Ask the serial driver for its low-latency mode (Linux: an FTDI adapter then "
+                          "uses a 1 ms latency timer); a note says so where the port has none.")(f)
+    f = click.option("--latency", type=FiniteRange(0, 5000), default=None, metavar="MS", envvar="ZKZAP_ZAP_LATENCY",
+                     help="How long the actuators are known to take to answer (ms, adapter included), "
+                          "before any reply is measured: a known slow setup; the wait widens when it "
+                          "needs more [env ZKZAP_ZAP_LATENCY].")(f)
     f = click.option("--return-mode", type=Choice(RETURN_MODES), default="1", show_default=True,
                      envvar="ZKZAP_ZAP_RETURN_MODE",
                      help="The actuators' feedback-return-mode: 0 answers Echo only, 1 Load Data and "
                           "Echo, 2 every command; 'auto' asks the actuator first "
                           "[env ZKZAP_ZAP_RETURN_MODE].")(f)
     f = port_options("zap")(f)
+    for param in f.__click_params__:
+        if param.name == "timeout":
+            param.help = ("The late window: how long after a request its reply may still begin, in seconds "
+                          "(default 0.15, what IR Robot's libraries allow); nothing is sent before it has "
+                          "closed.")
     if baud_type is not None:
         for param in f.__click_params__:
             if param.name == "baud":
@@ -97,7 +109,7 @@ def require_port(port, sim, sim_ids=None) -> None:
 #: Options that mean something only when packets are sent (how replies are read and shown).
 WIRE_ONLY = {"fmt": "format", "physical": "physical", "length": None, "count": "count", "interval": "interval",
              "verify": "verify", "retries": "retries", "return_mode": "return-mode", "timeout": "timeout",
-             "verbose": "verbose"}
+             "verbose": "verbose", "latency": "latency", "low_latency": "low-latency"}
 
 
 def refuse_with_dry_run() -> None:
@@ -150,9 +162,11 @@ def grant(packets, *, port, sim, yes, force) -> "Permission":
 
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
-              allow=None, **_):
+              latency=None, low_latency=False, allow=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first;
-    ``allow``: the permissions its packets are given (see :func:`authorize`)."""
+    ``allow``: the permissions its packets are given (see :func:`authorize`). When the command
+    ends, a note says once how to lower a USB adapter's latency timer if the measured latency
+    shows it."""
     from ... import checking
     from ...codec.permissions import as_permission
     from ...link.shared import Borrowed, shared
@@ -163,10 +177,11 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     if sim and port:
         port = None                      # an explicit --sim beats the environment's default port
     mode = 1 if return_mode == "auto" else int(return_mode)
+    latency = None if latency is None else latency / 1000.0      # --latency is in ms
     lent = shared("zap")
     if lent is not None:            # a batch: every command over the one open port
         bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout,
-                       allow=as_permission(allow))
+                       latency=latency if latency is not None else lent.latency, allow=as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
@@ -174,7 +189,11 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
-                   return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits, allow=allow)
+                   return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
+                   latency=latency, low_latency=low_latency, allow=allow)
+    from ..hints import adapter_notes
+
+    adapter_notes(bus)
     if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
         try:
             bus.detect_return_mode(probe)
@@ -223,7 +242,8 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
     bad = None
     with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode=return_mode,
                    retries=retries, ids=targets_of(packets), probe=probe,
-                   stop_bits=wire.get("stop_bits", 1), allow=allow) as bus:
+                   stop_bits=wire.get("stop_bits", 1), latency=wire.get("latency"),
+                   low_latency=wire.get("low_latency", False), allow=allow) as bus:
         for p in packets:
             reply = bus.command(p, check=False)
             if show_reply and reply is not None:
@@ -254,8 +274,12 @@ def _format(default, choices, what):
 
 
 def _link_args(common):
-    return {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                   "stop_bits")}
+    return {k: common[k] for k in LINK_KEYS}
+
+
+#: The link options of every zap command, as open_link takes them.
+LINK_KEYS = ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries", "stop_bits", "latency",
+             "low_latency")
 
 
 @click.command(cls=Command, context_settings=CONTEXT)

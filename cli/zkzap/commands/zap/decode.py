@@ -11,7 +11,7 @@ from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (InputPath, checked, close_output, decode_inputs, exits, format_option, note_skipped,
+from ..options import (InputPath, checked, close_output, decode_inputs, exits, format_option, note, note_skipped,
                        open_output, output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
@@ -65,7 +65,7 @@ def decode(inputs, binary, fmt, output, append):
       zap decode bus.pcapng -f json -o bus.json
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
+    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode, start
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -84,6 +84,7 @@ def decode(inputs, binary, fmt, output, append):
         probe = ZapFramer()
         if not probe.feed(chunks[0]):
             _explain_single(chunks[0])
+    start(chunks)
     stream, had = open_output(output, append, fmt=fmt, columns=COLUMNS,
                               inputs=decode_inputs(inputs, binary, explicit))
     writer = make_writer(fmt, stream, COLUMNS, table_columns=TABLE_COLUMNS, header=not had)
@@ -101,6 +102,9 @@ def decode(inputs, binary, fmt, output, append):
     finally:
         close_output(writer, stream)
     note_skipped(framer, "packet", "checksum")
+    text = hex_note(chunks)
+    if text:
+        note(text)
 
 
 def _explain_single(data: bytes):

@@ -93,19 +93,25 @@ class RegisterList(click.ParamType):
 
 # -- backup --------------------------------------------------------------------------------------
 
+#: -b of the fleet commands that search the bus: one baud rate, a list, or all (as zap scan).
+SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search: one, a list like 57600,115200, "
+                                                         "or 'all' (as zap scan) [env ZKZAP_ZAP_BAUD].")
+
+
 @exits({NO_REPLY: "a listed ID does not answer (nothing written)",
-        DEVICE_ERROR: "an actuator reports error bits (the backup is written first)"})
+        DEVICE_ERROR: "an actuator reports error bits (the backup is written first)",
+        CHECK_FAILED: "two actuators answer to one ID (nothing written)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Actuators to back up, like 1,2,5-8 (each must answer); with --scan: the IDs to search.")
 @click.option("--scan", "scan_", is_flag=True,
-              help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud). The default "
-                   "without --ids.")
+              help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud rates), found as "
+                   "'zap scan' finds them. The default without --ids.")
 @click.option("-o", "--output", type=OutputPath("document", formats=DOC_FORMATS, default=None), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
 @click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
-@link_options
+@link_options(**SEARCH_BAUDS)
 def backup(ids, scan_, output, fmt, **common):
     """Back up every readable register of every actuator: a fleet document.
 
@@ -115,12 +121,16 @@ def backup(ids, scan_, output, fmt, **common):
     written back). Values are raw, in the units of 'zap registers'. The file is written
     atomically once every actuator has been read; exit status 3 when a listed ID does not
     answer (nothing written), 5 when one reports error bits (the backup is written first).
+    Without --ids (or with --scan) the actuators are found as 'zap scan' finds them, at each
+    baud rate of -b (a list, or all); a bus where two actuators answer to one ID is refused
+    (exit 1, naming the ID), never backed up without one of them.
 
     \b
     Examples:
       zap backup -p /dev/ttyUSB0 -o fleet.json                 # every actuator found
       zap backup --ids 1-4 -p /dev/ttyUSB0 -o fleet.toml
       zap backup --ids 1 -p /dev/ttyUSB0 -f yaml > one.yaml
+      zap backup -b all -p /dev/ttyUSB0 -o fleet.json          # every actuator at any baud rate
     """
     if output and output != "-":
         doc_fmt = fmt or fleet.format_of(output)
@@ -131,17 +141,26 @@ def backup(ids, scan_, output, fmt, **common):
         doc_fmt = fmt or "json"
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    search = scan_ or ids is None
+    bauds = common["baud"]
+    search = scan_ or ids is None or len(bauds) > 1
     targets = ids if ids is not None else list(range(zap.MAX_ID + 1))
     sim_ids = ids if ids is not None else [0]
-    with open_link(ids=sim_ids, probe=sim_ids[0], **_link_args(common)) as bus:
+    args = dict(_link_args(common), baud=bauds[0])
+    with open_link(ids=sim_ids, probe=None if search else sim_ids[0], **args) as bus:
         if search:
-            found, garbled = fleet.PROCEDURES.find(bus, targets)
-            for g in garbled:
-                warn(f"ID {g}: garbled reply (two actuators with one ID?); not backed up")
+            found = fleet.survey(bus, targets, bauds, scan=True, retries=common["retries"])
             if not found:
-                raise NoReply(f"no actuator answered (IDs {fleet._ranges(targets)} at {bus.baud} baud)")
-            targets = found
+                raise NoReply(f"no actuator answered (IDs {fleet._ranges(targets)} at "
+                              f"{', '.join(map(str, bauds))} baud)")
+            missing = [i for i in ids or () if i not in {r["id"] for r in found}] if not scan_ else []
+            if missing:
+                raise NoReply(f"no reply from ID{'s' if len(missing) > 1 else ''} {fleet._ranges(missing)} at "
+                              f"{', '.join(map(str, bauds))} baud")
+            if common["return_mode"] == "auto":
+                bus.detect_return_mode(found[0]["id"])
+        else:
+            found = [{"id": i, "baud": bus.baud} for i in targets]
+        targets = [r["id"] for r in found]
         shown = sys.stderr.isatty() or common["verbose"]
 
         def said(ident, entry):
@@ -149,7 +168,7 @@ def backup(ids, scan_, output, fmt, **common):
                 note(f"ID {ident}: model 0x{entry['model']:04X}, firmware {entry['firmware']}, "
                      f"{len(entry['stored'])} stored settings")
 
-        doc = fleet.read_bus(bus, targets, on_actuator=said)
+        doc = fleet.read_fleet(bus, found, on_actuator=said)
     doc["port"] = "sim" if common["sim"] else common["port"]
     if output and output != "-":
         fleet.dump_document(doc, output, doc_fmt)
@@ -170,26 +189,30 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               ("unit", "unit")]
 
 
-@exits({OK: "equal", CHECK_FAILED: "they differ (like diff)", USAGE: "a bad file or option"})
+@exits({OK: "equal", CHECK_FAILED: "they differ (like diff), or two actuators answer to one ID on the bus",
+        USAGE: "a bad file or option"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("a", metavar="A", type=InputPath("fleet"))
 @click.argument("b", metavar="B", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
-              help="Compare only these actuators (default: every ID of either file; the file's IDs on the bus).")
+              help="Compare only these actuators (default: every ID of either file; on the bus, every "
+                   "actuator a scan finds at -b's baud rates).")
 @click.option("--all", "everything", is_flag=True, help="List equal registers too (column equal).")
 @click.option("--compare", type=Choice(tuple(fleet.COMPARE)), default="stored", show_default=True,
               help="stored: the settings that survive power-off; settings: stored and volatile; all: "
                    "read-only values too.")
 @click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
-@link_options
+@link_options(**SEARCH_BAUDS)
 def diff(a, b, ids, everything, compare, fmt, **common):
     """Compare two fleets: A and B are backup files or 'bus' (the live bus on -p).
 
     One row per actuator and register that differs: id, register, address, memory, a, b,
     unit ('0.1 V' for raw values in tenths); an actuator on one side only is one row with
     register '(actuator)'. Exit status 0 when equal, 1 when they differ (like diff), 2 for a
-    bad file.
+    bad file. On the bus, --ids are asked for one by one; without it (or with several baud
+    rates in -b, a list or all) the actuators are found as 'zap scan' finds them, and a bus
+    where two actuators answer to one ID is refused (exit 1, naming it).
 
     \b
     Examples:
@@ -207,9 +230,13 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         if common["return_mode"] == "0":
             raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
         other = next(iter(sides.values()))
-        wanted = ids if ids is not None else sorted(other)
-        with open_link(ids=wanted, probe=wanted[0], **_link_args(common)) as bus:
-            live = fleet.read_entries(bus, wanted, required=False)
+        bauds = common["baud"]
+        args = dict(_link_args(common), baud=bauds[0])
+        with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
+            found = fleet.survey(bus, ids, bauds, retries=common["retries"])
+            if common["return_mode"] == "auto" and found:
+                bus.detect_return_mode(found[0]["id"])
+            live = fleet.read_entries(bus, found)
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:

@@ -105,7 +105,16 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
             if writer is not None:
                 close_output(writer, stream)
             _summary(watcher, rate)
-    silent = [i for i, h in watcher.health.items() if h.answered == 0]
+    silent = [i for i, h in watcher.health.items() if h.answered == 0 and not h.garbled]
+    garbled = [i for i, h in watcher.health.items() if h.answered == 0 and h.garbled]
+    if garbled:
+        from ...errors import BadReply
+
+        ids = ", ".join(map(str, garbled))
+        raise BadReply(f"ID{'s' if len(garbled) > 1 else ''} {ids} at {watcher.bus.baud} baud: every reply was "
+                       "garbled during the watch (a collision: two actuators answering to one ID; or a line fault)"
+                       + (f"; no reply at all from ID{'s' if len(silent) > 1 else ''} {', '.join(map(str, silent))}"
+                          if silent else ""), ids=garbled, collision=True)
     if silent:
         raise NoReply(f"no reply from ID{'s' if len(silent) > 1 else ''} {', '.join(map(str, silent))} "
                       f"at {watcher.bus.baud} baud during the watch")

@@ -71,7 +71,12 @@ def _mqtt(ctx, param, value):
         from ...io.bridges.mqtt import MqttUrl
 
         require_extra("paho", "mqtt", "mqtt")
-        MqttUrl(value)
+        if MqttUrl(value).password_in_url:
+            from ...io.bridges.mqtt import PASSWORD_ENV
+            from ..options import warn
+
+            warn(f"mqtt: the password in the URL can be read by every user of this computer in the process "
+                 f"list (ps); give it in {PASSWORD_ENV} instead")
     return _store(ctx, param, value)
 
 

@@ -92,7 +92,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       xxd capture.bin | zk decode --accept status
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode
+    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode, start
     from ...io.writers import csv_dialect, json_dialect, make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -130,6 +130,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
         if not frames:
             _explain_single(data)
         framer = ZkFramer(accept)
+    start(chunks)
     stream, had = open_output(output, append, fmt=fmt, columns=cols, inputs=decode_inputs(inputs, binary, explicit))
     writer = make_writer(fmt, stream, cols, table_columns=TABLE_COLUMNS, header=not had)
     try:
@@ -144,6 +145,9 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
     finally:
         close_output(writer, stream)
     note_skipped(framer, "frame", "CRC")
+    text = hex_note(chunks)
+    if text:
+        note(text)
 
 
 def _explain_single(data: bytes):

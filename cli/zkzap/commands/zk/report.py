@@ -21,9 +21,9 @@ class AlignType(click.ParamType):
 
     def convert(self, value, param, ctx):
         text = str(value).strip().lower()
-        if text in ("start", "running") or re.fullmatch(r"step:[1-9]\d*", text):
+        if text in ("start", "first", "running") or re.fullmatch(r"step:[1-9]\d*", text):
             return text
-        self.fail(f"{value!r}; allowed start, running or step:N (N a step number, 1 or more)", param, ctx)
+        self.fail(f"{value!r}; allowed start, first, running or step:N (N a step number, 1 or more)", param, ctx)
 
 
 @exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]')",
@@ -44,8 +44,9 @@ class AlignType(click.ParamType):
 @click.option("--label", "labels", multiple=True, metavar="NAME",
               help="The name of a RUN in the legend, in order (default: its file name). Repeatable.")
 @click.option("--align", type=AlignType(), default="start", show_default=True,
-              help="The common time axis: start (each run from its first record), running (from the engine's "
-                   "first running state) or step:N (from the start of step N of each run).")
+              help="The common time axis: start (each run from its session's start, t = 0, where its schedule "
+                   "started), first (from its first record), running (from the engine's first running state) "
+                   "or step:N (from the start of step N of each run).")
 @click.option("-o", "--output", type=OutputPath("document", formats=REPORT_FORMATS, default=None), default=None,
               metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
@@ -122,6 +123,8 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
     runs = []
     for path, st, sm in zip(run_files, steps, summaries):
         run = R.load_run(path, extra=sorted(fields))
+        for text in run.notes:
+            note(text)
         run.steps = st if st is not None else ((sm or {}).get("steps") or None)
         run.summary = sm
         runs.append(run)

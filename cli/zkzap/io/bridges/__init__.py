@@ -14,7 +14,7 @@ import importlib.util
 import queue
 import threading
 
-from ...errors import UsageError
+from ...errors import MissingExtra
 
 #: Records a bridge holds while its peer is slow or away (10 s at the ECU's fastest 100 Hz).
 QUEUE_SIZE = 1000
@@ -31,8 +31,7 @@ def require_extra(module: str, extra: str, option: str) -> None:
     except (ImportError, ValueError):
         found = False
     if not found:
-        raise UsageError(f"{option}: needs the {module} library; install it with "
-                         f"pip install 'zkzap[{extra}]'")
+        raise MissingExtra(option, module, extra)
 
 
 class Bridge:

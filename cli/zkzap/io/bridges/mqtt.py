@@ -71,6 +71,9 @@ class MqttUrl:
         self.port = port or (8883 if self.tls else 1883)
         self.username = unquote(u.username) if u.username else None
         password = unquote(u.password) if u.password is not None else None
+        #: The password was given in the URL, where every local user can read it in the process
+        #: list (``ps``); :data:`PASSWORD_ENV` keeps it out of sight.
+        self.password_in_url = password is not None
         if password is None and env.get(PASSWORD_ENV):
             password = env[PASSWORD_ENV]
         self.password = password

@@ -17,6 +17,8 @@
     if (!a.polled) return el("span", { class: "tag warn", text: a.return_mode === 0 ? "mode 0: echo only" : a.status });
     const errs = (s && s.errors && s.errors.length) ? s.errors : a.errors;
     if (errs && errs.length) return el("span", { class: "tag bad", text: errs.join(", ") });
+    if (s && s.status === "bad-reply") return el("span", { class: "tag bad", text: "garbled",
+      title: "garbled reply: a collision (two actuators answering to one ID) or a line fault" });
     if (s && s.status !== "ok") return el("span", { class: "tag warn", text: s.status });
     return el("span", { class: "tag ok", text: a.status });
   }
