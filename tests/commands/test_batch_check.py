@@ -53,6 +53,16 @@ def test_a_refused_batch_writes_no_capture_and_creates_no_file(cli, tmp_path):
     assert r.exit_code == 2 and not cap.exists() and not book.exists(), r
 
 
+def test_a_line_may_read_what_an_earlier_line_writes(cli, tmp_path):
+    fleet = tmp_path / "fleet.json"
+    text = f"backup --ids 1,2 -o {fleet}\napply {fleet} --plan\napply {tmp_path / 'other.json'}\n"
+    r = cli("zap", "batch", "--sim", "--sim-ids", "1,2", input=text)
+    assert r.exit_code == 2 and "stdin:3: apply" in r.stderr and not fleet.exists(), r   # checked whole
+    r = cli("zap", "batch", "--sim", "--sim-ids", "1,2", input="\n".join(text.splitlines()[:2]) + "\n")
+    assert r.exit_code == 0, r
+    assert [json.loads(line)["exit"] for line in r.stdout.splitlines()] == [0, 0]
+
+
 def test_run_time_options_work_in_a_batch(cli, tmp_path):
     summary, book = tmp_path / "s.json", tmp_path / "k100.db"
     line = (f"send control --state run --throttle 20 --for 1 --limit egt_c<=900 --on-limit abort "

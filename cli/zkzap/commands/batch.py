@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import shlex
 import signal
 import sys
@@ -133,8 +134,24 @@ def check_lines(group, lines, protocol, defaults):
         _check_lines(group, lines, protocol, defaults)
 
 
+def _paths(leaf, params, kind):
+    """The file names ``params`` give the parameters of ``leaf`` whose type is ``kind``
+    (InputPath or OutputPath), as absolute paths."""
+    out = []
+    for p in leaf.params:
+        if isinstance(p.type, kind):
+            value = params.get(p.name)
+            for v in (value if isinstance(value, (list, tuple)) else (value,)):
+                if isinstance(v, str) and v not in ("", "-"):
+                    out.append(os.path.abspath(v))
+    return out
+
+
 def _check_lines(group, lines, protocol, defaults):
+    from .options import InputPath, OutputPath
+
     seen = {}
+    made = {}                              # files earlier lines write: path -> FILE:LINE
     for line in lines:
         twin = seen.get(tuple(line.tokens))
         if twin is not None:               # the same text checks the same: reuse the first's findings
@@ -154,7 +171,13 @@ def _check_lines(group, lines, protocol, defaults):
                 line.params = dict(ctx.params)
         except Exception as e:  # noqa: BLE001 - click's, the codec's and zkzap's: all name the problem
             _refuse(line, e)
-        _check_run(line, protocol)
+        # a line that reads what an earlier line writes (a backup, then its apply) is parsed
+        # whole now and runs its file's checks when it runs, after the line that makes the file
+        waits = [f for f in _paths(leaf, line.params, InputPath) if f in made and not os.path.exists(f)]
+        if not waits:
+            _check_run(line, protocol)
+        for f in _paths(leaf, line.params, OutputPath):
+            made.setdefault(f, line.where)
 
 
 def _check_run(line, protocol):

@@ -183,19 +183,26 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         from .mcap_output import check_mcap
 
         check_mcap(output, append, snapshot)
+    if stand is not None:
+        # external sensors first (their first lines name the fields the records get): a silent
+        # load cell is found before the ECU is sent anything
+        stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
     columns = record_columns if stand is None else stand.columns(record_columns)
-    out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
+    try:
+        out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
+    except BaseException:
+        if stand is not None:
+            stand.close()
+        raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
     try:
         if bridges:
             bridges.start()          # an unreachable peer is exit 4 before the port opens or a file is written
-        if stand is not None:
-            # external sensors first: a silent load cell is found before the ECU is sent anything
-            stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
     except BaseException:
-        if bridges:
-            bridges.close()
+        bridges.close()
+        if stand is not None:
+            stand.close()
         out.close()
         raise
     source = None
