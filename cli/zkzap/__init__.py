@@ -12,8 +12,10 @@ The public API (imported lazily: ``from zkzap import Bus`` loads neither click n
 - :mod:`zkzap.sim`: the simulators, started from Python (:func:`zkzap.sim.start_zk`,
   :func:`zkzap.sim.start_zap`), and the pytest fixtures ``zk_sim``/``zap_sim``;
 - :mod:`zkzap.errors`: one exception hierarchy with exit codes (:class:`ZkzapError`,
-  :class:`NoReply`, ...); every error zkzap raises for bad input or a device is one, and each
-  is importable from here.
+  :class:`NoReply`, :class:`PermissionNeeded`, ...); every error zkzap raises for bad input or
+  a device is one, and each is importable from here;
+- :class:`Permission` (:mod:`zkzap.codec.permissions`): what a frame needs from its sender
+  (engine start, stored write, identity change, ...), given with ``allow=``.
 """
 
 __version__ = "0.1.0"
@@ -37,7 +39,10 @@ _LAZY = {
     "DeviceError": "zkzap.errors",
     "BadReply": "zkzap.errors",
     "OutputError": "zkzap.errors",
+    "PermissionNeeded": "zkzap.errors",
+    "MoreToDo": "zkzap.errors",
     "Interrupted": "zkzap.errors",
+    "Permission": "zkzap.codec.permissions",
     "FieldValueError": "zkzap.codec.fields",
     "HexError": "zkzap.codec.hexfmt",
     "FrameError": "zkzap.codec.zk",
@@ -72,12 +77,14 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .api.zk import Ecu as Ecu, ProfileResult as ProfileResult, Status as Status
     from .codec.fields import FieldValueError as FieldValueError
     from .codec.hexfmt import HexError as HexError
+    from .codec.permissions import Permission as Permission
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError
     from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
                          Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
-                         NoReply as NoReply, OutputError as OutputError, PortError as PortError,
-                         UsageError as UsageError, ZkzapError as ZkzapError)
+                         MoreToDo as MoreToDo, NoReply as NoReply, OutputError as OutputError,
+                         PermissionNeeded as PermissionNeeded, PortError as PortError, UsageError as UsageError,
+                         ZkzapError as ZkzapError)
     from .link.pcapng import CaptureError as CaptureError
     from .sim.serve import PtyUnsupported as PtyUnsupported
     from .sim.zap_actuators import NoActuator as NoActuator

@@ -8,10 +8,12 @@ Every error zkzap raises for bad input or for what a device did is a :class:`Zkz
     unknown name (with the closest names: :func:`did_you_mean`), malformed text. The codec's
     :class:`~zkzap.codec.fields.FieldValueError` and :class:`~zkzap.codec.hexfmt.HexError`
     are InvalidValue errors.
+  - :class:`PermissionNeeded`: a frame needs a permission (:class:`~zkzap.codec.permissions.Permission`)
+    its sender was not given; nothing was sent.
 
 - :class:`CheckFailed` (1), :class:`NoReply` (3), :class:`PortError` (4),
   :class:`DeviceError` (5), :class:`BadReply` (6), :class:`OutputError` (7),
-  :class:`Interrupted` (130/143).
+  :class:`MoreToDo` (8), :class:`Interrupted` (130/143).
 - The codec's frame errors (:class:`~zkzap.codec.zk.FrameError`,
   :class:`~zkzap.codec.zap.PacketError`; exit 2) are ZkzapErrors and ValueErrors; their CRC
   and checksum mismatches (:class:`~zkzap.codec.zk.CrcError`,
@@ -23,6 +25,8 @@ from __future__ import annotations
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from typing import Any, Iterable, Mapping, Optional
+
+    from .codec.permissions import Permission
 
 OK = 0
 #: A check failed: CRC/checksum mismatch (``crc --check``, an explicit bad frame), read-back mismatch.
@@ -39,6 +43,9 @@ DEVICE_ERROR = 5
 BAD_REPLY = 6
 #: The output could not be written (disk full, file system gone); records before it are whole.
 OUTPUT_ERROR = 7
+#: More to do: the command did the part it was asked to and stopped; running it again goes on
+#: (``zap setup --no-wait`` set up one actuator and others are pending).
+MORE_TO_DO = 8
 #: Interrupted by Ctrl-C (SIGINT); 143 for SIGTERM.
 INTERRUPTED = 130
 TERMINATED = 143
@@ -52,6 +59,7 @@ EXIT_CODES = (
     (DEVICE_ERROR, "the device reported an error (actuator error bits, ECU error code)"),
     (BAD_REPLY, "corrupted or unexpected reply (bad checksum, wrong ID) after retries"),
     (OUTPUT_ERROR, "the output could not be written (disk full); the records before are whole"),
+    (MORE_TO_DO, "more to do: the part asked for is done and the command stopped; run it again for the rest"),
     (INTERRUPTED, "interrupted (Ctrl-C); 143 when terminated (SIGTERM)"),
 )
 
@@ -107,6 +115,20 @@ class InvalidValue(UsageError, ValueError):
     ``suggestions``, the closest allowed names (:func:`did_you_mean`)."""
 
 
+class PermissionNeeded(UsageError):
+    """A frame needs a permission it was not given: nothing was sent (exit 2).
+
+    Facts: ``missing`` and ``needed`` (:class:`zkzap.codec.permissions.Permission` flags),
+    ``reasons`` ({Permission: why}, the missing ones), ``frame`` (the bytes not sent) and
+    ``simulated`` (whether the port was a simulator, which grants the consent permissions)."""
+
+    missing: Permission
+    needed: Permission
+    reasons: dict[Permission, str]
+    frame: bytes
+    simulated: bool
+
+
 class CheckFailed(ZkzapError):
     """A check failed: a CRC or checksum mismatch, a read-back that differs, a goal not reached."""
 
@@ -142,6 +164,15 @@ class OutputError(ZkzapError):
     before the failure are whole."""
 
     code = OUTPUT_ERROR
+
+
+class MoreToDo(ZkzapError):
+    """The command did what it was asked to and stopped with more to do (exit 8): running it
+    again goes on. Facts: ``pending`` (what is left)."""
+
+    pending: list[int]
+
+    code = MORE_TO_DO
 
 
 class Interrupted(ZkzapError):

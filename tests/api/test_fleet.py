@@ -101,6 +101,9 @@ def _doc(entry, key="1"):
     ({"stored": {"goal-speed": 5}}, "1", r"goal-speed is a volatile register, not stored"),
     ({"volatile": {"present-position": 5}}, "1", r"present-position is a read-only register"),
     ({"stored": {"baud-rate": 33}}, "1", r"baud-rate: 33 is not allowed"),
+    ({"stored": {"alarm-led": 30}}, "1", r"stored\.alarm-led: 30 is not allowed; allowed bits 0 \(input voltage\), "
+                                         r"5 \(overload\): 0, 1, 32, 33"),
+    ({"volatile": {"led": 9}}, "1", r"volatile\.led: 9 is out of range"),
     ({"stored": {"id": 4}}, "1", r"stored\.id: 4 differs from the actuator's key 1"),
     ({"stored": {"speed-limit": "fast"}}, "1", r"'fast' is not an integer"),
     ({"stored": {"speed-limit": True}}, "1", r"True is not an integer"),

@@ -9,6 +9,7 @@ import pytest
 from zkzap.api.session import Session, abort_frames, controls_engine
 from zkzap.api.telemetry import Telemetry
 from zkzap.codec import zk
+from zkzap.codec.permissions import Permission
 from zkzap.errors import DeviceError, NoReply, PortError, UsageError
 from zkzap.link.zk_port import ZkLink
 from zkzap.link.zk_sources import LiveSource
@@ -20,7 +21,7 @@ MODE_NONE = zk.encode_control("mode", sw="none", rpm_factor=0)[0]
 
 
 def session(url, *, snapshot=False, protocol_version=None, ids=None, **kw):
-    link = ZkLink.open(url, 115200)
+    link = ZkLink.open(url, 115200, allow=Permission.ENGINE)      # the session's behaviour, not consent
     src = LiveSource(link)
     tel = Telemetry(protocol_version, ids, snapshot, wall0=src.wall0)
     out = []
@@ -188,7 +189,7 @@ class FailingPort:
 def test_port_failure_is_port_error_and_abort_is_tried():
     base = ZkLink.open("sim://zk?speed=20", 115200)
     port = FailingPort(base.ser, 30)
-    src = LiveSource(ZkLink(port, "/dev/ttyUSB9"))
+    src = LiveSource(ZkLink(port, "/dev/ttyUSB9", allow=Permission.ENGINE))
     tel = Telemetry()
     notes = []
     s = Session(src, tel, lambda r: None, control=lambda t: RUN30, notify=notes.append)

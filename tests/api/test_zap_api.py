@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import zkzap
-from zkzap import Bus, Reading
+from zkzap import Bus, Permission, Reading
 from zkzap.codec import zap
 from zkzap.errors import CheckFailed, DeviceError, NoReply, UsageError
 
@@ -140,8 +140,9 @@ def test_device_error_carries_the_reply(zap_sim):
 
 def test_protocol_change_refused_without_force(zap_sim):
     with Bus(zap_sim) as bus:
-        with pytest.raises(UsageError, match="Modbus RTU"):
+        with pytest.raises(UsageError, match="Modbus RTU") as e:
             bus.store(1, "protocol-type", 0)
+        assert e.value.missing == Permission.IDENTITY
 
 
 @pytest.mark.zap_sim(return_mode=0)

@@ -82,8 +82,8 @@ def test_a_run_that_starts_replaces_and_a_quiet_good_run_still_creates(cli, tmp_
 
 SAME_FILE = [
     # (args with {f} for the shared file, what stderr names)
-    ("zk decode --binary {f} -o {f}", "output: {f} is also the input (--binary {f})"),
-    ("zap decode --binary {f} -o {f}", "output: {f} is also the input (--binary {f})"),
+    ("zk decode --binary {f} -o {f}", "output: {f} is also the input (FILE {f})"),
+    ("zap decode --binary {f} -o {f}", "output: {f} is also the input (FILE {f})"),
     ("zk monitor --replay {f} -o {f}", "output: {f} is also the input (--replay {f})"),
     ("zk monitor --replay {f} --fast -f csv -o {d}/../{n}", "is also the input (--replay"),
     ("zk monitor -p sim://zk --count 1 -o {f} --raw-log {f}", "output: {f} is also given to --raw-log"),

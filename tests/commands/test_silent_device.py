@@ -52,7 +52,7 @@ def values(tmp_path_factory):
                "schedule": str(schedule), "file": str(zk_batch)},
         "zap": {"reg": "goal-position", "regs": "present-position", "value": "100", "position": "100", "new": "5",
                 "new_baud": "115200", "ids": "1", "targets": "1:100", "registers": "present-position",
-                "instruction": "echo",
+                "instruction": "echo", "code": "echo",
                 "file": lambda cmd: str(zap_batch if cmd.name == "batch" else fleet),
                 "a": str(fleet), "b": "bus"},
     }

@@ -195,7 +195,7 @@ def test_a_damaged_logbook_is_one_line_naming_the_run(cli, tmp_path, damage, msg
     (["profile", "{s}", "--sim", "--steps-csv", "x.csv", "--fuel-density", "800"],
      "allowed 0.5..1.2 kg/L (800 kg/m³ would be 0.8 kg/L)"),
     (["monitor", "--sim", "--limits", "{empty}"], "limits: empty.limits has no limit"),
-    (["monitor", "--sim", "--logbook", "/nonexistent/x.db"], "logbook: cannot create /nonexistent/x.db: no such "
+    (["monitor", "--sim", "--logbook", "/nonexistent/x.db"], "logbook: cannot open /nonexistent/x.db: no such "
                                                              "directory /nonexistent"),
     (["monitor", "--sim", "--mqtt", "mqtt://localhost/x/#"], "a topic prefix has no wildcards"),
     (["monitor", "--sim", "-o", "run.xyz"], "run.xyz: the suffix '.xyz' is not a format this command writes"),

@@ -42,7 +42,6 @@ def test_sync_move_splits_packets(cli):
     (["store", "present-position", "1"], "present-position: read-only register"),
     (["store", "goal-position", "4096"], "goal-position: 4096 is out of range; allowed 0..4095"),
     (["store", "goal-position", "abc"], "value: 'abc' is not an integer"),
-    (["store", "protocol-type", "0"], "pass --force"),
     (["store", "no-such-register", "1"], "register: unknown name 'no-such-register'"),
     (["load", "goal-position", "--length", "0"], "--length"),
     (["echo", "--id", "255"], "id: 255 is out of range; allowed 0..253, 254 or broadcast"),
@@ -61,9 +60,13 @@ def test_bad_input_exit_2_nothing_on_stdout(cli, args, needle):
     assert needle in r.stderr
 
 
-def test_store_protocol_type_zero_with_force(cli):
-    r = cli("zap", "store", "protocol-type", "0", "--force", "-n")
+def test_store_protocol_type_zero_needs_force_when_sent(cli):
+    r = cli("zap", "store", "protocol-type", "0", "-n")          # composed: nothing is sent
     assert r.exit_code == 0 and r.stdout.startswith("FF FF FF 00 04 F3 0A 00")
+    r = cli("zap", "store", "protocol-type", "0", "--sim")
+    assert r.exit_code == 2 and r.stdout == "" and "Modbus RTU" in r.stderr and "pass --force" in r.stderr
+    r = cli("zap", "store", "protocol-type", "0", "--sim", "--force")
+    assert r.exit_code == 0
 
 
 def test_zap_entry_point_subprocess(sh):

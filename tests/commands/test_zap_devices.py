@@ -85,7 +85,7 @@ def test_direct_id_writes_need_force(cli, args):
     url = sim_url("zap", ids="1,2")
     r = cli("zap", *args, "-p", url)
     assert (r.exit_code, r.stdout) == (2, ""), r
-    assert "--force" in r.stderr and "id:" in r.stderr
+    assert "--force" in r.stderr and "IDENTITY" in r.stderr and "writes id" in r.stderr
     assert cli("zap", *args, "-n").exit_code == 0               # a dry run sends nothing: no check
     assert cli("zap", *args, "-p", url, "--force").exit_code == 0
 

@@ -48,7 +48,8 @@ def test_backup_a_apply_to_fresh_b_then_diff_is_empty(cli, buses, suffix):
     assert (r.exit_code, r.stdout) == (0, ""), r
     assert "3 actuators (1-3) backed up" in r.stderr
     r = cli("zap", "diff", fleet_file, "bus", "-p", b)
-    assert r.exit_code == 1 and len(jsonl(r.stdout)) == 5 and "5 differences" in r.stderr
+    assert r.exit_code == 1 and len(jsonl(r.stdout)) == 5 and "note: 5 differences" in r.stderr
+    assert "error" not in r.stderr                  # a result, not an error
     r = cli("zap", "apply", fleet_file, "--plan", "-p", b)
     assert r.exit_code == 0 and [x["status"] for x in jsonl(r.stdout)] == ["planned"] * 5
     assert state_of(tmp / "b.json")[1]["speed-limit"] == 1023          # --plan writes nothing
@@ -227,10 +228,10 @@ def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, tmp_path):
     second = make_bus(tmp_path / "n2.json", ids="0")
     args = ("zap", "setup", "--ids", "4-5", "--state", state, "--find-ids", "0-7", "--find-baud", "57600",
             "--config", str(cfg))
-    r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends
-    assert r.exit_code == 1 and r.stdout == ""
+    r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends: more to do (8)
+    assert r.exit_code == 8 and r.stdout == ""
     assert "ID 4 done: found at ID 0, 57600 baud; 1 settings from" in r.stderr
-    assert "stopped before ID 5" in r.stderr and "ID 5 not set up" in r.stderr
+    assert "stopped before ID 5" in r.stderr and "more to do: ID 5 not set up yet" in r.stderr
     assert state_of(tmp_path / "n1.json")[4]["speed-limit"] == 700
     # the same actuator again is refused: it was set up already
     r = cli(*args, "-p", f"sim://zap?state={tmp_path / 'n1.json'}", input="\n")
@@ -256,6 +257,9 @@ def test_setup_skip_redo_and_two_actuators(cli, tmp_path):
     r = cli(*base, "-p", one, input="s\n\n")
     assert r.exit_code == 1 and "ID 1 skipped" in r.stderr and "ID 2 done" in r.stderr
     assert "skipped 1" in r.stderr
+    r = cli(*base, "-p", one, input="")             # nothing pending, but ID 1 is not done: not "every ID"
+    assert r.exit_code == 1 and "every ID" not in r.stderr
+    assert "setup not complete: ID 1 skipped (--redo 1 sets it up)" in r.stderr
     r = cli(*base, "--redo", "2", "-p", f"sim://zap?state={tmp_path / 'one.json'}", "--no-wait")
     assert r.exit_code == 1 and "ID 2 done: found at ID 2" in r.stderr      # ID 1 is still skipped
     r = cli(*base, "--redo", "7", "-p", one)
@@ -349,6 +353,41 @@ def test_apply_through_line_faults(cli, buses):
     # a reply that stays corrupted after the retries: exit 6 before any write
     r = cli("zap", "apply", f, "--retries", "1", "-p", "sim://zap?ids=1,2,3&faults=3:corrupt")
     assert (r.exit_code, r.stdout) == (6, "") and "ID 3: garbled reply" in r.stderr
+
+
+# -- summaries that say what they left out ------------------------------------------------------
+
+def test_a_plan_names_the_differences_it_does_not_write(cli, tmp_path):
+    dst = make_bus(tmp_path / "dst.json", ids="1")
+    fleet_file = tmp_path / "fleet.json"
+    assert cli("zap", "backup", "--ids", "1", "-p", dst, "-o", str(fleet_file)).exit_code == 0
+    doc = json.loads(fleet_file.read_text())
+    doc["actuators"]["1"]["stored"].update({"baud-rate": 16, "feedback-return-mode": 2})
+    fleet_file.write_text(json.dumps(doc))
+    fleet_file = str(fleet_file)
+    r = cli("zap", "apply", fleet_file, "-p", dst, "--plan")
+    assert r.exit_code == 0 and jsonl(r.stdout) == []
+    assert "nothing to write" in r.stderr and "2 differences not written" in r.stderr, r
+    assert "ID 1 baud-rate (32 on the bus, 16 in the file)" in r.stderr
+    assert "ID 1 feedback-return-mode (1 on the bus, 2 in the file)" in r.stderr
+    assert "--only NAME --force writes them" in r.stderr
+    r = cli("zap", "apply", fleet_file, "-p", dst, "--skip", "speed-limit")
+    assert r.exit_code == 0 and "nothing to write" in r.stderr and "2 differences not written" in r.stderr
+
+
+def test_setup_no_wait_has_its_own_status_for_more_to_do(cli, tmp_path):
+    state = str(tmp_path / "setup.json")
+    args = ("zap", "setup", "--ids", "1-3", "--state", state, "--find-ids", "0-3", "--find-baud", "57600",
+            "--no-wait")
+    codes = []
+    for n in range(3):
+        new = make_bus(tmp_path / f"new{n}.json", ids="0")          # the next factory-fresh actuator
+        codes.append(cli(*args, "-p", new).exit_code)
+    assert codes == [8, 8, 0]                                      # more to do, more to do, done
+    r = cli(*args, "-p", make_bus(tmp_path / "none.json", ids="0"))
+    assert r.exit_code == 0 and "every ID of 1-3 is done" in r.stderr
+    r = cli(*args, "-p", make_bus(tmp_path / "empty.json", ids="9"), "--redo", "2", "--find-ids", "0")
+    assert r.exit_code == 1 and "no actuator answers" in r.stderr  # a failure is not "more to do"
 
 
 def test_backup_and_diff_find_what_scan_finds_at_every_baud(cli, tmp_path):

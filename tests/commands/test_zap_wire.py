@@ -160,7 +160,9 @@ def test_raw_prints_the_reply(cli):
     r = cli("zap", "raw", "load", "00", "03", "--id", "1", "-p", url())
     assert r.exit_code == 0
     assert r.stdout == "FF FF FF 01 05 00 12 A1 15 31\n"
-    r = cli("zap", "raw", "0x99", "--id", "1", "-p", url())               # unknown: no reply, no error
+    r = cli("zap", "raw", "0x99", "--id", "1", "-p", url())               # undocumented: a deliberate act
+    assert r.exit_code == 2 and "needs permission UNDOCUMENTED" in r.stderr and "pass --force" in r.stderr
+    r = cli("zap", "raw", "0x99", "--id", "1", "-p", url(), "--force")    # unknown: no reply, no error
     assert (r.exit_code, r.stdout) == (0, "")
 
 

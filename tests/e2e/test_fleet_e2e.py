@@ -44,7 +44,7 @@ def test_setup_resumes_in_a_second_process(start_sim, sh, tmp_path):
     args = ["setup", "--ids", "1-2", "--state", state, "--find-ids", "0-3", "--find-baud", "57600,115200", "--yes"]
     url, proc = start_sim(["zap", "--ids", "0", "--pty"])
     r = sh("zap", *args, "-p", url, input="\n")
-    assert r.exit_code == 1 and "ID 1 done: found at ID 0, 57600 baud" in r.stderr
+    assert r.exit_code == 8 and "ID 1 done: found at ID 0, 57600 baud" in r.stderr
     stop_sim(proc)
     url, _ = start_sim(["zap", "--ids", "0@115200", "--pty"])    # the next one talks at 115200
     r = sh("zap", *args, "-p", url, input="\n")

@@ -118,8 +118,14 @@ def test_interactive_ctrl_c_stops_the_command_and_keeps_the_shell(start_sim, tmp
         term.keys("load present-voltage --physical --id 1", "Enter")
         screen = term.wait_for("12.0")
         assert "present-pos" not in screen.split("12.0")[-1]
+        term.keys("C-l")
+        term.wait_for("zap>")
+        term.keys("echo --id 1 --count 0 --interval 0.2", "Enter")
+        term.wait_for("reply from ID 1: seq=2")
+        term.keys("C-c")                                           # the last command: interrupted
+        term.wait_for("garbled; round trip", timeout=30)
         term.keys("exit", "Enter")
         term.wait_for("EXIT=")
-        assert "EXIT=0" in term.screen()                            # the last command succeeded
+        assert "EXIT=0" in term.screen()       # what was asked: exit; the Ctrl-C was asked for too
     finally:
         term.close()

@@ -33,6 +33,7 @@ def by_writer(pkts, writer_cls, *args):
         rec = dec.decode(p)
         rec["frame"] = p.hex(" ").upper()
         w.write(rec)
+    w.close()
     return out.getvalue()
 
 

@@ -5,6 +5,7 @@ import time
 import pytest
 
 from zkzap.codec import zap
+from zkzap.codec.permissions import Permission
 from zkzap.errors import BadReply, DeviceError, NoReply, PortError, UsageError
 from zkzap.link.port import open_port, sim_url
 from zkzap.link.zap_bus import (LATE_WINDOW, MARGIN, NETWORK_MARGIN, ZapBus, host_margin, is_simulated,
@@ -147,7 +148,7 @@ def test_late_reply_from_a_slow_actuator_still_counts(bus):
 def test_id_change_acknowledged_by_either_id():
     b = make(ids="1", return_mode=2)
     b.port.device.actuator(1).set("feedback-return-mode", 2)
-    r = b.store(1, "id", 5)
+    r = b.store(1, "id", 5, allow=Permission.IDENTITY)
     assert r.ident in (1, 5)
     assert b.echo(5).ident == 5
 
@@ -155,7 +156,7 @@ def test_id_change_acknowledged_by_either_id():
 def test_restart_and_wait_ready():
     b = make(ids="1", return_mode=2)
     b.port.device.actuator(1).set("feedback-return-mode", 2)
-    b.store(1, "baud-rate", zap.BAUD_TO_CODE[115200])
+    b.store(1, "baud-rate", zap.BAUD_TO_CODE[115200], allow=Permission.IDENTITY)
     assert b.restart(1).ident == 1
     b.set_baud(115200)
     assert b.wait_ready(1, within=1.0).ident == 1
@@ -176,7 +177,7 @@ def test_symmetric_store_moves_several(bus):
 
 
 def test_unknown_instruction_reply_is_optional(bus):
-    assert bus.command(zap.packet(1, 0x99, b"\x01")) is None
+    assert bus.command(zap.packet(1, 0x99, b"\x01"), allow=Permission.UNDOCUMENTED) is None
 
 
 def test_ping_for_scans(bus):

@@ -1,13 +1,15 @@
-"""The console's consent rules are the command line's: stored writes, ID and baud changes and
-engine starts ask on a real port only; a setting that changes how an actuator is reached needs
-force on every port."""
+"""The console asks for the library's permissions, decided on the typed frames: stored writes,
+factory resets and engine starts on a real port only; a direct write of an identity register, an
+undocumented address or value on every port. What a page grants is the library's allow=."""
 
 from __future__ import annotations
 
 import pytest
 
-from zkzap.codec import zap, zk
-from zkzap.web.consent import ENGINE, FORCE, MOVE, STORED, Needed, Policy
+from zkzap import Bus, Permission, PermissionNeeded
+from zkzap.codec import permissions, zap, zk
+from zkzap.sim import start_zap
+from zkzap.web.consent import ENGINE, FORCE, MOVE, STORED, Needed, Policy, needs_force
 
 REAL, SIM = "socket://127.0.0.1:9", "sim://zap?ids=1"
 
@@ -28,18 +30,42 @@ def needs(fn, *args):
     ("loop://", zap.factory_reset(1, False, False), (), None),
     (REAL, zap.factory_reset(1, False, False), (), STORED),
     (SIM, zap.store(1, "protocol-type", 1), (), FORCE),                   # force on every port
-    (SIM, zap.store(1, "feedback-return-mode", 2), (FORCE,), None),
+    (SIM, zap.store(1, "feedback-return-mode", 2), (), None),            # a stored setting, not identity
+    (REAL, zap.store(1, "feedback-return-mode", 2), (), STORED),
+    (REAL, zap.store(1, "id", 5, force=True), (), FORCE),                 # force is asked first
     (REAL, zap.store(1, "id", 5, force=True), (FORCE,), STORED),
+    (SIM, zap.store(1, 0x97, 1, force=True), (), FORCE),                  # IR Robot's undocumented lock
     (REAL, zap.symmetric_store("goal-position", [(1, 10), (2, 20)])[0], (), None),
 ])
 def test_mightyzap_writes(url, packet, granted, expected):
     assert needs(Policy(url).zap_packets, [packet], granted) == expected
 
 
-def test_identity_changes_and_check_moves():
-    assert needs(Policy(SIM).zap_identity, "ID", ()) == FORCE
-    assert needs(Policy(SIM).zap_identity, "ID", (FORCE,)) is None
-    assert needs(Policy(REAL).zap_identity, "baud rate (to 115200)", (FORCE,)) == STORED
+def test_grants_are_the_library_permissions():
+    assert Policy.allow(()) == Permission.NONE
+    assert Policy.allow((STORED,)) == Permission.STORED | Permission.FACTORY
+    assert Policy.allow((FORCE,)) == permissions.FORCE and Policy.allow((ENGINE,)) == Permission.ENGINE
+    assert Policy("loop://").simulated and not Policy(REAL).simulated
+    assert [r.name for r in zap.REGISTERS if needs_force(r)] == ["protocol-type"]   # id, baud: the checked ways
+
+
+def test_the_library_refusal_is_the_question():
+    """A write the bus refuses (nothing sent) becomes the page's question; granted, it goes out."""
+    policy = Policy(SIM)
+    with start_zap(ids=[1]) as sim, Bus(sim) as bus:
+        with pytest.raises(PermissionNeeded) as refused:
+            bus.store(1, "protocol-type", 1)
+        asked = policy.needed(refused.value)
+        assert asked.permission == FORCE and "protocol-type" in asked.text and "Tick 'force'" in asked.text
+        bus.store(1, "protocol-type", 1, allow=policy.allow((FORCE,)))
+        assert bus.load(1, "protocol-type") == 1
+    with pytest.raises(Needed) as e, Policy(REAL).asking():
+        permissions.require(zap.Command(zap.store(1, "long-stroke-limit", 3000)).needs(), Permission.NONE,
+                            simulated=False, frame=zap.store(1, "long-stroke-limit", 3000))
+    assert e.value.permission == STORED and "long-stroke-limit" in e.value.text
+
+
+def test_check_moves():
     assert needs(Policy(REAL).zap_check, [1, 2], True, ()) == MOVE
     assert needs(Policy(REAL).zap_check, [1], False, ()) is None
     assert needs(Policy(SIM).zap_check, [1], True, ()) is None

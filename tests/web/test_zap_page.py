@@ -123,14 +123,14 @@ def test_a_stored_write_asks_for_confirmation_and_a_refusal_writes_nothing(page,
 
 def test_a_setting_that_changes_how_it_answers_needs_force_then_consent(page, bus):
     _registers(page, 2)
-    _write(page, "feedback-return-mode", 1)
+    _write(page, "protocol-type", 1)
     assert "changes how the actuator is reached" in consent_dialog(page)
     assert not css(page, "#modal-ok")[0].is_enabled()      # not before 'force' is ticked
     click(page, "#modal-force")
     click(page, "#modal-ok")
     until(lambda: "stored" in text_of(page, "#modal.show #modal-text"), "the stored-write confirmation next")
     click(page, "#modal-ok")
-    until(lambda: "feedback-return-mode = 1" in text_of(page, "#log"), "the write in the log")
+    until(lambda: "protocol-type = 1" in text_of(page, "#log"), "the write in the log")
 
 
 def test_backup_diff_and_apply_of_a_fleet_file(page, bus, tmp_path):

@@ -302,23 +302,13 @@ def dumps(doc: dict, fmt: str) -> str:
     raise UsageError(f"format: {fmt!r}; allowed json, toml, yaml")
 
 
-def dump_document(doc: dict, path: str) -> None:
-    """Write ``doc`` to ``path`` in the format its suffix names, atomically (a failed or
-    interrupted write leaves any existing file as it was)."""
-    text = dumps(doc, format_of(path))
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        from ..errors import OutputError
+def dump_document(doc: dict, path: str, fmt=None) -> None:
+    """Write ``doc`` to ``path`` in ``fmt`` (default: the one its suffix names), whole
+    (:func:`zkzap.outfile.write_whole`: atomically onto a regular file, keeping its mode; a
+    failed or interrupted write leaves any existing file as it was)."""
+    from ..outfile import write_whole
 
-        raise OutputError(f"output: cannot write {path}: {e.strerror or e}") from None
+    write_whole(path, dumps(doc, fmt or format_of(path)), what="output")
 
 
 def loads(text: str, fmt: str, name: str):
@@ -545,6 +535,60 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
     return writes, unchanged
 
 
+def left_out(entries: dict, pairs, current: dict, *, only=None, skip=()) -> list:
+    """The differences an apply does not write, so a plan can say so: ``[(target, register,
+    bus value, file value, why)]`` with ``why`` ``"protected"`` (id, baud-rate, protocol-type,
+    feedback-return-mode: written only when named in ``only``, with force), ``"skipped"`` (in
+    ``skip``) or ``"not in --only"``. ``current``: {bus ID: {register name: raw}}. Volatile
+    settings are not differences an apply is meant to write (unless named in ``only``)."""
+    skip = set(skip or ())
+    out = []
+    for source, target in pairs:
+        entry = entries[source]
+        values = current.get(target, {})
+        for reg in zap.REGISTERS:
+            if not reg.stored or reg not in entry.values:
+                continue
+            new, old = entry.values[reg], values.get(reg.name)
+            if old == new:
+                continue
+            if only is not None:
+                if reg in only and reg not in skip:
+                    continue
+                why = "skipped" if reg in skip else "not in --only"
+            elif reg in skip:
+                why = "skipped"
+            elif reg.name in PROTECTED:
+                why = "protected"
+            else:
+                continue
+            out.append((target, reg, old, new, why))
+    return out
+
+
+_WHY_LEFT_OUT = {
+    "protected": "they change how the actuator is reached or answers; --only NAME --force writes them",
+    "skipped": "left out by --skip",
+    "not in --only": "not named in --only",
+}
+
+
+def describe_left_out(items) -> str:
+    """``"2 differences not written: baud-rate (ID 1: 32 on the bus, 16 in the file), ... —
+    they change how ..."``: what :func:`left_out` found, by reason."""
+    parts = []
+    for why in _WHY_LEFT_OUT:
+        group = [i for i in items if i[4] == why]
+        if not group:
+            continue
+        shown = ", ".join(f"ID {t} {r.name} ({o} on the bus, {n} in the file)" for t, r, o, n, _ in group[:4])
+        if len(group) > 4:
+            shown += f" and {len(group) - 4} more"
+        parts.append(f"{len(group)} difference{'s' if len(group) != 1 else ''} not written: {shown}: "
+                     f"{_WHY_LEFT_OUT[why]}")
+    return "; ".join(parts)
+
+
 def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
     """{ID: Entry} read from the bus (every register of each actuator). ``ids``: IDs, or scan
     records (``id``, ``baud``, as :func:`survey` gives them), each then read at the baud rate it
@@ -623,19 +667,26 @@ def identity_mismatch(entry: Entry, current: dict):
     return "; ".join(problems) or None
 
 
-def execute(bus, writes, done: list, *, on_write=None) -> None:
+def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
     """Carry out ``writes`` in order, each read back; every write whose packet went out is
     appended to ``done`` before its read-back, so after any exception (Ctrl-C, a vanished
     port, a silent actuator) ``done`` says exactly which writes were sent: status
     ``verified`` (read back equal), ``mismatch`` (read back another value) or ``sent`` (the
     read-back did not complete) or ``unverifiable`` (feedback-return-mode 0 never answers a read).
-    ``on_write(write)`` is called after each read-back."""
+    ``on_write(write)`` is called after each read-back. Each write needs what its packet needs
+    (:meth:`zkzap.codec.zap.Command.needs`): the bus's permissions, or ``allow``; every write is
+    checked before the first is sent."""
+    from ..codec.permissions import as_permission
+
+    allow = as_permission(allow)
+    for w in writes:
+        bus.authorize(zap.store(w.target, w.register, w.new), allow)
     for w in writes:
         reg = w.register
         mode = bus.return_mode
         w.status = "sending"
         try:
-            reply = bus.store(w.target, reg, w.new, force=reg.name in PROTECTED, check=False)
+            reply = bus.store(w.target, reg, w.new, check=False, allow=allow)
         finally:
             if reg.name == "feedback-return-mode":
                 bus.return_mode = mode      # the link's mode is the bus's: one actuator changed
@@ -704,11 +755,9 @@ class SetupState:
             return
         doc = {"format": SETUP_FORMAT, "ids": self.ids, "done": {str(k): v for k, v in sorted(self.done.items())},
                "skipped": sorted(set(self.skipped))}
-        tmp = f"{self.path}.tmp{os.getpid()}"
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, self.path)
+        from ..outfile import write_whole
+
+        write_whole(self.path, json.dumps(doc, indent=1) + "\n", what="state")
 
     def pending(self) -> list:
         return [i for i in self.ids if i not in self.done and i not in self.skipped]
@@ -719,16 +768,18 @@ class SetupState:
             self.skipped.remove(target)
         self.save()
 
-    def mark_skipped(self, target) -> None:
+    def mark_skipped(self, target, save=True) -> None:
         if target not in self.skipped:
             self.skipped.append(target)
-        self.save()
+        if save:
+            self.save()
 
-    def redo(self, target) -> None:
+    def redo(self, target, save=True) -> None:
         self.done.pop(target, None)
         if target in self.skipped:
             self.skipped.remove(target)
-        self.save()
+        if save:
+            self.save()
 
 
 class TwoAnswer(CheckFailed):
@@ -770,13 +821,17 @@ def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROC
     """Give the actuator found at ``found`` = (ID, baud) the ID ``target``, apply ``config``
     (an :class:`Entry`: its stored settings except id, baud-rate and protocol-type) and
     verify. Returns the record kept in the state file (with ``warning`` when the actuator's
-    model or firmware differs from ``config``'s)."""
+    model or firmware differs from ``config``'s). The writes need the STORED permission on a
+    real port (the bus's)."""
     ident, baud = found
     record = {"from_id": ident, "from_baud": baud, "baud": baud, "writes": 0, "time": now_iso()}
     if bus.baud != baud:
         bus.set_baud(baud)
     if ident != target:
-        bus.store(ident, REG["id"], target, force=True, check=False)
+        from ..codec.permissions import Permission
+
+        # the checked way to give an ID (found alone, target free): IDENTITY is the procedure's own
+        bus.store(ident, REG["id"], target, check=False, allow=Permission.IDENTITY)
         record["writes"] += 1
         bus.wait_ready(target, within=2.0)
     got = bus.read(target, REG["id"], check=False)

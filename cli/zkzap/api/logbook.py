@@ -108,6 +108,10 @@ def connect(path, *, create=True):
 
     if not create and not os.path.exists(path):
         raise UsageError(f"logbook: {path}: no such file")
+    if create:
+        from .. import checking
+
+        checking.effect("file", path=path)
     try:
         db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         # text a damaged file holds reads with replacement characters instead of failing the listing
@@ -135,18 +139,28 @@ def connect(path, *, create=True):
 
 
 def check_writable(path):
-    """Open (and create) the logbook before a run, so an unusable path is found first: a missing
-    directory, a directory or a file that cannot be written is a UsageError (exit 2) naming it."""
-    parent = os.path.dirname(os.path.abspath(path))
-    if os.path.isdir(path):
-        raise UsageError(f"logbook: {path} is a directory; give a file")
-    if not os.path.isdir(parent):
-        raise UsageError(f"logbook: cannot create {path}: no such directory {parent}")
-    if os.path.exists(path) and not os.access(path, os.R_OK | os.W_OK):
-        raise UsageError(f"logbook: cannot write {path}: permission denied")
-    if not os.path.exists(path) and not os.access(parent, os.W_OK | os.X_OK):
-        raise UsageError(f"logbook: cannot create {path}: permission denied in {parent}")
-    connect(path).close()
+    """Refuse, before a run, a logbook path that cannot take the run (exit 2): a device, a
+    FIFO or a directory (a logbook is an SQLite database file), a missing directory, no
+    permission, or a file that is not a zkzap logbook. Nothing is created: the first run it
+    records creates the database."""
+    from ..outfile import check_path
+
+    kind = check_path(path, "logbook")
+    if kind == "stream":
+        raise UsageError(f"logbook: {path} is not a regular file; a logbook is an SQLite database file")
+    if kind == "regular" and os.path.getsize(path) > 0:
+        import sqlite3
+
+        try:
+            uri = "file:" + os.path.abspath(path).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
+            db = sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_S)
+            try:
+                db.execute("SELECT 1 FROM runs LIMIT 1")
+            finally:
+                db.close()
+        except sqlite3.DatabaseError as e:
+            what = "not a zkzap logbook" if "no such table" in str(e) or "not a database" in str(e) else str(e)
+            raise UsageError(f"logbook: {path}: {what}") from None
 
 
 def record(path, run: dict) -> int:

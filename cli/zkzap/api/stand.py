@@ -37,6 +37,9 @@ class Stand:
         """Before the port opens: the external sensors' readers, and their first lines (their
         field names; a silent sensor is exit 3 with nothing sent)."""
         if self.aux is not None and not self._started:
+            from .. import checking
+
+            checking.effect("sensors")     # opening a sensor's port is as far as a check goes
             self._started = True
             self.aux.start(timeout)
             self._check_fields()

@@ -7,7 +7,18 @@ and :class:`Actuator` (one ID, registers as attributes).
 ...     print(bus[1].present_voltage)               # 12.0 V
 
 Registers are named as in ``zap registers`` (``goal-position``), with underscores
-(``goal_position``), or by address (``0x86``). Values are raw integers in the register's
+(``goal_position``), or by address (``0x86``).
+
+Writes keep the command line's rules, decided on the typed packet
+(:meth:`zkzap.codec.zap.Command.needs`): a stored setting, a factory reset or system write need
+:attr:`Permission.STORED <zkzap.codec.permissions.Permission>` / ``FACTORY`` on a real port (a
+simulator waives them); the id, baud-rate and protocol-type registers ``IDENTITY``; addresses and
+values the map does not document ``UNDOCUMENTED``; part of a multi-byte register ``PARTIAL``; such
+writes to every actuator ``BROADCAST``. Give them to the bus (``Bus(port, allow=Permission.STORED)``)
+or to one call (``bus.store(1, "id", 7, allow=Permission.IDENTITY)``; ``force=True`` gives every
+FORCE permission); a write without them raises :class:`~zkzap.errors.PermissionNeeded` and sends
+nothing. :meth:`Bus.set_id` and :meth:`Bus.set_baud` are the checked ways to change an identity:
+they need only ``STORED``. Values are raw integers in the register's
 units; a register with a unit (present-voltage, 0.1 V) reads through :meth:`Bus.read` and
 :class:`Actuator` attributes as a :class:`Reading`, a float that knows its unit and raw value.
 
@@ -28,6 +39,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 
     from typing_extensions import Self, TypeAlias
 
+    from ..codec.permissions import AllowSpec
     from ..link.zap_bus import Reply, ZapBus
     from ..sim.launch import Simulator
     from ._registers import RegisterAttributes as _Registers
@@ -35,9 +47,10 @@ else:
     _Registers = object
 
 from ..codec import zap
+from ..codec.permissions import FORCE, Permission, as_permission
 from ..errors import BadReply, CheckFailed, NoReply, UsageError, did_you_mean
 
-__all__ = ["Bus", "Actuator", "Reading", "ALL_BAUDS", "register_records", "map_blocks"]
+__all__ = ["Bus", "Actuator", "Reading", "Permission", "ALL_BAUDS", "register_records", "map_blocks"]
 
 #: Baud rates an actuator can talk at, in the order a scan over all of them tries: the factory
 #: default first, then the others fastest first.
@@ -136,14 +149,17 @@ class Bus:
     a request its reply may still begin (default 0.15: nothing is sent before it has closed, see
     :mod:`zkzap.link.zap_timing`); ``retries`` after a failed attempt; ``latency`` (seconds) what
     the actuators are known to take before any reply is measured; ``low_latency`` asks the serial
-    driver for its low-latency mode. Every Bus on one port in this process shares what was
-    learned of the actuators' latencies (:attr:`latencies`).
+    driver for its low-latency mode; ``allow`` the permissions every write is given (a
+    :class:`~zkzap.codec.permissions.Permission`, names like ``["stored"]``, or True for all; see
+    the module's description). A started simulator (:func:`zkzap.sim.start_zap`), whatever its
+    transport, or a ``sim://``/``loop://`` URL waives the consent permissions. Every Bus on one
+    port in this process shares what was learned of the actuators' latencies (:attr:`latencies`).
     """
 
     def __init__(self, port: Union[str, Simulator, None] = None, *, baud: int = 57600,
                  return_mode: Union[int, Literal["auto"]] = 1, timeout: Optional[float] = None,
                  retries: int = 2, latency: Optional[float] = None, low_latency: bool = False,
-                 _link: Optional[ZapBus] = None) -> None:
+                 allow: AllowSpec = None, _link: Optional[ZapBus] = None) -> None:
         if _link is None:
             from ..link.zap_bus import RETRIES, open_bus
 
@@ -154,9 +170,13 @@ class Bus:
             _link = open_bus(url, baud, timeout=timeout, return_mode=mode,
                              retries=RETRIES if retries is None else retries, latency=latency,
                              low_latency=low_latency)
+            if getattr(port, "kind", None) == "zap" and getattr(port, "device", None) is not None:
+                _link.simulated = True             # a simulator started here, over a pty or TCP too
             self._auto = return_mode == "auto"
         else:
             self._auto = False
+        if allow is not None:
+            _link.allow = as_permission(allow)
         self.link = _link
         """The :class:`zkzap.link.zap_bus.ZapBus` doing the transactions."""
 
@@ -189,6 +209,15 @@ class Bus:
     def url(self) -> str:
         """The port's device path or URL."""
         return self.link.url
+
+    @property
+    def allow(self) -> Permission:
+        """The permissions every write on this bus is given (see the module's description)."""
+        return self.link.allow
+
+    @allow.setter
+    def allow(self, value: AllowSpec) -> None:
+        self.link.allow = as_permission(value)
 
     @property
     def latencies(self) -> dict:
@@ -265,53 +294,52 @@ class Bus:
         return _value(reg, self.load(ident, reg))
 
     def _write(self, builder: Callable[..., bytes], ident: int, reg: RegisterSpec, value: Union[int, Reading],
-               force: bool) -> Optional[Reply]:
+               force: bool, allow: AllowSpec) -> Optional[Reply]:
         ident = zap.check_id(ident)
         reg = zap.register(reg)
         raw = getattr(value, "raw", value)
         pkt = builder(ident, reg, raw, force=force)
-        cmd = zap.Command(pkt)
-        if cmd.leaves_protocol and not force:
-            raise UsageError("protocol-type: 0 switches the actuator to Modbus RTU and it no longer "
-                             "answers this protocol; pass force=True to do it anyway", ident=ident)
         self._mode_for(ident)
-        return self.link.command(pkt)
+        return self.link.command(pkt, allow=_given(allow, force))
 
     def store(self, ident: int, reg: RegisterSpec, value: Union[int, Reading], *,
-              force: bool = False) -> Optional[Reply]:
+              force: bool = False, allow: AllowSpec = None) -> Optional[Reply]:
         """Store Data: write ``value`` (raw) to ``reg``. Returns the acknowledgement (return
-        mode 2) or None."""
-        return self._write(zap.store, ident, reg, value, force)
+        mode 2) or None. ``allow``: permissions for this write besides the bus's; ``force``:
+        every FORCE permission (and a read-only register may be written)."""
+        return self._write(zap.store, ident, reg, value, force, allow)
 
     def send(self, ident: int, reg: RegisterSpec, value: Union[int, Reading], *,
-             force: bool = False) -> Optional[Reply]:
-        """Send Data: stage ``value`` for ``reg``; :meth:`execute` applies it."""
-        return self._write(zap.send_data, ident, reg, value, force)
+             force: bool = False, allow: AllowSpec = None) -> Optional[Reply]:
+        """Send Data: stage ``value`` for ``reg``; :meth:`execute` applies it (permissions as
+        :meth:`store`)."""
+        return self._write(zap.send_data, ident, reg, value, force, allow)
 
     def execute(self, ident: int = zap.BROADCAST) -> Optional[Reply]:
         """Execution: apply the writes staged by :meth:`send` (default: every actuator)."""
         return self.link.command(zap.execute(zap.check_id(ident)))
 
-    def sync_move(self, targets: Mapping[int, int], register: RegisterSpec = "goal-position") -> None:
+    def sync_move(self, targets: Mapping[int, int], register: RegisterSpec = "goal-position", *,
+                  force: bool = False, allow: AllowSpec = None) -> None:
         """Symmetric Store to broadcast: ``{id: value}`` of one register (default
-        goal-position), split over as many packets as needed. Never answered."""
-        packets = zap.symmetric_store(register, targets)
-        if any(zap.Command(p).leaves_protocol for p in packets):
-            raise UsageError("protocol-type: 0 switches the actuators to Modbus RTU; not done")
-        for p in packets:
-            self.link.command(p)
+        goal-position), split over as many packets as needed (every one checked before the
+        first goes out; permissions as :meth:`store`). Never answered."""
+        self.link.symmetric_store(register, targets, allow=_given(allow, force))
 
-    def factory_reset(self, ident: int, *, reset_id: bool = False, reset_baud: bool = False) -> Optional[Reply]:
-        """Factory Reset: restore factory settings (also the ID and/or baud rate if asked)."""
-        return self.link.command(zap.factory_reset(zap.check_id(ident), reset_id, reset_baud))
+    def factory_reset(self, ident: int, *, reset_id: bool = False, reset_baud: bool = False,
+                      allow: AllowSpec = None) -> Optional[Reply]:
+        """Factory Reset: restore factory settings (also the ID and/or baud rate if asked).
+        Needs the FACTORY permission on a real port (BROADCAST too for ID 254)."""
+        return self.link.command(zap.factory_reset(zap.check_id(ident), reset_id, reset_baud), allow=allow)
 
     def restart(self, ident: int) -> Optional[Reply]:
         """Restart the actuator (a stored baud-rate change takes effect)."""
         return self.link.command(zap.restart(zap.check_id(ident)))
 
-    def command(self, packet: bytes, *, check: bool = True) -> Optional[Reply]:
-        """Send any command packet; returns the reply it gets (inferred from the packet), or None."""
-        return self.link.command(bytes(packet), check=check)
+    def command(self, packet: bytes, *, check: bool = True, allow: AllowSpec = None) -> Optional[Reply]:
+        """Send any command packet; returns the reply it gets (inferred from the packet), or
+        None. The packet needs what :meth:`zkzap.codec.zap.Command.needs` says (``allow``)."""
+        return self.link.command(bytes(packet), check=check, allow=allow)
 
     # -- procedures ----------------------------------------------------------------------------
 
@@ -492,7 +520,8 @@ class Bus:
         """Give the actuator at ``ident`` the ID ``new``, verified by reading it back from
         ``new``. Checks first that ``ident`` answers and that ``new`` is free (two actuators with
         one ID garble every reply; ``force`` skips that). Raises CheckFailed when ``new`` is
-        taken, does not answer afterwards or reads back another ID. Returns ``new``."""
+        taken, does not answer afterwards or reads back another ID. Returns ``new``. Needs the
+        STORED permission on a real port (the id register is a stored setting)."""
         ident = zap.check_id(ident, allow_broadcast=False)
         new = zap.check_id(new, allow_broadcast=False)
         if new == ident:
@@ -509,7 +538,7 @@ class Bus:
                               ident=ident, duplicate=True)
         if not force and self.link.answers(new):           # three full waits: never a guess
             raise CheckFailed(f"ID {new} is already taken by another actuator", ident=new, taken=True)
-        self.link.store(ident, ID_REG, new)
+        self.link.store(ident, ID_REG, new, allow=Permission.IDENTITY)   # the checked way: set_id itself
         value = self._read_back(new, ID_REG, ready_timeout,
                                 f"set-id: ID {new} does not answer after the change", "id")
         if value == new and (self.link.answers(ident, tries=2) or collides(self.link, new)):
@@ -523,14 +552,15 @@ class Bus:
         """Change actuator ``ident``'s baud rate to ``baud``, verified: store baud-rate, restart
         the actuator (unless ``restart=False``: then the rate takes effect at the next power-up),
         switch this port to ``baud``, wait for the actuator there and read baud-rate back.
-        Raises CheckFailed when it does not answer at ``baud`` or reads back another rate."""
+        Raises CheckFailed when it does not answer at ``baud`` or reads back another rate.
+        Needs the STORED permission on a real port."""
         ident = zap.check_id(ident, allow_broadcast=False)
         if baud not in zap.BAUD_TO_CODE:
             raise UsageError(f"baud: {baud} is not an actuator baud rate; allowed "
                              f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
         code = zap.BAUD_TO_CODE[baud]
         self.link.echo(ident)
-        self.link.store(ident, BAUD_REG, code)
+        self.link.store(ident, BAUD_REG, code, allow=Permission.IDENTITY)   # the checked way: set_baud itself
         if not restart:
             value = self.link.read(ident, BAUD_REG)
             if value != code:
@@ -545,6 +575,11 @@ class Bus:
             raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})",
                               ident=ident, value=value)
         return baud
+
+
+def _given(allow: AllowSpec, force: bool) -> Permission:
+    """A call's permissions: ``allow``, and every FORCE permission with ``force``."""
+    return as_permission(allow) | (FORCE if force else Permission.NONE)
 
 
 def _attr_register(name: str) -> zap.Register:
@@ -611,13 +646,15 @@ class Actuator(_Registers):
         """One register's value (see :meth:`Bus.read`)."""
         return self.bus.read(self.ident, reg)
 
-    def store(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False) -> Optional[Reply]:
+    def store(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False,
+              allow: AllowSpec = None) -> Optional[Reply]:
         """Store Data (see :meth:`Bus.store`)."""
-        return self.bus.store(self.ident, reg, value, force=force)
+        return self.bus.store(self.ident, reg, value, force=force, allow=allow)
 
-    def send(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False) -> Optional[Reply]:
+    def send(self, reg: RegisterSpec, value: Union[int, Reading], *, force: bool = False,
+             allow: AllowSpec = None) -> Optional[Reply]:
         """Send Data (see :meth:`Bus.send`)."""
-        return self.bus.send(self.ident, reg, value, force=force)
+        return self.bus.send(self.ident, reg, value, force=force, allow=allow)
 
     if TYPE_CHECKING:
         @overload

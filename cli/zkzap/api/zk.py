@@ -34,6 +34,8 @@ Built on :class:`~zkzap.link.zk_port.ZkLink` (the port), :class:`~zkzap.link.zk_
 
 from __future__ import annotations
 
+import contextlib
+
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
@@ -42,6 +44,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 
     from typing_extensions import Self, TypeAlias
 
+    from ..codec.permissions import AllowSpec
     from ..sim.launch import Simulator
     from .prestart import EcuLimits, Plan
     from .schedule import Schedule
@@ -101,12 +104,16 @@ class Ecu:
     with :func:`zkzap.sim.start`; ``baud`` the line speed and ``stop_bits`` (1 or 2);
     ``protocol_version`` the ECU's (None: read from status ID 6); ``silence`` the longest wait
     for a status frame before NoReply (session seconds; None: no limit); ``abort`` the abort
-    command (``standby``, ``stop`` or ``none``).
+    command (``standby``, ``stop`` or ``none``); ``allow`` the permissions its frames are
+    given: a frame that can start the engine or run ECU hardware (state run, the drain, test
+    and pump-on actions) needs :attr:`Permission.ENGINE <zkzap.codec.permissions.Permission>`
+    on a real port (the simulator waives it), else :class:`~zkzap.errors.PermissionNeeded`
+    and nothing is sent. ``send``, ``hold`` and ``run_profile`` take ``allow=`` for one call too.
     """
 
     def __init__(self, port: Union[str, Simulator], *, baud: int = 115200, protocol_version: Optional[int] = None,
                  silence: Optional[float] = 2.0, abort: Literal["standby", "stop", "none"] = "standby",
-                 stop_bits: Literal[1, 2] = 1) -> None:
+                 stop_bits: Literal[1, 2] = 1, allow: AllowSpec = None) -> None:
         from ..link.zk_port import ZkLink
         from ..link.zk_sources import LiveSource
         from .session import ABORTS
@@ -124,7 +131,7 @@ class Ecu:
         self.abort_kind = abort
         """The abort command sent on an abnormal end and at close (standby, stop, none)."""
         self.silence = silence
-        self.link = ZkLink.open(url, baud, stop_bits=stop_bits)
+        self.link = ZkLink.open(url, baud, stop_bits=stop_bits, allow=allow)
         """The :class:`~zkzap.link.zk_port.ZkLink` (the port)."""
         self.source = LiveSource(self.link)
         self.telemetry = Telemetry(protocol_version, clock=self.source.clock)
@@ -217,15 +224,35 @@ class Ecu:
         return Plan([cf], rpm_factor=rpm_factor or self._rpm_factor,
                     what=cf.command.name if cf.command is not None else f"ID {cf.id}")
 
-    def send(self, kind: Union[str, int, zk.ControlFrame], *, listen: bool = True, **fields: Any) -> zk.ControlFrame:
-        """Send one control frame (see :meth:`frame`); returns it. A frame that needs the ECU's
-        limits (an ID 7 target, a command newer than protocol version 1) is checked against them
-        first (see :meth:`check`; ``listen`` False: nothing is read, the frame is checked
-        against the version given or assumed, and an RPM target is refused)."""
+    def send(self, kind: Union[str, int, zk.ControlFrame], *, listen: bool = True,
+             allow: AllowSpec = None, **fields: Any) -> zk.ControlFrame:
+        """Send one control frame (see :meth:`frame`); returns it. ``allow``: permissions for
+        this frame besides the session's (refused before anything is read or sent). A frame
+        that needs the ECU's limits (an ID 7 target, a command newer than protocol version 1)
+        is checked against them first (see :meth:`check`; ``listen`` False: nothing is read,
+        the frame is checked against the version given or assumed, and an RPM target is
+        refused)."""
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
-        self.check(self._plan(cf, fields.get("rpm_factor")), listen=listen)
-        self._write(cf)
+        with self._allowing(allow):
+            self.link.authorize(cf.frame)          # refused before anything is read or sent
+            self.check(self._plan(cf, fields.get("rpm_factor")), listen=listen)
+            self._write(cf)
         return cf
+
+    @contextlib.contextmanager
+    def _allowing(self, allow):
+        """The session's permissions, with ``allow`` added while the block runs."""
+        if allow is None:
+            yield
+            return
+        from ..codec.permissions import as_permission
+
+        saved = self.link.allow
+        self.link.allow = saved | as_permission(allow)
+        try:
+            yield
+        finally:
+            self.link.allow = saved
 
     def abort(self) -> list[bytes]:
         """Send the abort command now (control ID 1 with state standby/stop and throttle 0;
@@ -301,7 +328,7 @@ class Ecu:
         return self._records(count=count, duration=duration)
 
     def hold(self, kind: Union[str, int, zk.ControlFrame], seconds: float, *, rate: float = 20.0,
-             **fields: Any) -> Iterator[Status]:
+             allow: AllowSpec = None, **fields: Any) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
         raises DeviceError; any abnormal end sends the abort command — Ctrl-C, and SIGTERM too:
@@ -317,6 +344,8 @@ class Ecu:
         from ..signals import Terminated, handle, held, restore
 
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
+        with self._allowing(allow):
+            self.link.authorize(cf.frame)          # refused before anything is sent
         self.check(self._plan(cf, fields.get("rpm_factor")))
         done = False
 
@@ -327,7 +356,8 @@ class Ecu:
         # instead of killing the process; the previous handler comes back after
         old = handle([signal.SIGTERM], terminated)
         try:
-            yield from self._records(cf, 1.0 / rate, duration=seconds)
+            with self._allowing(allow):
+                yield from self._records(cf, 1.0 / rate, duration=seconds)
             done = True
         finally:
             try:
@@ -368,7 +398,8 @@ class Ecu:
 
     def run_profile(self, schedule: ScheduleSpec, *, rate: float = 20.0,
                     interpolate: Literal["step", "linear"] = "step",
-                    on_record: Optional[Callable[[Status], None]] = None, check: bool = True) -> ProfileResult:
+                    on_record: Optional[Callable[[Status], None]] = None, check: bool = True,
+                    allow: AllowSpec = None) -> ProfileResult:
         """Run a throttle or RPM schedule as ``zk profile`` does: a
         :class:`~zkzap.api.schedule.Schedule`, CSV text (``time_s,throttle_pct[,state]`` or
         ``time_s,rpm=N[,state]`` rows, optionally under a header), the path of a CSV file
@@ -383,7 +414,9 @@ class Ecu:
         mode) is refused before the schedule's first frame
         (:class:`~zkzap.api.prestart.EcuLimitError`, exit status 2, nothing sent). With
         ``check`` a failure is raised (EcuLimitError, DeviceError, NoReply, PortError,
-        KeyboardInterrupt) after the abort; otherwise the result says how it ended."""
+        KeyboardInterrupt) after the abort; otherwise the result says how it ended. A schedule
+        that can start the engine needs the ENGINE permission on a real port (``allow``),
+        checked on every frame it can send before the first goes out."""
         import os
 
         from ..link.zk_sources import LiveSource
@@ -401,6 +434,9 @@ class Ecu:
             text = "\n".join(",".join(str(c) for c in row) for row in schedule)
             sched = Schedule.parse(text, interpolate=interpolate)
         sched.check_length()
+        with self._allowing(allow):
+            for frame in sched.frames():            # every frame it can send, before the first
+                self.link.authorize(frame)
         plan = sched.plan_check()
         if self.limits is not None:
             plan.check(self.limits)            # known already: nothing to listen for
@@ -412,7 +448,8 @@ class Ecu:
                           duration=sched.length, silence=self.silence, stop_on_error=True,
                           abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
                           plan=plan if self.limits is None else None)
-        outcome = session.run()
+        with self._allowing(allow):
+            outcome = session.run()
         if session.ecu_limits is not None:
             self.limits = session.ecu_limits
         if session.controlling:

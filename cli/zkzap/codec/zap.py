@@ -14,9 +14,11 @@ from ..errors import CHECK_FAILED, USAGE, CheckFailed, ZkzapError, unknown_name
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Any, Iterable, Mapping, Optional, Union
+    from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 
     from typing_extensions import TypeAlias
+
+    from .permissions import Permission
 
     #: Bytes of a packet: bytes, a bytearray, a memoryview or a list of ints.
     Bytes: TypeAlias = Union[bytes, bytearray, memoryview, "list[int]"]
@@ -75,6 +77,9 @@ EXECUTION = 0xF5
 FACTORY_RESET = 0xF6
 RESTART = 0xF8
 SYMMETRIC_STORE = 0x73
+#: IR Robot's undocumented system write (their Python library's factory reset) and bulk write.
+SYSTEM_WRITE = 0xF9
+BULK_WRITE = 0x93
 #: Instructions that write a register block: ``address, data...``.
 WRITE_CODES = frozenset((STORE_DATA, SEND_DATA))
 #: Instructions after which the actuator restarts (and is deaf for a moment).
@@ -121,26 +126,38 @@ BAUD_TO_CODE = {v: k for k, v in BAUD_CODES.items()}
 
 
 class Register:
-    """One register of the data map. ``scale`` converts raw to ``unit`` (0.1 V registers)."""
+    """One register of the data map. ``scale`` converts raw to ``unit`` (0.1 V registers).
+
+    The value domain is declared here, checked in one place (:meth:`check`, :meth:`allows`):
+    ``lo..hi`` (default: what ``size`` bytes hold), ``choices`` (an enumeration: raw value ->
+    meaning) or ``bits`` (a bit set: bit number -> meaning; other bits are outside the domain).
+    ``documented`` is False for addresses the 12Lf map does not give (IR Robot's header names
+    some; others are anonymous bytes), which are written only with the UNDOCUMENTED permission.
+    """
 
     __slots__ = ("address", "name", "size", "access", "stored", "default", "lo", "hi", "unit",
-                 "scale", "choices", "help")
+                 "scale", "choices", "bits", "help", "documented")
 
     def __init__(self, address: int, name: str, size: int, access: str, default: Optional[int] = None,
                  lo: Optional[int] = None, hi: Optional[int] = None, unit: str = "", scale: float = 1,
-                 choices: Optional[Mapping[int, str]] = None, help: str = "") -> None:
+                 choices: Optional[Mapping[int, str]] = None, bits: Optional[Mapping[int, str]] = None,
+                 help: str = "", documented: bool = True) -> None:
         self.address = address
         self.name = name
         self.size = size
         self.access = access.split()[0]           # "R" or "RW"
         self.stored = "NV" in access.split()[1:] if " " in access else None
         self.default = default
+        self.bits = dict(bits) if bits else None  # allowed bits -> meaning
         self.lo = 0 if lo is None else lo
-        self.hi = (1 << (8 * size)) - 1 if hi is None else hi
+        if hi is None:
+            hi = sum(1 << b for b in self.bits) if self.bits else (1 << (8 * size)) - 1
+        self.hi = hi
         self.unit = unit
         self.scale = scale
         self.choices = choices                    # allowed raw values -> meaning
         self.help = help
+        self.documented = documented
 
     @property
     def writable(self) -> bool:
@@ -153,22 +170,49 @@ class Register:
             return ""
         return "NV" if self.stored else "V"
 
+    @property
+    def mask(self) -> Optional[int]:
+        """The bits a bit-set register may hold (None for other registers)."""
+        return sum(1 << b for b in self.bits) if self.bits else None
+
     def describe_range(self) -> str:
         """The allowed raw values, as messages say them (``0..4095``, ``0 (off), 1 (on)``)."""
         if self.choices:
             return ", ".join(f"{k} ({v})" for k, v in self.choices.items())
+        if self.bits:
+            values = self.values()
+            which = f"0..{self.mask}" if len(values) == self.mask + 1 else ", ".join(map(str, values))
+            return "bits " + ", ".join(f"{b} ({v})" for b, v in sorted(self.bits.items())) + f": {which}"
         unit = f" {self.unit}" if self.unit and self.scale == 1 else ""
         return f"{self.lo}..{self.hi}{unit}"
+
+    def values(self) -> Sequence[int]:
+        """Every raw value of the documented domain (a range, or a list for choices and bits)."""
+        if self.choices is not None:
+            return sorted(self.choices)
+        if self.bits is not None:
+            return [v for v in range(self.lo, self.hi + 1) if not v & ~self.mask]
+        return range(self.lo, self.hi + 1)
+
+    def allows(self, value: object) -> bool:
+        """Whether ``value`` (raw) lies in the register's documented domain."""
+        if not isinstance(value, int) or isinstance(value, bool):
+            return False
+        if self.choices is not None:
+            return value in self.choices
+        if self.bits is not None and value & ~self.mask:
+            return False
+        return self.lo <= value <= self.hi
 
     def check(self, value: int) -> int:
         """``value`` if the register takes it; FieldValueError naming the register otherwise."""
         if not isinstance(value, int) or isinstance(value, bool):
             raise FieldValueError(f"{self.name}: {value!r} is not an integer")
-        if self.choices is not None and value not in self.choices:
+        if self.allows(value):
+            return value
+        if self.choices is not None or (self.bits is not None and self.lo <= value <= self.hi):
             raise FieldValueError(f"{self.name}: {value} is not allowed; allowed {self.describe_range()}")
-        if not self.lo <= value <= self.hi:
-            raise FieldValueError(f"{self.name}: {value} is out of range; allowed {self.describe_range()}")
-        return value
+        raise FieldValueError(f"{self.name}: {value} is out of range; allowed {self.describe_range()}")
 
     def to_bytes(self, value: int) -> bytes:
         """``value`` little-endian in the register's size."""
@@ -182,6 +226,8 @@ class Register:
 
 
 R = Register
+#: The alarm bits of alarm-led and alarm-shutdown: the error bits of a feedback packet.
+ALARM_BITS = {0: "input voltage", 5: "overload"}
 #: The 12Lf data map (firmware >= 2.0). NV = stored, survives power off; V = volatile.
 REGISTERS = (
     R(0x00, "model-number", 2, "R", help="model number"),
@@ -199,8 +245,8 @@ REGISTERS = (
     R(0x10, "feedback-return-mode", 1, "RW NV", 1,
       choices={0: "Echo only", 1: "Load Data and Echo", 2: "every command"},
       help="which commands are answered"),
-    R(0x11, "alarm-led", 1, "RW NV", 0x21, 0, 0x21, help="alarms shown on the LED (bit5 overload, bit0 voltage)"),
-    R(0x12, "alarm-shutdown", 1, "RW NV", 0x21, 0, 0x21, help="alarms that cut the force (same bits)"),
+    R(0x11, "alarm-led", 1, "RW NV", 0x21, bits=ALARM_BITS, help="alarms shown on the LED (bit5 overload, bit0 voltage)"),
+    R(0x12, "alarm-shutdown", 1, "RW NV", 0x21, bits=ALARM_BITS, help="alarms that cut the force (same bits)"),
     R(0x13, "start-compliance-margin", 1, "RW NV", None, 0, 255, help="start compliance margin"),
     R(0x14, "end-compliance-margin", 1, "RW NV", None, 0, 255, help="end compliance margin"),
     R(0x15, "speed-limit", 2, "RW NV", 1023, 0, 1023, help="speed limit"),
@@ -217,7 +263,7 @@ REGISTERS = (
     R(0x2F, "max-position-calibration", 1, "RW NV", None, 0, 255, help="maximum position calibration"),
     R(0x34, "current-limit", 2, "RW NV", 800, 0, 1600, unit="mA", help="stored current limit"),
     R(0x80, "force-on-off", 1, "RW V", 1, 0, 1, help="motor force (a goal position turns it back on)"),
-    R(0x81, "led", 1, "RW V", 0, 0, 7, help="LED: bit0 all off, bit1 red, bit2 green"),
+    R(0x81, "led", 1, "RW V", 0, bits={0: "all off", 1: "red", 2: "green"}, help="LED: bit0 all off, bit1 red, bit2 green"),
     R(0x86, "goal-position", 2, "RW V", None, 0, 4095, help="goal position (clamped to the stroke limits)"),
     R(0x88, "goal-speed", 2, "RW V", 1023, 0, 1023, help="goal speed (defaults to the speed limit)"),
     R(0x8A, "goal-current", 2, "RW V", 800, 0, 1600, unit="mA", help="goal current (defaults to the current limit)"),
@@ -235,12 +281,24 @@ REGISTER_BY_ADDRESS = {r.address: r for r in REGISTERS}
 #: Addresses IR Robot's Arduino header names but the 12Lf map does not document: readable by
 #: name or address, shown raw (no unit, no range), never part of the map (``zap dump``).
 UNDOCUMENTED_REGISTERS = (
-    Register(0x93, "present-temperature", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
-    Register(0x94, "registered-instruction", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
-    Register(0x97, "lock", 1, "R", help="undocumented (IR Robot's Arduino header); raw value"),
+    Register(0x93, "present-temperature", 1, "R", help="undocumented (IR Robot's Arduino header); raw value",
+             documented=False),
+    Register(0x94, "registered-instruction", 1, "R", help="undocumented (IR Robot's Arduino header); raw value",
+             documented=False),
+    # IR Robot's Arduino library writes it (Lock()): writable, with the UNDOCUMENTED permission
+    Register(0x97, "lock", 1, "RW V", help="undocumented (IR Robot's Arduino header: Lock() writes it); raw value",
+             documented=False),
 )
 UNDOCUMENTED_BY_NAME = {r.name: r for r in UNDOCUMENTED_REGISTERS}
 UNDOCUMENTED_BY_ADDRESS = {r.address: r for r in UNDOCUMENTED_REGISTERS}
+#: The register each address belongs to (every byte of a multi-byte register), named or not.
+OWNER = {a: r for r in REGISTERS + UNDOCUMENTED_REGISTERS for a in range(r.address, r.address + r.size)}
+#: The stored (EEPROM) part of the address space: every NV register of the map lies below 0x80
+#: and every volatile one from 0x80 (the Dynamixel layout IR Robot's header follows), so an
+#: undocumented address below 0x80 is taken to be stored memory.
+STORED_RANGE = range(0x00, 0x80)
+#: Registers that decide where or how an actuator answers (the IDENTITY permission).
+IDENTITY_REGISTERS = ("id", "baud-rate", "protocol-type")
 
 
 def register(spec: RegisterSpec) -> Register:
@@ -265,7 +323,13 @@ def register(spec: RegisterSpec) -> Register:
         raise FieldValueError(f"register: address {addr} is out of range; allowed 0x00..0xFF")
     reg = REGISTER_BY_ADDRESS.get(addr) or UNDOCUMENTED_BY_ADDRESS.get(addr)
     if reg is None:
-        reg = Register(addr, f"0x{addr:02x}", 1, "RW", help="not in the 12Lf map")
+        owner = OWNER.get(addr)
+        if owner is not None:          # inside a multi-byte register: one of its bytes, raw
+            reg = Register(addr, f"0x{addr:02x}", 1, "RW " + (owner.memory or "V"),
+                           help=f"byte {addr - owner.address} of {owner.name}", documented=False)
+        else:
+            reg = Register(addr, f"0x{addr:02x}", 1, "RW NV" if addr in STORED_RANGE else "RW V",
+                           help="not in the 12Lf map", documented=False)
     return reg
 
 
@@ -469,7 +533,7 @@ class Command:
     @property
     def stored_writes(self) -> list[str]:
         """Names of the stored (NV) settings this command writes (consent, memory pauses)."""
-        if self.code == FACTORY_RESET:
+        if self.code in (FACTORY_RESET, SYSTEM_WRITE):
             return ["every stored setting (factory reset)"]
         names = []
         span = None
@@ -479,9 +543,15 @@ class Command:
             span = (self.address, self.length)
         if span:
             for addr in range(span[0], min(span[0] + span[1], 256)):
-                reg = REGISTER_BY_ADDRESS.get(addr)
-                if reg is not None and reg.stored and reg.name not in names:
-                    names.append(reg.name)
+                reg = OWNER.get(addr)
+                if reg is not None and reg.stored:
+                    name = reg.name
+                elif reg is None and addr in STORED_RANGE:
+                    name = f"0x{addr:02x}"
+                else:
+                    continue
+                if name not in names:
+                    names.append(name)
         return names
 
     def written_value(self, reg: RegisterSpec) -> list[int]:
@@ -496,6 +566,80 @@ class Command:
                 out.append(data[offset])
         return out
 
+    def describe(self) -> str:
+        """One human line: ``store goal-position=2047 to ID 1``."""
+        to = "every actuator (broadcast)" if self.broadcast else f"ID {self.ident}"
+        if self.instruction is None:
+            return f"instruction 0x{self.code:02X} ({len(self.params)} parameter bytes) to {to}"
+        rec = decode_packet(self.packet)
+        what = rec["instruction"]
+        if "value" in rec:
+            what += f" {rec['register']}={rec['value']}"
+        elif "values" in rec:
+            what += " " + " ".join(f"{k}={v}" for k, v in rec["values"].items())
+        elif "targets" in rec:
+            what += f" {rec['register']} " + " ".join(f"{k}:{v}" for k, v in rec["targets"].items())
+        elif what == "load" and "register" in rec:
+            what += f" {rec['register']} ({rec['length']} bytes)"
+        elif what == "factory-reset" and "reset_id" in rec:
+            what += (" (ID too)" if rec["reset_id"] else "") + (" (baud rate too)" if rec["reset_baud"] else "")
+        elif self.params:
+            what += " " + self.params.hex(" ").upper()
+        return f"{what} to {to}"
+
+    def blocks(self) -> list[tuple[int, int, bytes]]:
+        """``[(ident, address, data bytes), ...]``: what this command writes where (one entry
+        per target for Symmetric Store; an empty list for a command that writes no register)."""
+        if self.code in WRITE_CODES and self.data is not None:
+            return [(self.ident, self.address, self.data)]
+        if self.code == SYMMETRIC_STORE and self.targets:
+            return [(i, self.address, d) for i, d in self.targets]
+        return []
+
+    def needs(self) -> dict[Permission, str]:
+        """``{Permission: reason}``: what sending this command needs (see
+        :mod:`zkzap.codec.permissions`); ``{}`` for a harmless one (Echo, Load Data, a goal
+        position). Decided here once, from the register table and the instruction table."""
+        from .permissions import Permission as P
+
+        out = {}
+
+        def need(p, why):
+            if p not in out:
+                out[p] = why
+
+        code = self.code
+        if code == FACTORY_RESET:
+            need(P.FACTORY, "factory reset: every stored setting is overwritten")
+        elif code == SYSTEM_WRITE:
+            need(P.FACTORY, "system write (0xF9): IR Robot's library sends it as a factory reset")
+        elif self.instruction is None:
+            need(P.UNDOCUMENTED, f"instruction 0x{code:02X} is not a mightyZAP instruction")
+        elif not self.instruction.documented:
+            need(P.UNDOCUMENTED, f"{self.instruction.cli} (0x{code:02X}) is not documented for the 12Lf")
+            if code == BULK_WRITE:
+                need(P.STORED, "bulk-write may write stored settings")
+        elif code in WRITE_CODES or code == SYMMETRIC_STORE:
+            blocks = self.blocks()
+            if not blocks:
+                need(P.UNDOCUMENTED, "a write whose parameters are not an address and data")
+            for _, addr, data in blocks:
+                for p, why in _block_needs(addr, data):
+                    need(p, why)
+        if self.broadcast and code != SYMMETRIC_STORE and out:
+            need(P.BROADCAST, "sent to every actuator at once (broadcast ID 254)")
+        return out
+
+    @property
+    def permissions(self) -> Permission:
+        """The :class:`~zkzap.codec.permissions.Permission` flags sending this command needs."""
+        from .permissions import Permission
+
+        out = Permission.NONE
+        for p in self.needs():
+            out |= p
+        return out
+
     @property
     def leaves_protocol(self) -> bool:
         """True when it writes 0 (Modbus RTU) to protocol-type: the actuator would leave this
@@ -507,6 +651,59 @@ class Command:
         if self.code == SYMMETRIC_STORE and self.targets:
             return [i for i, _ in self.targets]
         return [] if self.broadcast else [self.ident]
+
+
+_IDENTITY_WHY = {
+    "id": lambda v: f"writes id {v}: the actuator then answers to ID {v} (unchecked: another may have it)",
+    "baud-rate": lambda v: f"writes baud-rate {v}: after its next restart the actuator answers at "
+                           f"{BAUD_CODES.get(v, 'another')} baud only",
+    "protocol-type": lambda v: ("writes protocol-type 0: the actuator switches to Modbus RTU and no longer answers "
+                                "this protocol" if v == 0 else f"writes protocol-type {v}: it decides which protocol "
+                                                               "the actuator answers"),
+}
+
+
+def _block_needs(address: int, data: bytes):
+    """``[(Permission, reason)]`` for writing ``data`` at ``address``: stored memory, identity
+    registers, bytes the map does not document, registers written in part, values outside a
+    register's documented domain."""
+    from .permissions import Permission as P
+
+    out = []
+    end = address + len(data)
+    a = address
+    while a < end:
+        if a > 0xFF:
+            out.append((P.UNDOCUMENTED, "the data runs past address 0xFF"))
+            break
+        reg = OWNER.get(a)
+        if reg is None:
+            name = f"0x{a:02X}"
+            out.append((P.UNDOCUMENTED, f"writes {name}, which the 12Lf map does not document"))
+            if a in STORED_RANGE:
+                out.append((P.STORED, f"writes {name}, in the stored (NV) part of the map"))
+            a += 1
+            continue
+        first, last = reg.address, reg.address + reg.size
+        if first < address or last > end:
+            span = f"0x{first:02X}" if reg.size == 1 else f"0x{first:02X}..0x{last - 1:02X}"
+            out.append((P.PARTIAL, f"writes {min(last, end) - max(first, address)} of the {reg.size} bytes of "
+                                   f"{reg.name} ({span})"))
+        elif not reg.allows(int.from_bytes(data[first - address:last - address], "little")):
+            value = int.from_bytes(data[first - address:last - address], "little")
+            out.append((P.UNDOCUMENTED, f"{reg.name} {value} is outside its documented values "
+                                        f"({reg.describe_range()})"))
+        if not reg.documented:
+            out.append((P.UNDOCUMENTED, f"writes {reg.name} (0x{first:02X}), which the 12Lf map does not document"))
+        elif not reg.writable:
+            out.append((P.UNDOCUMENTED, f"writes {reg.name}, a read-only register"))
+        if reg.stored or (not reg.documented and first in STORED_RANGE):
+            out.append((P.STORED, f"writes {reg.name}, a stored setting (it survives power-off)"))
+        if reg.name in IDENTITY_REGISTERS:
+            value = int.from_bytes(data[max(first, address) - address:min(last, end) - address], "little")
+            out.append((P.IDENTITY, _IDENTITY_WHY[reg.name](value)))
+        a = last
+    return out
 
 
 # --- decoding ----------------------------------------------------------------------------------

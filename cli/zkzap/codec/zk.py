@@ -19,6 +19,8 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 
     from typing_extensions import Self, TypeAlias
 
+    from .permissions import Permission
+
     #: Bytes of a frame: bytes, a bytearray, a memoryview or a list of ints.
     Bytes: TypeAlias = Union[bytes, bytearray, memoryview, "list[int]"]
     #: A decoded record: a dict of JSON-ready values.
@@ -551,7 +553,8 @@ class ControlFrame:
 
     ``frame`` (the 4 bytes), ``id`` (the command ID), ``command`` (the
     :class:`ControlCommand`, None for an undefined ID). :attr:`hazard` says what it can do to
-    an engine (consent on a real port); :attr:`controls_engine` whether a session sending it
+    an engine and :meth:`needs` the permission that takes (ENGINE: consent on a real port);
+    :attr:`controls_engine` whether a session sending it
     is in control of the engine (and gets the abort command on an abnormal end).
     """
 
@@ -610,6 +613,23 @@ class ControlFrame:
     def hazardous(self) -> bool:
         """True when sending it on a real port needs consent (see :attr:`hazard`)."""
         return self.hazard is not None
+
+    def needs(self) -> dict[Permission, str]:
+        """``{Permission: reason}``: what sending this frame needs (see
+        :mod:`zkzap.codec.permissions`): ENGINE for a hazardous frame, else nothing."""
+        hazard = self.hazard
+        if hazard is None:
+            return {}
+        from .permissions import Permission
+
+        return {Permission.ENGINE: hazard}
+
+    @property
+    def permissions(self) -> Permission:
+        """The :class:`~zkzap.codec.permissions.Permission` flags sending this frame needs."""
+        from .permissions import Permission
+
+        return Permission.ENGINE if self.hazard is not None else Permission.NONE
 
     @property
     def controls_engine(self) -> bool:

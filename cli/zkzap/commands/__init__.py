@@ -79,12 +79,11 @@ class Command(QuickHelp, click.Command):
         return super().parse_args(ctx, args)
 
     def invoke(self, ctx):
-        if not ctx.resilient_parsing:
-            from .options import check_output_suffixes
+        if not ctx.resilient_parsing and _has_files(self):
+            from .options import check_files
 
-            check_output_suffixes(self, ctx.params)    # -o run.xlsx where .xlsx means nothing: exit 2
+            check_files(ctx)      # -o run.xlsx where .xlsx means nothing, an output that is an input: exit 2
         return super().invoke(ctx)
-
 
     def format_epilog(self, ctx, formatter):
         """The epilog, then the command's exit statuses (:func:`zkzap.commands.options.exit_help`)."""
@@ -96,6 +95,14 @@ class Command(QuickHelp, click.Command):
         formatter.write_paragraph()
         with formatter.indentation():
             formatter.write_text(text)
+
+
+def _has_files(cmd) -> bool:
+    """Whether ``cmd`` declares file options (cached on the command: a dry run pays one look-up)."""
+    has = cmd.__dict__.get("_zkzap_files")
+    if has is None:
+        has = cmd._zkzap_files = any(getattr(p.type, "name", None) == "file" for p in cmd.params)
+    return has
 
 
 def _long(option):

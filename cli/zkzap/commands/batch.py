@@ -2,8 +2,9 @@
 
 A batch file has one command per line in the command line's own grammar, without the program
 name and the port options (``load present-position --id 1``; ``# comments`` and blank lines
-are skipped). Every line is parsed and checked — and, for commands that compose frames, composed
-as with ``-n`` — before anything is sent: a bad line is refused naming ``FILE:LINE`` (exit 2).
+are skipped). Every line is checked whole before anything is sent: its command runs in check mode
+(:mod:`zkzap.checking`), every check it makes at run time, up to its first effect (a port, a
+file, a bridge); a bad line is refused naming ``FILE:LINE`` (exit 2).
 One consent (``--yes``, or one prompt on a terminal) covers every stored write and every
 engine-starting command of the batch. Then the lines run in order over the one port (see
 :mod:`zkzap.link.shared`); each gives a record ``{"line", "command", "exit", "result"}`` (and
@@ -16,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import shlex
 import signal
 import sys
@@ -23,8 +25,8 @@ import sys
 import click
 
 from .. import signals
-from ..errors import INTERRUPTED, OK, TERMINATED, USAGE, UsageError, ZkzapError
-from .options import consent, exits, note
+from ..errors import INTERRUPTED, MORE_TO_DO, OK, TERMINATED, USAGE, UsageError, ZkzapError
+from .options import exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
 PORT_TOKENS = ("-p", "--port", "--sim", "--sim-ids", "-b", "--baud", "--stop-bits", "--capture", "--low-latency")
@@ -46,14 +48,14 @@ EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 class Line:
     """One command of a batch: where it is, its text, its tokens and its command path."""
 
-    __slots__ = ("where", "number", "text", "tokens", "path", "params", "frames", "hazards", "leaf")
+    __slots__ = ("where", "number", "text", "tokens", "path", "params", "consents", "effect", "leaf")
 
     def __init__(self, where, number, text, tokens):
         self.where, self.number, self.text, self.tokens = where, number, text, tokens
         self.path = []
         self.params = {}
-        self.frames = []
-        self.hazards = []
+        self.consents = []      # what the line's command would ask consent for (see check_lines)
+        self.effect = None      # (what, facts) of the first effect its check stopped at
         self.leaf = None
 
 
@@ -105,13 +107,6 @@ def _resolve(group, line, protocol):
     return path, cmd, args, ctx.parent
 
 
-def _nested(path, values):
-    dm = dict(values)
-    for name in reversed(path):
-        dm = {name: dm}
-    return dm
-
-
 def _refuse(line, e):
     if isinstance(e, click.ClickException):
         text = " ".join(e.format_message().split())
@@ -130,20 +125,38 @@ def _batch_capture():
 
 
 def check_lines(group, lines, protocol, defaults):
-    """Parse every line as its command would (types, ranges) and compose its frames with
-    ``-n`` where the command can; a bad line raises UsageError naming ``FILE:LINE``."""
+    """Check every line whole before anything is sent: parse it as its command would (types,
+    ranges), then run the command itself in check mode (:mod:`zkzap.checking`) up to its first
+    effect, so every check it makes at run time runs now — limits, IDs, conditions, input files,
+    output paths, permissions — and the consents it would ask for are recorded on the line. A
+    bad line raises UsageError naming ``FILE:LINE``."""
     with _batch_capture():
         _check_lines(group, lines, protocol, defaults)
 
 
+def _paths(leaf, params, kind):
+    """The file names ``params`` give the parameters of ``leaf`` whose type is ``kind``
+    (InputPath or OutputPath), as absolute paths."""
+    out = []
+    for p in leaf.params:
+        if isinstance(p.type, kind):
+            value = params.get(p.name)
+            for v in (value if isinstance(value, (list, tuple)) else (value,)):
+                if isinstance(v, str) and v not in ("", "-"):
+                    out.append(os.path.abspath(v))
+    return out
+
+
 def _check_lines(group, lines, protocol, defaults):
-    from . import run
+    from .options import InputPath, OutputPath
 
     seen = {}
+    made = {}                              # files earlier lines write: path -> FILE:LINE
     for line in lines:
         twin = seen.get(tuple(line.tokens))
         if twin is not None:               # the same text checks the same: reuse the first's findings
-            line.path, line.params, line.frames, line.leaf = twin.path, twin.params, twin.frames, twin.leaf
+            line.path, line.params, line.leaf = twin.path, twin.params, twin.leaf
+            line.consents, line.effect = twin.consents, twin.effect
             continue
         seen[tuple(line.tokens)] = line
         bad = port_tokens(line.tokens)
@@ -158,118 +171,45 @@ def _check_lines(group, lines, protocol, defaults):
                 line.params = dict(ctx.params)
         except Exception as e:  # noqa: BLE001 - click's, the codec's and zkzap's: all name the problem
             _refuse(line, e)
-        _pre_check(line)
-        dry = _dry_run_values(line, leaf)
-        if dry is None:
-            continue
-        tokens = _without(line.tokens, leaf, set(dry))
-        out, err = io.StringIO(), io.StringIO()
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = run(group, protocol, tokens, default_map=_nested(line.path, dict(defaults, **dry)))
-        if code != 0:
-            message = err.getvalue().strip().splitlines()
-            text = message[-1].split("error: ", 1)[-1] if message else f"exit status {code}"
-            raise UsageError(f"{line.where}: {' '.join(line.path)}: {text}")
-        line.frames = _frames(out.getvalue())
+        # a line that reads what an earlier line writes (a backup, then its apply) is parsed
+        # whole now and runs its file's checks when it runs, after the line that makes the file
+        waits = [f for f in _paths(leaf, line.params, InputPath) if f in made and not os.path.exists(f)]
+        if not waits:
+            _check_run(line, protocol)
+        for f in _paths(leaf, line.params, OutputPath):
+            made.setdefault(f, line.where)
 
 
-def _without(tokens, leaf, names):
-    """``tokens`` without the options of ``leaf`` named ``names`` (and their values)."""
-    opts = {}
-    for p in leaf.params:
-        if isinstance(p, click.Option) and p.name in names:
-            for o in p.opts + p.secondary_opts:
-                opts[o] = p.is_flag or p.count
-    out = []
-    skip = False
-    for t in tokens:
-        if skip:
-            skip = False
-            continue
-        name = t.split("=", 1)[0]
-        if name in opts:
-            skip = not opts[name] and "=" not in t
-            continue
-        out.append(t)
-    return out
+def _check_run(line, protocol):
+    """Run the line's command in check mode: up to its first effect, its output discarded."""
+    from .. import checking
+
+    out, err = io.StringIO(), io.StringIO()
+    code = 0
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), checking.checking() as check:
+        code = invoke(line, protocol)
+    line.consents, line.effect = check.consents, check.effect
+    if code == USAGE:
+        message = err.getvalue().strip().splitlines()
+        text = message[-1].split("error: ", 1)[-1] if message else f"exit status {code}"
+        raise UsageError(f"{line.where}: {' '.join(line.path)}: {text}")
 
 
-def _pre_check(line):
-    """Range checks a command makes only once it runs (before the port opens)."""
-    from ..codec import zap
-
-    p = line.params
-    try:
-        if line.path == ["move"]:
-            zap.REGISTER_BY_NAME["goal-position"].check(p["position"])
-            if p.get("speed") is not None:
-                zap.REGISTER_BY_NAME["goal-speed"].check(p["speed"])
-    except ValueError as e:
-        _refuse(line, e)
+def consent_items(lines):
+    """``["FILE:LINE store id 7 --id 1 (id)", ...]``: the lines that need a consent on a real
+    port, with what each would have asked for (recorded while checking)."""
+    return [f"{line.where} {line.text} ({'; '.join(line.consents)})" for line in lines if line.consents]
 
 
-def _dry_run_values(line, leaf):
-    names = {p.name for p in leaf.params}
-    if "dry_run" not in names:
-        return None
-    values = {"dry_run": True}
-    if line.path[0] == "send" and "for_s" in names:          # zk send: compose only
-        values.update(for_s=None, no_wait=False, rate=None, abort=None, fmt=None, output=None, append=False,
-                      snapshot=None, ids=None, raw_log=None)
-    if line.path == ["profile"]:
-        values.update(fmt="jsonl", output=None, append=False)
-    return values
-
-
-def _frames(text):
-    from ..codec.hexfmt import parse_hex
-
-    frames = []
-    for row in text.splitlines():
-        row = row.strip()
-        if not row:
-            continue
-        if row.startswith("{"):
-            frame = json.loads(row).get("frame")
-            if frame:
-                frames.append(parse_hex(frame))
-            continue
-        frames.append(parse_hex(row))
-    return frames
-
-
-def zap_consent_items(lines):
-    """``["FILE:LINE store id (id)", ...]``: the lines that write stored settings."""
-    from ..codec import zap
-
-    items = []
-    for line in lines:
-        names = []
-        for f in line.frames:
-            names += [n for n in zap.Command(f).stored_writes if n not in names]
-        if line.path == ["set-id"]:
-            names.append("id")
-        elif line.path == ["set-baud"]:
-            names.append("baud-rate")
-        if names:
-            items.append(f"{line.where} {line.text} ({', '.join(names)})")
-    return items
-
-
-def zk_consent_items(lines):
-    """``["FILE:LINE send control ... (state run can start the engine)", ...]``."""
-    from ..codec import zk
-
-    items = []
-    for line in lines:
-        hazards = []
-        for f in line.frames:
-            h = zk.ControlFrame(f).hazard
-            if h and h not in hazards:
-                hazards.append(h)
-        if hazards:
-            items.append(f"{line.where} {line.text} ({'; '.join(hazards)})")
-    return items
+def line_ids(line) -> list:
+    """The actuator IDs a checked zap line addresses (its --id, and the IDs it opened the bus for)."""
+    ids = []
+    ident = line.params.get("ident")
+    if isinstance(ident, int):
+        ids.append(ident)
+    if line.effect is not None:
+        ids += line.effect[1].get("ids") or []
+    return ids
 
 
 def parse_result(text):
@@ -324,8 +264,13 @@ def invoke(line, protocol) -> int:
 
 
 #: The exit statuses of 'zap batch' and 'zk batch': a failed line's, the first one's.
-BATCH_EXITS = exits({OK: "every line succeeded", USAGE: "a bad line (FILE:LINE) or usage: nothing was sent"},
-                    tail=" Any other status is the first failed line's (its record says it too).")
+_BATCH_MEANINGS = {OK: "every line succeeded", USAGE: "a bad line (FILE:LINE) or usage: nothing was sent"}
+_BATCH_TAIL = " Any other status is the first failed line's (its record says it too)."
+BATCH_EXITS = exits(_BATCH_MEANINGS, tail=_BATCH_TAIL)
+#: A mightyZAP batch: a 'setup --no-wait' line that stops with IDs pending is "more to do" (8).
+ZAP_BATCH_EXITS = exits({**_BATCH_MEANINGS,
+                         MORE_TO_DO: "a setup line stopped as asked with IDs pending (run the batch again)"},
+                        tail=_BATCH_TAIL)
 
 
 def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
@@ -398,4 +343,4 @@ def batch_exit(code):
         raise click.exceptions.Exit(code)
 
 
-__all__ = ["read_lines", "check_lines", "run_lines", "zap_consent_items", "zk_consent_items", "USAGE"]
+__all__ = ["read_lines", "check_lines", "run_lines", "consent_items", "line_ids", "USAGE"]

@@ -7,7 +7,7 @@ never names a command.
 
 from __future__ import annotations
 
-from ..errors import CheckFailed, InvalidValue, NoReply, PortError, UsageError
+from ..errors import CheckFailed, InvalidValue, NoReply, PermissionNeeded, PortError, UsageError
 
 
 def hint(e) -> str:
@@ -18,6 +18,8 @@ def hint(e) -> str:
         if facts.get("mode_dependent"):
             text += "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"
         return text
+    if isinstance(e, PermissionNeeded):
+        return _permission_hint(e)
     if isinstance(e, InvalidValue) and facts.get("field") == "register" and not facts.get("suggestions"):
         return "; 'zap registers' lists them"
     if isinstance(e, NoReply) and facts.get("noise"):
@@ -51,6 +53,28 @@ def hint(e) -> str:
     return ""
 
 
+def _permission_hint(e) -> str:
+    """What the command line maps onto the missing permissions: --force, --yes."""
+    from ..codec import zap
+    from ..codec.permissions import CONSENT, FORCE, Permission
+
+    parts = []
+    frame = getattr(e, "frame", b"")
+    if e.missing & Permission.IDENTITY and len(frame) > 6 and frame[5] in zap.WRITE_CODES:
+        cmd = zap.Command(frame)
+        if zap.REGISTER_BY_NAME["id"].address in [cmd.address] and not cmd.broadcast:
+            parts.append("'zap set-id NEW --id OLD' checks that NEW is free and reads it back")
+        elif zap.REGISTER_BY_NAME["baud-rate"].address in [cmd.address] and not cmd.broadcast:
+            parts.append("'zap set-baud BAUD --id ID' restarts the actuator and verifies")
+    flags = []
+    if e.missing & FORCE:
+        flags.append("--force")
+    if e.missing & CONSENT:
+        flags.append("--yes")
+    if flags:
+        parts.append(("or " if parts else "") + f"pass {' and '.join(flags)} to do it anyway"
+                     if parts else f"pass {' and '.join(flags)} to do it")
+    return "".join(f"; {p}" for p in parts)
 def adapter_notes(bus) -> None:
     """Notes about a mightyZAP bus's USB adapter, on stderr: at once, when ``--low-latency``
     could not be had; when the command ends (once per process), how to lower an FTDI adapter's

@@ -299,21 +299,47 @@ class FilePath(click.ParamType):
         return [CompletionItem(incomplete, type="file")]
 
 
-class OutputPath(FilePath):
-    """``-o FILE``: a file whose suffix names its format when ``-f`` is not given (``formats``:
-    the command's; ``default``: the format of a name without a suffix, None to refuse one).
-    :class:`zkzap.commands.Command` checks the suffix before the command runs
-    (:func:`check_output_suffixes`), so an unknown one is exit 2 before anything opens."""
+class InputPath(FilePath):
+    """A file a command reads (``-``: stdin). Declared as such so that the one same-file check
+    (:func:`check_files`, run before every command) knows what no output may be; ``holds``
+    says what it holds (``schedule``, ``fleet``, ``zk capture``, ``zap capture``, ``limits``,
+    ``run``, ``steps``, ``summary``, ``logbook``, ``zk batch``, ``zap batch``, ``frames``: hex,
+    raw bytes or a capture); ``label`` names it in messages (default: the option, or the
+    argument's name in capitals)."""
 
-    def __init__(self, formats, default="jsonl"):
-        self.formats = tuple(formats)
+    def __init__(self, holds, label=None):
+        self.holds = holds
+        self.label = label
+
+
+class OutputPath(FilePath):
+    """A file a command writes, through :mod:`zkzap.outfile` (``-``: stdout where the command
+    allows it). ``kind`` says how: ``records`` (streamed, opened by the first record),
+    ``bytes`` (a raw log, opened by the first byte), ``capture`` (pcapng), ``document``
+    (written whole, atomically), ``database`` (the SQLite logbook), ``state`` (read and
+    rewritten whole: it is its own input), ``link`` (a symlink).
+
+    ``formats``: the formats the file's suffix may name when ``-f`` is not given (None: the
+    command fixes the format); ``default``: the format of a name without a suffix (None to
+    refuse one); ``suffixes``: the file-name endings it takes (by default those of
+    ``formats``, the default format's first). Before the command runs, :func:`check_files`
+    refuses an unknown suffix (naming the known ones) and an output that is one of the
+    command's inputs or another output (exit 2, nothing opened, no existing file touched)."""
+
+    def __init__(self, kind="records", *, formats=None, default="jsonl", suffixes=None):
+        self.kind = kind
+        self.formats = tuple(formats) if formats else None
         self.default = default
+        if suffixes is None and self.formats:
+            suffixes = sorted(_suffixes(self.formats), key=lambda s: _suffix_format(s) != default)
+        self.suffixes = tuple(suffixes) if suffixes else None     # the names it takes, when it decides the format
 
     def format_of(self, path, fmt=None):
-        """The format for ``path``: ``fmt`` when given, else what its suffix names."""
+        """The format for ``path``: ``fmt`` when given, else what its suffix names (a UsageError
+        for a suffix that names none of ``formats``)."""
         from ..io import format_for_path
 
-        if fmt:
+        if fmt or not self.formats:
             return fmt
         return format_for_path(path, self.formats, self.default, what="output")
 
@@ -329,15 +355,37 @@ def check_output_suffixes(cmd, params) -> None:
             p.type.format_of(value)
 
 
+def check_files(ctx) -> None:
+    """Refuse (exit 2) a command whose ``-o`` suffix names no format it writes
+    (:func:`check_output_suffixes`), whose output is one of its inputs, or two outputs that
+    are one file: files are compared, not names (:func:`zkzap.outfile.refuse_same_files`).
+    Runs for every command before its callback, from the types its options declare."""
+    outputs, inputs = {}, {}
+    for p in ctx.command.params:
+        value = ctx.params.get(p.name) if p.expose_value else ctx.meta.get(f"zkzap.{p.name}")
+        if not value or not isinstance(p.type, FilePath):
+            continue
+        label = getattr(p.type, "label", None) or (p.opts[-1] if isinstance(p, click.Option) else p.name.upper())
+        if isinstance(p.type, OutputPath):
+            outputs[label] = value
+        elif isinstance(p.type, InputPath):
+            inputs[label] = value
+    if outputs and (inputs or len(outputs) > 1):
+        from ..outfile import refuse_same_files
+
+        refuse_same_files(outputs, inputs)     # first: "is also the input" says more than its suffix
+    check_output_suffixes(ctx.command, ctx.params)
+
+
 def output_options(f=None, *, formats=FORMATS):
-    """``-o/--output`` (an :class:`OutputPath` of ``formats``) and ``--append``; as a decorator
-    with or without ``formats``."""
+    """``-o/--output`` (an :class:`OutputPath` of records in ``formats``) and ``--append``; as a
+    decorator with or without ``formats``."""
     if f is None:
         return lambda g: output_options(g, formats=formats)
     f = click.option("--append", is_flag=True, help="Append to --output instead of replacing it.")(f)
-    f = click.option("-o", "--output", type=OutputPath(formats),
-                     help="Write records to FILE instead of stdout (the format by its suffix: "
-                          + ", ".join(_suffixes(formats)) + "; JSON Lines without one).")(f)
+    f = click.option("-o", "--output", type=OutputPath("records", formats=formats),
+                     help="Write records to FILE instead of stdout, created by the first record (the "
+                          "format by its suffix: " + ", ".join(_suffixes(formats)) + "; JSON Lines without one).")(f)
     return f
 
 
@@ -347,11 +395,17 @@ def _suffixes(formats):
     return [s for s, f in SUFFIXES.items() if f in formats]
 
 
+def _suffix_format(suffix):
+    from ..io import SUFFIXES
+
+    return SUFFIXES.get(suffix)
+
+
 def output_file(path, append=False, *, fmt=None, columns=None, inputs=None):
-    """The checked :class:`~zkzap.io.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
+    """The checked :class:`~zkzap.outfile.OutFile` for ``-o PATH`` (None for stdout): refused
     (exit 2) when it is one of ``inputs`` (option -> paths), cannot be written, or cannot be
     appended to in ``fmt`` with ``columns``. Nothing is truncated until it is opened."""
-    from ..io.outfile import OutFile, refuse_same_files
+    from ..outfile import OutFile, refuse_same_files
 
     if not path or path == "-":
         return None
@@ -384,11 +438,14 @@ def output_format(fmt, path, formats=FORMATS):
 def open_output(path, append=False, *, fmt=None, columns=None, inputs=None):
     """(stream, had_content) for ``path`` ('-' or None: stdout), checked as :func:`output_file`
     checks it; ``had_content``: appending to existing records (no second header; a JSON array
-    continued)."""
+    continued). A file is opened by the first record written to the stream
+    (:class:`zkzap.outfile.LazyOutput`): a run that writes none leaves it as it was."""
     out = output_file(path, append, fmt=fmt, columns=columns, inputs=inputs)
     if out is None:
         return sys.stdout, False
-    return out.open(), out.had
+    from ..outfile import LazyOutput
+
+    return LazyOutput(out), out.had
 
 
 def checked(check, frame, hint=""):
@@ -451,13 +508,23 @@ zap_yes_option = click.option(
     "-y", "--yes", is_flag=True,
     help="Consent to writing stored settings (they survive power-off and wear the actuator's "
          "memory), an ID or baud change, or a factory reset on a real port; without it a terminal "
-         "prompts and a script is refused (sim:// and --sim never ask).")
+         "prompts and a script is refused (sim://, loop:// and --sim never ask).")
+
+#: ``--force`` on the mightyZAP commands that compose packets: the FORCE permissions of
+#: :mod:`zkzap.codec.permissions` (``--yes`` is the consent on a real port; this is needed on
+#: the simulator too).
+FORCE_HELP = ("Allow deliberate writes that --yes does not cover, simulator included: the id, baud-rate "
+              "or protocol-type register (set-id and set-baud check and verify instead), addresses and "
+              "values the 12Lf map does not document, a write to part of a multi-byte register, and "
+              "such writes to every actuator (broadcast).")
+
+force_option = click.option("--force", is_flag=True, help=FORCE_HELP)
 
 zap_move_yes_option = click.option(
     "-y", "--yes", is_flag=True,
     help="Consent to moving the rods (a full stroke each, then back to where they were) on a real "
          "port; without it a terminal prompts and a script is refused (--no-move checks without "
-         "moving; sim:// and --sim never ask).")
+         "moving; sim://, loop:// and --sim never ask).")
 
 protocol_version_option = click.option(
     "--protocol-version", type=IntRange(1, 63), default=None, metavar="N",
@@ -591,6 +658,7 @@ def capture_option(protocol: str):
     def callback(ctx, param, value):
         if ctx.resilient_parsing:
             return
+        ctx.meta["zkzap.capture"] = value             # for check_files: an output like the others
         if not value and "zkzap.link.capture" not in sys.modules:
             return                        # nothing asked, nothing to reset: import nothing
         from ..link import capture
@@ -601,7 +669,7 @@ def capture_option(protocol: str):
         if value:
             ctx.call_on_close(lambda: capture.request(None, protocol))   # close it, ask for no more
 
-    return click.option("--capture", type=FilePath(), default=None, metavar="FILE", expose_value=False,
+    return click.option("--capture", type=OutputPath("capture"), default=None, metavar="FILE", expose_value=False,
                         callback=callback,
                         help="Record every byte read and written, timestamped with its direction, in "
                              "FILE (pcapng; Wireshark opens it with zkzap's dissector).")
@@ -646,10 +714,14 @@ def read_hex_input(args, *, what="hex input") -> bytes:
     return parse_hex(" ".join(a for a in args), what=what)
 
 
-def consent(action: str, yes: bool) -> None:
+def consent(action: str, yes: bool, brief=None) -> None:
     """Ask before something hazardous. ``--yes`` consents; a terminal prompts; anything else
-    (a script, CI, no stdin) is refused with exit status 2 and nothing is sent."""
-    if yes:
+    (a script, CI, no stdin) is refused with exit status 2 and nothing is sent. While a batch
+    checks its lines (:mod:`zkzap.checking`) the consent is recorded (``brief``, else
+    ``action``) for the batch's one prompt."""
+    from .. import checking
+
+    if checking.consent(brief or action) or yes:
         return
     from ..io.term import is_tty
 
@@ -675,3 +747,35 @@ def _ask(question: str) -> bool:
         if answer in ("", "n", "no"):
             return False
         click.echo("Answer y or n.", err=True)
+
+
+def authorize(needs, *, what: str, yes: bool, force: bool, simulated: bool, consent_text=None, brief=None):
+    """The command line's side of the permission policy (:mod:`zkzap.codec.permissions`): the
+    permissions to give a command whose frames need ``needs`` — typed frames
+    (:class:`zkzap.codec.zap.Command`, :class:`zkzap.codec.zk.ControlFrame`), or a
+    ``{Permission: reason}`` of a procedure.
+
+    The FORCE permissions need ``--force`` (without it: PermissionNeeded naming the frame, exit
+    2, nothing sent); the CONSENT ones, on a real port, ``--yes`` or a yes at a prompt
+    (:func:`consent`, with ``consent_text`` or ``what`` and the reasons). Everything is decided
+    here, before the port opens; the bus or link then enforces the same rules on every frame."""
+    from ..codec.permissions import CONSENT, FORCE, Permission, require
+
+    granted = FORCE if force else Permission.NONE
+    if isinstance(needs, dict):
+        require({p: why for p, why in needs.items() if p & FORCE}, granted, what=what)
+    else:
+        frames, needs = list(needs), {}
+        for f in frames:
+            own = f.needs()
+            require({p: why for p, why in own.items() if p & FORCE}, granted,
+                    what=f.describe() if hasattr(f, "describe") else what, frame=getattr(f, "packet", None) or f.frame)
+            for p, why in own.items():
+                needs.setdefault(p, why)
+    wanted = {p: why for p, why in needs.items() if p & CONSENT}
+    if wanted and not simulated:
+        reasons = "; ".join(dict.fromkeys(wanted.values()))
+        consent(consent_text or f"{what}: {reasons}", yes, brief=brief or reasons)
+    for p in wanted:
+        granted |= p
+    return granted

@@ -14,7 +14,7 @@ import sys
 
 import click
 
-from ..errors import OK
+from ..errors import MORE_TO_DO, OK
 from . import CONTEXT, Command, Group
 from .batch import EXCLUDED, PORT_TOKENS, _batch_capture, port_tokens
 from .options import exits, port_options
@@ -93,11 +93,18 @@ def _help(group, protocol):
             if n not in EXCLUDED[protocol]]
     width = max(len(n) for n, _ in rows)
     click.echo("\n".join(f"  {n:<{width}}  {h}" for n, h in rows))
-    click.echo("  'COMMAND --help' for its options; exit, quit or Ctrl-D to leave.")
+    click.echo("  'COMMAND --help' for its options; exit [N], quit [N] or Ctrl-D to leave.")
 
 
 def loop(group, protocol, defaults, *, interactive) -> int:
-    """Read and run lines until exit or end of input; returns the last failure's status."""
+    """Read and run lines until exit or end of input; returns the shell's exit status:
+
+    - ``exit N`` / ``quit N``: N;
+    - ``exit``, ``quit``, Ctrl-D or the end of piped input: 0 at a terminal (the user asked to
+      leave); with piped input the status of the last command that failed, so a script can
+      tell. A command stopped by Ctrl-C (130) returns to the prompt and does not count: the
+      user stopped it on purpose;
+    - SIGTERM, at the prompt or during a command, ends the shell with 143."""
     from . import run
 
     if interactive:
@@ -113,14 +120,17 @@ def loop(group, protocol, defaults, *, interactive) -> int:
         readline.set_completer(Completer(group, protocol))
         readline.parse_and_bind("tab: complete")
     from .. import signals
+    from ..errors import INTERRUPTED, TERMINATED, USAGE
     from ..link import stop
 
-    last = 0
+    failed = 0
     try:
         while True:
             signals.forget()             # the last command's Ctrl-C is over: the next one counts
             try:
                 text = input(f"{protocol}> ") if interactive else sys.stdin.readline()
+            except signals.Terminated:
+                return TERMINATED
             except KeyboardInterrupt:
                 click.echo("", err=True)
                 continue
@@ -137,12 +147,16 @@ def loop(group, protocol, defaults, *, interactive) -> int:
                 tokens = shlex.split(text, comments=True)
             except ValueError as e:
                 click.echo(f"{protocol}: error: {e}", err=True)
-                last = 2
+                failed = USAGE
                 continue
             if not tokens:
                 continue
             if tokens[0] in ("exit", "quit"):
-                break
+                code = _exit_code(tokens, protocol)
+                if code is None:
+                    failed = USAGE
+                    continue
+                return code if code >= 0 else (0 if interactive else failed)
             if tokens[0] == "help":
                 _help(group, protocol)
                 continue
@@ -151,10 +165,14 @@ def loop(group, protocol, defaults, *, interactive) -> int:
                 what = (f"{bad[0]}: the port is the shell's" if bad
                         else f"{tokens[0]}: not in a shell")
                 click.echo(f"{protocol}: error: {what}", err=True)
-                last = 2
+                failed = USAGE
                 continue
             with stop.deferring():       # Ctrl-C: the command stops after its current transaction
-                last = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
+                code = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
+            if code == TERMINATED:
+                return TERMINATED        # SIGTERM ends the shell too, once the command has stopped
+            if code and code != INTERRUPTED:
+                failed = code
     finally:
         if interactive:
             import readline
@@ -164,7 +182,18 @@ def loop(group, protocol, defaults, *, interactive) -> int:
                 readline.write_history_file(history_path())
             except OSError:
                 pass
-    return last
+    return 0 if interactive else failed
+
+
+def _exit_code(tokens, protocol):
+    """``exit`` -> -1 (the default status), ``exit N`` -> N; None (after a message) for a bad N."""
+    if len(tokens) == 1:
+        return -1
+    if len(tokens) == 2 and tokens[1].isdigit() and int(tokens[1]) <= 255:
+        return int(tokens[1])
+    click.echo(f"{protocol}: error: {tokens[0]}: {' '.join(tokens[1:])!r} is not an exit status; "
+               "allowed 0..255", err=True)
+    return None
 
 
 @click.group(cls=Group, context_settings=CONTEXT)
@@ -188,18 +217,26 @@ def _description(protocol):
             "exit, quit or Ctrl-D leaves; Ctrl-C stops the running command after its current "
             "transaction (a ZK session sends its abort as usual) and returns to the prompt. Consent is asked per command on a "
             "real port (--yes on the line). Standard input that is not a terminal is run line "
-            "by line without a prompt; the exit status is the last failed command's.")
+            "by line without a prompt.\n\nExit status: 'exit N' gives N; exit, quit or Ctrl-D give 0 at a "
+            "terminal, and with piped input the status of the last command that failed (a command "
+            "stopped by Ctrl-C does not count: it returned to the prompt as asked); SIGTERM ends "
+            "the shell with 143.")
 
 
 #: A shell at a terminal ends well however its commands ended; piped, it reports the last failure.
-SHELL_EXITS = exits({OK: "exit, quit or Ctrl-D (piped: every command succeeded)"},
-                    tail=" Piped, any other status is the last failed command's.")
+_SHELL_MEANINGS = {OK: "exit, quit or Ctrl-D (piped: every command succeeded)"}
+_SHELL_TAIL = " Piped, any other status is the last failed command's; exit N gives N."
+SHELL_EXITS = exits(_SHELL_MEANINGS, tail=_SHELL_TAIL)
+#: The mightyZAP shell: piped, a 'setup --no-wait' that stopped with IDs pending is "more to do" (8).
+ZAP_SHELL_EXITS = exits({**_SHELL_MEANINGS,
+                         MORE_TO_DO: "piped, the last failed command was a setup that stopped with IDs pending"},
+                        tail=_SHELL_TAIL)
 
 
 def _make_zap():
     from .zap.compose import link_options
 
-    @SHELL_EXITS
+    @ZAP_SHELL_EXITS
     @click.command("zap", cls=Command, context_settings=CONTEXT, help=_description("zap") + """
 
 \b

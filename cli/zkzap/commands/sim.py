@@ -15,7 +15,7 @@ import click
 from ..errors import INTERRUPTED, OK, OUTPUT_ERROR, TERMINATED, UsageError
 from . import CONTEXT, Group
 from .complete import fault_kinds
-from .options import Choice, FiniteRange, IntRange, OutputPath, exits
+from .options import Choice, FiniteRange, InputPath, IntRange, OutputPath, exits
 
 
 def _listen(ctx, param, value):
@@ -39,12 +39,21 @@ def _listen(ctx, param, value):
     return host, number
 
 
+def _check_link(ctx, param, value):
+    if value and not ctx.resilient_parsing:
+        from ..outfile import check_link
+
+        check_link(value)            # before anything starts: only a symlink is ever replaced
+    return value
+
+
 def serve_options(f):
     f = click.option("--speed", type=FiniteRange(0.001, 10000, min_open=False), default=1.0,
                      show_default=True, metavar="X",
                      help="Run model time X times faster than real time (tests use 10 or more).")(f)
-    f = click.option("--link", "link", type=click.Path(dir_okay=False), default=None, metavar="PATH",
-                     help="With --pty: also make the pty available as a symlink at PATH.")(f)
+    f = click.option("--link", "link", type=OutputPath("link"), default=None, metavar="PATH", callback=_check_link,
+                     help="With --pty: also make the pty available as a symlink at PATH (a new path, or an "
+                          "old symlink: nothing else is replaced).")(f)
     f = click.option("--listen", callback=_listen, default=None, metavar="HOST:PORT",
                      help="Serve on a TCP socket instead (one client at a time, like a serial line: a "
                           "second is refused while the first is connected); port 0 picks a free "
@@ -55,7 +64,10 @@ def serve_options(f):
 
 
 def _serve(device, speed, use_pty, listen, link):
+    from .. import checking
     from ..sim.base import Clock, keep_wire_time
+
+    checking.effect("serve")
     from ..sim.serve import PtyUnsupported, serve_pty, serve_tcp
 
     if use_pty and listen:
@@ -132,11 +144,11 @@ SIM_EXITS = exits({OK: "stopped by Ctrl-C or SIGTERM", INTERRUPTED: None, TERMIN
                    "setting reads garbage (the host's receiver is modelled strictly).")
 @click.option("--set", "extra", multiple=True, callback=_parse_set, metavar="KEY=VALUE",
               help="Any other ECU simulator option (max_rpm, idle_rpm, battery, faults, ...); repeatable.")
-@click.option("--replay", type=click.Path(dir_okay=False), default=None, metavar="CAPTURE",
+@click.option("--replay", type=InputPath("zk capture"), default=None, metavar="CAPTURE",
               help="Play the ECU's status frames of a pcapng capture (--capture) at their recorded "
                    "times instead of the engine model.")
 @click.option("--loop", is_flag=True, help="With --replay: start again at the end.")
-@click.option("-o", "--output", type=OutputPath(("jsonl", "csv")), default=None, metavar="FILE",
+@click.option("-o", "--output", type=OutputPath("records", formats=("jsonl", "csv")), default=None, metavar="FILE",
               help="With --replay: log the host's control frames, decoded, to FILE (JSON Lines; CSV "
                    "for *.csv).")
 @serve_options
@@ -229,7 +241,7 @@ def _say_collision(event) -> None:
                    "an ID given twice makes two actuators that collide.")
 @click.option("-b", "--baud", type=Choice(["9600", "19200", "38400", "57600", "115200"]), default="57600",
               show_default=True, help="The actuators' baud rate (a pty host at another rate is not heard).")
-@click.option("--state", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+@click.option("--state", type=OutputPath("state"), default=None, metavar="FILE",
               help="Keep stored registers (and rod positions) in FILE across runs; when FILE exists "
                    "it defines the bus and --ids/--baud/--return-mode are not applied.")
 @click.option("--return-mode", type=Choice(["0", "1", "2"]), default=None,
@@ -247,7 +259,7 @@ def _say_collision(event) -> None:
               help="Inject a fault (repeatable): overload, voltage[=V], silent, corrupt, truncate[=N], "
                    "wrong-id[=ID], delay=MS, stuck, echo. ID 'all' or none: every actuator; /COUNT: "
                    "only the next COUNT replies.")
-@click.option("--replay", type=click.Path(dir_okay=False), default=None, metavar="CAPTURE",
+@click.option("--replay", type=InputPath("zap capture"), default=None, metavar="CAPTURE",
               help="Answer every request recorded in a pcapng capture (--capture) with its recorded "
                    "reply, after its recorded latency; other requests go to the model.")
 @serve_options

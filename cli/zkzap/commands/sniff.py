@@ -7,9 +7,9 @@ import sys
 
 import click
 
-from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, UsageError
+from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR
 from . import CONTEXT, Command, Group
-from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FilePath, FiniteRange, IntRange,
+from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FiniteRange, IntRange,
                       OutputPath, capture_option, close_output, exits, open_output)
 
 
@@ -62,7 +62,7 @@ def _common(protocol):
             click.option("-f", "--format", "fmt", type=Choice(SNIFF_FORMATS), default=None,
                          help="Output format (default: table on a terminal, jsonl otherwise, or by the "
                               "extension of -o)."),
-            click.option("-o", "--output", type=OutputPath(SNIFF_FORMATS), default=None,
+            click.option("-o", "--output", type=OutputPath("records", formats=SNIFF_FORMATS), default=None,
                          help="Write records to FILE (.csv, .json, .jsonl by its suffix; JSON Lines without one)."),
             click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
             click.option("-c", "--count", type=IntRange(1), default=None, metavar="N",
@@ -72,7 +72,7 @@ def _common(protocol):
             click.option("--stats", "show_stats", is_flag=True,
                          help="Print the summary (frames/s per direction and ID, CRC errors, gaps, "
                               "slowest replies) on stderr at the end."),
-            click.option("--stats-json", type=FilePath(), default=None, metavar="FILE",
+            click.option("--stats-json", type=OutputPath("document"), default=None, metavar="FILE",
                          help="Write the summary as JSON to FILE at the end."),
         ]
         for o in reversed(opts):
@@ -200,7 +200,6 @@ class LineTable:
 
 
 def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table):
-    import os
     import time
 
     from ..io.term import is_tty
@@ -212,10 +211,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
 
         fmt = format_for_path(output, SNIFF_FORMATS)
     if stats_json:
-        try:
-            open(stats_json, "a").close()
-        except OSError as e:
-            raise UsageError(f"stats-json: cannot open {stats_json}: {e.strerror}") from None
+        from ..outfile import check_path
+
+        check_path(stats_json, "stats-json")
     stream, had = open_output(output, append)
     if fmt is None:
         fmt = "table" if is_tty(stream) else "jsonl"
@@ -272,9 +270,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     if stats_json:
         import json
 
-        with open(stats_json, "w", encoding="utf-8") as f:
-            json.dump(summary, f, indent=2)
-            f.write("\n")
+        from ..outfile import write_whole
+
+        write_whole(stats_json, json.dumps(summary, indent=2) + "\n", what="stats-json")
     if reason == "interrupted":
         raise KeyboardInterrupt
     if reason == "noise":

@@ -13,7 +13,7 @@ import click
 
 from ..errors import UsageError
 from . import CONTEXT, Command, Group
-from .options import Choice, FilePath, FiniteRange, port_options, protocol_version_option
+from .options import Choice, FiniteRange, InputPath, port_options, protocol_version_option
 
 #: Where a console listens unless told: loopback only; a busy port is followed by the next ones.
 DEFAULT_LISTEN = "127.0.0.1:8470"
@@ -178,7 +178,7 @@ def _make_zk():
     @click.option("--rate", type=FiniteRange(1, 200), default=20.0, show_default=True, metavar="HZ",
                   help="Control frames per second while the console runs the engine.")
     @click.option("--limit", "limit", multiple=True, metavar="EXPR", help=LIMIT_HELP)
-    @click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
+    @click.option("--limits", "limits_files", multiple=True, type=InputPath("limits"), metavar="FILE",
                   help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable.")
     @click.option("--on-limit", type=Choice(["abort", "warn"]), default=None,
                   help="A violated limit while the console runs the engine: abort (the default: the abort "

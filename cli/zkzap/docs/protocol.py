@@ -95,17 +95,37 @@ def _zap() -> list:
                   [(f"0x{i.code:02X}", i.name, i.cli, when[i.reply], i.params_help, i.help)
                    for i in zap.INSTRUCTIONS])
     out += ["### Registers", "",
-            "Access R (read-only) or RW; memory NV (stored, survives power-off; writes need consent "
-            "on a real port) or V (volatile).", ""]
+            "Access R (read-only) or RW; memory NV (stored, survives power-off; writes need the "
+            "STORED permission: consent on a real port) or V (volatile). The range column is each "
+            "register's documented domain: a range, choices, or bits; a value outside it is refused.", ""]
     out += _table(("address", "name", "size", "access", "memory", "default", "range", "unit", "meaning"),
                   [(f"0x{r.address:02X}", r.name, r.size, r.access, r.memory,
                     "" if r.default is None else r.default, r.describe_range(),
                     (f"{r.scale:g} {r.unit}" if r.scale != 1 else r.unit), r.help) for r in zap.REGISTERS])
+    out += ["Addresses IR Robot's Arduino header names beyond the map (read raw by name, not part of "
+            "the map a dump reads; writing them needs the UNDOCUMENTED permission):", ""]
+    out += _table(("address", "name", "access", "meaning"),
+                  [(f"0x{r.address:02X}", r.name, r.access, r.help) for r in zap.UNDOCUMENTED_REGISTERS])
+    out += _permissions()
     out += ["### Feedback error bits", ""]
     out += _table(("bit", "name", "meaning"), [(b, n, zap.ERROR_TEXT.get(n, "")) for b, n in
                                               sorted(zap.ERROR_BITS.items())])
     out += ["### Baud-rate codes (register baud-rate)", ""]
     out += _table(("code", "baud"), [(c, b) for c, b in sorted(zap.BAUD_CODES.items())])
+    return out
+
+
+def _permissions() -> list:
+    from ..codec import permissions as P
+
+    out = ["### Permissions", "",
+           "What sending a frame needs, decided on the typed frame (`zap.Command.needs()`, "
+           "`zk.ControlFrame.needs()`) and enforced where every frame goes out. Consent guards real "
+           "hardware (a simulator waives it; the command line: --yes); force marks a deliberate act "
+           "(needed everywhere; the command line: --force). "
+           f"Identity registers: {', '.join(zap.IDENTITY_REGISTERS)}.", ""]
+    out += _table(("permission", "kind", "what needs it"),
+                  [(p.name, "consent" if p & P.CONSENT else "force", P.WHAT[p]) for p in P.members(P.ALL)])
     return out
 
 

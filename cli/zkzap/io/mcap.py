@@ -113,10 +113,11 @@ class McapWriter:
             compression = kind
             break
         self.stream = stream
-        self._w = Writer(stream, chunk_size=CHUNK_SIZE, compression=compression, index_types=IndexType.ALL,
-                         use_chunking=True, use_statistics=True, use_summary_offsets=True)
-        from .. import __version__
-
+        self._make = lambda: Writer(stream, chunk_size=CHUNK_SIZE, compression=compression,
+                                    index_types=IndexType.ALL, use_chunking=True, use_statistics=True,
+                                    use_summary_offsets=True)
+        self._library = library
+        self._w = None                     # started by the first record (a header is not a record)
         self._channels = {}
         self._seq = {}
         self._last_ns = 0
@@ -127,11 +128,6 @@ class McapWriter:
         self._pending = False             # messages not yet written out
         self._error = None                # an OSError of the flushing thread, raised by the next write
         self._stop = threading.Event()
-        try:
-            self._w.start(profile="", library=f"{library} {__version__}")
-            self.stream.flush()           # the header is on disk before the first record
-        except OSError as e:
-            self._fail(e)
         self._thread = None
         if flush_s:
             self._thread = threading.Thread(target=self._flusher, args=(flush_s,), name="zkzap-mcap-flush",
@@ -141,7 +137,7 @@ class McapWriter:
     def _flusher(self, period):
         while not self._stop.wait(period):
             with self._lock:
-                if self._closed or not self._pending:
+                if self._closed or not self._pending or self._w is None:
                     continue
                 try:
                     self._w.flush()       # the chunk in progress, its message indexes, then the stream
@@ -150,7 +146,19 @@ class McapWriter:
                     return
                 self._pending = False
 
+    def _start(self):
+        from .. import __version__
+
+        self._w = self._make()
+        try:
+            self._w.start(profile="", library=f"{self._library} {__version__}")
+            self.stream.flush()           # the header is on disk before the first record
+        except OSError as e:
+            self._fail(e)
+
     def _channel(self, rec):
+        if self._w is None:
+            self._start()
         kind = rec.get("kind") or "status"
         if kind == "control":
             key = ("control", rec.get("command") or f"id-{rec.get('id')}")
@@ -219,6 +227,11 @@ class McapWriter:
         if self._error is not None:
             self._fail(self._error)
         with self._lock:
+            if self._w is None:
+                if getattr(self.stream, "lazy", False):
+                    self._closed = True
+                    return                 # a file no record opened: left as it was
+                self._start()              # stdout: an empty, valid MCAP stream
             try:
                 self._w.finish()
                 self.stream.flush()

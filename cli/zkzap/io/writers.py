@@ -18,6 +18,11 @@ Bulk decoding writes blocks: :meth:`Writer.write_many` (records) and :meth:`Writ
 stream many whole records at once and flush after each block, so output is fast and a killed
 process still leaves whole lines: on a file or pipe a block goes out in one ``write`` system
 call loop with SIGINT/SIGTERM held off until it is complete.
+
+A header (a CSV header row, a JSON array's bracket) is written with the first record. On a
+file stream that opens with its first write (:class:`zkzap.outfile.LazyOutput`) a writer
+that got no record writes nothing at all, so the file is left as it was; on stdout an empty
+run still gives the header (``[]`` for JSON).
 """
 
 from __future__ import annotations
@@ -110,6 +115,11 @@ def csv_dialect(columns):
     return CsvDialect(columns)
 
 
+def _unopened(stream) -> bool:
+    """A file stream that opens with its first write, and has not been written to."""
+    return getattr(stream, "lazy", False) and not stream.opened
+
+
 def _raw_fd(stream):
     """The file descriptor under a UTF-8 text stream, or None (then blocks go through it)."""
     try:
@@ -141,6 +151,8 @@ class Writer:
             self.write(rec)
 
     def close(self) -> None:
+        if _unopened(self.stream):
+            return                       # no record: the file was never opened, nothing to flush
         try:
             self.stream.flush()
         except (BrokenPipeError, ValueError):
@@ -271,7 +283,8 @@ class JsonWriter(Writer):
             self.count += len(lines)
 
     def close(self):
-        self._put("\n]\n" if self.count or self._open else "[]\n")
+        if not _unopened(self.stream):
+            self._put("\n]\n" if self.count or self._open else "[]\n")
         super().close()
 
 
@@ -282,12 +295,17 @@ class CsvWriter(LineWriter):
     def __init__(self, stream, columns, flush=True, header=True):
         super().__init__(stream, flush)
         self.columns = list(columns)
-        if header:
-            self._put(",".join(self.columns) + "\n")
+        self._header = header           # written with the first record (or by close, on stdout)
+
+    def _head(self) -> str:
+        if not self._header:
+            return ""
+        self._header = False
+        return ",".join(self.columns) + "\n"
 
     def write(self, rec):
         get = rec.get
-        self._put(",".join(_csv_quote(csv_cell(get(c))) for c in self.columns) + "\n")
+        self._put(self._head() + ",".join(_csv_quote(csv_cell(get(c))) for c in self.columns) + "\n")
         self.count += 1
 
     def write_many(self, recs):
@@ -297,6 +315,19 @@ class CsvWriter(LineWriter):
             get = rec.get
             lines.append(",".join(_csv_quote(csv_cell(get(c))) for c in columns))
         self.write_lines(lines)
+
+    def write_lines(self, lines):
+        if lines and self._header:
+            lines.insert(0, self._head().rstrip("\n"))
+            super().write_lines(lines)
+            self.count -= 1              # the header is not a record
+            return
+        super().write_lines(lines)
+
+    def close(self):
+        if self._header and not _unopened(self.stream):
+            self._put(self._head())      # stdout (or an opened file): a run without records has its header
+        super().close()
 
 
 class TableWriter(Writer):

@@ -49,6 +49,10 @@ def request(path, protocol: str) -> None:
     ``protocol`` ('zk'/'zap') selects the link type."""
     global _requested
     finish()
+    if path:
+        from ..outfile import check_path
+
+        check_path(path, "capture")        # a bad path is an error before any port opens
     _requested = (path, protocol) if path else None
 
 
@@ -57,13 +61,12 @@ def requested():
 
 
 def writer_for(path, protocol):
-    """The shared Writer for ``path`` (opened now: a bad path is an error before any port use)."""
+    """The shared Writer for ``path`` (checked by :func:`request`; opened by the first packet)."""
     global _writer
     if _writer is None or _writer.path != path:
         if _writer is not None:
             _writer.close()
         _writer = Writer(path)
-        _writer.open()
     return _writer
 
 

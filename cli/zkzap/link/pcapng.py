@@ -97,8 +97,10 @@ class Writer:
     """A pcapng file being written: :meth:`interface` adds a port, :meth:`packet` a chunk.
 
     Thread-safe (a sniffer reads two ports in two threads). ``path`` is opened (created or
-    replaced; ``append`` adds a new section to an existing capture) on the first block, so a
-    command that never opens a port leaves no file behind."""
+    truncated in place; ``append`` adds a new section to an existing capture) by the first
+    packet, with the section header and the interfaces described so far: a command that never
+    sends or receives a byte leaves an existing file as it was (a header is not a record). A
+    device or FIFO is written through."""
 
     def __init__(self, path: str, *, append: bool = False, app: str | None = None):
         self.path = path
@@ -109,17 +111,21 @@ class Writer:
         self._regular = False
         self._lock = threading.Lock()
         self._interfaces = 0
+        self._pending = []                 # interface blocks waiting for the first packet
         self.failed = None
         self.packets = 0
 
     def open(self) -> None:
-        """Open the file and write the section header (done by the first block otherwise)."""
+        """Open the file and write the section header now (the first packet does otherwise)."""
         with self._lock:
             self._open()
 
     def _open(self):
         if self._fd is not None:
             return
+        from .. import checking
+
+        checking.effect("file", path=self.path)
         flags = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if self.append else os.O_TRUNC)
         try:
             self._fd = os.open(self.path, flags, 0o666)
@@ -131,14 +137,21 @@ class Writer:
         except OSError:
             self._regular = False
         self._put(section_header(self.app))
+        pending, self._pending = self._pending, []
+        for block in pending:
+            self._put(block)
 
     def interface(self, protocol: str, name: str, baud=None) -> int:
-        """Describe a port; returns its interface ID for :meth:`packet`."""
+        """Describe a port; returns its interface ID for :meth:`packet` (written before the
+        first packet)."""
         linktype = LINKTYPES[protocol]
         desc = f"zkzap {PROTOCOL_NAMES[protocol]}" + (f" {baud} baud" if baud else "")
         with self._lock:
-            self._open()
-            self._put(interface_block(linktype, name, desc))
+            block = interface_block(linktype, name, desc)
+            if self._fd is None:
+                self._pending.append(block)
+            else:
+                self._put(block)
             n = self._interfaces
             self._interfaces += 1
             return n
@@ -149,6 +162,8 @@ class Writer:
             return
         block = packet_block(if_id, int(round(ts * 1_000_000)), data, direction)
         with self._lock:
+            if self._fd is None:
+                self._open()
             self._put(block)
             self.packets += 1
 

@@ -60,6 +60,9 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
 
     if stop_bits not in STOP_BITS:
         raise UsageError(f"stop-bits: {stop_bits!r}; allowed 1, 2")
+    from .. import checking
+
+    checking.effect("port", url=url)
     if _HANDLERS not in serial.protocol_handler_packages:
         serial.protocol_handler_packages.append(_HANDLERS)
     try:

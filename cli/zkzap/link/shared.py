@@ -4,8 +4,9 @@ While :func:`sharing` is active, the commands' own port openings (:func:`zkzap.c
 compose.open_link`, :meth:`zkzap.link.zk_port.ZkLink.open`) borrow the shared link instead of
 opening the port again: each command runs over the same open port, and its "close" leaves the
 port open. The line settings a command changes for itself (the return mode, retries and timeout
-of the bus, its late window and latency hint; a scan's baud rate) are put back when it returns it;
-what the bus learned (the actuators' latencies) stays for the next command.
+of the bus, the permissions it was given, its late window and latency hint; a scan's baud rate)
+are put back when it returns it; what the bus learned (the actuators' latencies) stays for the
+next command.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ class Borrowed:
 
     def __init__(self, bus, **settings):
         self.bus = bus
-        self.saved = {k: getattr(bus, k) for k in ("return_mode", "retries", "timeout", "latency")}
+        self.saved = {k: getattr(bus, k) for k in ("return_mode", "retries", "timeout", "latency", "allow")}
         self.baud = bus.baud
         for k, v in settings.items():
             setattr(bus, k, v)

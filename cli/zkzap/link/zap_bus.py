@@ -38,6 +38,12 @@ as :class:`~zkzap.errors.NoReply` (exit 3), :class:`~zkzap.errors.BadReply` (exi
 reply is named a collision or line fault); error bits in a reply as
 :class:`~zkzap.errors.DeviceError` (exit 5, the reply attached as ``.reply``); a port that fails
 or vanishes as :class:`~zkzap.errors.PortError` (exit 4).
+
+Permissions: every command packet goes through :meth:`ZapBus.command`, which sends it only when
+the permissions it needs (:meth:`zkzap.codec.zap.Command.needs`) are given: the bus's
+:attr:`ZapBus.allow` or the call's ``allow=``; a simulated port (:func:`is_simulated`) gives the
+consent permissions by itself. Otherwise :class:`~zkzap.errors.PermissionNeeded` (exit 2), and
+nothing is sent.
 """
 
 from __future__ import annotations
@@ -52,6 +58,7 @@ if TYPE_CHECKING:
 
 from ..codec import zap
 from ..codec.framing import ZapFramer
+from ..codec.permissions import Permission, as_permission, require
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from . import stop
 from .port import close_port, wire_time
@@ -71,6 +78,10 @@ MEMORY = 2.0
 MAX_EVENTS = 4096
 #: Instructions that write nothing.
 _READS = (zap.ECHO, zap.LOAD_DATA)
+
+
+#: Instructions that never need a permission (they write nothing by themselves).
+_FREE = frozenset((zap.ECHO, zap.LOAD_DATA, zap.EXECUTION, zap.RESTART))
 
 
 def is_simulated(url) -> bool:
@@ -126,17 +137,6 @@ def leaves_protocol(pkt: bytes) -> bool:
     return zap.Command(pkt).leaves_protocol
 
 
-def writes_id(pkt: bytes) -> bool:
-    """True when the packet writes the ID register (Store/Send Data, Symmetric Store)."""
-    code, params = pkt[5], bytes(pkt[6:-1])
-    addr = zap.REGISTER_BY_NAME["id"].address
-    if code in (0xF3, 0xF4) and len(params) >= 2:
-        return params[0] <= addr < params[0] + len(params) - 1
-    if code == 0x73 and len(params) >= 2:
-        return params[1] > 0 and params[0] <= addr < params[0] + params[1]
-    return False
-
-
 class _Owed:
     """An attempt whose reply has not come: it may still come until ``until`` (its window),
     and is recognised as that attempt's until ``keep``. ``kind`` is ``reply`` (an expected
@@ -181,6 +181,8 @@ class ZapBus:
                  url=None, latency=None, policy=None):
         self.port = port
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
+        self.allow = Permission.NONE       # the permissions given to every command (see command())
+        self.simulated = is_simulated(self.url)
         self.return_mode = return_mode
         self.timeout = timeout
         self.retries = retries
@@ -754,11 +756,23 @@ class ZapBus:
 
     # -- instructions -------------------------------------------------------------------------
 
-    def command(self, pkt: bytes, *, check=True, optional=None):
+    def authorize(self, pkt: bytes, allow=None) -> None:
+        """Raise :class:`~zkzap.errors.PermissionNeeded` unless ``pkt`` may be sent: the
+        permissions it needs are :attr:`allow`'s, ``allow``'s, or waived by a simulated port."""
+        if pkt[5] in _FREE:
+            return                                  # Echo, Load Data, Execution, Restart
+        cmd = zap.Command(pkt)
+        needs = cmd.needs()
+        if needs:
+            require(needs, self.allow | as_permission(allow), simulated=self.simulated, what=cmd.describe(),
+                    frame=pkt)
+
+    def command(self, pkt: bytes, *, check=True, optional=None, allow=None):
         """Send any command packet and wait for what it gets (inferred from the packet): Load
         Data's data length, an ID change answered by the new ID, an unknown instruction's
-        optional reply."""
+        optional reply. ``allow``: permissions for this packet besides :attr:`allow`."""
         pkt = bytes(pkt)
+        self.authorize(pkt, allow)
         code, params = pkt[5], pkt[6:-1]
         kw = {}
         if code == zap.LOAD_DATA and len(params) == 2:
@@ -820,9 +834,12 @@ class ZapBus:
     def factory_reset(self, ident: int, reset_id=False, reset_baud=False, **kw):
         return self.command(zap.factory_reset(ident, reset_id, reset_baud), **kw)
 
-    def symmetric_store(self, reg, targets) -> None:
-        for pkt in zap.symmetric_store(reg, targets):
-            self.command(pkt)
+    def symmetric_store(self, reg, targets, **kw) -> None:
+        packets = zap.symmetric_store(reg, targets)
+        for pkt in packets:
+            self.authorize(pkt, kw.get("allow"))    # every packet before the first goes out
+        for pkt in packets:
+            self.command(pkt, **kw)
 
     def ping(self, ident: int, *, timeout=None, retries=0, quick=False, early=False, window=None):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
@@ -895,7 +912,8 @@ def set_low_latency(port):
 
 
 def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, return_mode=1,
-             retries=RETRIES, sim_options=None, stop_bits=1, latency=None, low_latency=False) -> ZapBus:
+             retries=RETRIES, sim_options=None, stop_bits=1, latency=None, low_latency=False,
+             allow=None) -> ZapBus:
     """Open ``port`` (any pyserial URL or device, or the in-process simulator with ``sim``;
     ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`. ``latency``
     (seconds) is the actuators' known latency before any is measured; ``low_latency`` asks the
@@ -914,6 +932,7 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         url = port
     p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
     bus = ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url, latency=latency)
+    bus.allow = as_permission(allow)
     if low_latency:
         bus.low_latency, bus.low_latency_reason = set_low_latency(p)
     return bus

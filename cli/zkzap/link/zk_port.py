@@ -9,6 +9,7 @@ here imports click or rich; pyserial is imported by :func:`zkzap.link.port.open_
 
 from __future__ import annotations
 
+from ..codec.permissions import Permission, as_permission
 from ..errors import ZkzapError
 from . import stop
 
@@ -25,11 +26,18 @@ def is_simulator(url: str) -> bool:
 
 class ZkLink:
     """A port to a ZK ECU. :meth:`read` returns the bytes that arrived within a short slice
-    (``b""`` if none) and appends them to the raw log; :meth:`write` sends a frame."""
+    (``b""`` if none) and appends them to the raw log; :meth:`write` sends a frame, only when
+    the permissions it needs (:meth:`zkzap.codec.zk.ControlFrame.needs`) are :attr:`allow`'s or
+    waived by the simulator (:class:`~zkzap.errors.PermissionNeeded` otherwise, nothing sent).
+    :attr:`controlled` says whether a frame that controls the engine went out."""
 
-    def __init__(self, ser, url, raw_log=None, baud=None, slice_s=READ_SLICE_S, stop_bits=1):
+    def __init__(self, ser, url, raw_log=None, baud=None, slice_s=READ_SLICE_S, stop_bits=1, allow=None):
         self.ser = ser
         self.url = url
+        self._cleared = {}                # frame -> whether it controls the engine (permitted)
+        self.allow = as_permission(allow)
+        self.controlled = False
+        self._parent = None
         self.raw_log = raw_log
         self.baud = baud if baud is not None else getattr(ser, "baudrate", None)
         self.slice_s = slice_s
@@ -38,16 +46,22 @@ class ZkLink:
         self.frames_out = 0
 
     @classmethod
-    def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S, stop_bits=1):
-        """Open ``url`` at ``baud`` (inside a batch: borrow the batch's one open port)."""
+    def open(cls, url, baud, raw_log=None, slice_s=READ_SLICE_S, stop_bits=1, allow=None):
+        """Open ``url`` at ``baud`` (inside a batch: borrow the batch's one open port);
+        ``allow``: the permissions its frames are given."""
         from .port import open_port
         from .shared import shared
 
         lent = shared("zk")
         if lent is not None:        # a batch: the one open port, left open by close()
-            return lent.borrow(raw_log, slice_s)
+            from .. import checking
+
+            checking.effect("port", url=url)
+            link = lent.borrow(raw_log, slice_s)
+            link.allow = as_permission(allow)
+            return link
         ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
-        return cls(ser, url, raw_log, baud, slice_s, stop_bits)
+        return cls(ser, url, raw_log, baud, slice_s, stop_bits, allow)
 
     def reopen(self) -> None:
         """Close the failed port and open the same device again (PortError while it is absent)."""
@@ -62,6 +76,7 @@ class ZkLink:
         self.ser.timeout = slice_s
         link = ZkLink(self.ser, self.url, raw_log, slice_s=slice_s)
         link.close = lambda: None
+        link._parent = self
         return link
 
     def set_slice(self, slice_s: float) -> None:
@@ -90,9 +105,38 @@ class ZkLink:
                 self.raw_log.flush()
         return data
 
+    def authorize(self, frame: bytes) -> bool:
+        """Raise :class:`~zkzap.errors.PermissionNeeded` unless ``frame`` may be sent; returns
+        whether it controls the engine."""
+        controls = self._cleared.get(frame)
+        if controls is None:
+            from ..codec import zk
+            from ..codec.permissions import require
+
+            cf = zk.ControlFrame(frame)
+            needs = cf.needs()
+            if needs:
+                require(needs, self.allow, simulated=is_simulator(self.url), what=f"{cf.frame.hex(' ').upper()} "
+                        f"({cf.command.name if cf.command else 'undefined ID'})", frame=frame)
+            controls = cf.controls_engine
+            if len(self._cleared) < 4096:
+                self._cleared[bytes(frame)] = controls
+        return controls
+
+    @property
+    def allow(self) -> Permission:
+        """The permissions this link's frames are given."""
+        return self._allow
+
+    @allow.setter
+    def allow(self, value) -> None:
+        self._allow = as_permission(value)
+        self._cleared = {}
+
     def write(self, frame: bytes) -> None:
         """Send ``frame`` and wait until it is out; a failure is PortError."""
         stop.check()                 # a stop requested (a batch's Ctrl-C) ends the command here
+        controls = self.authorize(frame)
         try:
             self.ser.write(frame)
             self.ser.flush()
@@ -101,6 +145,10 @@ class ZkLink:
         except Exception as e:
             raise port_failed(self.url, e) from None
         self.frames_out += 1
+        if controls and not self.controlled:
+            self.controlled = True
+            if self._parent is not None:
+                self._parent.controlled = True      # a batch's port: a line took control
 
     def close(self):
         """Close the port."""

@@ -117,11 +117,9 @@ def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) 
         tty.setraw(slave)
         path = os.ttyname(slave)
         if link:
-            try:
-                os.unlink(link)
-            except FileNotFoundError:
-                pass
-            os.symlink(path, link)
+            from ..outfile import make_link
+
+            make_link(path, link)           # only an old symlink is replaced, never a file or device
         sel = _selector()
         sel.register(master, selectors.EVENT_READ, "data")
         if stop_fd is not None:

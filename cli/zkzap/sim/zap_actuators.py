@@ -762,15 +762,14 @@ class ActuatorBus:
     # -- persistence --------------------------------------------------------------------------
 
     def save(self) -> None:
-        """Write the stored registers and rod positions to the state file (atomically)."""
+        """Write the stored registers and rod positions to the state file, whole
+        (:func:`zkzap.outfile.write_whole`: atomically, keeping the file's mode)."""
         if not self.state_path:
             return
         doc = {"format": STATE_FORMAT, "actuators": [a.state() for a in self.actuators]}
-        tmp = f"{self.state_path}.tmp{os.getpid()}"
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, self.state_path)
+        from ..outfile import write_whole
+
+        write_whole(self.state_path, json.dumps(doc, indent=1) + "\n", what="state")
 
     def load_state(self) -> bool:
         """Restore actuators from the state file; False when the file does not exist."""
@@ -778,6 +777,8 @@ class ActuatorBus:
         from ..errors import UsageError
 
         path = self.state_path
+        if os.path.exists(path) and not os.path.isfile(path):
+            raise InvalidValue(f"state {path}: not a regular file; a state file is read and rewritten whole")
         if not os.path.exists(path):
             return False
         try:
@@ -845,12 +846,15 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
             for a in bus.actuators:
                 a.set("feedback-return-mode", int(return_mode))
         if state:
+            from ..errors import ZkzapError
+
+            parent = os.path.dirname(os.path.abspath(os.path.realpath(state)))
+            if not os.path.isdir(parent):
+                raise InvalidValue(f"state {state}: cannot write: no such directory (no directory {parent})")
             try:
                 bus.save()
-            except OSError as e:
-                raise InvalidValue(f"state {state}: cannot write: {e.strerror or e}"
-                                 + (f" (no directory {os.path.dirname(os.path.abspath(state))})"
-                                    if isinstance(e, FileNotFoundError) else "")) from None
+            except (OSError, ZkzapError) as e:
+                raise InvalidValue(f"state {state}: cannot write: {getattr(e, 'strerror', None) or e}") from None
     if voltage not in (None, ""):
         bus.inject(None, "voltage", parse_number("voltage", voltage, 0, 25.5))
     for text in str(faults or "").split(","):

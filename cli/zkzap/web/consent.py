@@ -1,25 +1,31 @@
-"""Which console requests need a person's confirmation: the command line's consent rules, for
-the pages.
+"""Which console requests need a person's confirmation: the library's permissions
+(:mod:`zkzap.codec.permissions`), asked for on the page.
 
-The rules are the command line's (``--yes``, ``--force``): on a real port (anything but the
-in-process simulator and ``loop://``) writing stored (NV) settings, a factory reset, an ID or
-baud-rate change, a check's full-stroke moves and a ZK frame that can start the engine or run
-ECU hardware need consent; on every port, a write of a setting that changes how an actuator is
-reached or answers (id, baud-rate, protocol-type, feedback-return-mode) needs ``force`` as
-well. The page asks; the request comes back with the permissions granted.
+The rules are not this module's. What a frame needs is decided once, on the typed frame
+(:meth:`zkzap.codec.zap.Command.needs`, :meth:`zkzap.codec.zk.ControlFrame.needs`), and
+enforced where every frame goes out (the bus and the ZK link), for the command line, the
+library and the consoles alike: a stored write, a factory reset and a ZK frame that can start
+the engine or run ECU hardware need consent on a real port (a simulator waives it); a direct
+write of id, baud-rate or protocol-type, an undocumented address or value, a partial register
+and a broadcast of those need force on every port. ``zap set-id`` and ``zap set-baud``, the
+checked ways, need the stored-write consent only.
 
-Every console request that needs one goes through :class:`Policy`, which raises
-:class:`Needed` naming the permission when it is not granted. This module is the one adapter
-between the consoles and the policy: when the library checks permissions itself (an API call
-that raises a :class:`~zkzap.errors.ZkzapError` naming the permission unless it is given),
-this module passes the permissions on and turns that error into :class:`Needed`, and nothing
-else changes.
+This module is the one adapter between the pages and that mechanism: :meth:`Policy.allow`
+turns what a page granted into the ``allow=`` the library's calls take, and a
+:class:`~zkzap.errors.PermissionNeeded` the library raises (nothing sent) becomes
+:class:`Needed` — the permission the page asks for, with the words of its dialog; the request
+then comes back with it granted. Only a self-check's full-stroke moves are asked here
+(:data:`MOVE`, as ``zap check --yes`` asks on the command line): they are a procedure's effect,
+not a frame's permission.
 """
 
 from __future__ import annotations
 
-from ..api.fleet import PROTECTED
+import contextlib
+
+from ..codec import permissions as P
 from ..codec import zap, zk
+from ..codec.permissions import Permission
 
 #: Permissions a page can grant, with what the person is asked.
 STORED = "stored-write"
@@ -27,6 +33,15 @@ FORCE = "force"
 ENGINE = "engine"
 MOVE = "move"
 PERMISSIONS = (STORED, FORCE, ENGINE, MOVE)
+
+#: What each grant of a page gives the library (``allow=``).
+GRANTS = {
+    STORED: Permission.STORED | Permission.FACTORY,
+    FORCE: P.FORCE,
+    ENGINE: Permission.ENGINE,
+}
+#: Registers the console writes the checked way (``Bus.set_id``, ``Bus.set_baud``), not directly.
+CHECKED = ("id", "baud-rate")
 
 
 class Needed(Exception):
@@ -43,79 +58,101 @@ class Needed(Exception):
 
 
 def simulated(url: str) -> bool:
-    """True for ports where nothing real can be harmed (no consent there), as on the command line."""
-    return bool(url) and str(url).startswith(("sim://", "loop://"))
+    """True for ports where nothing real can be harmed (the library waives consent there):
+    the in-process simulator and ``loop://``."""
+    from ..link.zap_bus import is_simulated
+
+    return is_simulated(url)
+
+
+def needs_force(reg) -> bool:
+    """Whether the console's write of register ``reg`` needs force (the library's rule for a
+    direct write; id and baud-rate are written the checked way, which does not)."""
+    if reg.name in CHECKED or not reg.writable:
+        return False
+    value = min(reg.choices) if reg.choices else reg.lo
+    packet = zap.packet(1, zap.STORE_DATA, bytes((reg.address,)) + reg.to_bytes(value))
+    return bool(zap.Command(packet).permissions & P.FORCE)
 
 
 class Policy:
-    """The consent rules for one port ``url``."""
+    """The permissions of the requests on one port ``url``; ``simulated``: whether the library
+    waives consent there (default: as :func:`simulated` says of ``url``)."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str, simulated_port=None):
         self.url = url
-        self.real = not simulated(url)
+        self.simulated = simulated(url) if simulated_port is None else bool(simulated_port)
+        self.real = not self.simulated
 
-    def _need(self, permission, granted, text):
-        if permission not in granted:
-            raise Needed(permission, text)
+    @staticmethod
+    def allow(granted=()) -> Permission:
+        """The library's ``allow=`` for what a page granted."""
+        out = Permission.NONE
+        for g in granted:
+            out |= GRANTS.get(g, Permission.NONE)
+        return out
 
-    # -- mightyZAP ------------------------------------------------------------------------------
+    def needed(self, e) -> Needed:
+        """The page's question for the library's :class:`~zkzap.errors.PermissionNeeded` ``e``:
+        force first (the dialog's checkbox), then the engine, then the stored write."""
+        missing = e.missing
+        reasons = getattr(e, "reasons", None) or {}
+
+        def why(perms):
+            return "; ".join(dict.fromkeys(r for p, r in reasons.items() if p & perms)) or str(e)
+
+        if missing & P.FORCE:
+            return Needed(FORCE, f"{why(P.FORCE)}. This changes how the actuator is reached or answers, or "
+                                 "goes beyond what the 12Lf documents (a wrong value can make it unreachable). "
+                                 "Tick 'force' to send it.")
+        if missing & Permission.ENGINE:
+            frame = getattr(e, "frame", b"") or b""
+            return Needed(ENGINE, f"{frame.hex(' ').upper()} to {self.url}: {why(Permission.ENGINE)}.")
+        frame = getattr(e, "frame", b"") or b""
+        names = []
+        if len(frame) > 5:
+            try:
+                names = zap.Command(frame).stored_writes
+            except (zap.PacketError, ValueError):
+                names = []
+        what = ", ".join(names) or why(Permission.STORED | Permission.FACTORY)
+        return Needed(STORED, f"This writes stored settings on {self.url} ({what}). They survive power-off, "
+                              "and each write wears the actuator's memory.")
+
+    @contextlib.contextmanager
+    def asking(self):
+        """``with policy.asking():`` a library call; its PermissionNeeded (nothing was sent)
+        becomes :class:`Needed`."""
+        from ..errors import PermissionNeeded
+
+        try:
+            yield
+        except PermissionNeeded as e:
+            raise self.needed(e) from None
+
+    def _require(self, needs, granted, what, frame) -> None:
+        with self.asking():
+            P.require(needs, self.allow(granted), simulated=self.simulated, what=what, frame=frame)
+
+    # -- before a request's first frame -----------------------------------------------------------
 
     def zap_packets(self, packets, granted=()) -> None:
-        """Command packets about to go out: force for a protected setting (on every port),
-        consent for stored writes (on a real port)."""
-        protected = []
-        names = []
+        """Command packets about to go out, every one checked before the first (what the bus
+        checks as each goes out)."""
         for p in packets:
             cmd = zap.Command(p)
-            for name in PROTECTED:
-                if cmd.written_value(name) and name not in protected:
-                    protected.append(name)
-            for n in cmd.stored_writes:
-                if n not in names:
-                    names.append(n)
-        self.zap_protected(protected, granted)
-        if names and self.real:
-            self._need(STORED, granted, f"This writes stored settings on {self.url} ({', '.join(names)}). They "
-                                        "survive power-off, and each write wears the actuator's memory.")
+            self._require(cmd.needs(), granted, cmd.describe(), p)
 
-    def zap_protected(self, names, granted=()) -> None:
-        """Force for writing settings that change how an actuator is reached or answers."""
-        if names:
-            self._need(FORCE, granted, f"{', '.join(names)} changes how the actuator is reached or answers "
-                                       "(a wrong value can make it unreachable). Tick 'force' to write it.")
-
-    def zap_identity(self, what, granted=()) -> None:
-        """An ID or baud-rate change (verified by reading back): force, and consent on a real port."""
-        self.zap_protected([what.split(" ", 1)[0]], granted)
-        if self.real:
-            self._need(STORED, granted, f"This changes the {what} on {self.url}, a stored setting that survives "
-                                        "power-off.")
+    def zk_frames(self, frames, granted=()) -> None:
+        """Control frames a session is about to send, every one checked before the first (what
+        the ZK link checks as each goes out)."""
+        for f in frames:
+            cf = zk.ControlFrame(f)
+            self._require(cf.needs(), granted, f"{cf.frame.hex(' ').upper()}", cf.frame)
 
     def zap_check(self, ids, move, granted=()) -> None:
         """A self-check's full-stroke moves (a real port only)."""
-        if move and self.real:
+        if move and self.real and MOVE not in granted:
             many = len(ids) > 1
-            self._need(MOVE, granted, f"The check moves actuator{'s' if many else ''} "
-                                      f"{', '.join(map(str, ids))} on {self.url} through "
-                                      f"{'their' if many else 'its'} full stroke.")
-
-    def zap_apply(self, writes, granted=()) -> None:
-        """A fleet apply's planned writes."""
-        self.zap_protected(sorted({w.register.name for w in writes if w.register.name in PROTECTED}), granted)
-        stored = sum(1 for w in writes if w.register.stored)
-        if stored and self.real:
-            self._need(STORED, granted, f"The apply makes {len(writes)} write{'s' if len(writes) != 1 else ''} "
-                                        f"on {self.url}, {stored} of them stored settings that survive power-off.")
-
-    # -- ZK -----------------------------------------------------------------------------------
-
-    def zk_frames(self, frames, granted=()) -> None:
-        """Control frames about to go out: consent for one that can start the engine or run ECU
-        hardware (a real port only)."""
-        if not self.real:
-            return
-        for f in frames:
-            hazard = zk.ControlFrame(f).hazard
-            if hazard:
-                self._need(ENGINE, granted, f"{zk.ControlFrame(f).frame.hex(' ').upper()} to {self.url}: {hazard}.")
-
+            raise Needed(MOVE, f"The check moves actuator{'s' if many else ''} {', '.join(map(str, ids))} on "
+                               f"{self.url} through {'their' if many else 'its'} full stroke.")

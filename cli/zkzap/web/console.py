@@ -10,12 +10,13 @@ same request again with the permission in ``grant``.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import traceback
 from collections import deque
 
-from ..errors import ZkzapError
+from ..errors import PermissionNeeded, ZkzapError
 from .consent import Needed, Policy
 
 #: Log lines a page that connects is shown.
@@ -43,9 +44,9 @@ class Console:
     #: Requests a page that watches may send too.
     watch_ops = frozenset()
 
-    def __init__(self, url: str):
+    def __init__(self, url: str, simulated=None):
         self.url = url
-        self.policy = Policy(url)
+        self.policy = Policy(url, simulated)
         self.hub = None
         self.logs = deque(maxlen=LOG_KEPT)
         self.failure = None           # the ZkzapError that stopped the worker (a port failure)
@@ -170,13 +171,23 @@ class Console:
             self.error(ctx, f"unknown request {op!r}")
             return
         try:
-            fn(ctx, ctx.msg)
+            with self.granting(self.policy.allow(ctx.granted)):
+                fn(ctx, ctx.msg)
         except Needed as e:
             self.hub.send(ctx.cid, {"type": "consent", "req": ctx.req, "op": op, **e.message()})
+        except PermissionNeeded as e:      # the library refused a frame (nothing sent): ask for it
+            self.hub.send(ctx.cid, {"type": "consent", "req": ctx.req, "op": op, **self.policy.needed(e).message()})
         except ZkzapError as e:
             self.error(ctx, str(e))
         except (ValueError, TypeError, KeyError) as e:
             self.error(ctx, f"{op}: {e}")
+
+    @contextlib.contextmanager
+    def granting(self, allow):
+        """While one request runs: the library's permissions ``allow`` (what the page granted)
+        on this console's port; a console whose frames go out later (an engine session) gives
+        them itself."""
+        yield
 
     def error(self, ctx, text: str) -> None:
         if self.hub is not None:

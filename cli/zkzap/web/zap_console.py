@@ -6,12 +6,14 @@ The worker owns the :class:`~zkzap.api.zap.Bus` (a half-duplex line: one transac
 time). Between requests it polls the actuators found (:class:`~zkzap.api.watch.Watcher`:
 goal and present position, current, voltage, moving, in one Load Data each); a request ends
 the poll in between two polls and the poll resumes after it. Long jobs (scan, backup, apply,
-check) report progress and stop at the next step when cancelled. Writes follow the command
-line's consent rules through :class:`~.consent.Policy`.
+check) report progress and stop at the next step when cancelled. Writes carry the library's
+permissions, as the page granted them (:class:`~.consent.Policy`): the bus refuses a frame that
+needs one more, and the page asks for it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 from ..api import fleet
@@ -19,6 +21,7 @@ from ..api.watch import Watcher
 from ..codec import zap
 from ..codec.fields import FieldValueError
 from ..errors import NoReply, UsageError
+from .consent import needs_force
 from .console import Console, number
 
 R = zap.REGISTER_BY_NAME
@@ -45,7 +48,7 @@ class ZapConsole(Console):
     kind = "zap"
 
     def __init__(self, bus, *, rate=30.0, scan_ids=range(254), retries=2):
-        super().__init__(bus.url)
+        super().__init__(bus.url, simulated=bus.link.simulated)
         self.bus = bus
         self.rate = rate
         self.retries = retries
@@ -55,6 +58,15 @@ class ZapConsole(Console):
         self._progress_t = 0.0
         self._first_scan = list(scan_ids) if scan_ids is not None else None
         self.polls = 0
+
+    @contextlib.contextmanager
+    def granting(self, allow):
+        saved = self.bus.allow
+        self.bus.allow = saved | allow
+        try:
+            yield
+        finally:
+            self.bus.allow = saved
 
     # -- the worker -----------------------------------------------------------------------------
 
@@ -297,8 +309,7 @@ class ZapConsole(Console):
         value = number(msg, "value", int, what=reg.name)
         reg.check(value)
         if reg.name == "id":
-            self.policy.zap_identity("ID", ctx.granted)
-            new = self.bus.set_id(ident, value, force=False)
+            new = self.bus.set_id(ident, value, force=False)     # the checked way: a stored write
             rec = self.actuators.pop(ident)
             rec["id"] = new
             self.actuators[new] = rec
@@ -309,7 +320,6 @@ class ZapConsole(Console):
             return
         if reg.name == "baud-rate":
             baud = zap.BAUD_CODES[value]
-            self.policy.zap_identity(f"baud rate (to {baud})", ctx.granted)
             was = self.bus.baud
             self.bus.set_baud(ident, baud)
             self.actuators[ident]["baud"] = baud
@@ -319,9 +329,7 @@ class ZapConsole(Console):
             self._table()
             self.reply(ctx, id=ident, register=reg.name, value=value)
             return
-        pkt = zap.store(ident, reg, value)
-        self.policy.zap_packets([pkt], ctx.granted)
-        self.bus.store(ident, reg, value, force=reg.name in fleet.PROTECTED)
+        self.bus.store(ident, reg, value)          # with what the page granted (see granting)
         if reg.name == "feedback-return-mode":
             self.actuators[ident]["return_mode"] = value
             self.actuators[ident]["polled"] = value != 0
@@ -406,7 +414,6 @@ class ZapConsole(Console):
         if msg.get("plan") or not writes:
             self.reply(ctx, plan=[w.record() for w in writes], unchanged=unchanged, applied=False)
             return
-        self.policy.zap_apply(writes, ctx.granted)
         done = []
         count = {"n": 0}
 
@@ -432,7 +439,7 @@ def _register_info(reg) -> dict:
             "memory": reg.memory, "lo": reg.lo, "hi": reg.hi, "unit": reg.unit, "scale": reg.scale,
             "choices": {str(k): v for k, v in reg.choices.items()} if reg.choices else None,
             "range": reg.describe_range(), "help": reg.help, "default": reg.default,
-            "protected": reg.name in fleet.PROTECTED}
+            "protected": needs_force(reg)}
 
 
 def _ranges(ids) -> str:

@@ -9,7 +9,9 @@ throttle 0), on the abort (standby, throttle 0, out of RPM mode, pump off), and 
 controlling page closes or falls silent for a second (the dead-man rule: standby), on a new ECU
 error, a silent ECU, a violated limit (``--on-limit abort``) or when the console shuts down.
 
-Interlocks, as on the command line: a start needs consent on a real port; it is refused while
+Interlocks, as on the command line: a start needs the ENGINE permission on a real port (the
+page's consent, given to the ECU's link for that control session; the link refuses every frame
+without it, :mod:`.consent`); it is refused while
 the ECU is silent or a limit is violated now; RPM mode needs protocol version 4 or later and a
 target within the max rpm the ECU reports (status ID 6).
 """
@@ -94,8 +96,10 @@ class ZkConsole(Console):
     watch_ops = frozenset({"abort"})
 
     def __init__(self, ecu, *, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S):
-        super().__init__(ecu.url)
         from ..api.limits import LimitSet
+        from ..link.zk_port import is_simulator
+
+        super().__init__(ecu.url, simulated=is_simulator(ecu.url))
 
         self.ecu = ecu
         self.tel = ecu.telemetry
@@ -111,7 +115,7 @@ class ZkConsole(Console):
         self.since = None
         self._session = None
         self._source = None
-        self._next = None             # ("control", LiveCommand, label) to run after the session ends
+        self._next = None             # ("control", LiveCommand, label, allow) to run after the session ends
         self._oneshot = None          # ("abort"|"stop", label): frames to send between sessions
         self._last_frame = None       # real time of the last status frame
         self._last_t = None           # its time on the source's clock
@@ -129,7 +133,7 @@ class ZkConsole(Console):
                 self._send_once(kind, label)
             nxt, self._next = self._next, None
             if nxt is not None and not self.closing_now:
-                self._control(nxt[1], nxt[2])
+                self._control(nxt[1], nxt[2], nxt[3])
             else:
                 self._monitor()
 
@@ -150,7 +154,16 @@ class ZkConsole(Console):
         if outcome.reason not in ("end", "duration", "count"):
             outcome.raise_for_status()
 
-    def _control(self, command, label):
+    def _control(self, command, label, allow):
+        link = self.ecu.link
+        saved = link.allow
+        link.allow = saved | allow              # what the page granted, for this control session
+        try:
+            self._control_session(command, label)
+        finally:
+            link.allow = saved
+
+    def _control_session(self, command, label):
         if self.limits is not None:
             self.limits.tripped = None          # a violation seen before this start is not this run's
         self.tel.new_error = None               # an error before the start is not a new one
@@ -347,8 +360,8 @@ class ZkConsole(Console):
         cmd = self._command_from(msg)
         self._ready()
         self._limits_hold()
-        self.policy.zk_frames(cmd.frames, ctx.granted)
-        self._next = ("control", cmd, ctx.label)
+        self.policy.zk_frames(cmd.frames, ctx.granted)      # refused before the session starts
+        self._next = ("control", cmd, ctx.label, self.policy.allow(ctx.granted))
         self._cut()
         self.reply(ctx, command=cmd.describe())
 
@@ -357,6 +370,8 @@ class ZkConsole(Console):
         if self.command is None:
             raise UsageError("the engine is not running under this console; start it first")
         cmd = self._command_from(msg, rpm_used=self.command.rpm_used)
+        for f in cmd.frames:
+            self.ecu.link.authorize(f)          # with the session's permissions, before it goes out
         was = self.command
         self.command = cmd
         if (cmd.mode, cmd.throttle, cmd.rpm) != (was.mode, was.throttle, was.rpm):

@@ -8,14 +8,14 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..batch import BATCH_EXITS
-from ..options import consent, zap_yes_option as yes_option
+from ..batch import ZAP_BATCH_EXITS
+from ..options import InputPath, consent, zap_yes_option as yes_option
 from .compose import _link_args, link_options, open_link
 
 
-@BATCH_EXITS
+@ZAP_BATCH_EXITS
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath("zap batch"))
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @yes_option
@@ -25,9 +25,11 @@ def batch(file, keep_going, yes, **common):
 
     One command per line, as on the command line without 'zap' and the port options
     (load present-position --id 1; store goal-speed 600 --id 2); '#' comments and blank lines
-    are skipped. Every line is checked (and its packets composed) before anything is sent: a
-    bad line is refused naming FILE:LINE (stdin:LINE), exit status 2. On a real port the
-    stored writes of the whole batch need one consent (--yes, or one prompt listing them).
+    are skipped. Every line is checked whole before anything is sent — each command runs every
+    check it makes at run time (values, registers, conditions, files, permissions) up to the
+    point where it would open the port: a bad line is refused naming FILE:LINE (stdin:LINE),
+    exit status 2, nothing sent. On a real port the stored writes of the whole batch need one
+    consent (--yes, or one prompt listing them); --force goes on the line that needs it.
 
     Each command gives one JSON Lines record on stdout: line, command, exit (the status the
     command would have exited with), result (what it printed: a value, a record or a list of
@@ -50,7 +52,7 @@ def batch(file, keep_going, yes, **common):
     from .. import zap as _  # noqa: F401 - the group, for the lines
     from ...link.shared import sharing
     from ...link.zap_bus import is_simulated
-    from ..batch import check_lines, read_lines, read_source, run_lines, zap_consent_items
+    from ..batch import check_lines, consent_items, line_ids, read_lines, read_source, run_lines
     from . import zap as group
 
     text, name = read_source(file)
@@ -62,17 +64,11 @@ def batch(file, keep_going, yes, **common):
     if not lines:
         return
     if not (common["sim"] or is_simulated(common["port"])):
-        items = zap_consent_items(lines)
+        items = consent_items(lines)
         if items:
             consent(f"this batch writes stored settings on {common['port']}; they survive power-off: "
                     + "; ".join(items), yes)
-    ids = set()
-    for line in lines:
-        ident = line.params.get("ident")
-        if isinstance(ident, int) and ident != zap.BROADCAST:
-            ids.add(ident)
-        for f in line.frames:
-            ids.update(zap.Command(f).target_ids())
+    ids = {i for line in lines for i in line_ids(line) if i != zap.BROADCAST}
     args = _link_args(common)
     args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
     with open_link(ids=sorted(ids) or [0], **args) as bus, sharing("zap", bus):

@@ -17,9 +17,9 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, FiniteRange, IntRange, SignedCommand, consent, dry_run_option, port_options,
+from ..options import (Choice, FiniteRange, IntRange, SignedCommand, dry_run_option, force_option, port_options,
                        zap_yes_option as yes_option)
-from .params import INT, REGISTER, id_option
+from .params import INSTRUCTION, INT, REGISTER, TARGET, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
 
@@ -117,7 +117,7 @@ def refuse_with_dry_run() -> None:
     would be ignored, so it is refused (exit 2)."""
     ctx = click.get_current_context(silent=True)
     if ctx is None or ctx.get_parameter_source("dry_run") != click.core.ParameterSource.COMMANDLINE:
-        return                # -n not given by the user (a batch composes its lines this way first)
+        return                # -n not given on the command line (a default_map, a program)
     for p in ctx.command.params:
         spelled = WIRE_ONLY.get(p.name, "")
         if spelled and ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE:
@@ -142,54 +142,38 @@ def _port_from_env() -> bool:
         return False
 
 
-def ask_consent(packets, *, port, sim, yes) -> None:
-    """On a real port, writing stored (NV) settings needs consent (--yes or a prompt)."""
-    from ...link.zap_bus import is_simulated, stored_writes
+def grant(packets, *, port, sim, yes, force) -> "Permission":
+    """The permissions the packets need, granted as the command line maps them (--force, and
+    --yes or a prompt on a real port; see :func:`zkzap.commands.options.authorize`)."""
+    from ...link.zap_bus import is_simulated
+    from ..options import authorize
 
-    if sim or is_simulated(port):
-        return
+    cmds = [zap.Command(p) for p in packets]
     names = []
-    for p in packets:
-        for n in stored_writes(p):
-            if n not in names:
-                names.append(n)
+    for c in cmds:
+        names += [n for n in c.stored_writes if n not in names]
+    what = cmds[0].describe() if len(cmds) == 1 else f"{cmds[0].describe()} (and {len(cmds) - 1} more packets)"
+    text = None
     if names:
-        consent(f"this writes stored settings on {port} ({', '.join(names)}); they survive power-off "
-                "and each write wears the actuator's memory", yes)
-
-
-def refuse_protocol_change(packets, force) -> None:
-    from ...link.zap_bus import leaves_protocol
-
-    if not force and any(leaves_protocol(p) for p in packets):
-        raise UsageError("protocol-type: 0 switches the actuator to Modbus RTU and this tool can no "
-                         "longer reach it; pass --force to do it anyway")
-
-
-def refuse_id_write(packets, force) -> None:
-    """Writing the ID register directly skips set-id's checks: refused without --force."""
-    from ...link.zap_bus import writes_id
-
-    if force:
-        return
-    for p in packets:
-        if writes_id(p):
-            if p[3] == zap.BROADCAST:
-                raise UsageError("id: a broadcast ID write gives every actuator on the bus the same ID, and "
-                                 "their replies then collide; pass --force to do it anyway")
-            raise UsageError("id: writing the ID directly skips the checks of 'zap set-id NEW --id OLD' (that "
-                             "NEW is free, read back from NEW); use set-id, or pass --force")
+        text = (f"this writes stored settings on {port} ({', '.join(names)}); they survive power-off "
+                "and each write wears the actuator's memory")
+    return authorize(cmds, what=what, yes=yes, force=force, simulated=sim or is_simulated(port), consent_text=text,
+                     brief=", ".join(names) or None)
 
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
-              latency=None, low_latency=False, **_):
-    """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first. When
-    the command ends, a note says once how to lower a USB adapter's latency timer if the
-    measured latency shows it."""
+              latency=None, low_latency=False, allow=None, **_):
+    """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first;
+    ``allow``: the permissions its packets are given (see :func:`authorize`). When the command
+    ends, a note says once how to lower a USB adapter's latency timer if the measured latency
+    shows it."""
+    from ... import checking
+    from ...codec.permissions import as_permission
     from ...link.shared import Borrowed, shared
     from ...link.zap_bus import RETRIES, open_bus
 
     require_port(port, sim, sim_ids)
+    checking.effect("port", ids=list(ids))
     if sim and port:
         port = None                      # an explicit --sim beats the environment's default port
     mode = 1 if return_mode == "auto" else int(return_mode)
@@ -197,7 +181,7 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     lent = shared("zap")
     if lent is not None:            # a batch: every command over the one open port
         bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout,
-                       latency=latency if latency is not None else lent.latency)
+                       latency=latency if latency is not None else lent.latency, allow=as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
@@ -206,7 +190,7 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
                    return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
-                   latency=latency, low_latency=low_latency)
+                   latency=latency, low_latency=low_latency, allow=allow)
     from ..hints import adapter_notes
 
     adapter_notes(bus)
@@ -221,22 +205,7 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
 
 def describe(pkt: bytes) -> str:
     """One human line for a command packet: 'store goal-position=2047 to ID 1'."""
-    to = "every actuator (broadcast)" if pkt[3] == zap.BROADCAST else f"ID {pkt[3]}"
-    if not zap.is_command(pkt[5]):
-        return f"instruction 0x{pkt[5]:02X} ({len(pkt) - 7} parameter bytes) to {to}"
-    rec = zap.decode_packet(pkt)
-    what = rec["instruction"]
-    if "value" in rec:
-        what += f" {rec['register']}={rec['value']}"
-    elif "values" in rec:
-        what += " " + " ".join(f"{k}={v}" for k, v in rec["values"].items())
-    elif "targets" in rec:
-        what += f" {rec['register']} " + " ".join(f"{k}:{v}" for k, v in rec["targets"].items())
-    elif rec.get("instruction") == "load":
-        what += f" {rec['register']} ({rec['length']} bytes)"
-    elif rec.get("instruction") == "factory-reset":
-        what += (" (ID too)" if rec["reset_id"] else "") + (" (baud rate too)" if rec["reset_baud"] else "")
-    return f"{what} to {to}"
+    return zap.Command(pkt).describe()
 
 
 def acknowledgement(pkt: bytes, reply, bus) -> str:
@@ -266,9 +235,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
         from ...link.zap_safety import check_verifiable
 
         check_verifiable(packets)
-    refuse_protocol_change(packets, force)
-    refuse_id_write(packets, force)
-    ask_consent(packets, port=port, sim=sim, yes=yes)
+    allow = grant(packets, port=port, sim=sim, yes=yes, force=force)
     from ...link.zap_bus import device_error
 
     probe = next((p[3] for p in packets if p[3] != zap.BROADCAST), None)
@@ -276,7 +243,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
     with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode=return_mode,
                    retries=retries, ids=targets_of(packets), probe=probe,
                    stop_bits=wire.get("stop_bits", 1), latency=wire.get("latency"),
-                   low_latency=wire.get("low_latency", False)) as bus:
+                   low_latency=wire.get("low_latency", False), allow=allow) as bus:
         for p in packets:
             reply = bus.command(p, check=False)
             if show_reply and reply is not None:
@@ -505,14 +472,11 @@ def _write_command(name, builder, doc):
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
     @click.argument("value", metavar="VALUE", type=INT)
     @id_option()
-    @click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and direct ID "
-                                                "writes (which skip set-id's checks).")
+    @force_option
     @_verify_option(name)
     @wire_options
     def command(reg, value, ident, force, verify=False, **common):
-        pkt = builder(ident, reg, value)
-        refuse_protocol_change([pkt], force)
-        deliver([pkt], force=force, verify=verify, **common)
+        deliver([builder(ident, reg, value)], force=force, verify=verify, **common)
 
     return command
 
@@ -521,14 +485,18 @@ _WIRE_NOTE = """
 Sent to a port, the write is acknowledged only in feedback-return-mode 2 (-v says how it went);
 otherwise nothing confirms it, even with nothing attached to the port: 'zap store --verify' reads
 the value back. Error bits in an acknowledgement give exit status 5. On a real port, writing a stored (NV)
-register asks for consent (--yes); the simulator (--sim, sim://) and loop:// never ask.
+register asks for consent (--yes); the simulator (--sim, sim://) and loop:// never ask (--force
+is needed there too).
 """
 
 store = _write_command("store", zap.store, """Store Data (0xF3): write VALUE to REGISTER.
 
-VALUE is an integer in the register's units ('zap registers' lists ranges), written
-little-endian in the register's size. Read-only registers and values out of range are refused. Writing the id register needs
---force: 'zap set-id' checks first that the new ID is free and reads it back.
+VALUE is an integer in the register's units ('zap registers' lists ranges, bits and
+choices), written little-endian in the register's size. Read-only registers and values outside
+what the register documents are refused. Writing id, baud-rate or protocol-type needs --force
+('zap set-id' and 'zap set-baud' check and verify instead), as do addresses the map does not
+document (0x05, lock) and an address inside a multi-byte register (0x87, goal-position's high
+byte).
 """ + _WIRE_NOTE + """
 \b
 Examples:
@@ -565,18 +533,20 @@ def execute(ident, **common):
 @click.option("--reset-id", is_flag=True, help="Also reset the ID to 0 (option bit 0).")
 @click.option("--reset-baud", is_flag=True, help="Also reset the baud rate to 57600 (option bit 1).")
 @id_option()
+@force_option
 @wire_options
-def factory_reset(reset_id, reset_baud, ident, **common):
+def factory_reset(reset_id, reset_baud, ident, force, **common):
     """Factory Reset (0xF6): restore the factory settings (the actuator then restarts).
 
-    On a real port it asks for consent (--yes): every stored setting is overwritten.
+    On a real port it asks for consent (--yes): every stored setting is overwritten. To every
+    actuator at once (--id broadcast) it needs --force too.
 
     \b
     Examples:
       zap factory-reset --id 1 --reset-id -n     # FF FF FF 01 03 F6 01 04
       zap factory-reset --id 1 -p /dev/ttyUSB0 --yes
     """
-    deliver([zap.factory_reset(ident, reset_id, reset_baud)], **common)
+    deliver([zap.factory_reset(ident, reset_id, reset_baud)], force=force, **common)
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
@@ -593,27 +563,11 @@ def restart(ident, **common):
     deliver([zap.restart(ident)], **common)
 
 
-def parse_targets(pairs):
-    """``["1:1023", "2:2047"]`` -> ``[(1, 1023), (2, 2047)]``."""
-    out = []
-    for item in pairs:
-        ident, sep, value = item.partition(":")
-        if not sep:
-            raise UsageError(f"target: {item!r} is not ID:VALUE (for example 1:2047)")
-        try:
-            v = int(value, 0)
-        except ValueError:
-            raise UsageError(f"target: value {value!r} of {item!r} is not an integer") from None
-        out.append((zap.check_id(ident, allow_broadcast=False), v))
-    return out
-
-
 @click.command("sync-move", cls=Command, context_settings=CONTEXT)
-@click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...")
+@click.argument("targets", nargs=-1, required=True, metavar="ID:VALUE...", type=TARGET)
 @click.option("-r", "--register", "reg", type=REGISTER, default="goal-position", show_default=True,
               help="Register written on every actuator.")
-@click.option("--force", is_flag=True, help="Allow protocol-type 0 (leaves the IR protocol) and ID writes "
-                                            "(which skip set-id's checks).")
+@force_option
 @_verify_option("sync-move")
 @wire_options
 def sync_move(targets, reg, force, verify, **common):
@@ -627,19 +581,16 @@ def sync_move(targets, reg, force, verify, **common):
       zap sync-move 1:1023 2:2047 -n    # FF FF FF FE 0A 73 86 02 01 FF 03 02 FF 07 F1
       zap sync-move 1:300 2:300 3:300 --register goal-speed -p /dev/ttyUSB0
     """
-    packets = zap.symmetric_store(reg, parse_targets(targets))
-    refuse_protocol_change(packets, force)
-    deliver(packets, force=force, verify=verify, **common)
+    deliver(zap.symmetric_store(reg, list(targets)), force=force, verify=verify, **common)
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("instruction", metavar="INSTRUCTION")
+@click.argument("code", metavar="INSTRUCTION", type=INSTRUCTION)
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
 @id_option()
-@click.option("--force", is_flag=True, help="Allow writing protocol-type 0 (leaves the IR protocol) and ID "
-                                            "writes (which skip set-id's checks).")
+@force_option
 @wire_options
-def raw(instruction, params, ident, force, **common):
+def raw(code, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
     INSTRUCTION is a name (echo, load, store, send, execute, factory-reset, restart, sync-move;
@@ -647,7 +598,11 @@ def raw(instruction, params, ident, force, **common):
     code: 0xF2 (hex), 242 (decimal, as register addresses are read) or F2. PARAMs are hex bytes
     in any notation (8C 02, 0x8C,0x02). Sent to a
     port, the reply packet (when one comes) is printed as hex; an unknown instruction waits for
-    a reply but does not fail without one.
+    a reply but does not fail without one. The packet needs what it writes needs (see
+    'zap store'): --yes on a real port for stored settings and for system-write (IR Robot's
+    factory reset); --force for the id, baud-rate and protocol-type registers, addresses and
+    values the map does not document, part of a multi-byte register, and any undocumented
+    instruction but system-write.
 
     \b
     Examples:
@@ -655,24 +610,5 @@ def raw(instruction, params, ident, force, **common):
       zap raw 0xF3 03 01 -n          # FF FF FF 00 04 F3 03 01 04
       zap raw load 00 03 --id 1 -p /dev/ttyUSB0 | zap decode
     """
-    code = _instruction_code(instruction)
     data = parse_hex(" ".join(params), what="params") if params else b""
-    pkt = zap.packet(ident, code, data)
-    refuse_protocol_change([pkt], force)
-    deliver([pkt], force=force, show_reply=True, **common)
-
-
-def _instruction_code(text: str) -> int:
-    key = text.strip().lower()
-    ins = zap.INSTRUCTION_BY_NAME.get(key)
-    if ins is not None:
-        return ins.code
-    try:
-        # as register addresses: 0xF2 is hex, 242 decimal; bare hex with a letter (F2) is hex
-        code = int(key, 10) if key.isdigit() else int(key, 0) if key.startswith("0x") else int(key, 16)
-    except ValueError:
-        names = ", ".join(i.cli for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS)
-        raise UsageError(f"instruction: unknown {text!r}; allowed {names} or a code 0x00..0xFF") from None
-    if not 0 <= code <= 0xFF:
-        raise UsageError(f"instruction: code {text} is out of range; allowed 0x00..0xFF")
-    return code
+    deliver([zap.packet(ident, code, data)], force=force, show_reply=True, **common)

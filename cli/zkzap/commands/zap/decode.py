@@ -11,8 +11,8 @@ from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (checked, close_output, decode_inputs, exits, format_option, note, note_skipped, open_output,
-                       output_format, output_options)
+from ..options import (InputPath, checked, close_output, decode_inputs, exits, format_option, note, note_skipped,
+                       open_output, output_format, output_options)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -38,7 +38,7 @@ def _table_cells(rec):
 
 @exits({CHECK_FAILED: "a single packet given as arguments has a bad checksum"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", shell_complete=binary_inputs)
+@click.argument("inputs", nargs=-1, metavar="[HEX...|FILE...]", type=InputPath("frames", "FILE"), shell_complete=binary_inputs)
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options(formats=RECORD_FORMATS)

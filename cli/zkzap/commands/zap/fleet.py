@@ -12,9 +12,9 @@ import click
 
 from ...api import fleet
 from ...codec import zap
-from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, OK, USAGE, UsageError
+from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, MORE_TO_DO, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, FilePath, OutputPath, consent, exits, note, plural, resolve_format, warn,
+from ..options import (Choice, InputPath, OutputPath, consent, exits, note, plural, resolve_format, warn,
                        zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
@@ -107,7 +107,7 @@ SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search:
 @click.option("--scan", "scan_", is_flag=True,
               help="Back up every actuator that answers (IDs 0-253, or --ids, at -b's baud rates), found as "
                    "'zap scan' finds them. The default without --ids.")
-@click.option("-o", "--output", type=OutputPath(DOC_FORMATS, default=None), default=None,
+@click.option("-o", "--output", type=OutputPath("document", formats=DOC_FORMATS, default=None), default=None,
               help="Write the backup to FILE: .json, .toml or .yaml by its suffix (default: JSON on stdout).")
 @click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
@@ -134,6 +134,9 @@ def backup(ids, scan_, output, fmt, **common):
     """
     if output and output != "-":
         doc_fmt = fmt or fleet.format_of(output)
+        from ...outfile import check_path
+
+        check_path(output, "output")          # before the bus is read: the file is written at the end
     else:
         doc_fmt = fmt or "json"
     if common["return_mode"] == "0":
@@ -168,7 +171,7 @@ def backup(ids, scan_, output, fmt, **common):
         doc = fleet.read_fleet(bus, found, on_actuator=said)
     doc["port"] = "sim" if common["sim"] else common["port"]
     if output and output != "-":
-        fleet.dump_document(doc, output)
+        fleet.dump_document(doc, output, doc_fmt)
         note(f"{len(targets)} actuator{'s' if len(targets) != 1 else ''} ({fleet._ranges(targets)}) "
              f"backed up to {output}")
     else:
@@ -189,8 +192,8 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
 @exits({OK: "equal", CHECK_FAILED: "they differ (like diff), or two actuators answer to one ID on the bus",
         USAGE: "a bad file or option"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("a", metavar="A")
-@click.argument("b", metavar="B")
+@click.argument("a", metavar="A", type=InputPath("fleet"))
+@click.argument("b", metavar="B", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Compare only these actuators (default: every ID of either file; on the bus, every "
                    "actuator a scan finds at -b's baud rates).")
@@ -245,7 +248,8 @@ def diff(a, b, ids, everything, compare, fmt, **common):
     _write_rows(rows, fleet.DIFF_COLUMNS, fmt, table_columns=table, title=title)
     different = sum(1 for r in rows if not r["equal"])
     if different:
-        raise CheckFailed(f"{different} difference{'s' if different != 1 else ''} between {a} and {b}")
+        note(f"{different} difference{'s' if different != 1 else ''} between {a} and {b} ({compare} registers)")
+        raise click.exceptions.Exit(1)        # a result, like diff(1), not an error: exit 1 and a note
     if sys.stderr.isatty() or common["verbose"]:
         note(f"{a} and {b} are equal ({compare} registers)")
 
@@ -261,7 +265,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
         USAGE: "a bad FILE or option (nothing written)", NO_REPLY: "an actuator does not answer",
         DEVICE_ERROR: "an actuator reports error bits"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", metavar="FILE", type=FilePath())
+@click.argument("file", metavar="FILE", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Apply only these actuators of FILE (default: all of them).")
 @click.option("--map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
@@ -289,8 +293,9 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     a real port (--yes), writes, reads each back, and prints one row per write: id, register,
     old (the bus's value), new (FILE's), status (verified, mismatch; planned with --plan),
     read_back. Volatile settings are written only when named in --only; id, baud-rate,
-    protocol-type and feedback-return-mode only with --only and --force. A file from another
-    model or firmware is refused unless --force.
+    protocol-type and feedback-return-mode only with --only and --force: the plan and the
+    summary name every difference left out and why, so "0 writes" never hides one. A file from
+    another model or firmware is refused unless --force.
 
     An interrupted apply (Ctrl-C, a vanished port, a silent actuator) prints the writes that
     were made and says which; running the same command again makes the rest. Exit status 0
@@ -317,15 +322,19 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
     targets = [t for _, t in pairs]
+    from ...codec.permissions import FORCE, Permission
     from ...io.term import is_tty
     from ...link.zap_bus import device_error
 
-    if _real(common) and not yes and not plan_only and not (is_tty(sys.stdin) and is_tty(sys.stderr)):
+    interactive = is_tty(sys.stdin) and is_tty(sys.stderr)
+    if _real(common) and not plan_only and (yes or not interactive):
+        # a script gets its answer before the port opens; a terminal sees the plan first (below)
         consent(f"apply {file} to {common['port']}: it writes stored settings that survive power-off", yes)
+    allow = (FORCE if force else Permission.NONE) | (Permission.STORED if yes else Permission.NONE)
 
-    with open_link(ids=targets, probe=targets[0], **_link_args(common)) as bus:
-        writes, unchanged, _ = fleet.plan_bus(bus, entries, pairs, name=file, only=only_regs, skip=skip_regs,
-                                              force=force, on_mismatch=warn)
+    with open_link(ids=targets, probe=targets[0], allow=allow, **_link_args(common)) as bus:
+        writes, unchanged, current = fleet.plan_bus(bus, entries, pairs, name=file, only=only_regs, skip=skip_regs,
+                                                    force=force, on_mismatch=warn)
         n_act = len({w.target for w in writes})
         stored = sum(1 for w in writes if w.register.stored)
         equal = plural(unchanged, "setting") + " already equal"
@@ -336,20 +345,24 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
             kept = f" ({stored} of them to stored settings, which survive power-off)" if stored else ""
         to_write = f"{plural(len(writes), 'write')} on {plural(n_act, 'actuator')}{kept}"
         summary = f"{to_write}; {equal}" if writes else f"nothing to write; {equal}"
+        left_out = fleet.left_out(entries, pairs, current, only=only_regs, skip=skip_regs)
+        if left_out:
+            summary += "; " + fleet.describe_left_out(left_out)
         if plan_only:
             _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, fmt, table_columns=PLAN_TABLE,
                         title=f"plan: {file}")
             note(f"plan: {summary}; nothing written")
             return
         if not writes:
-            note(f"nothing to write: the bus matches {file} ({unchanged} setting{'s' if unchanged != 1 else ''} "
-                 "already equal)")
+            note(f"nothing to write: every setting apply writes matches {file} ({unchanged} already equal)"
+                 + (f"; {fleet.describe_left_out(left_out)}" if left_out else ""))
             return
         if _real(common) and not yes:
             if is_tty(sys.stderr):
                 _write_rows([w.record() for w in writes], fleet.PLAN_COLUMNS, "table", table_columns=PLAN_TABLE,
                             title=f"plan: {file}", stream=sys.stderr)
             consent(f"apply {file} to {common['port']}: {summary}", yes)
+            bus.allow |= Permission.STORED
         elif common["verbose"] or sys.stderr.isatty():
             note(f"applying {file}: {summary}")
         done: list = []
@@ -375,7 +388,8 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         w = errs[0]
         err = sum(1 << b for b, n in zap.ERROR_BITS.items() if n in w.errors)
         raise device_error(Reply(w.target, err, b"", b""))
-    note(f"{len(writes)} write{'s' if len(writes) != 1 else ''} made and verified ({unchanged} already equal)")
+    note(f"{len(writes)} write{'s' if len(writes) != 1 else ''} made and verified ({unchanged} already equal"
+         + (f"; {fleet.describe_left_out(left_out)}" if left_out else "") + ")")
 
 
 def _report_interrupted(writes, done, fmt, file, exc):
@@ -404,16 +418,19 @@ def _report_interrupted(writes, done, fmt, file, exc):
 
 # -- setup ---------------------------------------------------------------------------------------
 
-@exits({OK: "every ID is done", CHECK_FAILED: "some IDs remain (stopped, skipped, or a refusal)"})
+@exits({OK: "every ID is done",
+        CHECK_FAILED: "IDs were skipped or one could not be set up (two answer, none found, a read-back differs)",
+        MORE_TO_DO: "more to do: the run stopped as asked (--no-wait after its one ID, or q) with IDs pending; "
+                    "running it again goes on"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.option("--ids", "ids", type=IdList(), required=True, metavar="LIST",
               help="The IDs to give, in order, one actuator each: like 1-8.")
-@click.option("--config", "config", type=FilePath(), default=None,
+@click.option("--config", "config", type=InputPath("fleet"), default=None,
               help="A backup file whose stored settings each actuator gets (id, baud-rate, protocol-type "
                    "and feedback-return-mode excepted).")
 @click.option("--config-id", type=IdList(), default=None, metavar="ID",
               help="Which actuator of --config to copy (default: its only one).")
-@click.option("--state", "state_path", type=FilePath(), default="zap-setup.json", show_default=True,
+@click.option("--state", "state_path", type=OutputPath("state"), default="zap-setup.json", show_default=True,
               help="The state file: a second run resumes where the first stopped.")
 @click.option("--skip", "skip", type=IdList(), default=None, metavar="LIST", help="IDs of --ids to leave out.")
 @click.option("--redo", "redo", type=IdList(), default=None, metavar="LIST",
@@ -423,7 +440,8 @@ def _report_interrupted(writes, done, fmt, file, exc):
 @click.option("--find-baud", type=actuator_bauds(), default="all", show_default=True, metavar="BAUDS",
               help="The baud rates to search: a list or 'all' (57600 first).")
 @click.option("--no-wait", is_flag=True,
-              help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop.")
+              help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop; "
+                   "exit status 8 when IDs remain pending.")
 @yes_option
 @link_options
 def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, no_wait, yes, **common):
@@ -435,9 +453,11 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
     when two actuators answer (or one that was set up already), gives it the ID, applies
     --config's stored settings, and verifies by reading back. The state file records each ID
     done, so a second run (after a crash, a Ctrl-C, or another day) resumes with the next one.
-    The actuator keeps the baud rate it was found at. Exit status 0 when every ID is done, 1
-    when some remain (stopped, skipped, or a refusal), 2 for bad options; on a real port the
-    ID changes need consent (--yes).
+    The actuator keeps the baud rate it was found at. Exit status 0 when every ID is done; 8
+    (more to do) when the run stopped as asked with IDs still pending (--no-wait after its one
+    ID, or q), so a script can loop on it; 1 when IDs were skipped or one could not be set up
+    (two answer, none found, a read-back differs); 2 for bad options. On a real port the ID
+    changes need consent (--yes).
 
     \b
     Examples:
@@ -464,22 +484,32 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 raise UsageError(f"{opt}: ID {i} is not in --ids")
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be verified")
+    from ...outfile import check_state
+
+    check_state(state_path)                   # read now and saved after each ID: a file it can rewrite
     state = fleet.SetupState.load(state_path, ids)
     state.ids = ids
     for i in redo or ():
-        state.redo(i)
+        state.redo(i, save=False)
     for i in skip or ():
-        state.mark_skipped(i)
+        state.mark_skipped(i, save=False)
     if not state.pending():
-        note(f"every ID of {fleet._ranges(ids)} is done ({state_path}); --redo ID sets one up again")
+        if redo or skip:
+            state.save()
         _setup_summary(state)
+        _setup_end(state, state_path, stopped=False)
         return
-    if _real(common):
-        consent(f"setup gives actuators on {common['port']} new IDs (a stored setting)"
-                + (f" and {config}'s stored settings" if config else ""), yes)
+    from .scan import stored_consent
+
+    allow = stored_consent(common, yes, "setup gives actuators new IDs" + (f" and {config}'s stored settings"
+                                                                              if config else ""),
+                           "id" + (f" and {config}'s stored settings" if config else ""))
+    if redo or skip:
+        state.save()
     args = _link_args(common)
     args["baud"] = find_baud[0]
-    with open_link(ids=[0], **args) as bus:
+    stopped = refused = False
+    with open_link(ids=[0], allow=allow, **args) as bus:
         while state.pending():
             target = state.pending()[0]
             if not no_wait:
@@ -487,6 +517,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                               f"(s: skip ID {target}, q: quit) ")
                 if answer is None or answer == "q":
                     note(f"stopped before ID {target}; run the same command again to resume ({state_path})")
+                    stopped = True
                     break
                 if answer == "s":
                     state.mark_skipped(target)
@@ -509,18 +540,41 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 if no_wait:
                     raise
                 warn(f"ID {target}: {e}")
+                refused = True
                 continue
             state.mark_done(target, record)
             note(f"ID {target} done: found at ID {found[0]}, {found[1]} baud"
                  + (f"; {record.get('config', 0)} settings from {config}" if entry is not None else "")
                  + " (verified)")
             if no_wait:
+                stopped = True
                 break
     _setup_summary(state)
-    left = state.pending() + [i for i in state.skipped if i in ids]
-    if left:
-        raise CheckFailed(f"setup not complete: ID{'s' if len(left) != 1 else ''} "
-                          f"{fleet._ranges(left)} not set up ({state_path})")
+    _setup_end(state, state_path, stopped=stopped and not refused)
+
+
+def _setup_end(state, state_path, *, stopped):
+    """The end of a setup, and its exit status: 0 when every ID is done; 8 (more to do) when
+    the run stopped as asked (--no-wait after its one ID, q) with IDs pending; 1 when IDs were
+    skipped or could not be set up."""
+    from ...errors import MoreToDo
+
+    ids = state.ids
+    pending = state.pending()
+    skipped = [i for i in ids if i in state.skipped and i not in state.done]
+    if not pending and not skipped:
+        note(f"every ID of {fleet._ranges(ids)} is done ({state_path}); --redo ID sets one up again")
+        return
+    if pending and stopped and not skipped:
+        raise MoreToDo(f"more to do: ID{'s' if len(pending) != 1 else ''} {fleet._ranges(pending)} not set up yet; "
+                       f"run the same command again ({state_path})", pending=pending)
+    parts = []
+    if pending:
+        parts.append(f"ID{'s' if len(pending) != 1 else ''} {fleet._ranges(pending)} not set up")
+    if skipped:
+        parts.append(f"ID{'s' if len(skipped) != 1 else ''} {fleet._ranges(skipped)} skipped "
+                     f"(--redo {fleet._ranges(skipped)} sets {'them' if len(skipped) != 1 else 'it'} up)")
+    raise CheckFailed(f"setup not complete: {'; '.join(parts)} ({state_path})", pending=pending, skipped=skipped)
 
 
 def _ask(prompt):

@@ -57,8 +57,66 @@ class IntValue(click.ParamType):
             raise FieldValueError(f"{label}: {value!r} is not an integer") from None
 
 
+class InstructionType(click.ParamType):
+    """An instruction by name (the documented eight and IR Robot's vendor codes) or code, read
+    as register addresses are: ``0xF2`` and ``F2`` are hex, ``242`` decimal. Converts to the
+    code."""
+
+    name = "instruction"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, int):
+            return value
+        key = str(value).strip().lower()
+        ins = zap.INSTRUCTION_BY_NAME.get(key)
+        if ins is not None:
+            return ins.code
+        try:
+            # as register addresses: 0xF2 is hex, 242 decimal; bare hex with a letter (F2) is hex
+            code = int(key, 10) if key.isdigit() else int(key, 0) if key.startswith("0x") else int(key, 16)
+        except ValueError:
+            from ...errors import UsageError
+
+            names = ", ".join(i.cli for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS)
+            raise UsageError(f"instruction: unknown {value!r}; allowed {names} or a code 0x00..0xFF") from None
+        if not 0 <= code <= 0xFF:
+            from ...errors import UsageError
+
+            raise UsageError(f"instruction: code {value} is out of range; allowed 0x00..0xFF")
+        return code
+
+    def shell_complete(self, ctx, param, incomplete):
+        from click.shell_completion import CompletionItem
+
+        return [CompletionItem(i.cli, help=i.help) for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS
+                if i.cli.startswith(incomplete)]
+
+
+class TargetType(click.ParamType):
+    """``ID:VALUE`` (``2:2047``): an actuator (0..253) and a raw value; the register checks the
+    value. Converts to ``(id, value)``."""
+
+    name = "target"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        from ...errors import UsageError
+
+        ident, sep, raw = str(value).partition(":")
+        if not sep:
+            raise UsageError(f"target: {value!r} is not ID:VALUE (for example 1:2047)")
+        try:
+            v = int(raw, 0)
+        except ValueError:
+            raise UsageError(f"target: value {raw!r} of {value!r} is not an integer") from None
+        return zap.check_id(ident, allow_broadcast=False), v
+
+
 REGISTER = RegisterType()
 INT = IntValue()
+INSTRUCTION = InstructionType()
+TARGET = TargetType()
 
 
 def id_option(default=0, allow_broadcast=True, help=None):

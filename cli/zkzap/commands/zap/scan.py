@@ -12,11 +12,11 @@ import time
 
 import click
 
-from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks
+from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks  # noqa: F401 - re-exported
 from ...codec import zap
-from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
+from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (BaudList, Choice, FiniteRange, SignedCommand, consent, exits, format_option, id_option, note,
+from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, exits, format_option, id_option, note,
                        resolve_format, warn, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
@@ -62,11 +62,16 @@ def _progress(total, label):
     return progress
 
 
-def _consent_real(port, sim, yes, action):
+def stored_consent(common, yes, action, registers):
+    """The STORED permission for a procedure that writes a stored setting (set-id, set-baud,
+    setup), with consent on a real port (see :func:`zkzap.commands.options.authorize`)."""
+    from ...codec.permissions import Permission
     from ...link.zap_bus import is_simulated
 
-    if not (sim or is_simulated(port)):
-        consent(f"{action} on {port}: a stored setting that survives power-off", yes)
+    return authorize({Permission.STORED: "a stored setting that survives power-off"}, what=action,
+                     yes=yes, force=False, simulated=common["sim"] or is_simulated(common["port"]),
+                     consent_text=f"{action} on {common['port']}: a stored setting that survives power-off",
+                     brief=registers)
 
 
 # -- scan ----------------------------------------------------------------------------------------
@@ -320,8 +325,8 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
     if new == ident:
         note(f"ID {ident} already; nothing to do")
         return
-    _consent_real(common["port"], common["sim"], yes, f"change ID {ident} to {new}")
-    with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
+    allow = stored_consent(common, yes, f"change ID {ident} to {new}", "id")
+    with open_link(ids=[ident], probe=ident, allow=allow, **_link_args(common)) as link:
         Bus.over(link).set_id(ident, new, force=force, ready_timeout=ready_timeout)
     note(f"ID {ident} is now ID {new} (verified)")
 
@@ -350,8 +355,8 @@ def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
       zap set-baud 57600 --id 1 -b 115200 -p /dev/ttyUSB0 --yes
     """
     baud = int(new_baud)
-    _consent_real(common["port"], common["sim"], yes, f"change ID {ident}'s baud rate to {baud}")
-    with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
+    allow = stored_consent(common, yes, f"change ID {ident}'s baud rate to {baud}", "baud-rate")
+    with open_link(ids=[ident], probe=ident, allow=allow, **_link_args(common)) as link:
         Bus.over(link).set_baud(ident, baud, restart=not no_restart, ready_timeout=ready_timeout)
     if no_restart:
         note(f"ID {ident}: baud rate {baud} stored (verified); it takes effect at the next restart")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 
 import click
@@ -65,8 +64,9 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
                         example="moving==0") for u in until]
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
-               common["baud"])
+    reads = plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
+                       common["baud"])
+    shown = [r for _, _, regs in reads for r in regs]
     if fmt is None and output and output != "-":
         from ...io import format_for_path
 
@@ -76,18 +76,17 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     if fmt == "table" and not stdout_tty:
         raise UsageError("--format table: the live table needs a terminal; use jsonl or csv in a pipe")
     record_fmt = None if live and not output else (fmt if fmt not in (None, "table") else "jsonl")
-    if output and os.path.isdir(output):
-        raise UsageError(f"output: {output} is a directory")
+    columns = ["time", "t", "poll", "id"] + [r.name for r in shown] + ["errors", "status", "rtt_ms"]
+    stream, had = (None, False)
+    if record_fmt is not None:                  # checked now, opened by the first row
+        stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
     with open_link(ids=ids, **_link_args(common)) as bus:
         watcher = Watcher(bus, ids, list(registers), rate=rate, count=count, duration=duration, until=conds,
                           retries=common["retries"])
-        columns = ["time", "t", "poll", "id"] + [r.name for r in watcher.shown] + ["errors", "status", "rtt_ms"]
-        stream, had = (None, False)
         writer = None
         if record_fmt is not None:
             from ...io.writers import make_writer
 
-            stream, had = open_output(output, append)
             writer = make_writer(record_fmt, stream, columns, header=not had)
         view = None
         if live:

@@ -8,13 +8,13 @@ import click
 
 from .. import CONTEXT, Command
 from ..batch import BATCH_EXITS
-from ..options import abort_option, consent, note, port_options, yes_option
+from ..options import InputPath, abort_option, consent, note, port_options, yes_option
 from .telemetry import resolve_port
 
 
 @BATCH_EXITS
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("file", required=False, default="-", metavar="[FILE|-]")
+@click.argument("file", required=False, default="-", metavar="[FILE|-]", type=InputPath("zk batch"))
 @click.option("-k", "--keep-going", is_flag=True,
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @abort_option(default="standby",
@@ -27,10 +27,11 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
 
     One command per line, as on the command line without 'zk' and the port options
     (send control --state run --throttle 30 --for 10; monitor --count 20); '#' comments and
-    blank lines are skipped. Every line is checked (and its frames composed) before anything is
-    sent: a bad line is refused naming FILE:LINE (stdin:LINE), exit status 2. On a real port
-    the engine-starting commands of the whole batch need one consent (--yes, or one prompt
-    listing them).
+    blank lines are skipped. Every line is checked whole before anything is sent — each command
+    runs every check it makes at run time (values, limits, IDs, files, permissions) up to the
+    point where it would open the port: a bad line is refused naming FILE:LINE (stdin:LINE),
+    exit status 2, nothing sent. On a real port the engine-starting commands of the whole batch
+    need one consent (--yes, or one prompt listing them).
 
     Each command gives one JSON Lines record on stdout: line, command, exit, result (what it
     printed) and error when it failed; the status records of a 'send --for' or 'monitor' line
@@ -46,11 +47,10 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
       printf 'send keepalive\\nmonitor --count 5\\n' | zk batch --sim
       zk batch run.txt -p /dev/ttyUSB0 --yes
     """
-    from ...codec import zk
     from ...api.session import abort_frames, describe_abort
     from ...link.shared import sharing
     from ...link.zk_port import ZkLink, is_simulator
-    from ..batch import check_lines, read_lines, read_source, run_lines, zk_consent_items
+    from ..batch import check_lines, consent_items, read_lines, read_source, run_lines
     from . import zk as group
 
     text, name = read_source(file)
@@ -63,15 +63,14 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
     if not lines:
         return
     if not is_simulator(url):
-        items = zk_consent_items(lines)
+        items = consent_items(lines)
         if items:
             consent(f"this batch on {url} can start the engine or run ECU hardware: " + "; ".join(items), yes)
-    controls = any(zk.ControlFrame(f).controls_engine for line in lines for f in line.frames)
     link = ZkLink.open(url, baud, stop_bits=stop_bits)
     try:
         with sharing("zk", link):
             code = run_lines(group, "zk", lines, defaults, sys.stdout, keep_going=keep_going)
-        if code and controls and abort != "none":
+        if code and link.controlled and abort != "none":
             for f in abort_frames(abort):
                 link.write(f)
             note(f"batch stopped early: sent {describe_abort(abort)}")

@@ -8,7 +8,7 @@ import click
 
 from ...errors import OK, OUTPUT_ERROR, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import FilePath, FiniteRange, IntRange, exits, format_option
+from ..options import FiniteRange, InputPath, IntRange, exits, format_option
 
 TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "s"),
          ("running_s", "run s"), ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"),
@@ -20,7 +20,7 @@ DEFAULT_ABOVE = (80.0,)
 @exits({OK: "listed (or the service recorded)", USAGE: "FILE is missing or not a logbook, or bad usage",
         OUTPUT_ERROR: "the service could not be written"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("logbook_file", metavar="FILE", type=FilePath())
+@click.argument("logbook_file", metavar="FILE", type=InputPath("logbook"))
 @format_option()
 @click.option("--totals", "only_totals", is_flag=True, help="Only the totals (running hours, starts, fuel).")
 @click.option("--last", type=IntRange(1), default=None, metavar="N", help="Only the last N runs.")

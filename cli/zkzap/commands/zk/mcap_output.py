@@ -22,16 +22,17 @@ def check_mcap(output, append, snapshot) -> None:
         raise UsageError("format mcap: binary output; give -o FILE.mcap or redirect stdout")
 
 
-def open_mcap(output, append, snapshot):
-    """(binary stream, writer, snapshot=False) for an MCAP log on ``output`` ('-'/None: stdout)."""
+def open_mcap(output, append, snapshot, inputs=None):
+    """(binary stream, writer, snapshot=False) for an MCAP log on ``output`` ('-'/None: stdout);
+    a file is checked now and opened by the first record (:class:`zkzap.outfile.LazyOutput`)."""
     check_mcap(output, append, snapshot)
     from ...io.mcap import McapWriter
 
     if not output or output == "-":
         stream = sys.stdout.buffer
     else:
-        try:
-            stream = open(output, "wb")
-        except OSError as e:
-            raise UsageError(f"output: cannot open {output}: {e.strerror}") from None
+        from ...outfile import LazyOutput, OutFile, refuse_same_files
+
+        refuse_same_files({"--output": output}, inputs)
+        stream = LazyOutput(OutFile(output, binary=True).check())
     return stream, McapWriter(stream), False

@@ -14,7 +14,8 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from ...io import SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
-from ..options import FiniteRange, IntRange, note, output_file, port_options, protocol_version_option, rate_option
+from ..options import (FiniteRange, InputPath, IntRange, note, output_file, port_options, protocol_version_option,
+                       rate_option)
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
 from .telemetry import (check_log_options, errors_text, log_options, port_from_env, reconnect_option,
@@ -24,9 +25,10 @@ from .telemetry import (check_log_options, errors_text, log_options, port_from_e
 class Output:
     """Where records go: a writer (stdout or -o FILE), and the dashboard on a terminal.
 
-    ``-o FILE`` is checked here (before any port opens) and opened by the first record, never
-    before: a run that fails to start — no port, a silent ECU — or that writes no record
-    leaves an existing file as it was."""
+    ``-o FILE`` is checked here (before any port opens) and opened by the first record
+    (:class:`zkzap.outfile.LazyOutput`; a workbook: written by the first record, renamed over
+    the file at the close), never before: a run that writes no record — no port, a silent ECU,
+    a run cut short — leaves an existing file exactly as it was (a header is not a record)."""
 
     def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
         from ...io.term import is_tty
@@ -34,6 +36,7 @@ class Output:
         path = output if output and output != "-" else None
         if fmt is None and path:
             fmt = format_for_path(path, SESSION_FORMATS)
+        self.file = None
         self._xlsx = fmt == "xlsx"
         if self._xlsx:
             from ...io import xlsx
@@ -42,8 +45,8 @@ class Output:
         if fmt == "mcap":
             from .mcap_output import open_mcap
 
-            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot)
-            self.fmt, self._table, self.file = fmt, False, None
+            self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot, inputs=inputs)
+            self.fmt, self._table = fmt, False
             self.dashboard = _dashboard(title) if path and is_tty(sys.stdout) else None
             return
         if fmt is None:
@@ -52,7 +55,6 @@ class Output:
         self.stream = None if path else sys.stdout
         self.dashboard = None
         self.writer = None
-        self.file = None
         stdout_tty = is_tty(sys.stdout)
         if fmt == "table" and not path and stdout_tty:
             self.dashboard = _dashboard(title)
@@ -67,22 +69,18 @@ class Output:
         if self._table:
             self.snapshot = False
         self._columns = [] if self._table else columns_for(self.snapshot, ids)
+        had = False
         if path:
             self.file = output_file(path, append, fmt=fmt, columns=self._columns, inputs=inputs)
-        elif self.dashboard is None:
-            self._open()
+            if self._xlsx:
+                return                 # the workbook is made by the first record (see write)
+            from ...outfile import LazyOutput
 
-    def _open(self):
+            self.stream, had = LazyOutput(self.file), self.file.had
+        elif self.dashboard is not None:
+            return                     # the dashboard shows the records; stdout is its screen
         from ...io.writers import make_writer
 
-        had = False
-        if self._xlsx:
-            from ...io.xlsx import XlsxWriter
-
-            self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
-            return
-        if self.file is not None:
-            self.stream, had = self.file.open(), self.file.had
         if self._table:
             self.writer = make_writer("table", self.stream, [], table_columns=_TABLE_COLUMNS)
         else:
@@ -95,8 +93,10 @@ class Output:
             self.writer.sheets(*sheets)
 
     def write(self, rec):
-        if self.writer is None and self.file is not None:
-            self._open()
+        if self.writer is None and self._xlsx and self.file is not None:
+            from ...io.xlsx import XlsxWriter
+
+            self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
         if self.writer is not None:
             if self._table:
                 from .decode import summary
@@ -148,12 +148,13 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
                   stop_on_error=False, abort_at_end=False, title=None, stand=None, inputs=None, extra_outputs=None,
-                  reconnect=None, end=None, end_label="end of schedule", summarize=None, plan=None):
+                  reconnect=None, end=None, end_label="end of schedule", summarize=None, plan=None, allow=None):
     """Log status records from a port (or a replay) while optionally sending control frames.
 
     Returns ``(outcome, telemetry, session)``; the caller raises ``outcome.raise_for_status()``
     after its own reporting. Files are closed (whole) before this returns. ``stand``: the
     test-stand hooks (:class:`.stand.Stand`: limits, step averages, logbook statistics).
+    ``allow``: the permissions the control frames were given (see :func:`..options.authorize`).
     ``inputs`` and ``extra_outputs`` (option -> path) name the caller's other files: none may be
     an output. ``summarize(outcome, tel, session)`` gives ``(steps, summary)`` for the sheets of
     an ``-o FILE.xlsx`` workbook (``steps``: ``(columns, rows)`` or None). ``plan``: the
@@ -162,7 +163,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
-    from ...io.outfile import OutFile, refuse_same_files
+    from ...outfile import OutFile, refuse_same_files
     from ...link.port import fit_note
     from ...link.zk_port import ZkLink
     from ...link.zk_sources import LiveSource
@@ -182,27 +183,28 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         from .mcap_output import check_mcap
 
         check_mcap(output, append, snapshot)
-    if bridges:
-        bridges.start()              # an unreachable peer is exit 4 before the port or a file opens
     if stand is not None:
-        try:
-            # external sensors first: a silent load cell is found before the ECU is sent anything
-            stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
-        except BaseException:
-            if bridges:
-                bridges.close()
-            raise
+        # external sensors first (their first lines name the fields the records get): a silent
+        # load cell is found before the ECU is sent anything
+        stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
     columns = record_columns if stand is None else stand.columns(record_columns)
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
-        if bridges:
-            bridges.close()
         if stand is not None:
             stand.close()
         raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
+    try:
+        if bridges:
+            bridges.start()          # an unreachable peer is exit 4 before the port opens or a file is written
+    except BaseException:
+        bridges.close()
+        if stand is not None:
+            stand.close()
+        out.close()
+        raise
     source = None
     # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
     # view would redraw over them. They go to stderr once it has closed, below the last view.
@@ -216,7 +218,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
             source = replay_source(replay, fast=fast)
         else:
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits), reconnect=reconnect)
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits, allow=allow),
+                                reconnect=reconnect)
         tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
         sink, on_update = out.write, out.update if out.dashboard is not None else None
         if stand is not None:
@@ -275,7 +278,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 @session_exits("done (--count, --duration, end of replay)", "with --fail-on-error, an ECU error code was seen")
 @click.command(cls=Command, context_settings=CONTEXT)
 @port_options("zk", baud_auto=True)
-@click.option("--replay", type=click.Path(dir_okay=False, allow_dash=False), metavar="FILE",
+@click.option("--replay", type=InputPath("zk capture"), metavar="FILE",
               help="Decode a raw log (--raw-log) or a pcapng capture (--capture) instead of a port, "
                    "paced in real time.")
 @click.option("--fast", is_flag=True, help="With --replay: as fast as possible.")

@@ -7,10 +7,10 @@ import sys
 
 import click
 
-from ...errors import USAGE, OutputError, UsageError, ZkzapError
+from ...errors import USAGE, UsageError, ZkzapError
 from .. import CONTEXT, Command
-from ..options import (Choice, FilePath, FiniteRange, abort_option, close_output, consent, dry_run_option, note,
-                       port_options, protocol_version_option, rate_option, yes_option)
+from ..options import (Choice, InputPath, OutputPath, abort_option, authorize, close_output,
+                       dry_run_option, note, port_options, protocol_version_option, rate_option, yes_option)
 from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors)
 from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
@@ -33,7 +33,7 @@ def example_text(kind="throttle") -> str:
                "bad usage or input, or a schedule the ECU's reported limits refuse (an RPM target above its max "
                "rpm, a command newer than its protocol version): nothing was sent")
 @click.command(cls=Command, context_settings=CONTEXT, epilog=EPILOG)
-@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=FilePath())
+@click.argument("schedule", required=False, metavar="SCHEDULE.csv", type=InputPath("schedule"))
 @click.option("--example", type=Choice(list(EXAMPLES)), is_flag=False, flag_value="throttle", default=None,
               help="Print an example and exit: throttle (default: a start, steps up to 100 %, cool-down), rpm "
                    "(RPM-mode steps for steady-state averages) or limits (a limits file).")
@@ -45,14 +45,14 @@ def example_text(kind="throttle") -> str:
                    "and at the end of a schedule that ends in state run: that state with throttle 0 "
                    "(standby lets a hot engine cool); none sends nothing and says on stderr that the "
                    "engine is left running.")
-@click.option("--summary-json", type=click.Path(dir_okay=False, writable=True, allow_dash=True), default=None,
+@click.option("--summary-json", type=OutputPath("document"), default=None,
               metavar="FILE", help="Also write the summary as JSON to FILE ('-': stdout).")
 @click.option("--settle", type=Finite(0, 86400), default=None, metavar="SECONDS",
               help="Per-step averages: let each step settle SECONDS before averaging (default 3 with "
                    "--average or --steps-csv).")
 @click.option("--average", type=Finite(0, 86400, min_open=True), default=None, metavar="SECONDS",
               help="Per-step averages over the SECONDS after --settle (default: up to the step's end).")
-@click.option("--steps-csv", type=FilePath(), default=None, metavar="FILE",
+@click.option("--steps-csv", type=OutputPath("document"), default=None, metavar="FILE",
               help="Write one row per step to FILE: window, mean/min/max of rpm, egt_c, thrust_kg, "
                    "fuel_flow_l_min, pump_voltage_v, throttle_pct, TSFC, and whether it settled.")
 @click.option("--fuel-density", type=Finite(0.5, 1.2, unit="kg/L", hint=lambda v: (
@@ -156,12 +156,10 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
                         averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density)
-    if not is_simulator(url):
-        from ...codec import zk
+    from ...codec import zk
 
-        hazard = next((h for h in map(zk.control_hazard, sched.frames()) if h), None)
-        if hazard:
-            consent(f"schedule {name} on {url}: {hazard}", yes)
+    allow = authorize([zk.ControlFrame(f) for f in sched.frames()], what=f"schedule {name} on {url}",
+                      yes=yes, force=False, simulated=is_simulator(url))
     from .monitor import run_telemetry
 
     def summarize(outcome, tel, session):
@@ -183,7 +181,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
             stop_on_error=True, abort_at_end=sched.final_state == "run" or sched.ends_in_rpm_mode,
             title=f"zk profile {name} on {url}", stand=stand, reconnect=reconnect, plan=sched.plan_check(),
             inputs={"SCHEDULE": schedule}, extra_outputs={"--summary-json": summary_json, "--steps-csv": steps_csv},
-            summarize=summarize)
+            summarize=summarize, allow=allow)
     except ZkzapError as e:
         # a run that failed to start (no port, ...) still replaces an older summary: with its failure
         if summary_file and e.code != USAGE:
@@ -262,24 +260,24 @@ def _r(x, digits):
 
 def _check_summary(path, schedule, output, raw_log):
     """--summary-json FILE, checked before anything starts (None for '-' or none)."""
-    from ...io.outfile import OutFile, refuse_same_files
+    from ...outfile import check_path, refuse_same_files
 
     if not path or path == "-":
         return None
     refuse_same_files({"--summary-json": path, "--output": output, "--raw-log": raw_log}, {"SCHEDULE": schedule})
-    OutFile(path, what="summary-json").check()
+    check_path(path, "summary-json")
     return path
 
 
 def _write_json(path, summary):
-    """The summary as JSON: to stdout for '-', else whole (a temporary file renamed over FILE)."""
-    from ...io.outfile import write_atomic
+    """The summary as JSON: to stdout for '-', else whole (:func:`zkzap.outfile.write_whole`)."""
+    from ...outfile import write_whole
 
     text = json.dumps(summary, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return
-    write_atomic(path, text, what="summary-json")
+    write_whole(path, text, what="summary-json")
 
 
 def _check_dir(path, what):
@@ -287,20 +285,20 @@ def _check_dir(path, what):
 
 
 def _write_steps(path, columns, rows):
+    """One row per step: to stdout for '-', else whole (one row per step: small)."""
+    import io
+
     from ...io.writers import make_writer
 
-    stream = sys.stdout if path == "-" else None
-    try:
-        if stream is None:
-            stream = open(path, "w", encoding="utf-8", newline="")
-    except OSError as e:
-        raise OutputError(f"steps-csv: cannot write {path}: {e.strerror}") from None
+    stream = sys.stdout if path == "-" else io.StringIO()
     writer = make_writer("csv", stream, columns)
-    try:
-        for r in rows:
-            writer.write(r)
-    finally:
-        close_output(writer, stream)
+    for r in rows:
+        writer.write(r)
+    writer.close()
+    if path != "-":
+        from ...outfile import write_whole
+
+        write_whole(path, stream.getvalue(), what="steps-csv")
 
 
 def _print_plan(sched, rate, fmt, output, append, path):

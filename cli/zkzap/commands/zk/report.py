@@ -8,9 +8,9 @@ import re
 
 import click
 
-from ...errors import OK, OUTPUT_ERROR, USAGE, OutputError, UsageError
+from ...errors import OK, OUTPUT_ERROR, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FilePath, OutputPath, exits, note
+from ..options import Choice, InputPath, OutputPath, exits, note
 
 #: What a report is written as (named by the suffix of -o, or --format).
 REPORT_FORMATS = ("png", "svg", "pdf", "html")
@@ -29,17 +29,17 @@ class AlignType(click.ParamType):
 @exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]')",
         OUTPUT_ERROR: "the report could not be written"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.argument("run_files", metavar="RUN...", nargs=-1, required=True, type=FilePath())
-@click.option("--steps", "steps_files", multiple=True, type=FilePath(), metavar="STEPS.csv",
+@click.argument("run_files", metavar="RUN...", nargs=-1, required=True, type=InputPath("run", label="RUN"))
+@click.option("--steps", "steps_files", multiple=True, type=InputPath("steps"), metavar="STEPS.csv",
               help="The per-step averages of 'zk profile --steps-csv': target lines, the step windows, thrust and "
                    "EGT vs rpm, TSFC vs thrust. One per RUN, in order (a --summary with steps serves too).")
-@click.option("--summary", "summary_files", multiple=True, type=FilePath(), metavar="SUMMARY.json",
+@click.option("--summary", "summary_files", multiple=True, type=InputPath("summary"), metavar="SUMMARY.json",
               help="The summary of 'zk profile --summary-json' (or --summary-json of monitor, send): the header "
                    "table, the limits and their events, the steps. One per RUN, in order.")
 @click.option("--limit", "limit", multiple=True, metavar="EXPR",
               help="Draw this limit (FIELD OP NUMBER[,warn=N], as on the sessions) as a labelled line, its "
                    "warning level dashed. Repeatable; the limits of a --summary are drawn too.")
-@click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
+@click.option("--limits", "limits_files", multiple=True, type=InputPath("limits"), metavar="FILE",
               help="Draw the limits of FILE (one EXPR per line). Repeatable.")
 @click.option("--label", "labels", multiple=True, metavar="NAME",
               help="The name of a RUN in the legend, in order (default: its file name). Repeatable.")
@@ -47,7 +47,8 @@ class AlignType(click.ParamType):
               help="The common time axis: start (each run from its session's start, t = 0, where its schedule "
                    "started), first (from its first record), running (from the engine's first running state) "
                    "or step:N (from the start of step N of each run).")
-@click.option("-o", "--output", type=OutputPath(REPORT_FORMATS, default=None), default=None, metavar="REPORT",
+@click.option("-o", "--output", type=OutputPath("document", formats=REPORT_FORMATS, default=None), default=None,
+              metavar="REPORT",
               help="Write REPORT.png, .svg, .pdf or .html (one self-contained file).")
 @click.option("--format", "fmt", type=Choice(REPORT_FORMATS), default=None,
               help="The report's format (default: from the -o name).")
@@ -112,13 +113,9 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
         if output == "-":
             raise UsageError("output: a file name is needed (its extension names the format)")
         fmt = R.output_format(output, fmt)
-        d = os.path.dirname(os.path.abspath(output))
-        if not os.path.isdir(d):
-            raise UsageError(f"output: cannot write {output}: no such directory")
-        if os.path.exists(output):
-            for path in (*run_files, *steps_files, *summary_files, *limits_files):
-                if path and path != "-" and os.path.exists(path) and os.path.samefile(path, output):
-                    raise UsageError(f"output: {output} is also an input")
+        from ...outfile import check_path
+
+        check_path(output, "output")                  # its inputs: the options' own check
         R._mpl()                                      # refuse early (exit 2) without matplotlib
     steps = [R.load_steps(p) for p in steps_files] or [None] * n
     summaries = [R.load_summary(p) for p in summary_files] or [None] * n
@@ -144,15 +141,9 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
 
         skipped = R.terminal(runs, console_for(sys.stdout))
     else:
-        tmp = output + ".tmp"
-        try:
+        from ...outfile import replacing
+
+        with replacing(output, suffix=os.path.splitext(output)[1]) as tmp:
             skipped = R.render(tmp, fmt, runs, limits, title, pairs)
-            os.replace(tmp, output)
-        except OSError as e:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise OutputError(f"output: cannot write {output}: {e.strerror or e}") from None
     for s in skipped:
         note(f"skipped {s}")

@@ -14,8 +14,8 @@ from ...codec import zk
 from ...errors import DeviceError, UsageError
 from .. import CONTEXT, Command, Group
 from ..complete import raw_fields
-from ..options import (Choice, FINITE, FiniteRange, INTEGER, IntRange, SignedCommand, abort_option, apply_options,
-                       consent, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
+from ..options import (Choice, FiniteFloat, FiniteRange, Integer, IntRange, SignedCommand, abort_option, apply_options,
+                       authorize, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
                        yes_option)
 from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
                     session_sensors, summarizer, summary_option)
@@ -156,15 +156,14 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
                             controls=controls, sensors=sensors, engine=engine)
         check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
-    hazard = zk.control_hazard(frame)
-    if hazard and not is_simulator(url):
-        consent(f"{format_hex(frame)} to {url}: {hazard}", yes)
+    allow = authorize([zk.ControlFrame(frame)], what=f"{format_hex(frame)} to {url}", yes=yes, force=False,
+                      simulated=is_simulator(url))
     from ...api.prestart import Plan
 
     command = zk.decode_control(frame)["command"] or f"ID {frame[1] >> 4}"
     plan = Plan([frame], rpm_factor=rpm_factor, what=command)
     if for_s is None:
-        _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor)
+        _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor, allow)
         return
     from .monitor import run_telemetry
 
@@ -175,7 +174,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
         stop_bits=stop_bits, duration=for_s or None, control=lambda t: frame, rate=rate,
         abort=abort or DEFAULT_ABORT, stop_on_error=controls, title=title,
         end=(end or DEFAULT_END) if controls else None, end_label="end of --for",
-        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json}, plan=plan,
+        stand=stand, reconnect=reconnect, extra_outputs={"--summary-json": summary_json}, plan=plan, allow=allow,
         summarize=summarizer(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url))
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
@@ -227,17 +226,17 @@ def describe_frame(frame) -> str:
     return " ".join(parts)
 
 
-def _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor):
-    """Write one frame (through the API's :class:`~zkzap.Ecu`, so the pre-start check applies);
-    unless ``no_wait``, wait for a status frame to show the ECU is there. An engine left running
-    is said on stderr: a one-shot command sends no abort."""
+def _send_once(url, baud, frame, timeout, no_wait, stop_bits, plan, protocol_version, rpm_factor, allow=None):
+    """Write one frame (through the API's :class:`~zkzap.Ecu`, so the pre-start check applies,
+    with the permissions ``allow``); unless ``no_wait``, wait for a status frame to show the ECU
+    is there. An engine left running is said on stderr: a one-shot command sends no abort."""
     from ...api.session import DEFAULT_SILENCE_S
     from ...api.zk import Ecu
     from ...errors import NoReply
 
     cf = zk.ControlFrame(frame)
     with Ecu(url, baud=baud, stop_bits=stop_bits, protocol_version=protocol_version, abort="none",
-             silence=timeout if timeout is not None else DEFAULT_SILENCE_S) as ecu:
+             silence=timeout if timeout is not None else DEFAULT_SILENCE_S, allow=allow) as ecu:
         ecu.check(plan, listen=not no_wait)
         ecu.send(cf, listen=not no_wait)
         left = cf.leaves(rpm_factor)
@@ -281,6 +280,26 @@ def _check_version(cmd, raw_param, protocol_version):
         warn(f"{cmd.name} needs protocol version {need} or later; the ECU was given as {protocol_version}")
 
 
+class FieldFloat(FiniteFloat):
+    """A number for a control field with a scale (``throttle``, ``ignition-voltage``): finite;
+    the field (``field``, its range and steps) is checked by the codec, which names it."""
+
+    def __init__(self, field):
+        self.field = field
+
+
+class FieldInt(Integer):
+    """An integer for a control field (``accel-curve``, ``pressure``); the codec checks it
+    against ``field``'s range and names it."""
+
+    def __init__(self, field):
+        self.field = field
+
+
+def _field_type(f):
+    return FieldFloat(f) if f.decimals or callable(f.scale) or f.scale != 1 else FieldInt(f)
+
+
 def _make(cmd):
     fields = [f for f in cmd.fields if f.cli]
 
@@ -310,7 +329,7 @@ def _make(cmd):
                 ptype = Choice(choices, case_sensitive=False)
                 default = default if default is None else default
             else:
-                ptype = FINITE if f.decimals else INTEGER
+                ptype = FieldFloat(f) if f.decimals else FieldInt(f)
             params.append(click.Option([f.cli, f.key], type=ptype, default=default,
                                        required=default is None, show_default=default is not None,
                                        help=f"{f.help} [{f.describe_range()}]"))
@@ -319,7 +338,7 @@ def _make(cmd):
                 choices = [n for v, n in f.names.items() if f.lo <= v <= f.hi]
                 ptype = Choice(choices, case_sensitive=False)
             else:
-                ptype = FINITE if f.decimals or callable(f.scale) or f.scale != 1 else INTEGER
+                ptype = _field_type(f)
             params.append(click.Argument([f.key], type=ptype, metavar=f.cli, required=True))
     for p in cmd.params:
         params.append(click.Option([p.cli, p.key], type=IntRange(p.lo, p.hi), required=True,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import click
 
 from ...errors import UsageError
-from ..options import Choice, FilePath, FiniteRange, apply_options, note
+from ..options import Choice, FiniteRange, InputPath, OutputPath, apply_options, note
 
 LIMIT_HELP = ("Stop when a status field leaves a limit: FIELD OP NUMBER with OP one of < <= > >= == != "
               "and an optional warning band (egt_c<=850,warn=800; power_voltage_v>=7.2; error_code==0). "
@@ -25,7 +25,7 @@ Finite = FiniteRange
 def limit_options(f):
     opts = [
         click.option("--limit", "limit", multiple=True, metavar="EXPR", help=LIMIT_HELP),
-        click.option("--limits", "limits_files", multiple=True, type=FilePath(), metavar="FILE",
+        click.option("--limits", "limits_files", multiple=True, type=InputPath("limits"), metavar="FILE",
                      help="Read limits from FILE: one EXPR per line, '#' comments. Repeatable."),
         click.option("--on-limit", type=Choice(["abort", "exit", "warn"]), default=None,
                      help="On a violated limit: abort or exit end the session with exit 5 (one that "
@@ -37,7 +37,7 @@ def limit_options(f):
 
 def logbook_option(f):
     opts = [
-        click.option("--logbook", type=FilePath(), default=None, metavar="FILE",
+        click.option("--logbook", type=OutputPath("database"), default=None, metavar="FILE",
                      help="Record the run in the engine logbook FILE (SQLite; 'zk logbook FILE' lists "
                           "runs and totals)."),
         click.option("--engine", default=None, metavar="NAME",
@@ -139,25 +139,21 @@ def _record_keys():
 
 
 def summary_option(f):
-    return click.option("--summary-json", type=FilePath(), default=None, metavar="FILE",
+    return click.option("--summary-json", type=OutputPath("document"), default=None, metavar="FILE",
                         help="Write the run's summary (frames, max rpm and EGT, fuel, states, errors, each "
                              "limit's verdict, extreme value and first violation) as JSON to FILE ('-': stdout).")(f)
 
 
 def check_output_dir(path, what, records_to_stdout=False):
-    """Refuse an output file whose directory is missing or read-only, before the run (and ``-``
-    when the records already go to stdout)."""
-    import os
-
+    """Refuse an output file that cannot be written (a directory, a missing directory, no
+    permission), before the run (and ``-`` when the records already go to stdout)."""
     if path == "-" and records_to_stdout:
         raise UsageError(f"{what}: '-' needs -o FILE for the records (both would go to stdout)")
     if not path or path == "-":
         return
-    d = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(d):
-        raise UsageError(f"{what}: cannot write {path}: no such directory")
-    if not os.access(d, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise UsageError(f"{what}: cannot write {path}: permission denied")
+    from ...outfile import check_path
+
+    check_path(path, what)
 
 
 def session_summary(*, command, port, outcome, tel, session, stand) -> dict:
@@ -182,18 +178,14 @@ def write_summary(path, *, command, port, outcome, tel, session, stand):
     """The run summary as JSON (``-``: stdout)."""
     import json
 
-    from ...errors import OutputError
-
     out = session_summary(command=command, port=port, outcome=outcome, tel=tel, session=session, stand=stand)
     text = json.dumps(out, ensure_ascii=False, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return
-    try:
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(text)
-    except OSError as e:
-        raise OutputError(f"summary-json: cannot write {path}: {e.strerror}") from None
+    from ...outfile import write_whole
+
+    write_whole(path, text, what="summary-json")
 
 
 def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, controls=False, averager=None,

@@ -12,7 +12,7 @@ import click
 
 from ...errors import DEVICE_ERROR, NO_REPLY, OK, PORT_ERROR, USAGE, UsageError
 from ...io import SESSION_FORMATS
-from ..options import FilePath, FiniteRange, IntRange, OutputPath, apply_options, exits, format_option
+from ..options import FiniteRange, IntRange, OutputPath, apply_options, exits, format_option
 from .bridging import bridge_options
 
 
@@ -40,9 +40,10 @@ def log_options(f):
                            "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
                            "zkzap[mcap]); xlsx a workbook with sheets records, steps and summary (needs "
                            "zkzap[xlsx]); default table on a terminal, jsonl in a pipe, or by the suffix of -o."),
-        click.option("-o", "--output", type=OutputPath(SESSION_FORMATS),
+        click.option("-o", "--output", type=OutputPath("records", formats=SESSION_FORMATS),
                      help="Write records to FILE, in the format its suffix names (.csv, .json, .jsonl, .lp, .mcap, "
-                          ".xlsx; JSON Lines without one; the dashboard stays on a terminal)."),
+                          ".xlsx; JSON Lines without one), created or replaced by the first record: a run that "
+                          "writes none leaves it as it was (the dashboard stays on a terminal)."),
         click.option("--append", is_flag=True,
                      help="Append to --output and --raw-log (a CSV gets no second header)."),
         click.option("--snapshot/--frames", "snapshot", default=None,
@@ -52,7 +53,7 @@ def log_options(f):
                      help="Only these status IDs (1,2,6 or 1-3); CSV columns shrink to their fields."),
         click.option("--stale-after", type=IntRange(1, 1000), default=3, show_default=True,
                      metavar="N", help="An ID is stale after N of its periods without a frame."),
-        click.option("--raw-log", type=FilePath(), default=None,
+        click.option("--raw-log", type=OutputPath("bytes"), default=None,
                      metavar="FILE", help="Keep the exact bytes received in FILE (for --replay, "
                                           "or 'zk decode --binary')."),
         bridge_options,
