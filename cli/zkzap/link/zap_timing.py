@@ -19,7 +19,7 @@ sniffer and of capture decoding (:class:`Pairing`), follow the rules here:
    buffering, the host's scheduling). Each actuator has an :class:`Estimator` (a smoothed
    latency and its variation, as TCP's retransmission timer, RFC 6298); its timeout
    (:meth:`Estimator.timeout`) is bounded by :data:`FLOOR` and the late window. A reply after
-   its actuator's timeout is counted late; the bus-typical latency (the median of the
+   its actuator's timeout is counted late; the bus-typical latency (the lower median of the
    actuators') paces a scan's first pass. The estimators of a port are shared by every
    transaction in one process (:func:`policy_for`: ``zap batch``, ``zkzap shell``, every
    :class:`zkzap.Bus` on that port). ``--latency MS`` (``ZKZAP_ZAP_LATENCY``) gives the latency
