@@ -56,6 +56,11 @@ def test_policy_learns_per_actuator_and_paces_scans_by_the_typical_latency():
     assert p.summary()[1]["late"] == 1
     assert p.latency(9, hint=0.05) == p.typical()                   # an unknown ID: the bus-typical one
     assert Policy().latency(9, hint=0.05) == 0.05
+    pair = Policy()
+    pair.learn(1, 0.002, LATE_WINDOW)
+    pair.learn(2, 0.042, LATE_WINDOW)
+    assert pair.typical() == pytest.approx(0.002)                   # ... even among two
+    assert pair.quick() == pytest.approx(0.002 * 1.25)
 
 
 def test_the_window_and_the_latency_hint():

@@ -471,15 +471,20 @@ class ZapBus:
     def quiet(self) -> None:
         """Listen until no reply may still come: every open window closed (replies that come
         meanwhile are accounted for), then the quiet time after a stored write or a restart."""
-        while True:
+        self._close_windows()
+        self._drain()
+        self._settle()
+
+    def _close_windows(self) -> None:
+        """Listen until every open window has closed (what :meth:`quiet` does before the
+        drain; a transaction's write drains what came)."""
+        while self._owed:
             now = time.monotonic()
             self._expire(now)
             open_ = self._open_windows(now)
             if not open_:
                 break
             self._listen(min(o.until for o in open_))
-        self._drain()
-        self._settle()
 
     def linger(self, seconds: float) -> None:
         """Keep listening for ``seconds`` (late replies are accounted for; see :attr:`events`)."""
@@ -568,7 +573,8 @@ class ZapBus:
                 self.retried += 1
                 self._idle()
             if not early:
-                self.quiet()
+                self._close_windows()      # then the quiet time; the write drains what came
+                self._settle()
             t0 = self._write(pkt)
             limit = (self.quick_timeout(len(pkt)) + extra) if quick else span
             got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)

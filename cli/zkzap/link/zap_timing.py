@@ -19,7 +19,7 @@ sniffer and of capture decoding (:class:`Pairing`), follow the rules here:
    buffering, the host's scheduling). Each actuator has an :class:`Estimator` (a smoothed
    latency and its variation, as TCP's retransmission timer, RFC 6298); its timeout
    (:meth:`Estimator.timeout`) is bounded by :data:`FLOOR` and the late window. A reply after
-   its actuator's timeout is counted late; the bus-typical latency (the median of the
+   its actuator's timeout is counted late; the bus-typical latency (the lower median of the
    actuators') paces a scan's first pass. The estimators of a port are shared by every
    transaction in one process (:func:`policy_for`: ``zap batch``, ``zkzap shell``, every
    :class:`zkzap.Bus` on that port). ``--latency MS`` (``ZKZAP_ZAP_LATENCY``) gives the latency
@@ -147,12 +147,15 @@ class Policy:
         return typical if typical is not None else hint
 
     def typical(self):
-        """The bus-typical latency: the median of the actuators' smoothed latencies (None before
-        any was measured)."""
+        """The bus-typical latency: the median of the actuators' smoothed latencies, the lower
+        of the two middle ones for an even count (None before any was measured). One slow
+        actuator is not the bus, even among two: a scan's first pass paced by it would wait
+        its latency for every free ID (a second baud rate of ``--baud all``, another scan in
+        the same process), while its own late reply is heard and asked again anyway."""
         values = sorted(e.srtt for e in self.estimators.values() if e.srtt is not None)
         if not values:
             return None
-        return values[len(values) // 2]
+        return values[(len(values) - 1) // 2]
 
     def timeout(self, ident: int, window: float, hint=None) -> float:
         """When a reply of ``ident`` counts as late (its estimator's timeout, the hint before
