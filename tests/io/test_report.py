@@ -177,7 +177,9 @@ def test_two_runs_compared_aligned_at_a_step(cli, run, other):
     header, rows = R.step_comparison(runs)
     i, j = header.index(f"thrust kgf {runs[0].label}"), header.index(f"thrust kgf {runs[1].label}")
     a, b = float(rows[1][i]), float(rows[1][j])
-    assert b < a and rows[1][j + 1].startswith(f"{b - a:+.2f} (")                # 80 %: less thrust, and by how much
+    assert rows[1][j + 1].startswith(f"{b - a:+.2f} (")                          # the difference, and how much
+    if all(x.steps[1].get("settled") == "true" for x in runs):
+        assert b < a                             # 80 %: the weaker engine gives less thrust (when both settled)
     png = run["dir"] / "cmp.png"
     r = cli("zk", "report", run["tel"], other["tel"], "--summary", run["summary"], "--summary", other["summary"],
             "--align", "running", "-o", str(png))
