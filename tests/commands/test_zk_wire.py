@@ -101,7 +101,7 @@ def test_monitor_duration_and_version_note(cli):
     recs = jsonl(r.stdout)
     # (one read can bring a burst: at speed 20 a 50 ms stall of a loaded machine is 1 s of frames)
     assert r.exit_code == 0 and 110 <= len(recs) <= 200
-    assert 5.8 <= recs[-1]["t"] <= 9.0
+    assert 5.0 <= recs[-1]["t"] <= 9.0            # model seconds (6 s of it), not 6 real seconds (120)
 
 
 @pytest.mark.parametrize("args,msg", [
