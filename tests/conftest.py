@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 
 import pytest
+
 from click.testing import CliRunner
+
+# A suite started in the background of a non-interactive shell inherits SIGINT ignored, and so
+# would every program it starts (zkzap, like any program, leaves an ignored signal ignored):
+# the tests that send Ctrl-C to a program need it to arrive.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Run the source tree's package even when the tests are run without an install.
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli"))
