@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from e2e.conftest import clean_env, executable
+from e2e.conftest import clean_env, executable, read_first_line
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -59,20 +59,7 @@ class WebConsole:
         self.token = query.partition("token=")[2]
 
     def _first_line(self, timeout) -> str:
-        import selectors
-
-        sel = selectors.DefaultSelector()
-        sel.register(self.proc.stdout, selectors.EVENT_READ)
-        line = b""
-        deadline = time.monotonic() + timeout
-        try:
-            while not line.endswith(b"\n") and sel.select(max(0.0, deadline - time.monotonic())):
-                ch = os.read(self.proc.stdout.fileno(), 1)
-                if not ch:
-                    break
-                line += ch
-        finally:
-            sel.close()
+        line = read_first_line(self.proc, timeout)
         if not line.endswith(b"\n"):
             self.stop()
             pytest.fail(f"zkzap web printed no URL within {timeout:g} s (exit {self.proc.returncode}): "

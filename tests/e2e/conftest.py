@@ -40,7 +40,9 @@ def clean_env(**extra) -> dict:
     return env
 
 
-def _first_line(proc, timeout: float) -> str:
+def read_first_line(proc, timeout: float) -> bytes:
+    """The first line ``proc`` writes on its stdout pipe, read byte by byte (nothing after it is
+    consumed) within ``timeout`` seconds; what came, without a newline, when it did not."""
     sel = selectors.DefaultSelector()
     sel.register(proc.stdout, selectors.EVENT_READ)
     line = b""
@@ -56,6 +58,11 @@ def _first_line(proc, timeout: float) -> str:
             line += ch
     finally:
         sel.close()
+    return line
+
+
+def _first_line(proc, timeout: float) -> str:
+    line = read_first_line(proc, timeout)
     if not line.endswith(b"\n"):
         proc.kill()
         _, err = proc.communicate(timeout=5)

@@ -151,7 +151,7 @@ def _check_lines(group, lines, protocol, defaults):
     from .options import InputPath, OutputPath
 
     seen = {}
-    made = {}                              # files earlier lines write: path -> FILE:LINE
+    made = set()                           # the files earlier lines write
     for line in lines:
         twin = seen.get(tuple(line.tokens))
         if twin is not None:               # the same text checks the same: reuse the first's findings
@@ -173,11 +173,9 @@ def _check_lines(group, lines, protocol, defaults):
             _refuse(line, e)
         # a line that reads what an earlier line writes (a backup, then its apply) is parsed
         # whole now and runs its file's checks when it runs, after the line that makes the file
-        waits = [f for f in _paths(leaf, line.params, InputPath) if f in made and not os.path.exists(f)]
-        if not waits:
+        if not any(f in made and not os.path.exists(f) for f in _paths(leaf, line.params, InputPath)):
             _check_run(line, protocol)
-        for f in _paths(leaf, line.params, OutputPath):
-            made.setdefault(f, line.where)
+        made.update(_paths(leaf, line.params, OutputPath))
 
 
 def _check_run(line, protocol):
