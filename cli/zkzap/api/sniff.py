@@ -30,6 +30,7 @@ from collections import Counter, deque
 from ..codec import zap, zk
 from ..codec.framing import SignalLock, ZapFramer, ZkFramer
 from ..errors import NoReply, PortError, UsageError
+from ..link.clock import wall_now
 from ..link.pcapng import INBOUND, OUTBOUND, UNKNOWN
 from .capture import iso_utc
 
@@ -139,12 +140,12 @@ class _Reader(threading.Thread):
                     waiting = getattr(port, "in_waiting", 0)
                     if waiting:
                         data += port.read(waiting)
-                    ts = time.time()          # when the chunk's last byte had arrived
+                    ts = wall_now()           # when the chunk's last byte had arrived
                     if self.capture is not None:
                         w, if_id, direction = self.capture
                         w.packet(if_id, ts, bytes(data), direction)
             except Exception as e:  # noqa: BLE001 - SerialException, OSError; an OutputError of the capture
-                self.out.put((time.time(), self.index, e))
+                self.out.put((wall_now(), self.index, e))
                 return
             if data:
                 self.out.put((ts, self.index, bytes(data)))
@@ -200,7 +201,7 @@ class Sniffer:
                 close_port(p)
             raise
         self.t0 = self.heard = time.monotonic()
-        self.wall0 = time.time()
+        self.wall0 = wall_now()
         for i, p in enumerate(self.ports):
             r = _Reader(i, p, self.ports_spec[i][0], self.queue, taps[i])
             self.readers.append(r)
@@ -252,12 +253,12 @@ class Sniffer:
         # with one port the chunks are in order already; with two, chunks and then records are
         # held for the window, so both lines merge into one stream in time order
         window = MERGE_WINDOW_S if len(self.ports) > 1 else 0.0
-        horizon = time.time() - window
+        horizon = wall_now() - window
         fresh = []
         while self._held and self._held[0][0] <= horizon:
             ts, index, data = heapq.heappop(self._held)
             fresh += self.chunk(ts, index, data)
-        fresh += self.tick(time.time())
+        fresh += self.tick(wall_now())
         if not window:
             return fresh
         for rec in fresh:
@@ -275,7 +276,7 @@ class Sniffer:
         while self._held:
             ts, index, data = heapq.heappop(self._held)
             out += self.chunk(ts, index, data)
-        now = time.time()
+        now = wall_now()
         for i, framer in enumerate(self.framers):
             frames = framer.flush()
             for t, frame in self.locks[i].admit(0, frames, [(now, f) for f in frames]):

@@ -12,9 +12,8 @@ read or write that caused it, after cutting the file back to its last whole bloc
 
 from __future__ import annotations
 
-import time
-
 from ..codec.framing import ZapFramer, ZkFramer
+from .clock import wall_now
 from .pcapng import INBOUND, OUTBOUND, UNKNOWN, Reader, Writer
 
 _requested = None      # (path, protocol) named by the command being run
@@ -105,11 +104,11 @@ class TappedPort:
     def read(self, size=1):
         data = self._port.read(size)
         if data:
-            self._writer.packet(self._if, time.time(), bytes(data), self._rx_dir)
+            self._writer.packet(self._if, wall_now(), bytes(data), self._rx_dir)
         return data
 
     def write(self, data):
-        ts = time.time()
+        ts = wall_now()
         n = self._port.write(data)
         sent = bytes(data) if n is None else bytes(data)[:n]
         self._writer.packet(self._if, ts, sent, OUTBOUND)

@@ -18,6 +18,19 @@ from __future__ import annotations
 import time
 
 
+_ANCHOR: list = []
+
+
+def wall_now() -> float:
+    """The wall-clock time now, as the process's first reading of it plus the monotonic time
+    since: the stamps of a capture (and of a sniffer's ports) are dates whose differences are
+    true durations even while the system clock is slewed or stepped (round trips measured on the
+    monotonic clock and read from a capture then agree)."""
+    if not _ANCHOR:
+        _ANCHOR.extend((time.time(), time.monotonic()))
+    return _ANCHOR[0] + (time.monotonic() - _ANCHOR[1])
+
+
 def iso_utc(ts: float) -> str:
     """``2024-05-01T12:00:00.123Z`` for a POSIX time."""
     sec, ms = divmod(int(round(ts * 1000)), 1000)
