@@ -43,7 +43,7 @@ def test_estimator_smooths_like_tcps_retransmission_timer():
     assert tiny.timeout(FLOOR, LATE_WINDOW) >= FLOOR                # ... and by the floor
 
 
-def test_policy_learns_per_actuator_and_paces_scans_by_the_typical_latency():
+def test_policy_learns_per_actuator_and_knows_the_bus_typical_latency():
     p = Policy()
     assert p.quick() == pytest.approx(FLOOR * 1.25) and p.latency(1) is None
     for _ in range(5):
@@ -60,7 +60,12 @@ def test_policy_learns_per_actuator_and_paces_scans_by_the_typical_latency():
     pair.learn(1, 0.002, LATE_WINDOW)
     pair.learn(2, 0.042, LATE_WINDOW)
     assert pair.typical() == pytest.approx(0.002)                   # ... even among two
-    assert pair.quick() == pytest.approx(0.002 * 1.25)
+    assert pair.courtesy() == pytest.approx(0.002 * 1.25)
+    slow = Policy()
+    slow.learn(1, 0.040, LATE_WINDOW)
+    assert slow.courtesy() == pytest.approx(0.040 * 1.25)           # a write's courtesy: the bus's latency
+    assert slow.quick() == pytest.approx(FLOOR * 1.25)              # a free ID's probe: the floor
+    assert slow.quick(hint=0.030) == pytest.approx(0.030 * 1.25)    # ... or what --latency says
 
 
 def test_the_window_and_the_latency_hint():
@@ -183,17 +188,18 @@ def test_bytes_more_than_the_inter_byte_allowance_apart_are_a_truncated_reply():
         bus.read(1, "present-position", retries=0)
 
 
-def test_quick_probes_follow_the_bus_typical_latency():
+def test_quick_probes_wait_a_measured_actuator_out_and_an_unknown_id_only_the_floor():
     bus = make()
     before = bus.quick_timeout(7)
     assert before == pytest.approx(wire_time(8, 57600) + FLOOR * 1.25 + 0.0005)
     for _ in range(3):
         bus.echo(1)
-    assert bus.quick_timeout(7) < bus.reply_timeout(7, 7)
+    assert bus.quick_timeout(7, 1) < bus.reply_timeout(7, 7)
     slow = make(turnaround="15")
     for _ in range(3):
         slow.echo(1)
-    assert slow.quick_timeout(7) > 0.015                            # a slow bus gets waits to match
+    assert slow.quick_timeout(7, 1) > 0.015                         # a measured actuator: its own timeout
+    assert slow.quick_timeout(7, 2) == pytest.approx(before)        # an unknown ID: the floor, not the bus's
     hinted = make()
     hinted.latency = 0.030
     assert hinted.quick_timeout(7) > 0.030                          # --latency before any sample
@@ -345,3 +351,89 @@ def test_scan_finds_the_shared_id_whose_collision_came_during_the_next_probe():
     found, warnings = records(bus, [0, 1, 2, 3])
     assert [(r["id"], r["status"]) for r in found][:1] == [(1, "garbled")]
     assert any("ID 1" in w and "garbled" in w for w in warnings)
+
+
+class LateLine:
+    """One actuator, ``ident``, answering ``latency`` s after a request's last byte left, its
+    reply on the line for its bytes' time; a host write while it is on the line garbles it (a
+    collision). Its first Echo reply meets a probe whatever the host does (the collision this
+    test is about); later ones only if the host transmits over them."""
+
+    baudrate = 57600
+    port = "late-line"
+    timeout = 0.1
+
+    def __init__(self, ident, latency):
+        self.ident, self.latency = ident, latency
+        self.byte = wire_time(1, 57600)
+        self.line = []                    # [start, bytes] of replies on their way
+        self.rx = bytearray()
+        self.echoes = 0
+        self.collisions = 0
+
+    def _deliver(self):
+        now = time.monotonic()
+        for item in [x for x in self.line if x[0] + len(x[1]) * self.byte <= now]:
+            self.line.remove(item)
+            self.rx += item[1]
+
+    @property
+    def in_waiting(self):
+        self._deliver()
+        return len(self.rx)
+
+    def write(self, data):
+        data = bytes(data)
+        start = time.monotonic()
+        end = start + len(data) * self.byte
+        for item in self.line:
+            if item[0] < end and item[0] + len(item[1]) * self.byte > start:
+                item[1] = bytes(b & 0x5A for b in item[1])     # garbled on the line
+                self.collisions += 1
+        if data[3] != self.ident:
+            return len(data)
+        if data == zap.echo(self.ident):
+            self.echoes += 1
+            reply = zap.packet(self.ident, 0)
+            if self.echoes == 1:
+                reply = bytes(b & 0x5A for b in reply)          # it met a probe
+        elif data[5] == zap.LOAD_DATA:
+            reply = zap.packet(self.ident, 0, bytes(data[7]))
+        else:
+            return len(data)
+        self.line.append([end + self.latency, reply])
+        return len(data)
+
+    def read(self, n=1):
+        deadline = time.monotonic() + (self.timeout or 0)
+        while not self.in_waiting and time.monotonic() < deadline:
+            time.sleep(0.0002)
+        out = bytes(self.rx[:n])
+        del self.rx[:n]
+        return out
+
+    def reset_input_buffer(self):
+        self.rx.clear()
+
+    def close(self):
+        pass
+
+
+def test_a_late_reply_that_met_a_probe_is_found_in_a_quick_round_not_by_asking_every_suspect():
+    """ID 9's Echo reply, 140 ms late, is garbled on the line: any of the ~35 IDs probed in the
+    150 ms before may have sent it. The quick round probes them again with the line kept free
+    where those bytes would come again: ID 9's reply comes through clean, and nothing in its
+    window is left to ask with the whole window (which would cost about 155 ms an ID)."""
+    port = LateLine(9, 0.140)
+    bus = ZapBus(port, return_mode=1)
+    phases, found = [], []
+    for event in scan(bus, list(range(0, 41)), [57600]):
+        if event[0] == "probe":
+            phases.append(event[4])
+        elif event[0] == "record":
+            found.append((event[1]["id"], event[1]["status"]))
+    assert found == [(9, "ok")]
+    assert phases.count("first") == 41
+    assert phases.count("round") >= 20                        # the suspects, once more, quickly
+    assert phases.count("ask") <= 3                           # not every suspect at 155 ms each
+    assert port.collisions == 0                               # the round kept the line free for the reply

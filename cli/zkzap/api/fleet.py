@@ -86,8 +86,9 @@ class Procedures:
     def discover(bus, ids, bauds=None, *, retries=2):
         """Scan records (``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status``,
         ``errors``) of the actuators among ``ids`` at each of ``bauds`` (default: the bus's),
-        found as ``zap scan`` finds them (:mod:`zkzap.link.zap_scan`): a fast first pass that
-        asks again, with the whole window, wherever something came late or garbled. Two
+        found as ``zap scan`` finds them (:mod:`zkzap.link.zap_scan`): a fast first pass whose
+        doubts (something late or garbled on the line) are probed again in quick rounds and
+        what stays in doubt asked with the whole window. Two
         actuators sharing an ID give status ``duplicate`` or ``garbled``. The bus is left at the
         last baud rate."""
         from ..link.zap_scan import scan

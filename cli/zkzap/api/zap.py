@@ -359,8 +359,8 @@ class Bus:
              on_probe: Optional[Callable[[int, int, int], None]] = None,
              on_warning: Optional[Callable[[str], None]] = None,
              include_garbled: bool = True) -> Iterator[Record]:
-        """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, a second full
-        wait for the IDs near a late or garbled reply, then the model, firmware and return mode of
+        """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, quick rounds
+        and then full waits for the IDs near a late or garbled reply, then the model, firmware and return mode of
         each actuator found (see :mod:`zkzap.link.zap_scan` for the policy). Yields records in ID
         order: ``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status`` (``ok``,
         ``error``, ``garbled``, ``duplicate``, ``unidentified``) and ``errors``.
@@ -376,8 +376,8 @@ class Bus:
                                  f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
         for event in scan_bus(self.link, ids, bauds, retries=retries):
             if event[0] == "probe":
-                _, baud, ident, found, first = event
-                if on_probe is not None and first:
+                _, baud, ident, found, phase = event
+                if on_probe is not None and phase == "first":
                     on_probe(baud, ident, found)
             elif event[0] == "record":
                 if include_garbled or event[1]["status"] != "garbled":

@@ -269,11 +269,17 @@ class ZapBus:
         packets on the wire + the late window + the host margin + ``extra``."""
         return self.wire(tx_bytes + rx_bytes) + self.window + self.margin + extra
 
-    def quick_timeout(self, tx_bytes: int) -> float:
-        """A scan's first-pass wait for an unknown ID: our packet and the reply's first byte on
-        the wire, plus the bus-typical latency (see :meth:`zap_timing.Policy.quick`) and
-        :data:`~zkzap.link.zap_timing.QUICK_MARGIN`."""
-        return self.wire(tx_bytes + 1) + self.policy.quick(self.latency, self.window) + QUICK_MARGIN
+    def quick_timeout(self, tx_bytes: int, ident=None) -> float:
+        """A scan's first-pass wait: our packet and the reply's first byte on the wire, plus
+        :data:`~zkzap.link.zap_timing.QUICK_MARGIN` and, for an ID measured before, its own
+        timeout (it is probably there: its reply must not meet the next probe), else the
+        latency an unknown ID is allowed (see :meth:`zap_timing.Policy.quick`)."""
+        est = self.policy.estimators.get(ident) if ident is not None else None
+        if est is not None and est.samples:
+            wait = est.timeout(FLOOR, self.window)
+        else:
+            wait = self.policy.quick(self.latency, self.window)
+        return self.wire(tx_bytes + 1) + wait + QUICK_MARGIN
 
     def courtesy(self, ident: int, window=None) -> float:
         """How long the line stays quiet after a write the return mode does not answer: what
@@ -284,7 +290,7 @@ class ZapBus:
         est = self.policy.estimators.get(ident)
         if est is not None and est.samples:
             return est.timeout(FLOOR, window)
-        return self.policy.quick(self.latency, window)
+        return self.policy.courtesy(self.latency, window)
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
@@ -576,7 +582,7 @@ class ZapBus:
                 self._close_windows()      # then the quiet time; the write drains what came
                 self._settle()
             t0 = self._write(pkt)
-            limit = (self.quick_timeout(len(pkt)) + extra) if quick else span
+            limit = (self.quick_timeout(len(pkt), ident) + extra) if quick else span
             got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
             if isinstance(got, Reply):
                 return self._answered(got, pkt, restart, stored, check, win)

@@ -4,17 +4,17 @@
 command renders it). It keeps the bus's timing policy (:mod:`zkzap.link.zap_timing`) with the
 one exception the policy allows:
 
-1. **First pass.** Echo to each ID, waiting only for the bus-typical latency
-   (:meth:`ZapBus.quick_timeout`), then moving on: the first pass does not wait for the late
-   window of an ID that stays silent, but the bus keeps listening through every window it cut
-   short, and the scan judges what it hears. A reply that comes after its probe's wait is
-   recognised by its ID: that actuator is found. Bytes that make no packet (a late reply that
-   met a later probe on the line, replies of two actuators at once) are kept with the time they
-   arrived. The actuators found are identified at once
-   (step 3); after the last ID the scan listens until the last window has closed.
-2. **Asking again**, with the whole late window and the retries of an ordinary transaction
-   (nothing else is sent until its window has closed), every ID whose window the first pass
-   cut short while something was on the line:
+1. **First pass.** Echo to each ID, waiting only for the first byte of a reply from an ID
+   never measured at the latency floor (:meth:`ZapBus.quick_timeout`: about 4.4 ms at 57600),
+   an actuator measured before for its own timeout, then moving on: the first pass does not
+   wait for the late window of an ID that stays silent, but the bus keeps listening through
+   every window it cut short, and the scan judges what it hears. A reply that comes after its
+   probe's wait is recognised by its ID: that actuator is found. Bytes that make no packet (a
+   late reply that met a later probe on the line, replies of two actuators at once) are kept
+   with the time they arrived. The actuators found are identified at once (step 3); after the
+   last ID the scan listens until the last window has closed.
+2. **Quick rounds**, then **asking again**. The IDs in doubt are those whose window the first
+   pass cut short while something unexplained was on the line:
 
    - every ID whose probe may have met bytes on the line (its echo came back broken, or it
      went out while they were arriving: a late reply can come through clean and still have
@@ -23,10 +23,18 @@ one exception the policy allows:
    - for garbled bytes, every ID whose window they fell in: one of them may have sent them
      (a late reply that met a probe, or replies of two actuators that met each other).
 
-   What the second probes hear is judged the same way, until nothing is in doubt (every ID is
-   asked again at most once). Records come out in ID order: one is held while a lower ID may
-   still turn out to be there. A quiet line is never asked again: an ID whose whole window
-   passed with nothing on the line has no actuator.
+   They are probed again in a quick round (when there are at least :data:`REPLAY_MIN`), in
+   first-pass order, with no probe where the garbled bytes would come again: if one of these
+   IDs sent them, its reply comes as long after its new probe as they came after its first, on
+   a free line, and is recognised by its ID. Each ID is judged by its new window like a
+   first-pass probe. A second round spaces its probes (each waits until the reply it may draw
+   would have ended), so that two late replies that met each other meet no more. What is
+   still in doubt after :data:`REPLAYS` rounds is asked again with the whole late window and
+   the retries of an ordinary transaction (nothing else is sent until its window has closed),
+   judged the same way, until nothing is in doubt (every ID is asked so at most once). Records
+   come out in ID order: one is held while a lower ID may still turn out to be there. A quiet
+   line is never asked again: an ID whose whole window passed with nothing unexplained on the
+   line has no actuator.
 3. **Identify.** Each actuator found is asked for model number .. feedback-return-mode in one
    Load Data (retries). No reply at all, with the whole window, and an Echo answered: return
    mode 0 (Echo only). A read that fails otherwise leaves ``model``, ``firmware`` and
@@ -52,6 +60,7 @@ import time
 
 from ..codec import zap
 from ..errors import BadReply, NoReply
+from .zap_timing import QUICK_FACTOR
 
 #: The order ``--baud all`` tries: the factory default first, then the others fastest first.
 ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
@@ -63,6 +72,11 @@ LIVE_FIRST = zap.REGISTER_BY_NAME["present-position"]
 LIVE_LAST = zap.REGISTER_BY_NAME["present-voltage"]
 #: How far before garbled bytes arrived (beyond the adapter's timer) a probe may have met them.
 GARBLED_SLACK = 0.01
+#: Quick rounds over the IDs in doubt before they are asked again one by one with the whole window
+#: (each costs about one probe per ID and one window; asking costs one window per ID).
+REPLAYS = 2
+#: The fewest IDs in doubt for which a quick round is cheaper than asking them one by one.
+REPLAY_MIN = 3
 STATUSES = ("ok", "error", "garbled", "duplicate", "unidentified")
 ECHO_LEN = 7
 
@@ -80,8 +94,9 @@ def garbled_warning(ident: int, baud: int) -> str:
 def scan(bus, ids, bauds, *, retries: int = 2):
     """Probe ``ids`` at each of ``bauds`` on ``bus`` (a :class:`~zkzap.link.zap_bus.ZapBus`).
 
-    Yields ``("probe", baud, ident, found_so_far, first)`` before each probe (for progress;
-    ``first`` is False for the second probes of step 2),
+    Yields ``("probe", baud, ident, found_so_far, phase)`` before each probe (for progress;
+    ``phase`` is ``"first"``, ``"round"`` for the quick rounds of step 2, ``"ask"`` for asking
+    again with the whole window),
     ``("record", rec)`` for every actuator found (as found) and ``("warning", text)``.
     """
     found = [0]
@@ -112,13 +127,14 @@ class _Scan:
         self.asked = set()             # IDs asked again with the whole window
         self.held = []                 # (ID, [events]) found, not yet released
         self.echo_errors = {}          # ID -> the error bits of the Echo that found it
+        self.bursts = []               # (lo, hi) of the garbled bytes heard since the last round
 
     # -- steps ------------------------------------------------------------------------------
 
     def run(self):
         bus = self.bus
         for ident in self.ids:
-            yield ("probe", self.baud, ident, self.found[0], True)
+            yield ("probe", self.baud, ident, self.found[0], "first")
             r = self._probe(ident)
             if r is not None:
                 self._found(ident, r)
@@ -130,13 +146,23 @@ class _Scan:
                 self._identify(ident, early=True)
         bus.quiet()
         self._judge()
+        for round_ in range(REPLAYS):
+            todo = sorted(self.doubt - set(self.records) - self.asked)
+            if len(todo) < REPLAY_MIN:
+                break
+            yield from self._replay(todo, spaced=round_ > 0)
+            for ident in sorted(self.records):
+                if ident not in self.identified and ident not in self.provisional:
+                    self._identify(ident, early=True)
+            bus.quiet()
+            self._judge()
         while True:                    # every ID is asked again at most once: this ends
             todo = sorted(self.doubt - set(self.records) - self.asked)
             redo = sorted(i for i in self.records if i not in self.identified or i in self.provisional)
             if not todo and not redo:
                 break
             for ident in todo:
-                yield ("probe", self.baud, ident, self.found[0], False)
+                yield ("probe", self.baud, ident, self.found[0], "ask")
                 self._ask(ident)
                 self._judge()
             for ident in sorted(i for i in self.records if i not in self.identified or i in self.provisional):
@@ -164,6 +190,50 @@ class _Scan:
             t0 = bus.last_sent
             tx = bus.wire(ECHO_LEN)
             self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(ECHO_LEN) + bus.margin)
+
+    def _replay(self, todo, spaced):
+        """A quick round over ``todo`` (the IDs in doubt), in first-pass order, keeping the line
+        free where the bytes that raised the doubt would come again: if one of these IDs sent
+        them, its reply comes as long after its new probe as they came after its first one, and
+        meets no probe this time. Each ID is then judged by its new window like any first-pass
+        probe. ``spaced`` (a later round): after each probe the line stays quiet until its reply
+        would have ended (where those bytes came, else after the bus-typical latency), so that
+        late replies that met each other (or the probes between them) meet no more."""
+        bus = self.bus
+        guard = self._slack() + bus.wire(ECHO_LEN)
+        offsets = {}                    # ID -> [(from, to)] after its probe, where its reply would come
+        for lo, hi in self.bursts:
+            for ident in todo:
+                p = self.probes.get(ident)
+                if p is not None and p.t0 <= hi and p.t0 + p.span >= lo:
+                    offsets.setdefault(ident, []).append((lo - p.t0 - guard, hi - p.t0 + bus.margin))
+        self.bursts = []
+        free = []                       # (from, to): where a reply may come on the line: no probe then
+        tx = bus.wire(ECHO_LEN)
+        for ident in sorted(todo, key=lambda i: self.probes[i].t0 if i in self.probes else 0.0):
+            yield ("probe", self.baud, ident, self.found[0], "round")
+            self.doubt.discard(ident)
+            while True:
+                now = time.monotonic()
+                block = [b for a, b in free if a < now + tx + bus.margin and b > now]
+                if not block:
+                    break
+                bus.linger(max(block) - now)
+            r = self._probe(ident)
+            if r is not None:
+                self._found(ident, r)
+            t0 = self.probes[ident].t0
+            free.extend((t0 + a, t0 + b) for a, b in offsets.get(ident, ()))
+            if spaced:
+                typical = bus.policy.typical() or 0.0
+                ends = [t0 + b for _, b in offsets.get(ident, ())]
+                ends.append(t0 + tx + max(typical * QUICK_FACTOR, bus.policy.quick(bus.latency, bus.window))
+                            + bus.wire(ECHO_LEN) * 2 + bus.margin)
+                left = max(ends) - time.monotonic()
+                if left > 0:
+                    bus.linger(left)
+            self._judge()
+            yield from self._release()
 
     def _ask(self, ident):
         """Ask again, with the whole window and the retries: a record, found, or absent."""
@@ -215,6 +285,7 @@ class _Scan:
             self.records[ident] = fresh
             self.provisional.add(ident)
             return
+        self.provisional.discard(ident)
         self._final(ident, events)
 
     # -- judging what was heard --------------------------------------------------------------
@@ -254,6 +325,7 @@ class _Scan:
             if ev.kind != "garbled":
                 continue
             lo, hi = ev.lo - slack - bus.wire(ECHO_LEN), ev.hi
+            self.bursts.append((ev.lo, ev.hi))
             self._collided(lo, hi)
             # whoever sent them may be any ID whose window they fell in
             self.doubt |= {p.ident for p in self.probes.values()

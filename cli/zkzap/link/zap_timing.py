@@ -12,15 +12,18 @@ sniffer and of capture decoding (:class:`Pairing`), follow the rules here:
    missed reply the host keeps listening until the window closes before a retry or the next
    request, so a late reply is always the answer to the request it answers, with its true
    latency, and never meets a retry on the wire. The only exception is the first pass of a
-   scan (:mod:`zkzap.link.zap_scan`), which moves on early and then asks again every ID whose
-   window it cut short while something was on the line.
+   scan (:mod:`zkzap.link.zap_scan`), which moves on early (in quick rounds) and then asks
+   again with the whole window every ID whose window it cut short while something it could
+   not explain was on the line.
 2. **Learned latency.** Every answered transaction gives a latency sample: the round trip
    minus both packets' time on the wire (the actuator's turnaround, the USB adapter's
    buffering, the host's scheduling). Each actuator has an :class:`Estimator` (a smoothed
    latency and its variation, as TCP's retransmission timer, RFC 6298); its timeout
    (:meth:`Estimator.timeout`) is bounded by :data:`FLOOR` and the late window. A reply after
-   its actuator's timeout is counted late; the bus-typical latency (the lower median of the
-   actuators') paces a scan's first pass. The estimators of a port are shared by every
+   its actuator's timeout is counted late. A scan's first pass waits a measured actuator's
+   own timeout, and for an ID never measured only :data:`FLOOR` (plus the adapter's timer, or
+   the ``--latency`` hint): most IDs are free, and a slower reply is heard anyway. The
+   estimators of a port are shared by every
    transaction in one process (:func:`policy_for`: ``zap batch``, ``zkzap shell``, every
    :class:`zkzap.Bus` on that port). ``--latency MS`` (``ZKZAP_ZAP_LATENCY``) gives the latency
    of a known slow setup before any sample, and widens the window when it needs more.
@@ -47,7 +50,7 @@ MARGIN = 0.0025
 NETWORK_MARGIN = 0.02
 #: Allowance between two reply bytes (on top of one byte time and the margin).
 INTER_BYTE = 0.010
-#: What a scan's first pass adds to the bus-typical latency (a reply later than that is late).
+#: What a scan's first pass adds to its wait for the reply's first byte.
 QUICK_MARGIN = 0.0005
 #: Allowance for the memory pause after a write to stored (NV) registers.
 NV_PAUSE = 0.008
@@ -57,7 +60,8 @@ RESTART_PAUSE = 0.1
 RETRIES = 2
 #: The smoothing of the estimators (RFC 6298: alpha 1/8, beta 1/4, K 4).
 ALPHA, BETA, K = 0.125, 0.25, 4
-#: How much a scan's first pass stretches the bus-typical latency for its quick waits.
+#: How much a scan's first pass stretches the latency it allows an unknown ID (and a write's
+#: courtesy wait the bus-typical latency).
 QUICK_FACTOR = 1.25
 #: An FTDI adapter's latency timer is shown in the measured latency when the bus-typical latency
 #: reaches this share of it.
@@ -148,10 +152,9 @@ class Policy:
 
     def typical(self):
         """The bus-typical latency: the median of the actuators' smoothed latencies, the lower
-        of the two middle ones for an even count (None before any was measured). One slow
-        actuator is not the bus, even among two: a scan's first pass paced by it would wait
-        its latency for every free ID (a second baud rate of ``--baud all``, another scan in
-        the same process), while its own late reply is heard and asked again anyway."""
+        of the two middle ones for an even count (None before any was measured): one slow
+        actuator is not the bus, even among two. It keeps the line quiet after a write to an
+        unmeasured ID (:meth:`courtesy`) and spaces a scan's last quick round."""
         values = sorted(e.srtt for e in self.estimators.values() if e.srtt is not None)
         if not values:
             return None
@@ -177,9 +180,19 @@ class Policy:
         return min(window, max(INTER_BYTE, K * est.rttvar))
 
     def quick(self, hint=None, window=LATE_WINDOW) -> float:
-        """The latency a scan's first pass allows an unknown ID: the bus-typical latency (or the
-        hint, or :data:`FLOOR` plus the adapter's timer) stretched by :data:`QUICK_FACTOR`, within
-        the window."""
+        """The latency a scan's first pass allows an ID never measured: :data:`FLOOR` plus the
+        adapter's timer (or the ``--latency`` hint when larger) stretched by
+        :data:`QUICK_FACTOR`, within the window. Not the latency of the actuators already
+        measured: most IDs probed are free, and a slower actuator's reply that comes after the
+        wait is still heard (a scan judges it; see :mod:`zkzap.link.zap_scan`)."""
+        floor = FLOOR + (self.adapter or 0.0)
+        base = max(floor, hint) if hint is not None else floor
+        return min(window, base * QUICK_FACTOR)
+
+    def courtesy(self, hint=None, window=LATE_WINDOW) -> float:
+        """How long the line stays quiet after a write that an unmeasured actuator in another
+        return mode might acknowledge: the bus-typical latency (or the hint, or :data:`FLOOR`
+        plus the adapter's timer) stretched by :data:`QUICK_FACTOR`, within the window."""
         floor = FLOOR + (self.adapter or 0.0)
         typical = self.typical()
         base = typical if typical is not None else (hint if hint is not None else floor)
