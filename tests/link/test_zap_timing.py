@@ -357,7 +357,8 @@ class LateLine:
     """One actuator, ``ident``, answering ``latency`` s after a request's last byte left, its
     reply on the line for its bytes' time; a host write while it is on the line garbles it (a
     collision). Its first Echo reply meets a probe whatever the host does (the collision this
-    test is about); later ones only if the host transmits over them."""
+    test is about); later ones only if the host transmits over them (counted in
+    ``collisions``)."""
 
     baudrate = 57600
     port = "late-line"
@@ -373,7 +374,7 @@ class LateLine:
 
     def _deliver(self):
         now = time.monotonic()
-        for item in [x for x in self.line if x[0] + len(x[1]) * self.byte <= now]:
+        for item in [x for x in self.line if x[0] + len(x[1]) * self.byte <= now]:  # [start, bytes, counted]
             self.line.remove(item)
             self.rx += item[1]
 
@@ -389,7 +390,7 @@ class LateLine:
         for item in self.line:
             if item[0] < end and item[0] + len(item[1]) * self.byte > start:
                 item[1] = bytes(b & 0x5A for b in item[1])     # garbled on the line
-                self.collisions += 1
+                self.collisions += item[2]
         if data[3] != self.ident:
             return len(data)
         if data == zap.echo(self.ident):
@@ -401,7 +402,7 @@ class LateLine:
             reply = zap.packet(self.ident, 0, bytes(data[7]))
         else:
             return len(data)
-        self.line.append([end + self.latency, reply])
+        self.line.append([end + self.latency, reply, int(self.echoes > 1 or data[5] != zap.ECHO)])
         return len(data)
 
     def read(self, n=1):
