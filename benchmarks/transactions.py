@@ -69,6 +69,42 @@ def start_sim(ids, baud, extra=(), stderr=subprocess.DEVNULL):
     return p, port
 
 
+def timeline(bus, pkt, count, baud):
+    """Where a transaction's time goes, from ``count`` more round trips with their reads and
+    writes timed: ``reply_late_ms``, how much later than the line allows the reply's last byte
+    was read (the simulator and the pty: the line allows request and reply on the wire plus the
+    2 ms turnaround), and ``host_ms``, from that read to the next request's write (the library)."""
+    events = []
+    read, write = bus._read, bus._write
+
+    def timed_read(n, deadline):
+        data = read(n, deadline)
+        if data:
+            events.append(("r", time.monotonic()))
+        return data
+
+    def timed_write(p):
+        t0 = write(p)
+        events.append(("w", t0))
+        return t0
+
+    bus._read, bus._write = timed_read, timed_write
+    try:
+        for _ in range(count):
+            bus.transact(pkt)
+    finally:
+        del bus._read, bus._write
+    model = (len(pkt) + 9) * 10 / baud + 0.002
+    late, host = [], []
+    writes = [i for i, e in enumerate(events) if e[0] == "w"]
+    for a, b in zip(writes, writes[1:]):
+        reads = [e[1] for e in events[a + 1:b] if e[0] == "r"]
+        if reads:
+            late.append((reads[-1] - events[a][1] - model) * 1000)
+            host.append((events[b][1] - reads[-1]) * 1000)
+    return {"reply_late_ms": statistics.median(late), "host_ms": statistics.median(host)}
+
+
 def expected(ids):
     out = []
     for part in ids.split(","):
@@ -105,8 +141,10 @@ def main(argv=None):
             for _ in range(args.count):
                 bus.transact(pkt)
             dt = time.perf_counter() - t0
+            parts = timeline(bus, pkt, max(20, args.count // 5), args.baud)
         line = 1.0 / ((len(pkt) + 9) * 10 / args.baud + 0.002)
-        results["library"] = {"per_s": args.count / dt, "line_per_s": line, "ratio": args.count / dt / line}
+        results["library"] = {"per_s": args.count / dt, "line_per_s": line, "ratio": args.count / dt / line,
+                              **parts}
 
         env = dict(os.environ, NO_COLOR="1")
         cmd = tool("zap") + ["load", "present-position", "--id", "1", "-p", port, "-b", str(args.baud)]
@@ -151,7 +189,9 @@ def main(argv=None):
         lib = results["library"]
         print(f"Load Data round trips over a pty at {args.baud} baud: {lib['per_s']:,.0f}/s "
               f"({1000 / lib['per_s']:.2f} ms each); the line's limit {lib['line_per_s']:.0f}/s: "
-              f"{lib['ratio']:.2f}x (target >= 0.9x)")
+              f"{lib['ratio']:.2f}x (target >= 0.9x); a reply's last byte read {lib['reply_late_ms']:.2f} ms after "
+              f"the line allows (the simulator and the pty), the next request written {lib['host_ms']:.2f} ms "
+              "after it (the library)")
         print(f"zap load as a command: {results['command']['per_s']:.1f}/s")
         for s in scans:
             verdict = "" if s["target_s"] is None or not full else \

@@ -96,6 +96,20 @@ def _selector():
     return selectors.DefaultSelector()
 
 
+def _fine_timers() -> None:
+    """Wake this thread when its timers expire, not up to 50 us later: Linux lets a sleeping
+    thread's timer slip by its timer slack (50 us by default) to batch wake-ups, and every
+    reply the simulator sends would come that much later than the line it models."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(29, 1, 0, 0, 0)     # PR_SET_TIMERSLACK, 1 ns
+    except (OSError, AttributeError):
+        pass
+
+
 class _NoLock:
     def __enter__(self):
         return self
@@ -112,6 +126,7 @@ def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) 
     termios, tty = _termios()
     speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
     lock = lock or _NoLock()
+    _fine_timers()
     master, slave = os.openpty()
     try:
         tty.setraw(slave)
@@ -191,6 +206,7 @@ def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=No
     a line on stderr says so; the first client keeps the device. Once it disconnects, the next
     client gets it."""
     lock = lock or _NoLock()
+    _fine_timers()
     srv = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
     client = None
     sel = _selector()
