@@ -48,7 +48,7 @@ EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 class Line:
     """One command of a batch: where it is, its text, its tokens and its command path."""
 
-    __slots__ = ("where", "number", "text", "tokens", "path", "params", "consents", "effect", "leaf")
+    __slots__ = ("where", "number", "text", "tokens", "path", "params", "consents", "effect", "leaf", "checked")
 
     def __init__(self, where, number, text, tokens):
         self.where, self.number, self.text, self.tokens = where, number, text, tokens
@@ -57,6 +57,7 @@ class Line:
         self.consents = []      # what the line's command would ask consent for (see check_lines)
         self.effect = None      # (what, facts) of the first effect its check stopped at
         self.leaf = None
+        self.checked = False    # its command ran in check mode (its files' checks included)
 
 
 #: The longest batch line (characters): a real one is a command and its options, and the
@@ -156,7 +157,7 @@ def _check_lines(group, lines, protocol, defaults):
         twin = seen.get(tuple(line.tokens))
         if twin is not None:               # the same text checks the same: reuse the first's findings
             line.path, line.params, line.leaf = twin.path, twin.params, twin.leaf
-            line.consents, line.effect = twin.consents, twin.effect
+            line.consents, line.effect, line.checked = twin.consents, twin.effect, twin.checked
             continue
         seen[tuple(line.tokens)] = line
         bad = port_tokens(line.tokens)
@@ -187,6 +188,7 @@ def _check_run(line, protocol):
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), checking.checking() as check:
         code = invoke(line, protocol)
     line.consents, line.effect = check.consents, check.effect
+    line.checked = code != USAGE
     if code == USAGE:
         message = err.getvalue().strip().splitlines()
         text = message[-1].split("error: ", 1)[-1] if message else f"exit status {code}"
@@ -215,6 +217,9 @@ def parse_result(text):
     list of JSON Lines values, or the text itself."""
     if not text.strip():
         return None
+    digits = text[:-1]
+    if text[-1] == "\n" and digits.isascii() and digits.isdigit() and (digits[0] != "0" or len(digits) == 1):
+        return int(digits)                 # a bare value, the commonest result (what JSON reads it as)
     try:
         return json.loads(text)
     except ValueError:
@@ -235,13 +240,13 @@ def invoke(line, protocol) -> int:
     so the same values as parsing it again), with the command line's error conventions.
     Returns its exit status."""
     from . import PipeClosed, _error
-    from .hints import with_hint
 
     leaf, parent = line.leaf
     prog = protocol
     try:
         ctx = click.Context(leaf, info_name=line.path[-1], parent=parent)
         ctx.params = dict(line.params)
+        ctx.zkzap_files_checked = line.checked    # its check ran them on these very parameters
         with ctx:
             leaf.invoke(ctx)
         return 0
@@ -257,6 +262,8 @@ def invoke(line, protocol) -> int:
     except (BrokenPipeError, PipeClosed):
         raise
     except ZkzapError as e:
+        from .hints import with_hint
+
         _error(with_hint(e), prog)
         return e.code
 
@@ -290,26 +297,31 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
 
     first = 0
     last = None
+    buf, err = io.StringIO(), io.StringIO()   # what a line prints: emptied for the next line
     with stop.deferring():
         for line in lines:
             if stop.requested() is not None:
                 break                          # between two lines: the next one does not start
             last = line
-            buf, err = io.StringIO(), io.StringIO()
             Borrowed.keep_baud = line.path[0] in keep_baud_after
+            saved = sys.stdout, sys.stderr
+            sys.stdout, sys.stderr = buf, err
             try:
-                with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
-                    code = invoke(line, protocol)
+                code = invoke(line, protocol)
             finally:
+                sys.stdout, sys.stderr = saved
                 Borrowed.keep_baud = False
+            printed, messages = buf.getvalue(), err.getvalue()
+            for b in (buf, err):
+                b.seek(0)
+                b.truncate()
             signum = stop.requested()
             if signum is not None and stop.pending() is None and not code:
                 code = signals.EXIT.get(signum, INTERRUPTED)   # stopped, though the command returned
-            messages = err.getvalue()
             if messages:
                 sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
                 sys.stderr.flush()
-            rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(buf.getvalue())}
+            rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(printed)}
             if code:
                 errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
                 rec["error"] = errors[-1] if errors else None
