@@ -437,4 +437,6 @@ def test_a_late_reply_that_met_a_probe_is_found_in_a_quick_round_not_by_asking_e
     assert phases.count("first") == 41
     assert phases.count("round") >= 20                        # the suspects, once more, quickly
     assert phases.count("ask") <= 3                           # not every suspect at 155 ms each
-    assert port.collisions == 0                               # the round kept the line free for the reply
+    # the round kept the line free where the reply came (a host held up for longer than the free
+    # slot's margin, 12 ms, could still meet it once: the spaced second round finds it then)
+    assert port.collisions <= 1
