@@ -211,6 +211,8 @@ class _Scan:
         free = []                       # (from, to): where a reply may come on the line: no probe then
         tx = bus.wire(ECHO_LEN)
         for ident in sorted(todo, key=lambda i: self.probes[i].t0 if i in self.probes else 0.0):
+            if ident in self.records:
+                continue                # found meanwhile (its late reply came through)
             yield ("probe", self.baud, ident, self.found[0], "round")
             self.doubt.discard(ident)
             while True:
