@@ -27,8 +27,9 @@ one exception the policy allows:
    first-pass order, with no probe where the garbled bytes would come again: if one of these
    IDs sent them, its reply comes as long after its new probe as they came after its first, on
    a free line, and is recognised by its ID. Each ID is judged by its new window like a
-   first-pass probe. A second round spaces its probes (each waits until the reply it may draw
-   would have ended), so that two late replies that met each other meet no more. What is
+   first-pass probe. A second round spaces its probes (each waits until a reply at the
+   bus-typical latency would have ended), so that two late replies that met each other meet
+   no more. What is
    still in doubt after :data:`REPLAYS` rounds is asked again with the whole late window and
    the retries of an ordinary transaction (nothing else is sent until its window has closed),
    judged the same way, until nothing is in doubt (every ID is asked so at most once). Records
@@ -196,9 +197,9 @@ class _Scan:
         free where the bytes that raised the doubt would come again: if one of these IDs sent
         them, its reply comes as long after its new probe as they came after its first one, and
         meets no probe this time. Each ID is then judged by its new window like any first-pass
-        probe. ``spaced`` (a later round): after each probe the line stays quiet until its reply
-        would have ended (where those bytes came, else after the bus-typical latency), so that
-        late replies that met each other (or the probes between them) meet no more."""
+        probe. ``spaced`` (a later round): after each probe the line stays quiet until a reply at
+        the bus-typical latency would have ended, so that late replies that met each other (or
+        the probes between them) meet no more."""
         bus = self.bus
         guard = self._slack() + bus.wire(ECHO_LEN)
         offsets = {}                    # ID -> [(from, to)] after its probe, where its reply would come
@@ -227,11 +228,12 @@ class _Scan:
             t0 = self.probes[ident].t0
             free.extend((t0 + a, t0 + b) for a, b in offsets.get(ident, ()))
             if spaced:
+                # long enough for a reply at the bus-typical latency to end before the next probe
+                # (one later than that, where the garbled bytes came, has its free slot above)
                 typical = bus.policy.typical() or 0.0
-                ends = [t0 + b for _, b in offsets.get(ident, ())]
-                ends.append(t0 + tx + max(typical * QUICK_FACTOR, bus.policy.quick(bus.latency, bus.window))
-                            + bus.wire(ECHO_LEN) * 2 + bus.margin)
-                left = max(ends) - time.monotonic()
+                end = t0 + tx + max(typical * QUICK_FACTOR, bus.policy.quick(bus.latency, bus.window)) \
+                    + bus.wire(ECHO_LEN) * 2 + bus.margin
+                left = end - time.monotonic()
                 if left > 0:
                     bus.linger(left)
             self._judge()
