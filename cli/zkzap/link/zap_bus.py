@@ -274,10 +274,8 @@ class ZapBus:
         :data:`~zkzap.link.zap_timing.QUICK_MARGIN` and, for an ID measured before, its own
         timeout (it is probably there: its reply must not meet the next probe), else the
         latency an unknown ID is allowed (see :meth:`zap_timing.Policy.quick`)."""
-        est = self.policy.estimators.get(ident) if ident is not None else None
-        if est is not None and est.samples:
-            wait = est.timeout(FLOOR, self.window)
-        else:
+        wait = self.policy.measured(ident, self.window)
+        if wait is None:
             wait = self.policy.quick(self.latency, self.window)
         return self.wire(tx_bytes + 1) + wait + QUICK_MARGIN
 
@@ -287,10 +285,8 @@ class ZapBus:
         scan's first pass (an acknowledgement that an actuator set to another mode gives
         anyway must not meet the next request)."""
         window = self.window if window is None else window
-        est = self.policy.estimators.get(ident)
-        if est is not None and est.samples:
-            return est.timeout(FLOOR, window)
-        return self.policy.courtesy(self.latency, window)
+        measured = self.policy.measured(ident, window)
+        return measured if measured is not None else self.policy.courtesy(self.latency, window)
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])

@@ -141,22 +141,13 @@ class _Scan:
                 self._found(ident, r)
             self._judge()
             yield from self._release()
-        # the actuators found are identified while the last windows close
-        for ident in sorted(self.records):
-            if ident not in self.identified:
-                self._identify(ident, early=True)
-        bus.quiet()
-        self._judge()
+        self._identify_found()
         for round_ in range(REPLAYS):
             todo = sorted(self.doubt - set(self.records) - self.asked)
             if len(todo) < REPLAY_MIN:
                 break
             yield from self._replay(todo, spaced=round_ > 0)
-            for ident in sorted(self.records):
-                if ident not in self.identified and ident not in self.provisional:
-                    self._identify(ident, early=True)
-            bus.quiet()
-            self._judge()
+            self._identify_found()
         while True:                    # every ID is asked again at most once: this ends
             todo = sorted(self.doubt - set(self.records) - self.asked)
             redo = sorted(i for i in self.records if i not in self.identified or i in self.provisional)
@@ -191,6 +182,16 @@ class _Scan:
             t0 = bus.last_sent
             tx = bus.wire(ECHO_LEN)
             self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(ECHO_LEN) + bus.margin)
+
+    def _identify_found(self):
+        """Identify the actuators found and not identified yet while the last windows close (one
+        identified while windows were open is done again later, on a quiet line); then listen
+        until no reply may still come and judge what came."""
+        for ident in sorted(self.records):
+            if ident not in self.identified and ident not in self.provisional:
+                self._identify(ident, early=True)
+        self.bus.quiet()
+        self._judge()
 
     def _replay(self, todo, spaced):
         """A quick round over ``todo`` (the IDs in doubt), in first-pass order, keeping the line

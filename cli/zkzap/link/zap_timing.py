@@ -160,12 +160,20 @@ class Policy:
             return None
         return values[(len(values) - 1) // 2]
 
-    def timeout(self, ident: int, window: float, hint=None) -> float:
-        """When a reply of ``ident`` counts as late (its estimator's timeout, the hint before
-        any sample), within :data:`FLOOR` .. ``window``."""
+    def measured(self, ident, window: float):
+        """The timeout of ``ident``'s estimator within :data:`FLOOR` .. ``window``, or None
+        before its first sample."""
         est = self.estimators.get(ident)
         if est is not None and est.samples:
             return est.timeout(FLOOR, window)
+        return None
+
+    def timeout(self, ident: int, window: float, hint=None) -> float:
+        """When a reply of ``ident`` counts as late (its estimator's timeout, the hint before
+        any sample), within :data:`FLOOR` .. ``window``."""
+        measured = self.measured(ident, window)
+        if measured is not None:
+            return measured
         if hint is not None:
             return max(FLOOR, min(window, hint * QUICK_FACTOR + MARGIN))
         return window
