@@ -7,12 +7,12 @@ this Linux machine; on Windows pyserial uses its win32 backend instead).
 """
 
 import os
-import selectors
 import subprocess
 import sys
-import time
 
 import pytest
+
+from e2e.conftest import read_first_line
 
 CLI = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli")
 POSIX_ONLY = ("termios", "pty", "fcntl", "tty", "resource", "grp", "pwd")
@@ -85,18 +85,7 @@ def test_a_pty_simulator_says_it_needs_posix():
 
 
 def _first_line(proc, timeout=20.0):
-    sel = selectors.DefaultSelector()
-    sel.register(proc.stdout, selectors.EVENT_READ)
-    line = b""
-    end = time.monotonic() + timeout
-    while not line.endswith(b"\n") and time.monotonic() < end:
-        if sel.select(end - time.monotonic()):
-            ch = os.read(proc.stdout.fileno(), 1)
-            if not ch:
-                break
-            line += ch
-    sel.close()
-    return line.decode().strip()
+    return read_first_line(proc, timeout).decode().strip()
 
 
 @pytest.mark.parametrize("kind, client", [

@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from e2e.conftest import clean_env, executable, read_first_line
+from e2e.conftest import clean_env, executable, read_first_line, stop_sim
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -71,16 +71,9 @@ class WebConsole:
             return f.read()
 
     def stop(self, sig=signal.SIGTERM) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.proc.stdout.close()
+        code = stop_sim(self.proc, sig, timeout=15.0)
         self.log.close()
-        return self.proc.returncode
+        return code
 
     def close(self):
         self.stop()

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 
 import pytest
@@ -31,7 +30,7 @@ import pytest
 from zkzap.api.sniff import ZapSniffer
 
 from .buscheck import LINES, check_capture, check_rtts, frames
-from .conftest import _first_line, clean_env, executable
+from .conftest import _first_line, clean_env, executable, stop_sim
 
 #: (latency ms, gap ms, echo, mode, runner, lines, search): gap x echo x mode pairs all appear.
 BUSES = [
@@ -60,14 +59,7 @@ class Sim:
         self.url = _first_line(self.proc, 10.0)
 
     def stop(self) -> str:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.proc.stdout.close()
+        stop_sim(self.proc)
         self.err.seek(0)
         text = self.err.read()
         self.err.close()

@@ -353,22 +353,20 @@ def test_scan_finds_the_shared_id_whose_collision_came_during_the_next_probe():
     assert any("ID 1" in w and "garbled" in w for w in warnings)
 
 
-class LateLine:
+class LateLine(Scripted):
     """One actuator, ``ident``, answering ``latency`` s after a request's last byte left, its
     reply on the line for its bytes' time; a host write while it is on the line garbles it (a
     collision). Its first Echo reply meets a probe whatever the host does (the collision this
     test is about); later ones only if the host transmits over them (counted in
     ``collisions``)."""
 
-    baudrate = 57600
     port = "late-line"
-    timeout = 0.1
 
     def __init__(self, ident, latency):
+        super().__init__({})
         self.ident, self.latency = ident, latency
         self.byte = wire_time(1, 57600)
         self.line = []                    # [start, bytes] of replies on their way
-        self.rx = bytearray()
         self.echoes = 0
         self.collisions = 0
 
@@ -409,15 +407,7 @@ class LateLine:
         deadline = time.monotonic() + (self.timeout or 0)
         while not self.in_waiting and time.monotonic() < deadline:
             time.sleep(0.0002)
-        out = bytes(self.rx[:n])
-        del self.rx[:n]
-        return out
-
-    def reset_input_buffer(self):
-        self.rx.clear()
-
-    def close(self):
-        pass
+        return super().read(n)
 
 
 def test_a_late_reply_that_met_a_probe_is_found_in_a_quick_round_not_by_asking_every_suspect():
