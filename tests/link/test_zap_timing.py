@@ -313,6 +313,19 @@ def test_collision_bytes_before_a_reply_are_reported_to_scans():
     assert [e.kind for e in bus.take_events()] == ["garbled"]
 
 
+def test_bytes_held_for_a_packet_that_never_completes_are_dated_when_they_came():
+    """A scan judges garbled bytes by the windows they fell in: the start of a reply that never
+    completes is dated when it was read, not when the line was given up on (a window that had
+    closed meanwhile would lose the ID that sent it)."""
+    port = Scripted({})
+    bus = ZapBus(port, return_mode=1)
+    port.rx += bytes.fromhex("ffffff0302")                    # the start of a reply, and nothing more
+    came = time.monotonic()
+    bus.linger(0.15)
+    garbled = [e for e in bus.take_events() if e.kind == "garbled"]
+    assert garbled and garbled[0].hi - came < 0.05            # not 0.15 s later, at the flush
+
+
 def test_scan_identify_failure_leaves_fields_null():
     """ID 3 answers its first-pass Echo only late (while ID 4 is probed: heard, so found), then
     nothing: its identification fails and says why; no field is guessed."""

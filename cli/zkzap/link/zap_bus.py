@@ -194,6 +194,7 @@ class ZapBus:
         self._unechoed = {}                # write time -> packet, until its clean echo came back
         self._owed = deque()               # attempts whose reply may still come
         self._framer = ZapFramer()         # bytes read between transactions
+        self._held = None                  # [lo, hi]: when the bytes the framer holds were read
         self._quiet_until = 0.0
         self._seen_empty = time.monotonic()
         self._port_timeout = object()
@@ -254,6 +255,7 @@ class ZapBus:
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
         self._owed.clear()                 # nothing said at the old speed is heard at the new one
         self._framer = ZapFramer()
+        self._held = None
 
     def close(self) -> None:
         close_port(self.port)
@@ -405,13 +407,17 @@ class ZapBus:
         return owed
 
     def _account(self, data: bytes, lo: float, hi: float) -> None:
-        """Bytes read between transactions, through the idle framer."""
+        """Bytes read between transactions, through the idle framer. What they make is dated
+        from the first of them still held (an incomplete packet read earlier) to this read."""
         framer = self._framer
+        if self._held is not None:
+            lo = self._held[0]
         bad, skipped = framer.bad, framer.skipped
         for p in framer.feed(data):
             self._stray(bytes(p), lo, hi)
         if framer.bad != bad or framer.skipped != skipped:
             self._event("garbled", None, lo, hi, None, bytes(data))
+        self._held = [lo, hi] if framer.pending else None
 
     def _listen(self, until: float) -> bool:
         """Read until ``until`` or the next bytes; account for them. False when nothing came."""
@@ -427,15 +433,18 @@ class ZapBus:
         return True
 
     def _flush_idle(self) -> None:
+        """The bytes the idle framer holds once no more came: dated when they were read, not now
+        (a scan judges which windows they fell in)."""
         framer = self._framer
         if not framer.pending:
             return
-        now = time.monotonic()
+        lo, hi = self._held if self._held is not None else (self._seen_empty, time.monotonic())
+        self._held = None
         bad, skipped = framer.bad, framer.skipped
         for p in framer.flush():
-            self._stray(bytes(p), self._seen_empty, now)
+            self._stray(bytes(p), lo, hi)
         if framer.bad != bad or framer.skipped != skipped:
-            self._event("garbled", None, self._seen_empty, now, None, b"")
+            self._event("garbled", None, lo, hi, None, b"")
 
     def _reset_input(self) -> None:
         try:
@@ -619,7 +628,7 @@ class ZapBus:
         received = bytearray()
         echo_known = self.adapter_echo
         state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
-                 "explained": 0, "first": None, "lo": self._seen_empty}
+                 "explained": 0, "first": None, "lo": self._seen_empty, "hi": None}
         wrong = []
         deadline = base = t0 + limit
         tx = self.wire(len(pkt))
@@ -693,7 +702,7 @@ class ZapBus:
                 if time.monotonic() >= deadline:
                     break
                 continue
-            hi = time.monotonic()
+            hi = state["hi"] = time.monotonic()
             if state["first"] is None and not (echo_known and len(received) + len(chunk) <= len(pkt)
                                                and pkt.startswith(bytes(received) + chunk)):
                 state["first"] = hi               # the first byte that is not our own echo
@@ -705,10 +714,11 @@ class ZapBus:
             # bytes of an incomplete packet: give the rest time to trickle in (only while they do)
             deadline = max(base, time.monotonic() + self.wire(1) + gap + self.margin) if framer.pending else base
         pending, bad_before = framer.pending, framer.bad
-        now = time.monotonic()
-        got = examine(framer.flush(), self._seen_empty, now)   # a packet held back to rule out a rival
+        # what the bytes held make is dated when they were read, not at the deadline
+        last = state["hi"] if state["hi"] is not None else time.monotonic()
+        got = examine(framer.flush(), state["lo"], last)   # a packet held back to rule out a rival
         if framer.bad or len(received) > state["explained"]:
-            self._event("garbled", None, state["lo"], now, None, bytes(received))   # a collision or a line fault
+            self._event("garbled", None, state["lo"], last, None, bytes(received))   # a collision or a line fault
         if got is not None:
             return got
         copies = state["copies"]
