@@ -107,3 +107,17 @@ def test_esr_is_answered_at_once_then_at_most_once_a_second():
 
     assert big.on_frame(0, {"id": 8, "esr": 1}) == zk.encode_control("pressure", pressure_hpa=1023)[0]
     assert big.sent[0][1] == 1023 and "does not fit control ID 8" in said[2]
+
+
+def test_esr_answers_keep_a_schedule_of_one_a_second_whatever_the_jitter():
+    # status ID 8 twice a second, each read up to 0.12 s late: one answer a second, not one every
+    # 1.5 s (as a rule of "at least 0.9 s since the last answer" gives)
+    ans = PressureAnswer(lambda t: 1000, "x")
+    jitter = (0.0, 0.12, 0.03, 0.11, 0.0, 0.09, 0.12, 0.01, 0.1, 0.05)
+    asks = [k * 0.5 + jitter[k % len(jitter)] for k in range(21)]
+    sent = [t for t in asks if ans.on_frame(t, {"id": 8, "esr": 1}) is not None]
+    assert len(sent) == 11 and all(t >= n - 0.1 for n, t in enumerate(sent))
+    assert all(b - a >= 0.5 for a, b in zip(sent, sent[1:]))
+    # a bunch read at once after a stall gets one answer; after a pause the schedule starts again
+    assert ans.on_frame(13.0, {"id": 8, "esr": 1}) is not None and ans.on_frame(13.0, {"id": 8, "esr": 1}) is None
+    assert ans.on_frame(13.49, {"id": 8, "esr": 1}) is None and ans.on_frame(13.9, {"id": 8, "esr": 1}) is not None

@@ -44,7 +44,7 @@ def load_cell():
 
 def test_a_load_cell_on_a_pty_feeds_records_tsfc_and_corrections(cli, tmp_path, load_cell):
     sched = tmp_path / "s.csv"
-    sched.write_text("0,0,run\n16,50\n30,0,standby\n32,0,standby\n")          # model seconds
+    sched.write_text("0,0,run\n24,50\n38,0,standby\n40,0,standby\n")          # model seconds: 12 s of start-up
     tel, steps, summary = tmp_path / "tel.csv", tmp_path / "steps.csv", tmp_path / "s.json"
     r = cli("zk", "profile", str(sched), "-p", SIM, "-o", str(tel), "--aux", load_cell, "--thrust-from", "thrust_n",
             "--ambient-temp", "t_c", "--settle", "4", "--steps-csv", str(steps), "--summary-json", str(summary))
@@ -93,12 +93,21 @@ def test_the_ecus_request_for_air_pressure_is_answered_at_a_modest_rate(cli, tmp
     assert r.exit_code == 0, r
     answers = json.loads(summary.read_text())["air_pressure_answers"]
     times = [f["t"] for f in answers["frames"]]
-    assert 8 <= answers["sent"] <= 11 and answers["asked"] > answers["sent"]          # an ECU that keeps asking
-    assert all(b - a >= 0.9 for a, b in zip(times, times[1:]))
+    assert answers["sent"] >= 3 and answers["asked"] > answers["sent"]                 # an ECU that keeps asking
+    recs = [json.loads(line) for line in log.read_text().splitlines()]
+    asks = [rec["t"] for rec in recs if rec["id"] == 8 and rec["esr"]]
+    # the rule, judged on the requests as they were read (a loaded machine reads them late and in
+    # bunches): each answer is a request's; never two closer than 0.5 s, nor more than one a second
+    # on average; and a request a second after the last answer is always answered
+    assert set(times) <= set(asks)
+    assert all(b - a >= 0.5 - 0.002 for a, b in zip(times, times[1:]))
+    assert all(t >= times[0] + n * 1.0 - 0.1 - 0.002 for n, t in enumerate(times))
+    for t in asks:
+        before = [a for a in times if a < t]
+        assert t in times or not before or t - before[-1] < 1.0 + 0.002, (t, times)
     from zkzap.codec import zk
 
     assert {f["frame"] for f in answers["frames"]} == {zk.encode_control("pressure", pressure_hpa=995)[0].hex(" ").upper()}
-    recs = [json.loads(line) for line in log.read_text().splitlines()]
     assert [rec["pressure_pa"] for rec in recs if rec["id"] == 3][-1] == 99500         # the ECU took it
     assert "answering 995 hPa from --air-pressure" in r.stderr
 
