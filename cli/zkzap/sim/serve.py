@@ -13,6 +13,7 @@ import os
 import selectors
 import socket
 import sys
+import time
 
 from ..errors import UsageError
 from .base import Clock
@@ -80,11 +81,15 @@ def _announce(text, out):
     out.flush()
 
 
+#: How long the serving loop sleeps when nothing is due (it wakes at once for the host's bytes).
+IDLE_S = 0.5
+
+
 def _timeout(device, clock):
     wake = device.next_wakeup(clock.now())
     if wake is None:
-        return 0.5
-    return min(0.5, clock.real_delay(wake - clock.now()))
+        return IDLE_S
+    return min(IDLE_S, clock.real_delay(wake - clock.now()))
 
 
 def _selector():
@@ -110,6 +115,30 @@ def _fine_timers() -> None:
         pass
 
 
+#: With ``precise``, the last this-many seconds of a wait for a due reply byte are a poll loop,
+#: not a sleep: a sleeping thread wakes 0.1-0.2 ms after its timer (an idle core, a virtual
+#: machine), and every reply would reach the host that much later than the line it models.
+SPIN_S = 0.0003
+
+
+def _select(sel, wait, precise):
+    """``sel.select(wait)``; with ``precise`` (and a reply byte due within the wait), the end of
+    the wait polls, so the byte goes out on time. Only for a simulator in a process of its own
+    (``zkzap sim``): in a thread of the host's process it would hold the interpreter lock that
+    the host needs to read the reply."""
+    if not precise or wait <= 0 or wait >= IDLE_S:
+        return sel.select(wait)
+    deadline = time.monotonic() + wait
+    if wait > SPIN_S:
+        events = sel.select(wait - SPIN_S)
+        if events:
+            return events
+    while True:
+        events = sel.select(0)
+        if events or time.monotonic() >= deadline:
+            return events
+
+
 class _NoLock:
     def __enter__(self):
         return self
@@ -118,11 +147,12 @@ class _NoLock:
         return False
 
 
-def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) -> None:
+def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None, precise=False) -> None:
     """Serve ``device`` on a new pseudo-terminal until ``stop_fd`` becomes readable (or a signal
     handler raises). ``ready(path)`` is called once the pty exists (with ``link``, the path is
     also a symlink there); ``lock`` (a context manager) is held around every use of the device,
-    for a caller that inspects it from another thread. The device is not closed here."""
+    for a caller that inspects it from another thread; ``precise``: see :func:`_select`. The
+    device is not closed here."""
     termios, tty = _termios()
     speeds = {getattr(termios, f"B{b}"): b for b in _BAUDS if hasattr(termios, f"B{b}")}
     lock = lock or _NoLock()
@@ -144,7 +174,7 @@ def run_pty(device, clock: Clock, ready, *, stop_fd=None, lock=None, link=None) 
             while True:
                 with lock:
                     wait = _timeout(device, clock)
-                events = sel.select(wait)
+                events = _select(sel, wait, precise)
                 settings = host_settings(termios, slave, speeds)     # the host's, once a turn
                 for key, _ in events:
                     if key.data == "stop":
@@ -179,7 +209,7 @@ def serve_pty(device, clock: Clock, out=sys.stdout, link=None) -> None:
     _install_signals()
     try:
         # a signal right after the line is announced is a stop
-        run_pty(device, clock, lambda path: _announce(path, out), link=link)
+        run_pty(device, clock, lambda path: _announce(path, out), link=link, precise=True)
     except _Stop:
         pass
     finally:
@@ -196,10 +226,11 @@ def _refuse(conn, addr) -> None:
         sys.stderr.flush()
 
 
-def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=None, lock=None) -> None:
+def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=None, lock=None,
+            precise=False) -> None:
     """Serve ``device`` behind a TCP socket until ``stop_fd`` becomes readable (or a signal
     handler raises); ``ready(url)`` gets ``socket://HOST:PORT`` once it listens (port 0 picks a
-    free port); ``lock`` as for :func:`run_pty`. The device is not closed here.
+    free port); ``lock`` and ``precise`` as for :func:`run_pty`. The device is not closed here.
 
     One client at a time, like a serial line with one host: while a client is connected, a
     second connection is accepted and closed at once (its reads see the end of the stream) and
@@ -231,7 +262,7 @@ def run_tcp(device, clock: Clock, ready, *, host="127.0.0.1", port=0, stop_fd=No
             with lock:
                 wait = _timeout(device, clock)
             # a client's bytes (or its going) first: one that leaves frees the line for the next
-            for key, _ in sorted(sel.select(wait), key=lambda e: e[0].data != "client"):
+            for key, _ in sorted(_select(sel, wait, precise), key=lambda e: e[0].data != "client"):
                 if key.data == "stop":
                     return
                 if key.data == "accept":
@@ -271,7 +302,7 @@ def serve_tcp(device, clock: Clock, host="127.0.0.1", port=0, out=sys.stdout) ->
     ``socket://HOST:PORT`` is announced on ``out``."""
     _install_signals()
     try:
-        run_tcp(device, clock, lambda url: _announce(url, out), host=host, port=port)
+        run_tcp(device, clock, lambda url: _announce(url, out), host=host, port=port, precise=True)
     except _Stop:
         pass
     finally:
