@@ -48,7 +48,9 @@ nothing is sent.
 
 from __future__ import annotations
 
+import os
 import select
+import sys
 import time
 from collections import deque
 from typing import TYPE_CHECKING
@@ -71,6 +73,8 @@ __all__ = ["ZapBus", "Reply", "open_bus", "device_error", "error_message", "stor
 
 #: Read granularity on ports without a file descriptor (URL ports).
 QUANTUM = 0.001
+#: The most a read of a serial port's descriptor takes at once (a reply is at most 255 bytes).
+READ_CHUNK = 4096
 #: How long after its window closed a reply is still recognised as the answer of an old attempt
 #: (and never taken for another's), as a multiple of the window.
 MEMORY = 2.0
@@ -201,6 +205,10 @@ class ZapBus:
         self._line = (None, 0.0)           # (baud, one byte's time on the line)
         fd = getattr(port, "fd", None)
         self._fd = fd if isinstance(fd, int) and hasattr(port, "in_waiting") else None
+        # pyserial's own posix port (not a wrapper that sees what is read, as a capture's):
+        # its descriptor is read directly
+        posix = sys.modules.get("serial.serialposix")
+        self._raw = self._fd is not None and posix is not None and type(port) is posix.Serial
         self.events = []                   # Event: late, stray and garbled, for scans
         self.last_sent = 0.0               # when the last write began
         self.sent = 0
@@ -320,7 +328,7 @@ class ZapBus:
                 if not ready:
                     self._seen_empty = time.monotonic()
                     return b""
-                data = self.port.read(max(1, self.port.in_waiting))
+                data = self._read_fd() if self._raw else self.port.read(max(1, self.port.in_waiting))
             else:
                 left = deadline - time.monotonic()
                 before = time.monotonic()
@@ -333,6 +341,21 @@ class ZapBus:
             if isinstance(e, (KeyboardInterrupt, PortError)):
                 raise
             raise self._port_error(e) from None
+
+    def _read_fd(self) -> bytes:
+        """Everything waiting on a serial port's descriptor, in one read (what pyserial's read of
+        ``in_waiting`` bytes does, without its ioctl, select and timer on every call), with its
+        words for a port that fails or went away."""
+        try:
+            data = os.read(self._fd, READ_CHUNK)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError as e:
+            raise OSError(e.errno, f"read failed: [Errno {e.errno}] {e.strerror}") from None
+        if not data:
+            raise OSError("device reports readiness to read but returned no data "
+                          "(device disconnected or multiple access on port?)")
+        return data
 
     def _waiting(self):
         """Bytes waiting to be read (None on a port that cannot tell)."""
