@@ -41,6 +41,9 @@ def port_tokens(tokens) -> list:
             and t.split("=", 1)[0] not in own]
 
 
+#: A line's record as JSON (one encoder for every line).
+_encode = json.JSONEncoder(ensure_ascii=False).encode
+
 #: Commands a batch line cannot run.
 EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 
@@ -69,6 +72,7 @@ def read_lines(source, name):
     """``[Line]`` of a batch text (comments and blank lines skipped); a line that does not split,
     or is longer than :data:`MAX_LINE`, is refused naming ``NAME:LINE``."""
     out = []
+    split = {}                     # text -> (tokens, quoted): a batch repeats its lines (a poll)
     for number, raw in enumerate(source, 1):
         text = raw.strip()
         if not text or text.startswith("#"):
@@ -76,13 +80,16 @@ def read_lines(source, name):
         where = f"{name}:{number}"
         if len(text) > MAX_LINE:
             raise UsageError(f"{where}: a line of {len(text)} characters; a batch line has at most {MAX_LINE}")
-        try:
-            tokens = shlex.split(text, comments=True)
-        except ValueError as e:
-            raise UsageError(f"{where}: {e}") from None
-        if not tokens:
+        known = split.get(text)
+        if known is None:
+            try:
+                tokens = shlex.split(text, comments=True)
+            except ValueError as e:
+                raise UsageError(f"{where}: {e}") from None
+            known = split[text] = (tokens, " ".join(shlex.quote(t) for t in tokens))
+        if not known[0]:
             continue
-        out.append(Line(where, number, " ".join(shlex.quote(t) for t in tokens), tokens))
+        out.append(Line(where, number, known[1], list(known[0])))
     return out
 
 
@@ -325,7 +332,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
             if code:
                 errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
                 rec["error"] = errors[-1] if errors else None
-            out.write(json.dumps(rec, ensure_ascii=False) + "\n")
+            out.write(_encode(rec) + "\n")
             out.flush()
             if code and not first:
                 first = code
