@@ -351,10 +351,10 @@ class ZapBus:
         except (BlockingIOError, InterruptedError):
             return b""
         except OSError as e:
-            raise OSError(e.errno, f"read failed: [Errno {e.errno}] {e.strerror}") from None
+            raise self._port_error(OSError(e.errno, f"read failed: [Errno {e.errno}] {e.strerror}")) from None
         if not data:
-            raise OSError("device reports readiness to read but returned no data "
-                          "(device disconnected or multiple access on port?)")
+            raise self._port_error(Exception("device reports readiness to read but returned no data "
+                                             "(device disconnected or multiple access on port?)"))
         return data
 
     def _waiting(self):
