@@ -29,6 +29,19 @@ def test_set_baud_keeps_the_new_rate_for_the_lines_after(cli):
     assert records(r.stdout)[1]["result"] == 16
 
 
+def test_the_batch_port_is_checked_once_not_on_every_line(cli, monkeypatch):
+    # a port-name hint (macOS's /dev/tty.*, here for any port) is said once, by the batch
+    from zkzap.link import adapters
+
+    monkeypatch.setattr(adapters, "outgoing_port_hint", lambda device, platform=None: f"{device}: a hint")
+    r = cli("zap", "batch", "-", "-p", "sim://zap?ids=1", input="load id --id 1\n" * 3)
+    assert r.exit_code == 0, r.stderr
+    assert r.stderr.count("a hint") == 1 and [rec["result"] for rec in records(r.stdout)] == [1, 1, 1]
+    for line in (("load", "id"), ("store", "goal-position", "100")):            # and once by a command
+        r = cli("zap", *line, "--id", "1", "-p", "sim://zap?ids=1")
+        assert r.exit_code == 0 and r.stderr.count("a hint") == 1, r.stderr
+
+
 def test_line_options_override_the_batch_defaults(cli):
     r = cli("zap", "batch", "-", "--sim", "--sim-ids", "1", "--return-mode", "2",
             input="store goal-speed 300 --id 1 -v\nload goal-speed --id 1 --return-mode 1\n")

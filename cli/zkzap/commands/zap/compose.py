@@ -104,11 +104,13 @@ def targets_of(packets) -> list:
     return sorted(ids) or [0]
 
 
-def require_port(port, sim, sim_ids=None) -> None:
+def require_port(port, sim, sim_ids=None, *, warn=True) -> None:
+    """Refuse a command without a port (exit 2); ``warn``: and say what is wrong with the port's
+    name (once, where the port is opened: :func:`open_link`)."""
     check_sim_args(port, sim, sim_ids)
     if not port and not sim:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
-    if port and not sim:
+    if warn and port and not sim:
         from ..options import warn_port
 
         warn_port(port)
@@ -180,20 +182,20 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     from ...link.shared import Borrowed, shared
     from ...link.zap_bus import RETRIES, open_bus
 
-    require_port(port, sim, sim_ids)
+    lent = shared("zap")
+    if lent is None:                 # (a batch's line: the batch checked its port, and said so once)
+        require_port(port, sim, sim_ids)
     checking.effect("port", ids=list(ids))
-    if sim and port:
-        port = None                      # an explicit --sim beats the environment's default port
     mode = 1 if return_mode == "auto" else int(return_mode)
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
-    lent = shared("zap")
     if lent is not None:            # a batch: every command over the one open port
         bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout,
                        latency=latency if latency is not None else lent.latency, allow=as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
-    require_port(port, sim)
+    if sim and port:
+        port = None                      # an explicit --sim beats the environment's default port
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
@@ -238,7 +240,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
         for p in packets:
             _emit(format_hex(p))
         return
-    require_port(port, sim, sim_ids)
+    require_port(port, sim, sim_ids, warn=False)         # before any consent; open_link says the rest
     if verify:
         from ...link.zap_safety import check_verifiable
 
