@@ -7,6 +7,8 @@ values by parameter name (:func:`cmdargs.invocation`). The one exception is the 
 own: outside feedback-return-mode 2 a mightyZAP write is never acknowledged, so a command that
 sent nothing but packets that expect no reply (checked on its --capture with the codec's
 ``Command.expects_reply``) may succeed unconfirmed, as the README says.
+
+The same walk checks that what is wrong with a port's name is said once by every command.
 """
 
 from __future__ import annotations
@@ -94,3 +96,17 @@ def test_a_silent_device_never_gives_exit_0(cli, values, tmp_path, path, cmd):
         assert not any(zap.Command(pkt).expects_reply(1) for pkt in sent), r
     else:
         assert r.exit_code != 2, r          # refused input would be the test's failure, not the device's
+
+
+@pytest.mark.parametrize("path,cmd", DEVICE_COMMANDS, ids=[" ".join(p) for p, _ in DEVICE_COMMANDS])
+def test_a_port_hint_is_said_once(cli, values, tmp_path, path, cmd, monkeypatch):
+    """The same walk: what is wrong with a port's name (macOS's /dev/tty.* dial-in device; here
+    any name) is said once by every command that opens a port, however often it checks it."""
+    from zkzap.link import adapters
+
+    monkeypatch.setattr(adapters, "outgoing_port_hint", lambda device, platform=None: f"{device}: HINT")
+    proto = protocol(cmd)
+    args = invocation(cmd, values[proto], dict(BOUNDS[proto], state_path=tmp_path / "setup.json"))
+    r = cli(*path, *args, "-p", SILENT_ZK if proto == "zk" else SILENT_ZAP, input=STDIN[proto])
+    assert "Traceback" not in r.stderr and r.exit_code != 2, r
+    assert r.stderr.count("HINT") == 1, r.stderr

@@ -365,10 +365,19 @@ def _error(message: str, prog: str = "zkzap") -> None:
                color=color_enabled(sys.stderr))
 
 
+#: Runs in progress: a shell's commands run inside the shell's own run.
+_RUNS = 0
+
+
 def run(cmd, prog_name=None, args=None, **extra) -> int:
     """Run a click command with zkzap's error conventions; returns the exit status. ``extra``
     goes to the command's context (``default_map``)."""
+    global _RUNS
     debug = bool(os.environ.get("ZKZAP_DEBUG")) or "--debug" in (args if args is not None else sys.argv[1:])
+    said = getattr(sys.modules.get(__name__ + ".options"), "_SAID_PORTS", None)
+    if said and not _RUNS:
+        said.clear()                       # a new run says its port hints again (not a shell's command)
+    _RUNS += 1
     try:
         _signals.running()
         rv = cmd.main(args=args, prog_name=prog_name, standalone_mode=False, **extra)
@@ -407,6 +416,8 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
         if debug or not _output_full(e):
             raise
         return _output_failed(e, prog_name)
+    finally:
+        _RUNS -= 1
 
 
 def _interrupted(code) -> int:

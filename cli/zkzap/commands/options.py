@@ -641,12 +641,22 @@ def port_options(group: str, *, baud_auto: bool = False):
     return lambda f: apply_options(f, options)
 
 
+#: The port hints said in this run (:func:`warn_port`); :func:`zkzap.commands.run` empties it.
+_SAID_PORTS: set = set()
+
+
 def warn_port(url) -> None:
-    """Say on stderr when a port name is wrong for an outgoing connection (macOS /dev/tty.*)."""
+    """Say on stderr when a port name is wrong for an outgoing connection (macOS /dev/tty.*):
+    once per run, however often the command (a batch's every line, a shell's every command)
+    checks the port."""
+    from .. import checking
     from ..link.adapters import outgoing_port_hint
 
+    if checking.active() is not None:
+        return                             # a batch's check of its lines: what it says is not shown
     hint = outgoing_port_hint(url)
-    if hint:
+    if hint and hint not in _SAID_PORTS:
+        _SAID_PORTS.add(hint)
         warn(hint)
 
 

@@ -101,10 +101,10 @@ def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats,
       zkzap sniff zk -p /dev/ttyUSB0 -p /dev/ttyUSB1
       zkzap sniff zk -p /dev/ttyUSB0 --duration 60 -f csv -o flight.csv --stats
     """
-    from ..api.sniff import ZkSniffer, check_ports
+    from ..api.sniff import ZkSniffer
     from .zk.decode import columns, summary
 
-    spec = check_ports("zk", _ports(ports, "zk"))
+    spec = _checked("zk", ports)
     sniffer = ZkSniffer(spec, baud, capture=_capture(), protocol_version=protocol_version, stop_bits=stop_bits)
     cols = ["time", "t", "dir"] + columns()
     _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json,
@@ -132,10 +132,10 @@ def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats
       zkzap sniff zap -p /dev/ttyUSB0 --stats
       zkzap sniff zap -p /dev/ttyUSB0 -f csv -o bus.csv --capture bus.pcapng
     """
-    from ..api.sniff import ZapSniffer, check_ports
+    from ..api.sniff import ZapSniffer
     from ..codec import zap as zapc
 
-    spec = check_ports("zap", _ports(ports, "zap"))
+    spec = _checked("zap", ports)
     sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout, stop_bits=stop_bits)
     cols = ["time", "t", "dir"] + list(zapc.ZAP_KEYS) + ["frame", "pairing", "request", "expected_id",
                                                           "latency_ms", "waited_ms"]
@@ -159,6 +159,17 @@ def _zap_cell(rec):
     if rec.get("pairing") not in (None, "ok"):
         parts.append(rec["pairing"] + (f" (asked ID {rec['expected_id']})" if "expected_id" in rec else ""))
     return "  ".join(parts)
+
+
+def _checked(protocol, ports):
+    """[(url, role)] of the -p values (or the environment's port), each port's name checked."""
+    from ..api.sniff import check_ports
+    from .options import warn_port
+
+    spec = check_ports(protocol, _ports(ports, protocol))
+    for url, _ in spec:
+        warn_port(url)
+    return spec
 
 
 def _ports(ports, protocol):
