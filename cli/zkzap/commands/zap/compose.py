@@ -104,13 +104,13 @@ def targets_of(packets) -> list:
     return sorted(ids) or [0]
 
 
-def require_port(port, sim, sim_ids=None, *, warn=True) -> None:
-    """Refuse a command without a port (exit 2); ``warn``: and say what is wrong with the port's
-    name (once, where the port is opened: :func:`open_link`)."""
+def require_port(port, sim, sim_ids=None) -> None:
+    """Refuse a command without a port (exit 2), and say what is wrong with the port's name
+    (once per run: :func:`zkzap.commands.options.warn_port`)."""
     check_sim_args(port, sim, sim_ids)
     if not port and not sim:
         raise UsageError("no port: give -p PORT (or set ZKZAP_ZAP_PORT), --sim, or -n to print the packet")
-    if warn and port and not sim:
+    if port and not sim:
         from ..options import warn_port
 
         warn_port(port)
@@ -240,7 +240,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
         for p in packets:
             _emit(format_hex(p))
         return
-    require_port(port, sim, sim_ids, warn=False)         # before any consent; open_link says the rest
+    require_port(port, sim, sim_ids)                     # before any consent
     if verify:
         from ...link.zap_safety import check_verifiable
 
