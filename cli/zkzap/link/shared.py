@@ -36,6 +36,10 @@ def shared(protocol: str):
     return _SHARED.get(protocol)
 
 
+#: The bus settings a command may change for itself (put back when it returns the bus).
+SETTINGS = ("return_mode", "retries", "timeout", "latency", "allow")
+
+
 class Borrowed:
     """A shared ZapBus lent to one command: ``with`` gives the bus itself; leaving the block
     restores the bus's settings (and its baud rate, unless ``keep_baud``) instead of closing."""
@@ -44,10 +48,11 @@ class Borrowed:
 
     def __init__(self, bus, **settings):
         self.bus = bus
-        self.saved = {k: getattr(bus, k) for k in ("return_mode", "retries", "timeout", "latency", "allow")}
+        self.saved = {k: getattr(bus, k) for k in SETTINGS}
         self.baud = bus.baud
         for k, v in settings.items():
-            setattr(bus, k, v)
+            if self.saved.get(k, bus) != v:
+                setattr(bus, k, v)
 
     def __getattr__(self, name):
         return getattr(self.bus, name)
@@ -61,6 +66,7 @@ class Borrowed:
     def close(self):
         """Give the bus back: restore its settings (and baud rate), leave the port open."""
         for k, v in self.saved.items():
-            setattr(self.bus, k, v)
+            if getattr(self.bus, k) != v:  # (what the command changed, and nothing else)
+                setattr(self.bus, k, v)
         if not Borrowed.keep_baud and self.bus.baud != self.baud:
             self.bus.set_baud(self.baud)
