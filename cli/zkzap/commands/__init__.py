@@ -79,7 +79,7 @@ class Command(QuickHelp, click.Command):
         return super().parse_args(ctx, args)
 
     def invoke(self, ctx):
-        if not ctx.resilient_parsing and _has_files(self) and not getattr(ctx, "zkzap_files_checked", False):
+        if not ctx.resilient_parsing and _has_files(self):
             from .options import check_files
 
             check_files(ctx)      # -o run.xlsx where .xlsx means nothing, an output that is an input: exit 2

@@ -17,7 +17,7 @@ from ...codec import zap
 from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, FiniteRange, IntRange, SignedCommand, dry_run_option, force_option, port_options,
+from ..options import (Choice, FiniteRange, IntRange, Lazy, SignedCommand, dry_run_option, force_option, port_options,
                        zap_yes_option as yes_option)
 from .params import INSTRUCTION, INT, REGISTER, TARGET, id_option
 
@@ -171,34 +171,45 @@ def grant(packets, *, port, sim, yes, force) -> "Permission":
                      brief=", ".join(names) or None)
 
 
+#: Library modules used only when packets are sent (a dry run never imports them).
+_API_ZAP = Lazy("zkzap.api.zap")
+_CHECKING = Lazy("zkzap.checking")
+_PERMISSIONS = Lazy("zkzap.codec.permissions")
+_SHARED = Lazy("zkzap.link.shared")
+_ZAP_BUS = Lazy("zkzap.link.zap_bus")
+
+
+def _lent():
+    """The bus a batch or a shell lends its lines (:mod:`zkzap.link.shared`), or None; without
+    importing the link layer when nothing lends one."""
+    return None if "zkzap.link.shared" not in sys.modules else _SHARED.shared("zap")
+
+
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
               latency=None, low_latency=False, allow=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first;
     ``allow``: the permissions its packets are given (see :func:`authorize`). When the command
     ends, a note says once how to lower a USB adapter's latency timer if the measured latency
     shows it."""
-    from ... import checking
-    from ...codec.permissions import as_permission
-    from ...link.shared import Borrowed, shared
-    from ...link.zap_bus import RETRIES, open_bus
-
-    lent = shared("zap")
-    if lent is None:                 # (a batch's line: the batch checked its port, and said so once)
-        require_port(port, sim, sim_ids)
-    checking.effect("port", ids=list(ids))
+    lent = _lent()
     mode = 1 if return_mode == "auto" else int(return_mode)
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
     if lent is not None:            # a batch: every command over the one open port
-        bus = Borrowed(lent, return_mode=mode, retries=RETRIES if retries is None else retries, timeout=timeout,
-                       latency=latency if latency is not None else lent.latency, allow=as_permission(allow))
+        # (the batch checked its port, and said so once)
+        _CHECKING.effect("port", ids=list(ids))
+        bus = _SHARED.Borrowed(lent, return_mode=mode, retries=_ZAP_BUS.RETRIES if retries is None else retries,
+                               timeout=timeout, latency=latency if latency is not None else lent.latency,
+                               allow=_PERMISSIONS.as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
+    require_port(port, sim, sim_ids)
+    _CHECKING.effect("port", ids=list(ids))
     if sim and port:
         port = None                      # an explicit --sim beats the environment's default port
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
-    bus = open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
+    bus = _ZAP_BUS.open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
                    return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
                    latency=latency, low_latency=low_latency, allow=allow)
     from ..hints import adapter_notes
@@ -422,13 +433,11 @@ def load(regs, length, physical, fmt, ident, **common):
         raise UsageError("id: a broadcast Load Data is never answered; give one actuator's ID")
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    from ...link.zap_bus import device_error
-
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         replies = [(reg, size, *bus.read_registers(ident, reg.address, size, check=False)) for reg, size in reads]
-    from ...api.zap import register_records
+    register_records = _API_ZAP.register_records
 
     records, partial = [], []
     for reg, size, reply, values in replies:
@@ -452,7 +461,7 @@ def load(regs, length, physical, fmt, ident, **common):
             _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
     for _, _, reply, _ in replies:
         if reply.error:
-            raise device_error(reply)
+            raise _ZAP_BUS.device_error(reply)
 
 
 def _mark_partial(records, address, length) -> list:
