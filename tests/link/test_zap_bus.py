@@ -261,3 +261,38 @@ def test_a_serial_port_whose_line_goes_away_mid_wait_is_a_port_error_in_words():
         assert "Errno" not in str(e.value) and ("Input/output error" in str(e.value) or "went away" in str(e.value))
     finally:
         port.close()
+
+
+def test_spare_work_runs_while_the_request_is_on_the_wire_and_never_before_it(bus):
+    seen = []
+    bus.spare(lambda: seen.append((bus.sent, bus.replies)))
+    assert seen == []                                   # nothing runs when it is handed over
+    assert bus.read(1, "present-position") == 0
+    assert seen == [(1, 0)]                             # after the write, before the reply was read
+    bus.read(1, "present-position")
+    assert seen == [(1, 0)]                             # once
+    bus.spare(lambda: seen.append("at close"))
+    bus.close()
+    assert seen[-1] == "at close"                       # what is left runs when the bus closes
+
+
+def test_spare_work_that_outlasts_the_request_leaves_the_latency_unknown_not_longer(bus):
+    bus.read(1, "present-position")
+    est = bus.policy.estimator(1)
+    samples, srtt = est.samples, est.srtt
+    bus.spare(lambda: time.sleep(bus.wire(9) * 3))      # a blocked output, say
+    r = bus.load(1, 0x8C, 2)
+    assert r.latency is None and r.rtt > bus.wire(9) * 3      # the round trip is what it was
+    assert (est.samples, est.srtt) == (samples, srtt)        # and nothing was learned from it
+    assert bus.load(1, 0x8C, 2).latency is not None
+
+
+def test_spare_work_waits_for_a_request_whose_reply_it_can_wait_for(bus):
+    seen = []
+    bus.spare(lambda: seen.append(bus.sent))
+    bus.store(1, "goal-position", 100)                   # return mode 1: no reply, no wait
+    assert seen == []
+    bus.read(1, "goal-position")
+    assert seen == [2]
+    bus.run_spare()
+    assert seen == [2]

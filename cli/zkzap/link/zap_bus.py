@@ -78,6 +78,11 @@ READ_CHUNK = 4096
 #: How long after its window closed a reply is still recognised as the answer of an old attempt
 #: (and never taken for another's), as a multiple of the window.
 MEMORY = 2.0
+#: Spare time: work handed to :meth:`ZapBus.spare` starts after a write only within this share of
+#: the request's own time on the wire. No reply byte can come before the request has crossed the
+#: line, so work done by then delays nothing; work that runs past it (a blocked output) makes the
+#: reply's latency unknown (not learned), never longer.
+SPARE_SHARE = 0.5
 #: Garbled bytes and collisions kept for scans (events), at most.
 MAX_EVENTS = 4096
 #: Instructions that write nothing.
@@ -197,6 +202,7 @@ class ZapBus:
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
         self._unechoed = {}                # write time -> packet, until its clean echo came back
         self._owed = deque()               # attempts whose reply may still come
+        self._spare = deque()              # work for the time a reply is on its way (spare())
         self._framer = ZapFramer()         # bytes read between transactions
         self._held = None                  # [lo, hi]: when the bytes the framer holds were read
         self._quiet_until = 0.0
@@ -266,7 +272,20 @@ class ZapBus:
         self._held = None
 
     def close(self) -> None:
+        self.run_spare()
         close_port(self.port)
+
+    def spare(self, task) -> None:
+        """Run ``task()`` in the bus's next spare moment: right after a request has gone out,
+        while its reply cannot have arrived yet (:data:`SPARE_SHARE`), or at :meth:`run_spare`.
+        For work that must be done but not before the next transaction (a batch's output). A task
+        keeps what it raises to itself: it runs inside a transaction."""
+        self._spare.append(task)
+
+    def run_spare(self) -> None:
+        """Run the work handed to :meth:`spare` now, in order."""
+        while self._spare:
+            self._spare.popleft()()
 
     def __enter__(self):
         return self
@@ -647,6 +666,11 @@ class ZapBus:
         byte; extended while reply bytes trickle in). Returns a Reply (``rtt`` from the attempt
         that was answered, ``latency`` its first byte after the request left) or a problem tuple
         (kind, detail, received bytes)."""
+        tx = self.wire(len(pkt))
+        overran = False
+        if self._spare and time.monotonic() - t0 < tx * SPARE_SHARE:
+            self.run_spare()               # the request is still on the wire: the host's time is free
+            overran = time.monotonic() - t0 > tx       # a reply byte may have waited for the work
         framer = ZapFramer()
         received = bytearray()
         echo_known = self.adapter_echo
@@ -654,7 +678,6 @@ class ZapBus:
                  "explained": 0, "first": None, "lo": self._seen_empty, "hi": None}
         wrong = []
         deadline = base = t0 + limit
-        tx = self.wire(len(pkt))
         gap = self.policy.inter_byte(pkt[3], self.window)
         physical = self.wire(len(pkt) + rx_len)
 
@@ -715,7 +738,7 @@ class ZapBus:
                     self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
                                             deadline + (deadline - t0) * MEMORY))
                     return self._reply(p, hi - t0, None)
-                return self._reply(p, hi - t0, first - t0 - tx - self.wire(1))
+                return self._reply(p, hi - t0, None if overran else first - t0 - tx - self.wire(1))
             return None
 
         while True:
