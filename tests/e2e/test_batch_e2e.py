@@ -86,6 +86,38 @@ def test_zap_batch_ctrl_c_stops_after_the_current_command(start_sim, tmp_path):
     assert b"the batch stopped after the current transaction of " in err
 
 
+def test_zap_batch_records_reach_the_reader_while_the_next_line_waits(start_sim, tmp_path):
+    # a line's record is written while the next line's request is on the wire: the reader has it
+    # while the slow actuator (ID 2, 100 ms late) still owes the lines after it their replies
+    url, _ = start_sim(["zap", "--ids", "1,2", "--pty", "--fault", "2:delay=100"])
+    f = tmp_path / "poll.txt"
+    f.write_text("load id --id 1\n" + "load id --id 2\n" * 8)
+    proc = subprocess.Popen([executable("zap"), "batch", str(f), "-p", url], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=clean_env())
+    first = proc.stdout.readline()
+    still_running = proc.poll() is None                       # 8 slow lines to go: at least 0.8 s
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert json.loads(first) == {"line": 1, "command": "load id --id 1", "exit": 0, "result": 1}
+    assert still_running
+    recs = jsonl(out.decode())
+    assert [r["line"] for r in recs] == list(range(2, 10)) and {r["result"] for r in recs} == {2}
+
+
+def test_zap_batch_messages_follow_the_records_before_them(start_sim, tmp_path):
+    # a line's messages come after every earlier line's record (one terminal, in order), also
+    # when the line sent nothing it waited for (in return mode 1 a store is not answered)
+    url, _ = start_sim(["zap", "--ids", "1", "--pty"])
+    f = tmp_path / "mixed.txt"
+    f.write_text("load id --id 1\nstore goal-position 100 --id 1 -v\nload id --id 1\necho --id 7 --retries 0\n")
+    r = subprocess.run(f"{executable('zap')} batch {f} -p {url} 2>&1", shell=True,
+                       capture_output=True, text=True, env=clean_env(), timeout=60)
+    lines = r.stdout.splitlines()
+    assert r.returncode == 3, r.stdout
+    kinds = [json.loads(x)["line"] if x.startswith("{") else x.split(": ", 2)[0] for x in lines]
+    assert kinds == [1, f"{f}:2", 2, 3, f"{f}:4", 4], lines
+
+
 def test_zk_batch_over_a_pty(start_sim, sh):
     url, _ = start_sim(["zk", "--pty", "--speed", "20"])
     text = "send keepalive\nmonitor --count 4 --ids 1\nsend control --state run --throttle 20 --for 0.5 --ids 1\n"

@@ -26,6 +26,7 @@ import click
 
 from .. import signals
 from ..errors import INTERRUPTED, MORE_TO_DO, OK, TERMINATED, USAGE, UsageError, ZkzapError
+from . import PipeClosed
 from .options import exits, note
 
 #: Options a batch line may not carry: the port is the batch's.
@@ -242,24 +243,43 @@ def parse_result(text):
     return values
 
 
-def invoke(line, protocol) -> int:
+#: How many lines' click contexts a batch keeps for reuse (a batch repeats its lines: a poll).
+CONTEXTS = 16
+
+
+def _context(line, contexts):
+    """A click context for running ``line``'s command: the one ``contexts`` keeps for its text
+    (click makes a context ready for reuse when it closes), else a new one, kept."""
+    key = id(line.leaf)                    # twins share their first's leaf (see _check_lines)
+    held = contexts.get(key)
+    if held is None or held[0] is not line.leaf:
+        if len(contexts) >= CONTEXTS:
+            contexts.clear()
+        leaf, parent = line.leaf
+        held = contexts[key] = (line.leaf, click.Context(leaf, info_name=line.path[-1], parent=parent))
+    return held[1]
+
+
+def invoke(line, protocol, contexts=None) -> int:
     """Run a checked line's command with the parameters its check parsed (the same defaults,
     so the same values as parsing it again), with the command line's error conventions.
-    Returns its exit status."""
-    from . import PipeClosed, _error
-
-    leaf, parent = line.leaf
+    Returns its exit status. ``contexts``: where a run keeps its lines' click contexts."""
+    leaf = line.leaf[0]
     prog = protocol
     try:
-        ctx = click.Context(leaf, info_name=line.path[-1], parent=parent)
+        ctx = _context(line, {} if contexts is None else contexts)
         ctx.params = dict(line.params)
-        ctx.zkzap_files_checked = line.checked    # its check ran them on these very parameters
         with ctx:
-            leaf.invoke(ctx)
+            if line.checked:               # its check ran its files' checks on these very parameters
+                leaf.callback(**ctx.params)
+            else:
+                leaf.invoke(ctx)
         return 0
     except click.exceptions.Exit as e:
         return e.exit_code
     except click.ClickException as e:
+        from . import _error
+
         _error(" ".join(e.format_message().split()), prog)
         return e.exit_code
     except click.exceptions.Abort:
@@ -269,6 +289,7 @@ def invoke(line, protocol) -> int:
     except (BrokenPipeError, PipeClosed):
         raise
     except ZkzapError as e:
+        from . import _error
         from .hints import with_hint
 
         _error(with_hint(e), prog)
@@ -298,46 +319,97 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
                           keep_baud_after=keep_baud_after)
 
 
+class _Records:
+    """The batch's records on ``out``, in order. A line's record is written in the bus's next
+    spare moment (:meth:`zkzap.link.zap_bus.ZapBus.spare`: the next line's request is on the
+    wire, its reply on its way), so writing it never holds up the next transaction; it is
+    written at once before anything else the batch says, and when the batch ends. A link
+    without spare time (the ECU's) has each record written at once."""
+
+    def __init__(self, out, link):
+        self.out = out
+        self.spare = getattr(link, "spare", None)
+        self.held = None               # (line, exit, printed, messages) not written yet
+        self.queued = False            # the bus holds a call of _write (at most one)
+        self.failed = None             # what writing raised in the bus's spare time
+
+    def put(self, line, code, printed, messages) -> None:
+        self.flush()
+        self.held = (line, code, printed, messages)
+        if self.spare is None:
+            self.flush()
+        elif not self.queued:
+            self.queued = True
+            self.spare(self._spared)
+
+    def _spared(self) -> None:
+        self.queued = False
+        try:
+            self._write()
+        except Exception as e:  # noqa: BLE001 - a full disk, a closed pipe: raised by flush(), not in the bus
+            self.failed = e
+
+    def _write(self) -> None:
+        if self.held is None:
+            return
+        line, code, printed, messages = self.held
+        self.held = None
+        rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(printed)}
+        if code:
+            errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
+            rec["error"] = errors[-1] if errors else None
+        self.out.write(_encode(rec) + "\n")
+        self.out.flush()
+
+    def flush(self) -> None:
+        """Write the held record now; raise what writing an earlier one raised."""
+        failed, self.failed = self.failed, None
+        if failed is not None:
+            raise failed
+        self._write()
+
+
 def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
     from ..link import stop
-    from ..link.shared import Borrowed
+    from ..link.shared import Borrowed, shared
 
     first = 0
     last = None
     buf, err = io.StringIO(), io.StringIO()   # what a line prints: emptied for the next line
+    records = _Records(out, shared(protocol))
+    contexts = {}
     with stop.deferring():
-        for line in lines:
-            if stop.requested() is not None:
-                break                          # between two lines: the next one does not start
-            last = line
-            Borrowed.keep_baud = line.path[0] in keep_baud_after
-            saved = sys.stdout, sys.stderr
-            sys.stdout, sys.stderr = buf, err
-            try:
-                code = invoke(line, protocol)
-            finally:
-                sys.stdout, sys.stderr = saved
-                Borrowed.keep_baud = False
-            printed, messages = buf.getvalue(), err.getvalue()
-            for b in (buf, err):
-                b.seek(0)
-                b.truncate()
-            signum = stop.requested()
-            if signum is not None and stop.pending() is None and not code:
-                code = signals.EXIT.get(signum, INTERRUPTED)   # stopped, though the command returned
-            if messages:
-                sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
-                sys.stderr.flush()
-            rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(printed)}
-            if code:
-                errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
-                rec["error"] = errors[-1] if errors else None
-            out.write(_encode(rec) + "\n")
-            out.flush()
-            if code and not first:
-                first = code
-            if code in (INTERRUPTED, TERMINATED) or (code and not keep_going):
-                break
+        try:
+            for line in lines:
+                if stop.requested() is not None:
+                    break                          # between two lines: the next one does not start
+                last = line
+                Borrowed.keep_baud = line.path[0] in keep_baud_after
+                saved = sys.stdout, sys.stderr
+                sys.stdout, sys.stderr = buf, err
+                try:
+                    code = invoke(line, protocol, contexts)
+                finally:
+                    sys.stdout, sys.stderr = saved
+                    Borrowed.keep_baud = False
+                printed, messages = buf.getvalue(), err.getvalue()
+                for b in (buf, err):
+                    b.seek(0)
+                    b.truncate()
+                signum = stop.requested()
+                if signum is not None and stop.pending() is None and not code:
+                    code = signals.EXIT.get(signum, INTERRUPTED)   # stopped, though the command returned
+                if messages:
+                    records.flush()                # the records before, then this line's messages
+                    sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
+                    sys.stderr.flush()
+                records.put(line, code, printed, messages)
+                if code and not first:
+                    first = code
+                if code in (INTERRUPTED, TERMINATED) or (code and not keep_going):
+                    break
+        finally:
+            records.flush()
         signum = stop.requested()
     if signum is not None:
         where = f"the current transaction of {last.where} ({last.text})" if last else "its start"
