@@ -31,7 +31,7 @@ DEFAULT_BAUD = {"zk": 115200, "zap": 57600}
 
 
 class Lazy:
-    """Module ``name``, imported when an attribute of it is first used, then one look-up per use.
+    """``Lazy(name)()`` is module ``name``, imported at the first call.
 
     For the library modules a command needs only when it talks to a device: a dry run never
     imports them, and a batch's lines, which run the command again and again in one process, do
@@ -44,13 +44,13 @@ class Lazy:
         self._name = name
         self._module = None
 
-    def __getattr__(self, attr):
+    def __call__(self):
         module = self._module
         if module is None:
             import importlib
 
             module = self._module = importlib.import_module(self._name)
-        return getattr(module, attr)
+        return module
 
 
 class SignedCommand(Command):

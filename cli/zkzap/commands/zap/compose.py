@@ -182,7 +182,7 @@ _ZAP_BUS = Lazy("zkzap.link.zap_bus")
 def _lent():
     """The bus a batch or a shell lends its lines (:mod:`zkzap.link.shared`), or None; without
     importing the link layer when nothing lends one."""
-    return None if "zkzap.link.shared" not in sys.modules else _SHARED.shared("zap")
+    return None if "zkzap.link.shared" not in sys.modules else _SHARED().shared("zap")
 
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
@@ -196,20 +196,20 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
     if lent is not None:            # a batch: every command over the one open port
         # (the batch checked its port, and said so once)
-        _CHECKING.effect("port", ids=list(ids))
-        bus = _SHARED.Borrowed(lent, return_mode=mode, retries=_ZAP_BUS.RETRIES if retries is None else retries,
+        _CHECKING().effect("port", ids=list(ids))
+        bus = _SHARED().Borrowed(lent, return_mode=mode, retries=_ZAP_BUS().RETRIES if retries is None else retries,
                                timeout=timeout, latency=latency if latency is not None else lent.latency,
-                               allow=_PERMISSIONS.as_permission(allow))
+                               allow=_PERMISSIONS().as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
     require_port(port, sim, sim_ids)
-    _CHECKING.effect("port", ids=list(ids))
+    _CHECKING().effect("port", ids=list(ids))
     if sim and port:
         port = None                      # an explicit --sim beats the environment's default port
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
-    bus = _ZAP_BUS.open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
+    bus = _ZAP_BUS().open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
                    return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
                    latency=latency, low_latency=low_latency, allow=allow)
     from ..hints import adapter_notes
@@ -437,7 +437,7 @@ def load(regs, length, physical, fmt, ident, **common):
         if bus.return_mode == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         replies = [(reg, size, *bus.read_registers(ident, reg.address, size, check=False)) for reg, size in reads]
-    register_records = _API_ZAP.register_records
+    register_records = _API_ZAP().register_records
 
     records, partial = [], []
     for reg, size, reply, values in replies:
@@ -461,7 +461,7 @@ def load(regs, length, physical, fmt, ident, **common):
             _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
     for _, _, reply, _ in replies:
         if reply.error:
-            raise _ZAP_BUS.device_error(reply)
+            raise _ZAP_BUS().device_error(reply)
 
 
 def _mark_partial(records, address, length) -> list:
