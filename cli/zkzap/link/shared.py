@@ -51,7 +51,7 @@ class Borrowed:
         self.saved = {k: getattr(bus, k) for k in SETTINGS}
         self.baud = bus.baud
         for k, v in settings.items():
-            if self.saved.get(k, bus) != v:
+            if k not in self.saved or self.saved[k] != v:
                 setattr(bus, k, v)
 
     def __getattr__(self, name):

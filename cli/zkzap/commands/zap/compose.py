@@ -198,8 +198,8 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
         # (the batch checked its port, and said so once)
         _CHECKING().effect("port", ids=list(ids))
         bus = _SHARED().Borrowed(lent, return_mode=mode, retries=_ZAP_BUS().RETRIES if retries is None else retries,
-                               timeout=timeout, latency=latency if latency is not None else lent.latency,
-                               allow=_PERMISSIONS().as_permission(allow))
+                                 timeout=timeout, latency=latency if latency is not None else lent.latency,
+                                 allow=_PERMISSIONS().as_permission(allow))
         if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
@@ -210,8 +210,8 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     default_ids = ",".join(str(i) for i in ids)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = _ZAP_BUS().open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
-                   return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
-                   latency=latency, low_latency=low_latency, allow=allow)
+                              return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
+                              latency=latency, low_latency=low_latency, allow=allow)
     from ..hints import adapter_notes
 
     adapter_notes(bus)
