@@ -1,5 +1,6 @@
 """The serving loop's wait: with ``precise`` (a simulator in a process of its own), the end of a
-wait for a due reply byte polls instead of sleeping, so the byte goes out when it is due. Judged
+wait for a due reply byte polls instead of sleeping, so the byte goes out when it is due, and so
+does the time just after a reply, so the host's next request is heard when it comes. Judged
 by order, never by how fast a loaded machine is: a wait never ends before its time unless the
 host's bytes came, and the host's bytes end it at once."""
 
@@ -52,3 +53,33 @@ def test_the_idle_wait_is_a_plain_sleep(line, monkeypatch):
     calls.clear()
     serve._select(sel, 0.01, True)                   # due in 10 ms: a sleep, then polls
     assert calls[0] == pytest.approx(0.01 - serve.SPIN_S) and set(calls[1:]) == {0}
+
+
+def test_after_a_reply_the_loop_polls_for_the_next_request_then_sleeps(line, monkeypatch):
+    sel, _ = line
+    calls = []
+    real = sel.select
+    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
+    serve._select(sel, serve.IDLE_S, True, time.monotonic() + serve.LISTEN_S)
+    # polls while the host may ask again at once, then the rest of the idle wait as one sleep
+    assert len(calls) >= 2 and set(calls[:-1]) == {0}
+    assert 0 < calls[-1] <= serve.IDLE_S
+
+
+def test_a_request_while_listening_ends_the_wait_at_once(line, monkeypatch):
+    sel, w = line
+    calls = []
+    real = sel.select
+    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
+    os.write(w, b"\xff")
+    events = serve._select(sel, serve.IDLE_S, True, time.monotonic() + serve.LISTEN_S)
+    assert [key.data for key, _ in events] == ["data"] and calls == [0]
+
+
+def test_a_listen_past_its_time_changes_nothing(line, monkeypatch):
+    sel, _ = line
+    calls = []
+    real = sel.select
+    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
+    serve._select(sel, serve.IDLE_S, True, time.monotonic() - 1.0)
+    assert calls == [serve.IDLE_S]
