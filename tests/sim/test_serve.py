@@ -26,6 +26,16 @@ def line():
     os.close(w)
 
 
+@pytest.fixture
+def calls(line, monkeypatch):
+    """The timeouts the wait gives select(2), in order (each call returns at once)."""
+    sel, _ = line
+    made = []
+    real = sel.select
+    monkeypatch.setattr(sel, "select", lambda t=None: made.append(t) or real(0))
+    return made
+
+
 @pytest.mark.parametrize("precise", [False, True])
 @pytest.mark.parametrize("wait", [0.0002, 0.002])      # within the poll, and a sleep then the poll
 def test_a_wait_for_a_due_byte_ends_no_earlier_than_its_time(line, precise, wait):
@@ -43,11 +53,8 @@ def test_the_hosts_bytes_end_a_precise_wait(line, wait):
     assert [key.data for key, _ in events] == ["data"]
 
 
-def test_the_idle_wait_is_a_plain_sleep(line, monkeypatch):
+def test_the_idle_wait_is_a_plain_sleep(line, calls):
     sel, _ = line
-    calls = []
-    real = sel.select
-    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
     serve._select(sel, serve.IDLE_S, True)           # nothing due: no poll loop
     assert calls == [serve.IDLE_S]
     calls.clear()
@@ -55,31 +62,22 @@ def test_the_idle_wait_is_a_plain_sleep(line, monkeypatch):
     assert calls[0] == pytest.approx(0.01 - serve.SPIN_S) and set(calls[1:]) == {0}
 
 
-def test_after_a_reply_the_loop_polls_for_the_next_request_then_sleeps(line, monkeypatch):
+def test_after_a_reply_the_loop_polls_for_the_next_request_then_sleeps(line, calls):
     sel, _ = line
-    calls = []
-    real = sel.select
-    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
     serve._select(sel, serve.IDLE_S, True, time.monotonic() + serve.LISTEN_S)
     # polls while the host may ask again at once, then the rest of the idle wait as one sleep
     assert len(calls) >= 2 and set(calls[:-1]) == {0}
     assert 0 < calls[-1] <= serve.IDLE_S
 
 
-def test_a_request_while_listening_ends_the_wait_at_once(line, monkeypatch):
+def test_a_request_while_listening_ends_the_wait_at_once(line, calls):
     sel, w = line
-    calls = []
-    real = sel.select
-    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
     os.write(w, b"\xff")
     events = serve._select(sel, serve.IDLE_S, True, time.monotonic() + serve.LISTEN_S)
     assert [key.data for key, _ in events] == ["data"] and calls == [0]
 
 
-def test_a_listen_past_its_time_changes_nothing(line, monkeypatch):
+def test_a_listen_past_its_time_changes_nothing(line, calls):
     sel, _ = line
-    calls = []
-    real = sel.select
-    monkeypatch.setattr(sel, "select", lambda t=None: calls.append(t) or real(0))
     serve._select(sel, serve.IDLE_S, True, time.monotonic() - 1.0)
     assert calls == [serve.IDLE_S]
