@@ -78,9 +78,14 @@ def measure(seconds, rate, speed):
         "control_ratio": control / (seconds * rate),
         "status_frames": status, "status_expected": round(seconds * 20),
         "mcap_control_span_s": span.get("control"), "mcap_status_span_s": span.get("status"),
-        "mcap_span_ratio": span["control"] / span["status"] if span.get("status") else None,
+        "mcap_span_ratio": span["control"] / span["status"] if span.get("status") and "control" in span else None,
         "logbook_ended_ahead_s": _epoch(run["ended"]) - ended_real, "logbook_duration_s": run["duration_s"],
     }
+
+
+def _num(value, spec):
+    """``value`` formatted, or "n/a" (a channel with no message: a run starved of time)."""
+    return "n/a" if value is None else format(value, spec)
 
 
 def main(argv=None):
@@ -102,8 +107,8 @@ def main(argv=None):
         print(f"  control frames {m['control_frames']} of {m['control_expected']}: {m['control_ratio']:.3f}x "
               f"(target >= 0.9)")
         print(f"  status frames {m['status_frames']} of about {m['status_expected']}")
-        print(f"  MCAP span control {m['mcap_control_span_s']:.2f} s / status {m['mcap_status_span_s']:.2f} s: "
-              f"{m['mcap_span_ratio']:.3f}x (target 1.0)")
+        print(f"  MCAP span control {_num(m['mcap_control_span_s'], '.2f')} s / status "
+              f"{_num(m['mcap_status_span_s'], '.2f')} s: {_num(m['mcap_span_ratio'], '.3f')}x (target 1.0)")
         print(f"  logbook ended {m['logbook_ended_ahead_s']:+.1f} s from the real end (target <= +1; "
               f"duration {m['logbook_duration_s']:g} s of session time)")
     return 0 if ok or a.no_fail or a.quick else 1
