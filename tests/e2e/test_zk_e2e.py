@@ -134,7 +134,9 @@ def test_sigint_during_send_for_sends_the_abort(start_sim):
             break
         seen.append(json.loads(line)["engine_state_name"])
     drive.send_signal(signal.SIGINT)
-    rest, err = drive.communicate(timeout=10)
+    # read through the stream that readline() used: communicate() would skip what it buffered
+    rest, err = drive.stdout.read(), drive.stderr.read()
+    drive.wait(timeout=10)
     assert drive.returncode == 130 and "interrupted: sent standby, throttle 0" in err
     assert all(json.loads(line) for line in rest.splitlines())       # every line whole
     r = zk("monitor", "-p", url, "--count", "12", "--ids", "1")
