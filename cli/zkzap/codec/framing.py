@@ -369,11 +369,10 @@ class ZapFramer(_Framer):
     def feed(self, data: Bytes) -> list[bytes]:
         """Packets completed by ``data`` (a packet right after skipped bytes may be held back
         until the bytes that confirm it arrive)."""
-        if self._buf:
-            return self._scan(self._buf + bytes(data), False)
-        data = bytes(data)
+        data = self._buf + bytes(data) if self._buf else bytes(data)
         n = len(data)
-        # the usual read of a reply or a captured packet: exactly one whole packet, in step
+        # the usual read of a reply or a captured packet: exactly one whole packet, in step (the
+        # bytes held may be its first part: a reply read in two pieces)
         if (n >= 7 and self._synced and data[4] + 5 == n and data[4] >= 2 and data[3] != 0xFF
                 and data[0] == data[1] == data[2] == 0xFF):
             valid = self._valid
@@ -382,6 +381,8 @@ class ZapFramer(_Framer):
                     valid.clear()
                 valid[data] = None
                 self.frames += 1
+                self._bad_until -= n       # what the scan's end does (see _end_scan)
+                self._buf = b""
                 return [data]
         return self._scan(data, False)
 
