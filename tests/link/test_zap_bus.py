@@ -263,6 +263,78 @@ def test_a_serial_port_whose_line_goes_away_mid_wait_is_a_port_error_in_words():
         port.close()
 
 
+def _raw_pty_bus():
+    """A ZapBus on pyserial's own port over a new pty: (bus, port, master, path)."""
+    import os
+    import tty
+
+    import serial
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    tty.setraw(master)
+    path = os.ttyname(slave)
+    port = serial.Serial(path, 57600, timeout=0)
+    os.close(slave)
+    b = ZapBus(port, url=path)
+    assert b._raw                                          # written and read through its descriptor
+    return b, port, master, path
+
+
+def test_a_serial_port_whose_line_is_gone_before_a_write_is_a_port_error_in_words():
+    import os
+
+    b, port, master, path = _raw_pty_bus()
+    os.close(master)                                       # unplugged between two commands
+    try:
+        with pytest.raises(PortError) as e:
+            b.echo(1)
+        assert e.value.code == 4 and str(e.value).startswith(f"port {path} failed: ")
+        assert "Errno" not in str(e.value) and "Input/output error" in str(e.value)
+        with pytest.raises(PortError) as e:                # the write itself, in pyserial's words
+            b._write_fd(zap.echo(1))
+        assert str(e.value) == f"port {path} failed: write failed: Input/output error"
+    finally:
+        port.close()
+
+
+def test_a_request_the_driver_cannot_take_at_once_waits_for_room_and_goes_out_whole():
+    # the descriptor's write takes what fits; the rest goes through pyserial's write, which
+    # waits until the line has room: nothing is lost or sent twice
+    import os
+    import threading
+
+    b, port, master, _ = _raw_pty_bus()
+    filled = 0
+    try:
+        while True:
+            filled += os.write(port.fd, b"\0" * 256)
+    except BlockingIOError:
+        pass
+    got = bytearray()
+    os.set_blocking(master, False)
+
+    def drain():
+        time.sleep(0.05)                                   # the write waits meanwhile
+        end = time.monotonic() + 5
+        while time.monotonic() < end and len(got) < filled + 7:
+            try:
+                got.extend(os.read(master, 65536))
+            except BlockingIOError:
+                time.sleep(0.001)
+
+    t = threading.Thread(target=drain)
+    t.start()
+    try:
+        b._write(zap.echo(1))
+        t.join()
+        assert len(got) == filled + 7 and bytes(got[filled:]) == zap.echo(1) and not any(got[:filled])
+    finally:
+        t.join()
+        port.close()
+        os.close(master)
+
+
 def test_spare_work_runs_while_the_request_is_on_the_wire_and_never_before_it(bus):
     seen = []
     bus.spare(lambda: seen.append((bus.sent, bus.replies)))

@@ -376,6 +376,19 @@ class ZapBus:
                                              "(device disconnected or multiple access on port?)"))
         return data
 
+    def _write_fd(self, pkt: bytes) -> None:
+        """``pkt`` to a serial port's descriptor in one write (what pyserial's write does, without
+        its timer and its select after the write); what the driver did not take at once goes
+        through pyserial's write, which waits for room. Fails in pyserial's words."""
+        try:
+            n = os.write(self._fd, pkt)
+        except (BlockingIOError, InterruptedError):
+            n = 0
+        except OSError as e:
+            raise self._port_error(OSError(e.errno, f"write failed: [Errno {e.errno}] {e.strerror}")) from None
+        if n < len(pkt):
+            self.port.write(pkt[n:])
+
     def _waiting(self):
         """Bytes waiting to be read (None on a port that cannot tell)."""
         try:
@@ -562,7 +575,10 @@ class ZapBus:
         self._drain()
         t0 = time.monotonic()
         try:
-            self.port.write(pkt)
+            if self._raw:
+                self._write_fd(pkt)
+            else:
+                self.port.write(pkt)
         except Exception as e:  # serial.SerialException, OSError: the port failed or vanished
             if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):
                 raise
