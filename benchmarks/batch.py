@@ -81,22 +81,23 @@ def floor(port, baud, count, timeout=1.0):
 def batch_run(cmd, env, count):
     """(per transaction, whole run) rates of ``zap batch``: from its first record to its last,
     and from its start to its end."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
-    stamps, out = [], bytearray()
-    fd = p.stdout.fileno()
-    while True:
-        chunk = os.read(fd, 65536)
-        if not chunk:
-            break
-        now = time.perf_counter()
-        stamps += [now] * chunk.count(b"\n")
-        out += chunk
-    err = p.stderr.read()
-    p.wait()
-    took = time.perf_counter() - t0
+    with tempfile.TemporaryFile() as err:     # a file, not a pipe: the records are read alone
+        t0 = time.perf_counter()
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env)
+        stamps = []
+        fd = p.stdout.fileno()
+        while True:
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                break
+            now = time.perf_counter()
+            stamps += [now] * chunk.count(b"\n")
+        p.wait()
+        took = time.perf_counter() - t0
+        err.seek(0)
+        message = err.read()[-500:].decode(errors="replace")
     if p.returncode != 0 or len(stamps) != count:
-        raise SystemExit(f"batch failed (exit {p.returncode}, {len(stamps)} records): {err[-500:].decode()}")
+        raise SystemExit(f"batch failed (exit {p.returncode}, {len(stamps)} records): {message}")
     per = (count - 1) / (stamps[-1] - stamps[0]) if count > 1 and stamps[-1] > stamps[0] else float("nan")
     return per, count / took
 
