@@ -12,6 +12,7 @@ next command.
 from __future__ import annotations
 
 import contextlib
+import operator
 
 #: The shared link by protocol: "zap" -> ZapBus, "zk" -> ZkLink.
 _SHARED: dict = {}
@@ -38,6 +39,8 @@ def shared(protocol: str):
 
 #: The bus settings a command may change for itself (put back when it returns the bus).
 SETTINGS = ("return_mode", "retries", "timeout", "latency", "allow")
+#: A bus's SETTINGS as a tuple, in one call (a batch borrows its bus on every line).
+_settings = operator.attrgetter(*SETTINGS)
 
 
 class Borrowed:
@@ -48,10 +51,10 @@ class Borrowed:
 
     def __init__(self, bus, **settings):
         self.bus = bus
-        self.saved = {k: getattr(bus, k) for k in SETTINGS}
+        self.saved = _settings(bus)
         self.baud = bus.baud
         for k, v in settings.items():
-            if k not in self.saved or self.saved[k] != v:
+            if getattr(bus, k) != v:
                 setattr(bus, k, v)
 
     def __getattr__(self, name):
@@ -65,8 +68,10 @@ class Borrowed:
 
     def close(self):
         """Give the bus back: restore its settings (and baud rate), leave the port open."""
-        for k, v in self.saved.items():
-            if getattr(self.bus, k) != v:  # (what the command changed, and nothing else)
-                setattr(self.bus, k, v)
+        bus = self.bus
+        if _settings(bus) != self.saved:
+            for k, v in zip(SETTINGS, self.saved):
+                if getattr(bus, k) != v:   # (what the command changed, and nothing else)
+                    setattr(bus, k, v)
         if not Borrowed.keep_baud and self.bus.baud != self.baud:
             self.bus.set_baud(self.baud)
