@@ -9,7 +9,7 @@ import signal
 import subprocess
 import time
 
-from .conftest import clean_env, executable
+from .conftest import clean_env, executable, read_first_line
 
 FAST = ["--speed", "10"]
 
@@ -94,12 +94,7 @@ def test_zap_batch_records_reach_the_reader_while_the_next_line_waits(start_sim,
     f.write_text("load id --id 1\n" + "load id --id 2\n" * 8)
     proc = subprocess.Popen([executable("zap"), "batch", str(f), "-p", url], stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=clean_env())
-    first = b""
-    while not first.endswith(b"\n"):                          # from the pipe itself: communicate()
-        byte = os.read(proc.stdout.fileno(), 1)                # reads past a buffered reader's buffer
-        if not byte:
-            break
-        first += byte
+    first = read_first_line(proc, 30)                         # (nothing after it is consumed)
     still_running = proc.poll() is None                       # 8 slow lines to go: at least 0.8 s
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err

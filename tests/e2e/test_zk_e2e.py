@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from .conftest import clean_env, executable
+from .conftest import clean_env, executable, read_first_line
 
 SPEED = "20"
 
@@ -129,14 +129,12 @@ def test_sigint_during_send_for_sends_the_abort(start_sim):
     seen = []
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline and "running" not in seen:
-        line = drive.stdout.readline()
-        if not line:
+        line = read_first_line(drive, deadline - time.monotonic())     # (nothing after it is consumed)
+        if not line.endswith(b"\n"):
             break
         seen.append(json.loads(line)["engine_state_name"])
     drive.send_signal(signal.SIGINT)
-    # read through the stream that readline() used: communicate() would skip what it buffered
-    rest, err = drive.stdout.read(), drive.stderr.read()
-    drive.wait(timeout=10)
+    rest, err = drive.communicate(timeout=10)
     assert drive.returncode == 130 and "interrupted: sent standby, throttle 0" in err
     assert all(json.loads(line) for line in rest.splitlines())       # every line whole
     r = zk("monitor", "-p", url, "--count", "12", "--ids", "1")
