@@ -238,31 +238,6 @@ def test_open_bus_needs_a_port():
         assert b.echo(4).ident == 4 and b.baud == 115200
 
 
-def test_a_serial_port_whose_line_goes_away_mid_wait_is_a_port_error_in_words():
-    # pyserial's own port is read through its descriptor: the words stay pyserial's, made plain
-    import os
-    import threading
-    import tty
-
-    import serial
-
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    path = os.ttyname(slave)
-    port = serial.Serial(path, 57600, timeout=0)
-    os.close(slave)
-    b = ZapBus(port, url=path)
-    assert b._raw
-    threading.Timer(0.05, os.close, (master,)).start()     # the adapter is unplugged while it waits
-    try:
-        with pytest.raises(PortError) as e:
-            b.echo(1)
-        assert e.value.code == 4 and str(e.value).startswith(f"port {path} failed: ")
-        assert "Errno" not in str(e.value) and ("Input/output error" in str(e.value) or "went away" in str(e.value))
-    finally:
-        port.close()
-
-
 def _raw_pty_bus():
     """A ZapBus on pyserial's own port over a new pty: (bus, port, master, path)."""
     import os
@@ -279,6 +254,22 @@ def _raw_pty_bus():
     b = ZapBus(port, url=path)
     assert b._raw                                          # written and read through its descriptor
     return b, port, master, path
+
+
+def test_a_serial_port_whose_line_goes_away_mid_wait_is_a_port_error_in_words():
+    # pyserial's own port is read through its descriptor: the words stay pyserial's, made plain
+    import os
+    import threading
+
+    b, port, master, path = _raw_pty_bus()
+    threading.Timer(0.05, os.close, (master,)).start()     # the adapter is unplugged while it waits
+    try:
+        with pytest.raises(PortError) as e:
+            b.echo(1)
+        assert e.value.code == 4 and str(e.value).startswith(f"port {path} failed: ")
+        assert "Errno" not in str(e.value) and ("Input/output error" in str(e.value) or "went away" in str(e.value))
+    finally:
+        port.close()
 
 
 def test_a_serial_port_whose_line_is_gone_before_a_write_is_a_port_error_in_words():
