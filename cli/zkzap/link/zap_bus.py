@@ -329,6 +329,10 @@ class ZapBus:
 
         return port_failed(self.url, e)
 
+    def _fd_failed(self, what: str, e: OSError) -> PortError:
+        """The descriptor's ``what`` ("read", "write") failed: in pyserial's words, made plain."""
+        return self._port_error(OSError(e.errno, f"{what} failed: [Errno {e.errno}] {e.strerror}"))
+
     def _set_timeout(self, value) -> None:
         if self._port_timeout != value:
             self.port.timeout = value
@@ -370,7 +374,7 @@ class ZapBus:
         except (BlockingIOError, InterruptedError):
             return b""
         except OSError as e:
-            raise self._port_error(OSError(e.errno, f"read failed: [Errno {e.errno}] {e.strerror}")) from None
+            raise self._fd_failed("read", e) from None
         if not data:
             raise self._port_error(Exception("device reports readiness to read but returned no data "
                                              "(device disconnected or multiple access on port?)"))
@@ -385,7 +389,7 @@ class ZapBus:
         except (BlockingIOError, InterruptedError):
             n = 0
         except OSError as e:
-            raise self._port_error(OSError(e.errno, f"write failed: [Errno {e.errno}] {e.strerror}")) from None
+            raise self._fd_failed("write", e) from None
         if n < len(pkt):
             self.port.write(pkt[n:])
 
