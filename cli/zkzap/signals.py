@@ -149,10 +149,12 @@ class SignalGuard:
 
     def __init__(self):
         self.signum = None
+        self.repeats = 0             # signals after the first (a second Ctrl-C ends a rundown)
         self._old = {}
 
     def _handler(self, signum, frame):
         if self.signum is not None:
+            self.repeats += 1
             return
         self.signum = signum
         received(signum)

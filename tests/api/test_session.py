@@ -30,6 +30,14 @@ def session(url, *, snapshot=False, protocol_version=None, ids=None, **kw):
     return s, tel, out, link
 
 
+def abort_tail(received):
+    """The abort's four frames after the last run command, and the frames sent after them (the
+    rundown's held state)."""
+    got = list(received)
+    last_run = max(i for i, r in enumerate(got) if r["command"] == "control" and r["state"] == "run")
+    return got[last_run + 1:last_run + 5], got[last_run + 5:]
+
+
 def test_records_from_the_simulator():
     s, tel, out, link = session("sim://zk?speed=10", count=25)
     outcome = s.run()
@@ -73,10 +81,15 @@ def test_sigint_stops_between_records_and_sends_the_abort():
     assert outcome.reason == "interrupted" and outcome.exit_code == 130
     assert outcome.aborted == "standby"
     assert sum(r["command"] == "control" and r["state"] == "run" for r in ecu.received) >= 1
-    tail = list(ecu.received)[-4:]
+    tail, held = abort_tail(ecu.received)
     assert [r["command"] for r in tail] == ["control", "mode", "control", "control"]
     assert tail[0]["state"] == "standby" and tail[0]["throttle_pct"] == 0.0
     assert tail[1]["state"] == "none" and tail[1]["rpm_factor"] == 0
+    # the rundown: standby repeated until the engine is at rest, marked in the records
+    assert all(r["command"] == "control" and r["state"] == "standby" and r["throttle_pct"] == 0 for r in held)
+    kinds = [r.get("kind") for r in out]
+    assert kinds.count("trip") == 1 and kinds[-1] == "rundown" and out[-1]["ended"] == "rest"
+    assert outcome.rundown["ended"] == "rest"
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     with pytest.raises(KeyboardInterrupt):
         outcome.raise_for_status()
@@ -106,7 +119,10 @@ def test_new_ecu_error_ends_the_session_with_the_abort():
     assert outcome.reason == "ecu-error" and isinstance(outcome.error, DeviceError)
     assert outcome.exit_code == 5 and "ECU error 8 (egt-high" in str(outcome.error)
     assert outcome.aborted == "standby" and list(ecu.received)[-1]["state"] == "standby"
-    assert out[-1]["id"] == 1 and out[-1]["error_code"] == 8         # the record that showed it is written
+    trip = next(i for i, r in enumerate(out) if r.get("kind") == "trip")
+    assert out[trip - 1]["id"] == 1 and out[trip - 1]["error_code"] == 8    # the record that showed it is written
+    assert "ECU error 8" in out[trip]["trip"] and out[trip]["reason"] == "ecu-error"
+    assert out[-1]["kind"] == "rundown" and out[-1]["ended"] in ("rest", "max")
     assert tel.errors and 8 in tel.errors
 
 

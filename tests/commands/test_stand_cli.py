@@ -25,10 +25,19 @@ def test_send_for_violated_by_the_simulators_egt_aborts_and_exits_5(cli):
     assert "limit violated: sent standby, throttle 0" in r.stderr
     assert "error: limit violated: egt_c=" in r.stderr and "limit warning: egt_c=" in r.stderr
     recs = jsonl(r.stdout)
-    assert recs[-1]["limit"] == ["egt_c<=500,warn=400"] and recs[-1]["egt_c"] > 500
+    trip = next(i for i, rec in enumerate(recs) if rec["kind"] == "trip")
+    assert recs[trip - 1]["limit"] == ["egt_c<=500,warn=400"] and recs[trip - 1]["egt_c"] > 500
     assert any(rec.get("warnings") == ["egt_c<=500,warn=400"] for rec in recs)
-    assert all("limit" not in rec for rec in recs[:-1])
+    assert all("limit" not in rec for rec in recs[:trip - 1])
     assert "limit egt_c<=500,warn=400: VIOLATED first at" in r.stderr
+    # the trip is marked, and the rundown after it recorded until the engine is at rest
+    assert recs[trip]["limit"] == "egt_c<=500,warn=400" and recs[trip]["field"] == "egt_c"
+    assert recs[trip]["t"] == recs[trip - 1]["t"] and "sent standby, throttle 0" in recs[trip]["trip"]
+    rundown = [rec for rec in recs[trip + 1:] if rec["kind"] == "status"]
+    states = [rec["engine_state_name"] for rec in rundown if rec["id"] == 1]
+    assert "cooling" in states and states[-1] == "standby" and rundown[-1]["rpm"] <= 500
+    assert recs[-1]["kind"] == "rundown" and recs[-1]["ended"] == "rest"
+    assert "rundown recorded:" in r.stderr
 
 
 def test_monitor_limit_on_an_injected_error_exits_5_without_abort(cli, tmp_path):

@@ -169,7 +169,11 @@ def test_zk_batch_stops_the_session_and_aborts(relay, tmp_path, kind):
     assert code == status, err
     assert [x["line"] for x in recs] == [1, 2]
     assert recs[0]["exit"] == 0 and recs[1]["exit"] == status
-    assert recs[1]["result"] and recs[1]["result"][-1]["kind"] in ("status", "snapshot")
+    kinds = [x["kind"] for x in recs[1]["result"]]
+    if sig == signal.SIGINT:                                   # the rundown recorded, after the trip
+        assert kinds[-1] == "rundown" and "trip" in kinds
+    else:                                                      # SIGTERM: the process is to go
+        assert kinds[-1] in ("status", "snapshot") and "trip" not in kinds
     assert f"{why}: sent standby, throttle 0" in err
     assert f"{why}: the batch stopped after the current transaction of stdin:2" in err
     assert took < 15

@@ -50,7 +50,10 @@ def test_the_simulators_egt_violates_a_limit_and_the_engine_gets_the_abort(start
            "--ids", "1", "--limit", "egt_c<=500")
     assert r.returncode == 5, r.stderr
     assert "limit violated: sent standby, throttle 0" in r.stderr and "error: limit violated: egt_c=" in r.stderr
-    assert json.loads(r.stdout.splitlines()[-1])["limit"] == ["egt_c<=500"]
+    recs = [json.loads(line) for line in r.stdout.splitlines()]
+    trip = next(i for i, rec in enumerate(recs) if rec["kind"] == "trip")
+    assert recs[trip - 1]["limit"] == ["egt_c<=500"] and recs[trip]["limit"] == "egt_c<=500"
+    assert recs[-1]["kind"] == "rundown" and recs[-2]["engine_state_name"] == "standby"
 
 
 @pytest.mark.parametrize("how,code", [("exit", 5), ("warn", 0)])
@@ -63,3 +66,62 @@ def test_an_injected_error_violates_a_limit(start_sim, how, code):
     assert any(rec.get("limit") == ["error_code==0"] for rec in recs)
     if how == "warn":
         assert recs[-1]["t"] > 0.9 and "note: limit violated: error_code=8" in r.stderr
+
+
+def _interrupted_run(tmp_path, url, second):
+    """``zk send --for`` with the engine running, then Ctrl-C (and, with ``second``, Ctrl-C
+    again once the rundown is being recorded); its records, stderr and exit status."""
+    import signal
+    import threading
+    import time
+
+    out = tmp_path / "run.jsonl"
+    proc = subprocess.Popen([executable("zk"), "send", "control", "--state", "run", "--throttle", "50", "--for", "120",
+                             "-p", url, "--yes", "-o", str(out)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=clean_env())
+    err = []
+    reader = threading.Thread(target=lambda: err.extend(iter(proc.stderr.readline, "")), daemon=True)
+    reader.start()
+
+    def until(what, timeout=30):
+        end = time.monotonic() + timeout
+        while not what():
+            assert proc.poll() is None and time.monotonic() < end, "".join(err)
+            time.sleep(0.05)
+
+    def running():
+        lines = out.read_text().splitlines() if out.exists() else []
+        return any('"engine_state_name":"running"' in line for line in lines[-20:])
+
+    try:
+        until(running)
+        proc.send_signal(signal.SIGINT)
+        if second:
+            until(lambda: any("recording the rundown" in line for line in err))
+            proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    reader.join(5)
+    return [json.loads(line) for line in out.read_text().splitlines()], "".join(err), proc.returncode
+
+
+def test_ctrl_c_records_the_rundown_and_a_second_one_cuts_it(start_sim, tmp_path):
+    url, _ = start_sim(["zk", "--pty", "--speed", "5"])
+    recs, err, code = _interrupted_run(tmp_path, url, second=False)
+    assert code == 130, err
+    kinds = [r["kind"] for r in recs]
+    trip = kinds.index("trip")
+    assert recs[trip]["reason"] == "interrupted" and "sent standby, throttle 0" in recs[trip]["trip"]
+    after = [r["engine_state_name"] for r in recs[trip + 1:] if r.get("id") == 1]
+    assert after[0] in ("running", "cooling") and "cooling" in after and after[-1] == "standby"
+    assert recs[-1]["kind"] == "rundown" and recs[-1]["ended"] == "rest" and "rundown recorded:" in err
+
+    (tmp_path / "run.jsonl").unlink()
+    url, _ = start_sim(["zk", "--pty", "--speed", "2"])          # a cool-down of seconds
+    recs, err, code = _interrupted_run(tmp_path, url, second=True)
+    assert code == 130, err
+    assert recs[-1]["kind"] == "rundown" and recs[-1]["ended"] == "cut"
+    assert "rundown recording cut after" in err and "not recorded from there" in err
+    assert [r["engine_state_name"] for r in recs if r.get("id") == 1][-1] != "standby"

@@ -69,18 +69,40 @@ def describe_abort(kind: str) -> str:
 ENDS = ("standby", "stop", "hold")
 DEFAULT_END = "standby"
 
+#: After an abnormal end that sent the abort (a violated limit, an ECU error, Ctrl-C, a dead-man
+#: standby) the session goes on recording the rundown for at most this long (session seconds,
+#: ``--rundown``): until the ECU reports stop or standby with the rotor below
+#: :data:`RUNDOWN_RPM` (the cool-down over). A second Ctrl-C ends it at once.
+DEFAULT_RUNDOWN_S = 120.0
+#: The rotor speed below which a stopped or standing-by engine counts as run down (rpm).
+RUNDOWN_RPM = 500
+#: The ends after which the rundown is recorded (an end the session was asked for, its time or
+#: a schedule's end, is no trip; SIGTERM asks the process to go; the port or output failing
+#: leaves nothing to record with).
+RUNDOWN_AFTER = ("interrupted", "limit", "ecu-error")
+#: Engine states in which the engine has come to rest (with the rotor stopped).
+REST_STATES = (0, 1)   # stop, standby (zk.ENGINE_STATES)
+
+
+def at_rest(latest) -> bool:
+    """True when the ECU reports stop or standby and the rotor is below :data:`RUNDOWN_RPM`
+    (``latest``: a telemetry's latest values)."""
+    return latest.get("engine_state") in REST_STATES and (latest.get("rpm") or 0) <= RUNDOWN_RPM
+
 
 class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
     done), ``interrupted``, ``terminated``, ``port``, ``silence`` (no status frame within the
     timeout, or none at all in a session that ended by its time), ``ecu-error``, ``limit``,
     ``pipe``, ``output`` (an output file could not be written), ``refused`` (the ECU's reported
-    limits refuse the plan: nothing was sent)."""
+    limits refuse the plan: nothing was sent). ``rundown``: after a trip, how the recording of
+    the rundown went (``{"s": seconds, "ended": "rest"|"max"|"cut"|"silence"|"end"|"port"}``)."""
 
     def __init__(self, reason: str, error: Optional[BaseException] = None, aborted: Optional[str] = None) -> None:
         self.reason = reason
         self.error = error
         self.aborted = aborted   # the abort kind sent, or None
+        self.rundown = None
 
     @property
     def ok(self) -> bool:
@@ -138,7 +160,7 @@ class Session:
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
                  abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
-                 end_label="end of schedule", plan=None):
+                 end_label="end of schedule", plan=None, rundown=DEFAULT_RUNDOWN_S):
         self.source = source
         self.telemetry = telemetry
         self.sink = sink
@@ -157,6 +179,7 @@ class Session:
         self.update_interval = update_interval
         self.limits = limits     # an api.limits.LimitSet: its first violation ends the session
         self.plan = plan         # an api.prestart.Plan: checked against the ECU before sending
+        self.rundown = rundown   # longest rundown recorded after a trip (None or 0: none)
         self.ecu_limits = None   # what the ECU reported (api.prestart.EcuLimits), once listened
         self.sent = 0
         self.last_sent = None
@@ -376,6 +399,9 @@ class Session:
                 ran = self.duration if self.duration is not None else src.now()
                 outcome = Outcome("silence", silence_error(src, ran, heard=False, ran=True))
             self._abort(outcome)
+            if (self.rundown and src.live and outcome.reason in RUNDOWN_AFTER
+                    and outcome.aborted in ("standby", "stop")):
+                written += self._record_rundown(outcome, guard)
         if outcome.aborted == "failed" and (outcome.ok or outcome.reason in ("interrupted", "terminated")):
             # the end or abort command did not go out: the engine is in no stated state
             outcome = Outcome("port", self.abort_error, aborted="failed")
@@ -388,6 +414,93 @@ class Session:
             self.on_update(tel.snapshot(now), tel.health(now, src.framer))
         self.written = written
         return outcome
+
+    def _record_rundown(self, outcome, guard) -> int:
+        """After a trip: a ``trip`` record, then the ECU's records until the engine is at rest
+        (:func:`at_rest`), :attr:`rundown` seconds, a new signal, a silent ECU or the port's end,
+        the abort's state command repeated at the rate meanwhile; then a ``rundown`` record.
+        Returns the records written."""
+        src, tel = self.source, self.telemetry
+        t0 = src.now()
+        sw = outcome.aborted
+        why = _WHY.get(outcome.reason, outcome.reason)
+        err = outcome.error
+        what = str(err) if err is not None else why
+        trip = {"time": src.clock.iso(t0), "t": round(t0, 3), "kind": "trip",
+                "trip": f"{what}; sent {describe_abort(sw)}", "reason": outcome.reason, "sent": describe_abort(sw)}
+        if err is not None:
+            cond = getattr(err, "condition", None)
+            if cond is not None:
+                trip.update(limit=cond.text, field=cond.field, value=getattr(err, "value", None),
+                            t=round(err.t, 3) if getattr(err, "t", None) is not None else trip["t"])
+        written = 0
+        frame = abort_frames(sw, tel.decoder.known)[0]
+        signum, repeats = guard.signum, guard.repeats
+        ended = None
+        try:
+            self.sink(trip)
+            if at_rest(tel.latest):
+                ended = "rest"
+            else:
+                again = "Ctrl-C again ends it" if signum is not None else "Ctrl-C ends it"
+                self.notify(f"recording the rundown until the ECU reports stop or standby and the rotor is below "
+                            f"{RUNDOWN_RPM} rpm (at most {self.rundown:g} s; {again})")
+            next_send = t0 + self.period
+            last = t0
+            while ended is None:
+                if guard.signum != signum or guard.repeats != repeats:
+                    ended = "cut"
+                    break
+                now = src.now()
+                if now - t0 >= self.rundown:
+                    ended = "max"
+                    break
+                if now >= next_send:
+                    src.write(frame)            # the abort's state, held (an ECU wants a host that sends)
+                    next_send = max(next_send + self.period, now)
+                got = src.poll()
+                if got is None:
+                    ended = "end"
+                    break
+                for t, f in got:
+                    last = t
+                    for rec in tel.feed(t, f):
+                        self.sink(rec)
+                        written += 1
+                if at_rest(tel.latest):
+                    ended = "rest"
+                elif self.silence is not None and src.now() - last > self.silence:
+                    ended = "silence"
+                elif self.on_update is not None:
+                    self.on_update(tel.snapshot(src.now()), tel.health(src.now(), src.framer))
+        except PortError:
+            ended = "port"
+        except (OutputError, BrokenPipeError):
+            ended = "output"
+        now = src.now()
+        latest = tel.latest
+        state = latest.get("engine_state_name") or "unknown"
+        egt, rpm = latest.get("egt_c"), latest.get("rpm")
+        where = f"state {state}, EGT {_num(egt)} °C, {_num(rpm)} rpm"
+        outcome.rundown = {"s": round(now - t0, 3), "ended": ended, "records": written}
+        if ended != "output":
+            try:
+                self.sink({"time": src.clock.iso(now), "t": round(now, 3), "kind": "rundown",
+                           "trip": f"rundown {now - t0:.1f} s: {_RUNDOWN_SAID[ended]} ({where})",
+                           "rundown_s": round(now - t0, 3), "ended": ended})
+            except (OutputError, BrokenPipeError):
+                pass
+        if ended == "rest":
+            if now > t0:
+                self.notify(f"rundown recorded: {now - t0:.1f} s until the engine was at rest ({where})")
+        elif ended == "cut":
+            self.notify(f"rundown recording cut after {now - t0:.1f} s: not recorded from there ({where})")
+        elif ended == "max":
+            self.notify(f"rundown recording ended after its {self.rundown:g} s maximum: the engine is not at rest "
+                        f"({where})")
+        else:
+            self.notify(f"rundown recording ended after {now - t0:.1f} s ({_RUNDOWN_END[ended]}; {where})")
+        return written
 
     def _left(self) -> str:
         """What the engine keeps doing after the last frame sent, in words."""
@@ -433,5 +546,12 @@ class Session:
 _WHY = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
         "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
         "output": "output failed", "error": "error", "limit": "limit violated"}
+_RUNDOWN_SAID = {"rest": "the engine at rest", "cut": "recording cut", "max": "its maximum reached, not at rest",
+                 "silence": "the ECU fell silent", "end": "the source ended", "port": "the port failed",
+                 "output": "the output failed"}
+_RUNDOWN_END = {"silence": "the ECU fell silent", "end": "the source ended", "port": "the port failed",
+                "output": "the output failed"}
 
 
+def _num(value):
+    return "?" if value is None else f"{value:,.0f}"

@@ -68,6 +68,11 @@ def _properties(layout) -> dict:
     return props
 
 
+#: Records of a session's events (no status frame): a port's gap, a trip, the rundown after it;
+#: each kind on its own channel, /zk/event/KIND.
+EVENT_KINDS = ("gap", "trip", "rundown")
+
+
 def status_schema(sid: int) -> dict:
     """The JSON Schema of status ID ``sid`` records as ``zk monitor`` writes them."""
     spec = zk.STATUS_BY_ID.get(sid)
@@ -162,11 +167,15 @@ class McapWriter:
         kind = rec.get("kind") or "status"
         if kind == "control":
             key = ("control", rec.get("command") or f"id-{rec.get('id')}")
+        elif kind in EVENT_KINDS:
+            key = ("event", kind)
         else:
             key = ("status", rec.get("id"))
         ch = self._channels.get(key)
         if ch is None:
-            if key[0] == "control":
+            if key[0] == "event":
+                schema, topic, sname = {"type": "object"}, f"/zk/event/{key[1]}", f"zk.event.{key[1]}"
+            elif key[0] == "control":
                 name = key[1]
                 schema = control_schema(name) if name in zk.CONTROL_BY_NAME else {"type": "object"}
                 topic, sname = f"/zk/control/{name}", f"zk.control.{name}"

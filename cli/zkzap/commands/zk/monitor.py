@@ -144,6 +144,13 @@ def _dashboard(title):
     return Dashboard(sys.stdout, title)
 
 
+def _with_trip(columns):
+    def cols(snapshot, ids=None):
+        return columns(snapshot, ids) + ["trip"]
+
+    return cols
+
+
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
@@ -188,6 +195,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         # load cell is found before the ECU is sent anything
         stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
     columns = record_columns if stand is None else stand.columns(record_columns)
+    if control is not None and abort in ("standby", "stop"):
+        columns = _with_trip(columns)     # a trip and the rundown after it are marked
     try:
         out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
     except BaseException:
