@@ -627,36 +627,51 @@ class ActuatorBus:
     # -- Device interface ---------------------------------------------------------------------
 
     def receive(self, data: bytes, now: float, baud=None) -> None:
+        """The host's bytes, written at ``now`` at ``baud``: they take their time on the line, and
+        each command is heard when its own last byte is in (two packets in one write are two
+        commands, the first heard while the second is still on the wire); a byte that meets an
+        actuator's reply on the line garbles both (wired-AND)."""
         if not data:
             return
-        # the host's bytes take their time on the line: a command is heard when its last byte
-        # is in; a byte that meets an actuator's reply on the line garbles both (wired-AND)
         line = baud or (self.actuators[0].baud if self.actuators else 57600)
         byte = wire_time(1, line) * self.wire_scale
         start = max(now, self._rx_free)
-        arrived = start + byte * len(data)
-        self._rx_free = arrived
+        self._rx_free = start + byte * len(data)
+        framer = self._framers.get(baud)
+        if framer is None:
+            framer = self._framers[baud] = ZapFramer()
+        if len(data) >= 7 and data[4] + 5 == len(data) or len(data) < 7:
+            self._hear(data, 0, start, byte, baud, framer)      # one packet (or part of one)
+            return
+        # several packets (or bytes besides one): each is heard when its own last byte is in,
+        # and a reply to an earlier one may meet the later bytes on the line
+        for i in range(len(data)):
+            self._hear(data[i:i + 1], i, start, byte, baud, framer)
+
+    def _hear(self, data, offset, start, byte, baud, framer) -> None:
+        """Bytes ``offset`` .. of one write (started at ``start``) on the line, then the commands
+        they complete, heard at the end of their last byte."""
         heard = bytearray(data)
         met = set()
         echoed = []
-        for i, value in enumerate(data):
-            b = _Byte(start + i * byte, start + (i + 1) * byte, value, arrived, baud, host=True)
+        for k, value in enumerate(data):
+            i = offset + k
+            b = _Byte(start + i * byte, start + (i + 1) * byte, value, start + (offset + len(data)) * byte, baud,
+                      host=True)
             hit = self._meets(b.start, b.end)
             for x in hit:
-                heard[i] &= x.value
+                heard[k] &= x.value
                 x.value &= value
                 x.host = True
                 met |= x.ids
             if not hit and self.echo:
-                echoed.append((i, b))
+                echoed.append((k, b))
         if met:
-            self._collided(start, "host", met)
-        for i, b in echoed:               # the adapter's echo: what crossed the line
-            b.value = heard[i]
+            self._collided(start + offset * byte, "host", met)
+        for k, b in echoed:               # the adapter's echo: what crossed the line
+            b.value = heard[k]
             self._queue(b)
-        framer = self._framers.get(baud)
-        if framer is None:
-            framer = self._framers[baud] = ZapFramer()
+        arrived = start + (offset + len(data)) * byte
         for pkt in framer.feed(bytes(heard)):
             self.received.append(bytes(pkt))
             self._dispatch(bytes(pkt), arrived, baud)
