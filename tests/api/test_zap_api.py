@@ -150,7 +150,24 @@ def test_return_mode_auto(zap_sim):
     with Bus(zap_sim, return_mode="auto") as bus:
         with pytest.raises(UsageError, match="feedback-return-mode 0"):
             bus.load(1, "present-position")
-        assert bus.return_mode == 0
+        assert bus.return_mode_of(1) == 0
+        assert bus.return_mode == 1            # assumed of the others: each actuator has its own
+
+
+@pytest.mark.zap_sim(ids=[1, 2])
+def test_return_mode_is_each_actuators_own(zap_sim):
+    """One actuator told to answer every command changes nothing of how the others are waited
+    for: a write to another one is sent once and not waited for."""
+    with Bus(zap_sim) as bus:
+        bus.store(1, "feedback-return-mode", 2)
+        assert (bus.return_mode_of(1), bus.return_mode_of(2), bus.return_mode) == (2, 1, 1)
+        sent = bus.link.sent
+        bus[2].goal_position = 1000
+        assert bus.link.sent == sent + 1 and bus.link.retried == 0
+        assert bus.store(1, "led", 2) is not None           # mode 2: acknowledged
+        assert bus[2].goal_position == 1000
+        zap_sim.device.actuator(2).set("feedback-return-mode", 2)
+        assert bus.detect_return_mode(2) == 2 and bus.return_mode_of(1) == 2 and bus.return_mode == 1
 
 
 @pytest.mark.zap_sim(ids=[1], transport="pty")

@@ -67,7 +67,7 @@ def test_writes_wait_only_for_replies_the_mode_gives(bus, monkeypatch):
     # the simulator answers in the mode the command arrived in (1: no reply); the link waits
     # because mode 2 would answer, takes the silence, and follows the new mode from now on
     assert bus.store(1, "feedback-return-mode", 2) is None
-    assert bus.return_mode == 2
+    assert bus.mode_of(1) == 2 and bus.mode_of(2) == 1 and bus.return_mode == 1   # that actuator's own
     r = bus.store(1, "led", 2)                                   # mode 2: acknowledged
     assert r.ident == 1 and r.error == 0
     assert bus.execute() is None                                 # broadcast
@@ -82,7 +82,7 @@ def test_return_mode_0_answers_echo_only():
     assert b.echo(1).ident == 1
     assert b.detect_return_mode(1) == 0
     b.port.device.actuator(1).set("feedback-return-mode", 2)
-    assert b.detect_return_mode(1) == 2 and b.return_mode == 2
+    assert b.detect_return_mode(1) == 2 and b.mode_of(1) == 2 and b.return_mode == 0
 
 
 def test_error_bits_raise_device_error_with_the_reply(bus):

@@ -684,13 +684,9 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
         bus.authorize(zap.store(w.target, w.register, w.new), allow)
     for w in writes:
         reg = w.register
-        mode = bus.return_mode
         w.status = "sending"
-        try:
-            reply = bus.store(w.target, reg, w.new, check=False, allow=allow)
-        finally:
-            if reg.name == "feedback-return-mode":
-                bus.return_mode = mode      # the link's mode is the bus's: one actuator changed
+        # (a new feedback-return-mode is that actuator's from now on: the bus keeps it per ID)
+        reply = bus.store(w.target, reg, w.new, check=False, allow=allow)
         w.status = "sent"
         done.append(w)
         if reply is not None and reply.error:
@@ -704,14 +700,8 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
         if reg.name == "id":
             where = w.new
             bus.wait_ready(where, within=2.0)
-        saved = bus.return_mode
-        if reg.name == "feedback-return-mode":
-            bus.return_mode = w.new
         # a new baud rate takes effect at the next restart: the stored code reads back at once
-        try:
-            r = bus.load(where, reg.address, reg.size, check=False)
-        finally:
-            bus.return_mode = saved
+        r = bus.load(where, reg.address, reg.size, check=False)
         w.read_back = r.value
         if r.error:
             w.errors = sorted(set(w.errors) | set(r.errors))

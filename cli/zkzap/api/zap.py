@@ -143,9 +143,10 @@ class Bus:
     """A mightyZAP bus on one port: a context manager (the port closes on exit).
 
     ``port`` is a device path, any pyserial URL, ``sim://zap?ids=1,2`` or a simulator started
-    with :func:`zkzap.sim.start`; ``baud`` the line speed; ``return_mode`` the actuators'
-    feedback-return-mode (0 answers Echo only, 1 Load Data and Echo, 2 every command; ``"auto"``
-    asks the first actuator addressed); ``timeout`` (seconds) is the late window, how long after
+    with :func:`zkzap.sim.start`; ``baud`` the line speed; ``return_mode`` the feedback-return-mode
+    assumed of an actuator until its own is learned (0 answers Echo only, 1 Load Data and Echo, 2
+    every command; ``"auto"`` asks each actuator its own the first time it is addressed; see
+    :meth:`return_mode_of`); ``timeout`` (seconds) is the late window, how long after
     a request its reply may still begin (default 0.15: nothing is sent before it has closed, see
     :mod:`zkzap.link.zap_timing`); ``retries`` after a failed attempt; ``latency`` (seconds) what
     the actuators are known to take before any reply is measured; ``low_latency`` asks the serial
@@ -198,7 +199,9 @@ class Bus:
 
     @property
     def return_mode(self) -> int:
-        """The feedback-return-mode the bus assumes (0, 1 or 2)."""
+        """The feedback-return-mode (0, 1 or 2) assumed of an actuator whose own the bus has not
+        learned (see :meth:`return_mode_of`). Setting it changes what is assumed, not what was
+        learned of an actuator."""
         return self.link.return_mode
 
     @return_mode.setter
@@ -240,14 +243,22 @@ class Bus:
     def __getitem__(self, ident: int) -> Actuator:
         return Actuator(self, zap.check_id(ident))
 
+    def return_mode_of(self, ident: int) -> int:
+        """The feedback-return-mode of actuator ``ident``: the one learned of it (a scan's
+        identification, :meth:`detect_return_mode`, a write of feedback-return-mode through this
+        bus), else :attr:`return_mode`. Each actuator has its own: one told to answer every
+        command changes nothing of how the others are waited for."""
+        return self.link.mode_of(zap.check_id(ident, allow_broadcast=False))
+
     def _mode_for(self, ident: int) -> None:
         if self._auto and ident != zap.BROADCAST:
-            self._auto = False
-            self.link.detect_return_mode(ident)
+            dev = self.link.devices.get(ident)
+            if dev is None or dev.return_mode is None:
+                self.link.detect_return_mode(ident)
 
     def detect_return_mode(self, ident: int) -> int:
-        """Ask actuator ``ident`` its feedback-return-mode; the bus assumes it from now on."""
-        self._auto = False
+        """Ask actuator ``ident`` its feedback-return-mode; the bus assumes it of that actuator
+        from now on (see :meth:`return_mode_of`)."""
         return self.link.detect_return_mode(zap.check_id(ident, allow_broadcast=False))
 
     # -- instructions --------------------------------------------------------------------------
@@ -269,7 +280,7 @@ class Bus:
         reg = zap.register(reg)
         length = reg.size if length is None else length
         self._mode_for(ident)
-        if self.link.return_mode == 0:
+        if self.link.mode_of(ident) == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data",
                              ident=ident)
         return self.link.read_registers(ident, reg.address, length, check=check)
@@ -460,7 +471,7 @@ class Bus:
         self.store(ident, POSITION, position)
         if not wait:
             return None
-        if self.link.return_mode == 0:
+        if self.link.mode_of(ident) == 0:
             raise UsageError(f"wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data",
                              ident=ident)
         from ..link.zap_safety import interrupted_move
@@ -533,7 +544,7 @@ class Bus:
         except BadReply:          # every reply garbled: two actuators answer at once
             raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
                               ident=ident, duplicate=True) from None
-        if self.link.return_mode and collides(self.link, ident):
+        if self.link.mode_of(ident) and collides(self.link, ident):
             raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
                               ident=ident, duplicate=True)
         if not force and self.link.answers(new):           # three full waits: never a guess

@@ -2,8 +2,11 @@
 
 Which commands are answered depends on the actuator's feedback-return mode (register 0x10):
 0 answers Echo only; 1 (the default) Load Data and Echo; 2 every command; a broadcast (ID 254)
-never. :class:`ZapBus` is told the mode (``return_mode``, default 1, or :meth:`detect_return_mode`)
-and waits only when a reply will come.
+never. The mode is an actuator's own: :attr:`ZapBus.devices` keeps one
+:class:`~zkzap.link.devices.Device` per ID with the mode learned of it (read by a scan's
+identification or :meth:`ZapBus.detect_return_mode`, or written by this bus), and
+``return_mode`` (default 1) is only what is assumed of an actuator nothing was learned of. The
+bus waits only when a reply will come.
 
 Every transaction follows the bus's one timing policy (:mod:`zkzap.link.zap_timing`):
 
@@ -63,6 +66,7 @@ from ..codec.framing import ZapFramer
 from ..codec.permissions import Permission, as_permission, require
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from . import stop
+from .devices import Devices
 from .port import close_port, wire_time
 from .zap_timing import (FLOOR, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE, QUICK_MARGIN,
                          RESTART_PAUSE, RETRIES, host_margin, policy_for, usb_latency, window_for)
@@ -181,7 +185,8 @@ class Event:
 
 
 class ZapBus:
-    """Transactions on one port. ``return_mode`` is the bus's feedback-return mode (0, 1, 2);
+    """Transactions on one port. ``return_mode`` is the feedback-return mode (0, 1, 2) assumed of
+    an actuator whose own the bus has not learned (:attr:`devices`);
     ``timeout`` (seconds) replaces the late window; ``retries`` after a failure; ``latency``
     (seconds) is what the actuators are known to take before any was measured (``--latency``);
     ``margin`` replaces the host margin derived from the port."""
@@ -192,7 +197,7 @@ class ZapBus:
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
         self.allow = Permission.NONE       # the permissions given to every command (see command())
         self.simulated = is_simulated(self.url)
-        self.return_mode = return_mode
+        self.devices = Devices(return_mode)   # what is known of each actuator (see mode_of)
         self.timeout = timeout
         self.retries = retries
         self.latency = latency
@@ -223,6 +228,21 @@ class ZapBus:
         self.late = 0                      # replies after their actuator's timeout, or to earlier attempts
         self.stale = 0                     # stray packets skipped (acknowledgements nobody waited for)
         self.garbled = 0                   # bursts of bytes that made no packet (collisions, line faults)
+
+    # -- the actuators -----------------------------------------------------------------------
+
+    @property
+    def return_mode(self) -> int:
+        """The feedback-return mode assumed of an actuator whose own was never learned."""
+        return self.devices.default
+
+    @return_mode.setter
+    def return_mode(self, value: int) -> None:
+        self.devices.default = int(value)
+
+    def mode_of(self, ident: int) -> int:
+        """The feedback-return mode of actuator ``ident``: learned, else :attr:`return_mode`."""
+        return self.devices.mode(ident)
 
     # -- line -----------------------------------------------------------------------------------
 
@@ -319,7 +339,7 @@ class ZapBus:
 
     def expects_reply(self, pkt: bytes, return_mode=None) -> bool:
         ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
-        mode = self.return_mode if return_mode is None else return_mode
+        mode = self.devices.mode(pkt[3]) if return_mode is None else return_mode
         return ins is not None and ins.answered(mode, pkt[3])
 
     # -- reading ----------------------------------------------------------------------------------
@@ -867,13 +887,14 @@ class ZapBus:
                 and pkt[3] != zap.BROADCAST and params[1] <= 2:
             # the reply follows the old or the new mode (firmware-dependent): wait if either answers
             new = params[1]
-            old = self.return_mode
+            old = self.devices.mode(pkt[3])
             kw["reply"] = self.expects_reply(pkt, old) or self.expects_reply(pkt, new)
             kw["optional"] = self.expects_reply(pkt, old) != self.expects_reply(pkt, new)
             try:
                 return self.transact(pkt, check=check, **kw)
             finally:
-                self.return_mode = new
+                # that actuator's mode, not the bus's (a broadcast: every actuator's)
+                self.devices.learn_mode(pkt[3], new, broadcast=zap.BROADCAST)
         ins = zap.INSTRUCTION_BY_CODE.get(code)
         if (ins is None or not ins.documented) and pkt[3] != zap.BROADCAST:
             kw["reply"] = True
@@ -889,9 +910,10 @@ class ZapBus:
 
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
         """Load Data: ``length`` bytes from ``address``."""
-        if self.return_mode == 0:
-            raise UsageError("load: in feedback-return-mode 0 Load Data is never answered",
-                             ident=ident, return_mode=0, assumed_mode=True)
+        if self.devices.mode(ident) == 0:
+            raise UsageError(f"load: ID {ident} is in feedback-return-mode 0: Load Data is never answered",
+                             ident=ident, return_mode=0,
+                             assumed_mode=getattr(self.devices.get(ident), "return_mode", None) is None)
         return self.transact(zap.load(ident, address, length), reply=True, data_len=length, **kw)
 
     def read(self, ident: int, reg, **kw) -> int:
@@ -950,14 +972,15 @@ class ZapBus:
 
     def detect_return_mode(self, ident: int) -> int:
         """Ask the actuator: Load feedback-return-mode (answered in modes 1 and 2); no answer
-        but an Echo reply means mode 0. Sets and returns :attr:`return_mode`."""
+        but an Echo reply means mode 0. The mode is that actuator's from now on (:meth:`mode_of`);
+        returns it."""
         reg = zap.REGISTER_BY_NAME["feedback-return-mode"]
         r = self.transact(zap.load(ident, reg.address, 1), reply=True, data_len=1, optional=True, check=False)
         if r is not None and r.value in (0, 1, 2):
-            self.return_mode = r.value
+            self.devices.learn_mode(ident, r.value)
             return r.value
         self.echo(ident, check=False)
-        self.return_mode = 0
+        self.devices.learn_mode(ident, 0)
         return 0
 
     def wait_ready(self, ident: int, within: float = 2.0, check=False) -> Reply:

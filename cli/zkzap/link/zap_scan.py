@@ -425,6 +425,7 @@ def identify(bus, rec, retries=2, early=False) -> None:
     except NoReply as e:
         if _echo_answers(bus, ident, retries, early):
             rec["return_mode"] = 0                 # answers Echo, never Load Data: Echo only
+            bus.devices.learn_mode(ident, 0)       # that actuator's from now on
             return
         rec["status"] = "unidentified"
         late = any(ev.kind == "late" and ev.ident == ident for ev in bus.events)
@@ -434,6 +435,8 @@ def identify(bus, rec, retries=2, early=False) -> None:
     rec["model"] = values.get("model-number")
     rec["firmware"] = values.get("firmware-version")
     rec["return_mode"] = values.get("feedback-return-mode")
+    if rec["return_mode"] in (0, 1, 2):
+        bus.devices.learn_mode(ident, rec["return_mode"])   # that actuator's from now on
 
 
 def _echo_answers(bus, ident, retries, early=False) -> bool:

@@ -235,7 +235,7 @@ def acknowledgement(pkt: bytes, reply, bus) -> str:
                                                                if reply.error else "")
     if pkt[3] == zap.BROADCAST:
         return "not acknowledged (a broadcast is never answered)"
-    mode = bus.return_mode
+    mode = bus.mode_of(pkt[3])
     meaning = zap.REGISTER_BY_NAME["feedback-return-mode"].choices.get(mode, "?")
     return f"not acknowledged (feedback-return-mode {mode}: {meaning})"
 
@@ -434,7 +434,7 @@ def load(regs, length, physical, fmt, ident, **common):
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as bus:
-        if bus.return_mode == 0:
+        if bus.mode_of(ident) == 0:
             raise UsageError(f"ID {ident} is in feedback-return-mode 0: it answers Echo only, never Load Data")
         replies = [(reg, size, *bus.read_registers(ident, reg.address, size, check=False)) for reg, size in reads]
     register_records = _API_ZAP().register_records

@@ -254,7 +254,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
         if speed is not None:
             bus.store(ident, SPEED, speed)
         bus.store(ident, POSITION, position)
-        if bus.return_mode == 0:
+        if bus.return_mode_of(ident) == 0:
             raise UsageError(f"--wait: ID {ident} is in feedback-return-mode 0 and never answers Load Data")
         progress = _progress(None, f"ID {ident} -> {position}")
 

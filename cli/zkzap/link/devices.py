@@ -1,0 +1,97 @@
+"""What a bus knows of each device on it: one :class:`Device` per address, never one for the bus.
+
+A half-duplex bus with many devices (mightyZAP actuators on the IR protocol, the same actuators
+over Modbus RTU) keeps some facts per device that the framing does not carry: how it answers
+(a mightyZAP's feedback-return mode), the line speed it was last heard at, and what the bus
+asked it that has not been answered yet. A fact learned of one device (one actuator told to
+answer every command) says nothing of another: the bus keeps it on that device's record, and
+:attr:`Devices.default` stands for what is assumed of a device nothing was learned of.
+
+The latency learned of each device lives in the port's
+:class:`~zkzap.link.zap_timing.Policy` (shared by every bus on that port in one process); a
+device's record refers to it by address.
+
+Nothing here imports pyserial; nothing here knows a framing.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+__all__ = ["Device", "Devices"]
+
+
+class Device:
+    """One device on a bus: ``ident`` (its address), ``return_mode`` (how it answers, as
+    learned: None until the bus learned it, then the device's own), ``baud`` (the line speed it
+    last answered at, None before), ``late`` (replies that came after their attempt's window)
+    and ``doubts`` (replies the bus could not attribute with certainty: never taken for an
+    answer)."""
+
+    __slots__ = ("ident", "return_mode", "baud", "late", "doubts")
+
+    def __init__(self, ident: int) -> None:
+        self.ident = ident
+        self.return_mode: Optional[int] = None
+        self.baud: Optional[int] = None
+        self.late = 0
+        self.doubts = 0
+
+    def __repr__(self) -> str:
+        return (f"Device(id={self.ident}, return_mode={self.return_mode}, baud={self.baud}, "
+                f"late={self.late}, doubts={self.doubts})")
+
+
+class Devices:
+    """The devices of one bus by address. ``default`` is the return mode assumed of a device
+    whose own was never learned (the bus's ``return_mode`` setting)."""
+
+    __slots__ = ("_by_id", "default")
+
+    def __init__(self, default: int = 1) -> None:
+        self._by_id: dict[int, Device] = {}
+        self.default = default
+
+    def __getitem__(self, ident: int) -> Device:
+        dev = self._by_id.get(ident)
+        if dev is None:
+            dev = self._by_id[ident] = Device(ident)
+        return dev
+
+    def get(self, ident: int) -> Optional[Device]:
+        return self._by_id.get(ident)
+
+    def __iter__(self):
+        return iter(sorted(self._by_id.values(), key=lambda d: d.ident))
+
+    def __len__(self) -> int:
+        return len(self._by_id)
+
+    def mode(self, ident: int) -> int:
+        """The return mode of ``ident``: its own when learned, else :attr:`default`."""
+        dev = self._by_id.get(ident)
+        if dev is None or dev.return_mode is None:
+            return self.default
+        return dev.return_mode
+
+    def learn_mode(self, ident: int, mode: int, broadcast: Optional[int] = None) -> None:
+        """``ident`` answers in ``mode`` now; ``broadcast`` (its address): every device does, and
+        the default becomes ``mode``."""
+        if broadcast is not None and ident == broadcast:
+            self.default = mode
+            for dev in self._by_id.values():
+                dev.return_mode = mode
+            return
+        self[ident].return_mode = mode
+
+    def moved(self, old: int, new: int) -> None:
+        """The device at ``old`` now answers at ``new`` (an ID change): its record goes along,
+        and nothing is known any more of ``old``."""
+        dev = self._by_id.pop(old, None)
+        self._by_id.pop(new, None)
+        if dev is not None:
+            dev.ident = new
+            self._by_id[new] = dev
+
+    def forget(self, ident: int) -> None:
+        self._by_id.pop(ident, None)
