@@ -46,7 +46,7 @@ OUTPUT_ERROR = 7
 #: More to do: the command did the part it was asked to and stopped; running it again goes on
 #: (``zap setup --no-wait`` set up one actuator and others are pending).
 MORE_TO_DO = 8
-#: Interrupted by Ctrl-C (SIGINT); 143 for SIGTERM.
+#: Interrupted by Ctrl-C (SIGINT); 143 for SIGTERM, 128 + N for another signal N.
 INTERRUPTED = 130
 TERMINATED = 143
 
@@ -60,7 +60,7 @@ EXIT_CODES = (
     (BAD_REPLY, "corrupted or unexpected reply (bad checksum, wrong ID) after retries"),
     (OUTPUT_ERROR, "the output could not be written (disk full); the records before are whole"),
     (MORE_TO_DO, "more to do: the part asked for is done and the command stopped; run it again for the rest"),
-    (INTERRUPTED, "interrupted (Ctrl-C); 143 when terminated (SIGTERM)"),
+    (INTERRUPTED, "interrupted (Ctrl-C); 143 when terminated (SIGTERM), 128+N by another signal N (129 SIGHUP)"),
 )
 
 

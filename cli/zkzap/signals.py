@@ -1,11 +1,22 @@
-"""SIGINT and SIGTERM for the command-line programs, from the first instant of the process.
+"""The signals that end the command-line programs, from the first instant of the process.
+
+Every signal whose default action ends the process and that another process (a terminal, ssh,
+``timeout``, ``kill``) sends is handled — :data:`STOP_SIGNALS`: SIGINT, SIGTERM, SIGHUP,
+SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM, SIGPROF, SIGXCPU, SIGIO, SIGPWR, SIGSTKFLT and
+the real-time signals (SIGBREAK on Windows). A signal ignored when the program starts (``nohup``
+ignores SIGHUP, a shell's background job SIGINT and SIGQUIT) stays ignored: that is the
+convention. Not handled: SIGKILL and SIGSTOP (no process can), the faults of the process
+itself (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGSYS, SIGTRAP: its state cannot be trusted
+to run a clean-up), and SIGPIPE and SIGXFSZ, which Python ignores so that a write fails instead
+(a closed stdout ends a session as ``pipe``, with its abort).
 
 :func:`install` runs before click and the command modules are imported. Until :func:`running`
 is called (the command is about to parse its arguments), a signal ends the process at once,
-quietly, with 130 (SIGINT) or 143 (SIGTERM): nothing has been opened or written yet. From then
-on SIGINT raises :class:`KeyboardInterrupt` and SIGTERM :class:`Terminated` (a subclass, so
-every ``except KeyboardInterrupt`` that cleans up or prints a summary runs for both), and the
-program exits 130 or 143.
+quietly, with 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, ...): nothing has been
+opened or written yet. From then on SIGINT raises :class:`KeyboardInterrupt` and every other
+one :class:`Terminated` (a subclass, so every ``except KeyboardInterrupt`` that cleans up,
+sends an abort or prints a summary runs for all of them), and the program exits 128 + its
+number.
 
 Only the first signal counts: a repeat (``timeout`` signals the command and then its process
 group, so the command gets SIGTERM twice; an impatient second Ctrl-C) is recorded and
@@ -14,7 +25,7 @@ and the exit status stays that of the first signal.
 
 :class:`SignalGuard` is the loop-level alternative for a session that must stop between two
 records and send an abort: while it is active, SIGINT and SIGTERM (and SIGBREAK on Windows) only
-set a flag the loop checks. Stdlib only.
+set a flag the loop checks (and every other signal of :data:`STOP_SIGNALS`). Stdlib only.
 """
 
 from __future__ import annotations
@@ -23,12 +34,65 @@ import os
 import signal
 import threading
 
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
-EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+def _stop_signals() -> tuple:
+    names = ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGVTALRM",
+             "SIGPROF", "SIGXCPU", "SIGIO", "SIGPWR", "SIGSTKFLT", "SIGBREAK")
+    found = [getattr(signal, n) for n in names if hasattr(signal, n)]
+    if hasattr(signal, "SIGRTMIN"):
+        found += range(signal.SIGRTMIN, signal.SIGRTMAX + 1)
+    out = []
+    for s in found:                  # SIGIO and SIGPOLL are one signal on Linux
+        if int(s) not in {int(o) for o in out}:
+            out.append(s)
+    return tuple(out)
+
+
+#: The signals that end a session (and a program) safely: every one whose default action ends
+#: the process and that comes from outside it (see the module).
+STOP_SIGNALS = _stop_signals()
+#: The signals that end a session as Ctrl-C does (exit 130): SIGINT, and SIGBREAK on Windows.
+INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
+SIGNALS = STOP_SIGNALS
+
+
+def status(signum) -> int:
+    """The exit status of a program ended by ``signum``: 128 + its number (130 for SIGINT and
+    SIGBREAK, as Ctrl-C)."""
+    if signum in INTERRUPT_SIGNALS:
+        return 130
+    return 128 + int(signum)
+
+
+def name(signum) -> str:
+    """``SIGHUP``, ``SIGRTMIN+3``: the signal's name."""
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        if hasattr(signal, "SIGRTMIN") and signal.SIGRTMIN <= signum <= signal.SIGRTMAX:
+            return f"SIGRTMIN+{signum - signal.SIGRTMIN}"
+        return f"signal {signum}"
+
+
+def terminated_status(code) -> bool:
+    """True when ``code`` is the exit status of a signal other than Ctrl-C (a shell or batch
+    ends too, once its command has stopped)."""
+    return isinstance(code, int) and code > 128 and code != 130 and code - 128 in {int(s) for s in STOP_SIGNALS}
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C's KeyboardInterrupt; exit status 143."""
+    """A signal other than SIGINT (SIGTERM, SIGHUP, ...), raised like Ctrl-C's KeyboardInterrupt;
+    ``signum``: which one (exit status 128 + its number: 143 for SIGTERM)."""
+
+    def __init__(self, signum=signal.SIGTERM):
+        super().__init__()
+        self.signum = signum
+
+
+def interruption(signum) -> KeyboardInterrupt:
+    """What ``signum`` raises: KeyboardInterrupt for Ctrl-C, else :class:`Terminated`."""
+    return KeyboardInterrupt() if signum in INTERRUPT_SIGNALS else Terminated(signum)
 
 
 _state = {"phase": None, "first": None}
@@ -36,26 +100,21 @@ _state = {"phase": None, "first": None}
 
 def _handler(signum, frame):
     if _state["phase"] == "starting":
-        os._exit(EXIT.get(signum, 128 + signum))
+        os._exit(status(signum))
     if _state["first"] is not None:
         return                       # a repeat: the first signal is already being handled
     _state["first"] = signum
-    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    raise interruption(signum)
 
 
 def install() -> None:
-    """Handle SIGINT and SIGTERM from now on (the start-up phase: exit at once)."""
+    """Handle every signal of :data:`STOP_SIGNALS` from now on (the start-up phase: exit at
+    once); one ignored already stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         return
     _state["phase"] = "starting"
     _state["first"] = None
-    for s in SIGNALS:
-        try:
-            if signal.getsignal(s) is signal.SIG_IGN:   # nohup, a shell's background job
-                continue
-            signal.signal(s, _handler)
-        except (ValueError, OSError):   # pragma: no cover - embedded interpreters
-            pass
+    handle(STOP_SIGNALS, _handler)
 
 
 def running() -> None:
@@ -88,28 +147,28 @@ def first():
 
 
 def exit_status(exc) -> int:
-    """130 for Ctrl-C, 143 for SIGTERM (``exc``: the KeyboardInterrupt raised)."""
-    if isinstance(exc, Terminated) or _state["first"] == signal.SIGTERM:
-        return EXIT[signal.SIGTERM]
-    return EXIT[signal.SIGINT]
+    """130 for Ctrl-C, 143 for SIGTERM, 128 + N for signal N (``exc``: the KeyboardInterrupt
+    raised; the first signal received decides when there was one)."""
+    if _state["first"] is not None:
+        return status(_state["first"])
+    if isinstance(exc, Terminated):
+        return status(exc.signum)
+    return 130
 
 
 from ._program import is_program  # noqa: E402,F401 - part of this module's interface
 
 
-#: The signals that end a session: SIGINT (Ctrl-C), SIGTERM, and on Windows SIGBREAK (Ctrl-Break),
-#: which ends it like Ctrl-C.
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGBREAK") if hasattr(signal, n))
-INTERRUPT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGBREAK") if hasattr(signal, n))
-
-
 def handle(sigs, handler) -> dict:
-    """Install ``handler`` for each of ``sigs`` (only the main thread may; elsewhere nothing
-    changes); returns the handlers replaced, for :func:`restore`."""
+    """Install ``handler`` for each of ``sigs`` but those ignored (``nohup``: the convention is
+    kept); only the main thread may, elsewhere nothing changes. Returns the handlers replaced,
+    for :func:`restore`."""
     old = {}
     if threading.current_thread() is threading.main_thread():
         for s in sigs:
             try:
+                if signal.getsignal(s) is signal.SIG_IGN:
+                    continue
                 old[s] = signal.signal(s, handler)
             except (ValueError, OSError):   # pragma: no cover - embedded interpreters, other platforms
                 pass
@@ -123,7 +182,7 @@ def restore(old) -> None:
 
 
 class held:
-    """``with held():`` SIGINT and SIGTERM wait until the block ends (in the main thread, where
+    """``with held():`` the signals of :data:`STOP_SIGNALS` wait until the block ends (in the main thread, where
     handlers run; elsewhere, and where the platform cannot mask signals, nothing changes): a
     write of a whole block or line is never cut short by a handler raising in the middle."""
 
@@ -142,7 +201,7 @@ class held:
 
 
 class SignalGuard:
-    """Turn SIGINT and SIGTERM into a flag the session loop checks, so it stops between two
+    """Turn every signal of :data:`STOP_SIGNALS` into a flag the session loop checks, so it stops between two
     records (files stay whole) and can send the abort command. Only the first signal counts: a
     repeat (``timeout`` signals twice; a second Ctrl-C) neither interrupts the abort nor changes
     the exit status."""

@@ -3,9 +3,11 @@
 The commands are found by walking the command tree: those that declare ``--abort`` (the shared
 option of engine sessions), kept when what they would send controls the engine — the codec's
 ``ControlFrame.controls_engine`` on their own dry run. Each runs as a real subprocess against
-the ECU simulator on a pty and gets SIGINT or SIGTERM at a seeded moment (during start-up, or
-after its first record); afterwards the ECU itself is asked, through its status frames, what
-state it was left in: standby or stop, never run.
+the ECU simulator on a pty and gets a signal that ends a program (every one of
+``zkzap.signals.STOP_SIGNALS`` is sent to some command: SIGINT, SIGTERM, SIGHUP, SIGQUIT,
+SIGUSR1, ...) at a seeded moment (during start-up, or after its first record); afterwards the
+ECU itself is asked, through its status frames, what state it was left in: standby or stop,
+never run. The shell running an engine command is one more command of the walk.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import time
 
 import pytest
 
-from zkzap import Ecu
+from zkzap import Ecu, signals
 from zkzap.codec import zk
 
 from cmdargs import has, invocation
@@ -38,6 +40,19 @@ def _values(tmp_path):
 
 
 ENGINE_COMMANDS = [(path, cmd) for path, cmd in commands() if has(cmd, "abort")]
+#: The shell, running an engine command from its stdin: one more engine-controlling command.
+SHELL = (("shell", "zk"), None)
+RUNS = ENGINE_COMMANDS + [SHELL]
+#: Every named signal that ends a program, and one real-time signal; each run of the walk gets
+#: one in turn, and ``zk send control --for`` gets every one (test_every_signal_...).
+SIGNALS = [s for s in signals.STOP_SIGNALS if not hasattr(signal, "SIGRTMIN") or s < signal.SIGRTMIN
+           if s != getattr(signal, "SIGBREAK", None)]
+if hasattr(signal, "SIGRTMIN"):
+    SIGNALS.append(signal.SIGRTMIN + 2)
+
+
+def _signal_for(path):
+    return SIGNALS[(RUNS.index(next(r for r in RUNS if r[0] == path)) + 5) % len(SIGNALS)]
 
 
 def _controls_engine(cli, path, cmd, args) -> bool:
@@ -78,23 +93,47 @@ def test_the_walk_finds_the_engine_commands():
     assert "zk monitor" not in names and "zk check" not in names
 
 
-@pytest.mark.parametrize("path,cmd", ENGINE_COMMANDS, ids=[" ".join(p) for p, _ in ENGINE_COMMANDS])
+def test_the_signals_are_every_one_that_ends_a_program():
+    assert {signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2,
+            signal.SIGALRM} <= set(SIGNALS)
+
+
+@pytest.mark.parametrize("path,cmd", RUNS, ids=[" ".join(p) for p, _ in RUNS])
 def test_a_signal_at_any_moment_leaves_the_ecu_in_standby_or_stop(cli, start_sim, tmp_path, path, cmd):
     values = _values(tmp_path)
-    args = invocation(cmd, values, values)
-    if not _controls_engine(cli, path, cmd, args):
-        pytest.skip(f"{' '.join(path)} with these values does not control the engine")
+    if cmd is None:                                             # the shell, fed one engine command
+        argv = list(path)
+        line = "send control --state run --throttle 30 --for 0 --yes -f jsonl\n"
+    else:
+        args = invocation(cmd, values, values)
+        if not _controls_engine(cli, path, cmd, args):
+            pytest.skip(f"{' '.join(path)} with these values does not control the engine")
+        argv = [*path, *invocation(cmd, values, dict(values, for_s="0", yes=True, fmt="jsonl"))]
+        line = None
     rng = random.Random(" ".join(path))                         # seeded: the same moments every run
-    sig = rng.choice([signal.SIGINT, signal.SIGTERM])
+    _signal_ends_it_safely(start_sim, tmp_path, argv, _signal_for(path), rng, line)
+
+
+@pytest.mark.parametrize("sig", SIGNALS, ids=[signals.name(s) for s in SIGNALS])
+def test_every_signal_that_ends_a_program_ends_the_session_safely(start_sim, tmp_path, sig):
+    argv = ["zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "0", "--yes", "-f", "jsonl"]
+    _signal_ends_it_safely(start_sim, tmp_path, argv, sig, random.Random(signals.name(sig)), None)
+
+
+def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
+    """Run ``argv`` (fed ``line`` on a stdin kept open), send ``sig`` at a moment ``rng`` picks,
+    and check the exit status and the state the ECU was left in."""
+    capture = tmp_path / "wire.pcapng"
     early = rng.random() < 0.3                                  # during start-up, or once it runs
     moment = rng.uniform(0.0, 0.3 if early else 0.6)
     url, _ = start_sim(["zk", "--pty", "--speed", "10"])
-    run = invocation(cmd, values, dict(values, for_s="0", yes=True, fmt="jsonl"))
     env = clean_env(PYTHONPROFILEIMPORTTIME="1") if early else clean_env()
-    capture = tmp_path / "wire.pcapng"
-    proc = subprocess.Popen([executable("zkzap"), *path, *run, "-p", url, "--capture", str(capture)],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True, env=env)
+    proc = subprocess.Popen([executable("zkzap"), *argv, "--capture", str(capture), "-p", url],
+                            stdin=subprocess.DEVNULL if line is None else subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    if line is not None:
+        proc.stdin.write(line)                                  # kept open: the shell waits for more
+        proc.stdin.flush()
     watchdog = threading.Timer(60, proc.kill)
     watchdog.daemon = True
     watchdog.start()
@@ -114,8 +153,8 @@ def test_a_signal_at_any_moment_leaves_the_ecu_in_standby_or_stop(cli, start_sim
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert proc.returncode == (130 if sig == signal.SIGINT else 143), (moment, err)
+    assert proc.returncode == signals.status(sig), (signals.name(sig), moment, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     with Ecu(url, baud=115200) as ecu:                          # what the ECU says it was left in
         state = next(rec for rec in ecu.status() if rec.id == 1).sw_state_name
-    assert state in ("standby", "stop"), (moment, err)
+    assert state in ("standby", "stop"), (signals.name(sig), moment, err)

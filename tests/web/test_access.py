@@ -147,12 +147,14 @@ def test_one_page_controls_and_a_silent_controller_sends_the_engine_to_standby(c
     assert "no heartbeat for 1 s" in console.stderr()
 
 
-def test_ending_the_console_while_it_runs_the_engine_sends_standby():
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1],
+                         ids=["SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1"])
+def test_ending_the_console_while_it_runs_the_engine_sends_standby(sig):
     with start_zk(speed=10, transport="tcp") as ecu:
-        _end_while_running(ecu)
+        _end_while_running(ecu, sig)
 
 
-def _end_while_running(ecu):
+def _end_while_running(ecu, sig=signal.SIGTERM):
     c = WebConsole("zk", "-p", ecu.url)
 
     async def scenario():
@@ -163,7 +165,7 @@ def _end_while_running(ecu):
             r = await a.request("start", mode="throttle", throttle=15, grant=["engine"])
             assert r["type"] == "done", r
             await wait(lambda: sw(ecu) == "run", "the engine running")
-            assert c.stop(signal.SIGTERM) == 143
+            assert c.stop(sig) == 128 + sig
 
     try:
         run(scenario())

@@ -18,7 +18,7 @@ from ..codec import zk
 from ..codec.ids import id_ranges
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
 from ..errors import TERMINATED
-from ..signals import INTERRUPT_SIGNALS, SignalGuard
+from ..signals import INTERRUPT_SIGNALS, SignalGuard, name, status
 from .prestart import EcuLimitError, listen, silence_error
 from .telemetry import describe_error
 
@@ -103,6 +103,7 @@ class Outcome:
         self.error = error
         self.aborted = aborted   # the abort kind sent, or None
         self.rundown = None
+        self.signum = None       # ``terminated``: the signal (SIGTERM, SIGHUP, ...)
 
     @property
     def ok(self) -> bool:
@@ -119,7 +120,7 @@ class Outcome:
         if self.reason == "interrupted":
             return INTERRUPTED
         if self.reason == "terminated":
-            return TERMINATED
+            return status(self.signum) if self.signum is not None else TERMINATED
         return getattr(self.error, "code", 1)
 
     def raise_for_status(self) -> None:
@@ -130,7 +131,7 @@ class Outcome:
         if r == "terminated":
             from ..signals import Terminated
 
-            raise Terminated()
+            raise Terminated(self.signum) if self.signum is not None else Terminated()
         if r == "pipe":
             raise BrokenPipeError
         if self.error is not None:
@@ -291,12 +292,12 @@ class Session:
                     except NoReply as e:
                         outcome = Outcome("silence", e)
                     if guard.signum is not None and outcome is None:
-                        outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
+                        outcome = _signalled(guard.signum)
                 elif src.live:
                     src.restart()               # the session's time 0: now, not when the port opened
                 while outcome is None:
                     if guard.signum is not None:
-                        outcome = Outcome("interrupted" if guard.signum in INTERRUPT_SIGNALS else "terminated")
+                        outcome = _signalled(guard.signum)
                         break
                     now = src.now()
                     if self.duration is not None and now >= self.duration:
@@ -539,7 +540,16 @@ class Session:
             return
         outcome.aborted = kind
         why = _WHY.get(outcome.reason, self.end_label)
+        if outcome.reason == "terminated" and outcome.signum not in (None, TERMINATED - 128):
+            why = f"terminated ({name(outcome.signum)})"     # SIGHUP, SIGQUIT, ...: which one
         self.notify(f"{why}: sent {describe_abort(kind)}")
+
+
+def _signalled(signum) -> Outcome:
+    """The outcome of a session a signal ended: ``interrupted`` (Ctrl-C) or ``terminated``."""
+    outcome = Outcome("interrupted" if signum in INTERRUPT_SIGNALS else "terminated")
+    outcome.signum = signum
+    return outcome
 
 
 #: How a session's end is worded in its notes (an ok end: the session's ``end_label``).

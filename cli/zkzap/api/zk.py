@@ -331,17 +331,16 @@ class Ecu:
              allow: AllowSpec = None, **fields: Any) -> Iterator[Status]:
         """Send control frame ``kind`` with ``fields`` every ``1/rate`` s for ``seconds`` s,
         yielding the status records received meanwhile. A new ECU error while controlling
-        raises DeviceError; any abnormal end sends the abort command — Ctrl-C, and SIGTERM too:
-        while the hold runs (in the main thread) SIGTERM raises
+        raises DeviceError; any abnormal end sends the abort command — Ctrl-C, and SIGTERM too
+        (and every other signal that would end the process: SIGHUP, SIGQUIT, ...):
+        while the hold runs (in the main thread) such a signal raises
         :class:`~zkzap.signals.Terminated` (a KeyboardInterrupt) instead of ending the process
         where it stands, and the previous handler comes back after. A frame the ECU cannot
         follow is refused before the first is sent (see :meth:`check`); a hold that read no
         status frame raises NoReply."""
         if not 1 <= rate <= 200:
             raise UsageError(f"rate: {rate:g} is out of range; allowed 1..200 Hz")
-        import signal
-
-        from ..signals import Terminated, handle, held, restore
+        from ..signals import INTERRUPT_SIGNALS, STOP_SIGNALS, Terminated, handle, held, restore
 
         cf = kind if isinstance(kind, zk.ControlFrame) else self.frame(kind, **fields)
         with self._allowing(allow):
@@ -350,11 +349,16 @@ class Ecu:
         done = False
 
         def terminated(signum, frame):
-            raise Terminated()
+            raise Terminated(signum)
 
-        # while the engine is held, SIGTERM ends the hold as Ctrl-C does (so the abort goes out)
-        # instead of killing the process; the previous handler comes back after
-        old = handle([signal.SIGTERM], terminated)
+        # while the engine is held, SIGTERM (SIGHUP, ...: every signal that would end the process)
+        # ends the hold as Ctrl-C does (so the abort goes out) instead of killing the process where
+        # it stands; the previous handlers come back after. SIGINT keeps its handler (Ctrl-C's
+        # KeyboardInterrupt, or the program's), and so does a signal the process handles itself
+        import signal
+
+        old = handle([s for s in STOP_SIGNALS if s not in INTERRUPT_SIGNALS
+                      and (s == signal.SIGTERM or signal.getsignal(s) in (signal.SIG_DFL, None))], terminated)
         try:
             with self._allowing(allow):
                 yield from self._records(cf, 1.0 / rate, duration=seconds)

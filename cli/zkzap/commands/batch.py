@@ -25,7 +25,7 @@ import sys
 import click
 
 from .. import signals
-from ..errors import INTERRUPTED, MORE_TO_DO, OK, TERMINATED, USAGE, UsageError, ZkzapError
+from ..errors import INTERRUPTED, MORE_TO_DO, OK, USAGE, UsageError, ZkzapError
 from . import PipeClosed
 from .options import exits, note
 
@@ -284,7 +284,7 @@ def invoke(line, protocol, contexts=None) -> int:
         return e.exit_code
     except click.exceptions.Abort:
         return INTERRUPTED
-    except KeyboardInterrupt as e:         # Ctrl-C, or Terminated (SIGTERM): 130 or 143
+    except KeyboardInterrupt as e:         # Ctrl-C, or Terminated (SIGTERM, ...): 130, 143, 128 + N
         return signals.exit_status(e)
     except (BrokenPipeError, PipeClosed):
         raise
@@ -310,9 +310,9 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
     """Run checked lines in order (the port already shared); write one record per line to
     ``out``. Returns the batch's exit status: 0, or the first failure's code.
 
-    The first SIGINT/SIGTERM stops the running line after its current transaction
+    The first SIGINT/SIGTERM (or any signal that ends a program) stops the running line after its current transaction
     (:mod:`zkzap.link.stop`): the line ends as the command does on Ctrl-C, its record says exit
-    130 (143 for SIGTERM) with what it gathered, and no further line starts. A second signal
+    130 (143 for SIGTERM, 128 + N for another signal N) with what it gathered, and no further line starts. A second signal
     interrupts at once."""
     with _batch_capture():
         return _run_lines(group, protocol, lines, defaults, out, keep_going=keep_going,
@@ -398,7 +398,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                     b.truncate()
                 signum = stop.requested()
                 if signum is not None and stop.pending() is None and not code:
-                    code = signals.EXIT.get(signum, INTERRUPTED)   # stopped, though the command returned
+                    code = signals.status(signum)   # stopped, though the command returned
                 if messages:
                     records.flush()                # the records before, then this line's messages
                     sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
@@ -406,7 +406,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 records.put(line, code, printed, messages)
                 if code and not first:
                     first = code
-                if code in (INTERRUPTED, TERMINATED) or (code and not keep_going):
+                if code == INTERRUPTED or signals.terminated_status(code) or (code and not keep_going):
                     break
         finally:
             records.flush()
@@ -414,7 +414,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
     if signum is not None:
         where = f"the current transaction of {last.where} ({last.text})" if last else "its start"
         note(f"{'interrupted' if signum == signal.SIGINT else 'terminated'}: the batch stopped after {where}")
-        return signals.EXIT.get(signum, INTERRUPTED)
+        return signals.status(signum)
     return first
 
 

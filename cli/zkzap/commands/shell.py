@@ -104,7 +104,8 @@ def loop(group, protocol, defaults, *, interactive) -> int:
       leave); with piped input the status of the last command that failed, so a script can
       tell. A command stopped by Ctrl-C (130) returns to the prompt and does not count: the
       user stopped it on purpose;
-    - SIGTERM, at the prompt or during a command, ends the shell with 143."""
+    - SIGTERM, at the prompt or during a command, ends the shell with 143 (every other signal
+      that ends a program likewise, with 128 + its number: 129 for SIGHUP)."""
     from . import run
 
     if interactive:
@@ -120,7 +121,7 @@ def loop(group, protocol, defaults, *, interactive) -> int:
         readline.set_completer(Completer(group, protocol))
         readline.parse_and_bind("tab: complete")
     from .. import signals
-    from ..errors import INTERRUPTED, TERMINATED, USAGE
+    from ..errors import INTERRUPTED, USAGE
     from ..link import stop
 
     failed = 0
@@ -129,8 +130,8 @@ def loop(group, protocol, defaults, *, interactive) -> int:
             signals.forget()             # the last command's Ctrl-C is over: the next one counts
             try:
                 text = input(f"{protocol}> ") if interactive else sys.stdin.readline()
-            except signals.Terminated:
-                return TERMINATED
+            except signals.Terminated as e:
+                return signals.exit_status(e)
             except KeyboardInterrupt:
                 click.echo("", err=True)
                 continue
@@ -169,8 +170,8 @@ def loop(group, protocol, defaults, *, interactive) -> int:
                 continue
             with stop.deferring():       # Ctrl-C: the command stops after its current transaction
                 code = run(group, protocol, tokens, default_map=_defaults_for(group, tokens, defaults))
-            if code == TERMINATED:
-                return TERMINATED        # SIGTERM ends the shell too, once the command has stopped
+            if signals.terminated_status(code):
+                return code              # SIGTERM (SIGHUP, ...) ends the shell too, once the command has stopped
             if code and code != INTERRUPTED:
                 failed = code
     finally:

@@ -291,9 +291,9 @@ def _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_
     if not sniffer.frames_trusted and reason != "terminated":
         raise sniffer.silent()         # a silent line never passes
     if reason == "terminated":
-        from ..errors import TERMINATED, ZkzapError
+        from ..signals import Terminated
 
-        raise ZkzapError("terminated (SIGTERM)", TERMINATED)
+        raise Terminated(guard.signum)
 
 
 def stats_lines(s) -> list:

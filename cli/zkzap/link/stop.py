@@ -1,8 +1,8 @@
-"""Stop requests: Ctrl-C or SIGTERM that ends a command after its current transaction.
+"""Stop requests: Ctrl-C, SIGTERM or another signal that ends a command after its current transaction.
 
 Alone, a command takes Ctrl-C as a :class:`KeyboardInterrupt` raised wherever it is. Under
 :class:`deferring` (what ``zap batch``, ``zk batch`` and ``zkzap shell`` run their commands in)
-the first SIGINT or SIGTERM only *requests* a stop; the transaction entry points —
+the first SIGINT, SIGTERM or other stop signal only *requests* a stop; the transaction entry points —
 :meth:`zkzap.link.zap_bus.ZapBus.transact` (one request and its reply or timeout),
 :meth:`zkzap.link.zk_port.ZkLink.write` (one control frame) — and the waits between them
 (:func:`pause`) call :func:`check`, which raises the interruption there, once: between two
@@ -16,11 +16,13 @@ Outside :class:`deferring` every function here is a no-op. Stdlib only.
 
 from __future__ import annotations
 
-import signal
 import time
 
-#: The signals a deferred stop is requested by.
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+from ..signals import STOP_SIGNALS, interruption as _interruption
+
+#: The signals a deferred stop is requested by: every one that ends a program
+#: (:data:`zkzap.signals.STOP_SIGNALS`).
+SIGNALS = STOP_SIGNALS
 
 #: ``active``: a :class:`deferring` block runs; ``signum``: the first signal received in it;
 #: ``taken``: the interruption was raised (or a ZK session took the signal itself).
@@ -28,12 +30,6 @@ _state = {"active": 0, "signum": None, "taken": False}
 
 #: The longest sleep of :func:`pause` between two looks at the request (seconds).
 PAUSE_SLICE = 0.02
-
-
-def _interruption(signum) -> KeyboardInterrupt:
-    from ..signals import Terminated
-
-    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def request(signum) -> None:
@@ -70,7 +66,7 @@ def take():
 
 
 def check() -> None:
-    """Raise the pending stop request here (KeyboardInterrupt; Terminated for SIGTERM), once.
+    """Raise the pending stop request here (KeyboardInterrupt; Terminated for any other signal), once.
     Called before each transaction."""
     if _state["signum"] is not None and not _state["taken"]:
         _state["taken"] = True
@@ -93,9 +89,9 @@ def pause(seconds: float) -> None:
 
 
 class deferring:
-    """``with deferring() as d:``: while the block runs, the first SIGINT/SIGTERM requests a stop
+    """``with deferring() as d:``: while the block runs, the first stop signal requests a stop
     (see the module) instead of interrupting; a second one interrupts at once (KeyboardInterrupt,
-    Terminated for SIGTERM). ``d.signum`` is the first signal (None: none). Leaving the block
+    Terminated for any other signal). ``d.signum`` is the first signal (None: none). Leaving the block
     restores the signal handlers and forgets the request. Only the main thread handles signals:
     elsewhere the block changes nothing."""
 

@@ -434,7 +434,7 @@ def _url_host(host: str) -> str:
 
 
 def serve(console, *, host: str, port: int, token: str, announce, fallback_ports: int = 0) -> None:
-    """Run the console's server until SIGINT or SIGTERM (raised afterwards as KeyboardInterrupt /
+    """Run the console's server until SIGINT, SIGTERM or another stop signal (raised afterwards as KeyboardInterrupt /
     :class:`~zkzap.signals.Terminated`, after the console closed safely). ``announce(url)`` is
     called once it listens. With ``fallback_ports``, a busy ``port`` is followed by the next ones."""
     from .. import signals as _signals
@@ -491,9 +491,7 @@ def serve(console, *, host: str, port: int, token: str, announce, fallback_ports
             signal.signal(s, old[s])
         loop.close()
     if "signum" in got:
-        if got["signum"] == signal.SIGTERM:
-            raise _signals.Terminated()
-        raise KeyboardInterrupt
+        raise _signals.interruption(got["signum"])
 
 
 def stderr(message: str) -> None:
