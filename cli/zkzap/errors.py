@@ -181,6 +181,13 @@ class Interrupted(ZkzapError):
     code = INTERRUPTED
 
 
+def clip(text: object, width: int = 40) -> str:
+    """``text`` (its ``str``) cut to ``width`` characters with ``...``: what a message quotes of
+    an input, which may be a 20 MiB cell."""
+    text = str(text)
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
 def close_names(word: object, choices: Iterable[object], *, n: int = 3) -> list[str]:
     """The names of ``choices`` closest to ``word``, best first (at most ``n``; none when nothing
     is close). Case, ``-``/``_`` and surrounding blanks do not count; a name that contains the

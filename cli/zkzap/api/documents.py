@@ -26,11 +26,17 @@ import math
 import re
 
 from ..errors import InvalidValue, MissingExtra, UsageError
+from ..errors import clip as _clip
 
 #: Deepest nesting of objects and lists read (zkzap's own documents need 4).
 MAX_DEPTH = 100
 #: Longest integer read, in digits (Python's own limit for converting text to int).
 MAX_DIGITS = 4300
+#: The largest YAML document read (bytes). PyYAML builds a node, its marks and its tokens for
+#: every scalar before the value exists: about 100 bytes of memory and 5 us per character, so
+#: YAML is held to 4 MiB (0.4 GB at most; a backup of 254 actuators is about 0.5 MB) where JSON
+#: and TOML, read in a few bytes per character, take :data:`~zkzap.api.textfile.MAX_DOCUMENT`.
+MAX_YAML = 4 << 20
 #: Formats by file suffix.
 SUFFIXES = {".json": "json", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml"}
 
@@ -61,7 +67,7 @@ def read(path, what: str, fmt: str = "json", expected: str = "", limit=None, *, 
     """``(value, name)`` of the document file ``path`` (``-``: stdin) in ``fmt``."""
     from .textfile import MAX_DOCUMENT, read_text
 
-    text, name = read_text(path, what, expected, limit or MAX_DOCUMENT)
+    text, name = read_text(path, what, expected, limit or (MAX_YAML if fmt == "yaml" else MAX_DOCUMENT))
     return loads(text, fmt, name, finite=finite), name
 
 
@@ -105,8 +111,9 @@ _DECODER = json.JSONDecoder(object_pairs_hook=_pairs, parse_int=_int, parse_floa
                             parse_constant=_constant)
 _DECODER_NAN = json.JSONDecoder(object_pairs_hook=_pairs, parse_int=_int)
 
-#: The tokens that give JSON its structure: strings, brackets, braces, colons, commas.
-_JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[{}\[\]:,]')
+#: The characters that give JSON its structure: a string's opening quote, brackets, braces,
+#: colons, commas.
+_JSON_MARK = re.compile(r'[{}\[\]:,"]')
 
 
 def load_json(text: str, name: str = "document", *, finite: bool = True):
@@ -115,29 +122,54 @@ def load_json(text: str, name: str = "document", *, finite: bool = True):
     try:
         return (_DECODER if finite else _DECODER_NAN).decode(text)
     except _Refused as e:
-        pos = _first_duplicate(text) if e.text is None else text.find(e.text)
-        raise DocumentError(f"{name}:{line_of(text, pos)}: {e.what}") from None
+        refused = e.what, e.text
     except RecursionError:
-        raise DocumentError(f"{name}:{line_of(text, _too_deep(_JSON_TOKEN, text))}: nested more than "
+        raise DocumentError(f"{name}:{line_of(text, _too_deep(_json_tokens(text)))}: nested more than "
                             f"{MAX_DEPTH} levels deep") from None
     except json.JSONDecodeError as e:
         raise DocumentError(f"{name}:{e.lineno}: not valid JSON: {e.msg} (column {e.colno})") from None
     except ValueError as e:           # a number the parser could not convert
         raise DocumentError(f"{name}: not valid JSON: {e}") from None
+    # Located once the parser's frames (and the partial value they hold) are gone.
+    what, literal = refused
+    pos = _first_duplicate(text) if literal is None else text.find(literal)
+    raise DocumentError(f"{name}:{line_of(text, pos)}: {what}")
+
+
+def _json_tokens(text: str):
+    """``(position, character, string)`` for every structural character of the (valid) JSON
+    ``text``: a string's opening quote (with the string's value), a bracket, a brace, a colon or
+    a comma. Strings are read by the standard library's scanner, so memory stays the size of
+    the longest string, whatever the text (a regular expression for a whole string pushes
+    state for every character: about 120 bytes each)."""
+    from json.decoder import scanstring
+
+    search, pos = _JSON_MARK.search, 0
+    while True:
+        m = search(text, pos)
+        if m is None:
+            return
+        start, c = m.start(), m.group()
+        if c == '"':
+            try:
+                value, pos = scanstring(text, start + 1)
+            except ValueError:                    # a string not closed: the text ends here
+                return
+            yield start, c, value
+        else:
+            pos = start + 1
+            yield start, c, None
 
 
 def _first_duplicate(text: str) -> int:
     """Where the first key given twice in one object of the (valid) JSON ``text`` is, or -1."""
     stack, expect_key = [], False
-    for m in _JSON_TOKEN.finditer(text):
-        tok = m.group()
-        c = tok[0]
+    for pos, c, value in _json_tokens(text):
         if c == '"':
             if expect_key and stack and stack[-1] is not None:
-                key = json.loads(tok)
-                if key in stack[-1]:
-                    return m.start()
-                stack[-1].add(key)
+                if value in stack[-1]:
+                    return pos
+                stack[-1].add(value)
             expect_key = False
         elif c == "{":
             stack.append(set())
@@ -156,15 +188,16 @@ def _first_duplicate(text: str) -> int:
     return -1
 
 
-def _too_deep(token, text: str) -> int:
-    """Where the nesting of ``text`` first goes deeper than :data:`MAX_DEPTH`, or -1."""
+def _too_deep(tokens) -> int:
+    """Where the nesting of the ``(position, character, ...)`` ``tokens`` first goes deeper
+    than :data:`MAX_DEPTH`, or -1."""
     depth = 0
-    for m in token.finditer(text):
-        c = m.group()[0]
+    for token in tokens:
+        pos, c = token[0], token[1]
         if c in "[{":
             depth += 1
             if depth > MAX_DEPTH:
-                return m.start()
+                return pos
         elif c in "]}":
             depth -= 1
     return -1
@@ -174,14 +207,40 @@ def _lower(text: str) -> str:
     return text[:1].lower() + text[1:]
 
 
-def _clip(text: str, width: int = 40) -> str:
-    return text if len(text) <= width else text[:width - 3] + "..."
-
-
 # --- TOML -------------------------------------------------------------------------------------
 
-#: Strings, comments and brackets of TOML, for finding where nesting goes too deep.
-_TOML_TOKEN = re.compile(r'"""[\s\S]*?"""|\'\'\'[\s\S]*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*|[\[\]{}]')
+#: What opens a TOML string or comment, and TOML's brackets.
+_TOML_MARK = re.compile(r'"""|\'\'\'|["\'#\[\]{}]')
+#: The quote that closes a basic string: the first one after an even run of backslashes.
+_TOML_QUOTE = re.compile(r'(?<!\\)\\*"')
+
+
+def _toml_tokens(text: str):
+    """``(position, bracket)`` for every bracket and brace of the TOML ``text`` outside its
+    strings and comments, found with searches that keep no state per character."""
+    search, pos = _TOML_MARK.search, 0
+    while True:
+        m = search(text, pos)
+        if m is None:
+            return
+        start, tok = m.start(), m.group()
+        if tok in ('"""', "'''", "'", "#"):
+            end = text.find("\n" if tok == "#" else tok, m.end())
+            pos = end + len(tok) if end >= 0 else len(text)
+        elif tok == '"':
+            pos = m.end()
+            while True:
+                q = _TOML_QUOTE.search(text, pos)
+                if q is None:
+                    return
+                pos = q.end()
+                if len(q.group()) % 2:            # an even run of backslashes before it: the end
+                    break
+        else:
+            pos = m.end()
+            yield start, tok
+
+
 _TOML_WHERE = re.compile(r"\s*\(at line (\d+), column (\d+)\)$|\s*\(at end of document\)$")
 
 
@@ -197,7 +256,7 @@ def load_toml(text: str, name: str = "document"):
     try:
         return tomllib.loads(text)
     except RecursionError:
-        raise DocumentError(f"{name}:{line_of(text, _too_deep(_TOML_TOKEN, text))}: nested more than "
+        raise DocumentError(f"{name}:{line_of(text, _too_deep(_toml_tokens(text)))}: nested more than "
                             f"{MAX_DEPTH} levels deep") from None
     except tomllib.TOMLDecodeError as e:
         msg = str(e)

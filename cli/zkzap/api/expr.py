@@ -149,7 +149,9 @@ def parse_lines(text: str, fields=None, *, name: str = "limits") -> list:
     """Conditions from a file's text: one per line, ``#`` comments, blank lines skipped; errors
     name ``NAME:LINE``."""
     out = []
-    for lineno, line in enumerate(text.splitlines(), 1):
+    from .textfile import lines_of
+
+    for lineno, line in enumerate(lines_of(text), 1):
         line = line.split("#", 1)[0].strip().lstrip("\ufeff")
         if line:
             out.append(parse(line, fields, where=f"{name}:{lineno}"))

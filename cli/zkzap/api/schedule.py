@@ -30,7 +30,7 @@ import math
 
 from ..codec import zk
 from ..codec.fields import FieldValueError
-from ..errors import UsageError
+from ..errors import UsageError, clip
 from .prestart import EcuLimitError, Plan
 
 TYPE_CHECKING = False
@@ -92,9 +92,9 @@ def _number(cell, what, where, decimal_comma=False):
     try:
         value = float(text)
     except ValueError:
-        raise ScheduleError(f"{where}: {what}: {cell.strip()!r} is not a number") from None
+        raise ScheduleError(f"{where}: {what}: {clip(repr(cell.strip()))} is not a number") from None
     if not math.isfinite(value):
-        raise ScheduleError(f"{where}: {what}: {cell.strip()!r} is not a finite number")
+        raise ScheduleError(f"{where}: {what}: {clip(repr(cell.strip()))} is not a finite number")
     return value
 
 
@@ -152,7 +152,9 @@ class Schedule:
         cols = None
         sep = None
         state = default_state
-        for lineno, raw in enumerate(text.splitlines(), 1):
+        from .textfile import lines_of
+
+        for lineno, raw in enumerate(lines_of(text), 1):
             if lineno == 1:
                 raw = raw.lstrip("\ufeff")
             line = raw.split("#", 1)[0].strip()

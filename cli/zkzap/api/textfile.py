@@ -112,6 +112,27 @@ def read_text(path, what: str, expected: str = "", limit: int = MAX_DOCUMENT) ->
     return decode(data, what, name, expected), name
 
 
+#: A line of text and what ends it: the line boundaries of :meth:`str.splitlines`.
+_ENDS = "\n\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+_LINE = None
+
+
+def lines_of(text: str):
+    """The lines of ``text`` as :meth:`str.splitlines` gives them, one at a time: a document of
+    a million lines is parsed without a list of a million strings beside it."""
+    global _LINE
+    if _LINE is None:
+        import re
+
+        _LINE = re.compile(f"[^{_ENDS}]*(?:\r\n|[{_ENDS}]|\\Z)")
+    match, pos, end = _LINE.match, 0, len(text)
+    while pos < end:
+        m = match(text, pos)
+        pos = m.end()
+        line = m.group()
+        yield line.rstrip(_ENDS) if line[-1:] in _ENDS else line
+
+
 def iter_lines(path, what: str, expected: str = "", max_line: int = MAX_LINE):
     """``(line number, text)`` for every line of the UTF-8 file ``path`` (``-``: standard
     input), with its line ending (as a text file's lines are), read in constant memory; the first line loses a byte order
