@@ -2,7 +2,10 @@
 
 ZK uses CRC-8/MAXIM-DOW (Dallas 1-Wire): reflected polynomial 0x8C (0x31 normal form),
 init 0x00, no final xor; catalogue check value ``crc8(b"123456789") == 0xA1``.
-mightyZAP uses ``0xFF - (sum & 0xFF)`` over ID, SIZE, instruction/error and parameters.
+mightyZAP uses ``0xFF - (sum & 0xFF)`` over ID, SIZE, instruction/error and parameters on the
+IR protocol, and CRC-16/MODBUS on Modbus RTU: reflected polynomial 0xA001 (0x8005 normal form),
+init 0xFFFF, no final xor, sent low byte first; catalogue check value
+``crc16_modbus(b"123456789") == 0x4B37``.
 """
 
 from __future__ import annotations
@@ -49,3 +52,30 @@ def crc8_maxim(data: Union[bytes, bytearray, memoryview, Iterable[int]], seed: i
 def zap_checksum(data: Union[bytes, bytearray, memoryview, Iterable[int]]) -> int:
     """mightyZAP checksum of the bytes from ID to the last parameter."""
     return 0xFF - (sum(data) & 0xFF)
+
+
+def build_table16(poly: int = 0xA001) -> tuple:
+    """The lookup table of a reflected CRC-16 (CRC-16/MODBUS by default)."""
+    table = []
+    for i in range(256):
+        crc = i
+        for _ in range(8):
+            crc = (crc >> 1) ^ poly if crc & 1 else crc >> 1
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC16_TABLE: tuple = ()
+
+
+def crc16_modbus(data: Union[bytes, bytearray, memoryview, Iterable[int]], seed: int = 0xFFFF) -> int:
+    """CRC-16/MODBUS of ``data``, table-driven (the table is built on first use: nothing on the
+    IR paths pays for it). On the wire it goes low byte first: ``crc.to_bytes(2, "little")``."""
+    global _CRC16_TABLE
+    table = _CRC16_TABLE
+    if not table:
+        table = _CRC16_TABLE = build_table16()
+    crc = seed
+    for b in data:
+        crc = (crc >> 8) ^ table[(crc ^ b) & 0xFF]
+    return crc

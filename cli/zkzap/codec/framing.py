@@ -523,6 +523,104 @@ class ZapFramer(_Framer):
         return self._end_scan(buf, i, out, skipped, bad_until, synced, final)
 
 
+class RtuFramer(_Framer):
+    """Frames of Modbus RTU as the mightyZAP 17Lf speaks it (functions 0x03, 0x06, 0x10 and
+    their exception replies), cut from a byte stream without its timing.
+
+    A frame's length follows from its function and direction: 0x03 is 8 bytes as a request,
+    ``5 + N`` as a reply (N its byte count); 0x06 and 0x10 replies are 8; a 0x10 request
+    ``9 + N``; an exception reply 5. Each reading the bytes allow is tried, shortest first, and
+    the first whose CRC-16 matches wins (a false match is a 1 in 65536 chance per reading). A
+    start with an ID above 247 or a function the actuator does not know is skipped byte by byte.
+    The counters are the other framers': ``bad`` (a damaged region: CRC failed), ``truncated``
+    (cut short by the end of the stream), ``skipped`` (bytes in no frame).
+    """
+
+    #: Functions the framer knows (0x03, 0x06, 0x10) and the highest unit ID.
+    FUNCTIONS = (0x03, 0x06, 0x10)
+    MAX_ID = 247
+
+    def feed(self, data: Bytes) -> list[bytes]:
+        """Frames completed by ``data``."""
+        return self._scan(self._buf + bytes(data) if self._buf else bytes(data), False)
+
+    def flush(self) -> list[bytes]:
+        """End of stream: what is held is a frame cut short (counted as truncated)."""
+        out = self._scan(self._buf, True) if self._buf else []
+        self._reset()
+        return out
+
+    @classmethod
+    def _lengths(cls, buf, i, n):
+        """The frame lengths the bytes from ``i`` may have (None: more bytes needed to tell)."""
+        fn = buf[i + 1]
+        if fn & 0x80:
+            return (5,) if fn & 0x7F in cls.FUNCTIONS else ()
+        if fn == 0x03:
+            if i + 3 > n:
+                return None
+            c = buf[i + 2]
+            return (8, 5 + c) if c and c % 2 == 0 and 5 + c != 8 else (8,)
+        if fn == 0x06:
+            return (8,)
+        if fn == 0x10:
+            if i + 7 > n:
+                return (8,) if i + 8 <= n else None
+            c = buf[i + 6]
+            return (8, 9 + c) if c and c % 2 == 0 else (8,)
+        return ()
+
+    def _scan(self, buf, final) -> list:
+        from .crc import crc16_modbus
+
+        out = []
+        n = len(buf)
+        i = 0
+        skipped = 0
+        bad_until = self._bad_until
+        synced = self._synced
+        while i + 2 <= n:
+            if buf[i] > self.MAX_ID:
+                skipped += 1
+                i += 1
+                synced = False
+                continue
+            lengths = self._lengths(buf, i, n)
+            if lengths is None:
+                if not final:
+                    break
+                lengths = ()
+            found = 0
+            waiting = False
+            for ln in sorted(lengths):
+                if i + ln > n:
+                    waiting = True
+                    continue
+                if crc16_modbus(buf[i:i + ln - 2]) == buf[i + ln - 2] | buf[i + ln - 1] << 8:
+                    found = ln
+                    break
+            if found:
+                out.append(buf[i:i + found])
+                i += found
+                synced = True
+                continue
+            if waiting and not final:
+                break
+            if lengths and i >= bad_until:
+                if waiting:
+                    self.truncated += 1
+                else:
+                    self.bad += 1
+                bad_until = i + max(min(lengths), 1)
+            skipped += 1
+            i += 1
+            synced = False
+        if final and i < n:
+            if n - i >= 2 and i >= bad_until:
+                self.truncated += 1
+        return self._end_scan(buf, i, out, skipped, bad_until, synced, final)
+
+
 #: A stream is taken for a device talking the protocol once this many valid frames came while
 #: at least :data:`LOCK_SHARE` of its recent bytes were in valid frames.
 LOCK_FRAMES = 3

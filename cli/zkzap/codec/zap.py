@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 from .crc import zap_checksum
 from .fields import FieldValueError
 from .ids import id_ranges  # noqa: F401 - part of this module's interface
+from .regmap import Register, builtin
 
 HEADER = b"\xff\xff\xff"
 BROADCAST = 0xFE
@@ -121,162 +122,20 @@ INSTRUCTION_BY_NAME["send-data"] = INSTRUCTION_BY_NAME["send"]
 INSTRUCTION_BY_NAME["execution"] = INSTRUCTION_BY_NAME["execute"]
 INSTRUCTION_BY_NAME["factory-mode"] = INSTRUCTION_BY_NAME["system-write"]
 
-BAUD_CODES = {16: 115200, 32: 57600, 48: 38400, 64: 19200, 128: 9600}
-BAUD_TO_CODE = {v: k for k, v in BAUD_CODES.items()}
 
 
-class Register:
-    """One register of the data map. ``scale`` converts raw to ``unit`` (0.1 V registers).
 
-    The value domain is declared here, checked in one place (:meth:`check`, :meth:`allows`):
-    ``lo..hi`` (default: what ``size`` bytes hold), ``choices`` (an enumeration: raw value ->
-    meaning) or ``bits`` (a bit set: bit number -> meaning; other bits are outside the domain).
-    ``documented`` is False for addresses the 12Lf map does not give (IR Robot's header names
-    some; others are anonymous bytes), which are written only with the UNDOCUMENTED permission.
-    """
-
-    __slots__ = ("address", "name", "size", "access", "stored", "default", "lo", "hi", "unit",
-                 "scale", "choices", "bits", "help", "documented")
-
-    def __init__(self, address: int, name: str, size: int, access: str, default: Optional[int] = None,
-                 lo: Optional[int] = None, hi: Optional[int] = None, unit: str = "", scale: float = 1,
-                 choices: Optional[Mapping[int, str]] = None, bits: Optional[Mapping[int, str]] = None,
-                 help: str = "", documented: bool = True) -> None:
-        self.address = address
-        self.name = name
-        self.size = size
-        self.access = access.split()[0]           # "R" or "RW"
-        self.stored = "NV" in access.split()[1:] if " " in access else None
-        self.default = default
-        self.bits = dict(bits) if bits else None  # allowed bits -> meaning
-        self.lo = 0 if lo is None else lo
-        if hi is None:
-            hi = sum(1 << b for b in self.bits) if self.bits else (1 << (8 * size)) - 1
-        self.hi = hi
-        self.unit = unit
-        self.scale = scale
-        self.choices = choices                    # allowed raw values -> meaning
-        self.help = help
-        self.documented = documented
-
-    @property
-    def writable(self) -> bool:
-        return self.access == "RW"
-
-    @property
-    def memory(self) -> str:
-        """``"NV"`` (stored), ``"V"`` (volatile) or ``""`` for read-only registers."""
-        if self.stored is None:
-            return ""
-        return "NV" if self.stored else "V"
-
-    @property
-    def mask(self) -> Optional[int]:
-        """The bits a bit-set register may hold (None for other registers)."""
-        return sum(1 << b for b in self.bits) if self.bits else None
-
-    def describe_range(self) -> str:
-        """The allowed raw values, as messages say them (``0..4095``, ``0 (off), 1 (on)``)."""
-        if self.choices:
-            return ", ".join(f"{k} ({v})" for k, v in self.choices.items())
-        if self.bits:
-            values = self.values()
-            which = f"0..{self.mask}" if len(values) == self.mask + 1 else ", ".join(map(str, values))
-            return "bits " + ", ".join(f"{b} ({v})" for b, v in sorted(self.bits.items())) + f": {which}"
-        unit = f" {self.unit}" if self.unit and self.scale == 1 else ""
-        return f"{self.lo}..{self.hi}{unit}"
-
-    def values(self) -> Sequence[int]:
-        """Every raw value of the documented domain (a range, or a list for choices and bits)."""
-        if self.choices is not None:
-            return sorted(self.choices)
-        if self.bits is not None:
-            return [v for v in range(self.lo, self.hi + 1) if not v & ~self.mask]
-        return range(self.lo, self.hi + 1)
-
-    def allows(self, value: object) -> bool:
-        """Whether ``value`` (raw) lies in the register's documented domain."""
-        if not isinstance(value, int) or isinstance(value, bool):
-            return False
-        if self.choices is not None:
-            return value in self.choices
-        if self.bits is not None and value & ~self.mask:
-            return False
-        return self.lo <= value <= self.hi
-
-    def check(self, value: int) -> int:
-        """``value`` if the register takes it; FieldValueError naming the register otherwise."""
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise FieldValueError(f"{self.name}: {value!r} is not an integer")
-        if self.allows(value):
-            return value
-        if self.choices is not None or (self.bits is not None and self.lo <= value <= self.hi):
-            raise FieldValueError(f"{self.name}: {value} is not allowed; allowed {self.describe_range()}")
-        raise FieldValueError(f"{self.name}: {value} is out of range; allowed {self.describe_range()}")
-
-    def to_bytes(self, value: int) -> bytes:
-        """``value`` little-endian in the register's size."""
-        return value.to_bytes(self.size, "little")
-
-    def physical(self, raw: int) -> Union[int, float]:
-        """``raw`` in the register's unit (tenths of a volt as volts); unscaled values as they are."""
-        if self.scale == 1:
-            return raw
-        return round(raw * self.scale, 3)
-
-
-R = Register
 #: The alarm bits of alarm-led and alarm-shutdown: the error bits of a feedback packet.
 ALARM_BITS = {0: "input voltage", 5: "overload"}
-#: The 12Lf data map (firmware >= 2.0). NV = stored, survives power off; V = volatile.
-REGISTERS = (
-    R(0x00, "model-number", 2, "R", help="model number"),
-    R(0x02, "firmware-version", 1, "R", help="firmware version"),
-    R(0x03, "id", 1, "RW NV", 0, 0, 253, help="actuator ID"),
-    R(0x04, "baud-rate", 1, "RW NV", 32, choices={k: f"{v} bps" for k, v in BAUD_CODES.items()},
-      help="baud rate code, applied after restart"),
-    R(0x06, "short-stroke-limit", 2, "RW NV", 0, 0, 4095, help="short stroke limit (position)"),
-    R(0x08, "long-stroke-limit", 2, "RW NV", 3686, 0, 4095, help="long stroke limit (position)"),
-    R(0x0A, "protocol-type", 1, "RW NV", 1, choices={0: "Modbus RTU", 1: "IR"},
-      help="0 = Modbus RTU (leaves this protocol!), 1 = IR"),
-    R(0x0C, "lowest-limit-voltage", 1, "R", unit="V", scale=0.1, help="lowest input voltage"),
-    R(0x0D, "highest-limit-voltage", 1, "R", unit="V", scale=0.1, help="highest input voltage"),
-    R(0x0E, "motor-operating-rate-limit", 2, "RW NV", 1023, 0, 1023, help="motor operating rate limit"),
-    R(0x10, "feedback-return-mode", 1, "RW NV", 1,
-      choices={0: "Echo only", 1: "Load Data and Echo", 2: "every command"},
-      help="which commands are answered"),
-    R(0x11, "alarm-led", 1, "RW NV", 0x21, bits=ALARM_BITS, help="alarms shown on the LED (bit5 overload, bit0 voltage)"),
-    R(0x12, "alarm-shutdown", 1, "RW NV", 0x21, bits=ALARM_BITS, help="alarms that cut the force (same bits)"),
-    R(0x13, "start-compliance-margin", 1, "RW NV", None, 0, 255, help="start compliance margin"),
-    R(0x14, "end-compliance-margin", 1, "RW NV", None, 0, 255, help="end compliance margin"),
-    R(0x15, "speed-limit", 2, "RW NV", 1023, 0, 1023, help="speed limit"),
-    R(0x18, "calibration-short-stroke", 2, "R", help="calibrated short stroke"),
-    R(0x1A, "calibration-long-stroke", 2, "R", help="calibrated long stroke"),
-    R(0x21, "acceleration", 1, "RW NV", None, 0, 255, help="acceleration"),
-    R(0x22, "deceleration", 1, "RW NV", None, 0, 255, help="deceleration"),
-    R(0x23, "current-i-gain", 1, "RW NV", None, 0, 255, help="current loop I gain"),
-    R(0x24, "current-p-gain", 1, "RW NV", None, 0, 255, help="current loop P gain"),
-    R(0x25, "speed-d-gain", 1, "RW NV", None, 0, 255, help="speed D gain (position D on D7/D12/L12)"),
-    R(0x26, "speed-i-gain", 1, "RW NV", None, 0, 255, help="speed I gain (position I on D7/D12/L12)"),
-    R(0x27, "speed-p-gain", 1, "RW NV", None, 0, 255, help="speed P gain (position P on D7/D12/L12)"),
-    R(0x2E, "min-position-calibration", 1, "RW NV", None, 0, 255, help="minimum position calibration"),
-    R(0x2F, "max-position-calibration", 1, "RW NV", None, 0, 255, help="maximum position calibration"),
-    R(0x34, "current-limit", 2, "RW NV", 800, 0, 1600, unit="mA", help="stored current limit"),
-    R(0x80, "force-on-off", 1, "RW V", 1, 0, 1, help="motor force (a goal position turns it back on)"),
-    R(0x81, "led", 1, "RW V", 0, bits={0: "all off", 1: "red", 2: "green"}, help="LED: bit0 all off, bit1 red, bit2 green"),
-    R(0x86, "goal-position", 2, "RW V", None, 0, 4095, help="goal position (clamped to the stroke limits)"),
-    R(0x88, "goal-speed", 2, "RW V", 1023, 0, 1023, help="goal speed (defaults to the speed limit)"),
-    R(0x8A, "goal-current", 2, "RW V", 800, 0, 1600, unit="mA", help="goal current (defaults to the current limit)"),
-    R(0x8C, "present-position", 2, "R", None, 0, 4095, help="present position"),
-    R(0x8E, "present-current", 2, "R", unit="mA", help="present current"),
-    R(0x90, "present-motor-operating-rate", 2, "R", None, 0, 2047,
-      help="0 stopped, 1..1023 retracting, 1024..2047 extending"),
-    R(0x92, "present-voltage", 1, "R", unit="V", scale=0.1, help="present input voltage"),
-    R(0x96, "moving", 1, "R", 0, 0, 1, help="1 while moving"),
-)
-del R
+#: The 12Lf data map (firmware >= 2.0), read from its description (``maps/12lf-ir.map``, the
+#: format of :mod:`zkzap.codec.regmap`). NV = stored, survives power off; V = volatile.
+MAP = builtin("12lf-ir")
+REGISTERS = MAP.registers
 REGISTER_BY_NAME = {r.name: r for r in REGISTERS}
 REGISTER_BY_ADDRESS = {r.address: r for r in REGISTERS}
+#: Baud-rate codes (the baud-rate register's choices) -> bit/s.
+BAUD_CODES = MAP.baud_codes
+BAUD_TO_CODE = {v: k for k, v in BAUD_CODES.items()}
 
 #: Addresses IR Robot's Arduino header names but the 12Lf map does not document: readable by
 #: name or address, shown raw (no unit, no range), never part of the map (``zap dump``).
@@ -298,7 +157,7 @@ OWNER = {a: r for r in REGISTERS + UNDOCUMENTED_REGISTERS for a in range(r.addre
 #: undocumented address below 0x80 is taken to be stored memory.
 STORED_RANGE = range(0x00, 0x80)
 #: Registers that decide where or how an actuator answers (the IDENTITY permission).
-IDENTITY_REGISTERS = ("id", "baud-rate", "protocol-type")
+IDENTITY_REGISTERS = MAP.identity
 
 
 def register(spec: RegisterSpec) -> Register:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from ..codec import crc as crcs
-from ..codec import zap, zk
+from ..codec import modbus, zap, zk
 from ..codec.hexfmt import format_hex
 from ..errors import CHECK_FAILED, OK, UsageError
 from . import CONTEXT, Group
@@ -14,8 +14,8 @@ from .options import checked, exits, read_hex_input
 HEX = click.argument("hex_bytes", nargs=-1, metavar="HEX...")
 APPEND = click.option("-a", "--append", is_flag=True, help="Print the input followed by the checksum.")
 CHECK = click.option("-c", "--check", is_flag=True,
-                     help="Check a whole frame (ZK control, ZK status or mightyZAP): exit 0 when "
-                          "its CRC/checksum is right, 1 when not (expected and found on stderr).")
+                     help="Check a whole frame (ZK control, ZK status, mightyZAP IR or Modbus RTU): exit 0 "
+                          "when its CRC/checksum is right, 1 when not (expected and found on stderr).")
 
 
 @click.group(cls=Group, context_settings=CONTEXT)
@@ -27,15 +27,29 @@ def crc():
       zkzap crc zk 14 64                  # D3: CRC-8/MAXIM-DOW of exactly these bytes
       zkzap crc zap 00 02 F1              # 0C: mightyZAP checksum from ID to last parameter
       zkzap crc zk --append 14 64         # 14 64 D3
+      zkzap crc modbus 01 03 00 D2 00 01  # 24 33: CRC-16/MODBUS, low byte first
       zkzap crc check FF 14 64 D3         # exit 0; any protocol's whole frame
     """
 
 
 def check_any(frame: bytes) -> str:
-    """Check a whole frame of either protocol; returns a description, raises on mismatch."""
+    """Check a whole frame of any protocol; returns a description, raises on mismatch. A frame
+    that is neither a mightyZAP IR packet nor a ZK frame but whose last two bytes are its
+    CRC-16/MODBUS is a Modbus RTU frame."""
     if len(frame) >= 7 and frame[:3] == zap.HEADER:
         checked(zap.check_packet, frame)
         return f"mightyZAP packet: checksum {frame[-1]:02X} ok"
+    if len(frame) in (4, 7):
+        try:
+            kind = zk.check_frame(frame)
+        except zk.FrameError:
+            if modbus.crc_ok(frame):
+                return f"Modbus RTU frame: CRC {frame[-2]:02X} {frame[-1]:02X} ok"
+        else:
+            return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
+    elif len(frame) > 4 and frame[:3] != zap.HEADER:
+        checked(modbus.check_frame, frame, "; a mightyZAP packet starts FF FF FF, a ZK frame has 4 or 7 bytes")
+        return f"Modbus RTU frame: CRC {frame[-2]:02X} {frame[-1]:02X} ok"
     kind = checked(zk.check_frame, frame, "; a mightyZAP packet starts FF FF FF")
     return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
 
@@ -51,7 +65,9 @@ def _run(hex_bytes, append, check, compute):
         source = "stdin" if not hex_bytes or list(hex_bytes) == ["-"] else "hex input"
         raise UsageError(f"{source}: no bytes given")
     value = compute(data)
-    click.echo(format_hex(data + bytes((value,))) if append else f"{value:02X}")
+    if isinstance(value, int):
+        value = bytes((value,))
+    click.echo(format_hex(data + value) if append else format_hex(value))
 
 
 @exits({CHECK_FAILED: "with --check, the frame's CRC or checksum does not match"})
@@ -89,16 +105,37 @@ def crc_zap(hex_bytes, append, check):
     _run(hex_bytes, append, check, crcs.zap_checksum)
 
 
+@exits({CHECK_FAILED: "with --check, the frame's CRC does not match"})
+@crc.command("modbus", context_settings=CONTEXT)
+@HEX
+@APPEND
+@CHECK
+def crc_modbus(hex_bytes, append, check):
+    """CRC-16/MODBUS of the given bytes, as it goes on the wire: low byte first.
+
+    Give the frame from the ID to the last data byte (polynomial 0xA001 reflected, init 0xFFFF,
+    no final xor).
+
+    \b
+    Examples:
+      zkzap crc modbus 01 03 00 D2 00 01            # 24 33
+      zkzap crc modbus --append 01 06 00 CD 03 E8   # 01 06 00 CD 03 E8 18 8B
+      zkzap crc modbus --check 01 83 04 40 F3       # exit 0
+    """
+    _run(hex_bytes, append, check, lambda d: crcs.crc16_modbus(d).to_bytes(2, "little"))
+
+
 @exits({OK: "the frame is whole and its CRC or checksum matches",
         CHECK_FAILED: "the CRC or checksum does not match"})
 @crc.command("check", context_settings=CONTEXT)
 @HEX
 def crc_check(hex_bytes):
-    """Check a whole frame of either protocol (same as --check).
+    """Check a whole frame of any protocol (same as --check): ZK, mightyZAP IR, Modbus RTU.
 
     \b
     Examples:
       zkzap crc check FF 14 64 D3
       zkzap crc check FF FF FF 00 02 F1 0C
+      zkzap crc check 01 03 02 03 E8 B8 FA
     """
     _run(hex_bytes, False, True, None)

@@ -285,6 +285,56 @@ def id_option(default=0, allow_broadcast=True, help=None):
                         help=help)
 
 
+#: The mightyZAP protocol families (``--protocol``): the IR protocol of the 12Lf and Modbus RTU
+#: of the 17Lf (and of a 12Lf switched to it).
+ZAP_PROTOCOLS = ("ir", "modbus")
+PROTOCOL_ENV = "ZKZAP_ZAP_PROTOCOL"
+
+
+def _map_callback(ctx, param, value):
+    if value is None:
+        return None
+    from ..codec.regmap import load_map
+
+    return load_map(value)                 # MapError: exit 2, FILE:LINE
+
+
+def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS):
+    """``--protocol ir|modbus`` and ``--map FILE``, the one definition for every zap command.
+    Both are eager: a REGISTER argument is read against the map they choose
+    (:func:`zap_map`)."""
+    if f is None:
+        return lambda g: protocol_options(g, protocols=protocols)
+    f = click.option("--map", "regmap", metavar="FILE", default=None, is_eager=True, callback=_map_callback,
+                     help="A register map file for a model zkzap does not ship (format: the manual's "
+                          "Modbus page); its 'protocol:' line must agree with --protocol.")(f)
+    f = click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True, is_eager=True,
+                     envvar=PROTOCOL_ENV,
+                     help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
+                          f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}].")(f)
+    return f
+
+
+def zap_map(ctx=None):
+    """The register map a zap command works with: ``--map FILE``, else the shipped map of
+    ``--protocol`` (the 12Lf's on ir, the 17Lf's on modbus). A map whose protocol is not
+    ``--protocol`` is refused (exit 2)."""
+    from ..codec.regmap import default_map
+
+    ctx = ctx or click.get_current_context(silent=True)
+    params = ctx.params if ctx is not None else {}
+    protocol = params.get("protocol") or "ir"
+    regmap = params.get("regmap")
+    if regmap is None:
+        return default_map(protocol)
+    if regmap.protocol != protocol:
+        from ..errors import UsageError
+
+        raise UsageError(f"map: {regmap.path} describes the {regmap.protocol} protocol; give --protocol "
+                         f"{regmap.protocol}")
+    return regmap
+
+
 def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl"):
     from ..io.term import is_tty
 
@@ -516,6 +566,17 @@ def note_skipped(framer, what: str, check: str) -> None:
     if truncated:
         parts.append(f"{truncated} cut short by the end of the input")
     note(f"{plural(framer.frames, what)} decoded; {', '.join(parts)}; {plural(framer.skipped, 'byte')} skipped")
+
+
+def end_decode(framer, chunks, what: str, check: str) -> None:
+    """The notes a decoding stream ends with: what it skipped (:func:`note_skipped`) and what
+    the hex input held besides frames."""
+    from ..io.sources import hex_note
+
+    note_skipped(framer, what, check)
+    text = hex_note(chunks)
+    if text:
+        note(text)
 
 
 dry_run_option = click.option(

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import click
 
-from ...codec import zap
+from ...codec import modbus, zap
 from ...codec.framing import ZapFramer
 from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (InputPath, checked, close_output, decode_inputs, exits, format_option, note, note_skipped,
-                       open_output, output_format, output_options)
+from ..options import (InputPath, checked, close_output, decode_inputs, end_decode, exits, format_option,
+                       open_output, output_format, output_options, protocol_options, zap_map)
 
 COLUMNS = list(zap.ZAP_KEYS) + ["frame"]
 TABLE_COLUMNS = [("kind", "kind"), ("id", "id"), ("_what", "instruction/error"), ("_detail", "data"),
@@ -42,7 +42,8 @@ def _table_cells(rec):
 @click.option("--binary", is_flag=True, help="Inputs are files of raw bytes ('-' or none: stdin).")
 @format_option(choices=RECORD_FORMATS, help_extra=" influx: InfluxDB line protocol.")
 @output_options(formats=RECORD_FORMATS)
-def decode(inputs, binary, fmt, output, append):
+@protocol_options
+def decode(inputs, binary, fmt, output, append, protocol, regmap):
     """Decode mightyZAP packets to a table, JSON, JSON Lines or CSV.
 
     Commands and feedback are told apart by the byte after SIZE (an instruction code, or error
@@ -57,26 +58,31 @@ def decode(inputs, binary, fmt, output, append):
     the capture began), 'dir' (h2d host to actuator, d2h actuator to host) and, on feedback,
     'latency_ms' since the request it answers.
 
+    --protocol modbus decodes Modbus RTU frames (the 17Lf): requests, replies (a read's values
+    named by the request to the same ID just before) and exception replies, named by code and
+    meaning; a frame's length comes from its function, and every reading the bytes allow is
+    checked with its CRC-16.
+
     \b
     Examples:
       zap decode FF FF FF 01 05 F3 86 FF 07 7A
       zap decode FF FF FF 00 04 F2 8C 02 7B FF FF FF 00 04 00 FF 07 F5 -f json
       zap decode --binary bus.bin -f csv -o bus.csv
       zap decode bus.pcapng -f json -o bus.json
+      zap decode --protocol modbus 01 03 00 D2 00 01 24 33 01 03 02 03 E8 B8 FA
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode, start
+    from ...io.sources import run_decode, run_text_decode, start
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
+    if protocol == "modbus":
+        return _decode_modbus(inputs, binary, fmt, output, append, captures)
     if captures is not None:
         from ..capture_decode import zap_decode_captures
 
         return zap_decode_captures(captures, fmt=fmt, output=output, append=append, table_cells=_table_cells)
-    if binary:
-        chunks, explicit = binary_chunks(list(inputs)), False
-    else:
-        chunks, explicit = hex_chunks(inputs)
+    chunks, explicit = _chunks(inputs, binary)
     fmt = output_format(fmt, output, RECORD_FORMATS)
     framer = ZapFramer()
     decoder = zap.ZapDecoder()
@@ -101,13 +107,62 @@ def decode(inputs, binary, fmt, output, append):
             run_text_decode(chunks, framer, lines, writer)
     finally:
         close_output(writer, stream)
-    note_skipped(framer, "packet", "checksum")
-    text = hex_note(chunks)
-    if text:
-        note(text)
+    end_decode(framer, chunks, "packet", "checksum")
+
+
+def _chunks(inputs, binary):
+    """``(chunks, explicit)``: the inputs' bytes, and whether they were hex arguments."""
+    from ...io.sources import binary_chunks, hex_chunks
+
+    if binary:
+        return binary_chunks(list(inputs)), False
+    return hex_chunks(inputs)
 
 
 def _explain_single(data: bytes):
     if not data:
         raise UsageError("hex input: no bytes given")
     checked(zap.check_packet, data)
+
+
+MODBUS_COLUMNS = list(modbus.MODBUS_KEYS) + ["frame"]
+MODBUS_TABLE = [("kind", "kind"), ("id", "id"), ("function", "function"), ("_detail", "data"), ("frame", "frame")]
+
+
+def _modbus_cells(rec):
+    detail = [f"{k}={rec[k]}" for k in ("register", "value", "physical", "unit", "count", "values", "name",
+                                         "malformed", "params") if k in rec]
+    rec["_detail"] = " ".join(detail)
+    return rec
+
+
+def _decode_modbus(inputs, binary, fmt, output, append, captures):
+    from ...codec.framing import RtuFramer
+    from ...io.sources import run_decode, start
+    from ...io.writers import make_writer
+
+    if captures is not None:
+        raise UsageError("--protocol modbus: pcapng captures are decoded on the IR protocol only; "
+                         "give the raw bytes (--binary) or hex")
+    regmap = zap_map()
+    chunks, explicit = _chunks(inputs, binary)
+    fmt = output_format(fmt, output, RECORD_FORMATS)
+    if explicit:
+        data = chunks[0]
+        if not data:
+            raise UsageError("hex input: no bytes given")
+        probe = RtuFramer()
+        if not probe.feed(data) and not probe.flush():
+            checked(modbus.check_frame, data)
+    framer = RtuFramer()
+    decoder = modbus.ModbusDecoder(regmap)
+    start(chunks)
+    stream, had = open_output(output, append, fmt=fmt, columns=MODBUS_COLUMNS,
+                              inputs=decode_inputs(inputs, binary, explicit))
+    writer = make_writer(fmt, stream, MODBUS_COLUMNS, table_columns=MODBUS_TABLE, header=not had)
+    try:
+        decode = (lambda f: _modbus_cells(decoder.decode(f))) if fmt == "table" else decoder.decode
+        run_decode(chunks, framer, decode, writer)
+    finally:
+        close_output(writer, stream)
+    end_decode(framer, chunks, "frame", "CRC")

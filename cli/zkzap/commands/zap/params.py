@@ -15,12 +15,22 @@ class RegisterType(click.ParamType):
     def convert(self, value, param, ctx):
         if isinstance(value, zap.Register):
             return value
+        params = ctx.params if ctx is not None else {}
+        if params.get("protocol", "ir") != "ir" or params.get("regmap") is not None:
+            from ..options import zap_map
+
+            return zap_map(ctx).register(value)   # the map --protocol/--map choose
         return zap.register(value)   # FieldValueError names the field and what is allowed
 
     def shell_complete(self, ctx, param, incomplete):
         from click.shell_completion import CompletionItem
 
-        return [CompletionItem(r.name, help=r.help) for r in zap.REGISTERS if r.name.startswith(incomplete)]
+        regs = zap.REGISTERS
+        if ctx is not None and ctx.params.get("protocol") not in (None, "ir"):
+            from ..options import zap_map
+
+            regs = zap_map(ctx).registers
+        return [CompletionItem(r.name, help=r.help) for r in regs if r.name.startswith(incomplete)]
 
 
 class IdType(click.ParamType):

@@ -6,7 +6,7 @@ import click
 
 from ...codec import zap
 from .. import CONTEXT, Command
-from ..options import Choice, format_option, resolve_format, write_rows
+from ..options import Choice, format_option, protocol_options, resolve_format, write_rows, zap_map
 from .params import REGISTER
 
 COLUMNS = ["name", "address", "address_hex", "size", "access", "memory", "range", "lo", "hi", "unit", "scale",
@@ -38,13 +38,16 @@ def _table_row(reg) -> dict:
 @click.option("--memory", type=Choice(["NV", "V"], case_sensitive=False), default=None,
               help="Only stored (NV, survive power off; writes wear memory) or volatile (V) registers.")
 @format_option()
-def registers(which, writable, memory, fmt):
+@protocol_options
+def registers(which, writable, memory, fmt, protocol, regmap):
     """List the register map (12Lf, firmware 2.0 or later): name, address, size, access,
     NV (stored) or V (volatile), range, unit, default.
 
     REGISTER picks rows by name or address. Names are what 'zap load', 'zap store' and
     'zap decode' use; 2-byte values are little-endian. Registers with a scale (0.1 V) hold
     raw values: multiply by the scale for the unit. D7/D12/L12 actuators share most of the map.
+    --protocol modbus lists the 17Lf's control table (16-bit registers, big-endian, one
+    address each); --map FILE lists a map file's registers, after checking it.
 
     \b
     Examples:
@@ -52,13 +55,16 @@ def registers(which, writable, memory, fmt):
       zap registers goal-position present-position
       zap registers --writable --memory NV -f csv
       zap registers -f jsonl | jq -r 'select(.access == "RW") | .name'
+      zap registers --protocol modbus goal-position
     """
-    regs = list(which) if which else list(zap.REGISTERS)
+    regmap = zap_map()
+    regs = list(which) if which else list(regmap.registers)
     if writable:
         regs = [r for r in regs if r.writable]
     if memory:
         regs = [r for r in regs if r.memory == memory.upper()]
     fmt = resolve_format(fmt)
     make = _table_row if fmt == "table" else register_row
-    write_rows((make(r) for r in regs), COLUMNS, fmt, title="mightyZAP 12Lf registers",
+    write_rows((make(r) for r in regs), COLUMNS, fmt, title=f"mightyZAP {regmap.model} registers"
+               + ("" if regmap.protocol == "ir" else f" ({regmap.protocol})"),
                table_columns=TABLE_COLUMNS)

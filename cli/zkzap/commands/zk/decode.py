@@ -11,8 +11,8 @@ from ...errors import CHECK_FAILED, UsageError
 from ...io import RECORD_FORMATS
 from .. import CONTEXT, Command
 from ..complete import binary_inputs
-from ..options import (Choice, InputPath, checked, close_output, decode_inputs, exits, format_option, note,
-                       note_skipped, open_output, output_format, output_options, protocol_version_option)
+from ..options import (Choice, InputPath, checked, close_output, decode_inputs, end_decode, exits, format_option,
+                       note, open_output, output_format, output_options, protocol_version_option)
 
 
 def columns(accept="both", raw=False):
@@ -92,7 +92,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
       xxd capture.bin | zk decode --accept status
     """
     from ...api.capture import capture_inputs
-    from ...io.sources import binary_chunks, hex_chunks, hex_note, run_decode, run_text_decode, start
+    from ...io.sources import binary_chunks, hex_chunks, run_decode, run_text_decode, start
     from ...io.writers import csv_dialect, json_dialect, make_writer
 
     captures = capture_inputs(inputs, binary)
@@ -144,10 +144,7 @@ def decode(inputs, binary, fmt, output, append, protocol_version, accept, raw):
             run_text_decode(chunks, framer, lines, writer, check_assumed)
     finally:
         close_output(writer, stream)
-    note_skipped(framer, "frame", "CRC")
-    text = hex_note(chunks)
-    if text:
-        note(text)
+    end_decode(framer, chunks, "frame", "CRC")
 
 
 def _explain_single(data: bytes):
