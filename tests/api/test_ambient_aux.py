@@ -80,18 +80,65 @@ def test_sensor_quantities_refused(text, kind, msg):
 @pytest.mark.parametrize("lines,want", [
     (["thrust_n=12.5 T-amb=21", "thrust_n=13;T-amb=21.5"], [{"thrust_n": 12.5, "t_amb": 21},
                                                           {"thrust_n": 13, "t_amb": 21.5}]),
-    (["Thrust N;flow", "12,5;250", "1;2;3"], [{"thrust_n": "12,5", "flow": 250}]),
+    (["Thrust N;flow", "12,5;250", "1;2;3"], [{"flow": 250}]),
     (['{"rpm": 1, "load": 2.5}', "not json", '[1]'], [{"aux_rpm": 1, "load": 2.5}]),
 ])
 def test_the_three_line_shapes(lines, want):
     p = LineParser(taken={"rpm"})
-    assert [r for r in map(p.feed, lines) if r] == want
+    assert [r.values for r in map(p.feed, lines) if r] == want
 
 
 def test_a_csv_without_header_and_names():
-    with pytest.raises(UsageError, match="starts with its header"):
-        LineParser(set()).feed("1.5,2.5")
+    p = LineParser(set())
+    assert p.feed("1.5,2.5") is None and p.skipped == 1 and p.shape is None     # no header: no reading
     assert field_name("9 load", {"t"}) == "_9_load" and field_name("t", {"t"}) == "aux_t"
+
+
+def test_garbage_is_rejected_and_counted_never_stored():
+    from zkzap.api.sensors import parse_decl
+
+    (decl,) = parse_decl("cell.log,thrust:kgf:0..100", taken={"rpm"})
+    p = LineParser({"rpm"}, decl)
+    lines = ["HX711 load cell v1.2 ready", "thrust=12.3 status=OK", "thrust=abc", "thrust=-5",
+             "thrust=12.3 thrust=99", "thrust=NaN", "thrust=1" + "0" * 400, "> ", ""]
+    got = [p.feed(line) for line in lines]
+    assert [r.values for r in got if r] == [{"thrust": 12.3}] + [{}] * 5
+    assert [(k, why) for r in got if r for k, why, _ in r.rejected] == [
+        ("thrust", "not a number"), ("thrust", "outside 0..100 kgf"), ("thrust", "given twice in one line"),
+        ("thrust", "not a finite number"), ("thrust", "not a finite number")]
+    assert p.skipped == 3 and p.ignored == ["status"] and p.stats["thrust"][0] == 1
+
+
+def test_a_banner_is_no_csv_header():
+    p = LineParser(set())
+    got = [p.feed(line) for line in ("HX711 load cell v1.2 ready", "thrust_n,flow", "12.5,3", "abc", "13,x")]
+    assert p.header == ["thrust_n", "flow"] and p.skipped == 2                      # the banner and 'abc'
+    assert [r.values for r in got if r] == [{"thrust_n": 12.5, "flow": 3}, {"thrust_n": 13}]
+    p = LineParser(set())
+    assert [p.feed(line) for line in ("HX711 load cell v1.2 ready", "thrust=12.5")][1].values == {"thrust": 12.5}
+    assert p.shape == "pairs" and p.skipped == 1
+
+
+def test_json_values_a_record_cannot_hold_are_rejected():
+    p = LineParser(set())
+    got = [p.feed(line) for line in ('{"load": NaN, "ok": 1}', '{"load": 1e400, "x": Infinity, "y": "1"}',
+                                     '{"load": 2, "load": 3}', '{"load": -Infinity}', "[1]")]
+    assert [r.values for r in got if r] == [{"ok": 1}, {}, {}, {}]
+    assert sum(len(r.rejected) for r in got if r) == 6 and p.skipped == 1
+
+
+def test_calibration_tare_scale_and_curve():
+    from zkzap.api.sensors import Calibration
+
+    assert Calibration(tare=0.5, scale=2).apply(10.5) == 20.0
+    c = Calibration(tare=1.0, points=[[0, 0], [100, 98.0665], [200, 200]])
+    assert c.apply(1.0) == 0 and c.apply(51.0) == pytest.approx(49.03325) and c.apply(301.0) == pytest.approx(301.9335)
+    with pytest.raises(UsageError, match="given twice"):
+        Calibration(points=[[1, 2], [1, 3]])
+    with pytest.raises(UsageError, match="one point is a scale"):
+        Calibration(points=[[1, 2]])
+    with pytest.raises(UsageError, match="scale 0"):
+        Calibration(scale=0)
 
 
 def test_esr_is_answered_at_once_then_at_most_once_a_second():

@@ -50,7 +50,8 @@ def test_a_load_cell_on_a_pty_feeds_records_tsfc_and_corrections(cli, tmp_path, 
             "--ambient-temp", "t_c", "--settle", "4", "--steps-csv", str(steps), "--summary-json", str(summary))
     assert r.exit_code == 0, r
     rows = list(csv.DictReader(io.StringIO(tel.read_text())))
-    assert rows[-1]["thrust_n"] == "98.0665" and rows[-1]["status"] == "OK" and rows[-1]["t_c"] == "25.0"
+    assert rows[-1]["thrust_n"] == "98.0665" and rows[-1]["t_c"] == "25.0"
+    assert rows[-1]["status"] == ""                         # text is no value: rejected, never stored
     assert "rpm_corrected" in rows[0]
     (step,) = list(csv.DictReader(io.StringIO(steps.read_text())))
     assert step["target"] == "50 %" and float(step["thrust_from_kg_mean"]) == 10.0
@@ -62,7 +63,9 @@ def test_a_load_cell_on_a_pty_feeds_records_tsfc_and_corrections(cli, tmp_path, 
     assert float(step["rpm_corrected"]) == pytest.approx(float(step["rpm_mean"]) / theta ** 0.5, abs=0.1)
     assert float(step["thrust_corrected_kg"]) == pytest.approx(10.0 / (1013 / 1013.25), abs=1e-4)
     s = json.loads(summary.read_text())
-    assert s["aux"][0]["fields"] == ["thrust_n", "t_c", "status"] and s["aux"][0]["readings"] > 10
+    aux = s["aux"][0]
+    assert aux["fields"] == ["thrust_n", "t_c", "status"] and aux["readings"] > 10 and aux["skipped"] == 0
+    assert aux["rejected"] == aux["readings"] and aux["channels"][2]["rejected"] == {"not a number": aux["readings"]}
 
 
 def test_a_silent_sensor_is_exit_3_before_anything_is_sent(cli, tmp_path):
@@ -78,7 +81,7 @@ def test_a_silent_sensor_is_exit_3_before_anything_is_sent(cli, tmp_path):
     quiet.write_text("")
     r = cli("zk", "send", "control", "--state", "run", "--for", "5", "-p", path, "--yes", "--aux", str(quiet),
             "--timeout", "0.3")
-    assert r.exit_code == 3 and f"aux: no line from {quiet} within 0.3 s" in r.stderr, r
+    assert r.exit_code == 3 and f"aux: no reading from {quiet} within 0.3 s (no line;" in r.stderr, r
     assert written() == b"" and r.stdout == ""
     os.close(master)
     os.close(slave)

@@ -87,9 +87,10 @@ class Quantity:
         self.kind, self.value, self.field, self.unit, self.option = kind, value, field, unit, option
 
     @classmethod
-    def parse(cls, text, kind, option, *, constant=True):
+    def parse(cls, text, kind, option, *, constant=True, declared=None):
         """``NUMBER`` (in the working unit; when ``constant``) or ``FIELD[:UNIT]``: an external
-        sensor's field (``--aux``), its unit given or implied by the name's ending (``load_n``: N)."""
+        sensor's field (``--aux``), its unit given, declared with the sensor (``declared``: field ->
+        unit) or implied by the name's ending (``load_n``: N)."""
         text = str(text).strip()
         work, units = UNITS[kind]
         try:
@@ -109,6 +110,12 @@ class Quantity:
             raise UsageError(f"{option}: {text!r}: expected {what}FIELD[:UNIT], FIELD a field of an --aux sensor")
         unit = unit.strip().lower()
         allowed = ", ".join(u for u in units if u)
+        given = (declared or {}).get(field)
+        if not sep and given:
+            unit, sep = given.strip().lower(), ":"
+            if unit not in units:
+                raise UsageError(f"{option}: {field} is declared in {given}; a {kind.replace('_', ' ')} is in one "
+                                 f"of {allowed}")
         if not sep:
             unit = next((u for tail, u in _BY_SUFFIX[kind] if field.lower().endswith(tail)), None)
             if unit is None:

@@ -43,6 +43,8 @@ class Stand:
             self._started = True
             self.aux.start(timeout)
             self._check_fields()
+            if self.averager is not None:
+                self.averager.add_channels(self.aux.channels.values())
 
     def _check_fields(self):
         from ..errors import unknown_name
@@ -62,6 +64,8 @@ class Stand:
                                    otherwise=f"; the --aux sensors give {', '.join(self.aux.fields) or 'no field'}")
 
     def close(self) -> None:
+        """Stop the external sensors' readers (at the session's end, before any summary: their
+        counts are frozen then). Closing twice is closing once."""
         if self.aux is not None:
             self.aux.close()
 

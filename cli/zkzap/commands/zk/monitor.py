@@ -248,6 +248,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         session.bridges = bridges.stats() if bridges else None
         with out:
             outcome = session.run()
+            if stand is not None:
+                stand.close()            # the sensors stop with the session: one count for every summary
             if summarize and out.fmt == "xlsx" and outcome.reason != "refused":
                 out.finish(summarize(outcome, tel, session))
     finally:

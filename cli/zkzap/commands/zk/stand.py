@@ -49,9 +49,11 @@ def logbook_option(f):
 
 SENSOR_HELP = {
     "aux": "Read an external sensor (load cell, flowmeter, barometer) from SOURCE: a serial port or URL "
-           "(9600 baud, or SOURCE@BAUD), a FIFO, a file (followed as it grows) or '-'. Lines of name=value pairs, "
-           "CSV with a header, or JSON objects; each is stamped on arrival and its fields merged into the "
-           "records. Repeatable.",
+           "(9600 baud, or SOURCE@BAUD), a FIFO, a file (followed as it grows) or '-', optionally declared: "
+           "SOURCE,KEY[:UNIT][:LO..HI],...[,stale=S][,format=pairs|csv|json], or a sensors file (.toml, .yaml) "
+           "with channels, ranges and calibration. Lines of name=value pairs, CSV with a header, or JSON objects; "
+           "lines that are no reading are skipped, values that are no finite number, out of range or given twice "
+           "are rejected (both counted in the summary). Repeatable.",
     "thrust": "Use this --aux field as the thrust (FIELD:UNIT, UNIT kgf, kg, N, daN, lbf or g; or implied by the "
               "name: load_n) for TSFC and the corrections instead of the ECU's 0.1 kg reading.",
     "flow": "Use this --aux field as the fuel flow (FIELD:UNIT, UNIT L/min, mL/min, cc/min, L/h, kg/h, g/min or "
@@ -86,14 +88,18 @@ class Sensors:
         from ...api.ambient import Quantity
         from ...api.aux import parse_specs
 
-        self.specs = parse_specs(aux)
-        self.thrust = Quantity.parse(thrust_from, "thrust", "thrust-from", constant=False) if thrust_from else None
-        self.flow = (Quantity.parse(fuel_flow_from, "fuel_flow", "fuel-flow-from", constant=False)
+        self.specs = parse_specs(aux, taken=_record_keys())
+        units = {c.name: c.unit for s in self.specs for c in s.decl.channels or () if c.unit}
+        self.thrust = (Quantity.parse(thrust_from, "thrust", "thrust-from", constant=False, declared=units)
+                       if thrust_from else None)
+        self.flow = (Quantity.parse(fuel_flow_from, "fuel_flow", "fuel-flow-from", constant=False, declared=units)
                      if fuel_flow_from else None)
-        temp = Quantity.parse(ambient_temp, "temperature", "ambient-temp") if ambient_temp is not None else None
-        press = (Quantity.parse(ambient_pressure, "pressure", "ambient-pressure")
+        temp = (Quantity.parse(ambient_temp, "temperature", "ambient-temp", declared=units)
+                if ambient_temp is not None else None)
+        press = (Quantity.parse(ambient_pressure, "pressure", "ambient-pressure", declared=units)
                  if ambient_pressure is not None else None)
-        self.air = Quantity.parse(air_pressure, "pressure", "air-pressure") if air_pressure is not None else None
+        self.air = (Quantity.parse(air_pressure, "pressure", "air-pressure", declared=units)
+                    if air_pressure is not None else None)
         if press is not None and temp is None:
             raise UsageError("ambient-pressure: the corrections need --ambient-temp too (theta = T/288.15 K)")
         if temp is not None and temp.field is None and not -60 <= temp.value <= 60:
