@@ -99,6 +99,8 @@ def files(tmp_path_factory):
     out["zk batch"] = str(d / "zk.txt")
     (d / "zap.txt").write_text("echo --id 1\n")
     out["zap batch"] = str(d / "zap.txt")
+    (d / "path.csv").write_text("t,id,position\n0,1,100\n0.1,1,200\n")
+    out["zap path"] = str(d / "path.csv")
     out["frames"] = str(d / "zk.pcapng")
     outs = d / "outputs"
     outs.mkdir()

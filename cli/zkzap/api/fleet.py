@@ -50,7 +50,7 @@ FORMAT = "zkzap-fleet/1"
 SETUP_FORMAT = "zkzap-setup/1"
 SECTIONS = ("stored", "volatile", "read-only")
 #: Entry keys besides the sections.
-META_KEYS = ("model", "firmware", "baud", "time", "errors")
+META_KEYS = ("model", "firmware", "baud", "time", "errors", "motion")
 #: Settings an apply never writes unless named with ``only`` and ``force``: they change how
 #: (or whether) the actuator can be reached and answers.
 PROTECTED = ("id", "baud-rate", "protocol-type", "feedback-return-mode")
@@ -195,13 +195,15 @@ def read_bus(bus, ids, *, procedures=PROCEDURES, on_actuator=None) -> dict:
 # -- documents: validation -------------------------------------------------------------------
 
 class Entry:
-    """One checked actuator of a document: ``ident``, ``model``, ``firmware``, ``baud`` and
-    ``values`` ({Register: raw}, every section)."""
+    """One checked actuator of a document: ``ident``, ``model``, ``firmware``, ``baud``,
+    ``values`` ({Register: raw}, every section) and ``motion`` (its stroke and calibration, see
+    :mod:`zkzap.api.units`; None when the file gives none)."""
 
-    __slots__ = ("ident", "model", "firmware", "baud", "values")
+    __slots__ = ("ident", "model", "firmware", "baud", "values", "motion")
 
-    def __init__(self, ident, model, firmware, baud, values):
+    def __init__(self, ident, model, firmware, baud, values, motion=None):
         self.ident, self.model, self.firmware, self.baud, self.values = ident, model, firmware, baud, values
+        self.motion = motion
 
     def settings(self, section):
         return {r: v for r, v in self.values.items() if section_of(r) == section}
@@ -279,7 +281,12 @@ def check_document(doc, name="document") -> dict:
         stored_id = values.get(REG["id"])
         if stored_id is not None and stored_id != ident:
             fail(f"{where}.stored.id", f"{stored_id} differs from the actuator's key {ident}")
-        out[ident] = Entry(ident, entry.get("model"), entry.get("firmware"), baud, values)
+        motion = entry.get("motion")
+        if motion is not None:
+            from .units import check_motion
+
+            check_motion(motion, f"{where}.motion", fail)
+        out[ident] = Entry(ident, entry.get("model"), entry.get("firmware"), baud, values, motion)
     return out
 
 

@@ -480,6 +480,25 @@ class Bus:
             return self.wait_stopped(ident, position, timeout=timeout, poll=poll, on_progress=on_progress,
                                      notify=notify)
 
+    def play(self, path: Any, *, unit: str = "counts", scales: Optional[Mapping[int, Any]] = None,
+             interpolate: Optional[str] = None, rate: Optional[float] = None, loops: int = 1, log: bool = True,
+             limit: Optional[float] = None, stop_mode: str = "hold",
+             on_row: Optional[Callable[[Record], None]] = None,
+             on_progress: Optional[Callable[[int, int], None]] = None) -> Any:
+        """Play a timed path file (CSV, JSON or JSON Lines rows of t, id, position, speed,
+        current) on this bus, as ``zap play`` does: rows of one time are one sync move; with
+        ``interpolate="linear"`` goals every 1/``rate`` s; a plan the line cannot carry raises
+        UsageError before anything moves. ``on_row(row)`` gets each log row (goal vs present,
+        current, voltage), ``on_progress(done, total)`` each step sent. A hardware error bit, a
+        current over ``limit`` mA or Ctrl-C stops every actuator (``stop_mode`` ``hold``: goal
+        := present position; ``off``: force off). Returns the
+        :class:`~zkzap.api.motion.Player`: its ``summary()`` (lateness p50/p99/max) and
+        ``stopped`` (None when the path ran to its end). See :mod:`zkzap.api.motion`."""
+        from .motion import play
+
+        return play(self, path, unit=unit, scales=scales, interpolate=interpolate, rate=rate, loops=loops, log=log,
+                    limit=limit, stop_mode=stop_mode, on_row=on_row, on_progress=on_progress)
+
     def stop(self, ident: int) -> int:
         """Stop actuator ``ident`` where it is: its present position becomes its goal position.
         Returns that position."""

@@ -265,6 +265,9 @@ ZAP_COMMANDS = {
     "watch": (".zap.watch", "watch", "Poll registers of several actuators live, or log them."),
     "check": (".zap.check", "check", "Self-check actuators: echo, voltage, errors, a full-stroke move."),
     "batch": (".zap.batch", "batch", "Run many zap commands over one open port (JSON Lines)."),
+    "play": (".zap.motion", "play", "Play a timed path of goal positions on several actuators."),
+    "teach": (".zap.motion", "teach", "Record present positions as waypoints, for zap play."),
+    "calibrate": (".zap.motion", "calibrate", "Teach the two ends of the stroke, for millimetres."),
 }
 ROOT_COMMANDS = {
     "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),

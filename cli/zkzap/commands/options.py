@@ -335,6 +335,35 @@ def zap_map(ctx=None):
     return regmap
 
 
+def unit_options(f):
+    """``--unit counts|mm`` and ``--fleet FILE`` (the fleet file that gives each actuator's
+    stroke, see :mod:`zkzap.api.units`): positions in counts (the default) or millimetres, and
+    speeds in mm/s; tables show counts beside millimetres."""
+    f = click.option("--fleet", "fleet_file", type=InputPath("fleet"), default=None, envvar="ZKZAP_ZAP_FLEET",
+                     metavar="FILE",
+                     help="The fleet file giving each actuator's stroke (motion.part, motion.stroke_mm or a "
+                          "zap calibrate calibration), for --unit mm [env ZKZAP_ZAP_FLEET].")(f)
+    f = click.option("--unit", type=Choice(["counts", "mm"]), default="counts", show_default=True,
+                     help="Positions in counts (0..4095) or millimetres (and speeds in mm/s), by the strokes "
+                          "of --fleet.")(f)
+    return f
+
+
+def unit_scales(unit, fleet_file, ids):
+    """``{ID: Scale}`` for ``--unit mm`` (None for counts); exit 2 without --fleet."""
+    if unit != "mm":
+        if fleet_file:                    # read all the same: a bad file is refused, not ignored
+            from ..api.fleet import read_document
+
+            read_document(fleet_file)
+        return None
+    if not fleet_file:
+        raise UsageError("--unit mm: needs --fleet FILE (the fleet file giving each actuator's stroke)")
+    from ..api.units import scales
+
+    return scales(fleet_file, ids)
+
+
 def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl"):
     from ..io.term import is_tty
 

@@ -1,0 +1,96 @@
+"""zap play: how late the goals leave, over a real pty to the bus simulator.
+
+    python benchmarks/zap_play.py                     # 6 actuators, 57600 baud, 50 Hz, 5 rounds of 4 s
+    python benchmarks/zap_play.py --ids 1-8 --baud 115200 --rate 100
+
+Starts ``zkzap sim zap --ids ...`` (its pty on the first line) and plays, with the library's
+player (:class:`zkzap.api.motion.Player`, what ``zap play`` runs), a linear path of every
+actuator across the stroke and back, interpolated at ``--rate``: one sync move per step, and
+the log reads in between (goal vs present, current, voltage). A step's lateness is the time
+from its due time to when its first byte is handed to the port. Each round prints p50, p99
+and max lateness and the log rows read; the target is p99 <= 2 ms at 57600 baud for 6
+actuators at 50 Hz. A last line plays the same path without log reads (the schedule alone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
+from common import add_quick, until_ready  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
+
+TARGET_MS = 2.0
+
+
+def tool(name):
+    exe = os.path.join(os.path.dirname(sys.executable), name)
+    return [exe] if os.path.exists(exe) else [sys.executable, "-m", "zkzap"]
+
+
+def start_sim(ids, baud):
+    env = dict(os.environ, NO_COLOR="1")
+    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids, "--baud", str(baud)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    port = p.stdout.readline().strip()
+    if not port:
+        p.kill()
+        raise SystemExit(f"simulator did not start: {p.stderr.read()[-500:]}")
+    return p, port
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--baud", type=int, default=57600)
+    ap.add_argument("--ids", default="1-6")
+    ap.add_argument("--rate", type=float, default=50.0)
+    ap.add_argument("--seconds", type=float, default=4.0, help="length of the path played each round")
+    ap.add_argument("--rounds", type=int, default=5)
+    add_quick(ap, seconds=0.4, rounds=1)
+    args = ap.parse_args(argv)
+
+    from zkzap.api import motion
+    from zkzap.link.port import open_port
+    from zkzap.link.zap_bus import ZapBus
+    from zkzap.sim.zap_actuators import parse_ids
+
+    ids = [i for i, _ in parse_ids(args.ids)]
+    every = '"' + ",".join(map(str, ids)) + '"'
+    half = args.seconds / 2
+    text = f"t,id,position\n0,{every},200\n{half:g},{every},3400\n{args.seconds:g},{every},200\n"
+    rows = motion.read_path(io.StringIO(text), name="path")
+    plan = motion.plan(rows, baud=args.baud, interpolate="linear", rate=args.rate)
+    print(plan.note)
+    sim, port = start_sim(args.ids, args.baud)
+    worst = None
+    try:
+        with ZapBus(open_port(port, args.baud, timeout=0)) as bus:
+            until_ready(lambda: bus.echo(ids[0]))
+            for n in range(args.rounds + 1):
+                log = n < args.rounds
+                player = motion.Player(bus, plan, log=log, settle=0.5)
+                got = sum(1 for _ in player.rows())
+                s = player.summary()
+                if log:
+                    worst = s["lateness_p99_ms"] if worst is None else max(worst, s["lateness_p99_ms"])
+                label = f"round {n + 1}" if log else "no log reads"
+                print(f"{label:13s} {len(ids)} IDs at {args.baud} baud, {args.rate:g} Hz: {s['steps']} steps, lateness "
+                      f"p50 {s['lateness_p50_ms']:.3f} ms, p99 {s['lateness_p99_ms']:.3f} ms, max "
+                      f"{s['lateness_max_ms']:.3f} ms; {got} log rows ({got / max(1, s['steps']):.2f} a step), "
+                      f"{s['read_failures']} unanswered")
+    finally:
+        sim.terminate()
+        sim.wait(5)
+    met = worst is not None and worst <= TARGET_MS
+    print(f"worst p99 {worst:.3f} ms: target <= {TARGET_MS:g} ms {'met' if met else 'NOT met'}")
+    return 0 if met or args.quick else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,180 @@
+"""Trajectories, stops, teaching and physical units, on the simulator's moving model."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import pytest
+
+from zkzap import Bus
+from zkzap.api import motion, units
+from zkzap.errors import UsageError
+from zkzap.sim import start_zap
+
+
+def rows_of(text, **kw):
+    return motion.read_path(io.StringIO(text), name="path.csv", **kw)
+
+
+# -- reading and planning ----------------------------------------------------------------------
+
+def test_rows_of_one_time_are_one_sync_move():
+    rows = rows_of('t,id,position,speed\n0,"1,2",100,500\n0,3,300\n1,1,2000\n')
+    p = motion.plan(rows)
+    assert [s.t for s in p.steps] == [0, 1]
+    first = p.steps[0]
+    assert first.goals == {1: 100, 2: 100, 3: 300} and first.speeds == {1: 500, 2: 500}
+    # goal-speed first, then one Symmetric Store of every goal
+    assert [f[5] for f in first.frames] == [0x73, 0x73] and first.frames[1][6] == 0x86
+    assert len(first.frames[1]) == 4 + 1 + 2 + 3 * 3 + 1 + 1
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("t,id,position\n0,1,5000\n", "path.csv:2: position: 5000 is out of range"),
+    ("t,id,position\n-1,1,5\n", "path.csv:2: t: -1 is before the start"),
+    ("t,id,position\n0,1,5\n0,1,6\n", "ID 1 is given twice at t=0"),
+    ("t,id,pos\n0,1,5\n", "unknown field 'pos'"),
+    ("t,id,position\n0,300,5\n", "id: '300' is not an actuator ID"),
+    ("t,id,position\nnan,1,5\n", "t: nan is not a finite number"),
+    ("t,id,position\n0,1,2.5\n", "position: 2.5 is not a whole number of counts"),
+    ("t,id,position\n", "no rows"),
+    ('[{"t": 0, "id": [1, 1], "position": 3}]', "id: 1 is given twice"),
+])
+def test_a_bad_row_is_refused_naming_the_line(text, needle):
+    with pytest.raises(UsageError, match=needle.replace("(", r"\(")):
+        rows_of(text)
+
+
+def test_json_and_json_lines_read_like_csv():
+    a = rows_of('[{"t": 0, "id": [1, 2], "position": 10}, {"t": 0.5, "id": 1, "position": 20, "current": 500}]')
+    b = rows_of('{"t": 0, "id": [1, 2], "position": 10}\n{"time": 0.5, "ids": 1, "goal": 20, "current": 500}\n')
+    assert [(r.t, r.ids, r.position, r.current) for r in a] == [(r.t, r.ids, r.position, r.current) for r in b]
+
+
+def test_linear_interpolation_keeps_to_its_rate_and_its_keyframes():
+    rows = rows_of("t,id,position\n0,1,0\n1,1,1000\n")
+    p = motion.plan(rows, interpolate="linear", rate=10)
+    assert [round(s.t, 3) for s in p.steps] == [round(k / 10, 3) for k in range(11)]
+    assert [s.goals[1] for s in p.steps] == list(range(0, 1001, 100))
+    assert "10 Hz" in p.note and "170 Hz" not in p.note
+
+
+def test_a_rate_the_line_cannot_carry_is_refused_with_the_rate_it_can():
+    rows = rows_of('t,id,position\n0,"1,2,3,4,5,6",0\n1,"1,2,3,4,5,6",4000\n')
+    assert motion.max_rate(range(1, 7), 57600) == pytest.approx(0.8 / (27 * 10 / 57600))
+    with pytest.raises(UsageError, match=r"170 Hz") as e:
+        motion.plan(rows, interpolate="linear", rate=200)
+    assert e.value.max_rate == 170
+    assert motion.plan(rows, interpolate="linear", rate=170).rate == 170
+    # at 9600 baud the same path carries 28 Hz: the default 50 Hz becomes what the line carries
+    assert motion.plan(rows, baud=9600, interpolate="linear").rate == 28
+
+
+def test_steps_closer_than_their_frames_take_are_refused():
+    rows = rows_of('t,id,position\n0,"1,2,3,4,5,6",0\n0.002,1,10\n')
+    with pytest.raises(UsageError, match="2.0 ms apart.*4.69 ms"):
+        motion.plan(rows)
+
+
+# -- playing on the simulator ------------------------------------------------------------------
+
+def test_play_logs_goal_against_present_and_ends_at_the_goals():
+    with start_zap(ids=[1, 2], speed=4) as sim, Bus(sim) as bus:
+        rows = []
+        player = bus.play(io.StringIO("t,id,position\n0,\"1,2\",1000\n0.3,1,3000\n"), on_row=rows.append)
+        assert player.stopped is None and player.sent == 2 and not player.unsettled
+        assert {r["id"] for r in rows} == {1, 2}
+        moving = [r for r in rows if r["tracking_error"]]
+        assert moving and all(r["current_ma"] > 100 for r in moving)          # the model draws current moving
+        last = {r["id"]: r for r in rows}
+        assert last[1]["present"] == 3000 and last[2]["present"] == 1000
+        assert sim.device.actuator(1).get("present-position") == 3000
+        s = player.summary()
+        assert s["lateness_p99_ms"] is not None and s["steps"] == 2
+
+
+def test_a_current_over_the_limit_stops_every_actuator_where_it_is():
+    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
+        player = bus.play(io.StringIO('t,id,position\n0,"1,2",4000\n'), limit=100)
+        assert player.stopped.reason == "current-limit" and "over the limit of 100 mA" in player.stopped.message
+        held = player.stopped.positions
+        for ident in (1, 2):
+            a = sim.device.actuator(ident)
+            assert held[ident] is not None and a.get("goal-position") == held[ident] < 4000
+
+
+def test_a_hardware_error_stops_every_actuator_force_off_when_asked():
+    with start_zap(ids=[1, 2], faults=["2:overload"]) as sim, Bus(sim) as bus:
+        player = bus.play(io.StringIO('t,id,position\n0,"1,2",3000\n'), stop_mode="off")
+        assert player.stopped.reason == "device-error" and "overload" in player.stopped.message
+        assert sim.device.actuator(1).get("force-on-off") == 0
+
+
+def test_loops_repeat_the_path():
+    with start_zap(ids=[1], speed=4) as sim, Bus(sim) as bus:
+        player = bus.play(io.StringIO("t,id,position\n0,1,500\n0.2,1,1500\n"), loops=3, log=False)
+        assert player.sent == 6 and len(player.lateness) == 6
+
+
+def test_taught_waypoints_play_back():
+    with start_zap(ids=[1, 2]) as sim, Bus(sim) as bus:
+        teacher = motion.Teacher(bus, [1, 2], interval=0.5)
+        for pos in (100, 900):
+            for i in (1, 2):
+                sim.device.actuator(i).set("goal-position", pos + i)     # moved by hand: it stays there
+                sim.device.actuator(i).set("present-position", pos + i)
+            rows = teacher.take()
+        assert rows == [{"t": 0.5, "id": 1, "position": 901, "counts": 901},
+                        {"t": 0.5, "id": 2, "position": 902, "counts": 902}]
+        buf = io.StringIO()
+        motion.write_path(buf, [{"t": 0.0, "id": 1, "position": 101}] + rows)
+        back = motion.read_path(io.StringIO(buf.getvalue()))
+        assert [(r.t, r.ids, r.position) for r in back] == [(0, (1,), 101), (0.5, (1,), 901), (0.5, (2,), 902)]
+
+
+# -- units -------------------------------------------------------------------------------------
+
+def test_the_rated_stroke_ends_at_the_factory_long_stroke_limit():
+    s = units.Scale(27.0)
+    assert s.mm(units.RATED_COUNTS) == 27.0 and s.mm(0) == 0.0
+    assert s.counts(13.5) == 1843
+    assert units.stroke_of_part("12Lf-20PT-27") == 27.0 and units.stroke_of_part("L12-20PT-6") == 56.0
+    with pytest.raises(UsageError, match="not in the model table"):
+        units.stroke_of_part("12Lf-20PT-99")
+    with pytest.raises(UsageError, match="outside the rod's travel"):
+        s.counts(31)
+    with pytest.raises(UsageError, match="max_speed_mm_s"):
+        s.speed_raw(10)
+
+
+def test_a_calibration_counts_from_the_retracted_end():
+    s = units.Scale(27.0, calibration={"retracted": 100, "extended": 3700, "travel_mm": 27.0}, max_speed_mm_s=40)
+    assert s.mm(100) == 0 and s.mm(3700) == 27.0 and s.counts(27.0) == 3700
+    assert s.speed_raw(20) == 512 and s.speed_mm_s(1023) == 40
+
+
+def test_motion_entries_in_the_fleet_file(tmp_path):
+    path = str(tmp_path / "fleet.json")
+    units.record_motion(path, 1, {"part": "12Lf-20PT-27"})
+    units.record_motion(path, 2, {"stroke_mm": 56})
+    units.record_motion(path, 2, {"calibration": {"retracted": 0, "extended": 3686, "travel_mm": 56.5}})
+    doc = json.load(open(path))
+    assert doc["actuators"]["2"]["motion"] == {"stroke_mm": 56, "calibration": {"retracted": 0, "extended": 3686,
+                                                                                 "travel_mm": 56.5}}
+    sc = units.scales(path, [1, 2])
+    assert sc[1].mm(3686) == 27.0 and sc[2].mm(3686) == 56.5
+    with pytest.raises(UsageError, match="ID 3 has no motion entry"):
+        units.scales(path, [3])
+    doc["actuators"]["1"]["motion"]["stroke"] = 3
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(UsageError, match=r"actuators\.1\.motion\.stroke: unknown key"):
+        units.scales(str(tmp_path / "bad.json"), [1])
+
+
+def test_a_path_in_millimetres_plays_in_counts(tmp_path):
+    sc = {1: units.Scale(27.0, ident=1), 2: units.Scale(56.0, ident=2)}
+    rows = rows_of('t,id,position\n0,"1,2",13.5\n', unit="mm", scales=sc)
+    assert sorted((r.ids, r.position) for r in rows) == [((1,), 1843), ((2,), 889)]
+    with pytest.raises(UsageError, match="path.csv:2: position: 40 mm is outside"):
+        rows_of("t,id,position\n0,1,40\n", unit="mm", scales=sc)

@@ -1,0 +1,148 @@
+"""zap play, teach and calibrate end to end on the simulator (its moving model: real reach
+times and currents), in-process and as real subprocesses."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+SIX = '"1,2,3,4,5,6"'
+
+
+def jsonl(text):
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
+
+
+@pytest.fixture
+def path(tmp_path):
+    def make(text, name="path.csv"):
+        p = tmp_path / name
+        p.write_text(text)
+        return str(p)
+    return make
+
+
+def test_dry_run_prints_the_plan_and_its_frames(cli, path):
+    r = cli("zap", "play", path(f"t,id,position,speed\n0,{SIX},0,1023\n1,{SIX},3000\n"), "-n")
+    assert r.exit_code == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert len(lines) == 3 and "goal-speed" in lines[0] and lines[2].lstrip().startswith("1.000")
+    assert lines[2].endswith("FF FF FF FE 16 73 86 02 01 B8 0B 02 B8 0B 03 B8 0B 04 B8 0B 05 B8 0B 06 B8 0B 49")
+    assert "2 steps, 3 frames" in r.stderr
+    r = cli("zap", "play", path(f"t,id,position\n0,{SIX},0\n1,{SIX},3000\n"), "-n", "--interpolate", "linear",
+            "-f", "jsonl")
+    steps = jsonl(r.stdout)
+    assert len(steps) == 51 and steps[25]["goals"]["1"] == 1500 and "interpolating at 50 Hz" in r.stderr
+
+
+def test_a_rate_the_line_cannot_carry_is_refused_before_anything_is_sent(cli, path, pty_port):
+    port, written = pty_port
+    r = cli("zap", "play", path(f"t,id,position\n0,{SIX},0\n1,{SIX},3000\n"), "--interpolate", "linear",
+            "--rate", "200", "-p", port)
+    assert r.exit_code == 2 and r.stdout == "" and written() == b""
+    assert "more than the line carries" in r.stderr and "170 Hz" in r.stderr
+    r = cli("zap", "play", path("t,id,position\n0,1,0\n0,1,5\n"), "-p", port)
+    assert r.exit_code == 2 and "path.csv:3" in r.stderr and written() == b""
+
+
+def test_play_logs_tracking_to_csv_and_reaches_the_goals(cli, path, tmp_path):
+    out = tmp_path / "run.csv"
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",1500\n0.4,2,3000\n'), "-p", "sim://zap?ids=1,2&speed=4",
+            "-o", str(out), "--interpolate", "linear", "--rate", "20")
+    assert r.exit_code == 0, r.stderr
+    import csv
+
+    rows = list(csv.DictReader(open(out)))
+    assert rows[0].keys() >= {"t", "id", "goal", "present", "tracking_error", "current_ma", "voltage_v"}
+    last = {row["id"]: row for row in rows}
+    assert last["1"]["present"] == "1500" and last["2"]["present"] == "3000"
+    assert any(int(row["current_ma"]) > 100 for row in rows)
+    assert "lateness p50" in r.stderr and "9 of 9 steps" in r.stderr
+
+
+def test_play_in_millimetres_shows_counts_beside_mm(cli, path, tmp_path):
+    fleet = tmp_path / "fleet.json"
+    fleet.write_text(json.dumps({"format": "zkzap-fleet/1", "actuators": {"1": {"motion": {"part": "12Lf-20PT-27"}}}}))
+    r = cli("zap", "play", path("t,id,position\n0,1,13.5\n"), "--unit", "mm", "--fleet", str(fleet),
+            "-p", "sim://zap?ids=1&speed=4", "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    last = jsonl(r.stdout)[-1]
+    assert last["goal"] == 1843 and last["goal_mm"] == 13.5 and last["present"] == 1843 and last["present_mm"] == 13.5
+    r = cli("zap", "play", path("t,id,position\n0,1,13.5\n"), "--unit", "mm", "-p", "sim://zap?ids=1")
+    assert r.exit_code == 2 and "needs --fleet" in r.stderr
+
+
+def test_a_current_over_the_limit_stops_every_actuator_and_says_so(cli, path):
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "--limit", "200", "-p", "sim://zap?ids=1,2",
+            "-f", "jsonl")
+    assert r.exit_code == 1, r.stderr
+    assert "stopped every actuator" in r.stderr and "over the limit of 200 mA" in r.stderr
+    assert "ID 1 held at" in r.stderr and "ID 2 held at" in r.stderr
+
+
+def test_a_hardware_error_stops_every_actuator(cli, path):
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "-p", "sim://zap?ids=1,2&faults=1:overload",
+            "--stop", "off", "-f", "jsonl")
+    assert r.exit_code == 5, r.stderr
+    assert "overload" in r.stderr and "force off: ID 1, ID 2" in r.stderr
+
+
+def test_ctrl_c_stops_every_actuator_where_it_is(path, tmp_path):
+    from e2e.conftest import clean_env, executable
+
+    p = path('t,id,position\n0,"1,2",0\n0.1,"1,2",4000\n60,"1,2",0\n')
+    proc = subprocess.Popen([executable("zap"), "play", p, "-p", "sim://zap?ids=1,2", "-f", "jsonl"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=clean_env())
+    first = proc.stdout.readline()            # it is playing
+    assert first
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130, err
+    err = err.decode()
+    assert "stopped every actuator (interrupted)" in err and "ID 1 held at" in err and "ID 2 held at" in err
+
+
+def test_teach_records_waypoints_that_play_back(cli, tmp_path):
+    out = tmp_path / "taught.csv"
+    r = cli("zap", "teach", "--ids", "1,2", "-o", str(out), "-p", "sim://zap?ids=1,2", input="\n\nq\n")
+    assert r.exit_code == 0, r.stderr
+    assert out.read_text() == "t,id,position\n0,1,0\n0,2,0\n1,1,0\n1,2,0\n"
+    assert "2 waypoints of 2 actuators written" in r.stderr
+    r = cli("zap", "play", str(out), "-n")
+    assert r.exit_code == 0 and len(r.stdout.splitlines()) == 2
+    out2 = tmp_path / "timed.json"
+    r = cli("zap", "teach", "--ids", "1", "-o", str(out2), "--rate", "20", "--count", "3", "-p", "sim://zap?ids=1")
+    assert r.exit_code == 0, r.stderr
+    rows = json.load(open(out2))
+    assert [x["id"] for x in rows] == [1, 1, 1] and rows[2]["t"] > rows[1]["t"] > 0
+
+
+def test_calibrate_records_the_two_ends_and_mm_follow_them(cli, tmp_path, path):
+    fleet = tmp_path / "fleet.json"
+    r = cli("zap", "calibrate", "--id", "1", "--fleet", str(fleet), "--part", "12Lf-20PT-27", "--retracted", "100",
+            "--extended", "3700", "--travel", "27", "--measure-speed", "-p", "sim://zap?ids=1&speed=4")
+    assert r.exit_code == 0, r.stderr
+    motion = json.load(open(fleet))["actuators"]["1"]["motion"]
+    assert motion["calibration"] == {"retracted": 100, "extended": 3700, "travel_mm": 27}
+    assert motion["part"] == "12Lf-20PT-27"
+    # the simulator's rod: 10000 counts/s at goal-speed 1023, 3600 counts = 27 mm -> 75 mm/s
+    assert motion["max_speed_mm_s"] == pytest.approx(75, rel=0.15)
+    r = cli("zap", "play", path("t,id,position,speed\n0,1,0,30\n"), "--unit", "mm", "--fleet", str(fleet), "-n",
+            "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    step = jsonl(r.stdout)[0]
+    assert step["goals"] == {"1": 100} and 380 < step["speeds"]["1"] < 440
+    r = cli("zap", "calibrate", "--id", "1", "--fleet", str(fleet), "--manual", "-p", "sim://zap?ids=1",
+            input="\n\n")
+    assert r.exit_code == 1 and "both ends read" in r.stderr
+    r = cli("zap", "calibrate", "--id", "2", "--fleet", str(fleet), "--stroke", "27", "-p", "sim://zap?ids=2&speed=8")
+    assert r.exit_code == 0, r.stderr
+    doc = json.load(open(fleet))["actuators"]
+    assert doc["2"]["motion"]["calibration"] == {"retracted": 0, "extended": 3686, "travel_mm": 27.0}
+    assert "max_speed_mm_s" in doc["1"]["motion"]                   # the other entry is kept
