@@ -17,32 +17,16 @@ from __future__ import annotations
 import argparse
 import io
 import os
-import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # common.py, beside this script
 from common import add_quick, until_ready  # noqa: E402
+from zap_watch import start_sim  # noqa: E402 - the simulator on a pty, as zap_watch.py starts it
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "cli"))
 
 TARGET_MS = 2.0
-
-
-def tool(name):
-    exe = os.path.join(os.path.dirname(sys.executable), name)
-    return [exe] if os.path.exists(exe) else [sys.executable, "-m", "zkzap"]
-
-
-def start_sim(ids, baud):
-    env = dict(os.environ, NO_COLOR="1")
-    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids, "--baud", str(baud)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    port = p.stdout.readline().strip()
-    if not port:
-        p.kill()
-        raise SystemExit(f"simulator did not start: {p.stderr.read()[-500:]}")
-    return p, port
 
 
 def main(argv=None):
