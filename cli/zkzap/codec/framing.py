@@ -540,6 +540,12 @@ class RtuFramer(_Framer):
     FUNCTIONS = (0x03, 0x06, 0x10)
     MAX_ID = 247
 
+    def __init__(self, any_function: bool = False) -> None:
+        super().__init__()
+        #: Also frames of other function codes, of any length whose CRC matches within the bytes
+        #: at hand (a device hearing whole requests: the simulator answers them "illegal function").
+        self.any_function = any_function
+
     def feed(self, data: Bytes) -> list[bytes]:
         """Frames completed by ``data``."""
         return self._scan(self._buf + bytes(data) if self._buf else bytes(data), False)
@@ -555,7 +561,7 @@ class RtuFramer(_Framer):
         """The frame lengths the bytes from ``i`` may have (None: more bytes needed to tell)."""
         fn = buf[i + 1]
         if fn & 0x80:
-            return (5,) if fn & 0x7F in cls.FUNCTIONS else ()
+            return (5,)            # an exception reply, to any function (1: illegal function)
         if fn == 0x03:
             if i + 3 > n:
                 return None
@@ -569,6 +575,10 @@ class RtuFramer(_Framer):
             c = buf[i + 6]
             return (8, 9 + c) if c and c % 2 == 0 else (8,)
         return ()
+
+    def _other(self, buf, i, n):
+        """Lengths of a frame of a function the framer does not know, within the bytes at hand."""
+        return range(4, min(n - i, 256) + 1) if self.any_function else ()
 
     def _scan(self, buf, final) -> list:
         from .crc import crc16_modbus
@@ -586,6 +596,8 @@ class RtuFramer(_Framer):
                 synced = False
                 continue
             lengths = self._lengths(buf, i, n)
+            if lengths == () and buf[i + 1] not in self.FUNCTIONS:
+                lengths = self._other(buf, i, n)
             if lengths is None:
                 if not final:
                     break

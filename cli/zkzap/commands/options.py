@@ -308,11 +308,17 @@ def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS):
     f = click.option("--map", "regmap", metavar="FILE", default=None, is_eager=True, callback=_map_callback,
                      help="A register map file for a model zkzap does not ship (format: the manual's "
                           "Modbus page); its 'protocol:' line must agree with --protocol.")(f)
-    f = click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True, is_eager=True,
-                     envvar=PROTOCOL_ENV,
-                     help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
-                          f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}].")(f)
-    return f
+    return protocol_option(f, protocols=protocols)
+
+
+def protocol_option(f=None, *, protocols=ZAP_PROTOCOLS):
+    """``--protocol ir|modbus`` alone (the simulator, which has no map to choose)."""
+    if f is None:
+        return lambda g: protocol_option(g, protocols=protocols)
+    return click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True,
+                        is_eager=True, envvar=PROTOCOL_ENV,
+                        help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
+                             f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}].")(f)
 
 
 def zap_map(ctx=None):

@@ -15,7 +15,7 @@ import click
 from ..errors import INTERRUPTED, OK, OUTPUT_ERROR, TERMINATED, UsageError
 from . import CONTEXT, Group
 from .complete import fault_kinds
-from .options import Choice, FiniteRange, InputPath, IntRange, OutputPath, exits
+from .options import Choice, FiniteRange, InputPath, IntRange, OutputPath, exits, protocol_option
 
 
 def _listen(ctx, param, value):
@@ -236,9 +236,9 @@ def _say_collision(event) -> None:
 
 @SIM_EXITS
 @sim.command("zap", context_settings=CONTEXT)
-@click.option("--ids", default="0", show_default=True, metavar="LIST",
+@click.option("--ids", default=None, metavar="LIST",
               help="Actuator IDs on the bus, like 1,2,5-8; ID@BAUD puts one at another baud rate; "
-                   "an ID given twice makes two actuators that collide.")
+                   "an ID given twice makes two actuators that collide (default 0; 1 with --protocol modbus).")
 @click.option("-b", "--baud", type=Choice(["9600", "19200", "38400", "57600", "115200"]), default="57600",
               show_default=True, help="The actuators' baud rate (a pty host at another rate is not heard).")
 @click.option("--state", type=OutputPath("state"), default=None, metavar="FILE",
@@ -262,10 +262,17 @@ def _say_collision(event) -> None:
 @click.option("--replay", type=InputPath("zap capture"), default=None, metavar="CAPTURE",
               help="Answer every request recorded in a pcapng capture (--capture) with its recorded "
                    "reply, after its recorded latency; other requests go to the model.")
+@protocol_option
 @serve_options
-def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, replay, speed, use_pty, listen, link):
+def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, replay, protocol, speed, use_pty,
+        listen, link):
     """The mightyZAP actuator-bus simulator: 12Lf actuators with the full register map, moving
     at goal speed, answering as their feedback-return mode says.
+
+    With --protocol modbus: 17Lf actuators speaking Modbus RTU (IDs 1..247), with the 17Lf's
+    control table; they answer every unicast request, with an exception reply for an unknown
+    function (1), an address outside the table or a read-only register written (2), a count or
+    value out of range (3), or a stored register written while the 'locked' fault holds (6).
 
     \b
     Fault examples:
@@ -274,6 +281,7 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
       --fault 1:corrupt/1       ID 1's next reply has a bad checksum (then it recovers)
       --fault all:delay=30      every reply 30 ms late
       --fault 2:voltage=6.5     ID 2's supply at 6.5 V: voltage error bit in every reply
+      --fault 1:locked          (modbus) ID 1's parameters are locked: stored writes get exception 6
 
     \b
     Examples:
@@ -297,6 +305,10 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
     """
     from ..sim.zap_actuators import parse_fault
 
+    if protocol == "modbus" and (replay is not None or return_mode is not None):
+        raise UsageError(f"{'--replay' if replay is not None else '--return-mode'}: not with --protocol modbus "
+                         "(a 17Lf answers every unicast request; captures are of the IR protocol)")
+
     for text in faults:
         try:
             parse_fault(text)
@@ -309,12 +321,12 @@ def zap(ids, baud, state, return_mode, voltage, echo, turnaround, gap, faults, r
         _check_capture(replay, "zap")
         recorded = recorded_replies(replay)
         ctx = click.get_current_context()
-        if ctx.get_parameter_source("ids") == click.core.ParameterSource.DEFAULT and recorded[1]:
+        if ids is None and recorded[1]:
             ids = ",".join(str(i) for i in sorted(recorded[1]))
     device = _make("zap", ids=ids, baud=baud, state=state, return_mode=return_mode,
                    voltage=None if voltage is None else str(voltage), echo="1" if echo else "0",
                    turnaround=None if turnaround is None else str(turnaround),
-                   gap=None if gap is None else str(gap), faults=",".join(faults))
+                   gap=None if gap is None else str(gap), faults=",".join(faults), protocol=protocol)
     if replay is not None:
         from ..sim.replay import ZapReplay
 

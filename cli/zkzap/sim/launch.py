@@ -180,7 +180,8 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
               return_mode: Optional[Literal[0, 1, 2]] = None, echo: bool = False, voltage: Optional[float] = None,
               faults: Sequence[Fault] = (), state: Optional[str] = None, turnaround: Optional[float] = None,
               gap: Optional[float] = None, speed: float = 1.0, transport: Transport = "inprocess",
-              host: str = "127.0.0.1", port: int = 0, replay: Optional[CapturePath] = None) -> Simulator:
+              host: str = "127.0.0.1", port: int = 0, replay: Optional[CapturePath] = None,
+              protocol: Literal["ir", "modbus"] = "ir") -> Simulator:
     """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
     actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate; default
     ID 0, or with ``replay`` the IDs that answered in the capture) at
@@ -198,9 +199,17 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
     recorded: a silent actuator is reproduced); other requests go to the simulated bus, whose
     actuators are then the IDs that answered in the capture unless ``ids`` are given.
     :class:`~zkzap.link.pcapng.CaptureError` (a :class:`~zkzap.errors.UsageError`) for a
-    file that is not such a capture."""
+    file that is not such a capture.
+
+    ``protocol="modbus"``: 17Lf actuators speaking Modbus RTU (:mod:`zkzap.sim.zap_modbus`;
+    IDs 1..247, default 1; no return mode, no replay)."""
     from ..codec import zap
-    from .zap_actuators import TURNAROUND, Actuator, ActuatorBus, _millis, parse_ids
+    from .zap_actuators import TURNAROUND, ActuatorBus, _millis, parse_ids
+
+    if protocol not in ("ir", "modbus"):
+        raise InvalidValue(f"protocol: {protocol!r}; allowed ir, modbus")
+    if protocol == "modbus" and (replay is not None or return_mode is not None):
+        raise InvalidValue("protocol modbus: a 17Lf has no return mode, and captures are of the IR protocol")
 
     recorded = None
     if replay is not None:
@@ -213,7 +222,7 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
         if ids is None and recorded[1]:
             ids = sorted(recorded[1])
     if ids is None:
-        ids = (0,)
+        ids = (0,) if protocol == "ir" else (1,)
     if baud not in zap.BAUD_TO_CODE:
         raise InvalidValue(f"baud: {baud}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
     if isinstance(ids, str):
@@ -221,15 +230,22 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
     else:
         pairs = [(i, None) if isinstance(i, int) else (int(i[0]), int(i[1])) for i in ids]
     for ident, _ in pairs:
-        zap.check_id(ident, allow_broadcast=False)
+        if protocol == "modbus":
+            from ..codec import modbus
+
+            modbus.check_id(ident, allow_broadcast=False)
+        else:
+            zap.check_id(ident, allow_broadcast=False)
     timing = {}
     for key, value, top, default in (("turnaround", turnaround, 1000.0, TURNAROUND), ("gap", gap, 100.0, 0.0)):
         if isinstance(value, bool):
             raise InvalidValue(f"{key}: {value!r} is not a number of milliseconds")
         timing[key] = default if value is None else _millis(key, value, top)
+    if protocol == "modbus":
+        from .zap_modbus import ModbusActuatorBus as ActuatorBus  # noqa: N814 - the protocol's bus
     bus = ActuatorBus([], state_path=state, echo=bool(echo), **timing)
     if not (state and bus.load_state()):
-        bus.actuators = [Actuator(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
+        bus.actuators = [bus.actuator_class(n, ident, b or baud) for n, (ident, b) in enumerate(pairs)]
         if return_mode is not None:
             if return_mode not in (0, 1, 2):
                 raise InvalidValue(f"return_mode: {return_mode!r}; allowed 0, 1, 2")

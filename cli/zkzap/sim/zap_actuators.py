@@ -107,10 +107,10 @@ FAULT_KINDS = {
     "overload": "overload", "voltage": "voltage", "silent": "silent", "no-reply": "silent",
     "noreply": "silent", "mute": "silent", "corrupt": "corrupt", "checksum": "corrupt",
     "truncate": "truncate", "truncated": "truncate", "wrong-id": "wrong-id", "delay": "delay",
-    "stuck": "stuck", "echo": "echo",
+    "stuck": "stuck", "echo": "echo", "locked": "locked",
 }
 FAULT_HELP = ("overload, voltage[=V], silent, corrupt, truncate[=N], wrong-id[=ID], delay=MS, stuck, "
-              "echo")
+              "echo, locked (Modbus)")
 #: Faults that change replies (COUNT applies to them).
 REPLY_FAULTS = ("silent", "corrupt", "truncate", "wrong-id", "delay")
 
@@ -222,7 +222,15 @@ def parse_ids(text: str):
 
 
 class Actuator:
-    """One simulated 12Lf. ``slot`` is its place on the bus (stable across ID changes)."""
+    """One simulated 12Lf. ``slot`` is its place on the bus (stable across ID changes).
+
+    The motion model speaks register names (goal-position, goal-speed, present-current, ...);
+    another protocol family's actuator (:mod:`zkzap.sim.zap_modbus`) keeps its own control table
+    behind :meth:`_peek`/:meth:`_poke` and its own scale (:attr:`POSITION_MAX`, :attr:`SPEED_MAX`)."""
+
+    #: The highest position and the goal speed of full speed.
+    POSITION_MAX = 4095
+    SPEED_MAX = 1023
 
     def __init__(self, slot: int, ident: int = 0, baud: int = 57600):
         self.slot = slot
@@ -330,7 +338,7 @@ class Actuator:
         velocity = 0.0
         if driving and not self.stuck:
             goal = self._peek(R["goal-position"])
-            velocity = FULL_SPEED * self.speed() / 1023.0
+            velocity = FULL_SPEED * self.speed() / self.SPEED_MAX
             gap = goal - self.pos
             step = velocity * dt
             if abs(gap) <= step:
@@ -341,7 +349,7 @@ class Actuator:
         self._refresh(driving, velocity)
 
     def _refresh(self, driving: bool, velocity: float) -> None:
-        self._poke(R["present-position"], max(0, min(4095, round(self.pos))))
+        self._poke(R["present-position"], max(0, min(self.POSITION_MAX, round(self.pos))))
         self._poke(R["moving"], 1 if driving else 0)
         duty = self.speed() if driving else 0
         if duty and self._peek(R["goal-position"]) > self.pos:
@@ -476,6 +484,16 @@ class Actuator:
             return None
         return done + self.turnaround, reply, baud
 
+    @staticmethod
+    def _sender(reply) -> int:
+        """The ID a reply carries."""
+        return reply[3]
+
+    @staticmethod
+    def _repack(reply, ident):
+        """``reply`` as if ``ident`` had sent it (the wrong-id fault)."""
+        return zap.packet(ident, reply[5], reply[6:-1])
+
     def apply_faults(self, t, reply):
         """Reply faults: returns (t, reply) or None (silent)."""
         for kind in REPLY_FAULTS:
@@ -491,8 +509,8 @@ class Actuator:
             if kind == "delay":
                 t += (20.0 if f.value is None else f.value) / 1000.0
             elif kind == "wrong-id":
-                other = (reply[3] + 1) % 254 if f.value is None else int(f.value)
-                reply = zap.packet(other, reply[5], reply[6:-1])
+                other = (self._sender(reply) + 1) % 254 if f.value is None else int(f.value)
+                reply = self._repack(reply, other)
             elif kind == "corrupt":
                 reply = reply[:-1] + bytes(((reply[-1] ^ 0x5A),))
             elif kind == "truncate":
@@ -518,8 +536,8 @@ class Actuator:
                 raise InvalidValue(f"{name}: {value!r} is out of range; allowed {reg.describe_range()}")
             self._poke(reg, value)
         pos = st.get("position", 0)
-        if not isinstance(pos, int) or not 0 <= pos <= 4095:
-            raise InvalidValue(f"position: {pos!r} is out of range; allowed 0..4095")
+        if not isinstance(pos, int) or not 0 <= pos <= self.POSITION_MAX:
+            raise InvalidValue(f"position: {pos!r} is out of range; allowed 0..{self.POSITION_MAX}")
         self.pos = float(pos)
         self.power_on(0.0)
 
@@ -551,6 +569,11 @@ class ActuatorBus:
     was replying, ``actuators`` when two actuators replied at once); ``on_collision`` is called
     with each.
     """
+
+    #: The protocol family's actuator, framer and state-file format.
+    actuator_class = Actuator
+    framer_class = ZapFramer
+    state_format = STATE_FORMAT
 
     def __init__(self, actuators, *, state_path=None, echo=False, turnaround=TURNAROUND, gap=0.0):
         self.actuators = list(actuators)
@@ -593,6 +616,9 @@ class ActuatorBus:
         if kind == "echo":
             self.echo = True
             return
+        if kind == "locked":
+            raise InvalidValue("fault: locked is a Modbus actuator's (parameters locked: exception 6); "
+                               "the IR protocol has no such reply")
         targets = self._targets(ident)
         if not targets:
             raise InvalidValue(f"fault: no actuator with ID {ident} on the simulated bus")
@@ -639,8 +665,8 @@ class ActuatorBus:
         self._rx_free = start + byte * len(data)
         framer = self._framers.get(baud)
         if framer is None:
-            framer = self._framers[baud] = ZapFramer()
-        if len(data) >= 7 and data[4] + 5 == len(data) or len(data) < 7:
+            framer = self._framers[baud] = self.framer_class()
+        if self._single(data):
             self._hear(data, 0, start, byte, baud, framer)      # one packet (or part of one)
             return
         # several packets (or bytes besides one): each is heard when its own last byte is in,
@@ -682,15 +708,24 @@ class ActuatorBus:
         if self.on_collision is not None:
             self.on_collision(event)
 
-    def _dispatch(self, pkt: bytes, now: float, baud) -> None:
+    @staticmethod
+    def _single(data) -> bool:
+        """Whether one write's bytes are one packet (or part of one), heard as a whole."""
+        return len(data) >= 7 and data[4] + 5 == len(data) or len(data) < 7
+
+    def _addressed(self, pkt: bytes, listeners: list):
+        """The actuators among ``listeners`` a packet addresses (None: not a command)."""
         ident, code = pkt[3], pkt[5]
         if not zap.is_command(code):
-            return                         # feedback from someone else: not for actuators
-        listeners = [a for a in self.actuators if baud is None or a.baud == baud]
+            return None                    # feedback from someone else: not for actuators
         if ident == zap.BROADCAST:
-            targets = listeners
-        else:
-            targets = [a for a in listeners if a.ident == ident]
+            return listeners
+        return [a for a in listeners if a.ident == ident]
+
+    def _dispatch(self, pkt: bytes, now: float, baud) -> None:
+        targets = self._addressed(pkt, [a for a in self.actuators if baud is None or a.baud == baud])
+        if targets is None:
+            return
         replies = []
         stored = False
         for a in targets:
@@ -781,7 +816,7 @@ class ActuatorBus:
         (:func:`zkzap.outfile.write_whole`: atomically, keeping the file's mode)."""
         if not self.state_path:
             return
-        doc = {"format": STATE_FORMAT, "actuators": [a.state() for a in self.actuators]}
+        doc = {"format": self.state_format, "actuators": [a.state() for a in self.actuators]}
         from ..outfile import write_whole
 
         write_whole(self.state_path, json.dumps(doc, indent=1) + "\n", what="state")
@@ -800,12 +835,12 @@ class ActuatorBus:
             doc, _ = read(path, "state")
         except UsageError as e:            # unreadable, not UTF-8, not JSON: FILE:LINE: what
             raise InvalidValue(str(e) if str(e).startswith("state: ") else f"state: {e}") from None
-        if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT or \
+        if not isinstance(doc, dict) or doc.get("format") != self.state_format or \
                 not isinstance(doc.get("actuators"), list) or not doc["actuators"]:
-            raise InvalidValue(f"state {path}: not a zkzap actuator-bus state file (format {STATE_FORMAT})")
+            raise InvalidValue(f"state {path}: not a zkzap actuator-bus state file (format {self.state_format})")
         actuators = []
         for i, st in enumerate(doc["actuators"]):
-            a = Actuator(i)
+            a = self.actuator_class(i)
             try:
                 a.restore(st)
             except (ValueError, TypeError, AttributeError) as e:
@@ -827,8 +862,8 @@ def _millis(key, value, top=1000.0) -> float:
     return ms / 1000.0
 
 
-def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_mode=None,
-                 voltage=None, turnaround=None, gap=None, **unknown) -> ActuatorBus:
+def from_options(ids=None, state=None, baud="57600", echo="0", faults="", return_mode=None,
+                 voltage=None, turnaround=None, gap=None, protocol="ir", **unknown) -> ActuatorBus:
     """Build a bus from string options (a ``sim://zap?...`` query or ``zkzap sim zap``).
 
     ``ids``: ``1,2,5-8`` (``ID@BAUD`` for one actuator at another baud rate); ``baud``: the
@@ -837,9 +872,12 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
     supply voltage; ``turnaround``: milliseconds from a command's last byte to the reply's first
     (default 2); ``gap``: milliseconds between two reply bytes (default 0); ``state``: a JSON
     file keeping stored registers across runs (when it exists
-    it defines the bus and ``ids``/``baud``/``return_mode`` are not applied).
+    it defines the bus and ``ids``/``baud``/``return_mode`` are not applied); ``protocol``:
+    ``ir`` (12Lf actuators, IDs 0..253, default 0) or ``modbus`` (17Lf actuators,
+    :mod:`zkzap.sim.zap_modbus`: IDs 1..247, default 1; no return mode).
     """
-    allowed = ("ids", "state", "baud", "echo", "faults", "return_mode", "voltage", "turnaround", "gap", "speed")
+    allowed = ("ids", "state", "baud", "echo", "faults", "return_mode", "voltage", "turnaround", "gap", "speed",
+               "protocol")
     if len(unknown) == 1:
         raise unknown_name("zap simulator", next(iter(unknown)), allowed, noun="option")
     if unknown:
@@ -850,11 +888,22 @@ def from_options(ids="0", state=None, baud="57600", echo="0", faults="", return_
         line = -1
     if line not in zap.BAUD_TO_CODE:
         raise InvalidValue(f"baud: {baud!r}; allowed {', '.join(str(v) for v in sorted(zap.BAUD_TO_CODE))}")
-    bus = ActuatorBus([], state_path=state or None, echo=parse_flag("echo", echo),
+    cls = ActuatorBus
+    if protocol not in (None, "", "ir"):
+        if protocol != "modbus":
+            raise InvalidValue(f"protocol: {protocol!r}; allowed ir, modbus")
+        if return_mode not in (None, ""):
+            raise InvalidValue("return_mode: a Modbus actuator has no feedback-return-mode (it answers "
+                               "every unicast request)")
+        from .zap_modbus import ModbusActuatorBus as cls, parse_ids as modbus_ids
+    if ids is None:
+        ids = "0" if cls is ActuatorBus else "1"
+    pairs = parse_ids(ids) if cls is ActuatorBus else modbus_ids(ids)
+    bus = cls([], state_path=state or None, echo=parse_flag("echo", echo),
                       turnaround=TURNAROUND if turnaround in (None, "") else _millis("turnaround", turnaround),
                       gap=0.0 if gap in (None, "") else _millis("gap", gap, 100.0))
     if not (state and bus.load_state()):
-        bus.actuators = [Actuator(i, ident, b or line) for i, (ident, b) in enumerate(parse_ids(ids))]
+        bus.actuators = [bus.actuator_class(i, ident, b or line) for i, (ident, b) in enumerate(pairs)]
         if return_mode not in (None, ""):
             if str(return_mode) not in ("0", "1", "2"):
                 raise InvalidValue(f"return_mode: {return_mode!r}; allowed 0, 1, 2")
