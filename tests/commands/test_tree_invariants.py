@@ -102,6 +102,9 @@ def files(tmp_path_factory):
     (d / "path.csv").write_text("t,id,position\n0,1,100\n0.1,1,200\n")
     out["zap path"] = str(d / "path.csv")
     out["frames"] = str(d / "zk.pcapng")
+    (d / "cell.log").write_text("raw=1.5\n" * 20)
+    (d / "stand.toml").write_text(f'[[sensor]]\nsource = "{d / "cell.log"}"\n[[sensor.channel]]\nname = "raw"\n')
+    out["sensors"] = str(d / "stand.toml")
     outs = d / "outputs"
     outs.mkdir()
     made = []

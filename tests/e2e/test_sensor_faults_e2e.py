@@ -29,6 +29,7 @@ class Cell:
         self.path = os.ttyname(self.slave)
         self.stop = threading.Event()
         self.sent = 0
+        self.lines = lines
 
         def talk():
             t0 = time.monotonic()
@@ -38,7 +39,7 @@ class Cell:
                 while not self.stop.is_set():
                     if life is not None and time.monotonic() - t0 > life:
                         return
-                    os.write(self.master, lines[self.sent % len(lines)].encode() + b"\r\n")
+                    os.write(self.master, self.lines[self.sent % len(self.lines)].encode() + b"\r\n")
                     self.sent += 1
                     time.sleep(period)
             except OSError:
@@ -137,3 +138,38 @@ def test_every_summary_counts_the_same_lines_and_the_port_closes_cleanly(cli, tm
     got = dict(zip(cells_[head], cells_[head + 1]))
     assert (got["lines"], got["readings"], got["skipped"], got["rejected"]) == \
         (aux["lines"], aux["readings"], aux["skipped"], aux["rejected"])
+
+
+def test_tare_and_calibrate_write_the_file_and_a_run_records_what_it_used(cli, tmp_path, cells):
+    import subprocess
+    import sys
+
+    tomllib = pytest.importorskip("tomllib")
+    cell = cells(["raw=101.5"])
+    stand = tmp_path / "stand.toml"
+    stand.write_text(f'# the stand\n[[sensor]]\nname = "load cell"\nsource = "{cell.path}@115200"\n\n'
+                     '[[sensor.channel]]\nname = "thrust_n"\nkey = "raw"\nunit = "N"\nrange = [-50, 2000]\n')
+    r = cli("zk", "sensor", "tare", str(stand), "--average", "0.3")
+    assert r.exit_code == 0 and "thrust_n tare 101.5 N raw" in r.stderr, r
+    assert "# the stand" in stand.read_text()                                  # the file is kept, comments too
+    exe = os.path.join(os.path.dirname(sys.executable), "zk")
+    p = subprocess.Popen([exe, "sensor", "calibrate", str(stand), "--point", "0", "--point", "98.0665",
+                          "--average", "0.3"], stdin=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for load in ("101.5", "1101.5"):
+        cell_lines = [f"raw={load}"]
+        while "press Enter" not in p.stderr.readline():
+            pass
+        cell.lines = cell_lines
+        time.sleep(0.1)                                    # the lines on their way
+        p.stdin.write("\n")
+        p.stdin.flush()
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err
+    cal = tomllib.loads(stand.read_text())["sensor"][0]["channel"][0]["calibration"]
+    assert cal["tare"] == 101.5 and cal["points"] == [[0.0, 0.0], [1000.0, 98.0665]] and cal["date"].endswith("Z")
+    assert cal["measured"] == [[101.5, 0.0], [1101.5, 98.0665]]
+    cell.lines = ["raw=601.5"]                                      # half the reference load
+    rows, (step,), s, _ = _run(cli, tmp_path, str(stand), "--thrust-from", "thrust_n")
+    assert rows[-1]["thrust_n"] == "49.03325" and float(step["thrust_from_kg_mean"]) == 5.0
+    (chan,) = s["aux"][0]["channels"]
+    assert chan["calibration"] == cal and s["aux"][0]["declared_in"] == str(stand)

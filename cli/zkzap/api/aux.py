@@ -250,8 +250,9 @@ class Spec:
     """One ``--aux SOURCE`` as given: ``kind`` (stdin, fifo, file, serial), ``path``, ``baud``, and
     its declaration ``decl`` (:class:`~zkzap.api.sensors.SensorDecl`; None: nothing declared)."""
 
-    def __init__(self, text, decl=None):
+    def __init__(self, text, decl=None, follow=True):
         self.decl = decl
+        self.follow = follow                # a file: followed as it grows (False: read to its end)
         self.text = text = str(text).strip()
         if not text:
             raise UsageError("aux: an empty source; give a serial port, a URL, a FIFO, a file or -")
@@ -352,7 +353,7 @@ class _Reader(threading.Thread):
         while not self.stop.is_set():
             chunk = stream.readline(MAX_LINE)
             if not chunk:
-                if kind == "file":
+                if kind == "file" and self.spec.follow:
                     time.sleep(0.05)                              # followed as it grows
                     continue
                 return                                            # a FIFO's writer or stdin closed

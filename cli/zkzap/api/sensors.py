@@ -77,7 +77,7 @@ class Calibration:
     at least two, x strictly increasing) extended along its end segments. ``date`` (ISO 8601)
     and ``source`` (the file it was read from) say where it came from."""
 
-    def __init__(self, tare=0.0, scale=1.0, points=(), date=None, what="calibration"):
+    def __init__(self, tare=0.0, scale=1.0, points=(), date=None, what="calibration", measured=()):
         self.tare = _number(tare, f"{what}: tare")
         self.scale = _number(scale, f"{what}: scale")
         if self.scale == 0:
@@ -97,6 +97,9 @@ class Calibration:
             raise UsageError(f"{what}: a curve (points) and a scale: give one of them")
         self.points = pts
         self.date = None if date is None else str(date)
+        #: the readings it was computed from, ``[(raw, reference)]`` (``zk sensor calibrate``)
+        self.measured = [(_number(a, f"{what}: measured"), _number(b, f"{what}: measured"))
+                         for a, b in (measured or ())]
 
     @classmethod
     def from_doc(cls, doc, what="calibration"):
@@ -104,10 +107,14 @@ class Calibration:
             return None
         if not isinstance(doc, dict):
             raise UsageError(f"{what}: a table of tare, scale, points and date")
-        unknown = set(doc) - {"tare", "scale", "points", "date"}
+        unknown = set(doc) - {"tare", "scale", "points", "date", "measured"}
         if unknown:
-            raise UsageError(f"{what}: unknown key {sorted(unknown)[0]!r}; allowed tare, scale, points, date")
-        return cls(doc.get("tare", 0.0), doc.get("scale", 1.0), doc.get("points") or (), doc.get("date"), what)
+            raise UsageError(f"{what}: unknown key {sorted(unknown)[0]!r}; allowed tare, scale, points, date, measured")
+        measured = doc.get("measured") or []
+        if not isinstance(measured, list) or not all(isinstance(m, list) and len(m) == 2 for m in measured):
+            raise UsageError(f"{what}: measured: a list of [raw, reference]")
+        return cls(doc.get("tare", 0.0), doc.get("scale", 1.0), doc.get("points") or (), doc.get("date"), what,
+                   measured)
 
     def apply(self, raw: float) -> float:
         """The calibrated value of a raw reading."""
@@ -134,6 +141,8 @@ class Calibration:
             out["scale"] = self.scale
         if self.date:
             out["date"] = self.date
+        if self.measured:
+            out["measured"] = [list(m) for m in self.measured]
         return out
 
 
@@ -376,3 +385,83 @@ def _find_channel(tree, index, channel, name):
     except (KeyError, IndexError, TypeError):
         pass
     raise UsageError(f"sensors file {name}: no channel {channel} in sensor {index + 1}")
+
+
+def uncalibrated(decl) -> SensorDecl:
+    """A copy of ``decl`` whose channels give their raw readings: no calibration, no range (what
+    ``zk sensor tare`` and ``calibrate`` measure)."""
+    chans = None
+    if decl.channels is not None:
+        chans = [Channel(c.name, c.key, c.unit, None, None, c.stale_s, None, c.declared) for c in decl.channels]
+    return SensorDecl(decl.source, decl.format, chans, decl.label, decl.stale_s, decl.file, decl.index)
+
+
+class Probe:
+    """Declared sensors read outside an engine session (``zk sensor``): readings stamped on a
+    clock of their own (seconds since the first reading was awaited). ``raw``: the channels'
+    raw readings (:func:`uncalibrated`); ``follow``: a file source is followed as it grows (False:
+    read to its end)."""
+
+    def __init__(self, decls, *, timeout=2.0, raw=False, notify=None, follow=True):
+        import time
+
+        from .. import checking
+        from .aux import AuxHub, Spec
+
+        self.decls = [uncalibrated(d) if raw else d for d in decls]
+        specs = [Spec(d.source, d, follow) for d in self.decls]        # a source that is none: exit 2
+        checking.effect("sensors")         # opening a sensor's port is as far as a check goes
+        self.hub = AuxHub(specs, notify=notify)
+        self._time = time
+        t0 = time.monotonic()
+        self.hub.start(timeout)
+        self.hub.bind(lambda: time.monotonic() - t0)
+
+    def readings(self, duration=None, count=None, stop=None):
+        """``(t, Reading)`` as they come, for ``duration`` seconds or ``count`` readings (or until
+        ``stop()`` is true); a source that ends ends it too."""
+        n = 0
+        clock = self.hub._clock
+        while duration is None or clock() < duration:
+            got = self.hub.drain()
+            for t, reading in got:
+                yield t, reading
+                n += 1
+                if count is not None and n >= count:
+                    return
+            if stop is not None and stop():
+                return
+            if not got:
+                if all(not r.is_alive() for r in self.hub._readers) and self.hub._queue.empty():
+                    return
+                self._time.sleep(0.02)
+
+    def measure(self, name, seconds) -> dict:
+        """The mean, standard deviation and count of channel ``name``'s valid values that arrive in
+        the next ``seconds`` (none from before); UsageError when none came."""
+        import statistics
+
+        start = self.hub._clock()            # what came before the measurement is not of it
+        values = [r.values[name] for t, r in self.readings(duration=start + seconds) if t >= start and name in r.values]
+        if not values:
+            raise UsageError(f"sensor: no valid value of {name} in {seconds:g} s")
+        return {"mean": statistics.fmean(values), "std": statistics.stdev(values) if len(values) > 1 else 0.0,
+                "n": len(values)}
+
+    def summary(self) -> list:
+        return self.hub.summary()
+
+    def close(self) -> None:
+        self.hub.close()
+
+
+def solve(tare, points) -> Calibration:
+    """The calibration of measured ``points`` ``[(raw, reference)]`` over ``tare`` (raw at no
+    load): one point gives the scale, two or more the curve through them (x = raw - tare)."""
+    pts = [(raw - tare, ref) for raw, ref in points]
+    if len(pts) == 1:
+        x, ref = pts[0]
+        if x == 0:
+            raise UsageError(f"calibrate: the reading at {ref:g} is the tare's ({tare:g}): no load reached the sensor")
+        return Calibration(tare, ref / x, measured=points)
+    return Calibration(tare, points=pts, measured=points)

@@ -235,6 +235,7 @@ ZK_COMMANDS = {
     "check": (".zk.check", "check", "Pre-flight check: watch the ECU, test limits, give a verdict."),
     "report": (".zk.report", "report", "Render a run's CSV (or raw log) as a report with plots."),
     "logbook": (".zk.logbook", "logbook", "List the runs in an engine logbook, with totals."),
+    "sensor": (".zk.sensor", "sensor", "An external sensor of the stand: read, tare, calibrate."),
     "states": (".zk.tables", "states", "List the engine states (appendix table)."),
     "errors": (".zk.tables", "errors", "List the engine error codes (appendix table)."),
     "fields": (".zk.tables", "fields", "List every control and status field with bits, unit and range."),

@@ -412,7 +412,7 @@ class InputPath(FilePath):
     (:func:`check_files`, run before every command) knows what no output may be; ``holds``
     says what it holds (``schedule``, ``fleet``, ``zk capture``, ``zap capture``, ``limits``,
     ``run``, ``steps``, ``summary``, ``logbook``, ``zk batch``, ``zap batch``, ``frames``: hex,
-    raw bytes or a capture); ``label`` names it in messages (default: the option, or the
+    raw bytes or a capture; ``sensors``: a sensors file, or a sensor's source); ``label`` names it in messages (default: the option, or the
     argument's name in capitals)."""
 
     def __init__(self, holds, label=None):
