@@ -183,3 +183,18 @@ def test_load_reads_a_file_and_names_it(tmp_path):
     path.write_bytes(b"0,10\n\xff\xfe\n")
     with pytest.raises(UsageError, match=r"run\.csv:2: not UTF-8 text \(byte 0xFF at byte 5\)"):
         Schedule.load(str(path))
+
+
+def test_ramps_are_no_steps_and_repeated_targets_are_one_step():
+    from zkzap.commands.zk.profile import example_text
+
+    step = Schedule.parse(example_text(), name="x")
+    assert [(r.target_text(), a, b) for _, r, a, b in step.steps()] == [
+        ("0 %", 0, 25), ("30 %", 25, 40), ("60 %", 40, 55), ("100 %", 55, 62), ("30 %", 62, 70), ("0 %", 70, 75)]
+    assert step.ramps() == []
+    linear = Schedule.parse(example_text(), name="x", interpolate="linear")
+    assert [(r.target_text(), a, b) for _, r, a, b in linear.steps()] == [
+        ("0 %", 0, 20), ("30 %", 25, 35), ("60 %", 40, 50), ("100 %", 55, 60), ("0 %", 70, 75)]
+    assert [(a, b, why) for _, a, b, why in linear.ramps()] == [
+        (20, 25, "ramp 0 % to 30 %"), (35, 40, "ramp 30 % to 60 %"), (50, 55, "ramp 60 % to 100 %"),
+        (60, 62, "ramp 100 % to 30 %"), (62, 70, "ramp 30 % to 0 %")]

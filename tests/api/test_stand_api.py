@@ -144,3 +144,27 @@ def test_limit_bookkeeping_matches_a_direct_count(op, threshold, stream):
     want = None if not values else (max(values) if op in ("<", "<=") else min(values))
     assert s["extreme"] == want
     assert (lims.tripped is not None) == bool(bad)
+
+
+def _fed(rpm, egt=600.0, thrust=5.0):
+    sched = Schedule.parse("0,60\n10,60,standby\n", name="s")
+    avg = StepAverager(sched.steps(), settle=2, average=None)
+    for i in range(100):
+        t = i * 0.1
+        avg.feed(t, {"id": 1, "rpm": rpm(t), "egt_c": egt if not callable(egt) else egt(t)})
+        avg.feed(t + 0.05, {"id": 4, "rpm": rpm(t), "thrust_kg": thrust if not callable(thrust) else thrust(t)})
+    (row,) = avg.rows()
+    return row
+
+
+def test_settling_is_the_drift_across_the_window_on_rpm_egt_and_thrust():
+    # a 2 % rise across the window whose half-means differ by under 1 %: not settled
+    row = _fed(lambda t: 100000 + max(0.0, t - 2) / 8 * 2000)
+    assert row["settled"] is False and "rpm drifted +1.98 %" in row["note"] and "(more than 1 %)" in row["note"]
+    assert row["drift_rpm"] == pytest.approx(2000, rel=0.02) and row["rpm_std"] > 0
+    flat = _fed(lambda t: 100000 + (50 if int(t * 10) % 2 else -50))          # noise, no trend
+    assert flat["settled"] is True and flat["note"] == "" and flat["rpm_std"] == pytest.approx(50, rel=0.05)
+    egt = _fed(lambda t: 100000, egt=lambda t: 600 + 2 * t)                  # +16 °C across 8 s
+    assert egt["settled"] is False and "EGT drifted +16.0 °C across the window (more than 10 °C)" in egt["note"]
+    thrust = _fed(lambda t: 100000, thrust=lambda t: 5.0 + 0.05 * t)         # +0.4 kgf on 5.2
+    assert thrust["settled"] is False and "thrust drifted +7." in thrust["note"]

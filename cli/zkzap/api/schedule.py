@@ -406,14 +406,42 @@ class Schedule:
 
     # --- steps for steady-state reduction ------------------------------------------------------------
     def steps(self) -> list[tuple[int, Row, float, float]]:
-        """``[(number, row, t_start, t_end)]``: each row in state ``run`` that holds for some time
-        (a standby, stop or pwm row is no steady state of the engine)."""
+        """``[(number, row, t_start, t_end)]``: each steady target in state ``run`` that holds for
+        some time (a standby, stop or pwm row is no steady state of the engine). Rows that repeat
+        the target before them (same mode, state and target) are one step, from the first row's
+        time; with ``--interpolate linear`` a row whose target ramps to the next row's is no step
+        (:meth:`ramps`)."""
         out = []
+        for i, r, end in self._segments():
+            if r.state != "run" or self._ramps(i):
+                continue
+            if out and out[-1][3] == r.t and _same_target(out[-1][1], r):
+                out[-1] = (out[-1][0], out[-1][1], out[-1][2], end)
+                continue
+            out.append((len(out) + 1, r, r.t, end))
+        return out
+
+    def ramps(self) -> list[tuple[Row, float, float, str]]:
+        """``[(row, t_start, t_end, why)]``: the rows in state ``run`` whose target ramps to the next
+        row's (``--interpolate linear``): no steady state, so no step."""
+        return [(r, r.t, end, f"ramp {r.target_text()} to {self.rows[i + 1].target_text()}")
+                for i, r, end in self._segments() if r.state == "run" and self._ramps(i)]
+
+    def _segments(self):
         for i, r in enumerate(self.rows[:-1]):
             end = self.rows[i + 1].t
-            if end > r.t and r.state == "run":
-                out.append((len(out) + 1, r, r.t, end))
-        return out
+            if end > r.t:
+                yield i, r, end
+
+    def _ramps(self, i) -> bool:
+        if self.interpolate != "linear":
+            return False
+        r, n = self.rows[i], self.rows[i + 1]
+        return n.mode == r.mode and (r.rpm, r.throttle) != (n.rpm, n.throttle)
+
+
+def _same_target(a, b) -> bool:
+    return a.mode == b.mode and a.state == b.state and a.target_text() == b.target_text()
 
 
 def frames_target(frame, factor):

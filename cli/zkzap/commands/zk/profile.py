@@ -168,7 +168,9 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         if averager is not None:
             summary["steps"] = averager.rows()
             summary["rows_not_steps"] = [{"line": row.line, "target": row.target_text(), "from_s": a, "to_s": b,
-                                          "why": why} for row, a, b, why in averager.skipped]
+                                          "why": why}
+                                         for row, a, b, why in sorted(averager.skipped + sched.ramps(),
+                                                                      key=lambda x: x[1])]
             summary["fuel_density_kg_l"] = averager.density
         steps = (averager.columns(), summary["steps"]) if averager is not None else None
         return steps, summary
@@ -236,22 +238,39 @@ def _print_summary(s):
         "  errors: " + ("; ".join(describe_error(e["code"], e["name"], e["t"]) for e in s["errors"]) or "none"),
     ]
     for st in s.get("steps") or ():
-        mean = st["rpm_mean"]
-        lines.append(f"  step {st['step']} ({st['target']}): "
-                     + ("no frames" if mean is None else
-                        f"rpm {mean:.0f}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}, "
-                        f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kg')}"
-                        + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN*s)" if st["tsfc_g_kn_s"] is not None else "")
-                        + (f"; corrected rpm {st['rpm_corrected']:.0f}, thrust {st['thrust_corrected_kg']:g} kg"
-                           if st.get("thrust_corrected_kg") is not None and st.get("rpm_corrected") is not None
-                           else "")
-                        + (f", TSFC {st['tsfc_corrected_g_kn_s']:g}" if st.get("tsfc_corrected_g_kn_s") is not None
-                           else ""))
-                     + (f" [{st['note']}]" if st["note"] else ""))
+        lines.append(_step_line(st, v))
     for row in s.get("rows_not_steps") or ():
         lines.append(f"  line {row['line']} ({row['target']}, {row['from_s']:g}..{row['to_s']:g} s): "
                      f"{row['why']}, not a step")
     click.echo("\n".join(lines), err=True)
+
+
+def _step_line(st, v):
+    """A step on stderr: its means (± the standard deviation), the thrust TSFC was computed from
+    (the sensor's, when --thrust-from), whether it settled."""
+    mean = st["rpm_mean"]
+    mark = {False: " NOT SETTLED", None: " (no verdict)"}.get(st.get("settled"), "")
+    head = f"  step {st['step']} ({st['target']}){mark}: "
+    if mean is None:
+        return head + "no frames" + (f" [{st['note']}]" if st["note"] else "")
+
+    def pm(key, digits):
+        sd = st.get(key.replace("_mean", "_std"))
+        return "" if sd is None else f" ±{sd:.{digits}f}"
+
+    if st.get("thrust_from") is not None:
+        thrust = (f"thrust {v(_r(st['thrust_from_kg_mean'], 2), ' kgf')}{pm('thrust_from_kg_mean', 2)} "
+                  f"({st['thrust_from']}; ECU {v(_r(st['thrust_kg_mean'], 1), ' kgf')})")
+    else:
+        thrust = f"thrust {v(_r(st['thrust_kg_mean'], 2), ' kgf')}{pm('thrust_kg_mean', 2)}"
+    text = (f"rpm {mean:.0f}{pm('rpm_mean', 0)}, EGT {v(_r(st['egt_c_mean'], 0), ' °C')}{pm('egt_c_mean', 1)}, "
+            f"{thrust}"
+            + (f", TSFC {st['tsfc_g_kn_s']:g} g/(kN·s)" if st["tsfc_g_kn_s"] is not None else ""))
+    if st.get("thrust_corrected_kg") is not None and st.get("rpm_corrected") is not None:
+        text += f"; corrected rpm {st['rpm_corrected']:.0f}, thrust {st['thrust_corrected_kg']:g} kgf"
+    if st.get("tsfc_corrected_g_kn_s") is not None:
+        text += f", TSFC {st['tsfc_corrected_g_kn_s']:g}"
+    return head + text + (f" [{st['note']}]" if st["note"] else "")
 
 
 def _r(x, digits):
