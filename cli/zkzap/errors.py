@@ -238,7 +238,7 @@ def unknown_name(what: str, word: object, choices: Iterable[object], *, noun: st
     if otherwise is None:
         otherwise = f"; allowed {', '.join(choices)}" if len(choices) <= 16 else ""
     hint = did_you_mean(word, choices, otherwise=otherwise)
-    error: InvalidValue = cls(f"{what}: unknown {noun} {str(word)!r}{hint}", name=word,
+    error: InvalidValue = cls(f"{what}: unknown {noun} {clip(repr(str(word)), 60)}{hint}", name=word,
                               suggestions=close_names(word, choices), **facts)
     return error
 

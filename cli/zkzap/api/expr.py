@@ -19,7 +19,7 @@ import math
 import operator
 import re
 
-from ..errors import UsageError, close_names, did_you_mean
+from ..errors import UsageError, clip, close_names, did_you_mean
 
 #: Operators, longest first (the parser tries them in this order).
 OPERATORS = {
@@ -41,9 +41,11 @@ def parse_number(text: str, what: str) -> float:
     try:
         value = float(int(t, 16)) if t.startswith(("0x", "-0x")) else float(t)
     except ValueError:
-        raise ExpressionError(f"{what}: {text.strip()!r} is not a number") from None
+        raise ExpressionError(f"{what}: {clip(repr(text.strip()))} is not a number") from None
+    except OverflowError:             # a hexadecimal integer beyond a float's range
+        raise ExpressionError(f"{what}: {clip(repr(text.strip()))} is out of range (at most 1.8e308)") from None
     if not math.isfinite(value):
-        raise ExpressionError(f"{what}: {text.strip()!r} is not a finite number")
+        raise ExpressionError(f"{what}: {clip(repr(text.strip()))} is not a finite number")
     return value
 
 

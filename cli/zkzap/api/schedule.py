@@ -29,7 +29,7 @@ import csv
 import math
 
 from ..codec import zk
-from ..codec.fields import FieldValueError
+from ..codec.fields import FieldValueError, beyond_float
 from ..errors import UsageError, clip
 from .prestart import EcuLimitError, Plan
 
@@ -93,6 +93,8 @@ def _number(cell, what, where, decimal_comma=False):
         value = float(text)
     except ValueError:
         raise ScheduleError(f"{where}: {what}: {clip(repr(cell.strip()))} is not a number") from None
+    if beyond_float(text, value):
+        raise ScheduleError(f"{where}: {what}: {clip(repr(cell.strip()))} is out of range")
     if not math.isfinite(value):
         raise ScheduleError(f"{where}: {what}: {clip(repr(cell.strip()))} is not a finite number")
     return value

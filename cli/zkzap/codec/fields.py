@@ -11,7 +11,9 @@ with no per-field interpretation.
 
 from __future__ import annotations
 
-from ..errors import InvalidValue, unknown_name
+import math
+
+from ..errors import InvalidValue, clip, unknown_name
 
 
 class FieldValueError(InvalidValue):
@@ -227,7 +229,7 @@ class Field:
         if not isinstance(raw, int) or isinstance(raw, bool):
             raise FieldValueError(f"{label}: {raw!r} is not an integer")
         if not self.lo <= raw <= self.hi:
-            raise FieldValueError(f"{label}: raw value {raw} is out of range {self.lo}..{self.hi}"
+            raise FieldValueError(f"{label}: raw value {quote_value(raw)} is out of range {self.lo}..{self.hi}"
                                   f" ({self.width}-bit field)")
         return raw
 
@@ -251,31 +253,34 @@ class Field:
                                        otherwise=f"; allowed {self.describe_range(ctx)}",
                                        cls=FieldValueError) from None
             if not isinstance(value, int) or not self.lo <= value <= self.hi:
-                raise self._range_error(value, ctx)
+                raise self._range_error(quote_value(value), ctx)
             return value, None
         if self.values is not None:
             for raw, phys in self.values.items():
-                if phys == value or str(phys) == str(value):
+                if phys == value or (isinstance(value, str) and str(phys) == value.strip()):
                     return raw, None
-            raise self._range_error(value, ctx)
+            raise self._range_error(quote_value(value), ctx)
         if isinstance(value, str):
             try:
                 value = float(value) if any(c in value for c in ".eE") else int(value, 0)
             except ValueError:
-                raise FieldValueError(f"{self.label}: {value!r} is not a number") from None
+                raise FieldValueError(f"{self.label}: {clip(repr(value))} is not a number") from None
+        if not isinstance(value, (int, float)):
+            raise FieldValueError(f"{self.label}: {clip(repr(value))} is not a number")
         if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
             raise FieldValueError(f"{self.label}: {value} is not a finite number; allowed "
                                   f"{self.describe_range(ctx)}")
         s = self.scale_for(ctx)
         if s is None:
             raise FieldValueError(f"{self.label}: needs {self.scale.param.replace('_', '-')} to convert")
-        exact = (value - self.offset) / s
-        raw = int(round(exact))
+        # The range first, compared exactly (an int of 400 digits, 1e308): only a value in range
+        # is converted, so no arithmetic on it can overflow.
         lo_p, hi_p = self._phys(self.lo, s), self._phys(self.hi, s)
         eps = abs(s) * 1e-6
         if value < min(lo_p, hi_p) - eps or value > max(lo_p, hi_p) + eps:
-            raise self._range_error(_fmt(value), ctx)
-        raw = min(max(raw, self.lo), self.hi)
+            raise self._range_error(quote_value(value), ctx)
+        exact = (value - self.offset) / s
+        raw = min(max(int(round(exact)), self.lo), self.hi)
         note = None
         if abs(exact - raw) > 1e-6:
             unit = f" {self.unit}" if self.unit else ""
@@ -311,6 +316,23 @@ class Field:
             if b == byte:
                 m |= ((1 << (hi - lo + 1)) - 1) << lo
         return m
+
+
+def beyond_float(text: str, value: float) -> bool:
+    """Whether ``value``, read from ``text``, is infinite only because the finite number written
+    (``1e400``, 400 digits) is beyond a float's range: out of range, not "not finite"."""
+    return math.isinf(value) and not any(w in str(text).lower() for w in ("inf", "nan"))
+
+
+def quote_value(x) -> str:
+    """A value as a message quotes it: :func:`_fmt`, a huge float in ``g`` form, an integer of
+    many digits by its count."""
+    if isinstance(x, float) and abs(x) >= 1e15:
+        return f"{x:.6g}"
+    if isinstance(x, int) and abs(x) >= 10 ** 18:
+        digits = len(str(abs(x))) if abs(x) < 10 ** 4000 else "over 4000"
+        return f"{'a negative' if x < 0 else 'an'} integer of {digits} digits"
+    return _fmt(x) if isinstance(x, (int, float)) else clip(repr(x) if isinstance(x, str) else str(x))
 
 
 def _fmt(x) -> str:

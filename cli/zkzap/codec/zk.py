@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     #: A decoded record: a dict of JSON-ready values.
     Record: TypeAlias = dict[str, Any]
 from .crc import crc8_maxim
-from .fields import OUT_OF_RANGE, ContextScale, Field, FieldValueError, Layout, VersionScale
+from .fields import OUT_OF_RANGE, ContextScale, Field, FieldValueError, Layout, VersionScale, quote_value
 
 CONTROL_HEAD = 0xFF
 STATUS_HEAD = 0xF0
@@ -130,7 +130,7 @@ class Param:
     def check(self, value: int) -> int:
         """``value`` if it is within the parameter's range; FieldValueError otherwise."""
         if not isinstance(value, int) or not self.lo <= value <= self.hi:
-            raise FieldValueError(f"{self.label}: {value} is out of range; allowed {self.lo}..{self.hi}")
+            raise FieldValueError(f"{self.label}: {quote_value(value)} is out of range; allowed {self.lo}..{self.hi}")
         return value
 
 
@@ -374,7 +374,7 @@ def _check_byte(key, value, mask, cmd):
     """A reserved-bits value: only the bits no field of ``cmd`` uses (the ID nibble and the
     fields' bits are never reachable this way)."""
     if not isinstance(value, int) or value < 0 or value > 0xFF:
-        raise FieldValueError(f"{key}: {value!r} is out of range; allowed bits {mask:#04x}")
+        raise FieldValueError(f"{key}: {quote_value(value)} is out of range; allowed bits {mask:#04x}")
     if value & ~mask:
         where = (f"allowed bits {mask:#04x}" if mask
                  else f"command {cmd.id} ({cmd.name}) has no reserved bits in that byte")

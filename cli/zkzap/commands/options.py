@@ -10,7 +10,8 @@ import sys
 
 import click
 
-from ..errors import UsageError
+from ..codec.fields import beyond_float, quote_value
+from ..errors import UsageError, clip
 from ..io import FORMATS
 from . import Command
 
@@ -77,9 +78,12 @@ def _number(value, kind, allowed, param, ctx, fail):
             number = int(text, 0) if kind is int else float(text)
         except ValueError:
             what = "an integer" if kind is int else "a number"
-            fail(f"{value!r} is not {what}{allowed}", param, ctx)
-    if not math.isfinite(number):
-        fail(f"{value!r} is not a finite number{allowed}", param, ctx)
+            fail(f"{clip(repr(value))} is not {what}{allowed}", param, ctx)
+    if isinstance(number, float) and not math.isfinite(number):     # an int of any size is finite
+        if beyond_float(value, number):
+            # a finite number beyond a float's range (1e400, 400 digits): too large, not infinite
+            fail(f"{clip(repr(value))} is out of range{allowed or ' (a float reaches 1.8e308)'}", param, ctx)
+        fail(f"{clip(repr(value))} is not a finite number{allowed}", param, ctx)
     return kind(number)
 
 
@@ -121,7 +125,8 @@ class _NumberRange:
         hi_bad = self.max is not None and (number >= self.max if self.max_open else number > self.max)
         if lo_bad or hi_bad:
             extra = self.hint(number) if self.hint is not None else None
-            self.fail(f"{number:g} is out of range; allowed {self.allowed()}" + (f" ({extra})" if extra else ""),
+            shown = f"{number:g}" if isinstance(number, float) else quote_value(number)
+            self.fail(f"{shown} is out of range; allowed {self.allowed()}" + (f" ({extra})" if extra else ""),
                       param, ctx)
         return number
 
