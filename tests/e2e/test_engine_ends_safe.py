@@ -120,6 +120,20 @@ def test_every_signal_that_ends_a_program_ends_the_session_safely(start_sim, tmp
     _signal_ends_it_safely(start_sim, tmp_path, argv, sig, random.Random(signals.name(sig)), None)
 
 
+def spawn(argv, line=None, *, stdout=subprocess.DEVNULL, env=None):
+    """``zkzap ARGV`` as a process (fed ``line`` on a stdin kept open, the shell's way), killed
+    by a watchdog after 60 s; returns it and the watchdog (to cancel)."""
+    proc = subprocess.Popen([executable("zkzap"), *argv], stdin=subprocess.DEVNULL if line is None else subprocess.PIPE,
+                            stdout=stdout, stderr=subprocess.PIPE, text=True, env=env or clean_env())
+    if line is not None:
+        proc.stdin.write(line)                                  # kept open: the shell waits for more
+        proc.stdin.flush()
+    watchdog = threading.Timer(60, proc.kill)
+    watchdog.daemon = True
+    watchdog.start()
+    return proc, watchdog
+
+
 def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
     """Run ``argv`` (fed ``line`` on a stdin kept open), send ``sig`` at a moment ``rng`` picks,
     and check the exit status and the state the ECU was left in."""
@@ -128,15 +142,7 @@ def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
     moment = rng.uniform(0.0, 0.3 if early else 0.6)
     url, _ = start_sim(["zk", "--pty", "--speed", "10"])
     env = clean_env(PYTHONPROFILEIMPORTTIME="1") if early else clean_env()
-    proc = subprocess.Popen([executable("zkzap"), *argv, "--capture", str(capture), "-p", url],
-                            stdin=subprocess.DEVNULL if line is None else subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
-    if line is not None:
-        proc.stdin.write(line)                                  # kept open: the shell waits for more
-        proc.stdin.flush()
-    watchdog = threading.Timer(60, proc.kill)
-    watchdog.daemon = True
-    watchdog.start()
+    proc, watchdog = spawn([*argv, "--capture", str(capture), "-p", url], line, env=env)
     try:
         if early:
             # from the moment the zkzap package is imported its handlers are in place (before

@@ -25,7 +25,7 @@ import sys
 import click
 
 from .. import signals
-from ..errors import INTERRUPTED, MORE_TO_DO, OK, USAGE, UsageError, ZkzapError
+from ..errors import INTERRUPTED, MORE_TO_DO, OK, OUTPUT_ERROR, USAGE, UsageError, ZkzapError
 from . import PipeClosed
 from .options import exits, note
 
@@ -327,7 +327,11 @@ class _Records:
     without spare time (the ECU's) has each record written at once."""
 
     def __init__(self, out, link):
+        from ..offload import Lane
+
         self.out = out
+        # written off the bus's and the engine's path: a stdout nobody reads never holds a line up
+        self.lane = Lane("stdout" if out is sys.stdout else getattr(out, "name", "the records"))
         self.spare = getattr(link, "spare", None)
         self.held = None               # (line, exit, printed, messages) not written yet
         self.queued = False            # the bus holds a call of _write (at most one)
@@ -358,7 +362,10 @@ class _Records:
         if code:
             errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
             rec["error"] = errors[-1] if errors else None
-        self.out.write(_encode(rec) + "\n")
+        self.lane.call(self._emit, _encode(rec) + "\n")
+
+    def _emit(self, text) -> None:
+        self.out.write(text)
         self.out.flush()
 
     def flush(self) -> None:
@@ -366,7 +373,17 @@ class _Records:
         failed, self.failed = self.failed, None
         if failed is not None:
             raise failed
+        self.lane.check()
         self._write()
+
+    def close(self) -> bool:
+        """Write what is left (at most :data:`zkzap.offload.DRAIN_S`); False: the output is
+        stalled (said on stderr; the writes left are not made)."""
+        if self.lane.finish():
+            self.lane.check()
+            return True
+        note(self.lane.lost())
+        return False
 
 
 def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_baud_after=()):
@@ -401,6 +418,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                     code = signals.status(signum)   # stopped, though the command returned
                 if messages:
                     records.flush()                # the records before, then this line's messages
+                    records.lane.drain()
                     sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
                     sys.stderr.flush()
                 records.put(line, code, printed, messages)
@@ -409,7 +427,11 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 if code == INTERRUPTED or signals.terminated_status(code) or (code and not keep_going):
                     break
         finally:
-            records.flush()
+            try:
+                records.flush()
+            finally:
+                if not records.close() and not first:
+                    first = OUTPUT_ERROR
         signum = stop.requested()
     if signum is not None:
         where = f"the current transaction of {last.where} ({last.text})" if last else "its start"

@@ -6,8 +6,10 @@ reads a capture back as frames.
 :func:`zkzap.link.port.open_port` then wraps the port it opens in a :class:`TappedPort`, which
 writes every chunk read (inbound, device -> host) and written (outbound, host -> device) with
 a microsecond timestamp. Several ports opened by one command share one file (one interface
-each). A failed capture write (disk full) raises :class:`~zkzap.errors.OutputError` from the
-read or write that caused it, after cutting the file back to its last whole block.
+each). Packets are written by a thread of their own (:mod:`zkzap.offload`), never by the
+read or write that made them. A failed capture write (disk full) raises
+:class:`~zkzap.errors.OutputError` from the next read or write, after cutting the file back to
+its last whole block.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from .pcapng import INBOUND, OUTBOUND, UNKNOWN, Reader, Writer
 
 _requested = None      # (path, protocol) named by the command being run
 _writer = None         # the Writer of that capture, opened with the first port
+_lane = None           # the thread that writes its packets (zkzap.offload): never the port's caller
 
 
 _kept = 0              # >0: commands run inside another (a batch's lines) leave the capture be
@@ -64,17 +67,33 @@ def writer_for(path, protocol):
     global _writer
     if _writer is None or _writer.path != path:
         if _writer is not None:
-            _writer.close()
+            finish()
         _writer = Writer(path)
     return _writer
 
 
+def lane():
+    """The :class:`~zkzap.offload.Lane` the capture's packets are written in (None: no capture
+    open)."""
+    return _lane
+
+
 def finish() -> None:
-    """Close the capture file (every block is already on disk)."""
-    global _writer
+    """Close the capture file once its queued packets are written, and raise what writing
+    them raised (:class:`~zkzap.errors.OutputError`). A capture that takes nothing for
+    :data:`zkzap.offload.DRAIN_S` is left as it is (abandoned) and raises
+    :class:`~zkzap.offload.Stalled`, unless that was said already."""
+    global _writer, _lane
     if _writer is not None:
-        _writer.close()
-        _writer = None
+        w, lane_, _writer, _lane = _writer, _lane, None, None
+        if lane_ is None:
+            w.close()
+        elif not lane_.finish(w.close):
+            if not lane_.told:
+                lane_.told = True
+                raise lane_.stalled()
+        else:
+            lane_.check()
 
 
 def tap(port, url: str, baud=None, capture=None, direction=None):
@@ -84,10 +103,17 @@ def tap(port, url: str, baud=None, capture=None, direction=None):
     capture = capture if capture is not None else _requested
     if not capture:
         return port
+    global _lane
+    from ..offload import Lane, Proxy
+
     path, protocol = capture
     w = writer_for(path, protocol)
     if_id = w.interface(protocol, url, baud)
-    return TappedPort(port, w, if_id, INBOUND if direction is None else direction)
+    if _lane is None:
+        _lane = Lane(f"--capture {path}")
+    # packets are written off the port's path: a capture that stalls (a FIFO nobody reads) never
+    # holds up a read or a control frame; its failure is raised by the next read or write
+    return TappedPort(port, Proxy(w, _lane, ("packet",)), if_id, INBOUND if direction is None else direction)
 
 
 class TappedPort:

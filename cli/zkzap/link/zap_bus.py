@@ -381,7 +381,7 @@ class ZapBus:
                     self._seen_empty = before
             return data
         except Exception as e:
-            if isinstance(e, (KeyboardInterrupt, PortError)):
+            if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):   # OutputError: the capture's
                 raise
             raise self._port_error(e) from None
 

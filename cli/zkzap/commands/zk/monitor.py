@@ -86,9 +86,23 @@ class Output:
         else:
             self.writer = make_writer(self.fmt, self.stream, self._columns, header=not had, measurement="status")
 
+    #: The :class:`~zkzap.offload.Lane` the records are written in (None: in the caller's thread).
+    lane = None
+
+    def offload(self, lane):
+        """Write the records (and close) in ``lane`` from now on; returns the session's sink."""
+        self.lane = lane
+        return lane.wrap(self.write)
+
     def finish(self, sheets=None):
         """The run ended: a workbook that got records gets its steps and summary sheets
         (``sheets``: ``(steps, summary)``). A file no record opened stays as it was."""
+        if self.lane is not None:
+            self.lane.call(self._finish, sheets)
+        else:
+            self._finish(sheets)
+
+    def _finish(self, sheets):
         if sheets is not None and self._xlsx and self.writer is not None:
             self.writer.sheets(*sheets)
 
@@ -123,6 +137,15 @@ class Output:
         return False
 
     def close(self):
+        """Close the writer and the file (in the lane, once its records are written: one that
+        stays blocked is abandoned, see :mod:`zkzap.offload`)."""
+        if self.lane is not None:
+            lane, self.lane = self.lane, None
+            lane.finish(self._close)
+        else:
+            self._close()
+
+    def _close(self):
         if self.writer is not None:
             w, self.writer = self.writer, None
             try:
@@ -151,6 +174,39 @@ def _with_trip(columns):
     return cols
 
 
+def capture_lane():
+    """The lane of the ``--capture`` file, when one is open (imports nothing otherwise)."""
+    capture = sys.modules.get("zkzap.link.capture")
+    return capture.lane() if capture is not None else None
+
+
+def _outputs_settled(outcome, lanes):
+    """The session's outcome once its outputs have written what was queued: a write that failed
+    after the session's last record, or an output still blocked at the end (abandoned: said on
+    stderr), makes an end that was normal an output failure (exit 7)."""
+    from ...api.session import Outcome
+    from ...offload import abandoned
+
+    failed = None
+    given_up = abandoned()
+    for lane in lanes:
+        # the records and the raw log are closed already; the capture closes with the command
+        if lane in given_up or not lane.drain():
+            lane.abandon()
+            note(lane.lost())
+            failed = failed or lane.stalled()
+            continue
+        try:
+            lane.check()
+        except BrokenPipeError:
+            pass                                  # the reader went away: ends quietly, as always
+        except Exception as e:
+            failed = failed or e
+    if failed is not None and (outcome.ok or outcome.reason == "pipe"):
+        return Outcome("output", failed, aborted=outcome.aborted)
+    return outcome
+
+
 def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, output=None, append=False,
                   snapshot=None, ids=None, stale_after=3, raw_log=None, protocol_version=None, timeout=None,
                   stop_bits=1, count=None, duration=None, control=None, rate=None, abort="none",
@@ -171,6 +227,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
     from ...api.telemetry import Telemetry, parse_ids, record_columns
     from ...outfile import OutFile, refuse_same_files
+    from contextlib import nullcontext
+
+    from ...offload import Lane, Proxy, urgent
     from ...link.port import fit_note
     from ...link.zk_port import ZkLink
     from ...link.zk_sources import LiveSource
@@ -215,6 +274,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         out.close()
         raise
     source = None
+    raw_lane = raw_proxy = None
     # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
     # view would redraw over them. They go to stderr once it has closed, below the last view.
     held = []
@@ -227,10 +287,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
 
             source = replay_source(replay, fast=fast)
         else:
-            source = LiveSource(ZkLink.open(url, baud, raw_log=raw, stop_bits=stop_bits, allow=allow),
+            # the raw log is written off the control path, like the records (zkzap.offload)
+            if raw is not None:
+                raw_lane = Lane(f"--raw-log {raw_log}")
+                raw_proxy = Proxy(raw, raw_lane, ("write", "flush"))
+            source = LiveSource(ZkLink.open(url, baud, raw_log=raw_proxy, stop_bits=stop_bits, allow=allow),
                                 reconnect=reconnect)
         tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
-        sink, on_update = out.write, out.update if out.dashboard is not None else None
+        sink = out.offload(Lane("stdout" if output in (None, "-") else f"--output {output}"))
+        on_update = out.update if out.dashboard is not None else None
         if stand is not None:
             on_update = stand.attach(tel, source, on_update)
         if bridges or out.fmt == "mcap":
@@ -246,8 +311,10 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                           on_update=on_update, notify=notify, plan=plan,
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
+        lanes = [lane for lane in (out.lane, raw_lane, capture_lane()) if lane is not None]
         with out:
-            outcome = session.run()
+            with urgent() if control is not None else nullcontext():
+                outcome = session.run()
             if stand is not None:
                 stand.close()            # the sensors stop with the session: one count for every summary
             if summarize and out.fmt == "xlsx" and outcome.reason != "refused":
@@ -259,7 +326,10 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source.close()
         out.close()
         if raw is not None:
-            raw.close()
+            if raw_lane is not None:
+                raw_lane.finish(raw.close)
+            else:
+                raw.close()
         if bridges:
             bridges.close()
             session_stats = bridges.stats()
@@ -269,6 +339,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             note(message)
     if outcome.reason == "refused":
         raise outcome.error          # the ECU's limits refuse the plan: nothing was sent or written
+    outcome = _outputs_settled(outcome, lanes)
     if bridges:
         session.bridges = session_stats
     if tel.version_note:

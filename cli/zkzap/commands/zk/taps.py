@@ -28,6 +28,13 @@ def tap_session(source, tel, out, bridges, on_update):
     mcap = out.writer if out.fmt == "mcap" else None
     submit = bridges.submit if bridges else None
     write = out.write
+    lane = getattr(out, "lane", None)
+    if lane is not None:              # the records' writes are made off the control path
+        write = lane.wrap(write)
+        if mcap is not None:
+            mcap = lane.wrap(mcap.write)
+    elif mcap is not None:
+        mcap = mcap.write
 
     def on_frame(frame):
         t = source.now()
@@ -35,7 +42,7 @@ def tap_session(source, tel, out, bridges, on_update):
         rec.update(decoder.decode(frame))
         rec["frame"] = frame.hex(" ").upper()
         if mcap is not None:
-            mcap.write(rec)
+            mcap(rec)
         if submit is not None:
             submit(rec)
 
