@@ -113,6 +113,15 @@ def click(driver, selector):
     element.click()
 
 
+def take_control(driver):
+    """The page just loaded: take control when another page had it, and wait until it controls."""
+    until(lambda: "Take control" in text_of(driver, "#control") or "You control" in text_of(driver, "#control"),
+          "the page's control banner")
+    if "Take control" in text_of(driver, "#control"):
+        click(driver, "#take")
+    until(lambda: "You control" in text_of(driver, "#control"), "control")
+
+
 def consent_dialog(driver):
     """The confirmation dialog's text once it is shown."""
     return until(lambda: text_of(driver, "#modal.show #modal-text"), "the confirmation dialog")

@@ -51,6 +51,8 @@ _LAZY = {
     "ChecksumError": "zkzap.codec.zap",
     "ExpressionError": "zkzap.api.expr",
     "LimitViolation": "zkzap.api.limits",
+    "StartRefused": "zkzap.api.alarms",
+    "StartAlarm": "zkzap.api.alarms",
     "EcuLimitError": "zkzap.api.prestart",
     "ScheduleError": "zkzap.api.schedule",
     "ScheduleTargetError": "zkzap.api.schedule",
@@ -67,6 +69,7 @@ __all__ = ["__version__", *_LAZY]
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time, imported on first use
+    from .api.alarms import StartAlarm as StartAlarm, StartRefused as StartRefused
     from .api.expr import ExpressionError as ExpressionError
     from .api.fleet import (DocumentError as DocumentError, NotFound as NotFound, SharedId as SharedId,
                             TwoAnswer as TwoAnswer)

@@ -36,6 +36,25 @@ def test_zk_shell_piped(start_sim, sh):
     assert len(r.stdout.splitlines()) == 4 and r.stdout.startswith("time,t,id,")
 
 
+def test_zk_shell_latches_a_trip_until_acknowledged_and_the_engine_is_cool(start_sim, sh):
+    url, _ = start_sim(["zk", "--pty", "--speed", "20"])
+    run = "send control --state run --throttle {} --for 20 --ids 1 -f jsonl --yes"
+    text = "\n".join([run.format(40) + " --limit 'egt_c<=500'",     # trips; the rundown is recorded
+                       run.format(10),                                 # refused: the alarm is latched
+                       "alarms", "ack",
+                       run.format(10),                                 # refused: setpoint 0 after a trip
+                       "send control --state run --throttle 0 --for 0.5 --ids 1 -f jsonl --yes",   # allowed
+                       "alarms", "ack", "exit"]) + "\n"
+    r = sh("zkzap", "shell", "zk", "-p", url, input=text)
+    err = r.stderr
+    assert "error: limit violated: egt_c=" in err and "rundown recorded:" in err
+    assert "zk: error: start refused: alarm latched: limit egt_c<=500 violated: egt_c=" in err
+    assert "LATCHED" in r.stdout and "acknowledged 1 alarm" in err
+    assert "zk: error: start refused: after a trip the engine starts at setpoint 0 (asked 10)" in err
+    assert err.count("zk: error: start refused") == 2 and "interrupted" not in err
+    assert r.stdout.count('"kind":"trip"') == 1 and r.stdout.count('"kind":"rundown"') == 1
+
+
 class Terminal:
     def __init__(self, argv, env, width=100, height=30):
         self.socket = f"zkzap-shell-{uuid.uuid4().hex[:8]}"

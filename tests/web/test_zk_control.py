@@ -48,9 +48,21 @@ def scenario(console, steps):
 
 
 async def idle(page, ecu):
-    """Nothing runs: abort anything left, and wait for the engine to leave run."""
+    """Nothing runs and a start is allowed: abort anything left, wait for the engine to leave run,
+    acknowledge what an earlier test latched, wait until the engine is at rest and cool; after a
+    trip the first start is at setpoint 0: one is made (and stopped) so that a test starts where
+    it wants."""
     await page.request("abort")
     await wait(lambda: device(ecu, lambda d: d.effective_sw()) != "run", "the engine out of run")
+    await wait(lambda: not page.seen("engine") or not page.seen("engine")[-1]["controlling"], "no run")
+    await page.request("ack")
+    await wait(lambda: page.seen("health") and page.seen("health")[-1].get("interlock") is None,
+               "the engine at rest and cool", timeout=60)
+    if page.seen("alarms") and page.seen("alarms")[-1]["zero_setpoint"]:
+        r = await page.request("start", mode="throttle", throttle=0, grant=["engine"])
+        assert r["type"] == "done", r
+        await page.request("stop")
+        await wait(lambda: not page.seen("engine")[-1]["controlling"], "the start at 0 stopped")
 
 
 def test_rpm_mode_and_its_interlocks(console, ecu):
@@ -93,8 +105,13 @@ def test_a_violated_limit_ends_the_run_with_the_abort(console, ecu):
         await wait(lambda: any(m.get("limits") and m["limits"][0]["verdict"] == "violated" for m in page.seen("health")),
                    "the limit's verdict on the page")
         refused = await page.request("start", mode="throttle", throttle=10, grant=["engine"])
-        if device(ecu, lambda d: d.rpm) > 120000:        # still above the limit: no start
-            assert refused["type"] == "error" and "violated now" in refused["text"]
+        assert refused["type"] == "error" and "alarm latched: limit rpm<=120000 violated" in refused["text"]
+        alarms = page.seen("alarms")[-1]
+        assert alarms["latched"] == 1 and alarms["zero_setpoint"] and alarms["items"][0]["limit"] == "rpm<=120000"
+        done = await page.request("ack")
+        assert done["type"] == "done" and done["acknowledged"] == [alarms["items"][0]["id"]]
+        refused = await page.request("start", mode="throttle", throttle=0, grant=["engine"])
+        assert refused["type"] == "error" and "not back at rest and cool" in refused["text"]
 
     scenario(console, steps)
 

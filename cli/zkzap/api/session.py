@@ -19,6 +19,7 @@ from ..codec.ids import id_ranges
 from ..errors import DeviceError, NoReply, OutputError, PortError, UsageError
 from ..errors import TERMINATED
 from ..signals import INTERRUPT_SIGNALS, SignalGuard, name, status
+from .alarms import StartRefused
 from .prestart import EcuLimitError, listen, silence_error
 from .telemetry import describe_error
 
@@ -79,7 +80,7 @@ RUNDOWN_RPM = 500
 #: The ends after which the rundown is recorded (an end the session was asked for, its time or
 #: a schedule's end, is no trip; SIGTERM asks the process to go; the port or output failing
 #: leaves nothing to record with).
-RUNDOWN_AFTER = ("interrupted", "limit", "ecu-error")
+RUNDOWN_AFTER = ("interrupted", "limit", "ecu-error", "alarm")
 #: Engine states in which the engine has come to rest (with the rotor stopped).
 REST_STATES = (0, 1)   # stop, standby (zk.ENGINE_STATES)
 
@@ -94,6 +95,7 @@ class Outcome:
     """How a session ended. ``reason``: ``count``, ``duration``, ``end`` (replay or schedule
     done), ``interrupted``, ``terminated``, ``port``, ``silence`` (no status frame within the
     timeout, or none at all in a session that ended by its time), ``ecu-error``, ``limit``,
+    ``alarm`` (a hung or hot start, :mod:`zkzap.api.alarms`),
     ``pipe``, ``output`` (an output file could not be written), ``refused`` (the ECU's reported
     limits refuse the plan: nothing was sent). ``rundown``: after a trip, how the recording of
     the rundown went (``{"s": seconds, "ended": "rest"|"max"|"cut"|"silence"|"end"|"port"}``)."""
@@ -138,6 +140,24 @@ class Outcome:
             raise self.error
 
 
+def trip_record(outcome, t, clock, why=None) -> dict:
+    """The record that marks a trip in a session's records: ``kind`` ``trip``, ``trip`` (what
+    tripped and what was sent, in words), ``reason`` (the outcome's), ``sent``; for a violated
+    limit also ``limit``, ``field``, ``value`` and the violation's ``t``. ``why``: the words
+    when the outcome has no error (an abort from a console, the dead-man rule)."""
+    sent = describe_abort(outcome.aborted) if outcome.aborted in ABORTS else outcome.aborted
+    err = outcome.error
+    what = str(err) if err is not None else (why or _WHY.get(outcome.reason, outcome.reason))
+    rec = {"time": clock.iso(t), "t": round(t, 3), "kind": "trip", "trip": f"{what}; sent {sent}" if sent else what,
+           "reason": outcome.reason, "sent": sent}
+    cond = getattr(err, "condition", None)
+    if cond is not None:
+        at = getattr(err, "t", None)
+        rec.update(limit=cond.text, field=cond.field, value=getattr(err, "value", None),
+                   t=round(at, 3) if at is not None else rec["t"])
+    return rec
+
+
 class Session:
     """Run a source through telemetry into ``sink`` while sending control frames.
 
@@ -155,15 +175,24 @@ class Session:
     (``refused``, exit 2) before the first frame goes out; the session's time 0 is then the end
     of that listening (the frames heard meanwhile only set the protocol version).
 
-    Every time is the source's clock (session seconds: model time on a sped-up simulator).
+    Every time is the source's clock (session seconds: model time on a sped-up simulator), which
+    the session restarts at its start unless ``restart`` is False (the sessions of a console, one
+    after the other on one clock: their records' ``t`` and the status rate's window go on).
     """
 
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
                  abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
-                 end_label="end of schedule", plan=None, rundown=DEFAULT_RUNDOWN_S):
+                 end_label="end of schedule", plan=None, rundown=DEFAULT_RUNDOWN_S, alarms=None, restart=True):
         self.source = source
         self.telemetry = telemetry
+        self.alarms = alarms     # an api.alarms.Alarms: the stand's alarm list and start interlock
+        self.restart = restart   # False: the source's clock goes on (one of a console's sessions)
+        if alarms is not None:
+            def sink(rec, _sink=sink, _observe=alarms.observe):
+                _sink(rec)
+                if rec.get("kind") in ("status", "snapshot", None) and "t" in rec:
+                    _observe(rec["t"], rec)
         self.sink = sink
         self.control = control
         self.period = 1.0 / rate
@@ -194,6 +223,7 @@ class Session:
         # that the ECU never sends are reported (all of them: the session ends)
         self._cycle = set() if telemetry.ids is not None else None
         self._back_t = 0.0
+        self._started = False             # a state-run frame went out (the interlock passed)
         self.interrupted = None           # PortError text when a reconnect cut engine control
         self.abort_error = None           # the PortError that kept the abort from going out
 
@@ -246,6 +276,12 @@ class Session:
         self.sink(rec)
 
     def _send(self, frame):
+        if self.alarms is not None and not self._started and frame[1] >> 4 in (1, 6):
+            c = zk.ControlFrame(frame)
+            if c.sw == 3:                     # state run: a start (refused: nothing sent)
+                self.alarms.check_start(setpoint=(((frame[1] & 3) << 8) | frame[2]) / 10 if c.id == 1 else None)
+                self._started = True
+                self.alarms.started()
         self.source.write(frame)
         self.sent += 1
         self.last_sent = frame
@@ -268,7 +304,8 @@ class Session:
         if limits.frame is not None:
             tel.seed(limits.frame)
         self.plan.check(limits)
-        src.restart()
+        if self.restart:
+            src.restart()
 
     def run(self) -> Outcome:
         """Run until an end (see the class); returns the :class:`Outcome` (the abort, if sent,
@@ -293,7 +330,7 @@ class Session:
                         outcome = Outcome("silence", e)
                     if guard.signum is not None and outcome is None:
                         outcome = _signalled(guard.signum)
-                elif src.live:
+                elif src.live and self.restart:
                     src.restart()               # the session's time 0: now, not when the port opened
                 while outcome is None:
                     if guard.signum is not None:
@@ -363,6 +400,11 @@ class Session:
                         if self.limits is not None and self.limits.tripped is not None:
                             outcome = Outcome("limit", self.limits.tripped)
                             break
+                        if self.alarms is not None and self.alarms.tripped is not None:
+                            tripped, self.alarms.tripped = self.alarms.tripped, None
+                            if self.controlling:         # a hung or hot start under this session
+                                outcome = Outcome("alarm", tripped)
+                                break
                     if outcome is not None:
                         break
                     now = src.now()
@@ -376,6 +418,8 @@ class Session:
                             outcome = Outcome("silence", silence_error(
                                 src, self.silence, heard=self.last_frame_t is not None))
                             break
+            except StartRefused as e:           # the stand's interlock: nothing was sent
+                outcome = Outcome("refused", e)
             except PortError as e:
                 outcome = Outcome("port", e)
             except OutputError as e:           # a full disk under -o or --raw-log
@@ -400,9 +444,18 @@ class Session:
                 ran = self.duration if self.duration is not None else src.now()
                 outcome = Outcome("silence", silence_error(src, ran, heard=False, ran=True))
             self._abort(outcome)
-            if (self.rundown and src.live and outcome.reason in RUNDOWN_AFTER
-                    and outcome.aborted in ("standby", "stop")):
-                written += self._record_rundown(outcome, guard)
+            if self.alarms is not None and self.controlling and not outcome.ok and outcome.reason != "pipe":
+                self._trip_alarm(outcome)
+            if src.live and outcome.reason in RUNDOWN_AFTER and outcome.aborted in ("standby", "stop"):
+                try:
+                    self.sink(trip_record(outcome, src.now(), src.clock))
+                except (OutputError, BrokenPipeError):
+                    pass
+                else:
+                    if self.rundown:
+                        written += self._record_rundown(outcome, guard)
+        if self.alarms is not None:
+            self.alarms.seen(tel.latest)
         if outcome.aborted == "failed" and (outcome.ok or outcome.reason in ("interrupted", "terminated")):
             # the end or abort command did not go out: the engine is in no stated state
             outcome = Outcome("port", self.abort_error, aborted="failed")
@@ -416,30 +469,29 @@ class Session:
         self.written = written
         return outcome
 
+    def _trip_alarm(self, outcome):
+        """The stand's alarm for this abnormal end (latched until acknowledged)."""
+        err = outcome.error
+        what = str(err) if err is not None else _WHY.get(outcome.reason, outcome.reason)
+        sent = outcome.aborted
+        if sent in ABORTS and sent != "none":
+            what += f"; sent {describe_abort(sent)}"
+        cond = getattr(err, "condition", None)
+        self.alarms.trip(outcome.reason, what, t=self.source.now(), limit=cond.text if cond is not None else None,
+                         field=cond.field if cond is not None else None, value=getattr(err, "value", None))
+
     def _record_rundown(self, outcome, guard) -> int:
-        """After a trip: a ``trip`` record, then the ECU's records until the engine is at rest
+        """After a trip (its record written): the ECU's records until the engine is at rest
         (:func:`at_rest`), :attr:`rundown` seconds, a new signal, a silent ECU or the port's end,
         the abort's state command repeated at the rate meanwhile; then a ``rundown`` record.
         Returns the records written."""
         src, tel = self.source, self.telemetry
         t0 = src.now()
-        sw = outcome.aborted
-        why = _WHY.get(outcome.reason, outcome.reason)
-        err = outcome.error
-        what = str(err) if err is not None else why
-        trip = {"time": src.clock.iso(t0), "t": round(t0, 3), "kind": "trip",
-                "trip": f"{what}; sent {describe_abort(sw)}", "reason": outcome.reason, "sent": describe_abort(sw)}
-        if err is not None:
-            cond = getattr(err, "condition", None)
-            if cond is not None:
-                trip.update(limit=cond.text, field=cond.field, value=getattr(err, "value", None),
-                            t=round(err.t, 3) if getattr(err, "t", None) is not None else trip["t"])
         written = 0
-        frame = abort_frames(sw, tel.decoder.known)[0]
+        frame = abort_frames(outcome.aborted, tel.decoder.known)[0]
         signum, repeats = guard.signum, guard.repeats
         ended = None
         try:
-            self.sink(trip)
             if at_rest(tel.latest):
                 ended = "rest"
             else:
@@ -555,7 +607,8 @@ def _signalled(signum) -> Outcome:
 #: How a session's end is worded in its notes (an ok end: the session's ``end_label``).
 _WHY = {"interrupted": "interrupted", "terminated": "terminated", "port": "port failure",
         "silence": "ECU silent", "ecu-error": "ECU error", "pipe": "output closed",
-        "output": "output failed", "error": "error", "limit": "limit violated"}
+        "output": "output failed", "error": "error", "limit": "limit violated",
+        "alarm": "start alarm"}
 _RUNDOWN_SAID = {"rest": "the engine at rest", "cut": "recording cut", "max": "its maximum reached, not at rest",
                  "silence": "the ECU fell silent", "end": "the source ended", "port": "the port failed",
                  "output": "the output failed"}

@@ -53,7 +53,8 @@ class Completer:
         if not args:
             names = [n for n in self.group.list_commands(click.Context(self.group))
                      if n not in EXCLUDED[self.protocol]]
-            return sorted(n for n in list(names) + list(BUILTINS) if n.startswith(text))
+            own = list(BUILTINS) + (list(ZK_BUILTINS) if self.protocol == "zk" else [])
+            return sorted(n for n in list(names) + own if n.startswith(text))
         comp = ShellComplete(self.group, {}, self.protocol, "_ZKZAP_COMPLETE")
         try:
             items = comp.get_completions(args, text)
@@ -93,6 +94,8 @@ def _help(group, protocol):
             if n not in EXCLUDED[protocol]]
     width = max(len(n) for n, _ in rows)
     click.echo("\n".join(f"  {n:<{width}}  {h}" for n, h in rows))
+    if protocol == "zk":
+        click.echo("  alarms  the alarm list of this shell's sessions (a trip latches until 'ack'); ack acknowledges")
     click.echo("  'COMMAND --help' for its options; exit [N], quit [N] or Ctrl-D to leave.")
 
 
@@ -161,6 +164,9 @@ def loop(group, protocol, defaults, *, interactive) -> int:
             if tokens[0] == "help":
                 _help(group, protocol)
                 continue
+            if protocol == "zk" and tokens[0] in ZK_BUILTINS:
+                failed = _alarm_builtin(tokens) or failed
+                continue
             bad = port_tokens(tokens)
             if bad or tokens[0] in EXCLUDED[protocol]:
                 what = (f"{bad[0]}: the port is the shell's" if bad
@@ -184,6 +190,44 @@ def loop(group, protocol, defaults, *, interactive) -> int:
             except OSError:
                 pass
     return 0 if interactive else failed
+
+
+#: The zk shell's own commands: the alarm list of its sessions, and its acknowledgement.
+ZK_BUILTINS = ("alarms", "ack")
+
+
+def _alarm_builtin(tokens) -> int:
+    """``alarms``: the list (newest first) and whether a start is allowed; ``ack``: acknowledge
+    the latched alarms. Returns an exit status (2: bad usage)."""
+    from ..api.alarms import current
+
+    alarms = current()
+    if len(tokens) > 1:
+        click.echo(f"zk: error: {tokens[0]}: takes no argument", err=True)
+        return 2
+    if tokens[0] == "ack":
+        done = alarms.acknowledge(_operator())
+        if not done:
+            click.echo("no alarm is latched", err=True)
+        return 0
+    for a in alarms.to_list():
+        state = "LATCHED" if a["latched"] else ("acknowledged" if a["acked_by"] else a["level"])
+        by = f" (by {a['acked_by']} at {a['acked_at']})" if a["acked_by"] else ""
+        click.echo(f"{a['time']}  {state:<12}  {a['text']}{by}")
+    if not alarms.entries:
+        click.echo("no alarm", err=True)
+    why = alarms.refusal()
+    click.echo(why if why else "a start is allowed", err=True)
+    return 0
+
+
+def _operator() -> str:
+    import getpass
+
+    try:
+        return getpass.getuser()
+    except Exception:  # noqa: BLE001 - no user name in this environment
+        return "the shell's user"
 
 
 def _exit_code(tokens, protocol):
@@ -284,8 +328,11 @@ Examples:
         if timeout is not None:
             defaults["timeout"] = timeout
         link = ZkLink.open(url, baud, stop_bits=stop_bits)
+        from ..api.alarms import Alarms, installed
+        from .options import note
+
         try:
-            with sharing("zk", link), _batch_capture():
+            with sharing("zk", link), _batch_capture(), installed(Alarms(tell_limits=False, notify=note)):
                 code = loop(group, "zk", defaults, interactive=_interactive())
         finally:
             link.close()

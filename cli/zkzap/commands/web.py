@@ -173,6 +173,34 @@ LIMIT_HELP = ("A limit the engine must stay within: FIELD OP NUMBER with an opti
               "runs the engine ends it with the abort (see --on-limit). Repeatable.")
 
 
+def _recording_options(f):
+    """Where a console's records go and what it records them with, as on the command line."""
+    from ..io import SESSION_FORMATS
+    from .options import OutputPath, apply_options
+    from .zk.stand import logbook_option, sensor_options
+
+    opts = [
+        click.option("-o", "--output", type=OutputPath("records", formats=SESSION_FORMATS), default=None,
+                     metavar="FILE",
+                     help="Write every status record the console receives to FILE, in the format its suffix names "
+                          "(.csv, .json, .jsonl, .lp, .mcap, .xlsx; JSON Lines without one), as 'zk monitor -o' "
+                          "does: created or replaced by the first record, trips and rundowns marked."),
+        click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
+        click.option("--restart-egt", type=FiniteRange(0, 1000), default=None, metavar="DEGC",
+                     help="After a trip a start waits for the ECU's stop or standby with the rotor stopped and EGT "
+                          "below DEGC (default 150)."),
+        click.option("--hung-start", type=FiniteRange(0, 3600), default=None, metavar="S",
+                     help="A start still in ignition, preheat or the fuel ramp after S seconds is a hung start: an "
+                          "alarm, and a run of this console ends with the abort (default 90; 0: not watched)."),
+        click.option("--hot-start", type=FiniteRange(0, 2000), default=None, metavar="DEGC",
+                     help="EGT above DEGC during ignition, preheat or the fuel ramp is a hot start: an alarm, and a "
+                          "run of this console ends with the abort (default 850; 0: not watched)."),
+        sensor_options,
+        logbook_option,
+    ]
+    return apply_options(f, opts)
+
+
 def _make_zk():
     @click.command("zk", cls=Command, context_settings=CONTEXT)
     @click.option("--rate", type=FiniteRange(1, 200), default=20.0, show_default=True, metavar="HZ",
@@ -183,11 +211,14 @@ def _make_zk():
     @click.option("--on-limit", type=Choice(["abort", "warn"]), default=None,
                   help="A violated limit while the console runs the engine: abort (the default: the abort "
                        "command, standby) or warn (shown, the engine goes on).")
+    @_recording_options
     @protocol_version_option
     @web_options
     @port_options("zk")
     def zk_web(rate, limit, limits_files, on_limit, protocol_version, listen, token, open_browser, port, baud,
-               stop_bits, timeout, sim):
+               stop_bits, timeout, sim, output=None, append=False, restart_egt=None, hung_start=None, hot_start=None,
+               aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None, ambient_pressure=None,
+               air_pressure=None, logbook=None, engine=None):
         """Serve a browser console for the ECU on one port.
 
         Every page shows the status stream live at the ECU's rate: gauges and time plots of
@@ -199,6 +230,16 @@ def _make_zk():
         the ECU reports a new error or falls silent, when a limit is violated, and when the
         console ends.
 
+        A trip (a violated limit, an ECU error, the abort, the dead-man rule, a hung or hot
+        start) latches an alarm in the page's alarm list until the controlling page acknowledges
+        it; meanwhile, and after a trip until the engine is at rest and cool (--restart-egt), a
+        start is refused, and the first start after a trip is at setpoint 0.
+
+        The console records as the command line does: -o FILE gets every status record (the
+        rundown after a trip too, the trip marked), --logbook FILE the console's time as one run
+        (--engine names the engine), --aux the external sensors merged into the records,
+        --air-pressure the ECU's ESR request answered.
+
         On a real port a start asks for confirmation on the page (sim:// and --sim never ask);
         RPM mode needs protocol version 4 or later and a target within the ECU's max rpm.
 
@@ -207,23 +248,40 @@ def _make_zk():
           zkzap web zk -p /dev/ttyUSB0
           zkzap web zk -p 'sim://zk?speed=10'
           zkzap web zk -p /dev/ttyUSB0 --limit 'egt_c<=850,warn=800' --limit 'power_voltage_v>=7.2'
+          zkzap web zk -p /dev/ttyUSB0 -o run.csv --logbook engine.db --engine K100-1234
         """
         from .. import web as webpkg
-        from ..api import limits as L
         from ..api.zk import Ecu
+        from .zk.monitor import session_output
+        from .zk.stand import build_stand, session_sensors
         from .zk.telemetry import resolve_port
 
         webpkg.require()
         check_access(listen, token)
-        conditions = L.read_limits(limit, limits_files)
-        if on_limit is not None and not conditions:
-            raise UsageError("on-limit: give --limit EXPR or --limits FILE with it")
+        sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
+        stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
+                            controls=True, sensors=sensors, engine=engine, force=True)
+        alarms = {k: v for k, v in (("restart_egt_c", restart_egt), ("hung_start_s", hung_start),
+                                    ("hot_start_egt_c", hot_start)) if v is not None}
         url = resolve_port(port, sim)
         silence = timeout if timeout is not None else 2.0
-        ecu = Ecu(url, baud=baud, protocol_version=protocol_version, stop_bits=stop_bits, silence=silence)
+        stand.start(silence)             # the external sensors' first lines: a silent one is exit 3
+        record = None
+        try:
+            if output:
+                record = session_output(None, output, append, None, None, f"zkzap web zk on {url}", stand,
+                                        controls=True, view=False)
+                record.path = output
+            ecu = Ecu(url, baud=baud, protocol_version=protocol_version, stop_bits=stop_bits, silence=silence)
+        except BaseException:
+            stand.close()
+            if record is not None:
+                record.close()
+            raise
         from ..web.zk_console import ZkConsole
 
-        console = ZkConsole(ecu, conditions=conditions, on_limit=on_limit or "abort", rate=rate, silence=silence)
+        console = ZkConsole(ecu, on_limit=on_limit or "abort", rate=rate, silence=silence, alarms=alarms,
+                            stand=stand, record=record)
         _serve(console, listen, token, "zk", "sim" if sim else url)
 
     for p in zk_web.params:

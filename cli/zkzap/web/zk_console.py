@@ -12,7 +12,10 @@ error, a silent ECU, a violated limit (``--on-limit abort``) or when the console
 Interlocks, as on the command line: a start needs the ENGINE permission on a real port (the
 page's consent, given to the ECU's link for that control session; the link refuses every frame
 without it, :mod:`.consent`); it is refused while
-the ECU is silent or a limit is violated now; RPM mode needs protocol version 4 or later and a
+the ECU is silent or a limit is violated now, and by the stand's alarm list
+(:class:`~zkzap.api.alarms.Alarms`): while an alarm is latched (a trip, an abort, the dead-man
+rule), until the engine is at rest and cool after a trip, and at any setpoint but 0 for the
+first start after one; RPM mode needs protocol version 4 or later and a
 target within the max rpm the ECU reports (status ID 6).
 """
 
@@ -95,7 +98,9 @@ class ZkConsole(Console):
     kind = "zk"
     watch_ops = frozenset({"abort"})
 
-    def __init__(self, ecu, *, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S):
+    def __init__(self, ecu, *, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S, alarms=None,
+                 stand=None, record=None, command="zkzap web zk"):
+        from ..api.alarms import Alarms
         from ..api.limits import LimitSet
         from ..link.zk_port import is_simulator
 
@@ -106,9 +111,26 @@ class ZkConsole(Console):
         self.rate = rate
         self.silence = silence
         self.abort_kind = ecu.abort_kind
-        self.limits = LimitSet(conditions, on_limit, notify=lambda m: self.log(m, "warn")) if conditions else None
-        if self.limits is not None:
+        #: The test-stand hooks (:class:`~zkzap.api.stand.Stand`: limits, external sensors,
+        #: corrected values, the ESR answer, the logbook's figures) and where the records go
+        #: (``record.write(rec)``, closed with the console): as on the command line.
+        self.stand = stand
+        self.record = record
+        self.command_name = command
+        if stand is not None and stand.limits is not None:
+            self.limits = stand.limits
+            self.limits.notify = lambda m: self.log(m, "warn")
+        else:
+            self.limits = LimitSet(conditions, on_limit, notify=lambda m: self.log(m, "warn")) if conditions else None
+        if stand is not None:
+            stand.attach(self.tel, ecu.source, None)        # every frame: limits, sensors, ESR answers
+        elif self.limits is not None:
             self.tel.on_frame = self.limits.check
+        #: The stand's alarm list and start interlock (``alarms``: its settings, the keywords of
+        #: :class:`~zkzap.api.alarms.Alarms`), shared by every session of the console.
+        self.alarms = Alarms(self.limits.conditions if self.limits else (), notify=lambda m: self.log(m, "error"),
+                             on_change=self._alarms_changed, **(alarms or {}))
+        self._cut_as = None           # how a request ended the control session: abort, dead-man
         self.history = deque(maxlen=HISTORY_MAX)
         self.command = None           # the LiveCommand of the running control session
         self.controller = None        # who started it
@@ -140,7 +162,8 @@ class ZkConsole(Console):
     def _session_for(self, control=None, **kw):
         self._source = _Cuttable(self.ecu.source)
         s = Session(self._source, self.tel, self._sink, control=control, rate=self.rate, abort=self.abort_kind,
-                    on_update=self._update, notify=self._note, update_interval=0.02, **kw)
+                    on_update=self._update, notify=self._note, update_interval=0.02, alarms=self.alarms,
+                    restart=False, **kw)
         # the source goes on from session to session: a session's silence counts from the last
         # frame any of them saw, not from the source's start
         s.last_frame_t = self._last_t
@@ -148,7 +171,7 @@ class ZkConsole(Console):
         return s
 
     def _monitor(self):
-        s = self._session_for(silence=None)
+        s = self._session_for(silence=None, rundown=None)
         outcome = s.run()
         self._session = None
         if outcome.reason not in ("end", "duration", "count"):
@@ -169,9 +192,12 @@ class ZkConsole(Console):
         self.tel.new_error = None               # an error before the start is not a new one
         self.command, self.controller, self.since = command, label, time.time()
         self.ended = None
+        self._cut_as = None
+        # the rundown after a trip is recorded by the monitoring session that follows (a page may
+        # be told why a start is refused meanwhile, and watch the engine run down)
         s = self._session_for(control=lambda t: self.command.frame_at(t), silence=self.silence,
                               stop_on_error=True, limits=self.limits, end=self.abort_kind,
-                              end_label="end of control")
+                              end_label="end of control", rundown=None)
         self._engine_message()
         self.log(f"{label} starts the engine: {self._describe(command)}")
         outcome = s.run()
@@ -184,21 +210,31 @@ class ZkConsole(Console):
             why = str(outcome.error) if outcome.error is not None else outcome.reason
         self.ended = {"t": round(time.time(), 3), "reason": outcome.reason, "why": why,
                       "sent": describe_abort(sent) if sent and sent not in ("hold", "failed") else sent}
+        if outcome.ok and self._cut_as is not None:      # an abort or the dead-man rule: a trip too
+            said = f"{why}; sent {self.ended['sent']}" if sent and sent not in ("hold", "failed") else why
+            self.alarms.trip(self._cut_as, said, t=s.ended_t)
+            if self.record is not None and sent in ("standby", "stop"):
+                from ..api.session import Outcome, trip_record
+
+                src = self.ecu.source
+                self.record.write(trip_record(Outcome(self._cut_as, aborted=sent), src.now(), src.clock, why=why))
         self._engine_message()
         if not outcome.ok:
             self.log(f"engine control ended: {why}", "error")
             if outcome.reason in ("port", "output", "error"):
                 outcome.raise_for_status()
 
-    def _cut(self, end=None, label=None):
+    def _cut(self, end=None, label=None, trip=None):
         """End the running session (on the worker); a control session sends ``end`` (stop,
-        standby) as it ends."""
+        standby) as it ends; ``trip`` (abort, dead-man) latches an alarm for it."""
         s = self._session
         if s is None:
             return False
         if end is not None and s.control is not None:
             s.end = end
             s.end_label = label or s.end_label
+            if trip is not None:
+                self._cut_as = trip
         self._source.cut = True
         return True
 
@@ -219,11 +255,40 @@ class ZkConsole(Console):
         # the worker takes it from here: _update sees closing_now and ends the session
 
     def shutdown(self):
-        self.ecu.close()
+        src = self.ecu.source
+        ended = src.now()
+        try:
+            self.ecu.close()
+        finally:
+            if self.record is not None:
+                self.record.close()
+            if self.stand is not None:
+                self.stand.close()
+                self._log_run(ended)
+
+    def _log_run(self, ended):
+        """The console's whole time as one run of the logbook (``--logbook``)."""
+        from ..api.session import Outcome
+
+        f = self.failure
+        outcome = Outcome("end") if f is None else Outcome(getattr(f, "reason", None) or "port", f)
+
+        class Served:                    # what the logbook takes of a session: its length
+            ended_t = ended
+
+        files = (getattr(self.record, "path", None),)
+        run_id = self.stand.log_run(command=self.command_name, port=self.url, schedule=None, files=files,
+                                    outcome=outcome, tel=self.tel, session=Served)
+        if run_id is not None:
+            self.log(f"logbook {self.stand.logbook}: run {run_id} recorded")
 
     # -- session hooks (on the worker) ----------------------------------------------------------
 
     def _sink(self, rec):
+        if self.record is not None:
+            self.record.write(rec)            # whole records, as the command line writes them
+        if rec.get("kind") in ("trip", "rundown", "gap"):
+            return                            # a session's event: the file's only
         now = time.time()
         self._last_frame = now
         self._last_t = rec["t"]
@@ -239,7 +304,7 @@ class ZkConsole(Console):
 
     def _update(self, snapshot, health):
         if self.closing_now:
-            self._cut(self.abort_kind, "the console is shutting down")
+            self._cut(self.abort_kind, "the console is shutting down", trip="abort")
             return
         self.handle_requests()
         now = time.time()
@@ -255,7 +320,16 @@ class ZkConsole(Console):
                "version_note": self.tel.version_note}
         if self.limits is not None:
             msg["limits"] = self.limits.summary()
+        msg["interlock"] = self.alarms.refusal(self.tel.latest) if self.command is None else None
         return msg
+
+    def _alarms(self) -> dict:
+        a = self.alarms
+        return {"type": "alarms", "items": a.to_list(), "latched": len(a.latched), "zero_setpoint": a.zero_setpoint,
+                "restart_egt_c": a.restart_egt_c}
+
+    def _alarms_changed(self):
+        self.broadcast(self._alarms())
 
     def _engine_message(self):
         self.broadcast(self._engine())
@@ -283,11 +357,14 @@ class ZkConsole(Console):
                        for c in (self.limits.conditions if self.limits else ())],
             "on_limit": self.limits.on_limit if self.limits else None,
             "states": zk.ENGINE_STATES, "errors": zk.ERRORS,
+            "alarms": {"restart_egt_c": self.alarms.restart_egt_c, "hung_start_s": self.alarms.hung_start_s,
+                       "hot_start_egt_c": self.alarms.hot_start_egt_c},
         })
         return out
 
     def snapshot(self) -> list:
-        return super().snapshot() + [self._engine(), {"type": "history", "items": self._history()}, self._health()]
+        return super().snapshot() + [self._engine(), {"type": "history", "items": self._history()}, self._health(),
+                                     self._alarms()]
 
     def _history(self) -> list:
         """The last :data:`HISTORY_S` of records for a page's plots, at most one per status ID
@@ -359,6 +436,7 @@ class ZkConsole(Console):
                              "or target instead")
         cmd = self._command_from(msg)
         self._ready()
+        self.alarms.check_start(self.tel.latest, cmd.throttle if cmd.mode == "throttle" else cmd.rpm)
         self._limits_hold()
         self.policy.zk_frames(cmd.frames, ctx.granted)      # refused before the session starts
         self._next = ("control", cmd, ctx.label, self.policy.allow(ctx.granted))
@@ -385,18 +463,26 @@ class ZkConsole(Console):
         self.reply(ctx)
 
     def op_abort(self, ctx, msg):
-        self._end_or_send(self.abort_kind, f"abort from {ctx.label}")
+        self._end_or_send(self.abort_kind, f"abort from {ctx.label}", trip="abort")
         self.reply(ctx)
 
-    def _end_or_send(self, kind, label):
+    def op_ack(self, ctx, msg):
+        """The controlling operator acknowledges the latched alarms (``ids``: only these)."""
+        ids = msg.get("ids")
+        if ids is not None and (not isinstance(ids, list) or not all(isinstance(i, int) for i in ids)):
+            raise ValueError("ids: a list of alarm numbers")
+        done = self.alarms.acknowledge(ctx.label, ids)
+        self.reply(ctx, acknowledged=[a.id for a in done])
+
+    def _end_or_send(self, kind, label, trip=None):
         """End the control session with ``kind`` (stop, standby), or, while nobody runs the engine
         from here, send it once."""
         if self.command is not None:
-            self._cut(kind, label)
+            self._cut(kind, label, trip)
         else:
             self._oneshot = (kind, label)
             self._cut()
 
     def op__lost(self, ctx, msg):
         if self.command is not None:
-            self._cut(self.abort_kind, f"dead-man: {ctx.label} lost control ({msg.get('reason')})")
+            self._cut(self.abort_kind, f"dead-man: {ctx.label} lost control ({msg.get('reason')})", trip="dead-man")

@@ -30,7 +30,7 @@ class Output:
     the file at the close), never before: a run that writes no record — no port, a silent ECU,
     a run cut short — leaves an existing file exactly as it was (a header is not a record)."""
 
-    def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None):
+    def __init__(self, fmt, output, append, snapshot, ids, title, columns_for, inputs=None, view=True):
         from ...io.term import is_tty
 
         path = output if output and output != "-" else None
@@ -47,7 +47,7 @@ class Output:
 
             self.stream, self.writer, self.snapshot = open_mcap(output, append, snapshot, inputs=inputs)
             self.fmt, self._table = fmt, False
-            self.dashboard = _dashboard(title) if path and is_tty(sys.stdout) else None
+            self.dashboard = _dashboard(title) if path and view and is_tty(sys.stdout) else None
             return
         if fmt is None:
             fmt = "table" if is_tty(sys.stdout) else "jsonl"
@@ -55,7 +55,7 @@ class Output:
         self.stream = None if path else sys.stdout
         self.dashboard = None
         self.writer = None
-        stdout_tty = is_tty(sys.stdout)
+        stdout_tty = view and is_tty(sys.stdout)
         if fmt == "table" and not path and stdout_tty:
             self.dashboard = _dashboard(title)
         elif path and stdout_tty:
@@ -167,11 +167,20 @@ def _dashboard(title):
     return Dashboard(sys.stdout, title)
 
 
-def _with_trip(columns):
-    def cols(snapshot, ids=None):
-        return columns(snapshot, ids) + ["trip"]
+def session_output(fmt, output, append, snapshot, ids, title, stand, *, controls, view=True) -> Output:
+    """The :class:`Output` of a session's records: their columns with the stand's (limits, sensors,
+    corrected values) and, for a session that controls the engine, ``trip`` (a trip and the
+    rundown after it are marked). ``view``: the dashboard on a terminal."""
+    from ...api.telemetry import record_columns
 
-    return cols
+    columns = record_columns if stand is None else stand.columns(record_columns)
+    if controls:
+        base = columns
+
+        def columns(snapshot, ids=None):
+            return base(snapshot, ids) + ["trip"]
+
+    return Output(fmt, output, append, snapshot, ids, title, columns, view=view)
 
 
 def capture_lane():
@@ -225,7 +234,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     reported limits before the first).
     """
     from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
-    from ...api.telemetry import Telemetry, parse_ids, record_columns
+    from ...api.telemetry import Telemetry, parse_ids
     from ...outfile import OutFile, refuse_same_files
     from contextlib import nullcontext
 
@@ -253,11 +262,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         # external sensors first (their first lines name the fields the records get): a silent
         # load cell is found before the ECU is sent anything
         stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
-    columns = record_columns if stand is None else stand.columns(record_columns)
-    if control is not None and abort in ("standby", "stop"):
-        columns = _with_trip(columns)     # a trip and the rundown after it are marked
     try:
-        out = Output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", columns)
+        out = session_output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", stand,
+                             controls=control is not None and abort in ("standby", "stop"))
     except BaseException:
         if stand is not None:
             stand.close()
@@ -304,7 +311,16 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
             if stand is not None:
                 stand.write = source.write       # ESR answers are recorded like every control frame
-        session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort,
+        alarms = None
+        if replay is None:
+            # the stand's alarm list: a shell's or a batch's (a trip latches for the next command),
+            # else this session's own (hung and hot starts)
+            from ...api.alarms import Alarms, current
+
+            alarms = current() or Alarms(tell_limits=False, notify=notify)
+            if stand is not None and stand.limits is not None:
+                alarms.settings(conditions=stand.limits.conditions)
+        session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort, alarms=alarms,
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
                           stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,

@@ -42,15 +42,16 @@
       const s = svg("svg", { viewBox: "0 0 200 166", role: "img", "aria-label": g.name });
       s.append(svg("path", { d: arc(A0, A0 + SWEEP), stroke: "#2c3a48", "stroke-width": 14, fill: "none", "stroke-linecap": "round" }));
       const val = svg("path", { d: arc(A0, A0 + 0.1), stroke: "#4aa3ff", "stroke-width": 14, fill: "none", "stroke-linecap": "round" });
-      const mark = svg("path", { d: "", stroke: "#ff5d5d", "stroke-width": 4, fill: "none" });
+      const band = svg("path", { d: "", stroke: "#f2b134", "stroke-width": 4, fill: "none", class: "band" });
+      const mark = svg("path", { d: "", stroke: "#ff5d5d", "stroke-width": 4, fill: "none", class: "mark" });
       const v = svg("text", { x: CX, y: CY + 8, "text-anchor": "middle", class: "gv" }, "–");
       const u = svg("text", { x: CX, y: CY + 32, "text-anchor": "middle", class: "gu" }, g.unit);
       const lo = svg("text", { x: pt(A0)[0], y: CY + 62, "text-anchor": "middle", class: "gs" }, "0");
       const hi = svg("text", { x: pt(A0 + SWEEP)[0], y: CY + 62, "text-anchor": "middle", class: "gs" }, "");
-      s.append(val, mark, v, u, lo, hi);
+      s.append(val, band, mark, v, u, lo, hi);
       const cell = el("div", { class: "gauge", id: "g-" + g.key }, s, el("div", { class: "n", text: g.name }));
       box.append(cell);
-      gauges[g.key] = { g, cell, val, mark, v, hi };
+      gauges[g.key] = { g, cell, val, band, mark, v, hi };
     }
     const t = el("div", { class: "tiles" });
     for (const d of TILES) {
@@ -61,20 +62,20 @@
     }
     box.append(t);
   }
-  function limitMark(key, max) {
-    const texts = limitsByField[key];
-    if (!texts || !Z.hello) return "";
-    const c = Z.hello.limits.find(l => l.field === key);
-    if (!c) return "";
-    const f = Math.max(0, Math.min(1, c.threshold / max));
+  const tick = (value, max) => {
+    const f = Math.max(0, Math.min(1, value / max));
     const a = A0 + SWEEP * f, [x0, y0] = [CX + (R - 11) * Math.cos(a * Math.PI / 180), CY + (R - 11) * Math.sin(a * Math.PI / 180)];
     const [x1, y1] = [CX + (R + 11) * Math.cos(a * Math.PI / 180), CY + (R + 11) * Math.sin(a * Math.PI / 180)];
     return `M${x0.toFixed(1)} ${y0.toFixed(1)} L${x1.toFixed(1)} ${y1.toFixed(1)}`;
-  }
+  };
+  const fieldLimits = (key) => Z.hello && limitsByField[key] ? Z.hello.limits.filter(l => l.field === key) : [];
+  // the limit's tick (red) and its warning band's start (amber), for every limit of the field
+  const limitMark = (key, max) => fieldLimits(key).map(c => tick(c.threshold, max)).join(" ");
+  const bandMark = (key, max) => fieldLimits(key).filter(c => c.warn !== null && c.warn !== undefined).map(c => tick(c.warn, max)).join(" ");
   const levels = {};              // field -> "", "warn", "bad" from the limits
   function paintGauges() {
     for (const key in gauges) {
-      const { g, cell, val, mark, v, hi } = gauges[key];
+      const { g, cell, val, band, mark, v, hi } = gauges[key];
       const x = latest[key], max = g.max(), lvl = levels[key] || "";
       const sig = `${x}|${max}|${lvl}`;
       if (gauges[key].sig === sig) continue;
@@ -83,6 +84,7 @@
       val.setAttribute("d", arc(A0, A0 + Math.max(0.1, SWEEP * f)));
       val.setAttribute("stroke", lvl === "bad" ? "#ff5d5d" : lvl === "warn" ? "#f2b134" : "#4aa3ff");
       mark.setAttribute("d", limitMark(key, max));
+      band.setAttribute("d", bandMark(key, max));
       const text = fmt(x, g.digits);
       setText(v, text);
       v.style.fontSize = text.length > 6 ? "28px" : "";
@@ -210,6 +212,48 @@
       ? "A violation while this console runs the engine ends the run with the abort." : "Violations are shown; the engine goes on (--on-limit warn)." }));
   }
 
+  // -- alarms --------------------------------------------------------------------------------
+  let alarms = { items: [], latched: 0 };
+  let beeped = 0, audio = null;
+  function beep() {                 // an audible alarm, while one is latched (when the box is ticked)
+    if (!$("#audible").checked) return;
+    try {
+      audio = audio || new (window.AudioContext || window.webkitAudioContext)();
+      const o = audio.createOscillator(), g = audio.createGain();
+      o.frequency.value = 880; g.gain.value = 0.15; o.connect(g); g.connect(audio.destination);
+      o.start(); o.stop(audio.currentTime + 0.25);
+    } catch (e) { /* no audio on this machine */ }
+  }
+  function paintAlarms() {
+    const box = $("#alarms");
+    const items = alarms.items;
+    $("#alarmscard").classList.toggle("latched", alarms.latched > 0);
+    $("#ack").disabled = !(alarms.latched > 0 && Z.controlling());
+    $("#ack").textContent = alarms.latched > 0 ? `Acknowledge ${alarms.latched}` : "Acknowledge";
+    if (!items.length) { box.className = "dim"; box.textContent = "No alarm."; return; }
+    box.className = "";
+    box.replaceChildren(...items.slice(0, 50).map(a => {
+      const state = a.latched ? "LATCHED" : a.level === "warning" ? (a.active ? "warning" : "warning, over") : a.active ? "active, acknowledged" : "acknowledged";
+      const row = el("div", { class: `alarm ${a.level}` + (a.latched ? " latched" : ""), "data-id": a.id },
+        el("span", { class: "when", text: clock(Date.parse(a.time) / 1000) }),
+        el("span", { class: "what", text: a.text }),
+        el("span", { class: "tag " + (a.latched ? "bad" : a.level === "warning" ? "warn" : ""), text: state }));
+      if (a.acked_by) row.append(el("span", { class: "acked", text: `acknowledged by ${a.acked_by} at ${clock(Date.parse(a.acked_at) / 1000)}` }));
+      return row;
+    }));
+  }
+  let interlock = null;
+  function paintInterlock(text) {
+    if (text !== undefined) interlock = text;
+    const i = $("#interlock");
+    const said = interlock || (alarms.zero_setpoint ? "After the trip the next start is at setpoint 0." : "");
+    setText(i, said);
+    setClass(i, "interlock small " + (interlock ? "bad" : "dim"));
+  }
+  function zeroSetpoint() {         // after a trip the next start begins at setpoint 0
+    for (const id of ["#throttle", "#throttle-range", "#rpm", "#rpm-range"]) $(id).value = 0;
+  }
+
   // -- messages ------------------------------------------------------------------------------
   const pct = (arr, p) => { if (!arr.length) return null; const s = arr.slice(-400).sort((a, b) => a - b); return s[Math.min(s.length - 1, Math.floor(p * s.length))]; };
   const handlers = {
@@ -221,7 +265,21 @@
     },
     history(m) { for (const it of m.items) take(it, false); },
     samples(m) { for (const it of m.items) take(it, true); },
-    engine(m) { engine = m; paintEngine(); },
+    engine(m) {
+      const ended = engine.controlling && !m.controlling;
+      engine = m;
+      if (ended && alarms.zero_setpoint) zeroSetpoint();     // a run that tripped: back to 0
+      paintEngine();
+    },
+    alarms(m) {
+      const more = m.latched > alarms.latched;
+      const zero = m.zero_setpoint && !alarms.zero_setpoint;
+      alarms = m;
+      if (zero && !engine.controlling) zeroSetpoint();
+      paintAlarms();
+      paintInterlock();
+      if (more) beep();
+    },
     health(m) {
       const l = $("#link");
       const silent = m.silent_s !== null && m.silent_s > 1;
@@ -234,12 +292,15 @@
       const p50 = pct(Z.stats.latencies, .5), p99 = pct(Z.stats.latencies, .99);
       $("#lat").textContent = p50 === null ? "" : `latency p50 ${fmt(p50)} ms · p99 ${fmt(p99)} ms` + (Z.stats.dropped ? ` · ${Z.stats.dropped} dropped` : "");
       if (m.limits) paintLimits(m.limits);
+      paintInterlock(m.interlock);
+      if (alarms.latched && Date.now() - beeped > 2000) { beeped = Date.now(); beep(); }
       const mx = latest.max_rpm, idle = latest.idle_rpm;
       if (mx) { $("#rpm-range").max = mx; $("#rpm").max = mx; $("#rpm-limits").textContent = `(${fmt(idle)} – ${fmt(mx)})`; }
       if (idle) $("#rpm-range").min = 0;
     },
     controlchange(c) {
       $("#ctlnote").textContent = c.controlling ? "" : "view only";
+      paintAlarms();
       $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls";
     },
   };
@@ -256,6 +317,10 @@
       if (r) Z.toast("engine start sent", "info");
     });
     $("#stop").addEventListener("click", () => Z.send("stop"));
+    $("#ack").addEventListener("click", async () => {
+      const r = await Z.send("ack", {});
+      if (r && r.acknowledged) Z.toast(`${r.acknowledged.length} alarm${r.acknowledged.length === 1 ? "" : "s"} acknowledged`, "info");
+    });
     $("#abort").addEventListener("click", () => Z.send("abort"));
     setInterval(() => {
       if (lastSample && Date.now() - lastSample > 2500) { const l = $("#link"); l.textContent = `no status for ${fmt((Date.now() - lastSample) / 1000, 1)} s`; l.className = "pill bad"; }

@@ -1,0 +1,111 @@
+"""The ZK console's latched trips in a real browser: a start at full throttle trips a limit and
+the engine gets standby; the alarm list shows it latched and the setpoint is back at 0; a
+start is refused while the alarm is latched, and after it is acknowledged still refused while
+the engine is hot; once the engine is at rest and cool, the start is allowed, at setpoint 0.
+The run is recorded like the command line's: the console's -o file and its logbook entry.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+
+import pytest
+
+from webpage import WebConsole, click, console_errors, js, set_value, take_control, text_of, until
+
+LIMIT = "egt_c<=650,warn=620"
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    d = tmp_path_factory.mktemp("alarms")
+    return d / "run.jsonl", d / "engine.db"
+
+
+@pytest.fixture(scope="module")
+def console(recorded):
+    out, book = recorded
+    c = WebConsole("zk", "-p", "sim://zk?speed=4", "--limit", LIMIT, "-o", str(out), "--logbook", str(book),
+                   "--engine", "K100-1")
+    yield c
+    c.close()
+
+
+@pytest.fixture
+def page(browser, console):
+    browser.get(console.url)
+    take_control(browser)
+    until(lambda: "frames/s" in text_of(browser, "#link"), "the status stream")
+    return browser
+
+
+def toast_after(page, before):
+    """The first toast newer than the ``before`` count of toasts."""
+    return until(lambda: js(page, "const t = [...document.querySelectorAll('#toasts .toast')].map(e => e.innerText);"
+                                  "return t.length > arguments[0] ? t[t.length - 1] : null;", before),
+                 "a toast")
+
+
+def toasts(page):
+    return js(page, "return document.querySelectorAll('#toasts .toast').length")
+
+
+def start_refused(page, why):
+    before = toasts(page)
+    click(page, "#start")
+    text = toast_after(page, before)
+    assert why in text, text
+    assert "Running under this console" not in text_of(page, "#command")
+    return text
+
+
+def test_a_trip_latches_and_a_start_waits_for_the_acknowledgement_and_a_cool_engine(page, console, recorded):
+    set_value(page, "#throttle", 100)
+    click(page, "#start")
+    until(lambda: "Running under this console" in text_of(page, "#command"), "the run")
+    until(lambda: "LATCHED" in text_of(page, "#alarms"), "the trip in the alarm list", timeout=60)
+    assert f"limit {LIMIT} violated: egt_c=" in text_of(page, "#alarms")
+    until(lambda: "Monitoring" in text_of(page, "#command"), "the run's end")
+    assert "limit violated" in text_of(page, "#ended") and "standby, throttle 0" in text_of(page, "#ended")
+    # the setpoint is back at 0; a start at the old setpoint is refused while the alarm is latched
+    assert js(page, "return document.querySelector('#throttle').value") == "0"
+    set_value(page, "#throttle", 100)
+    start_refused(page, "alarm latched")
+    assert "start refused: alarm latched" in text_of(page, "#interlock")
+    # acknowledged: still refused while the engine runs down hot
+    set_value(page, "#throttle", 0)
+    click(page, "#ack")
+    until(lambda: "acknowledged by page" in text_of(page, "#alarms"), "the acknowledgement in the list")
+    assert "LATCHED" not in text_of(page, "#alarms")
+    start_refused(page, "not back at rest and cool after the trip")
+    # once at rest and cool, a start at setpoint 0 is allowed; at any other setpoint it is refused
+    until(lambda: "refused" not in text_of(page, "#interlock"), "the engine at rest and cool", timeout=60)
+    assert "next start is at setpoint 0" in text_of(page, "#interlock")
+    set_value(page, "#throttle", 30)
+    start_refused(page, "after a trip the engine starts at setpoint 0")
+    set_value(page, "#throttle", 0)
+    click(page, "#start")
+    until(lambda: "Running under this console: throttle 0" in text_of(page, "#command"), "the start at 0")
+    click(page, "#abort")
+    until(lambda: "Monitoring" in text_of(page, "#command"), "the abort's end")
+    until(lambda: "LATCHED" in text_of(page, "#alarms"), "the abort in the alarm list")
+    assert "abort from page" in text_of(page, "#alarms .alarm.latched")
+    click(page, "#ack")
+    until(lambda: "LATCHED" not in text_of(page, "#alarms"), "the abort acknowledged")
+    assert console_errors(page) == []
+    # the log says who acknowledged what
+    err = console.stderr()
+    assert "acknowledged 1 alarm: limit egt_c<=650,warn=620 violated" in err
+
+    # the browser run is recorded like the command line's: the file, with the trip marked
+    out, book = recorded
+    recs = [json.loads(line) for line in out.read_text().splitlines()]
+    trip = [r for r in recs if r["kind"] == "trip"]
+    assert trip and trip[0]["limit"] == LIMIT and "sent standby, throttle 0" in trip[0]["trip"]
+    assert any(r.get("limit") == [LIMIT] for r in recs if r["kind"] == "status")
+    console.stop()
+    with sqlite3.connect(book) as db:
+        rows = db.execute("select command, engine, starts, running_s, limits_violated, files from runs").fetchall()
+    assert len(rows) == 1 and rows[0][:3] == ("zkzap web zk", "K100-1", 1) and rows[0][3] > 0, rows
+    assert LIMIT in rows[0][4] and str(out) in rows[0][5]
