@@ -80,7 +80,7 @@ def test_steps_closer_than_their_frames_take_are_refused():
 # -- playing on the simulator ------------------------------------------------------------------
 
 def test_play_logs_goal_against_present_and_ends_at_the_goals():
-    with start_zap(ids=[1, 2], speed=4) as sim, Bus(sim) as bus:
+    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
         rows = []
         player = bus.play(io.StringIO("t,id,position\n0,\"1,2\",1000\n0.3,1,3000\n"), on_row=rows.append)
         assert player.stopped is None and player.sent == 2 and not player.unsettled
@@ -178,3 +178,57 @@ def test_a_path_in_millimetres_plays_in_counts(tmp_path):
     assert sorted((r.ids, r.position) for r in rows) == [((1,), 1843), ((2,), 889)]
     with pytest.raises(UsageError, match="path.csv:2: position: 40 mm is outside"):
         rows_of("t,id,position\n0,1,40\n", unit="mm", scales=sc)
+
+
+# -- endurance cycles --------------------------------------------------------------------------
+
+def test_cycles_measure_reach_time_and_current_on_the_moving_model():
+    from zkzap.api.cycle import Cycler
+    from zkzap.sim.zap_actuators import FULL_SPEED
+
+    with start_zap(ids=[1]) as sim, Bus(sim) as bus:
+        sim.device.actuator(1).set("goal-position", 500)
+        sim.device.actuator(1).set("present-position", 500)
+        c = Cycler(bus, 1, 500, 3500, dwell=0.05, cycles=2)
+        recs = list(c.run())
+        assert c.reason == "done" and [r["cycle"] for r in recs] == [1, 2]
+        travel = (3000 - 7) / FULL_SPEED                # to within the end-compliance-margin
+        for r in recs:
+            for key in ("reach_b_s", "reach_a_s"):      # resolution: one poll (~7 ms, more on a loaded machine)
+                assert travel <= r[key] <= travel + 0.1, r
+            assert r["peak_current_ma"] == 420 and 15 < r["mean_current_ma"] <= 420
+            assert r["min_voltage_v"] == 12.0 and r["errors"] == [] and r["status"] == "ok"
+
+
+@pytest.mark.parametrize("fault,kw,reason", [
+    ("stuck", {"stall": 0.2}, "stall"),
+    (None, {"limit": 300}, "current-limit"),
+    ("overload", {}, "device-error"),
+])
+def test_a_cycle_run_stops_the_rod_where_it_is(fault, kw, reason):
+    from zkzap.api.cycle import Cycler
+
+    with start_zap(ids=[1], speed=1 if kw.get("limit") else 4) as sim, Bus(sim) as bus:
+        sim.device.actuator(1).set("present-position", 1000)
+        sim.device.actuator(1).set("goal-position", 1000)
+        if fault:
+            sim.inject(1, fault)
+        c = Cycler(bus, 1, 1000, 3000, cycles=5, dwell=0.05, **kw)
+        recs = list(c.run())
+        assert c.reason == reason and recs[-1]["status"] == reason and c.done == 0
+        a = sim.device.actuator(1)
+        if reason != "device-error":
+            assert c.held is not None and a.get("goal-position") == c.held < 3000
+
+
+def test_the_cycle_state_round_trips(tmp_path):
+    from zkzap.api.cycle import CycleState
+
+    path = str(tmp_path / "state.json")
+    s = CycleState(path, {k: None for k in CycleState.KEYS}, done=7, output="run.csv")
+    s.save()
+    back = CycleState.load(path)
+    assert back.done == 7 and back.output == "run.csv"
+    (tmp_path / "bad.json").write_text('{"format": "zkzap-cycle/1", "params": {}, "done": 1}')
+    with pytest.raises(UsageError, match="params: missing"):
+        CycleState.load(str(tmp_path / "bad.json"))

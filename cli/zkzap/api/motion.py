@@ -593,6 +593,13 @@ class Player:
             return "current-limit", f"ID {row['id']} draws {row['current_ma']} mA, over the limit of {self.limit:g} mA"
         return None
 
+    def stop(self, reason="interrupted", message="interrupted", error=None) -> None:
+        """Stop every actuator now (as a Ctrl-C does; for a caller interrupted outside
+        :meth:`rows`, while handling a row). Once: a second call does nothing."""
+        if self.stopped is not None:
+            return
+        self._stop(reason, message, error)
+
     def _stop(self, reason, message, error=None):
         try:
             positions = stop_all(self.link, self.plan.ids, self.stop_mode)

@@ -269,6 +269,7 @@ ZAP_COMMANDS = {
     "play": (".zap.motion", "play", "Play a timed path of goal positions on several actuators."),
     "teach": (".zap.motion", "teach", "Record present positions as waypoints, for zap play."),
     "calibrate": (".zap.motion", "calibrate", "Teach the two ends of the stroke, for millimetres."),
+    "cycle": (".zap.cycle", "cycle", "Endurance cycles of one actuator, measured, resumable, with a report."),
 }
 ROOT_COMMANDS = {
     "zk": (".zk", "zk", "ZK turbine ECU: send, monitor, profile, decode."),

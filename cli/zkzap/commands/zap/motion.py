@@ -166,6 +166,9 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, fmt, output, 
             for row in player.rows():
                 if writer is not None:
                     writer.write(row)
+        except KeyboardInterrupt:
+            player.stop()                  # interrupted while a row was written: the rods too
+            raise
         finally:
             if progress is not None:
                 progress.stop()

@@ -1,0 +1,175 @@
+"""The report of an endurance run (``zap cycle --report``): per-cycle reach times and currents
+over the run, their histograms, and a summary, as PNG, SVG, PDF or one self-contained HTML
+file — the formats of ``zk report`` (:mod:`zkzap.io.report`), chosen the same way.
+
+The input is the cycle records (:data:`zkzap.api.cycle.COLUMNS`), from the run itself or read
+back from its output file (CSV, JSON Lines or a JSON array), kept as float arrays.
+matplotlib is imported only to draw (optional extra ``plot``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from array import array
+
+from ..errors import UsageError
+from .report import FORMATS, _file_meta, _mpl, _svg, output_format  # noqa: F401 - one report family
+
+SERIES = ("cycle", "reach_b_s", "reach_a_s", "peak_current_ma", "mean_current_ma", "min_voltage_v", "overshoot_b",
+          "overshoot_a")
+
+
+class CycleRun:
+    """The series of a cycle run (float arrays, nan where empty), the statuses seen and the
+    cycles with error bits."""
+
+    def __init__(self, name="cycle run"):
+        self.name = name
+        self.series = {k: array("d") for k in SERIES}
+        self.statuses = {}
+        self.flagged = 0
+
+    def add(self, rec) -> None:
+        for k in SERIES:
+            v = rec.get(k)
+            try:
+                self.series[k].append(float(v) if v not in (None, "") else math.nan)
+            except (TypeError, ValueError):
+                self.series[k].append(math.nan)
+        status = rec.get("status") or "ok"
+        self.statuses[status] = self.statuses.get(status, 0) + 1
+        errors = rec.get("errors")
+        if errors not in (None, "", [], "[]"):
+            self.flagged += 1
+
+    def __len__(self):
+        return len(self.series["cycle"])
+
+    def summary_rows(self):
+        def stats(key, unit, dec=3):
+            vals = sorted(v for v in self.series[key] if v == v)
+            if not vals:
+                return "-"
+            p99 = vals[min(len(vals) - 1, max(0, math.ceil(0.99 * len(vals)) - 1))]
+            return (f"mean {sum(vals) / len(vals):.{dec}f} {unit}, p99 {p99:.{dec}f}, min {vals[0]:.{dec}f}, "
+                    f"max {vals[-1]:.{dec}f}")
+
+        cycles = [v for v in self.series["cycle"] if v == v]
+        return [("cycles", f"{len(self)}" + (f" ({int(min(cycles))}..{int(max(cycles))})" if cycles else "")),
+                ("statuses", ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.items()))),
+                ("reach time to B", stats("reach_b_s", "s")), ("reach time to A", stats("reach_a_s", "s")),
+                ("peak current", stats("peak_current_ma", "mA", 0)),
+                ("mean current", stats("mean_current_ma", "mA", 1)),
+                ("lowest voltage", stats("min_voltage_v", "V", 1)),
+                ("cycles with error bits", str(self.flagged))]
+
+
+def load_records(path) -> CycleRun:
+    """A :class:`CycleRun` from a cycle output file (.csv, .jsonl, .json)."""
+    run = CycleRun(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            head = f.read(1)
+            f.seek(0)
+            if head == "[":
+                from ..api.documents import load_json
+
+                for rec in load_json(f.read(), path):
+                    if isinstance(rec, dict):
+                        run.add(rec)
+            elif head == "{":
+                for n, line in enumerate(f, 1):
+                    if line.strip():
+                        try:
+                            run.add(json.loads(line))
+                        except ValueError:
+                            raise UsageError(f"{path}:{n}: not a JSON record") from None
+            else:
+                for rec in csv.DictReader(f):
+                    run.add(rec)
+    except OSError as e:
+        raise UsageError(f"{path}: cannot read: {e.strerror or e}") from None
+    return run
+
+
+def _axes(fig, run):
+    s = run.series
+    x = s["cycle"]
+    grid = fig.add_gridspec(3, 2)
+    ax = fig.add_subplot(grid[0, 0])
+    ax.plot(x, s["reach_b_s"], ".", ms=3, label="to B")
+    ax.plot(x, s["reach_a_s"], ".", ms=3, label="to A")
+    ax.set_title("Reach time per cycle")
+    ax.set_xlabel("cycle")
+    ax.set_ylabel("reach time (s)")
+    ax.legend(loc="best", fontsize="small")
+    ax = fig.add_subplot(grid[0, 1])
+    vals = [v for k in ("reach_b_s", "reach_a_s") for v in s[k] if v == v]
+    if vals:
+        ax.hist(vals, bins=min(50, max(5, len(vals) // 4)))
+    ax.set_title("Reach time histogram")
+    ax.set_xlabel("reach time (s)")
+    ax.set_ylabel("legs")
+    ax = fig.add_subplot(grid[1, 0])
+    ax.plot(x, s["peak_current_ma"], ".", ms=3, label="peak")
+    ax.plot(x, s["mean_current_ma"], ".", ms=3, label="mean")
+    ax.set_title("Current per cycle")
+    ax.set_xlabel("cycle")
+    ax.set_ylabel("current (mA)")
+    ax.legend(loc="best", fontsize="small")
+    ax = fig.add_subplot(grid[1, 1])
+    vals = [v for v in s["peak_current_ma"] if v == v]
+    if vals:
+        ax.hist(vals, bins=min(50, max(5, len(vals) // 4)))
+    ax.set_title("Peak current histogram")
+    ax.set_xlabel("peak current (mA)")
+    ax.set_ylabel("cycles")
+    ax = fig.add_subplot(grid[2, 0])
+    ax.plot(x, s["min_voltage_v"], ".", ms=3)
+    ax.set_title("Lowest supply voltage per cycle")
+    ax.set_xlabel("cycle")
+    ax.set_ylabel("voltage (V)")
+    ax = fig.add_subplot(grid[2, 1])
+    ax.plot(x, s["overshoot_b"], ".", ms=3, label="at B")
+    ax.plot(x, s["overshoot_a"], ".", ms=3, label="at A")
+    ax.set_title("Overshoot per cycle")
+    ax.set_xlabel("cycle")
+    ax.set_ylabel("overshoot (counts)")
+    ax.legend(loc="best", fontsize="small")
+
+
+def figure(run, title, meta=()):
+    Figure = _mpl()
+    fig = Figure(figsize=(12, 12), layout="constrained")
+    text = title + "\n" + "   ".join(f"{k}: {v}" for k, v in list(meta) + run.summary_rows()[:2])
+    fig.suptitle(text, fontsize="medium")
+    _axes(fig, run)
+    return fig
+
+
+def render(path, fmt, run, title="zkzap cycle report", meta=()) -> None:
+    """Write the report of ``run`` to ``path`` in ``fmt`` (png, svg, pdf, html)."""
+    if not len(run):
+        raise UsageError("report: no cycle to report")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*constrained.*", category=UserWarning)
+        if fmt == "html":
+            from html import escape
+
+            rows = list(meta) + run.summary_rows()
+            table = "".join(f"<tr><th>{escape(str(k))}</th><td>{escape(str(v))}</td></tr>" for k, v in rows)
+            fig = figure(run, title, meta)
+            text = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
+                    "<style>body{font-family:sans-serif;margin:1.5em;max-width:1300px}table{border-collapse:collapse}"
+                    "td,th{border-bottom:1px solid #ccc;padding:2px 8px;text-align:left}svg{max-width:100%;height:auto}"
+                    f"</style></head><body><h1>{escape(title)}</h1><table id=\"summary\">{table}</table>"
+                    f"<figure id=\"cycles\">{_svg(fig)}</figure></body></html>\n")
+            with open(path, "w", encoding="utf-8") as f:
+                f.write(text)
+            return
+        fig = figure(run, title, meta)
+        fig.savefig(path, format=fmt, dpi=100, metadata=_file_meta(fmt, title))
