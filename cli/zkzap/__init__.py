@@ -49,6 +49,11 @@ _LAZY = {
     "CrcError": "zkzap.codec.zk",
     "PacketError": "zkzap.codec.zap",
     "ChecksumError": "zkzap.codec.zap",
+    "ModbusFrameError": "zkzap.codec.modbus",
+    "ModbusCrcError": "zkzap.codec.modbus",
+    "ExceptionReply": "zkzap.codec.modbus",
+    "ReplyMismatch": "zkzap.codec.modbus",
+    "MapError": "zkzap.codec.regmap",
     "ExpressionError": "zkzap.api.expr",
     "LimitViolation": "zkzap.api.limits",
     "StartRefused": "zkzap.api.alarms",
@@ -80,6 +85,9 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .api.zk import Ecu as Ecu, ProfileResult as ProfileResult, Status as Status
     from .codec.fields import FieldValueError as FieldValueError
     from .codec.hexfmt import HexError as HexError
+    from .codec.modbus import (ExceptionReply as ExceptionReply, ModbusCrcError as ModbusCrcError,
+                               ModbusFrameError as ModbusFrameError, ReplyMismatch as ReplyMismatch)
+    from .codec.regmap import MapError as MapError
     from .codec.permissions import Permission as Permission
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError

@@ -217,3 +217,33 @@ def test_framer_counts_bad_and_truncated_and_keeps_the_next_frame():
     out = f.feed(bad + good + good[:5]) + f.flush()
     assert out == [good]
     assert f.bad == 1 and f.truncated == 1 and f.skipped == len(bad) + 5
+
+
+@pytest.mark.parametrize("baud,seconds", [(9600, 3.5 * 11 / 9600), (19200, 3.5 * 11 / 19200), (38400, 0.00175),
+                                          (57600, 0.00175), (115200, 0.00175)])
+def test_inter_frame_silence(baud, seconds):
+    assert modbus.silence(baud) == pytest.approx(seconds)
+
+
+def test_the_bus_keeps_the_silence_between_frames():
+    """Every request starts at least 3.5 characters (1.75 ms at 57600) after the last byte on
+    the line, sent or received."""
+    import time
+
+    from zkzap.link.modbus_bus import ModbusBus
+    from zkzap.link.port import open_port
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[1], protocol="modbus") as sim:
+        bus = ModbusBus(open_port(sim.url, 57600, timeout=0.1), url=sim.url)
+        writes = []
+        real = bus.port.write
+
+        def write(data):
+            writes.append((time.monotonic(), bus._line_free))
+            return real(data)
+
+        bus.port.write = write
+        for _ in range(5):
+            bus.read(1, "present-position")
+        assert all(t - free >= modbus.silence(57600) * 0.999 for t, free in writes[1:])

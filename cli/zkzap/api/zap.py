@@ -157,10 +157,25 @@ class Bus:
     port in this process shares what was learned of the actuators' latencies (:attr:`latencies`).
     """
 
+    #: The protocol family: ``ir`` here, ``modbus`` on a :class:`zkzap.api.zap_modbus.ModbusBus`.
+    protocol = "ir"
+
+    def __new__(cls, *args: Any, protocol: Literal["ir", "modbus"] = "ir", **kw: Any) -> Self:
+        if protocol not in ("ir", "modbus"):
+            raise UsageError(f"protocol: {protocol!r}; allowed ir, modbus", protocol=protocol)
+        if protocol == "modbus" and cls is Bus:
+            from .zap_modbus import ModbusBus
+
+            return object.__new__(ModbusBus)
+        return object.__new__(cls)
+
     def __init__(self, port: Union[str, Simulator, None] = None, *, baud: int = 57600,
                  return_mode: Union[int, Literal["auto"]] = 1, timeout: Optional[float] = None,
                  retries: int = 2, latency: Optional[float] = None, low_latency: bool = False,
-                 allow: AllowSpec = None, _link: Optional[ZapBus] = None) -> None:
+                 allow: AllowSpec = None, protocol: Literal["ir", "modbus"] = "ir",
+                 _link: Optional[ZapBus] = None) -> None:
+        """``protocol="modbus"``: actuators speaking Modbus RTU (the 17Lf; the Bus is then a
+        :class:`zkzap.api.zap_modbus.ModbusBus`, which also takes ``regmap=``)."""
         if _link is None:
             from ..link.zap_bus import RETRIES, open_bus
 
@@ -515,13 +530,10 @@ class Bus:
         margin = self.load(ident, "end-compliance-margin")
         if goal != position and notify is not None:
             notify(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits")
-        length = _span(WATCH_FIRST, WATCH_LAST)
         start = time.monotonic()
         first = None
         while True:
-            _, values = self.link.read_registers(ident, WATCH_FIRST.address, length)
-            v = {reg.name: raw for reg, raw in values}
-            pos, moving = v["present-position"], v["moving"]
+            pos, moving = self._position_moving(ident)
             if first is None:
                 first = pos
             if on_progress is not None:
@@ -538,6 +550,12 @@ class Bus:
                               ident=ident, position=pos, goal=goal, timeout=timeout)
             if poll:
                 time.sleep(poll)
+
+    def _position_moving(self, ident: int) -> tuple[int, int]:
+        """present-position and moving, read in one Load Data (present-position .. moving)."""
+        _, values = self.link.read_registers(ident, WATCH_FIRST.address, _span(WATCH_FIRST, WATCH_LAST))
+        v = {reg.name: raw for reg, raw in values}
+        return v["present-position"], v["moving"]
 
     def _read_back(self, ident: int, reg: zap.Register, within: float, message: str, change: str) -> int:
         try:

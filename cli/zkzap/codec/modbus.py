@@ -39,6 +39,17 @@ MAX_WRITE = 123
 MAX_FRAME = 256
 EXCEPTION_BIT = 0x80
 
+#: Bits of one character on the line, as Modbus RTU counts it (start, 8 data, parity or a second
+#: stop bit, stop).
+CHAR_BITS = 11
+
+
+def silence(baud: int) -> float:
+    """The silence that separates two frames (seconds): 3.5 characters of 11 bits, and 1.75 ms
+    above 19200 baud (the Modbus serial line guide's fixed value for fast lines)."""
+    return 0.00175 if baud > 19200 else 3.5 * CHAR_BITS / baud
+
+
 #: Function code -> (name on the command line, Modbus name).
 FUNCTIONS = {
     READ_HOLDING: ("read", "Read Holding Registers"),
@@ -68,13 +79,13 @@ def exception_meaning(code: int) -> str:
 
 # --- errors --------------------------------------------------------------------------------------
 
-class FrameError(ZkzapError, ValueError):
+class ModbusFrameError(ZkzapError, ValueError):
     """A malformed Modbus RTU frame: bad input (exit 2), also a ``ValueError``."""
 
     code = USAGE
 
 
-class CrcError(FrameError, CheckFailed):
+class ModbusCrcError(ModbusFrameError, CheckFailed):
     """A frame whose CRC-16 does not match (exit 1): facts ``expected`` and ``found`` (the
     16-bit CRC values, low byte first on the wire)."""
 
@@ -123,16 +134,16 @@ def crc_ok(data: Union[bytes, bytearray, memoryview]) -> bool:
 
 
 def check_frame(data: Union[bytes, bytearray, memoryview]) -> None:
-    """Raise :class:`FrameError`/:class:`CrcError` unless ``data`` is one whole frame."""
+    """Raise :class:`ModbusFrameError`/:class:`ModbusCrcError` unless ``data`` is one whole frame."""
     n = len(data)
     if n < 4:
-        raise FrameError(f"Modbus RTU frame: {n} bytes; a frame has at least 4 (ID, function, CRC)")
+        raise ModbusFrameError(f"Modbus RTU frame: {n} bytes; a frame has at least 4 (ID, function, CRC)")
     if n > MAX_FRAME:
-        raise FrameError(f"Modbus RTU frame: {n} bytes; at most {MAX_FRAME}")
+        raise ModbusFrameError(f"Modbus RTU frame: {n} bytes; at most {MAX_FRAME}")
     expected = crc16_modbus(data[:-2])
     found = int.from_bytes(data[-2:], "little")
     if expected != found:
-        raise CrcError(f"Modbus RTU frame: CRC mismatch: expected {expected & 0xFF:02X} {expected >> 8:02X}, "
+        raise ModbusCrcError(f"Modbus RTU frame: CRC mismatch: expected {expected & 0xFF:02X} {expected >> 8:02X}, "
                        f"found {found & 0xFF:02X} {found >> 8:02X}", expected, found)
 
 

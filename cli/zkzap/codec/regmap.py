@@ -201,9 +201,13 @@ class RegisterMap:
         return f"<RegisterMap {self.model} {self.protocol}: {len(self.registers)} registers>"
 
     def register(self, spec: Union[str, int, Register]) -> Register:
-        """A register of this map by name or address (FieldValueError naming the choices)."""
+        """A register of this map by name or address (FieldValueError naming the choices). A
+        :class:`Register` of another map stands for this map's register of the same name (the
+        same words where the meaning is the same)."""
         if isinstance(spec, Register):
-            return spec
+            if self.by_name.get(spec.name) is spec:
+                return spec
+            spec = spec.name
         if isinstance(spec, str):
             key = spec.strip().lower().replace("_", "-")
             if key in self.by_name:

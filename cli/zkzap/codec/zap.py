@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 from .crc import zap_checksum
 from .fields import FieldValueError
 from .ids import id_ranges  # noqa: F401 - part of this module's interface
-from .regmap import Register, builtin
+from .regmap import Register as Register, builtin  # Register: part of this module's interface
 
 HEADER = b"\xff\xff\xff"
 BROADCAST = 0xFE

@@ -150,6 +150,84 @@ def leaves_protocol(pkt: bytes) -> bool:
     return zap.Command(pkt).leaves_protocol
 
 
+class IrFamily:
+    """What the bus's transactions need to know of the IR protocol's packets (the protocol
+    family seam: :mod:`zkzap.link.modbus_bus` gives Modbus RTU's): how packets are framed, who
+    sent one, whether it is a request, how long a reply of ``data_len`` data bytes is, whether
+    a reply is a copy of its request."""
+
+    name = "ir"
+    BROADCAST = zap.BROADCAST
+    #: Bytes of a reply besides its data (header, ID, SIZE, error, checksum).
+    OVERHEAD = 7
+    framer = ZapFramer
+
+    @staticmethod
+    def ident(p) -> int:
+        return p[3]
+
+    @staticmethod
+    def is_request(p) -> bool:
+        return zap.is_command(p[5])
+
+    @classmethod
+    def fits(cls, p, data_len) -> bool:
+        """Whether ``p`` has the length of a reply of ``data_len`` data bytes (None: any)."""
+        return data_len is None or len(p) - cls.OVERHEAD == data_len
+
+    @staticmethod
+    def restarts(pkt) -> bool:
+        return pkt[5] in zap.RESTART_CODES
+
+    @staticmethod
+    def stored(pkt) -> bool:
+        return pkt[5] not in _READS and bool(stored_writes(pkt))
+
+    @staticmethod
+    def copy_reply(pkt) -> bool:
+        """Whether the reply is a copy of the request (Restart's feedback)."""
+        return pkt[5] in zap.RESTART_CODES
+
+    @staticmethod
+    def cut_short(tail: bytes) -> bool:
+        """Whether bytes held at the end look like the start of a reply (not line noise)."""
+        return tail.startswith(b"\xff")
+
+    @staticmethod
+    def reply(p, rtt, latency, copy=False):
+        if copy:
+            return Reply(p[3], 0, b"", p, rtt, latency)
+        return Reply(p[3], p[5], p[6:-1], p, rtt, latency)
+
+    # -- what a scan asks (zkzap.link.zap_scan) ------------------------------------------------------
+
+    #: A scan's probe (Echo) and its reply, in bytes.
+    PROBE_LEN = 7
+    _INFO = (zap.REGISTER_BY_NAME["model-number"], zap.REGISTER_BY_NAME["feedback-return-mode"])
+    _LIVE = (zap.REGISTER_BY_NAME["present-position"], zap.REGISTER_BY_NAME["present-voltage"])
+
+    @classmethod
+    def info_request(cls, ident):
+        """``(request, data_len)`` identifying an actuator: model number .. feedback-return-mode."""
+        first, last = cls._INFO
+        length = last.address + last.size - first.address
+        return zap.load(ident, first.address, length), length
+
+    @classmethod
+    def info_values(cls, reply) -> dict:
+        """``{"model", "firmware", "return_mode"}`` from the reply to :meth:`info_request`."""
+        values = {reg.name: raw for reg, raw in zap._register_values(cls._INFO[0].address, reply.data)}
+        return {"model": values.get("model-number"), "firmware": values.get("firmware-version"),
+                "return_mode": values.get("feedback-return-mode")}
+
+    @classmethod
+    def live_request(cls, ident):
+        """``(request, data_len)`` of live registers, which differ between two units with one ID."""
+        first, last = cls._LIVE
+        length = last.address + last.size - first.address
+        return zap.load(ident, first.address, length), length
+
+
 class _Owed:
     """An attempt whose reply has not come: it may still come until ``until`` (its window),
     and is recognised as that attempt's until ``keep``. ``kind`` is ``reply`` (an expected
@@ -161,8 +239,8 @@ class _Owed:
         self.token, self.ids, self.data_len, self.t0, self.sent = token, ids, data_len, t0, sent
         self.until, self.keep, self.kind = until, keep, kind
 
-    def matches(self, p) -> bool:
-        return p[3] in self.ids and (self.data_len is None or len(p) - 7 == self.data_len)
+    def matches(self, p, family=IrFamily) -> bool:
+        return family.ident(p) in self.ids and family.fits(p, self.data_len)
 
 
 class Event:
@@ -185,11 +263,14 @@ class Event:
 
 
 class ZapBus:
-    """Transactions on one port. ``return_mode`` is the feedback-return mode (0, 1, 2) assumed of
+    """Transactions on one port (of the protocol family :attr:`family`). ``return_mode`` is the feedback-return mode (0, 1, 2) assumed of
     an actuator whose own the bus has not learned (:attr:`devices`);
     ``timeout`` (seconds) replaces the late window; ``retries`` after a failure; ``latency``
     (seconds) is what the actuators are known to take before any was measured (``--latency``);
     ``margin`` replaces the host margin derived from the port."""
+
+    #: The protocol family of the packets (see :class:`IrFamily`).
+    family = IrFamily
 
     def __init__(self, port, *, return_mode: int = 1, timeout=None, retries: int = RETRIES, margin=None,
                  url=None, latency=None, policy=None):
@@ -208,7 +289,7 @@ class ZapBus:
         self._unechoed = {}                # write time -> packet, until its clean echo came back
         self._owed = deque()               # attempts whose reply may still come
         self._spare = deque()              # work for the time a reply is on its way (spare())
-        self._framer = ZapFramer()         # bytes read between transactions
+        self._framer = self.family.framer()     # bytes read between transactions
         self._held = None                  # [lo, hi]: when the bytes the framer holds were read
         self._quiet_until = 0.0
         self._seen_empty = time.monotonic()
@@ -288,7 +369,7 @@ class ZapBus:
         except Exception as e:  # serial.SerialException
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
         self._owed.clear()                 # nothing said at the old speed is heard at the new one
-        self._framer = ZapFramer()
+        self._framer = self.family.framer()
         self._held = None
 
     def close(self) -> None:
@@ -459,12 +540,13 @@ class ZapBus:
         if self._echoed(p):
             self.adapter_echo = True
             return None
-        if zap.is_command(p[5]):
+        family = self.family
+        if family.is_request(p):
             return None                    # another master's command
         owed = self._take_owed(p, hi)
         if owed is None:
             self.stale += 1
-            self._event("stray", p[3], lo, hi, None, p)
+            self._event("stray", family.ident(p), lo, hi, None, p)
             return None
         if owed.kind == "ack":
             self.stale += 1                # an acknowledgement nobody waited for
@@ -472,13 +554,13 @@ class ZapBus:
         if token is not None and owed.token is token:
             return owed, p
         self.late += 1
-        self._event("late", p[3], lo, hi, owed.t0, p)
+        self._event("late", family.ident(p), lo, hi, owed.t0, p)
         return None
 
     def _take_owed(self, p, now):
         """The attempt a stray packet answers: one whose window is open first, else the oldest
         one still recognised."""
-        found = [o for o in self._owed if o.keep >= now and o.matches(p)]
+        found = [o for o in self._owed if o.keep >= now and o.matches(p, self.family)]
         if not found:
             return None
         owed = next((o for o in found if o.until > now), found[0])
@@ -633,11 +715,12 @@ class ZapBus:
         """
         stop.check()                       # a stop requested (a batch's Ctrl-C) ends the command here
         pkt = bytes(pkt)
-        ident = pkt[3]
+        family = self.family
+        ident = family.ident(pkt)
         if reply is None:
             reply = self.expects_reply(pkt)
-        stored = pkt[5] not in _READS and bool(stored_writes(pkt))
-        restart = pkt[5] in zap.RESTART_CODES
+        stored = family.stored(pkt)
+        restart = family.restarts(pkt)
         extra = extra + (NV_PAUSE if stored else 0.0)
         tries = 1 + (self.retries if retries is None else retries)
         accept = set(accept_ids) if accept_ids else {ident}
@@ -649,14 +732,14 @@ class ZapBus:
             t0 = self._write(pkt)
             pause = RESTART_PAUSE if restart else (NV_PAUSE if stored else 0.0)
             self._quiet_until = t0 + tx + pause
-            if ident != zap.BROADCAST:
+            if ident != family.BROADCAST:
                 # an actuator in another return mode acknowledges anyway: the line stays quiet for
                 # its learned latency (the bus-typical one before it was measured), and that
                 # acknowledgement is skipped when it comes
-                until = t0 + tx + self.courtesy(ident, win) + self.wire(7) + self.margin
+                until = t0 + tx + self.courtesy(ident, win) + self.wire(family.OVERHEAD) + self.margin
                 self._owed.append(_Owed(None, accept, None, t0, t0 + tx, until + pause, until + win, "ack"))
             return None
-        rx_len = 7 + (data_len or 0)
+        rx_len = family.OVERHEAD + (data_len or 0)
         span = tx + win + self.wire(rx_len) + self.margin + extra      # the whole window of an attempt
         token = object()
         problems = []
@@ -670,7 +753,7 @@ class ZapBus:
                 self._settle()
             t0 = self._write(pkt)
             limit = (self.quick_timeout(len(pkt), ident) + extra) if quick else span
-            got = self._await(pkt, accept, data_len, rx_len, t0, limit, restart, token)
+            got = self._await(pkt, accept, data_len, rx_len, t0, limit, family.copy_reply(pkt), token)
             if isinstance(got, Reply):
                 return self._answered(got, pkt, restart, stored, check, win)
             if got[0] == "none":
@@ -701,7 +784,7 @@ class ZapBus:
             pass
         self._flush_idle()
 
-    def _await(self, pkt, accept, data_len, rx_len, t0, limit, restart, token):
+    def _await(self, pkt, accept, data_len, rx_len, t0, limit, copy_reply, token):
         """Read until a valid reply or the deadline (``limit`` after ``t0``, for the first reply
         byte; extended while reply bytes trickle in). Returns a Reply (``rtt`` from the attempt
         that was answered, ``latency`` its first byte after the request left) or a problem tuple
@@ -711,14 +794,16 @@ class ZapBus:
         if self._spare and time.monotonic() - t0 < tx * SPARE_SHARE:
             self.run_spare()               # the request is still on the wire: the host's time is free
             overran = time.monotonic() - t0 > tx       # a reply byte may have waited for the work
-        framer = ZapFramer()
+        family = self.family
+        ident_of = family.ident
+        framer = family.framer()
         received = bytearray()
         echo_known = self.adapter_echo
         state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
                  "explained": 0, "first": None, "lo": self._seen_empty, "hi": None}
         wrong = []
         deadline = base = t0 + limit
-        gap = self.policy.inter_byte(pkt[3], self.window)
+        gap = self.policy.inter_byte(ident_of(pkt), self.window)
         physical = self.wire(len(pkt) + rx_len)
 
         def examine(packets, lo, hi):
@@ -731,15 +816,15 @@ class ZapBus:
                     self._echoed(p)
                     state["want"] = max(state["want"], len(received) + rx_len)
                     continue
-                if p in self._recent or zap.is_command(p[5]):
+                if p in self._recent or family.is_request(p):
                     self._echoed(p)
                     continue                      # a late echo of an earlier packet, another master
                 now = time.monotonic()
                 # an earlier attempt's: its window was still open when this one went out (a
                 # scan's first pass), or it came too early to be this attempt's reply
                 # (a reply that cannot be this one's answer is any recognised earlier attempt's)
-                ours = p[3] in accept and (data_len is None or len(p) - 7 == data_len)
-                owed = next((o for o in self._owed if o.matches(p) and o.keep >= now
+                ours = ident_of(p) in accept and family.fits(p, data_len)
+                owed = next((o for o in self._owed if o.matches(p, family) and o.keep >= now
                              and (not ours or o.until > t0 or now - t0 < physical)), None) if self._owed else None
                 if owed is not None:
                     self._owed.remove(owed)
@@ -754,18 +839,17 @@ class ZapBus:
                         return self._reply(p, hi - owed.t0, None)
                     else:
                         self.late += 1
-                        self._event("late", p[3], lo, hi, owed.t0, p)
+                        self._event("late", ident_of(p), lo, hi, owed.t0, p)
                     state["want"] = len(received) + rx_len
                     continue
-                if p[3] not in accept:
+                if ident_of(p) not in accept:
                     wrong.append(p)
-                    self._event("stray", p[3], lo, hi, None, p)
+                    self._event("stray", ident_of(p), lo, hi, None, p)
                     state["want"] = len(received) + rx_len
                     continue
-                data = p[6:-1]
-                if data_len is not None and len(data) != data_len:
+                if not family.fits(p, data_len):
                     self.stale += 1               # an ack nobody waited for; the reply may follow
-                    state["mismatch"] = (len(data), bytes(p))
+                    state["mismatch"] = (len(p) - family.OVERHEAD, bytes(p))
                     state["want"] = len(received) + rx_len
                     continue
                 if framer.bad or framer.skipped:
@@ -810,15 +894,15 @@ class ZapBus:
         copies = state["copies"]
         # The documented Restart feedback is a copy of the command itself: accept a copy that
         # is more than the adapter's known echo.
-        if restart and not wrong and copies >= (2 if echo_known else 1):
+        if copy_reply and not wrong and copies >= (2 if echo_known else 1):
             return self._reply(pkt, time.monotonic() - t0, None, copy=True)
         if wrong:
-            ids = ", ".join(str(p[3]) for p in wrong)
+            ids = ", ".join(str(ident_of(p)) for p in wrong)
             return ("wrong-id", f"reply from ID {ids}, expected ID {min(accept)}", bytes(received))
         if state["mismatch"] is not None:
             n = state["mismatch"][0]
             return ("length", f"reply carries {n} data bytes, expected {data_len}", bytes(received))
-        if pending and not bad_before and bytes(received[-pending:]).startswith(b"\xff"):
+        if pending and not bad_before and family.cut_short(bytes(received[-pending:])):
             return ("truncated", f"truncated reply ({pending} bytes of an incomplete packet: a collision "
                                  "or a line fault)", bytes(received))
         if framer.bad:
@@ -829,14 +913,11 @@ class ZapBus:
                                "baud rate)", bytes(received))
         return ("none", "echo only" if copies else "", bytes(received))
 
-    @staticmethod
-    def _reply(p, rtt, latency, copy=False):
-        if copy:
-            return Reply(p[3], 0, b"", p, rtt, latency)
-        return Reply(p[3], p[5], p[6:-1], p, rtt, latency)
+    def _reply(self, p, rtt, latency, copy=False):
+        return self.family.reply(p, rtt, latency, copy)
 
     def _fail(self, pkt, problems, limit, tries, optional):
-        ident = pkt[3]
+        ident = self.family.ident(pkt)
         kinds = [p[0] for p in problems]
         if all(k == "none" for k in kinds):
             if optional:
@@ -844,11 +925,10 @@ class ZapBus:
             ms = self.window * 1000
             echo = any(p[1] == "echo only" for p in problems)
             note = " (only our own bytes came back: the adapter echoes)" if echo else ""
-            ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
             raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {ms:.1f} ms "
                           f"({tries} {'try' if tries == 1 else 'tries'}){note}",
                           ident=ident, baud=self.baud, timeout=limit, window=self.window, tries=tries,
-                          echo_only=echo, mode_dependent=ins is not None and ins.reply != "always",
+                          echo_only=echo, mode_dependent=self.mode_dependent(pkt),
                           protocol="zap")
         bad = [p for p in problems if p[0] != "none"][-1]
         seen = bad[2].hex(" ").upper() if bad[2] else "nothing"
@@ -859,6 +939,11 @@ class ZapBus:
                        collision=bad[0] in ("checksum", "garbage", "truncated"), protocol="zap")
 
     # -- instructions -------------------------------------------------------------------------
+
+    def mode_dependent(self, pkt: bytes) -> bool:
+        """Whether an answer to ``pkt`` depends on the actuator's feedback-return mode."""
+        ins = zap.INSTRUCTION_BY_CODE.get(pkt[5])
+        return ins is not None and ins.reply != "always"
 
     def authorize(self, pkt: bytes, allow=None) -> None:
         """Raise :class:`~zkzap.errors.PermissionNeeded` unless ``pkt`` may be sent: the
@@ -1025,7 +1110,7 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
     ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`. ``latency``
     (seconds) is the actuators' known latency before any is measured; ``low_latency`` asks the
     driver for its low-latency mode (:attr:`ZapBus.low_latency` says whether it could)."""
-    from .port import open_port, sim_url
+    from .port import sim_url
 
     if sim:
         opts = dict(sim_options or {})
@@ -1037,8 +1122,17 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         if not port:
             raise UsageError("no port", no_port="zap")
         url = port
+    return open_on(url, baud, stop_bits, allow, low_latency, ZapBus, return_mode=return_mode, timeout=timeout,
+                   retries=retries, latency=latency)
+
+
+def open_on(url, baud, stop_bits, allow, low_latency, cls, **kw):
+    """A bus of class ``cls`` (``**kw``: its options) on the port ``url`` opened at ``baud``,
+    given ``allow``, in the driver's low-latency mode when asked."""
+    from .port import open_port
+
     p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
-    bus = ZapBus(p, return_mode=return_mode, timeout=timeout, retries=retries, url=url, latency=latency)
+    bus = cls(p, url=url, **kw)
     bus.allow = as_permission(allow)
     if low_latency:
         bus.low_latency, bus.low_latency_reason = set_low_latency(p)

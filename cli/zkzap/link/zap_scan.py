@@ -65,12 +65,6 @@ from .zap_timing import QUICK_FACTOR
 
 #: The order ``--baud all`` tries: the factory default first, then the others fastest first.
 ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
-#: The block read to identify an actuator: model-number .. feedback-return-mode.
-INFO_FIRST = zap.REGISTER_BY_NAME["model-number"]
-INFO_LAST = zap.REGISTER_BY_NAME["feedback-return-mode"]
-#: Live registers read to reveal two actuators sharing an ID: present-position .. present-voltage.
-LIVE_FIRST = zap.REGISTER_BY_NAME["present-position"]
-LIVE_LAST = zap.REGISTER_BY_NAME["present-voltage"]
 #: How far before garbled bytes arrived (beyond the adapter's timer) a probe may have met them.
 GARBLED_SLACK = 0.01
 #: Quick rounds over the IDs in doubt before they are asked again one by one with the whole window
@@ -79,7 +73,6 @@ REPLAYS = 2
 #: The fewest IDs in doubt for which a quick round is cheaper than asking them one by one.
 REPLAY_MIN = 3
 STATUSES = ("ok", "error", "garbled", "duplicate", "unidentified")
-ECHO_LEN = 7
 
 
 def duplicate_warning(ident: int, baud: int) -> str:
@@ -180,8 +173,8 @@ class _Scan:
             return None
         finally:
             t0 = bus.last_sent
-            tx = bus.wire(ECHO_LEN)
-            self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(ECHO_LEN) + bus.margin)
+            tx = bus.wire(bus.family.PROBE_LEN)
+            self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(bus.family.PROBE_LEN) + bus.margin)
 
     def _identify_found(self):
         """Identify the actuators found and not identified yet while the last windows close (one
@@ -202,7 +195,7 @@ class _Scan:
         the bus-typical latency would have ended, so that late replies that met each other (or
         the probes between them) meet no more."""
         bus = self.bus
-        guard = self._slack() + bus.wire(ECHO_LEN)
+        guard = self._slack() + bus.wire(bus.family.PROBE_LEN)
         offsets = {}                    # ID -> [(from, to)] after its probe, where its reply would come
         for lo, hi in self.bursts:
             for ident in todo:
@@ -211,7 +204,7 @@ class _Scan:
                     offsets.setdefault(ident, []).append((lo - p.t0 - guard, hi - p.t0 + bus.margin))
         self.bursts = []
         free = []                       # (from, to): where a reply may come on the line: no probe then
-        tx = bus.wire(ECHO_LEN)
+        tx = bus.wire(bus.family.PROBE_LEN)
         for ident in sorted(todo, key=lambda i: self.probes[i].t0 if i in self.probes else 0.0):
             if ident in self.records:
                 continue                # found meanwhile (its late reply came through)
@@ -233,7 +226,7 @@ class _Scan:
                 # (one later than that, where the garbled bytes came, has its free slot above)
                 typical = bus.policy.typical() or 0.0
                 end = t0 + tx + max(typical * QUICK_FACTOR, bus.policy.quick(bus.latency, bus.window)) \
-                    + bus.wire(ECHO_LEN) * 2 + bus.margin
+                    + bus.wire(bus.family.PROBE_LEN) * 2 + bus.margin
                 left = end - time.monotonic()
                 if left > 0:
                     bus.linger(left)
@@ -320,7 +313,7 @@ class _Scan:
                 ident = ev.ident
                 if ident not in self.records and (ev.kind == "late" or ident in self.probes):
                     if ev.packet[4] == 2:             # an Echo reply (no data): the actuator is there
-                        self._found(ident, _AsReply(ev.packet))
+                        self._found(ident, bus.family.reply(ev.packet, 0.0, None))
                     self.late_seen.add(ident)
                 # a late reply can come through clean and still have broken a probe sent while
                 # it was on the line (the probe's header of FF bytes leaves it as it was, while
@@ -329,7 +322,7 @@ class _Scan:
                 continue
             if ev.kind != "garbled":
                 continue
-            lo, hi = ev.lo - slack - bus.wire(ECHO_LEN), ev.hi
+            lo, hi = ev.lo - slack - bus.wire(bus.family.PROBE_LEN), ev.hi
             self.bursts.append((ev.lo, ev.hi))
             self._collided(lo, hi)
             # whoever sent them may be any ID whose window they fell in
@@ -355,17 +348,6 @@ class _Scan:
             return True
         p = self.probes.get(i)
         return p is None or p.t0 + p.span > now
-
-
-class _AsReply:
-    """A late Echo reply heard between transactions, as the record needs it."""
-
-    def __init__(self, packet):
-        self.ident, self.error = packet[3], packet[5]
-
-    @property
-    def errors(self):
-        return zap.error_names(self.error)
 
 
 def _late_text(bus, ident) -> str:
@@ -398,10 +380,9 @@ def _finish(bus, rec, retries, early=False):
 def collides(bus, ident: int, retries: int = 2, early=False) -> bool:
     """Whether two actuators seem to answer to ``ident``: its live registers (which differ
     between two units) come back garbled on every try."""
-    length = LIVE_LAST.address + LIVE_LAST.size - LIVE_FIRST.address
+    pkt, length = bus.family.live_request(ident)
     try:
-        bus.transact(zap.load(ident, LIVE_FIRST.address, length), reply=True, data_len=length,
-                     retries=retries, check=False, early=early)
+        bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, early=early)
     except BadReply:
         return True
     except NoReply:
@@ -414,8 +395,7 @@ def identify(bus, rec, retries=2, early=False) -> None:
     them null with status ``unidentified`` (or ``duplicate`` when the reply is garbled) and the
     reason in ``errors``."""
     ident = rec["id"]
-    length = INFO_LAST.address + INFO_LAST.size - INFO_FIRST.address
-    pkt = zap.load(ident, INFO_FIRST.address, length)
+    pkt, length = bus.family.info_request(ident)
     try:
         r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, early=early)
     except BadReply as e:
@@ -431,10 +411,7 @@ def identify(bus, rec, retries=2, early=False) -> None:
         late = any(ev.kind == "late" and ev.ident == ident for ev in bus.events)
         rec["errors"] = rec["errors"] + [_late_text(bus, ident) if late else f"identify: {e}"]
         return
-    values = {reg.name: raw for reg, raw in zap._register_values(INFO_FIRST.address, r.data)}
-    rec["model"] = values.get("model-number")
-    rec["firmware"] = values.get("firmware-version")
-    rec["return_mode"] = values.get("feedback-return-mode")
+    rec.update(bus.family.info_values(r))
     if rec["return_mode"] in (0, 1, 2):
         bus.devices.learn_mode(ident, rec["return_mode"])   # that actuator's from now on
 
