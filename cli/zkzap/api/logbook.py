@@ -20,7 +20,7 @@ import json
 import os
 import time
 
-from ..errors import OutputError, UsageError
+from ..errors import OutputError, UsageError, clip
 
 BUSY_TIMEOUT_S = 30.0
 RUNNING_STATES = frozenset({"running", "running-min-throttle", "running-pump-limit"})
@@ -234,8 +234,26 @@ def _run(path, rec) -> dict:
         if v is None and nullable:
             continue
         if not _number(v):
-            bad(k, f"{v!r} is not a number")
+            bad(k, f"{clip(repr(v))} is not a number")
+    for k, nullable in _TEXTS.items():
+        what = _not_text(rec[k], nullable)
+        if what:
+            bad(k, what)
     return rec
+
+
+#: Columns that must hold text (None where the column allows NULL).
+_TEXTS = {"started": False, "ended": False, "command": False, "port": True, "schedule": True,
+          "outcome": False, "engine": True}
+
+
+def _not_text(v, nullable) -> str:
+    """What is wrong with ``v`` as a text column's value ('' when nothing is)."""
+    if isinstance(v, str) or (v is None and nullable):
+        return ""
+    if isinstance(v, bytes):
+        return f"a BLOB of {len(v)} byte{'' if len(v) == 1 else 's'} is not text"
+    return f"{clip(repr(v))} is not text"
 
 
 def _number(v) -> bool:
@@ -308,7 +326,12 @@ def services(path, engine=None) -> list:
         db.close()
     for svc in out:
         if not isinstance(svc["after_run"], int) or isinstance(svc["after_run"], bool):
-            raise UsageError(f"logbook: {path}: service {svc['id']}: after_run: {svc['after_run']!r} is not a run ID")
+            raise UsageError(f"logbook: {path}: service {svc['id']}: after_run: {clip(repr(svc['after_run']))} "
+                             "is not a run ID")
+        for k, nullable in (("engine", False), ("at", False), ("note", True)):
+            what = _not_text(svc[k], nullable)
+            if what:
+                raise UsageError(f"logbook: {path}: service {svc['id']}: {k}: {what}")
     return out
 
 

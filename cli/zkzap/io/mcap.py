@@ -193,6 +193,12 @@ class McapWriter:
         if ns is None and rec.get("time") is None and isinstance(rec.get("t"), (int, float)):
             ns = round(rec["t"] * 1e9)     # no wall-clock time (a raw log's replay): time since its start
         if ns is not None:
+            if not 0 <= ns < 1 << 64:
+                from ..errors import UsageError
+
+                when = rec.get("time") if rec.get("time") is not None else f"t = {rec.get('t')} s"
+                raise UsageError(f"mcap: a record at {when}: MCAP's log time is nanoseconds since 1970 in "
+                                 "64 bits (1970-01-01 to 2554-07-21)")
             self._last_ns = ns
         return self._last_ns
 
@@ -204,10 +210,10 @@ class McapWriter:
         data = _dumps({k: v for k, v in rec.items() if k[:1] != "_"}).encode("utf-8")
         with self._lock:
             try:
+                ns = self._time_ns(rec)       # before the channel: a time MCAP cannot hold starts no file
                 ch = self._channel(rec)
                 seq = self._seq[ch]
                 self._seq[ch] = seq + 1
-                ns = self._time_ns(rec)
                 self._w.add_message(channel_id=ch, log_time=ns, data=data, publish_time=ns, sequence=seq)
             except OSError as e:
                 self._fail(e)

@@ -19,7 +19,8 @@ import math
 import os
 from array import array
 
-from ..errors import UsageError
+from ..codec.fields import beyond_float, quote_value
+from ..errors import UsageError, clip
 
 #: Time-history panels: (title, unit label, [(column, legend label)]).
 PANELS = (
@@ -72,13 +73,21 @@ class Run:
         self.summary = None
         self.offset = 0.0            # subtracted from t on a comparison's common axis
 
-    def add(self, rec):
+    def add(self, rec, where=None):
+        """Take the record ``rec`` (read at ``where``, ``FILE:LINE``)."""
+        try:
+            self._add(rec)
+        except _Beyond as e:
+            key = next((c for c in ("t", *self.keep) if _beyond(rec.get(c))), "?")
+            raise UsageError(f"run: {where or self.name}: {key}: {e}") from None
+
+    def _add(self, rec):
         t = _float(rec.get("t"))
         if t is None:
             return
+        values = [_float(rec.get(c)) for c in self.keep]      # all read before any is kept
         self.t.append(t)
-        for c in self.keep:
-            v = _float(rec.get(c))
+        for c, v in zip(self.keep, values):
             s = self.series.get(c)
             if s is None:
                 s = self.series[c] = array("d", [math.nan] * (len(self.t) - 1))
@@ -99,6 +108,10 @@ class Run:
         return next((t for t, name in self.states if name in RUNNING_STATES), None)
 
 
+class _Beyond(UsageError):
+    """A number written in full that no float holds (an integer of 400 digits, ``1e400``)."""
+
+
 def _float(v):
     if v is None or v == "" or isinstance(v, bool):
         return None
@@ -106,7 +119,19 @@ def _float(v):
         f = float(v)
     except (TypeError, ValueError):
         return None
+    except OverflowError:                     # an int beyond a float's range
+        raise _Beyond(f"{quote_value(v)} is beyond a float's range (1.8e308)") from None
+    if isinstance(v, str) and beyond_float(v, f):
+        raise _Beyond(f"{clip(repr(v))} is beyond a float's range (1.8e308)")
     return f if math.isfinite(f) else None
+
+
+def _beyond(v) -> bool:
+    try:
+        _float(v)
+    except _Beyond:
+        return True
+    return False
 
 
 def _texts(v):
@@ -191,7 +216,7 @@ def _json_lines(lines, path, run):
             raise UsageError(f"run: {path}:{n}: not a JSON record") from None
         if n <= 100:
             run.columns.update(rec)
-        run.add(rec)
+        run.add(rec, f"{path}:{n}")
 
 
 #: The longest record of a JSON array read (characters, over however many lines it spans).
@@ -233,7 +258,7 @@ def _json_array(lines, path, run):
             _record(rec, path, start)
             if count < 100:
                 run.columns.update(rec)
-            run.add(rec)
+            run.add(rec, f"{path}:{start}")
             count += 1
             buf, start = rest[end:], n
     if not closed:
@@ -263,7 +288,7 @@ def _csv_rows(lines, path, run):
                              f"(a header with a 't' column), JSON records or a raw log")
         run.columns.update(reader.fieldnames)
         for rec in reader:
-            run.add(rec)
+            run.add(rec, f"{path}:{lines.n}")
     except csv.Error as e:
         raise UsageError(f"run: {path}:{lines.n}: not a CSV row: {e}") from None
 
@@ -324,7 +349,7 @@ def load_steps(path) -> list:
 
 
 def _is_number(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and not _beyond(v)
 
 
 def _number_or_null(v):
@@ -339,8 +364,11 @@ _SUMMARY_LISTS = {
     "errors": (lambda x: isinstance(x, dict) and _is_number(x.get("code")) and isinstance(x.get("name"), str)
                and _is_number(x.get("t")), "an ECU error: an object with code, name and t", "ECU errors"),
     "limits": (lambda x: isinstance(x, dict) and isinstance(x.get("limit"), str)
-               and isinstance(x.get("verdict", ""), str) and _number_or_null(x.get("first_violation_t")),
-               "a limit: an object with limit, verdict and first_violation_t", "limits"),
+               and isinstance(x.get("verdict", ""), str) and _number_or_null(x.get("first_violation_t"))
+               and all(isinstance(x.get(k), (str, type(None))) for k in ("field", "op"))
+               and all(_number_or_null(x.get(k)) for k in ("threshold", "warn")),
+               "a limit: an object with limit, verdict and first_violation_t (and field and op as "
+               "strings, threshold and warn as numbers)", "limits"),
     "steps": (lambda x: isinstance(x, dict) and isinstance(x.get("step"), (str, int, float, type(None))),
               "a step: an object with a step number", "steps"),
 }
