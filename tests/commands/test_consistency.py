@@ -253,6 +253,9 @@ class _View:
     def update(self, snapshot, health):
         pass
 
+    def note(self, text):
+        pass
+
 
 @pytest.mark.parametrize("args,title,duration", [
     (["send", "control", "--state", "run", "--throttle", "50", "--for", "1"], "zk send control run 50 %", 1.0),

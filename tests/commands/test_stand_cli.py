@@ -59,12 +59,15 @@ def test_on_limit_warn_keeps_going_and_the_summary_names_it(cli, tmp_path):
     sched.write_text("0,0,run\n16,60\n20,0,standby\n24,0,standby\n")       # model seconds
     r = cli("zk", "profile", str(sched), "-p", SIM, "-f", "jsonl", "--ids", "1", "--limit", "egt_c<=550",
             "--limit", "prop_rpm<=10", "--on-limit", "warn", "--summary-json", str(summary))
-    assert r.exit_code == 0, r
+    # the run went on to its end, and its exit status says a limit was violated: no clean run to a script
+    assert r.exit_code == 5, r
+    assert "error: limit violated (--on-limit warn: the run went on): egt_c<=550" in r.stderr
     s = json.loads(summary.read_text())
     lim = {x["limit"]: x for x in s["limits"]}
     assert lim["egt_c<=550"]["verdict"] == "violated" and lim["egt_c<=550"]["extreme"] > 550
     assert lim["egt_c<=550"]["first_violation_t"] > 0 and lim["prop_rpm<=10"]["verdict"] == "ok"
-    assert s["outcome"] == "duration" and "limit violated: egt_c=" in r.stderr
+    assert s["outcome"] == "duration" and s["exit_status"] == 5 and "limit violated: egt_c=" in r.stderr
+    assert "trip" not in r.stdout                                # nothing tripped: the run went on
 
 
 def test_limits_file_on_profile_aborts(cli, tmp_path):

@@ -214,5 +214,23 @@ def test_after_ctrl_c_the_abort_notice_and_the_last_view_stay_on_screen(sim, ter
     lines = [ln for ln in screen.splitlines() if ln.strip()]
     assert len(lines) == len(set(lines)) or screen.count("╭") == 1, screen    # one view, not copies
     assert screen.count("╭") == 1 and screen.count("╰") == 1, screen
-    assert screen.index("╰") < screen.index("note: interrupted"), screen       # the notice below it
+    assert screen.index("note: interrupted") < screen.index("╭"), screen       # the notice above it
+    assert "note: rundown recorded" in screen, screen                            # the rundown was recorded
     assert "elapsed" in screen, screen
+
+
+def test_a_limit_warning_stays_on_screen_above_the_live_view(sim, terminal, tmp_path):
+    port, _ = sim("--speed", "10")
+    term = terminal(cmd("zk_main", "send", "control", "--state", "run", "--throttle", "40", "--for", "60",
+                        "-p", port, "--yes", "--limit", "egt_c<=900,warn=300", "--on-limit", "warn",
+                        "-o", str(tmp_path / "d.csv")))
+    screen = term.wait_for(lambda s: "note: limit warning: egt_c=" in s, timeout=30, what="the warning")
+    elapsed = re.compile(r"elapsed ([0-9.]+) s")
+    then = float(elapsed.search(screen).group(1))
+    screen = term.wait_for(lambda s: elapsed.search(s) and float(elapsed.search(s).group(1)) > then + 2,
+                           what="the view redrawn since the warning")
+    assert "note: limit warning: egt_c=" in screen, screen
+    assert screen.index("note: limit warning") < screen.index("╭"), screen     # above the view, not under it
+    assert screen.count("╭") == 1 and screen.count("╰") == 1, screen          # no fragments of old views
+    term.keys("C-c")
+    term.wait_for(lambda s: "EXIT=" in s, what="Ctrl-C to end the run")

@@ -56,7 +56,7 @@ def test_the_simulators_egt_violates_a_limit_and_the_engine_gets_the_abort(start
     assert recs[-1]["kind"] == "rundown" and recs[-2]["engine_state_name"] == "standby"
 
 
-@pytest.mark.parametrize("how,code", [("exit", 5), ("warn", 0)])
+@pytest.mark.parametrize("how,code", [("exit", 5), ("warn", 5)])
 def test_an_injected_error_violates_a_limit(start_sim, how, code):
     url, _ = start_sim(["zk", "--pty", "--speed", "20", "--set", "error=egt-high", "--set", "error_after=0.5"])
     r = zk("monitor", "-p", url, "--duration", "1", "-f", "jsonl", "--limit", "error_code==0", "--on-limit", how)

@@ -139,6 +139,22 @@ class Stand:
             out["air_pressure_answers"] = self.answer.summary()
         return out
 
+    def warned_violation(self, outcome):
+        """With ``--on-limit warn``: after a run that otherwise ended well, the
+        :class:`~zkzap.api.limits.LimitViolation` (exit 5) naming the limits violated (the run went
+        on); None when none was, or the run ended otherwise."""
+        limits = self.limits
+        if limits is None or limits.on_limit != "warn" or not outcome.ok or not limits.violated():
+            return None
+        from .limits import LimitViolation
+
+        return LimitViolation(f"limit violated (--on-limit warn: the run went on): {', '.join(limits.violated())}")
+
+    def exit_status(self, outcome) -> int:
+        """The run's exit status: the outcome's, or 5 for a limit violated under ``--on-limit warn``."""
+        err = self.warned_violation(outcome)
+        return err.code if err is not None else outcome.exit_code
+
     def log_run(self, *, command, port, schedule, files, outcome, tel, session):
         """Append this run to the logbook (when one was given); returns the run's ID."""
         if not self.logbook:
@@ -159,7 +175,7 @@ class Stand:
             "fuel_used_l": s["fuel_used_l"], "errors": [f"{e['code']} {e['name']}" for e in s["errors"]],
             "limits_violated": self.limits.violated() if self.limits is not None else [],
             "command": command, "port": port, "schedule": schedule, "files": [f for f in files if f],
-            "outcome": outcome.reason, "exit_status": outcome.exit_code, "engine": self.engine,
+            "outcome": outcome.reason, "exit_status": self.exit_status(outcome), "engine": self.engine,
             "throttle_s": self.stats.throttle_s,
         }
         return _logbook.record(self.logbook, run)

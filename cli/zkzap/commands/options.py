@@ -245,12 +245,39 @@ def exit_help(cmd) -> str:
     return exit_status_help(dict(exit_statuses(cmd)), tail=getattr(cmd, "exit_tail", ""))
 
 
+#: Where messages go while a live view holds the terminal (its ``note``): above the view.
+_NOTE_SINKS = []
+
+
 def note(message: str) -> None:
-    """A message for the person (stderr), never mixed with data."""
+    """A message for the person (stderr), never mixed with data; above a live view while one is
+    shown (:func:`notes_above`)."""
+    if _NOTE_SINKS:
+        _NOTE_SINKS[-1](f"note: {message}")
+        return
     click.echo(f"note: {message}", err=True)
 
 
+class notes_above:
+    """``with notes_above(view.note):`` every :func:`note` and :func:`warn` goes to ``sink`` (a live
+    view's place above itself) until the block ends."""
+
+    def __init__(self, sink):
+        self.sink = sink
+
+    def __enter__(self):
+        _NOTE_SINKS.append(self.sink)
+        return self
+
+    def __exit__(self, *exc):
+        _NOTE_SINKS.remove(self.sink)
+        return False
+
+
 def warn(message: str) -> None:
+    if _NOTE_SINKS:
+        _NOTE_SINKS[-1](f"warning: {message}")
+        return
     from ..io.term import color_enabled, style
 
     click.echo(f"{style('warning:', sys.stderr, fg='yellow', bold=True)} {message}", err=True,

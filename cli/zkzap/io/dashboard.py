@@ -131,6 +131,21 @@ class LiveView:
             live.__exit__(*exc)
         return False
 
+    def note(self, text: str) -> None:
+        """A message for the person above the live view (rich moves the view down; a line written
+        to the terminal beside it would be drawn over by the next refresh). Not live: stderr."""
+        live = getattr(self, "_live", None)
+        if live is None:
+            import sys
+
+            sys.stderr.write(text + "\n")
+            sys.stderr.flush()
+            return
+        from rich.text import Text
+
+        live.console.print(Text(text, style="yellow" if text.startswith(("warning", "note: limit")) else ""),
+                           soft_wrap=True)
+
 
 class History:
     """The last ``points`` samples of one value, one per ``interval`` seconds of ``time_s``:

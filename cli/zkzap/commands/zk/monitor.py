@@ -16,8 +16,8 @@ from ...io import SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
 from ..options import (FiniteRange, InputPath, IntRange, note, output_file, port_options, protocol_version_option,
                        rate_option)
-from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
-                    session_sensors, summarizer, summary_option)
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, raise_for_status, report,
+                    sensor_options, session_sensors, summarizer, summary_option)
 from .telemetry import (check_log_options, errors_text, log_options, port_from_env, reconnect_option,
                         resolve_port, session_exits, zk_timeout_help)
 
@@ -282,10 +282,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         raise
     source = None
     raw_lane = raw_proxy = None
-    # While the dashboard holds the screen, the session's messages (the abort notice...) wait: the
-    # view would redraw over them. They go to stderr once it has closed, below the last view.
-    held = []
-    notify = note if out.dashboard is None else held.append
+    # While the dashboard holds the screen, every message (the session's, the limits', the
+    # sensors'...) is printed above it: a line beside it would be drawn over by the next refresh
+    notify = note
     if out.dashboard is not None:
         out.dashboard.duration = duration
     try:
@@ -328,7 +327,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         lanes = [lane for lane in (out.lane, raw_lane, capture_lane()) if lane is not None]
-        with out:
+        from ..options import notes_above
+
+        with out, notes_above(out.dashboard.note) if out.dashboard is not None else nullcontext():
             with urgent() if control is not None else nullcontext():
                 outcome = session.run()
             if stand is not None:
@@ -351,8 +352,6 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             session_stats = bridges.stats()
             for line in bridges.lines():
                 note(line)
-        for message in held:
-            note(message)
     if outcome.reason == "refused":
         raise outcome.error          # the ECU's limits refuse the plan: nothing was sent or written
     outcome = _outputs_settled(outcome, lanes)
@@ -469,7 +468,7 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
     if 13 in tel.errors and not keepalive and (tel.decoder.known or 99) < 5:
         note("error 13 (loss of control signal): ECUs before protocol version 5 need a host that keeps "
              "sending; --keepalive does")
-    outcome.raise_for_status()
+    raise_for_status(outcome, stand)
     if fail_on_error and tel.errors:
         raise DeviceError(errors_text(tel))
 

@@ -11,8 +11,8 @@ from ...errors import USAGE, UsageError, ZkzapError
 from .. import CONTEXT, Command
 from ..options import (Choice, InputPath, OutputPath, abort_option, authorize, close_output,
                        dry_run_option, note, port_options, protocol_version_option, rate_option, yes_option)
-from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
-                    session_sensors)
+from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, raise_for_status, report,
+                    sensor_options, session_sensors)
 from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -165,6 +165,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     def summarize(outcome, tel, session):
         summary = _summary(name, url, sched, outcome, tel, session)
         summary.update(stand.summary())
+        summary["exit_status"] = stand.exit_status(outcome)
         if averager is not None:
             summary["steps"] = averager.rows()
             summary["rows_not_steps"] = [{"line": row.line, "target": row.target_text(), "from_s": a, "to_s": b,
@@ -199,7 +200,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
         _write_steps(steps_csv, *steps)
     if summary_json:
         _write_json(summary_file or summary_json, summary)
-    outcome.raise_for_status()
+    raise_for_status(outcome, stand)
 
 
 zk_timeout_help(profile)

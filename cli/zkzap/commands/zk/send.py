@@ -17,8 +17,8 @@ from ..complete import raw_fields
 from ..options import (Choice, FiniteFloat, FiniteRange, Integer, IntRange, SignedCommand, abort_option, apply_options,
                        authorize, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
                        yes_option)
-from .stand import (build_stand, check_output_dir, limit_options, logbook_option, report, sensor_options,
-                    session_sensors, summarizer, summary_option)
+from .stand import (build_stand, check_output_dir, limit_options, logbook_option, raise_for_status, report,
+                    sensor_options, session_sensors, summarizer, summary_option)
 from .telemetry import (TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port, session_exits,
                         zk_timeout_help)
 
@@ -179,7 +179,7 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     click.echo(summary_line(title.split(" on ")[0], outcome, tel, session), err=True)
     report(stand, command=f"zk send {zk.decode_control(frame)['command']}", port=url, files=(output, raw_log),
            outcome=outcome, tel=tel, session=session, summary_json=summary_json)
-    outcome.raise_for_status()
+    raise_for_status(outcome, stand)
     if tel.errors:
         # an error the ECU latched before (or one seen while nothing controlled the engine): the
         # command did not do what it was asked, so the exit status says so

@@ -30,7 +30,9 @@ def limit_options(f):
         click.option("--on-limit", type=Choice(["abort", "exit", "warn"]), default=None,
                      help="On a violated limit: abort or exit end the session with exit 5 (one that "
                           "controls the engine ends with the --abort command either way, as every end "
-                          "does; abort is for such sessions only), warn goes on (the summary names it)."),
+                          "does; abort is for such sessions only), warn goes on to the run's end (the summary "
+                          "names it) and then exits 5 too: a run whose limits were violated is never a clean "
+                          "run to a script."),
     ]
     return apply_options(f, opts)
 
@@ -165,7 +167,8 @@ def check_output_dir(path, what, records_to_stdout=False):
 def session_summary(*, command, port, outcome, tel, session, stand) -> dict:
     """The run summary of ``zk monitor`` and ``zk send --for`` (``--summary-json``, a workbook's
     summary sheet)."""
-    out = {"command": command, "port": port, "outcome": outcome.reason, "exit_status": outcome.exit_code,
+    out = {"command": command, "port": port, "outcome": outcome.reason,
+           "exit_status": stand.exit_status(outcome) if stand is not None else outcome.exit_code,
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
@@ -242,6 +245,15 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
         answer.quantity = q
     return Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook,
                  aux=aux, corrections=corrections, answer=answer, engine=engine.strip() if engine else None)
+
+
+def raise_for_status(outcome, stand) -> None:
+    """After the reporting: the outcome's exit status, or (``--on-limit warn``) exit 5 for a run
+    that went on through a violated limit: a script never takes it for a clean run."""
+    outcome.raise_for_status()
+    err = stand.warned_violation(outcome) if stand is not None else None
+    if err is not None:
+        raise err
 
 
 def report(stand, *, command, port, schedule=None, files=(), outcome, tel, session, quiet=False, summary_json=None):

@@ -26,7 +26,10 @@ def session_exits(done: str, device: str, usage: "str | None" = None):
                           "wrong baud rate, count as none)",
                 PORT_ERROR: "the port failed or vanished, or the abort could not be sent (with --reconnect: a "
                             "session that controlled the engine and lost the port, however it ends)",
-                DEVICE_ERROR: device}
+                DEVICE_ERROR: device + "; a violated --limit (with --on-limit warn: after the run went on to its "
+                                       "end); a hung or hot start; a start refused while an alarm of the shell "
+                                       "or batch is latched or the engine is not yet at rest and cool after a "
+                                       "trip (nothing sent)"}
     if usage is not None:
         meanings[USAGE] = usage
     return exits(meanings, tail=" Every record already written stays whole.")
