@@ -82,6 +82,8 @@ def files(tmp_path_factory):
             w.packet(i, 1.0 + k / 100, data, direction)
         w.close()
         out[f"{proto} capture"] = str(d / f"{proto}.pcapng")
+    (d / "token.txt").write_text("a-token-for-the-walk\n")
+    out["token"] = str(d / "token.txt")
     (d / "limits.txt").write_text("rpm<=200000\n")
     out["limits"] = str(d / "limits.txt")
     (d / "run.csv").write_text("time,t,id,rpm,egt_c\n2026-01-01T00:00:00.000Z,0.0,1,0,20\n")

@@ -196,3 +196,46 @@ def test_a_silent_ecu_is_shown_as_silent_and_never_started():
         assert "stopped: no status frame from the ECU" in c.stderr()
     finally:
         c.close()
+
+
+def test_the_token_can_come_from_a_file_and_never_from_both(cli, tmp_path):
+    f = tmp_path / "token"
+    f.write_text("from-a-file-123\n")
+    c = WebConsole("zk", "--sim", "--token-file", str(f))
+    try:
+        assert c.token == "from-a-file-123"
+    finally:
+        c.close()
+    both = cli("web", "zk", "--sim", "--token-file", str(f), "--token", "abcdefghijk")
+    assert both.exit_code == 2 and "give --token or --token-file, not both" in both.stderr
+    f.write_text("\n")
+    empty = cli("web", "zk", "--sim", "--token-file", str(f))
+    assert empty.exit_code == 2 and "has no token on its first line" in empty.stderr
+    r = cli("web", "zk", "--help")
+    assert "visible to every user of the machine (ps)" in " ".join(r.stdout.split())
+
+
+def test_connections_are_capped_with_a_clear_refusal(console):
+    from zkzap.web.server import MAX_CLIENTS
+
+    async def scenario():
+        async with aiohttp.ClientSession() as s:
+            kw = {"params": {"token": console.token}, "headers": {"Origin": console.base}}
+            open_ = []
+            refused = None
+            for _ in range(MAX_CLIENTS + 1):
+                try:
+                    open_.append(await s.ws_connect(console.base + "/ws", **kw))
+                except aiohttp.WSServerHandshakeError as e:
+                    refused = e.status
+                    break
+            assert refused == 503 and len(open_) <= MAX_CLIENTS
+            async with s.get(console.base + "/ws", **kw) as r:
+                assert "pages are connected already" in await r.text()
+            for ws in open_:
+                await ws.close()
+            await asyncio.sleep(0.2)
+            again = await s.ws_connect(console.base + "/ws", **kw)          # room again
+            await again.close()
+
+    run(scenario())

@@ -33,6 +33,22 @@ def parse_listen(text: str):
     return (m.group(1) or m.group(2)), port
 
 
+def read_token(token, token_file):
+    """The token given: ``--token`` (or ZKZAP_WEB_TOKEN), or the first line of ``--token-file``
+    (not both: exit 2)."""
+    if token_file is None:
+        return token
+    if token is not None:
+        raise UsageError("token-file: give --token or --token-file, not both (ZKZAP_WEB_TOKEN is --token)")
+    from ..api.textfile import read_text
+
+    lines = read_text(token_file, "token-file", limit=4096)[0].splitlines()
+    first = lines[0].strip() if lines else ""
+    if not first:
+        raise UsageError(f"token-file: {token_file} has no token on its first line")
+    return first
+
+
 def check_access(listen, token):
     """(host, port, token, fallback): a non-loopback address needs a token (exit 2 without one);
     ``auto`` (or none, on loopback) generates one."""
@@ -56,7 +72,12 @@ def web_options(f):
                           "port 0: a free one). Any address other machines reach needs --token."),
         click.option("--token", metavar="SECRET", envvar="ZKZAP_WEB_TOKEN", default=None,
                      help="The secret every page and request must carry (in the printed URL, then a cookie); "
-                          "'auto' generates one. Default on loopback: generated [env ZKZAP_WEB_TOKEN]."),
+                          "'auto' generates one. Default on loopback: generated. On the command line it is "
+                          "visible to every user of the machine (ps): give it in ZKZAP_WEB_TOKEN or with "
+                          "--token-file instead."),
+        click.option("--token-file", type=InputPath("token"), default=None, metavar="FILE",
+                     help="Read the token from FILE (its first line; '-': stdin), where other users cannot "
+                          "see it."),
         click.option("--open", "open_browser", is_flag=True, help="Open the console in the default browser."),
     ]
     for opt in reversed(opts):
@@ -120,7 +141,7 @@ def _make_zap():
                   help="The IDs the first scan searches, like 1-8 ('none': no scan at the start).")
     @web_options
     @link_options
-    def zap_web(rate, scan_ids, listen, token, open_browser, **common):
+    def zap_web(rate, scan_ids, listen, token, token_file, open_browser, **common):
         """Serve a browser console for the actuators on one port.
 
         It scans the bus (IDs and baud rates, with progress), lists the actuators with their
@@ -145,6 +166,7 @@ def _make_zap():
         from .zap.compose import _link_args, open_link
 
         webpkg.require()
+        token = read_token(token, token_file)
         check_access(listen, token)
         ids = None if scan_ids.strip().lower() == "none" else _ids(scan_ids)
         args = _link_args(common)
@@ -215,8 +237,8 @@ def _make_zk():
     @protocol_version_option
     @web_options
     @port_options("zk")
-    def zk_web(rate, limit, limits_files, on_limit, protocol_version, listen, token, open_browser, port, baud,
-               stop_bits, timeout, sim, output=None, append=False, restart_egt=None, hung_start=None, hot_start=None,
+    def zk_web(rate, limit, limits_files, on_limit, protocol_version, listen, token, token_file, open_browser, port,
+               baud, stop_bits, timeout, sim, output=None, append=False, restart_egt=None, hung_start=None, hot_start=None,
                aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None, ambient_pressure=None,
                air_pressure=None, logbook=None, engine=None):
         """Serve a browser console for the ECU on one port.
@@ -257,6 +279,7 @@ def _make_zk():
         from .zk.telemetry import resolve_port
 
         webpkg.require()
+        token = read_token(token, token_file)
         check_access(listen, token)
         sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,

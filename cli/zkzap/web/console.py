@@ -11,6 +11,7 @@ same request again with the permission in ``grant``.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 import traceback
@@ -55,6 +56,7 @@ class Console:
         self._wake = threading.Condition()
         self._closing = False
         self._thread = None
+        self._told = set()            # the kinds of internal error whose traceback went to stderr
 
     # -- life -----------------------------------------------------------------------------------
 
@@ -134,6 +136,11 @@ class Console:
         """The controlling page lost control (closed, released, silent)."""
         self.log(f"{label} no longer controls: {reason}")
 
+    def failsafe(self, reason: str) -> None:
+        """A part the console's safety rests on failed (the pings and the dead-man rule): end
+        what needs a live hand, and say so (any thread)."""
+        self.log(f"{reason}; it runs again", "error")
+
     # -- requests -------------------------------------------------------------------------------
 
     def request(self, cid, label, msg) -> None:
@@ -179,8 +186,14 @@ class Console:
             self.hub.send(ctx.cid, {"type": "consent", "req": ctx.req, "op": op, **self.policy.needed(e).message()})
         except ZkzapError as e:
             self.error(ctx, str(e))
-        except (ValueError, TypeError, KeyError) as e:
+        except (ValueError, TypeError, KeyError, OverflowError) as e:
             self.error(ctx, f"{op}: {e}")
+        except Exception as e:  # noqa: BLE001 - no request may end the worker: said, and it goes on
+            if type(e).__name__ not in self._told:
+                self._told.add(type(e).__name__)
+                traceback.print_exc()
+            self.log(f"{op} from {ctx.label}: internal error ({type(e).__name__}: {e})", "error")
+            self.error(ctx, f"{op}: internal error ({type(e).__name__})")
 
     @contextlib.contextmanager
     def granting(self, allow):
@@ -199,19 +212,32 @@ class Console:
 
 
 def number(msg, key, kind=float, lo=None, hi=None, what=None):
-    """A number from a request, checked: ``ValueError`` naming the field otherwise."""
+    """A number from a request, checked: ``ValueError`` naming the field otherwise (a huge
+    integer, NaN or an infinity included: the range is checked before any conversion)."""
     value = msg.get(key)
+    name = what or key
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        try:
-            value = kind(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what or key}: {value!r} is not a number") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise ValueError(f"{what or key}: {value!r} is not a finite number")
+        if isinstance(value, str) and len(value) <= 40:
+            try:
+                value = float(value) if kind is float or not value.strip().lstrip("+-").isdigit() else int(value)
+            except ValueError:
+                raise ValueError(f"{name}: {value!r} is not a number") from None
+        else:
+            raise ValueError(f"{name}: {_short(value)} is not a number")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"{name}: {value!r} is not a finite number")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ValueError(f"{name}: {_short(value)} is out of range; allowed {lo:g}..{hi:g}")
     if kind is int:
         if value != int(value):
-            raise ValueError(f"{what or key}: {value!r} is not a whole number")
-        value = int(value)
-    if (lo is not None and value < lo) or (hi is not None and value > hi):
-        raise ValueError(f"{what or key}: {value:g} is out of range; allowed {lo:g}..{hi:g}")
-    return value
+            raise ValueError(f"{name}: {value!r} is not a whole number")
+        return int(value)
+    return float(value)
+
+
+def _short(value) -> str:
+    """``value`` for a message: a number in a few characters, anything else cut short."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10 ** 15:
+        return f"a {len(str(abs(value)))}-digit number"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

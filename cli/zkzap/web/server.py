@@ -23,8 +23,11 @@ page; a page that cannot keep up loses its oldest batches first (counted), never
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import json
+import math
 import os
+import re
 import secrets
 import signal
 import sys
@@ -45,15 +48,79 @@ BACKLOG = 400
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1", "[::1]")
 #: Requests a server handles itself (the consoles see the others).
 OWN_OPS = ("pong", "hello", "take", "release")
+#: Pages connected at once; one more is refused (HTTP 503) until one closes.
+MAX_CLIENTS = 16
+#: What a page's message may be (checked before anything else looks at it): its size in
+#: characters, the nesting of its arrays and objects, the items of one array or object, the
+#: magnitude of an integer (JSON's interoperable range), and an op's name.
+MAX_MESSAGE = 4 * 1024 * 1024
+MAX_DEPTH = 8
+MAX_ITEMS = 4096
+MAX_INT = 2 ** 53
+OP_RE = re.compile(r"[a-z][a-z0-9]*(?:-[a-z0-9]+)*\Z")
 
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
        "connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; form-action 'none'")
 
 
 def is_loopback(host: str) -> bool:
-    """True for an address only this machine reaches (127.0.0.0/8, ::1, localhost)."""
+    """True for an address only this machine reaches: a literal loopback address (127.0.0.0/8,
+    ::1) or ``localhost``; never another name (``127.evil.example`` is a name anyone can point
+    anywhere)."""
     h = host.strip("[]").lower()
-    return h == "localhost" or h == "::1" or h.startswith("127.")
+    if h == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(h).is_loopback
+    except ValueError:
+        return False
+
+
+class BadMessage(ValueError):
+    """A page's message that is not what a page sends (see :func:`parse_message`)."""
+
+
+def _no_constant(name):
+    raise BadMessage(f"{name} is not a JSON number")
+
+
+def parse_message(text) -> dict:
+    """A page's message, checked at the boundary before anything else sees it: a JSON object
+    of at most :data:`MAX_MESSAGE` characters, arrays and objects nested at most
+    :data:`MAX_DEPTH` deep with at most :data:`MAX_ITEMS` items each, finite numbers only (no
+    NaN or Infinity), integers within ±2^53, string keys, and an ``op`` (when present) that is
+    a lower-case name (``set``, ``sync-move``: never ``_lost`` or ``-lost``). Raises
+    :class:`BadMessage` saying what is wrong."""
+    if not isinstance(text, str) or len(text) > MAX_MESSAGE:
+        raise BadMessage(f"a message of more than {MAX_MESSAGE} characters")
+    try:
+        msg = json.loads(text, parse_constant=_no_constant)
+    except RecursionError:
+        raise BadMessage(f"nested more than {MAX_DEPTH} deep") from None
+    except BadMessage:
+        raise
+    except ValueError:
+        raise BadMessage("not a JSON object") from None
+    if not isinstance(msg, dict):
+        raise BadMessage("not a JSON object")
+    stack = [(msg, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise BadMessage(f"nested more than {MAX_DEPTH} deep")
+        if len(value) > MAX_ITEMS:
+            raise BadMessage(f"more than {MAX_ITEMS} items in one array or object")
+        for item in (value.values() if isinstance(value, dict) else value):
+            if isinstance(item, (dict, list)):
+                stack.append((item, depth + 1))
+            elif isinstance(item, int) and not isinstance(item, bool) and not -MAX_INT <= item <= MAX_INT:
+                raise BadMessage("an integer beyond ±2^53")
+            elif isinstance(item, float) and not math.isfinite(item):
+                raise BadMessage("a number that is not finite")
+    op = msg.get("op")
+    if op is not None and not (isinstance(op, str) and OP_RE.match(op)):
+        raise BadMessage(f"unknown request {op!r}"[:200])
+    return msg
 
 
 def new_token() -> str:
@@ -221,6 +288,7 @@ class Server:
         self.url = None
         self._ids = 0
         self._tasks = []
+        self._told = set()
         self.cookie = None
         self.stopping = False
 
@@ -245,8 +313,32 @@ class Server:
         self.cookie = f"zkzap_token_{self.port}"
         self.url = f"http://{_url_host(self.host)}:{self.port}/?token={self.token}"
         self.console.start(self.hub)
-        self._tasks = [self.loop.create_task(self._pinger())]
+        self._tasks = [self.loop.create_task(self._supervised(self._pinger, "the pings and the dead-man rule"))]
         return self.url
+
+    def _internal(self, where, e) -> None:
+        """An internal error the server goes on after: its traceback on stderr, once per kind."""
+        import traceback
+
+        key = (where.split(" from ")[0], type(e).__name__)
+        if key not in self._told:
+            self._told.add(key)
+            print(f"zkzap web: internal error in {where}:", file=sys.stderr)
+            traceback.print_exception(type(e), e, e.__traceback__, file=sys.stderr)
+
+    async def _supervised(self, run, what):
+        """Run ``run()`` for ever: when it fails, the console ends what needs a live hand (a ZK
+        console: the engine session, with the abort) and says so, and it starts again."""
+        while not self.stopping:
+            try:
+                await run()
+                return
+            except asyncio.CancelledError:
+                raise
+            except Exception as e:  # noqa: BLE001 - supervised: the failsafe, then on again
+                self._internal(what, e)
+                self.console.failsafe(f"{what} failed ({type(e).__name__}: {e})")
+                await asyncio.sleep(PING_S)
 
     async def stop(self):
         """End the console first (a ZK console ends its engine run: 'the console is shutting
@@ -314,7 +406,10 @@ class Server:
             return web.Response(status=403, text="zkzap web: requests must come from the console's own page\n")
         if not self._authorised(request):
             return web.Response(status=403, text="zkzap web: the token is missing or wrong\n")
-        ws = web.WebSocketResponse(heartbeat=None, max_msg_size=8 * 1024 * 1024, compress=False)
+        if len(self.hub.clients) >= MAX_CLIENTS:
+            return web.Response(status=503, text=f"zkzap web: {MAX_CLIENTS} pages are connected already; "
+                                                 f"close one and open this page again\n")
+        ws = web.WebSocketResponse(heartbeat=None, max_msg_size=MAX_MESSAGE * 4, compress=False)
         await ws.prepare(request)
         hub = self.hub
         self._ids += 1
@@ -335,13 +430,16 @@ class Server:
                     continue
                 c.last_seen = self.loop.time()
                 try:
-                    msg = json.loads(m.data)
-                    if not isinstance(msg, dict):
-                        raise ValueError
-                except ValueError:
-                    hub._send(c.id, dumps({"type": "error", "text": "not a JSON object"}))
+                    msg = parse_message(m.data)
+                except BadMessage as e:
+                    hub._send(c.id, dumps({"type": "error", "text": f"refused: {e}"}))
                     continue
-                self._message(c, msg)
+                try:
+                    self._message(c, msg)
+                except Exception as e:  # noqa: BLE001 - no message may end a page's connection
+                    self._internal(f"a message from {c.label}", e)
+                    hub._send(c.id, dumps({"type": "error", "req": msg.get("req"),
+                                           "text": f"internal error: {type(e).__name__}"}))
         finally:
             hub.clients.pop(c.id, None)
             c.task.cancel()
@@ -356,12 +454,17 @@ class Server:
         hub = self.hub
         op = msg.get("op")
         req = msg.get("req")
-        if not isinstance(op, str) or op.startswith("_"):
+        if not isinstance(req, (int, str)) or isinstance(req, bool) or isinstance(req, str) and len(req) > 64:
+            req = None                    # an id the page can match a reply with, or none
+            msg["req"] = None
+        if not isinstance(op, str):       # parse_message let only a well-formed name through
             hub._send(c.id, dumps({"type": "error", "req": req, "text": f"unknown request {op!r}"}))
             return
         if op == "pong":
-            if msg.get("n") == c.ping_n and isinstance(msg.get("t"), (int, float)):
-                c.rtt_ms = round((time.time() * 1000 - msg["t"]), 1)
+            t = msg.get("t")
+            if msg.get("n") == c.ping_n and isinstance(t, (int, float)) and not isinstance(t, bool):
+                rtt = time.time() * 1000 - t
+                c.rtt_ms = round(rtt, 1) if 0 <= rtt < 3.6e6 else None   # a clock that says otherwise: unknown
             return
         if op == "hello":
             name = str(msg.get("name") or "")[:40].strip()
@@ -379,6 +482,8 @@ class Server:
                 ctl = hub.clients[hub.controller]
                 hub._send(c.id, dumps({"type": "error", "req": req,
                                        "text": f"{ctl.label} controls; it must release control first"}))
+            else:
+                hub._send(c.id, dumps({"type": "done", "req": req, "text": "this page controls already"}))
             return
         if op == "release":
             if hub.controller == c.id:

@@ -483,6 +483,14 @@ class ZkConsole(Console):
             self._oneshot = (kind, label)
             self._cut()
 
+    def failsafe(self, reason):
+        super().failsafe(reason)
+        self.request(None, "the console", {"op": "_failsafe", "reason": reason})
+
+    def op__failsafe(self, ctx, msg):
+        if self.command is not None:
+            self._cut(self.abort_kind, f"failsafe: {msg.get('reason')}")
+
     def op__lost(self, ctx, msg):
         if self.command is not None:
             self._cut(self.abort_kind, f"dead-man: {ctx.label} lost control ({msg.get('reason')})", trip="dead-man")
