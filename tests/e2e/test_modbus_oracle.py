@@ -126,3 +126,19 @@ def test_zkzap_finds_reads_and_writes_a_pymodbus_17lf(peer):
         assert e.value.exception == 2 and e.value.name == "illegal-data-address"
         with pytest.raises(NoReply):
             bus.read(4, "model-number")
+
+
+def test_the_command_line_drives_the_pymodbus_17lf(peer, sh):
+    import json
+
+    r = sh("zap", "scan", "--protocol", "modbus", "--ids", "1-9", "-p", peer.url, "-f", "jsonl")
+    assert r.exit_code == 0, r
+    assert [json.loads(x)["id"] for x in r.stdout.splitlines()] == [3, 7]
+    r = sh("zap", "store", "--protocol", "modbus", "goal-position", "777", "--id", "3", "-p", peer.url, "--verify")
+    assert r.exit_code == 0, r
+    assert peer.value(3, 205) == 777
+    r = sh("zap", "store", "--protocol", "modbus", "speed-limit", "700", "--id", "3", "-p", peer.url)
+    assert r.exit_code == 2 and "--yes" in r.stderr and peer.value(3, 20) == 1000    # consent on a real port
+    peer.set(7, 211, 432)
+    r = sh("zap", "load", "--protocol", "modbus", "present-current", "--id", "7", "-p", peer.url)
+    assert r.exit_code == 0 and r.stdout == "432\n"

@@ -198,7 +198,13 @@ class Bus:
 
     @classmethod
     def over(cls, link: ZapBus) -> Self:
-        """A Bus over an open :class:`~zkzap.link.zap_bus.ZapBus` (closing the Bus closes it)."""
+        """A Bus over an open :class:`~zkzap.link.zap_bus.ZapBus` (closing the Bus closes it);
+        over a Modbus RTU link (:class:`~zkzap.link.modbus_bus.ModbusBus`) a
+        :class:`~zkzap.api.zap_modbus.ModbusBus`."""
+        if cls is Bus and link.family.name == "modbus":
+            from .zap_modbus import ModbusBus
+
+            return ModbusBus(_link=link)  # type: ignore[return-value]
         return cls(_link=link)
 
     # -- the line ------------------------------------------------------------------------------

@@ -277,6 +277,17 @@ def write_block(ident: int, values: Mapping[Union[str, int], int], regmap: Optio
     return out
 
 
+def write_frames(ident: int, values: Mapping[Union[str, int], int], regmap: Optional[RegisterMap] = None, *,
+                 force: bool = False) -> list[bytes]:
+    """The frames a bus sends to write ``values``: :func:`write_block`'s runs, each as Write
+    Multiple Registers (one register too: its reply cannot be mistaken for an adapter's echo)."""
+    out = []
+    for f in write_block(ident, values, regmap, force=force):
+        r = Request(f)
+        out.append(write_registers(ident, r.address, r.values) if r.function == WRITE_SINGLE else f)
+    return out
+
+
 # --- typed frames --------------------------------------------------------------------------------
 
 class Request:

@@ -245,9 +245,7 @@ class ModbusBus(ZapBus):
     def write_frames(self, ident: int, values, *, force: bool = False) -> list[bytes]:
         """The frames writing ``values`` ({register: value}): one Write Multiple Registers per
         run of adjacent registers (checked against the map before anything is sent)."""
-        frames = modbus.write_block(ident, values, self.regmap, force=force)
-        return [modbus.write_registers(ident, r.address, r.values) if r.function == modbus.WRITE_SINGLE else f
-                for f, r in ((f, modbus.Request(f)) for f in frames)]
+        return modbus.write_frames(ident, values, self.regmap, force=force)
 
     def write(self, ident: int, values, *, force: bool = False, **kw):
         """Write ``values`` ({register: value}); every frame's permissions are checked before the

@@ -18,7 +18,7 @@ from ...codec.hexfmt import format_hex, parse_hex
 from ...errors import UsageError
 from .. import CONTEXT, Command
 from ..options import (Choice, FiniteRange, IntRange, Lazy, SignedCommand, dry_run_option, force_option, port_options,
-                       zap_yes_option as yes_option)
+                       protocol_options, zap_map, zap_yes_option as yes_option)
 from .params import INSTRUCTION, INT, REGISTER, TARGET, id_option
 
 RETURN_MODES = ("0", "1", "2", "auto")
@@ -186,7 +186,7 @@ def _lent():
 
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
-              latency=None, low_latency=False, allow=None, **_):
+              latency=None, low_latency=False, allow=None, protocol="ir", regmap=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first;
     ``allow``: the permissions its packets are given (see :func:`authorize`). When the command
     ends, a note says once how to lower a USB adapter's latency timer if the measured latency
@@ -194,6 +194,10 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
     lent = _lent()
     mode = 1 if return_mode == "auto" else int(return_mode)
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
+    if protocol == "modbus":
+        return _open_modbus(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, retries=retries,
+                            ids=ids, stop_bits=stop_bits, latency=latency, low_latency=low_latency, allow=allow,
+                            regmap=regmap, lent=lent)
     if lent is not None:            # a batch: every command over the one open port
         # (the batch checked its port, and said so once)
         _CHECKING().effect("port", ids=list(ids))
@@ -221,6 +225,24 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
         except BaseException:
             bus.close()
             raise
+    return bus
+
+
+def _open_modbus(*, port, baud, sim, sim_ids, ids, regmap, lent, **kw):
+    """The Modbus RTU bus of a command (``--protocol modbus``), on the port or the simulated 17Lf."""
+    if lent is not None:
+        raise UsageError("--protocol modbus: not in a batch or shell yet (their port speaks the IR protocol)")
+    require_port(port, sim, sim_ids)
+    _CHECKING().effect("port", ids=list(ids))
+    from ...link.modbus_bus import open_modbus_bus
+
+    if sim:
+        port = None
+    default_ids = ",".join(str(i) for i in ids if i) or "1"
+    bus = open_modbus_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, regmap=regmap, **kw)
+    from ..hints import adapter_notes
+
+    adapter_notes(bus)
     return bus
 
 
@@ -295,12 +317,16 @@ def _format(default, choices, what):
 
 
 def _link_args(common):
-    return {k: common[k] for k in LINK_KEYS}
+    out = {k: common[k] for k in LINK_KEYS}
+    out.update((k, common[k]) for k in PROTOCOL_KEYS if k in common)
+    return out
 
 
-#: The link options of every zap command, as open_link takes them.
+#: The link options of every zap command, as open_link takes them (and --protocol, --map where the
+#: command has them).
 LINK_KEYS = ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries", "stop_bits", "latency",
              "low_latency")
+PROTOCOL_KEYS = ("protocol", "regmap")
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
@@ -400,6 +426,7 @@ LOAD_COLUMNS = ["id", "register", "address", "value", "physical", "unit", "meani
          "'value' prints the bare value (for pos=$(zap load ...)); the others give records")
 @id_option(allow_broadcast=True)
 @wire_options
+@protocol_options
 def load(regs, length, physical, fmt, ident, **common):
     """Load Data (0xF2): read REGISTER (one Load Data each, when several are given).
 
@@ -416,7 +443,12 @@ def load(regs, length, physical, fmt, ident, **common):
       pos=$(zap load present-position --id 1 -p /dev/ttyUSB0)
       zap load present-position present-current moving --id 1 --sim
       zap load model-number --length 17 --id 1 --sim -f json
+      zap load --protocol modbus present-position --id 1 -n   # 01 03 00 D2 00 01 24 33
+
+    With --protocol modbus: Read Holding Registers (0x03); --length counts registers (1..125).
     """
+    if common["protocol"] == "modbus":
+        return _modbus_load(regs, length, physical, fmt, ident, common)
     if length is not None and len(regs) > 1:
         raise UsageError(f"--length: reads from one REGISTER; {len(regs)} are given (each is read whole)")
     reads = []
@@ -444,6 +476,17 @@ def load(regs, length, physical, fmt, ident, **common):
         got = register_records(reply.ident, values, reply.errors)
         partial += _mark_partial(got, reg.address, size)
         records += got
+    _load_output(records, fmt, physical, partial)
+    if common["verbose"]:
+        for pkt, (_, _, reply, _) in zip(pkts, replies):
+            _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
+    for _, _, reply, _ in replies:
+        if reply.error:
+            raise _ZAP_BUS().device_error(reply)
+
+
+def _load_output(records, fmt, physical, partial):
+    """The records of a read: bare values (``fmt`` value) or records in ``fmt``."""
     if fmt == "value":
         for rec in records:
             v = rec["physical"] if physical and "physical" in rec else rec["value"]
@@ -456,12 +499,28 @@ def load(regs, length, physical, fmt, ident, **common):
         for rec in records:
             writer.write(rec)
         writer.close()
-    if common["verbose"]:
-        for pkt, (_, _, reply, _) in zip(pkts, replies):
-            _say(f"sent {describe(pkt)}: {acknowledgement(pkt, reply, bus)}")
-    for _, _, reply, _ in replies:
-        if reply.error:
-            raise _ZAP_BUS().device_error(reply)
+
+
+def _modbus_load(regs, length, physical, fmt, ident, common):
+    from ...codec import modbus
+
+    if length is not None and len(regs) > 1:
+        raise UsageError(f"--length: reads from one REGISTER; {len(regs)} are given (each is read whole)")
+    if length is not None and length > modbus.MAX_READ:
+        raise UsageError(f"--length: {length} registers; one read carries 1..{modbus.MAX_READ}")
+    regmap = zap_map()
+    if ident == modbus.BROADCAST:
+        raise UsageError("id: a broadcast read is never answered; give one actuator's ID (1..247)")
+    count = 1 if length is None else length
+    frames = [modbus.read(ident, reg, count, regmap) for reg in regs]
+    if common["dry_run"]:
+        return deliver(frames, **common)
+    records = []
+    with open_link(ids=[ident], **_link_args(common)) as bus:
+        for reg in regs:
+            _, values = bus.read_registers(ident, reg.address, count)
+            records += _API_ZAP().register_records(ident, values, [])
+    _load_output(records, fmt, physical, [])
 
 
 def _mark_partial(records, address, length) -> list:
@@ -494,10 +553,55 @@ def _write_command(name, builder, doc):
     @force_option
     @_verify_option(name)
     @wire_options
+    @(protocol_options if name == "store" else (lambda f: f))
     def command(reg, value, ident, force, verify=False, **common):
+        if common.get("protocol") == "modbus":
+            return _modbus_store(reg, value, ident, force, verify, common)
+        common.pop("protocol", None)
+        common.pop("regmap", None)
         deliver([builder(ident, reg, value)], force=force, verify=verify, **common)
 
     return command
+
+
+def _modbus_store(reg, value, ident, force, verify, common):
+    """``zap store --protocol modbus``: one Write Multiple Registers (see the manual's
+    decisions), its permissions as on the IR protocol, the reply checked; ``--verify`` reads
+    the value back."""
+    from ...codec import modbus
+    from ...link.zap_bus import is_simulated
+    from ..options import authorize
+
+    regmap = zap_map()
+    frames = modbus.write_frames(ident, {reg.name: value}, regmap, force=force)
+    if common["dry_run"]:
+        return deliver(frames, **{k: v for k, v in common.items() if k not in PROTOCOL_KEYS})
+    require_port(common["port"], common["sim"], common["sim_ids"])
+    reqs = [modbus.Request(f) for f in frames]
+    needs = {}
+    for r in reqs:
+        for p, why in r.needs(regmap).items():
+            needs.setdefault(p, why)
+    what = reqs[0].describe(regmap)
+    allow = authorize(needs, what=what, yes=common["yes"], force=force,
+                      simulated=common["sim"] or is_simulated(common["port"]),
+                      consent_text=f"{what} on {common['port']}: a stored setting that survives power-off"
+                      if any(regmap.owner[a].stored for a in [reqs[0].address]) else None)
+    with open_link(ids=[ident], allow=allow, **_link_args(common)) as bus:
+        for f in frames:
+            reply = bus.command(f)
+            if common["verbose"]:
+                _say(f"sent {what}: " + ("not acknowledged (a broadcast is never answered)" if reply is None
+                                         else f"acknowledged in {reply.rtt * 1000:.1f} ms"))
+        if verify and ident != modbus.BROADCAST:
+            back = bus.read(ident, reg)
+            if back != value:
+                from ...errors import CheckFailed
+
+                raise CheckFailed(f"ID {ident}: {reg.name} reads back {back}, not {value}", ident=ident,
+                                  register=reg.name, value=back)
+            if common["verbose"]:
+                _say(f"ID {ident}: {reg.name} reads back {back}")
 
 
 _WIRE_NOTE = """

@@ -42,6 +42,10 @@ class IdType(click.ParamType):
         self.allow_broadcast = allow_broadcast
 
     def convert(self, value, param, ctx):
+        if ctx is not None and ctx.params.get("protocol") == "modbus":
+            from ...codec import modbus
+
+            return modbus.check_id(value, allow_broadcast=self.allow_broadcast)   # 1..247, 0 broadcast
         return zap.check_id(value, allow_broadcast=self.allow_broadcast)
 
     def shell_complete(self, ctx, param, incomplete):

@@ -17,7 +17,7 @@ from ...codec import zap
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
 from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, exits, format_option, id_option, note,
-                       resolve_format, warn, zap_yes_option as yes_option)
+                       protocol_options, resolve_format, warn, zap_map, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, IdType
 
@@ -83,6 +83,7 @@ def stored_consent(common, yes, action, registers):
 @format_option()
 @link_options(baud_type=actuator_bauds(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
                                               "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
+@protocol_options(protocols=("ir", "modbus", "auto"))
 def scan(ids, fmt, **common):
     """Find every actuator on the bus: Echo to each ID at each baud rate, then read the model,
     firmware and return mode of those that answer.
@@ -102,30 +103,56 @@ def scan(ids, fmt, **common):
       zap scan -p /dev/ttyUSB0
       zap scan -b all --ids 0-20 -p /dev/ttyUSB0 -f json
       zap scan --sim --sim-ids 1,2,3
+      zap scan --protocol modbus -b all -p /dev/ttyUSB0     # 17Lf actuators, IDs 1-247
+      zap scan --protocol auto -p /dev/ttyUSB0              # both protocols: records say which
+
+    With --protocol modbus the probe is a read of the model number (IDs 1-247 by default; an
+    exception reply counts as an answer, its name in errors) and return_mode is null; with
+    --protocol auto the IR protocol is scanned, then Modbus RTU, and every record carries
+    'protocol'.
     """
+    from ...codec import modbus
     from ...io.writers import make_writer
 
     bauds = common["baud"]
     fmt = resolve_format(fmt)
-    writer = make_writer(fmt, sys.stdout, SCAN_COLUMNS, table_columns=SCAN_TABLE, title="mightyZAP actuators")
+    protocols = ["ir", "modbus"] if common["protocol"] == "auto" else [common["protocol"]]
+    if "modbus" in protocols:
+        ctx = click.get_current_context()
+        if ctx.get_parameter_source("ids") == click.core.ParameterSource.DEFAULT:
+            ids_for = {"ir": ids, "modbus": list(range(1, modbus.MAX_ID + 1))}
+        else:
+            bad = [i for i in ids if not 1 <= i <= modbus.MAX_ID]
+            if bad and protocols == ["modbus"]:
+                raise UsageError(f"--ids: {bad[0]} is not a Modbus unit ID; allowed 1..247")
+            ids_for = {"ir": ids, "modbus": [i for i in ids if 1 <= i <= modbus.MAX_ID]}
+    else:
+        ids_for = {"ir": ids}
+    columns = SCAN_COLUMNS + (["protocol"] if len(protocols) > 1 else [])
+    table = SCAN_TABLE + ([("protocol", "protocol")] if len(protocols) > 1 else [])
+    writer = make_writer(fmt, sys.stdout, columns, table_columns=table, title="mightyZAP actuators")
     found = []
     t0 = time.monotonic()
     progress = None
-    args = _link_args(common)
-    args["return_mode"] = "1"
-    args["baud"] = bauds[0]
     try:
-        with open_link(ids=[0], **args) as link:
-            progress = _progress(len(ids) * len(bauds), "scanning")
+        progress = _progress(sum(len(ids_for[p]) for p in protocols) * len(bauds), "scanning")
 
-            def probed(baud, ident, n):
-                if progress is not None:
-                    progress.update(0, description=f"{baud} baud, ID {ident:3d} ({n} found)")
-                    progress.advance(0)
+        def probed(baud, ident, n):
+            if progress is not None:
+                progress.update(0, description=f"{baud} baud, ID {ident:3d} ({n} found)")
+                progress.advance(0)
 
-            for rec in Bus.over(link).scan(ids, bauds, retries=common["retries"],
-                                           on_probe=probed if progress is not None else None, on_warning=warn):
-                _emit(writer, rec, found, fmt)
+        for protocol in protocols:
+            args = _link_args(common)
+            args["return_mode"] = "1"
+            args["baud"] = bauds[0]
+            args["protocol"] = protocol
+            with open_link(ids=[0 if protocol == "ir" else 1], **args) as link:
+                for rec in Bus.over(link).scan(ids_for[protocol], bauds, retries=common["retries"],
+                                               on_probe=probed if progress is not None else None, on_warning=warn):
+                    if len(protocols) > 1:
+                        rec["protocol"] = protocol
+                    _emit(writer, rec, found, fmt)
     except KeyboardInterrupt:             # Ctrl-C or SIGTERM: what was found so far, then 130/143
         if progress is not None:
             progress.stop()
@@ -167,6 +194,7 @@ DUMP_TABLE = [("_address", "addr"), ("register", "register"), ("value", "value")
 @id_option(allow_broadcast=False)
 @format_option()
 @link_options
+@protocol_options
 def dump(ident, fmt, **common):
     """Read back the whole register map of one actuator (12Lf), with names, units and values.
 
@@ -182,7 +210,7 @@ def dump(ident, fmt, **common):
     from ...io.writers import make_writer
     from ...link.zap_bus import device_error
 
-    if common["return_mode"] == "0":
+    if common["return_mode"] == "0" and common["protocol"] == "ir":
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
     with open_link(ids=[ident], probe=ident, **_link_args(common)) as link:
         records, worst = Bus.over(link).dump_records(ident)
@@ -220,6 +248,7 @@ def dump(ident, fmt, **common):
               help="With --wait: on Ctrl-C or SIGTERM leave the rod moving to its goal (default: stop it "
                    "where it is).")
 @link_options
+@protocol_options
 def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
     """Move to POSITION (0..4095), optionally waiting until the actuator stops there.
 
@@ -237,12 +266,13 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
       zap move 0 --id 1 --speed 300 --wait -p /dev/ttyUSB0
       pos=$(zap move 3000 --id 2 --wait --sim)
     """
-    POSITION.check(position)
+    regmap = zap_map()
+    regmap.register(POSITION).check(position)       # the goal range of the protocol's map
     if speed is not None:
-        SPEED.check(speed)
+        regmap.register(SPEED).check(speed)
     if no_stop and not wait:
         raise UsageError("no-stop: applies only with --wait")
-    if wait and ident == zap.BROADCAST:
+    if wait and ident == (zap.BROADCAST if common["protocol"] == "ir" else 0):
         raise UsageError("--wait: a broadcast is never answered; give one actuator's ID to wait for it")
     with open_link(ids=[ident], probe=ident if wait else None, **_link_args(common)) as link:
         bus = Bus.over(link)
@@ -307,6 +337,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
               help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options
+@protocol_options
 def set_id(new, ident, force, ready_timeout, yes, **common):
     """Give the actuator at --id the ID NEW, verified by reading it back from NEW.
 

@@ -1,0 +1,56 @@
+"""The zap commands with --protocol modbus, against the simulated 17Lf (in-process, --sim)."""
+
+import json
+
+import pytest
+
+
+@pytest.mark.parametrize("args,out", [
+    (["load", "--protocol", "modbus", "present-position", "--id", "1", "-n"], "01 03 00 D2 00 01 24 33\n"),
+    (["load", "--protocol", "modbus", "present-current", "--id", "1", "-n"], "01 03 00 D3 00 01 75 F3\n"),
+    (["store", "--protocol", "modbus", "goal-position", "1000", "--id", "1", "-n"], "01 10 00 CD 00 01 02 03 E8 B6 F3\n"),
+])
+def test_dry_run_prints_the_frames(cli, args, out):
+    r = cli("zap", *args)
+    assert r.exit_code == 0 and r.stdout == out and r.stderr == ""
+
+
+@pytest.mark.parametrize("args,fault", [
+    (["store", "--protocol", "modbus", "present-position", "5", "--id", "1", "-n"], "read-only"),
+    (["store", "--protocol", "modbus", "goal-position", "10001", "--id", "1", "-n"], "out of range"),
+    (["load", "--protocol", "modbus", "present-position", "--id", "248", "-n"], "1..247"),
+    (["load", "--protocol", "modbus", "protocol-type", "--id", "1", "-n"], "protocol-type"),
+    (["load", "--protocol", "modbus", "present-position", "--id", "0", "-n"], "broadcast"),
+    (["store", "--protocol", "modbus", "id", "5", "--id", "1", "--sim"], "IDENTITY"),
+    (["store", "--protocol", "modbus", "goal-position", "5", "--id", "0", "--sim", "--force", "-n", "-v"], "verbose"),
+])
+def test_bad_input_exit_2_nothing_on_stdout(cli, args, fault):
+    r = cli("zap", *args)
+    assert r.exit_code == 2 and r.stdout == "" and fault in r.stderr, r
+
+
+def test_store_load_move_set_id_dump_on_the_simulated_17lf(cli):
+    r = cli("zap", "store", "--protocol", "modbus", "goal-speed", "500", "--id", "1", "--sim", "--verify")
+    assert r.exit_code == 0, r
+    r = cli("zap", "move", "--protocol", "modbus", "7000", "--id", "1", "--sim", "--wait")
+    assert r.exit_code == 0 and r.stdout == "7000\n", r
+    r = cli("zap", "set-id", "--protocol", "modbus", "9", "--id", "1", "--sim")
+    assert r.exit_code == 0 and "ID 9" in r.stderr, r
+    r = cli("zap", "dump", "--protocol", "modbus", "--id", "2", "--sim", "--sim-ids", "2", "-f", "jsonl")
+    recs = [json.loads(x) for x in r.stdout.splitlines()]
+    assert r.exit_code == 0 and len(recs) == 110 and recs[0]["register"] == "model-number"
+
+
+def test_scan_modbus_and_auto(cli):
+    r = cli("zap", "scan", "--protocol", "modbus", "--sim", "--sim-ids", "3,200", "-f", "jsonl")
+    assert r.exit_code == 0 and [json.loads(x)["id"] for x in r.stdout.splitlines()] == [3, 200]
+    r = cli("zap", "scan", "--protocol", "auto", "--sim", "--sim-ids", "4", "--ids", "1-5", "-f", "jsonl")
+    recs = [json.loads(x) for x in r.stdout.splitlines()]
+    assert [(x["id"], x["protocol"]) for x in recs] == [(4, "ir"), (4, "modbus")]
+
+
+def test_an_exception_reply_is_a_named_error_exit_5(cli):
+    r = cli("zap", "load", "--protocol", "modbus", "--map", "/dev/null", "x", "--id", "1", "--sim")
+    assert r.exit_code == 2
+    r = cli("zap", "load", "--protocol", "modbus", "indirect-data-0", "--id", "1", "--sim", "--length", "12")
+    assert r.exit_code == 5 and "illegal-data-address" in r.stderr and r.stdout == ""
