@@ -69,6 +69,50 @@ def _paths(value):
     return [value] if isinstance(value, str) else [p for p in (value or ()) if p]
 
 
+def device_of(path):
+    """What ``path`` is on the machine, through symlinks: ``("dev", rdev)`` for a device node
+    (two nodes of one device are one), else ``(st_dev, st_ino)``; None when it does not exist.
+    ``-`` is stdout here (an output)."""
+    try:
+        st = os.fstat(sys.stdout.fileno()) if path == "-" else os.stat(path)
+    except (OSError, ValueError, AttributeError, TypeError):
+        return None
+    if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode):
+        return ("dev", st.st_rdev)
+    return st.st_dev, st.st_ino
+
+
+def port_path(url):
+    """The file a port URL opens (``/dev/ttyUSB0``; ``spy:///dev/ttyUSB0``'s device), or None
+    for a URL that opens none (``socket://``, ``sim://``, ``rfc2217://``)."""
+    if not isinstance(url, str) or not url:
+        return None
+    if "://" not in url:
+        return url
+    scheme, _, rest = url.partition("://")
+    if scheme.lower() == "spy":
+        return rest.split("?", 1)[0] or None
+    return None
+
+
+def refuse_port_outputs(outputs: dict, ports) -> None:
+    """Raise :class:`UsageError` when one of ``outputs`` (option -> path; ``-``: stdout) is the
+    device (or file) one of ``ports`` (port URLs) opens: records, a capture or MAVLink written
+    into the control line. Devices are compared, not names (a symlink to the port, another node
+    of the same device)."""
+    devices = [(url, device_of(p)) for url in ports for p in [port_path(url)] if p is not None]
+    devices = [(url, d) for url, d in devices if d is not None]
+    if not devices:
+        return
+    for opt, value in outputs.items():
+        for path in _paths(value):
+            d = device_of(path)
+            for url, port in devices:
+                if d is not None and d == port:
+                    what = "stdout is" if path == "-" else f"{opt.lstrip('-')}: {path} is"
+                    raise UsageError(f"{what} the port ({url}): what is written there would go onto the line")
+
+
 def refuse_same_files(outputs: dict, inputs: dict = None) -> None:
     """Raise :class:`UsageError` when two of ``outputs`` (option -> path) name one file, or an
     output is one of ``inputs`` (option -> path or list of paths; ``-`` is stdin). Files are

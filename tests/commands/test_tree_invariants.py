@@ -448,3 +448,55 @@ def test_an_output_option_refuses_its_own_input(path, name, files, port):
     # a symlink is never made over a file; anything else names the input it would destroy
     assert "is also the input" in err or param.type.kind == "link", err
     assert open(value, "rb").read() == before
+
+
+_PORTED = [(path, name) for path, name in OUTPUTS
+           if {"port", "ports"} & {p.name for p in dict(commands())[tuple(path)].params}]
+
+
+@pytest.mark.parametrize("path,name", _PORTED, ids=[f"{' '.join(p)} {n}" for p, n in _PORTED])
+def test_an_output_option_refuses_the_port_itself(path, name, files, port, tmp_path):
+    """Records, a capture or a document written into the control line: refused (exit 2) before
+    the port opens, whether the output names the port's device or a symlink to it."""
+    import os
+    import select
+
+    cmd = dict(commands())[tuple(path)]
+    param = next(p for p in cmd.params if p.name == name)
+    by = {p.name: p for p in cmd.params}
+    master, slave = os.openpty()
+    try:
+        device = os.ttyname(slave)
+        link = tmp_path / "the-port"
+        link.symlink_to(device)
+        line = Line(path, cmd)
+        base = _valid_line(path, cmd, files, port)
+        line.args, line.opts = dict(base.args), dict(base.opts)
+        pname = "port" if "port" in by else "ports"
+        line.opts[pname] = (by[pname], device)
+        for target in (device, str(link)):
+            argv = line.argv((param, target))
+            code, out, err = _invoke(argv, check=False)
+            assert code == 2 and out == "", f"{' '.join(argv)}: exit {code}: {err}"
+            assert "is the port" in err, err
+        assert not select.select([master], [], [], 0)[0], "bytes went onto the line"
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_stdout_that_is_the_port_is_refused(tmp_path):
+    """``zk send ... -p /dev/ttyUSB0 > /dev/ttyUSB0``: stdout is the control line."""
+    import os
+    import subprocess
+    import sys
+
+    master, slave = os.openpty()
+    try:
+        exe = os.path.join(os.path.dirname(sys.executable), "zk")
+        r = subprocess.run([exe, "send", "control", "--state", "run", "--throttle", "20", "--for", "1", "--yes",
+                            "-p", os.ttyname(slave)], stdout=slave, stderr=subprocess.PIPE, text=True, timeout=60)
+        assert r.returncode == 2 and "stdout is the port" in r.stderr, r.stderr
+    finally:
+        os.close(master)
+        os.close(slave)

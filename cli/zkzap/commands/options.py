@@ -514,7 +514,32 @@ def check_files(ctx) -> None:
         from ..outfile import refuse_same_files
 
         refuse_same_files(outputs, inputs)     # first: "is also the input" says more than its suffix
+    _refuse_port_outputs(ctx, outputs)
     check_output_suffixes(ctx.command, ctx.params)
+
+
+#: The parameters that name a command's port(s).
+_PORT_PARAMS = ("port", "ports")
+
+
+def _refuse_port_outputs(ctx, outputs) -> None:
+    """An output (``-o``, ``--raw-log``, ``--capture``, a MAVLink serial device, stdout) that
+    is the command's own port is refused before anything opens (exit 2)."""
+    ports = []
+    for p in ctx.command.params:
+        if p.name in _PORT_PARAMS:
+            value = ctx.params.get(p.name)
+            ports += [value] if isinstance(value, str) else list(value or ())
+    if not any(isinstance(u, str) and "://" not in u or str(u).lower().startswith("spy://") for u in ports):
+        return                                 # sim://, socket://: no device of this machine to write to
+    outputs = dict(outputs)
+    mavlink = (ctx.meta.get("zkzap.bridges") or {}).get("mavlink")
+    if isinstance(mavlink, str) and mavlink.startswith(("/", "COM", "com")):
+        outputs["--mavlink"] = mavlink.split(",", 1)[0]
+    outputs.setdefault("stdout", "-")
+    from ..outfile import refuse_port_outputs
+
+    refuse_port_outputs(outputs, ports)
 
 
 def output_options(f=None, *, formats=FORMATS):
