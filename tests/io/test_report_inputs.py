@@ -96,3 +96,35 @@ def test_a_json_array_cut_by_a_killed_run_reads_to_its_last_whole_record(cli, tm
     f = _files(tmp_path, run=json.dumps([{"t": i, "rpm": i} for i in range(3)], indent=4).encode(), name="t.json")
     r = report(cli, f)
     assert r.exit_code == 0 and "not closed" not in r.stderr, r
+
+
+def test_what_is_not_a_run_is_refused(cli, tmp_path):
+    import random
+
+    rnd = random.Random(36)
+    junk = tmp_path / "chunk.bin"
+    junk.write_bytes(bytes(rnd.randrange(256) for _ in range(100_000)))       # frames a CRC lets through
+    r = cli("zk", "report", str(junk), "--terminal")
+    assert r.exit_code == 2 and "not a run" in r.stderr and "are no ZK status frame" in r.stderr, r
+    few = tmp_path / "few.bin"
+    from zkzap.codec import zk
+
+    few.write_bytes(b"".join(zk.encode_status(1, rpm=50000, engine_state=6, error_code=0, egt_c=500, sw_state=3)
+                             for _ in range(3)))
+    r = cli("zk", "report", str(few), "--terminal")
+    assert r.exit_code == 2 and "not a run: 3 status records (at least 10)" in r.stderr, r
+    wild = tmp_path / "wild.csv"
+    wild.write_text("t,rpm,throttle_pct\n" + "".join(f"{i},{650000 + i},160\n" for i in range(20)))
+    r = cli("zk", "report", str(wild), "--terminal")
+    assert r.exit_code == 2 and "outside the protocol's range" in r.stderr and "throttle_pct 160" in r.stderr, r
+
+
+def test_its_own_workbook_and_mcap_are_runs(cli, tmp_path):
+    pytest.importorskip("openpyxl")
+    pytest.importorskip("mcap")
+    for name in ("run.xlsx", "run.mcap"):
+        out = tmp_path / name
+        r = cli("zk", "monitor", "--sim", "--duration", "2", "-o", str(out))
+        assert r.exit_code == 0, r
+        r = cli("zk", "report", str(out), "--terminal")
+        assert r.exit_code == 0 and "Engine speed" in r.stdout and "not a run" not in r.stderr, (name, r)

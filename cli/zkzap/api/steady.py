@@ -340,8 +340,9 @@ class StepAverager:
                 frac, floor = SETTLING[name]
                 tol = max(frac * abs(mean), floor)
                 if abs(d) > tol:
-                    how = f"{abs(d) / abs(mean) * 100:.2f} %" if frac and mean else f"{abs(d):.1f} {unit}"
-                    lim = f"{frac * 100:g} %" if frac and tol > floor else f"{tol:g} {unit}"
+                    relative = frac and frac * abs(mean) >= floor        # the tolerance is the fraction
+                    how = f"{abs(d) / abs(mean) * 100:.2f} %" if relative else f"{abs(d):.{2 if floor < 1 else 1}f} {unit}"
+                    lim = f"{frac * 100:g} %" if relative else f"{tol:g} {unit}"
                     moving.append(f"{label} drifted {'+' if d > 0 else '-'}{how} across the window (more than {lim})")
         if moving:
             settled = False

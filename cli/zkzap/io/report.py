@@ -24,17 +24,21 @@ from ..errors import UsageError, clip
 
 #: Time-history panels: (title, unit label, [(column, legend label)]).
 PANELS = (
-    ("Engine speed", "rpm", [("rpm", "rpm"), ("target_rpm", "target rpm")]),
+    ("Engine speed", "rpm", [("rpm", "rpm"), ("target_rpm", "target rpm"), ("rpm_corrected", "corrected N/√θ")]),
     ("Exhaust gas temperature", "EGT (°C)", [("egt_c", "EGT")]),
-    ("Thrust", "thrust (kgf)", [("thrust_kg", "thrust")]),
+    ("Thrust", "thrust (kgf)", [("thrust_kg", "thrust (ECU)"), ("thrust_corrected_kg", "corrected F/δ")]),
     ("Throttle", "throttle (%)", [("throttle_pct", "throttle (ECU)"), ("target_throttle_pct", "target")]),
-    ("Fuel flow", "fuel flow (L/min)", [("fuel_flow_l_min", "fuel flow")]),
+    ("Fuel flow", "fuel flow (L/min)", [("fuel_flow_l_min", "fuel flow (ECU)"),
+                                        ("fuel_flow_corrected_l_min", "corrected")]),
     ("Voltages", "voltage (V)", [("power_voltage_v", "battery"), ("pump_voltage_v", "pump"),
                                  ("radio_voltage_v", "radio")]),
 )
 #: Columns measured (not targets: those come from the steps file).
 MEASURED = ("rpm", "egt_c", "thrust_kg", "throttle_pct", "fuel_flow_l_min", "power_voltage_v", "pump_voltage_v",
-            "radio_voltage_v")
+            "radio_voltage_v", "rpm_corrected", "thrust_corrected_kg", "fuel_flow_corrected_l_min")
+#: The keys of a record that are no external sensor's channel (the rest of a record's numbers are).
+_NOT_SENSOR = ("time", "t", "kind", "id", "frame", "payload", "stale", "stale_ids", "warnings", "limit", "reserved",
+               "out_of_range", "gap_s", "since_t", "reason", "step", "target_rpm", "target_throttle_pct")
 #: Steady-state plots from the steps: (title, x column, x label, y column, y label).
 STEP_PLOTS = (
     ("Thrust vs rpm", "rpm_mean", "rpm", "thrust_kg_mean", "thrust (kgf)"),
@@ -72,6 +76,10 @@ class Run:
         self.steps = None            # rows of its steps file (or its summary's steps)
         self.summary = None
         self.offset = 0.0            # subtracted from t on a comparison's common axis
+        self.outside = 0             # records with a value outside the protocol's range
+        self.first_outside = None    # (t, column, value, (lo, hi))
+        self.sensors = []            # the columns of external sensors (numbers no status field holds)
+        self._looked = 0
 
     def add(self, rec, where=None):
         """Take the record ``rec`` (read at ``where``, ``FILE:LINE``)."""
@@ -85,21 +93,45 @@ class Run:
         t = _float(rec.get("t"))
         if t is None:
             return
+        if rec.get("kind") not in (None, "", "status"):
+            return                   # a control frame, a gap, a trip: no status values
+        if self._looked < 100:
+            self._looked += 1
+            self._discover(rec)
         values = [_float(rec.get(c)) for c in self.keep]      # all read before any is kept
         self.t.append(t)
+        ranges = _ranges()
+        outside = None
         for c, v in zip(self.keep, values):
+            r = ranges.get(c)
+            if v is not None and r is not None and not r[0] <= v <= r[1] and outside is None:
+                outside = (t, c, v, r)
             s = self.series.get(c)
             if s is None:
                 s = self.series[c] = array("d", [math.nan] * (len(self.t) - 1))
             s.append(math.nan if v is None else v)
             if v is not None:
                 self.present.add(c)
+        if outside is not None:
+            self.outside += 1
+            if self.first_outside is None:
+                self.first_outside = outside
         name = rec.get("engine_state_name")
         if name and isinstance(name, str) and (not self.states or self.states[-1][1] != name):
             self.states.append((t, name))
         for key, events in (("limit", self.limit_events), ("warnings", self.warn_events)):
             for text in _texts(rec.get(key)):
                 events.setdefault(text, t)
+
+    def _discover(self, rec):
+        known = _known_keys()
+        for k, v in rec.items():
+            if k in known or k in self.keep or not isinstance(k, str) or k.endswith("_name"):
+                continue
+            if _float(v) is not None:
+                self.keep += (k,)
+                self.sensors.append(k)
+                self.series[k] = array("d", [math.nan] * len(self.t))
 
     def running_t(self):
         """When the engine first reached a running state (None: never)."""
@@ -110,6 +142,58 @@ class Run:
 
 class _Beyond(UsageError):
     """A number written in full that no float holds (an integer of 400 digits, ``1e400``)."""
+
+
+_RANGES = None
+_KNOWN = None
+
+
+def _known_keys():
+    global _KNOWN
+    if _KNOWN is None:
+        from ..codec import zk
+
+        _KNOWN = frozenset(zk.STATUS_KEYS) | frozenset(MEASURED) | frozenset(_NOT_SENSOR)
+    return _KNOWN
+
+
+def _ranges():
+    """The protocol's range of each status field (its table's physical range)."""
+    global _RANGES
+    if _RANGES is None:
+        from .xlsx import status_fields
+
+        _RANGES = {}
+        for key, fields in status_fields().items():
+            got = [r for r in (f.physical_range() for f in fields) if r is not None]
+            if got:
+                _RANGES[key] = (min(r[0] for r in got), max(r[1] for r in got))
+    return _RANGES
+
+
+#: A run has at least this many status records; more than :data:`MAX_OUTSIDE` of them with a
+#: value outside the protocol's ranges and it is no run (a chunk of another file, decoded).
+MIN_RECORDS = 10
+MAX_OUTSIDE = 0.02
+
+
+def check_run(run, path, min_records=1) -> None:
+    """Refuse (UsageError) what is not a run: fewer than ``min_records`` status records (a raw
+    log: :data:`MIN_RECORDS`, since bytes of any file can hold a frame by chance), or more than
+    :data:`MAX_OUTSIDE` of them holding values outside the protocol's ranges; a few such records
+    are noted."""
+    n = len(run.t)
+    if n < min_records:
+        raise UsageError(f"run: {path}: not a run: {n} status record{'s' if n != 1 else ''} (at least "
+                         f"{min_records})")
+    if run.outside:
+        t, c, v, (lo, hi) = run.first_outside
+        what = f"{c} {v:g} at t={t:g} s is outside the protocol's range {lo:g}..{hi:g}"
+        if run.outside > MAX_OUTSIDE * n:
+            raise UsageError(f"run: {path}: not a run: {run.outside} of {n} records hold values outside the "
+                             f"protocol's ranges ({what})")
+        run.notes.append(f"{path}: {run.outside} record{'s' if run.outside > 1 else ''} hold values outside the "
+                         f"protocol's ranges ({what})")
 
 
 def _float(v):
@@ -182,8 +266,13 @@ def load_run(path, extra=()) -> Run:
     except OSError as e:
         raise UsageError(f"run: cannot read {path}: {e.strerror}") from None
     run = Run(path, extra)
-    if _is_binary(head):
+    if head.startswith(b"PK\x03\x04"):
+        _load_xlsx(path, run)
+    elif head.startswith(b"\x89MCAP"):
+        _load_mcap(path, run)
+    elif _is_binary(head):
         _load_raw(path, run)
+        run.min_records = MIN_RECORDS
     else:
         from ..api.textfile import iter_lines
 
@@ -197,6 +286,7 @@ def load_run(path, extra=()) -> Run:
             _csv_rows(lines, path, run)
     if not len(run.t):
         raise UsageError(f"run: {path}: no records")
+    check_run(run, path, getattr(run, "min_records", 1))
     return run
 
 
@@ -312,7 +402,9 @@ def _load_stdin(extra):
 
 
 def _load_raw(path, run):
-    """A raw log, or a pcapng capture (by its content: its own receive times become ``t``)."""
+    """A raw log, or a pcapng capture (by its content: its own receive times become ``t``). A
+    file most of whose bytes are no ZK status frame is no raw log (a binary that happens to hold
+    a few bytes a CRC lets through)."""
     from ..api.capture import replay_source
     from ..api.telemetry import Telemetry
 
@@ -331,6 +423,74 @@ def _load_raw(path, run):
             run.add(rec)
     finally:
         src.close()
+    framer = getattr(src, "framer", None)
+    frames, skipped = getattr(framer, "frames", 0), getattr(framer, "skipped", 0)
+    if skipped > frames * 7:
+        raise UsageError(f"run: {path}: not a run: {skipped} of its {skipped + frames * 7} bytes are no ZK status "
+                         f"frame ({frames} frames); expected a raw log (--raw-log), a capture, or the CSV, JSON, "
+                         f"workbook or MCAP a session writes")
+
+
+def _load_xlsx(path, run):
+    """The records sheet(s) of a workbook a session wrote (``-o run.xlsx``: a units row under
+    the header)."""
+    from .bridges import require_extra
+
+    require_extra("openpyxl", "xlsx", "run: a workbook")
+    import zipfile
+
+    from openpyxl import load_workbook
+
+    try:
+        book = load_workbook(path, read_only=True, data_only=True)
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as e:
+        raise UsageError(f"run: {path}: not a workbook a session wrote: {e}") from None
+    try:
+        sheets = [ws for ws in book.worksheets if ws.title == "records" or ws.title.startswith("records ")]
+        if not sheets:
+            raise UsageError(f"run: {path}: a workbook without a records sheet (expected the workbook "
+                             f"'zk monitor -o run.xlsx' or 'zk profile -o run.xlsx' writes)")
+        for ws in sheets:
+            rows = ws.iter_rows(values_only=True)
+            header = next(rows, None)
+            if not header or "t" not in header:
+                raise UsageError(f"run: {path}: sheet {ws.title}: no header with a 't' column")
+            header = [str(h) if h is not None else "" for h in header]
+            run.columns.update(header)
+            for n, row in enumerate(rows, 2):
+                rec = dict(zip(header, row))
+                if n == 2 and rec.get("t") == "s":
+                    continue                               # the units row
+                run.add(rec, f"{path}: sheet {ws.title}: row {n}")
+    finally:
+        book.close()
+
+
+def _load_mcap(path, run):
+    """The status messages of an MCAP file a session wrote (``-o run.mcap``), in log-time order;
+    a file cut by a kill reads up to its last whole chunk."""
+    from .bridges import require_extra
+
+    require_extra("mcap", "mcap", "run: an MCAP file")
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    with open(path, "rb") as f:
+        try:
+            for _schema, channel, message in NonSeekingReader(f).iter_messages():
+                if not channel.topic.startswith("/zk/status/"):
+                    continue
+                try:
+                    rec = json.loads(message.data)
+                except ValueError:
+                    raise UsageError(f"run: {path}: a message on {channel.topic} is not a JSON record") from None
+                if isinstance(rec, dict):
+                    run.columns.update(rec)
+                    run.add(rec)
+        except McapError as e:
+            if not len(run.t):
+                raise UsageError(f"run: {path}: not an MCAP file a session wrote: {e}") from None
+            run.notes.append(f"{path}: the MCAP file ends early ({e}): read up to its last whole chunk")
 
 
 def load_steps(path) -> list:
@@ -478,6 +638,11 @@ def plan_many(runs, steps_list, limits=()):
                 why = f"no values in {' or '.join(cols)} in {names}"
             skipped.append(f"{title.lower()}: {why}")
     shown = {c for _, _, lines in panels for c, _ in lines}
+    for run in runs:
+        for c in run.sensors:
+            if c in present and c not in shown:
+                shown.add(c)
+                panels.append((f"Sensor {c}", _unit(c, _declared_units(runs).get(c)), [(c, c)]))
     for text, field, *_ in limits:
         if field in shown:
             continue
@@ -490,14 +655,22 @@ def plan_many(runs, steps_list, limits=()):
     if not any(steps_list):
         skipped.append("steady-state plots (thrust vs rpm, EGT vs rpm, TSFC vs thrust): no --steps file")
     else:
-        for title, x, xl, y, yl in STEP_PLOTS:
+        for title, x0, xl, y0, yl in STEP_PLOTS:
             series = []
+            sources = set()
             for run, steps in zip(runs, steps_list):
-                pts = [(float(r[x]), float(r[y]), str(r.get("settled")).lower() not in ("false", "none", ""))
+                # the thrust TSFC was computed from: the --thrust-from sensor's, when the steps have it
+                x, y = (_thrust_column(steps) if c == "thrust_kg_mean" else c for c in (x0, y0))
+                if "thrust_from_kg_mean" in (x, y):
+                    sources.add(next((r.get("thrust_from") for r in steps if r.get("thrust_from")), "sensor"))
+                pts = [(float(r[x]), float(r[y]), settled(r))
                        for r in steps or () if _float(r.get(x)) is not None and _float(r.get(y)) is not None
                        and (y != "tsfc_g_kn_s" or float(r[y]) > 0)]
                 if pts:
                     series.append((run.label, sorted(pts)))
+            if sources:
+                where = f"kgf, sensor {', '.join(sorted(sources))}"
+                xl, yl = (lbl.replace("kgf", where) if lbl.startswith("thrust") else lbl for lbl in (xl, yl))
             if series:
                 step_plots.append((title, xl, yl, series))
             else:
@@ -505,11 +678,33 @@ def plan_many(runs, steps_list, limits=()):
     return panels, step_plots, skipped
 
 
-def _unit(field):
+def _unit(field, unit=None):
     from .xlsx import unit_of
 
-    unit = unit_of(field)
+    unit = unit or unit_of(field)
     return f"{field} ({unit})" if unit else field
+
+
+def settled(row) -> bool:
+    """Whether a step row (from a steps file or a summary) settled."""
+    return str(row.get("settled")).lower() not in ("false", "none", "")
+
+
+def _thrust_column(steps):
+    """The steps' thrust column: the sensor's (``--thrust-from``) when they have one, else the ECU's."""
+    return ("thrust_from_kg_mean" if any(_float(r.get("thrust_from_kg_mean")) is not None for r in steps or ())
+            else "thrust_kg_mean")
+
+
+def _declared_units(runs):
+    """The units the runs' summaries declare for their sensors' channels."""
+    out = {}
+    for run in runs:
+        for s in (run.summary or {}).get("aux") or ():
+            for c in (s.get("channels") or []) if isinstance(s, dict) else ():
+                if isinstance(c, dict) and isinstance(c.get("name"), str) and isinstance(c.get("unit"), str):
+                    out.setdefault(c["name"], c["unit"])
+    return out
 
 
 def _targets(steps):
@@ -592,23 +787,37 @@ def step_comparison(runs, short=False):
         if len({t for t in targets if t}) > 1:
             target = " / ".join(t or "-" for t in targets)
         row = [n, target]
+        marks = ["" if settled(b.get(n) or {"settled": True}) else "*" for b in by_run]
         for col, _, dec in COMPARED:
-            ref = _float((by_run[0].get(n) or {}).get(col))
-            row.append(_fmt(ref, dec))
-            for b in by_run[1:]:
-                v = _float((b.get(n) or {}).get(col))
-                row.append(_fmt(v, dec))
+            cols = [_thrust_column(run.steps) if col == "thrust_kg_mean" else col for run in runs]
+            ref = _float((by_run[0].get(n) or {}).get(cols[0]))
+            row.append(_fmt(ref, dec) + marks[0])
+            for k, b in enumerate(by_run[1:], 1):
+                v = _float((b.get(n) or {}).get(cols[k]))
+                row.append(_fmt(v, dec) + marks[k])
                 if v is None or ref is None:
                     row.append("-")
                 else:
-                    pct = f" ({(v - ref) / ref * 100:+.1f} %)" if ref else ""
-                    row.append(f"{v - ref:+.{dec}f}{pct}")
+                    pct = f" ({_signed((v - ref) / ref * 100, 1)} %)" if ref else ""
+                    row.append(f"{_signed(v - ref, dec)}{pct}")
         rows.append(row)
     return header, rows
 
 
+#: Under a comparison: what the mark of an unsettled step's value means.
+UNSETTLED_NOTE = "* not settled (its note says why): compare it with care"
+
+
 def _fmt(v, dec):
-    return "-" if v is None else f"{v:.{dec}f}"
+    if v is None:
+        return "-"
+    text = f"{v:.{dec}f}"
+    return text[1:] if text.startswith("-") and not text.strip("-0.") else text      # no -0.0
+
+
+def _signed(v, dec):
+    text = f"{v:+.{dec}f}"
+    return text if text.strip("+-0.") else text.replace("-", "+", 1)
 
 
 # --- matplotlib ----------------------------------------------------------------------------------
@@ -653,8 +862,11 @@ def _history_axes(fig, grid, runs, panels, limits):
                     if many and k:
                         continue                     # the targets of the reference run
                     xs, ys = [], []
+                    end = run.t[-1] if len(run.t) else 0.0
                     for a, b, v in targets[c]:
-                        xs += [a - run.offset, b - run.offset, math.nan]
+                        if a >= end:
+                            continue                 # after the run ended (an abort): never sent
+                        xs += [a - run.offset, min(b, end) - run.offset, math.nan]
                         ys += [v, v, math.nan]
                     ax.plot(xs, ys, color="black", linestyle="--", linewidth=1.0, label=label)
                 elif c in run.present:
@@ -674,10 +886,12 @@ def _history_axes(fig, grid, runs, panels, limits):
             if field not in fields:
                 continue
             ax.axhline(threshold, color=LIMIT_COLOUR, linewidth=1.0, linestyle="-", label=f"limit {text}")
-            _line_label(ax, threshold, f"limit {op} {threshold:g}", LIMIT_COLOUR)
+            # the limit's label above its line, the warning's below its own: apart however close
+            above = warn is None or threshold >= warn
+            _line_label(ax, threshold, f"limit {op} {threshold:g}", LIMIT_COLOUR, above=above)
             if warn is not None:
                 ax.axhline(warn, color=WARN_COLOUR, linewidth=1.0, linestyle="--", label=f"warning {op} {warn:g}")
-                _line_label(ax, warn, f"warn {op} {warn:g}", WARN_COLOUR)
+                _line_label(ax, warn, f"warn {op} {warn:g}", WARN_COLOUR, above=not above)
         for k, run in enumerate(runs):
             for text, et in _limit_times(run, run.summary):
                 who = f" ({run.label})" if many else ""
@@ -695,17 +909,25 @@ def _history_axes(fig, grid, runs, panels, limits):
         if handles:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0, frameon=False)
     if axes:
+        ends = [run.t[-1] - run.offset for run in runs if len(run.t)]
+        starts = [min(run.t) - run.offset for run in runs if len(run.t)]
+        if ends and max(ends) > min(starts):
+            axes[0].set_xlim(min(min(starts), 0.0), max(ends))   # the plots stop where the runs did
         what = {"start": "the start", "running": "the engine's first running state"}
         axes[-1].set_xlabel("time since " + (what.get(getattr(ref, "aligned", "start"), f"the start of "
                                              f"{getattr(ref, 'aligned', 'the run').replace(':', ' ')}")) + " (s)")
     return axes
 
 
-def _line_label(ax, y, text, colour):
+def _line_label(ax, y, text, colour, above=True):
     from matplotlib.transforms import blended_transform_factory
 
-    ax.text(0.995, y, text, color=colour, fontsize=6.5, ha="right", va="bottom",
+    ax.text(0.995, y, text, color=colour, fontsize=6.5, ha="right", va="bottom" if above else "top",
             transform=blended_transform_factory(ax.transAxes, ax.transData), clip_on=True)
+
+
+#: An averaging window's shade (settled, not settled): neither a state's colour.
+WINDOW_COLOURS = ("#c7c1dd", "#f2b8b5")
 
 
 def _shade_windows(ax, run, label=True, numbers=True):
@@ -714,20 +936,26 @@ def _shade_windows(ax, run, label=True, numbers=True):
 
     tr = blended_transform_factory(ax.transData, ax.transAxes)
     first = True
+    shown = set()
+    end = run.t[-1] if len(run.t) else 0.0
     for r in run.steps:
         a, w0, w1 = (_float(r.get(k)) for k in ("step_start_s", "window_start_s", "window_end_s"))
-        if a is None or w0 is None or w1 is None:
+        if a is None or w0 is None or w1 is None or a >= end:
             continue
+        w0, w1 = min(w0, end), min(w1, end)
         a, w0, w1 = a - run.offset, w0 - run.offset, w1 - run.offset
+        ok = settled(r)
         if w0 > a:
             ax.axvspan(a, w0, facecolor="none", edgecolor="#9aa7b8", hatch="///", linewidth=0, zorder=0.5,
                        label="settling" if label and first else None)
         if w1 > w0:
-            ax.axvspan(w0, w1, color="#c9d7ea", alpha=0.45, zorder=0.6,
-                       label="averaging window" if label and first else None)
+            what = "averaging window" if ok else "averaging window (not settled)"
+            ax.axvspan(w0, w1, color=WINDOW_COLOURS[0 if ok else 1], alpha=0.55, zorder=0.6,
+                       label=what if label and what not in shown else None)
+            shown.add(what)
         if numbers:
-            ax.text((a + max(w1, a)) / 2, 1.0, str(r.get("step")), transform=tr, ha="center", va="bottom",
-                    fontsize=7, color="#34495e", fontweight="bold")
+            ax.text((a + max(w1, a)) / 2, 1.0, f"{r.get('step')}{'' if ok else '*'}", transform=tr, ha="center",
+                    va="bottom", fontsize=7, color="#34495e" if ok else "#a61c00", fontweight="bold")
         first = False
 
 
@@ -788,7 +1016,8 @@ def figure_histories(runs, panels, limits, title):
     fig = Figure(figsize=(11, 1.7 * n + 1.2), layout="constrained")
     grid = fig.add_gridspec(n, 1)
     _history_axes(fig, grid, runs, panels, limits)
-    fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
+    if title:
+        fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
     return fig
 
 
@@ -797,8 +1026,53 @@ def figure_steps(step_plots, title):
     fig = Figure(figsize=(11, 3.4), layout="constrained")
     grid = fig.add_gridspec(1, max(len(step_plots), 1))
     _step_axes(fig, grid, step_plots)
-    fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
+    if title:
+        fig.suptitle(_wrap(title), fontsize=11, x=0.01, ha="left")
     return fig
+
+
+#: A step table's columns: (column, heading, decimals; None: as it is).
+STEP_TABLE = (("step", "step", None), ("target", "target", None), ("window_start_s", "window from (s)", 1),
+              ("window_end_s", "to (s)", 1), ("frames", "frames", None), ("rpm_mean", "rpm", 0),
+              ("rpm_std", "± rpm", 0), ("egt_c_mean", "EGT (°C)", 0), ("egt_c_std", "± EGT", 1),
+              ("thrust_kg_mean", "thrust ECU (kgf)", 2), ("thrust_from_kg_mean", "thrust sensor (kgf)", 3),
+              ("thrust_from_kg_std", "± thrust sensor", 3), ("fuel_flow_l_min_mean", "fuel flow ECU (L/min)", 3),
+              ("fuel_flow_from_l_min_mean", "fuel flow sensor (L/min)", 4),
+              ("tsfc_g_kn_s", "TSFC (g/(kN·s))", 2), ("tsfc_kg_kgf_h", "TSFC (kg/(kgf·h))", 4),
+              ("rpm_corrected", "rpm corrected", 0), ("thrust_corrected_kg", "thrust corrected (kgf)", 3),
+              ("tsfc_corrected_g_kn_s", "TSFC corrected", 2), ("settled", "settled", None), ("note", "note", None))
+
+
+def step_table(steps):
+    """``(columns, headings)`` of a step table: :data:`STEP_TABLE`'s columns the steps have values
+    in (the basic ones always), then each sensor channel's mean (``X_mean`` columns beyond them)."""
+    always = {"step", "target", "rpm_mean", "egt_c_mean", "thrust_kg_mean", "tsfc_g_kn_s", "settled", "note"}
+    cols, head = [], []
+    known = {c for c, _, _ in STEP_TABLE}
+    for c, h, _ in STEP_TABLE:
+        if c in always or any(r.get(c) not in (None, "") for r in steps):
+            cols.append(c)
+            head.append(h)
+    for c in steps[0] if steps else ():
+        if c.endswith("_mean") and c not in known and not c.startswith(("pump_voltage", "throttle", "fuel_flow")):
+            if any(r.get(c) not in (None, "") for r in steps):
+                cols.insert(cols.index("settled"), c)
+                head.insert(head.index("settled"), c[:-5].replace("_", " "))
+    return cols, head
+
+
+_DECIMALS = {c: d for c, _, d in STEP_TABLE}
+
+
+def _cell(row, col):
+    v = row.get(col)
+    dec = _DECIMALS.get(col, 3 if col.endswith("_mean") else None)
+    f = _float(v)
+    if col == "settled":
+        return "yes" if settled(row) else "NO" if str(v).lower() == "false" else "-"
+    if dec is None or f is None:
+        return "" if v is None else v
+    return _fmt(f, dec)
 
 
 def header_rows(runs, meta):
@@ -852,7 +1126,8 @@ def figure_all(runs, panels, step_plots, limits, title, meta):
     if comparison:
         ax = fig.add_subplot(grid[-1])
         ax.axis("off")
-        ax.set_title("Steps side by side (Δ: difference from " + runs[0].label + ")", fontsize=9, loc="left")
+        ax.set_title("Steps side by side (Δ: difference from " + runs[0].label + "; " + UNSETTLED_NOTE + ")",
+                     fontsize=9, loc="left")
         header, body = comparison
         table = ax.table(cellText=body, colLabels=header, loc="upper left", cellLoc="center")
         table.auto_set_font_size(False)
@@ -935,27 +1210,23 @@ def _html(runs, panels, step_plots, limits, title, meta):
             "<tr><th>" + escape(str(r[0])) + "</th>" + "".join(f"<td>{escape(str(v))}</td>" for v in r[1:]) + "</tr>"
             for r in rows) + "</table>")
     if panels:
-        fig = figure_histories(runs, panels, limits, "Time histories")
+        fig = figure_histories(runs, panels, limits, None)
         parts.append(f"<figure id=\"time-histories\"><figcaption>Time histories: "
                      f"{escape(', '.join(p[0] for p in panels))}</figcaption>{_svg(fig)}</figure>")
     if step_plots:
-        fig = figure_steps(step_plots, "Steady state (step means)")
-        parts.append(f"<figure id=\"steady-state\"><figcaption>Steady state: "
+        fig = figure_steps(step_plots, None)
+        parts.append(f"<figure id=\"steady-state\"><figcaption>Steady state (step means): "
                      f"{escape(', '.join(p[0] for p in step_plots))}</figcaption>{_svg(fig)}</figure>")
     if len(runs) > 1 and any(r.steps for r in runs):
         header, body = step_comparison(runs)
-        parts.append(f"<h2>Steps side by side</h2><p>Δ: the difference from {escape(runs[0].label)}.</p>"
-                     + _table(body, header, "step-comparison"))
+        parts.append(f"<h2>Steps side by side</h2><p>Δ: the difference from {escape(runs[0].label)}. "
+                     f"{escape(UNSETTLED_NOTE)}.</p>" + _table(body, header, "step-comparison"))
     for run in runs:
         if run.steps:
-            cols = ["step", "target", "window_start_s", "window_end_s", "rpm_mean", "egt_c_mean", "thrust_kg_mean",
-                    "fuel_flow_l_min_mean", "tsfc_g_kn_s", "tsfc_kg_kgf_h", "settled", "note"]
-            extra = [c for c in ("rpm_corrected", "thrust_corrected_kg", "tsfc_corrected_g_kn_s")
-                     if any(r.get(c) not in (None, "") for r in run.steps)]
-            cols[-2:-2] = extra
+            cols, head = step_table(run.steps)
             name = f"Steps: {run.label}" if len(runs) > 1 else "Steps"
             ident = "steps" if run is runs[0] else None
-            parts.append(f"<h2>{escape(name)}</h2>" + _table([[r.get(c, "") for c in cols] for r in run.steps], cols,
+            parts.append(f"<h2>{escape(name)}</h2>" + _table([[_cell(r, c) for c in cols] for r in run.steps], head,
                                                             ident))
     parts.append("</body></html>\n")
     return "\n".join(parts)
@@ -1012,7 +1283,7 @@ def terminal(runs, console, width=None, height=6):
         from rich.table import Table
 
         header, body = step_comparison(runs)
-        table = Table(title=f"Steps side by side (Δ: difference from {runs[0].label})")
+        table = Table(title=f"Steps side by side (Δ: difference from {runs[0].label})", caption=UNSETTLED_NOTE)
         for h in header:
             table.add_column(str(h))
         for r in body:

@@ -35,6 +35,9 @@ UNITS = {
     "tsfc_g_kn_s": "g/(kN·s)", "tsfc_kg_kgf_h": "kg/(kgf·h)", "target_throttle_pct": "%", "target_rpm": "rpm",
     "duration_s": "s", "schedule_s": "s", "running_s": "s", "fuel_used_l": "L", "fuel_total_l": "L",
     "max_rpm": "rpm", "max_egt_c": "°C", "fuel_density_kg_l": "kg/L", "gap_s": "s", "since_t": "s",
+    # thrust is a force: kgf, though the protocol's tables say kg
+    "thrust_kg": "kgf", "thrust_from_kg": "kgf", "thrust_corrected_kg": "kgf", "rpm_corrected": "rpm",
+    "drift_rpm": "rpm", "drift_egt_c": "°C", "drift_thrust_kg": "kgf",
 }
 
 
@@ -68,18 +71,27 @@ def unit_of(column) -> str:
 
 
 _UNITS = None
+_FIELDS = None
+
+
+def status_fields() -> dict:
+    """Every status field of the protocol tables by its key: ``{key: [field, ...]}`` (one per
+    status ID that carries it)."""
+    global _FIELDS
+    if _FIELDS is None:
+        from ..codec import zk
+
+        _FIELDS = {}
+        for s in zk.STATUS:
+            for f in s.layout.fields:
+                _FIELDS.setdefault(f.key, []).append(f)
+    return _FIELDS
 
 
 def _status_units():
     global _UNITS
     if _UNITS is None:
-        from ..codec import zk
-
-        _UNITS = {}
-        for s in zk.STATUS:
-            for f in s.layout.fields:
-                if f.unit:
-                    _UNITS.setdefault(f.key, f.unit)
+        _UNITS = {k: next(f.unit for f in fs if f.unit) for k, fs in status_fields().items() if any(f.unit for f in fs)}
     return _UNITS
 
 
