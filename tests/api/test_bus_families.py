@@ -122,3 +122,12 @@ def test_scan_names_two_actuators_with_one_id(rig):
         with Bus(sim.url, protocol=protocol) as other:
             found = {r["id"]: r["status"] for r in other.scan(range(1, 9))}
     assert found[6] == "ok" and found[4] in ("garbled", "duplicate")
+
+
+def test_a_move_waited_for_ends_where_the_rod_stopped(rig):
+    """Regression: the final position and "stopped" must belong together (on the 17Lf they are
+    two reads: moving first, then the position)."""
+    sim, bus, _ = rig
+    for goal in (3000, 1200, 2900):
+        final = bus.move(1, goal, poll=0)
+        assert final == _truth(sim, 1, "present-position") == goal

@@ -160,9 +160,13 @@ class ModbusBus(Bus):
         return records, None
 
     def _position_moving(self, ident: int) -> tuple[int, int]:
+        """present-position and moving. The 17Lf's table has a gap between them (212), so they are
+        two reads: moving first, then the position. A rod that reads "stopped" has stopped, and
+        the position read after it is where (the other order pairs a position from during the
+        move with "stopped" read after it: a wrong final position)."""
         m = self.map
-        pos = self.link.read_values(ident, m.by_name["present-position"].address, 1)[0]
-        return pos, self.link.read_values(ident, m.by_name["moving"].address, 1)[0]
+        moving = self.link.read_values(ident, m.by_name["moving"].address, 1)[0]
+        return self.link.read_values(ident, m.by_name["present-position"].address, 1)[0], moving
 
     def move(self, ident: int, position: int, *, wait: bool = True, speed: Optional[int] = None,
              timeout: float = 10.0, poll: float = 0.01, on_progress: Any = None, notify: Any = None,
