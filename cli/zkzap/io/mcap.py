@@ -24,6 +24,7 @@ import threading
 
 from ..codec import zk
 from .writers import IsoNs
+from .writers import dumps as _dumps
 
 #: The extra that provides this module's library.
 EXTRA = "mcap"
@@ -31,7 +32,6 @@ CHUNK_SIZE = 256 * 1024
 #: The longest a record waits in memory before its chunk is written out (seconds).
 FLUSH_S = 0.5
 
-_dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
 
 _COMMON = {
     "time": {"type": ["string", "null"], "format": "date-time",

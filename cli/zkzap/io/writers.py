@@ -35,7 +35,54 @@ from ..errors import OutputError
 from ..signals import held
 from . import FORMATS  # noqa: F401 - re-exported
 
-_dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
+#: A number no output format holds is written as no value (JSON null, an empty CSV or workbook
+#: cell, no line-protocol field): NaN and ±Infinity (``1e400`` read as a float is one) — JSON
+#: has neither, CSV readers disagree on them, line protocol and MCAP's JSON refuse them — and an
+#: integer too long to write (Python writes none of more than 4300 digits). A format with
+#: narrower numbers says so itself: line protocol's integers are 64-bit (a larger one is written
+#: as a float), a workbook's cells are doubles (:func:`fits_double`).
+_LONGEST = 10 ** 4300
+_INF = float("inf")
+
+
+def holds(v) -> bool:
+    """Whether the number ``v`` is one every output format holds (anything else: True)."""
+    if isinstance(v, float):
+        return v == v and v != _INF and v != -_INF
+    if isinstance(v, int):
+        return -_LONGEST < v < _LONGEST
+    return True
+
+
+def fits_double(v) -> bool:
+    """Whether the number ``v`` is a finite double's (an int within a double's range)."""
+    return holds(v) and (not isinstance(v, int) or -(1 << 1024) < v < 1 << 1024)
+
+
+def plain(v):
+    """``v`` (a record, a list, a value) with every number no format holds replaced by None."""
+    if isinstance(v, dict):
+        return {k: plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [plain(x) for x in v]
+    return v if holds(v) else None
+
+
+_strict = json.JSONEncoder(ensure_ascii=False, separators=(",", ":"), allow_nan=False).encode
+
+
+def dumps(value, **options) -> str:
+    """``value`` as JSON text (compact unless ``options`` say otherwise, as :func:`json.dumps`
+    takes them), every number JSON cannot hold written as null (see :func:`holds`). Records of
+    finite numbers, nearly all, are encoded once."""
+    encode = json.JSONEncoder(ensure_ascii=False, allow_nan=False, **options).encode if options else _strict
+    try:
+        return encode(value)
+    except ValueError:                # NaN or an infinity (or an int of more than 4300 digits)
+        return encode(plain(value))
+
+
+_dumps = dumps
 
 
 def csv_cell(v) -> str:
@@ -46,7 +93,9 @@ def csv_cell(v) -> str:
     if v is False:
         return "false"
     if isinstance(v, float):
-        return repr(v)
+        return repr(v) if holds(v) else ""
+    if isinstance(v, int) and not holds(v):
+        return ""
     if isinstance(v, (list, tuple)):
         return ";".join(csv_cell(x) for x in v)
     if isinstance(v, dict):
@@ -392,9 +441,11 @@ def lp_field_value(v):
     if v is False:
         return "false"
     if isinstance(v, int):
-        return f"{v}i"
+        if -(1 << 63) <= v < 1 << 63:
+            return f"{v}i"
+        return repr(float(v)) if fits_double(v) else None      # beyond line protocol's 64-bit integers
     if isinstance(v, float):
-        return repr(v) if v == v and v not in (float("inf"), float("-inf")) else None
+        return repr(v) if holds(v) else None
     if isinstance(v, (list, tuple)):
         v = ";".join(csv_cell(x) for x in v)
     elif isinstance(v, dict):

@@ -99,17 +99,28 @@ def cell(value, column=None):
     """A value as a workbook cell: numbers and booleans as they are, ``time`` as a date-time,
     lists ``;``-joined, dicts ``key=value``, anything else as text."""
     if value is None or isinstance(value, (bool, int, float)):
-        if isinstance(value, float) and value != value:
-            return None
-        return value
+        from .writers import fits_double
+
+        # a cell is a double, written with 16 significant digits (openpyxl): 1.7976931348623157e308
+        # would come back as infinity, so a workbook holds numbers below 1e308
+        return value if value is None or isinstance(value, bool) or (fits_double(value) and abs(value) < 1e308) \
+            else None
     if column == "time" and isinstance(value, str):
         try:
             return datetime.datetime.strptime(value.rstrip("Z"), "%Y-%m-%dT%H:%M:%S.%f")
         except ValueError:
-            return value
+            return _xml_text(value)
     from .writers import csv_cell
 
-    return csv_cell(value)
+    return _xml_text(value if isinstance(value, str) else csv_cell(value))
+
+
+def _xml_text(text: str) -> str:
+    """``text`` as a cell holds it: the control characters XML has no place for written as
+    ``\\xNN`` (openpyxl refuses them, and the workbook would be lost)."""
+    from openpyxl.cell.cell import ILLEGAL_CHARACTERS_RE
+
+    return ILLEGAL_CHARACTERS_RE.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 class XlsxWriter:

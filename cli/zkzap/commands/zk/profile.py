@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
 import click
@@ -291,9 +290,10 @@ def _check_summary(path, schedule, output, raw_log):
 
 def _write_json(path, summary):
     """The summary as JSON: to stdout for '-', else whole (:func:`zkzap.outfile.write_whole`)."""
+    from ...io.writers import dumps
     from ...outfile import write_whole
 
-    text = json.dumps(summary, ensure_ascii=False, indent=2) + "\n"
+    text = dumps(summary, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return

@@ -185,10 +185,10 @@ def summarizer(stand, *, command, port):
 
 def write_summary(path, *, command, port, outcome, tel, session, stand):
     """The run summary as JSON (``-``: stdout)."""
-    import json
+    from ...io.writers import dumps
 
     out = session_summary(command=command, port=port, outcome=outcome, tel=tel, session=session, stand=stand)
-    text = json.dumps(out, ensure_ascii=False, indent=2) + "\n"
+    text = dumps(out, indent=2) + "\n"
     if path == "-":
         click.echo(text, nl=False)
         return

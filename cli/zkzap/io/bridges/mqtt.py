@@ -21,7 +21,6 @@ confirmed when the session ended), ``reconnects``.
 
 from __future__ import annotations
 
-import json
 import os
 import queue
 import threading
@@ -29,6 +28,7 @@ import time
 from urllib.parse import unquote, urlsplit
 
 from ...errors import PortError, UsageError
+from ..writers import dumps as _dumps
 from . import DRAIN_S, Bridge
 
 EXTRA = "mqtt"
@@ -42,7 +42,6 @@ RECONNECT_MAX_S = 5.0
 CONNECT_TIMEOUT_S = 5.0
 KEEPALIVE_S = 10
 
-_dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":")).encode
 
 
 class MqttUrl:
