@@ -108,9 +108,29 @@ def test_a_banner_before_a_csv_header_is_skipped(cli, tmp_path, cells):
     assert aux["skipped"] >= 2 and aux["format"] == "csv" and aux["rejected"] == 0
 
 
-def test_a_sensor_that_dies_goes_stale_in_session_time(cli, tmp_path, cells):
-    cell = cells(["thrust_n=98.0665"], life=0.3)                  # about 6 model seconds at speed 20
-    rows, (step,), s, r = _run(cli, tmp_path, f"{cell.path}@115200,thrust_n:N,stale=2", "--thrust-from", "thrust_n")
+def test_a_sensor_that_dies_goes_stale_in_session_time(cli, tmp_path):
+    # a FIFO: its writer's open waits for the reader's, so the sensor's life starts with the
+    # session's sensors however loaded the machine; it stays open, silent, once it dies
+    fifo = tmp_path / "cell"
+    os.mkfifo(fifo)
+    done = threading.Event()
+
+    def talk():
+        with open(fifo, "w") as f:
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 0.3:                      # about 6 model seconds at speed 20
+                f.write("thrust_n=98.0665\n")
+                f.flush()
+                time.sleep(0.01)
+            done.wait(60)
+
+    writer = threading.Thread(target=talk, daemon=True)
+    writer.start()
+    try:
+        rows, (step,), s, r = _run(cli, tmp_path, f"{fifo},thrust_n:N,stale=2", "--thrust-from", "thrust_n")
+    finally:
+        done.set()
+        writer.join(5)
     late = [row for row in rows if float(row["t"]) > 12]
     assert late and all(row["thrust_n"] == "" for row in late)     # blank 2 model seconds after the last line
     assert step["thrust_from_kg_mean"] == "" and step["tsfc_g_kn_s"] == "" and step["settled"] == "false"
