@@ -132,9 +132,42 @@ def refuse_same_files(outputs: dict, inputs: dict = None) -> None:
                                  f"destroy what is being read")
 
 
+def _kernel_file(path) -> bool:
+    """Whether ``path`` (or, when it does not exist, its directory) is on /proc or /sys: files of
+    the kernel's interfaces, which take a value the kernel parses, not an output."""
+    try:
+        st = os.stat(path if os.path.exists(path) else os.path.dirname(os.path.abspath(path)) or ".")
+    except OSError:
+        return False
+    for root in ("/proc", "/sys"):
+        try:
+            if os.stat(root).st_dev == st.st_dev and os.path.ismount(root):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def _refuse_unwritable(path, what):
+    """Refuse (exit 2) what no output can be: a symlink loop (or a path the system cannot
+    resolve), a socket, a file of /proc or /sys."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:              # ELOOP, ENAMETOOLONG, ENOTDIR...
+        raise UsageError(f"{what}: cannot open {path}: {e.strerror or e}") from None
+    if st is not None and stat.S_ISSOCK(st.st_mode):
+        raise UsageError(f"{what}: cannot open {path}: it is a socket (an output is a file, a device or a FIFO)")
+    if (st is None or stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)) and _kernel_file(path):
+        raise UsageError(f"{what}: cannot open {path}: a file of the kernel's /proc or /sys, not an output")
+
+
 def check_path(path, what="output") -> str:
     """Refuse (exit 2) an output path that cannot be written: a directory, a missing directory,
-    no permission. Returns its kind (``new``, ``regular``, ``stream``)."""
+    no permission, a symlink loop, a socket, a file of /proc or /sys. Returns its kind (``new``,
+    ``regular``, ``stream``)."""
+    _refuse_unwritable(path, what)
     kind = _kind(path)
     if kind == "dir":
         raise UsageError(f"{what}: cannot open {path}: Is a directory")

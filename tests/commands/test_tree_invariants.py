@@ -400,6 +400,48 @@ def test_an_output_option_survives_devices_fifos_and_symlinks(path, name, where,
             assert stat.S_IMODE(os.stat(real).st_mode) == 0o600, f"{' '.join(argv)}: the mode changed"
 
 
+#: What no output can be: refused before anything runs (exit 2, nothing sent), where writing
+#: telemetry to a kernel interface file failed as "disk full" (exit 7).
+UNWRITABLE = ["symlink-loop", "socket", "proc", "proc-new", "sys"]
+
+
+@pytest.fixture(scope="module")
+def special(tmp_path_factory):
+    import os
+    import socket
+
+    d = tmp_path_factory.mktemp("special")
+    os.symlink(d / "loop-b", d / "loop-a")
+    os.symlink(d / "loop-a", d / "loop-b")
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(d / "sock"))
+    yield {"symlink-loop": str(d / "loop-a"), "socket": str(d / "sock"), "proc": "/proc/self/comm",
+           "proc-new": "/proc/zkzap-output", "sys": "/sys/kernel/zkzap-output"}
+    sock.close()
+
+
+@pytest.mark.skipif(not __import__("os").path.ismount("/proc"), reason="no /proc")
+@pytest.mark.parametrize("where", UNWRITABLE)
+@pytest.mark.parametrize("path,name", OUTPUTS, ids=[f"{' '.join(p)} {n}" for p, n in OUTPUTS])
+def test_an_output_that_no_file_can_be_is_refused(path, name, where, files, port, special):
+    import os
+
+    if where == "sys" and not os.path.ismount("/sys"):
+        pytest.skip("no /sys")
+    cmd = dict(commands())[tuple(path)]
+    param = next(p for p in cmd.params if p.name == name)
+    line = _runnable(path, cmd, name, files, port)
+    if "listen" in {p.name for p in cmd.params}:
+        line.opts["listen"] = (next(p for p in cmd.params if p.name == "listen"), "127.0.0.1:0")
+    argv = line.argv((param, special[where]))
+    sent = port.data
+    code, out, err = _invoke(argv, check=False)
+    assert code == 2, f"{' '.join(argv)}: exit {code}: {err}"
+    assert "Traceback" not in err and err.count("\n") <= 2, err
+    assert not os.path.exists("/proc/zkzap-output") and not os.path.exists("/sys/kernel/zkzap-output")
+    assert port.data == sent, f"{' '.join(argv)} sent to the port"
+
+
 def _serve_briefly(argv):
     """Run a serving command (a simulator) as a process until it says where it serves, then
     stop it with SIGTERM; its exit status (2: refused before it served)."""
