@@ -61,7 +61,7 @@ EXAMPLES = {"IdType": ("1", "255"), "IntValue": ("100", "abc"), "RegisterType": 
             "IdList": ("1", "300"), "BaudType": ("57600", "12"), "BaudList": ("57600", "12"), "MapType": ("1:2", "1"),
             "RegisterList": ("goal-speed", "no-such-register"), "InstructionType": ("echo", "jump"),
             "TargetType": ("1:100", "1-2"), "FiniteFloat": ("1.0", "nan"),
-            "PointType": ("98.0665=1002.4", "nan")}
+            "PointType": ("98.0665=1002.4", "nan"), "NumberValue": ("100", "nan")}
 
 
 def bad_value(p):

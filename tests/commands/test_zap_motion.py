@@ -223,3 +223,36 @@ def test_ctrl_c_stops_a_cycle_run_and_it_resumes(tmp_path):
     done = json.load(open(state))["done"]
     assert done >= 1 and [json.loads(x)["cycle"] for x in out.read_text().splitlines()][:done] == \
         list(range(1, done + 1))
+
+
+def test_move_and_watch_in_millimetres(cli, tmp_path):
+    fleet = tmp_path / "fleet.json"
+    fleet.write_text(json.dumps({"format": "zkzap-fleet/1", "actuators": {
+        "1": {"motion": {"part": "12Lf-20PT-27"}}, "2": {"motion": {"stroke_mm": 56}}}}))
+    sim = "sim://zap?ids=1,2&speed=4"
+    r = cli("zap", "move", "13.5", "--unit", "mm", "--fleet", str(fleet), "--id", "1", "--wait", "-p", sim)
+    assert r.exit_code == 0, r.stderr
+    assert abs(float(r.stdout) - 13.5) <= 7 * 27 / 3686          # within the end-compliance-margin
+    r = cli("zap", "watch", "present-position", "moving", "--ids", "1,2", "-c", "1", "--unit", "mm", "--fleet",
+            str(fleet), "-p", sim)
+    assert r.exit_code == 0, r.stderr
+    rows = jsonl(r.stdout)
+    assert [x["present-position_mm"] for x in rows] == [round(x["present-position"] * s / 3686, 3)
+                                                         for x, s in zip(rows, (27, 56))]
+    assert "moving_mm" not in rows[0]
+    r = cli("zap", "move", "13.5", "--id", "1", "-p", sim)
+    assert r.exit_code == 2 and "millimetres need --unit mm" in r.stderr
+    r = cli("zap", "move", "40", "--unit", "mm", "--fleet", str(fleet), "--id", "1", "-p", sim)
+    assert r.exit_code == 2 and "outside the rod's travel" in r.stderr
+
+
+def test_a_backup_onto_the_fleet_file_keeps_the_calibration(cli, tmp_path):
+    fleet = tmp_path / "fleet.json"
+    sim = "sim://zap?ids=1&speed=8"
+    r = cli("zap", "calibrate", "--id", "1", "--fleet", str(fleet), "--stroke", "27", "-p", sim)
+    assert r.exit_code == 0, r.stderr
+    r = cli("zap", "backup", "--ids", "1", "-o", str(fleet), "-p", sim)
+    assert r.exit_code == 0, r.stderr
+    doc = json.load(open(fleet))["actuators"]["1"]
+    assert doc["motion"]["calibration"]["extended"] == 3686 and "stored" in doc
+    assert "motion entries of 1 kept" in r.stderr

@@ -210,6 +210,33 @@ def scales(path, ids) -> dict:
     return out
 
 
+def motion_entries(path) -> dict:
+    """``{ID: motion entry}`` of the fleet file at ``path``; ``{}`` when there is none or it is
+    not a readable fleet file (a backup about to replace it keeps them: :func:`keep_motion`)."""
+    import os
+
+    if not path or path == "-" or not os.path.isfile(path):
+        return {}
+    from .fleet import read_document
+
+    try:
+        return {i: e.motion for i, e in read_document(path).items() if e.motion}
+    except UsageError:
+        return {}
+
+
+def keep_motion(doc: dict, entries: dict) -> list:
+    """Put ``entries`` ({ID: motion}) into the backup document ``doc`` for the actuators it
+    holds; returns those IDs."""
+    kept = []
+    for ident, motion in sorted(entries.items()):
+        entry = doc["actuators"].get(str(ident))
+        if entry is not None:
+            entry["motion"] = motion
+            kept.append(ident)
+    return kept
+
+
 def record_motion(path, ident: int, motion: dict) -> None:
     """Merge ``motion`` into actuator ``ident``'s motion entry of the fleet file at ``path``
     (created when missing), rewritten whole and atomically."""

@@ -36,6 +36,10 @@ LOAD_BYTES = 9
 REPLY_BYTES = 7
 
 
+#: Registers holding a rod position: with scales, a row gives each in mm too.
+MM_REGISTERS = ("goal-position", "present-position", "short-stroke-limit", "long-stroke-limit")
+
+
 def split_gap(baud: int) -> int:
     """Unrequested bytes worth reading through rather than sending another Load: a second
     transaction costs its own command and reply header plus a turnaround."""
@@ -102,7 +106,7 @@ class Watcher:
     """
 
     def __init__(self, bus, ids, registers, *, rate=None, count=None, duration=None, until=(), retries=0,
-                 history=40, clock=time.monotonic, sleep=pause):
+                 history=40, clock=time.monotonic, sleep=pause, scales=None):
         self.bus = bus
         self.ids = list(ids)
         self.registers = list(dict.fromkeys(registers))
@@ -123,6 +127,9 @@ class Watcher:
         self._clock = clock
         self._sleep = sleep
         self.stopped_by = None
+        self.scales = scales or {}
+        """{ID: :class:`zkzap.api.units.Scale`}: rows get ``NAME_mm`` beside each position register."""
+        self.mm = [r for r in self.shown if r.name in MM_REGISTERS] if self.scales else []
 
     @property
     def elapsed(self) -> float:
@@ -165,6 +172,9 @@ class Watcher:
         now = self._clock()
         row["time"] = _iso(time.time())
         row["t"] = round(now - self.started, 4)
+        scale = self.scales.get(ident)
+        for r in self.mm:
+            row[f"{r.name}_mm"] = None if scale is None or row[r.name] is None else scale.mm(row[r.name])
         row["errors"] = errors
         row["status"] = status
         row["rtt_ms"] = round(rtt * 1000, 2) if status == "ok" else None

@@ -80,9 +80,13 @@ class WatchView(LiveView):
                 reg = w.shown[n] if n < len(w.shown) else None
                 raw = row.get(reg.name) if reg is not None else None
                 style = "yellow" if reg is not None and reg.name == "moving" and raw else None
+                text = value_text(reg, raw) if reg is not None else ""
+                mm = row.get(f"{reg.name}_mm") if reg is not None else None
+                if mm is not None:
+                    text += f" ({mm:g} mm)"           # the counts always, the millimetres beside them
                 table.add_row(Text(f"ID {ident}", style="bold") if n == 0 else "",
                               reg.name if reg is not None else "",
-                              Text(value_text(reg, raw), style=style) if reg is not None else "",
+                              Text(text, style=style) if reg is not None else "",
                               Text(sparkline(w.history[ident][reg.name], spark), style="cyan") if reg is not None
                               else "",
                               link[n] if n < len(link) else "", end_section=n == lines - 1)

@@ -171,9 +171,12 @@ def backup(ids, scan_, output, fmt, **common):
         doc = fleet.read_fleet(bus, found, on_actuator=said)
     doc["port"] = "sim" if common["sim"] else common["port"]
     if output and output != "-":
+        from ...api.units import keep_motion, motion_entries
+
+        kept = keep_motion(doc, motion_entries(output))     # strokes and calibrations are not on the bus
         fleet.dump_document(doc, output, doc_fmt)
         note(f"{len(targets)} actuator{'s' if len(targets) != 1 else ''} ({fleet._ranges(targets)}) "
-             f"backed up to {output}")
+             f"backed up to {output}" + (f"; the motion entries of {fleet._ranges(kept)} kept" if kept else ""))
     else:
         click.echo(fleet.dumps(doc, doc_fmt), nl=False)
     bad = [(i, e["errors"]) for i, e in doc["actuators"].items() if e.get("errors")]

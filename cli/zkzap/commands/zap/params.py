@@ -71,6 +71,34 @@ class IntValue(click.ParamType):
             raise FieldValueError(f"{label}: {value!r} is not an integer") from None
 
 
+class NumberValue(IntValue):
+    """An integer (decimal or 0x.. hex), or with ``--unit mm`` a finite decimal number: a
+    position or speed the command converts (:func:`zkzap.commands.options.unit_scales`)."""
+
+    name = "number"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (int, float)):
+            return value
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter:
+            raise
+        except ValueError:
+            import math
+
+            try:
+                v = float(str(value).strip())
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                from ...codec.fields import FieldValueError
+
+                label = param.human_readable_name.lower() if param else "value"
+                raise FieldValueError(f"{label}: {value!r} is not a number") from None
+            return v
+
+
 class InstructionType(click.ParamType):
     """An instruction by name (the documented eight and IR Robot's vendor codes) or code, read
     as register addresses are: ``0xF2`` and ``F2`` are hex, ``242`` decimal. Converts to the
@@ -129,6 +157,7 @@ class TargetType(click.ParamType):
 
 REGISTER = RegisterType()
 INT = IntValue()
+NUMBER = NumberValue()
 INSTRUCTION = InstructionType()
 TARGET = TargetType()
 

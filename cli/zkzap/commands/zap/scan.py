@@ -17,9 +17,10 @@ from ...codec import zap
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
 from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, exits, format_option, id_option, note,
-                       protocol_options, resolve_format, warn, zap_map, zap_yes_option as yes_option)
+                       protocol_options, resolve_format, unit_options, unit_scales, warn, zap_map,
+                       zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
-from .params import INT, IdType
+from .params import INT, NUMBER, IdType
 
 SCAN_COLUMNS = ["id", "baud", "model", "firmware", "return_mode", "status", "errors"]
 SCAN_TABLE = [("id", "id"), ("baud", "baud"), ("_model", "model"), ("firmware", "firmware"),
@@ -234,10 +235,10 @@ def dump(ident, fmt, **common):
         NO_REPLY: "no reply; with --wait, still moving at --wait-timeout",
         DEVICE_ERROR: "a reply carried error bits (overload: the force is cut)"})
 @click.command(cls=SignedCommand, context_settings=CONTEXT)
-@click.argument("position", type=INT, metavar="POSITION")
+@click.argument("position", type=NUMBER, metavar="POSITION")
 @id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
-@click.option("-s", "--speed", type=INT, default=None,
-              help=f"Goal speed {SPEED.lo}..{SPEED.hi}, written first (default: leave as it is).")
+@click.option("-s", "--speed", type=NUMBER, default=None,
+              help=f"Goal speed {SPEED.lo}..{SPEED.hi} (mm/s with --unit mm), written first (default: leave as it is).")
 @click.option("-w", "--wait", is_flag=True,
               help="Wait until the actuator stops at the goal; print its final position.")
 @click.option("--wait-timeout", type=FiniteRange(0.01, 86400), default=10.0, show_default=True,
@@ -247,12 +248,15 @@ def dump(ident, fmt, **common):
 @click.option("--no-stop", is_flag=True,
               help="With --wait: on Ctrl-C or SIGTERM leave the rod moving to its goal (default: stop it "
                    "where it is).")
+@unit_options
 @link_options
 @protocol_options
-def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
-    """Move to POSITION (0..4095), optionally waiting until the actuator stops there.
+def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_file, **common):
+    """Move to POSITION (0..4095; millimetres with --unit mm), optionally waiting until the
+    actuator stops there.
 
-    Writes goal-speed (with --speed) and goal-position; a goal position turns the force back
+    With --unit mm, POSITION and --speed (mm/s) are converted by the actuator's stroke in the
+    --fleet file (and the final position printed in mm). Writes goal-speed (with --speed) and goal-position; a goal position turns the force back
     on. The actuator clamps the goal to its stroke limits: --wait reads the goal back and says
     so. With --wait the final position goes to stdout; exit status 3 when it is still moving
     at --wait-timeout, 1 when it stopped away from the goal (beyond end-compliance-margin),
@@ -265,8 +269,27 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
       zap move 2047 --id 1 -p /dev/ttyUSB0
       zap move 0 --id 1 --speed 300 --wait -p /dev/ttyUSB0
       pos=$(zap move 3000 --id 2 --wait --sim)
+      zap move 12.5 --unit mm --fleet fleet.json --id 1 --wait -p /dev/ttyUSB0
     """
     regmap = zap_map()
+    scale = None
+    if unit == "mm" and common["protocol"] != "ir":
+        raise UsageError("--unit mm: the strokes are known in the IR protocol's counts (12Lf) only")
+    if unit == "mm":
+        if ident == zap.BROADCAST:
+            raise UsageError("--unit mm: give one actuator's ID (each has its own stroke)")
+        scale = unit_scales(unit, fleet_file, [ident])[ident]
+        mm = position
+        position = scale.counts(position, what="position")
+        if speed is not None:
+            speed = scale.speed_raw(speed)
+        if common["verbose"]:
+            note(f"ID {ident}: {mm:g} mm is position {position}")
+    else:
+        unit_scales(unit, fleet_file, [])
+        for name, v in (("position", position), ("speed", speed)):
+            if isinstance(v, float):
+                raise UsageError(f"{name}: {v:g} is not a whole number of counts; millimetres need --unit mm")
     regmap.register(POSITION).check(position)       # the goal range of the protocol's map
     if speed is not None:
         regmap.register(SPEED).check(speed)
@@ -314,8 +337,8 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
             if progress is not None:
                 progress.stop()
                 progress = None
-            if guard.stopped_at is not None:
-                click.echo(str(guard.stopped_at))    # where it stopped: the position, as ever
+            if guard.stopped_at is not None:         # where it stopped: the position, as ever
+                click.echo(str(guard.stopped_at) if scale is None else f"{scale.mm(guard.stopped_at):g}")
             raise
         finally:
             if progress is not None:
@@ -323,7 +346,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, **common):
         if common["verbose"]:
             note(f"ID {ident} stopped at {final} (goal {bus.load(ident, POSITION)}) after "
                  f"{time.monotonic() - start:.2f} s")
-    click.echo(str(final))
+    click.echo(str(final) if scale is None else f"{scale.mm(final):g}")
 
 
 # -- set-id / set-baud ---------------------------------------------------------------------------

@@ -9,7 +9,8 @@ import click
 from ...codec import zap
 from ...errors import NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options
+from ..options import (Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options,
+                       unit_options, unit_scales)
 from .compose import _link_args, link_options, open_link
 from .params import REGISTER
 from .scan import IdList
@@ -34,8 +35,9 @@ FORMATS = ("table", "jsonl", "json", "csv")
               help="Record format (default: the live table on a terminal, else by the suffix of -o: .csv, .json, .jsonl; "
                    "jsonl in a pipe).")
 @output_options
+@unit_options
 @link_options
-def watch(registers, ids, rate, count, duration, until, fmt, output, append, **common):
+def watch(registers, ids, rate, count, duration, until, fmt, output, append, unit, fleet_file, **common):
     """Poll REGISTER... of every actuator listed, as fast as the line allows or at --rate.
 
     One Load Data per actuator and poll reads the registers as one contiguous block (the IR
@@ -45,7 +47,8 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     status (ok, no-reply, bad-reply) and rtt_ms. A read that fails after --retries is a row
     with empty values, and the watch goes on. On a terminal: a live table per actuator with units, sparklines, error
     bits in colour and link health, and the achieved poll rate beside the asked one and the
-    wire limit. JSON Lines in a pipe; CSV by -f csv or an -o *.csv name. A summary goes to
+    wire limit. With --unit mm each position register gets a NAME_mm column (and its mm beside
+    the counts in the table), by the strokes of --fleet. JSON Lines in a pipe; CSV by -f csv or an -o *.csv name. A summary goes to
     stderr at the end. Exit status 3 when an actuator never answered.
 
     \b
@@ -67,6 +70,10 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     reads = plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
                        common["baud"])
     shown = [r for _, _, regs in reads for r in regs]
+    from ...api.watch import MM_REGISTERS
+
+    scales = unit_scales(unit, fleet_file, ids)
+    mm_cols = [f"{r.name}_mm" for r in shown if r.name in MM_REGISTERS] if scales else []
     if fmt is None and output and output != "-":
         from ...io import format_for_path
 
@@ -76,13 +83,13 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, **c
     if fmt == "table" and not stdout_tty:
         raise UsageError("--format table: the live table needs a terminal; use jsonl or csv in a pipe")
     record_fmt = None if live and not output else (fmt if fmt not in (None, "table") else "jsonl")
-    columns = ["time", "t", "poll", "id"] + [r.name for r in shown] + ["errors", "status", "rtt_ms"]
+    columns = ["time", "t", "poll", "id"] + [r.name for r in shown] + mm_cols + ["errors", "status", "rtt_ms"]
     stream, had = (None, False)
     if record_fmt is not None:                  # checked now, opened by the first row
         stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
     with open_link(ids=ids, **_link_args(common)) as bus:
         watcher = Watcher(bus, ids, list(registers), rate=rate, count=count, duration=duration, until=conds,
-                          retries=common["retries"])
+                          retries=common["retries"], scales=scales)
         writer = None
         if record_fmt is not None:
             from ...io.writers import make_writer
