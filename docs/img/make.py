@@ -1,6 +1,6 @@
 """Make the screenshots of docs/web.md: the consoles on the simulators, in headless Chromium.
 
-    python docs/img/make.py            # writes docs/img/web-*.png
+    python docs/img/make.py            # writes docs/img/web-*.png (or: make.py zk alarms)
 
 Needs the extra 'web', selenium, and Debian's chromium and chromium-driver (the test suite's
 setup). Each picture is a console after a few real actions (a scan and moves, a start).
@@ -116,6 +116,32 @@ def zk_shots():
             p.wait()
 
 
+def alarm_shots():
+    """A trip: the engine at full throttle over its EGT limit, the alarm latched, the start refused."""
+    with start_zk(speed=2, transport="tcp") as sim:
+        p, url = console("zk", "-p", sim.url, "--limit", "egt_c<=650,warn=620", "--limit", "power_voltage_v>=11")
+        d = browser(1440, 1000)
+        try:
+            d.get(url)
+            wait(d, "return window.zkzapStats.samples > 20")
+            d.execute_script("const t = document.querySelector('#throttle'); t.value = 100;"
+                             "t.dispatchEvent(new Event('change')); document.querySelector('#start').click();")
+            wait(d, "return document.querySelector('#modal.show') !== null")
+            d.execute_script("document.querySelector('#modal-ok').click()")
+            wait(d, "return document.querySelector('#alarms .alarm.latched') !== null", 90)
+            wait(d, "return document.querySelector('#command').textContent.startsWith('Monitoring')")
+            d.execute_script("const t = document.querySelector('#throttle'); t.value = 100;"
+                             "t.dispatchEvent(new Event('change')); document.querySelector('#start').click();")
+            time.sleep(1.5)
+            shoot(d, "web-zk-alarms.png")
+        finally:
+            d.quit()
+            p.terminate()
+            p.wait()
+
+
+SHOTS = {"zap": zap_shots, "zk": zk_shots, "alarms": alarm_shots}
+
 if __name__ == "__main__":
-    zap_shots()
-    zk_shots()
+    for name in sys.argv[1:] or SHOTS:     # python docs/img/make.py [zap] [zk] [alarms]
+        SHOTS[name]()

@@ -12,6 +12,15 @@ import pytest
 SIM = "sim://zk?speed=20"
 
 
+@pytest.fixture
+def stand_port():
+    """The simulator served over TCP: a real port to the logbook (an engine's hours are counted)."""
+    from zkzap.sim import start_zk
+
+    with start_zk(speed=20, transport="tcp") as sim:
+        yield sim.url
+
+
 def jsonl(text):
     return [json.loads(line) for line in text.splitlines() if line.strip()]
 
@@ -127,17 +136,24 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     assert run["max_rpm"] >= 95000 and doc["totals"]["starts"] == 1 and doc["totals"]["running_s"] > 0
 
 
-def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path):
+def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path, stand_port):
     book = str(tmp_path / "engine.db")
-    cli("zk", "monitor", "-p", SIM, "--count", "5", "-f", "jsonl", "--logbook", book)
+    cli("zk", "monitor", "-p", stand_port, "--count", "5", "-f", "jsonl", "--logbook", book)
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", stand_port,
+            "--yes", "-f", "jsonl", "--logbook", book)
+    assert r.exit_code == 0 and "run 2 recorded" in r.stderr
     r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", SIM, "-f", "jsonl",
             "--logbook", book)
-    assert r.exit_code == 0 and "run 2 recorded" in r.stderr
+    assert r.exit_code == 0 and "run 3 recorded" in r.stderr
     r = cli("zk", "logbook", book, "-f", "csv")
     rows = list(csv.DictReader(io.StringIO(r.stdout)))
-    assert [row["command"] for row in rows] == ["zk monitor", "zk send control"]
+    assert [row["command"] for row in rows] == ["zk monitor", "zk send control", "zk send control"]
     r = cli("zk", "logbook", book, "--totals", "-f", "jsonl")
-    assert jsonl(r.stdout)[0]["runs"] == 2
+    tot = jsonl(r.stdout)[0]
+    # the run on sim:// is listed, and counted toward no engine's hours, starts or fuel
+    assert tot["runs"] == 2 and tot["simulated_runs"] == 1 and tot["starts"] == 1
+    sim_run = float(rows[2]["running_s"])
+    assert sim_run > 0 and tot["running_s"] == round(float(rows[1]["running_s"]), 1)
 
 
 @pytest.mark.parametrize("damage,msg", [
@@ -233,7 +249,7 @@ def test_bad_input_exit_2(cli, tmp_path, monkeypatch, args, msg):
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_path):
+def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_path, stand_port):
     import sqlite3
 
     book = str(tmp_path / "engines.db")
@@ -243,13 +259,13 @@ def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_p
     old.execute(SCHEMA.replace(",\n    engine TEXT,\n    throttle_s TEXT", ""))
     old.close()
     for throttle, engine in ((90, "K100-1"), (50, "K100-2")):
-        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "25", "-p", SIM,
-                "-f", "jsonl", "--logbook", book, "--engine", engine)
+        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "25", "-p",
+                stand_port, "--yes", "-f", "jsonl", "--logbook", book, "--engine", engine)
         assert r.exit_code == 0, r
     r = cli("zk", "logbook", book, "--service", "K100-1", "--note", "25 h inspection")
     assert r.exit_code == 0 and "service 1 of K100-1 recorded" in r.stderr
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "25", "-p", SIM, "-f", "jsonl",
-            "--logbook", book, "--engine", "K100-1")
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "25", "-p", stand_port,
+            "--yes", "-f", "jsonl", "--logbook", book, "--engine", "K100-1")
     assert r.exit_code == 0, r
     doc = json.loads(cli("zk", "logbook", book, "--engine", "K100-1", "--above", "80", "--above", "55",
                          "-f", "json").stdout)
@@ -265,3 +281,12 @@ def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_p
     assert [row["period"] for row in rows] == ["all runs", f"since the service of {doc['last_service']['at']}"]
     r = cli("zk", "logbook", book, "--engine", "K100-9")
     assert r.exit_code == 2 and "engines there: K100-1, K100-2" in r.stderr
+
+
+def test_an_unanswered_air_pressure_request_is_said_once(cli):
+    r = cli("zk", "monitor", "-p", SIM + "&esr=1", "--duration", "3", "-f", "jsonl")
+    assert r.exit_code == 0, r
+    assert r.stderr.count("the ECU asks for the air pressure (status ID 8's ESR bit") == 1
+    assert "nothing answers it: --air-pressure HPA" in r.stderr
+    r = cli("zk", "monitor", "-p", SIM + "&esr=1", "--duration", "3", "-f", "jsonl", "--air-pressure", "1013")
+    assert r.exit_code == 0 and "nothing answers it" not in r.stderr and "answering 1013 hPa" in r.stderr

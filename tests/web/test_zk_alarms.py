@@ -60,6 +60,17 @@ def start_refused(page, why):
     return text
 
 
+def test_a_limit_is_drawn_on_its_gauge_and_in_its_plot(page):
+    # the gauge marks the limit (red) and where its warning band begins (amber)
+    assert js(page, "return document.querySelector('#g-egt_c path.mark').getAttribute('d')").startswith("M")
+    assert js(page, "return document.querySelector('#g-egt_c path.band').getAttribute('d')").startswith("M")
+    assert js(page, "return document.querySelector('#g-rpm path.band').getAttribute('d')") == ""
+    # the EGT plot has the limit's line and its warning band's
+    egt = js(page, "return [...document.querySelectorAll('#plots .plot')].find(p => p.innerText.startsWith('EGT'))"
+                   ".innerText")
+    assert f"limit {LIMIT}" in egt and "warning" in egt
+
+
 def test_a_trip_latches_and_a_start_waits_for_the_acknowledgement_and_a_cool_engine(page, console, recorded):
     set_value(page, "#throttle", 100)
     click(page, "#start")

@@ -87,6 +87,15 @@ def test_rpm_mode_and_its_interlocks(console, ecu):
         engine = page.seen("engine")[-1]
         assert not engine["controlling"] and "stop from page" in engine["ended"]["why"]
         assert engine["ended"]["sent"] == "stop, throttle 0"
+        # the status rate's window goes on over the console's sessions: frames/s stays the ECU's rate
+        # (it counted up by the frames of every session before, its clock restarted per session)
+        import time
+
+        first, t0 = page.seen("health")[-1], time.monotonic()
+        await wait(lambda: page.seen("health")[-1]["frames"] > first["frames"] + 200, "frames after the run")
+        last, t1 = page.seen("health")[-1], time.monotonic()
+        measured = (last["frames"] - first["frames"]) / (t1 - t0)        # frames a second, as they came
+        assert 0 < last["frames_per_s"] <= measured * 1.5, (last, measured)
 
     scenario(console, steps)
 

@@ -268,10 +268,19 @@ def _integer_text(k) -> bool:
     return True
 
 
+def simulated(run) -> bool:
+    """A run on a simulator (its port ``sim://...``): no real engine ran."""
+    return str(run.get("port") or "").startswith("sim://")
+
+
 def totals(recs, above=()) -> dict:
     """Totals of ``recs``: runs, run and running time, starts, fuel, maxima, runs with errors or
     limits; with ``above`` (throttle percentages) the running hours at or above each
-    (``hours_above``: {"80": h}; from runs recorded with their throttle times)."""
+    (``hours_above``: {"80": h}; from runs recorded with their throttle times). Runs on a
+    simulator (:func:`simulated`) count toward none of them: an engine's hours are its own;
+    ``simulated_runs`` says how many were left out."""
+    sims = sum(1 for r in recs if simulated(r))
+    recs = [r for r in recs if not simulated(r)]
     fuel = [r["fuel_used_l"] for r in recs if r["fuel_used_l"] is not None]
     out = {
         "runs": len(recs),
@@ -284,6 +293,7 @@ def totals(recs, above=()) -> dict:
         "max_egt_c": max((r["max_egt_c"] for r in recs if r["max_egt_c"] is not None), default=None),
         "runs_with_errors": sum(1 for r in recs if r["errors"]),
         "runs_with_limits": sum(1 for r in recs if r["limits_violated"]),
+        "simulated_runs": sims,
     }
     if above:
         out["hours_above"] = {f"{pct:g}": round(sum(s for r in recs for k, s in (r.get("throttle_s") or {}).items()

@@ -183,11 +183,14 @@ class Session:
     def __init__(self, source, telemetry, sink, *, control=None, rate=DEFAULT_RATE, abort=DEFAULT_ABORT,
                  count=None, duration=None, silence=DEFAULT_SILENCE_S, stop_on_error=False,
                  abort_at_end=False, on_update=None, notify=None, update_interval=0.1, limits=None, end=None,
-                 end_label="end of schedule", plan=None, rundown=DEFAULT_RUNDOWN_S, alarms=None, restart=True):
+                 end_label="end of schedule", plan=None, rundown=DEFAULT_RUNDOWN_S, alarms=None, restart=True,
+                 answers_esr=False):
         self.source = source
         self.telemetry = telemetry
         self.alarms = alarms     # an api.alarms.Alarms: the stand's alarm list and start interlock
         self.restart = restart   # False: the source's clock goes on (one of a console's sessions)
+        self.answers_esr = answers_esr   # something answers the ECU's ESR request (an air pressure)
+        self._esr_said = False
         if alarms is not None:
             def sink(rec, _sink=sink, _observe=alarms.observe):
                 _sink(rec)
@@ -393,6 +396,11 @@ class Session:
                                 break
                         if outcome is not None:
                             break
+                        if not self._esr_said and not self.answers_esr and tel.latest.get("esr"):
+                            self._esr_said = True
+                            self.notify(f"the ECU asks for the air pressure (status ID 8's ESR bit, at t={t:.2f} s) "
+                                        f"and nothing answers it: --air-pressure HPA (or an --aux barometer's "
+                                        f"field) does")
                         if tel.new_error is not None and self.stop_on_error:
                             code, name, et = tel.new_error
                             outcome = Outcome("ecu-error", DeviceError(describe_error(code, name, et)))

@@ -131,6 +131,7 @@ class ZkConsole(Console):
         self.alarms = Alarms(self.limits.conditions if self.limits else (), notify=lambda m: self.log(m, "error"),
                              on_change=self._alarms_changed, **(alarms or {}))
         self._cut_as = None           # how a request ended the control session: abort, dead-man
+        self._esr_said = False        # the ECU's unanswered request for the air pressure was said
         self.history = deque(maxlen=HISTORY_MAX)
         self.command = None           # the LiveCommand of the running control session
         self.controller = None        # who started it
@@ -163,7 +164,8 @@ class ZkConsole(Console):
         self._source = _Cuttable(self.ecu.source)
         s = Session(self._source, self.tel, self._sink, control=control, rate=self.rate, abort=self.abort_kind,
                     on_update=self._update, notify=self._note, update_interval=0.02, alarms=self.alarms,
-                    restart=False, **kw)
+                    restart=False, answers_esr=self.stand is not None and self.stand.answer is not None, **kw)
+        s._esr_said = self._esr_said       # said once for the console, not once a session
         # the source goes on from session to session: a session's silence counts from the last
         # frame any of them saw, not from the source's start
         s.last_frame_t = self._last_t
@@ -299,6 +301,8 @@ class ZkConsole(Console):
             self.hub.sample(item)
 
     def _note(self, message):
+        if message.startswith("the ECU asks for the air pressure"):
+            self._esr_said = True
         level = "warn" if ("sent" in message or "error" in message or "limit" in message) else "info"
         self.log(message, level)
 

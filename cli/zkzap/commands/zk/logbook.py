@@ -119,6 +119,9 @@ def _totals_text(t) -> str:
             f"max EGT {t['max_egt_c'] if t['max_egt_c'] is not None else '-'} °C")
     for pct, h in (t.get("hours_above") or {}).items():
         text += f", {h:.3f} h at or above {pct} % throttle"
+    if t.get("simulated_runs"):
+        n = t["simulated_runs"]
+        text += f"; {n} run{'' if n == 1 else 's'} on a simulator not counted"
     return text
 
 

@@ -324,6 +324,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
                           stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
                           on_update=on_update, notify=notify, plan=plan,
+                          answers_esr=stand is not None and stand.answer is not None,
                           limits=stand.limits if stand is not None else None)
         session.bridges = bridges.stats() if bridges else None
         lanes = [lane for lane in (out.lane, raw_lane, capture_lane()) if lane is not None]

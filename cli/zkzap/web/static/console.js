@@ -230,7 +230,7 @@ const Z = (() => {
         width: Math.max(area.clientWidth || wrap.clientWidth || 300, 200), height: opts.height || 170,
         scales, axes, legend: { show: false },
         cursor: { drag: { x: false, y: false } },
-        series: [{}, ...series.map(s => ({ label: s.label, stroke: s.color, width: 1.6, scale: s.scale || "y", spanGaps: true,
+        series: [{}, ...series.map(s => ({ label: s.label, stroke: s.color, width: s.width || 1.6, dash: s.dash, scale: s.scale || "y", spanGaps: true,
                                             points: { show: false }, value: (u, v) => fmt(v, s.digits ?? opts.digits ?? 0) }))],
       }, this.data, area);
       this.area = area;

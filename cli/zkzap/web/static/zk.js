@@ -157,29 +157,51 @@
   }
 
   // -- plots ---------------------------------------------------------------------------------
-  let plots = {};
+  let plots = null;
+  // the plots a limit's field is drawn in: its limit (red, dashed) and warning band (amber, dotted)
+  // are lines there
+  const PLOT_OF = { rpm: "rpm", egt_c: "egt", thrust_kg: "thrust", fuel_flow_l_min: "fuel", power_voltage_v: "volts",
+                    pump_voltage_v: "volts", radio_voltage_v: "volts", current_a: "current" };
+  const lines = {};                // plot -> [threshold values], pushed with every point
+  function limitSeries(name) {
+    const out = [];
+    lines[name] = [];
+    for (const c of (Z.hello && Z.hello.limits) || []) {
+      if (PLOT_OF[c.field] !== name) continue;
+      out.push({ label: `limit ${c.text}`, color: "#ff5d5d", dash: [6, 4], width: 1.2 });
+      lines[name].push(c.threshold);
+      if (c.warn !== null && c.warn !== undefined) {
+        out.push({ label: "warning", color: "#f2b134", dash: [2, 4], width: 1.2 });
+        lines[name].push(c.warn);
+      }
+    }
+    return out;
+  }
   function buildPlots() {
     const box = $("#plots");
-    plots.rpm = new Z.Plot(box, "RPM", [{ label: "rpm", color: "#4aa3ff" }, { label: "target", color: "#f2b134" }]);
-    plots.egt = new Z.Plot(box, "EGT", [{ label: "EGT °C", color: "#ff7b54" }]);
+    plots = {};
+    plots.rpm = new Z.Plot(box, "RPM", [{ label: "rpm", color: "#4aa3ff" }, { label: "target", color: "#f2b134" }, ...limitSeries("rpm")]);
+    plots.egt = new Z.Plot(box, "EGT", [{ label: "EGT °C", color: "#ff7b54" }, ...limitSeries("egt")]);
     plots.thrust = new Z.Plot(box, "Thrust and throttle", [{ label: "thrust kg", color: "#3fcf7a", digits: 1 },
-      { label: "throttle %", color: "#c59bff", scale: "r" }], { right: true, rightRange: [0, 100], digits: 1 });
-    plots.fuel = new Z.Plot(box, "Fuel flow", [{ label: "L/min", color: "#57c7e6", digits: 2 }], { digits: 2 });
+      { label: "throttle %", color: "#c59bff", scale: "r" }, ...limitSeries("thrust")], { right: true, rightRange: [0, 100], digits: 1 });
+    plots.fuel = new Z.Plot(box, "Fuel flow", [{ label: "L/min", color: "#57c7e6", digits: 2 }, ...limitSeries("fuel")], { digits: 2 });
     plots.volts = new Z.Plot(box, "Voltages", [{ label: "power V", color: "#f2b134", digits: 1 },
-      { label: "pump V", color: "#3fcf7a", digits: 1 }, { label: "radio V", color: "#8b9bab", digits: 1 }], { digits: 1 });
-    plots.current = new Z.Plot(box, "Current", [{ label: "A", color: "#ff5d5d", digits: 1 }], { digits: 1 });
+      { label: "pump V", color: "#3fcf7a", digits: 1 }, { label: "radio V", color: "#8b9bab", digits: 1 }, ...limitSeries("volts")], { digits: 1 });
+    plots.current = new Z.Plot(box, "Current", [{ label: "A", color: "#ff5d5d", digits: 1 }, ...limitSeries("current")], { digits: 1 });
     Z.onFrame(() => { paintGauges(); paintState(); });
   }
+  const put = (name, t, values) => plots[name].push(t, values.concat(lines[name]));
   function plotSample(it) {
+    if (!plots) return;
     const t = it.w / 1000;
     const target = engine.controlling && engine.command && engine.command.mode === "rpm" ? engine.command.rpm : null;
-    plots.rpm.push(t, [it.rpm, target]);
+    put("rpm", t, [it.rpm, target]);
     switch (it.id) {
-      case 1: plots.egt.push(t, [it.egt_c]); break;
-      case 2: plots.volts.push(t, [it.power_voltage_v, it.pump_voltage_v, it.radio_voltage_v]); break;
-      case 3: plots.thrust.push(t, [null, it.throttle_pct]); break;
-      case 4: plots.thrust.push(t, [it.thrust_kg, null]); plots.current.push(t, [it.current_a]); break;
-      case 7: plots.fuel.push(t, [it.fuel_flow_l_min]); break;
+      case 1: put("egt", t, [it.egt_c]); break;
+      case 2: put("volts", t, [it.power_voltage_v, it.pump_voltage_v, it.radio_voltage_v]); break;
+      case 3: put("thrust", t, [null, it.throttle_pct]); break;
+      case 4: put("thrust", t, [it.thrust_kg, null]); put("current", t, [it.current_a]); break;
+      case 7: put("fuel", t, [it.fuel_flow_l_min]); break;
     }
   }
 
@@ -262,6 +284,7 @@
       for (const c of m.limits) (limitsByField[c.field] = limitsByField[c.field] || []).push(c.text);
       $("#safety").textContent = `Abort: ${m.abort_text}, out of RPM mode — from every page. The engine also goes to standby when the controlling page closes or is silent for ${m.deadman_s} s, the ECU falls silent for ${m.silence_s} s or reports a new error, or a limit is violated.` + (m.simulated ? "" : " A start asks for confirmation.");
       paintLimits(null);
+      if (!plots) buildPlots();       // with the limits' lines (the first hello; a reconnection keeps them)
     },
     history(m) { for (const it of m.items) take(it, false); },
     samples(m) { for (const it of m.items) take(it, true); },
@@ -307,7 +330,6 @@
 
   {
     buildGauges();
-    buildPlots();
     bind($("#throttle-range"), $("#throttle"));
     bind($("#rpm-range"), $("#rpm"));
     $("#mode-throttle").addEventListener("click", () => setMode("throttle"));
