@@ -133,7 +133,8 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
     doc = json.loads(r.stdout)
     run = doc["runs"][0]
     assert run["command"] == "zk profile" and run["schedule"] == str(sched) and str(steps) in run["files"]
-    assert run["max_rpm"] >= 95000 and doc["totals"]["starts"] == 1 and doc["totals"]["running_s"] > 0
+    assert run["max_rpm"] >= 95000 and run["starts"] == 1 and run["running_s"] > 0
+    assert doc["totals"]["simulated_runs"] == 1 and doc["totals"]["starts"] == 0     # sim://: no engine's hours
 
 
 def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path, stand_port):
