@@ -85,6 +85,18 @@ def test_a_full_queue_waits_for_room_otherwise():
     assert lane.finish()
 
 
+def test_a_full_queue_drops_and_counts_once_a_stop_is_requested(monkeypatch):
+    lane, release = _blocked_lane(1)
+    try:
+        lane.call(time.sleep, 0)
+        monkeypatch.setattr(offload, "_stopping", lambda: True)
+        t = time.monotonic()
+        lane.call(time.sleep, 0)                  # no room, a signal came: not waited for
+        assert time.monotonic() - t < 0.05 and lane.dropped == 1 and lane.pending == 3
+    finally:
+        release.set()
+
+
 def test_a_stalled_output_is_abandoned_and_a_slow_one_waited_for():
     lane, release = _blocked_lane(10)
     try:

@@ -14,7 +14,8 @@ When a lane's queue is full (:data:`LIMIT` writes waiting), :meth:`Lane.call` ei
 :class:`Stalled` at once (in an :class:`urgent` block: a session that controls the engine,
 which ends safely on it — abort sent, exit 7, the message says how many writes were not made)
 or waits for room (a session that only listens, where waiting loses nothing), until a stop is
-requested (a signal): then it raises :class:`Stalled` too. At the end, :meth:`Lane.finish`
+requested (a signal): the session then ends by the signal, and the writes that found no room
+are counted with those not made. At the end, :meth:`Lane.finish`
 waits while the lane makes the writes still queued; one that makes none for :data:`DRAIN_S` is
 abandoned (:func:`abandoned`): the program exits without touching its stream again. Stdlib
 only.
@@ -87,6 +88,7 @@ class Lane:
         self._last = time.monotonic()   # when a write last completed
         self._closed = False
         self.done = 0               # writes made
+        self.dropped = 0            # writes not queued while a stop was under way (the queue full)
         self.told = False           # the stall was said (by whoever said it)
 
     @property
@@ -96,8 +98,8 @@ class Lane:
 
     @property
     def pending(self) -> int:
-        """Writes queued or in progress."""
-        return len(self._queue) + (self._running is not None)
+        """Writes queued or in progress, and those dropped (see :meth:`call`)."""
+        return len(self._queue) + (self._running is not None) + self.dropped
 
     def _start(self):
         self._thread = threading.Thread(target=self._run, name=f"zkzap output {self.what}", daemon=True)
@@ -149,8 +151,11 @@ class Lane:
         with self._cv:
             while len(self._queue) >= self.limit:
                 wait = self.wait if self.wait is not None else not _urgent[0]
-                if not wait or _stopping():
+                if not wait:
                     raise self.stalled()
+                if _stopping():
+                    self.dropped += 1     # the session ends by the signal: counted, said at the end
+                    return
                 self._cv.wait(WAIT_SLICE)
                 if self._error is not None:
                     raise self._error

@@ -55,6 +55,26 @@ def _controlled(ecu) -> bool:
     return last is not None and zk.ControlFrame(last).controls_engine
 
 
+def _until_controlled(ecu, proc, timeout=30.0):
+    end = time.monotonic() + timeout
+    while not _controlled(ecu):
+        assert proc.poll() is None, f"exited {proc.returncode}: {proc.stderr.read()}"
+        assert time.monotonic() < end, "the engine never came under control"
+        time.sleep(0.02)
+
+
+def _abort_follows(ecu, act, what):
+    """Do ``act()``; the ECU must receive the abort within its loss-of-signal time."""
+    with ecu.lock:
+        n = len(ecu.device.received)
+    start = time.monotonic()
+    act()
+    while not _aborted_since(ecu, n):
+        took = time.monotonic() - start
+        assert took < LOSS_OF_SIGNAL_S, f"no abort within {took:.2f} s of {what}"
+        time.sleep(0.005)
+
+
 @pytest.mark.parametrize("index", range(len(RUNS)), ids=[" ".join(p) for p, _ in RUNS])
 def test_a_stalled_output_never_holds_up_the_abort(cli, tmp_path, index):
     path, cmd = RUNS[index]
@@ -83,21 +103,10 @@ def test_a_stalled_output_never_holds_up_the_abort(cli, tmp_path, index):
         if stall is None:
             fcntl.fcntl(proc.stdout.fileno(), fcntl.F_SETPIPE_SZ, 4096)   # full after a few records
         try:
-            end = time.monotonic() + 30
-            while not _controlled(ecu):
-                assert proc.poll() is None, f"exited {proc.returncode}: {proc.stderr.read()}"
-                assert time.monotonic() < end, "the engine never came under control"
-                time.sleep(0.02)
+            _until_controlled(ecu, proc)
             time.sleep(0.5)            # stdout's pipe is full, or the FIFO's open is waiting
             assert proc.poll() is None, proc.stderr.read()
-            with ecu.lock:
-                n = len(ecu.device.received)
-            sent = time.monotonic()
-            proc.send_signal(sig)
-            while not _aborted_since(ecu, n):
-                took = time.monotonic() - sent
-                assert took < LOSS_OF_SIGNAL_S, f"no abort within {took:.2f} s of {signals.name(sig)}"
-                time.sleep(0.005)
+            _abort_follows(ecu, lambda: proc.send_signal(sig), signals.name(sig))
             if line is not None:
                 proc.stdin.close()       # the shell's input ends (Ctrl-C took it back to its prompt)
             proc.wait(timeout=30)        # stdout unread to the end: communicate() would read it
@@ -113,3 +122,38 @@ def test_a_stalled_output_never_holds_up_the_abort(cli, tmp_path, index):
         assert "stalled" in err and "writes not made" in err, err
         with ecu.lock:
             assert ecu.device.effective_sw() in ("standby", "stop")
+
+
+@pytest.mark.parametrize("index", range(len(RUNS)), ids=[" ".join(p) for p, _ in RUNS])
+def test_a_closed_stdout_ends_the_session_with_its_abort(cli, tmp_path, index):
+    """The reader of stdout goes away (``| head -1``; SIGPIPE, which Python turns into EPIPE):
+    the session ends quietly (exit 0), and the abort reaches the ECU within its loss-of-signal
+    time of the close."""
+    path, cmd = RUNS[index]
+    if path == ("zk", "batch"):
+        pytest.skip("a batch's line writes to the batch, which writes its record when the line ends")
+    values = _values(tmp_path)
+    if cmd is None:
+        argv, line = list(path), "send control --state run --throttle 30 --for 0 --yes -f jsonl\n"
+    else:
+        args = invocation(cmd, values, values)
+        if not _controls_engine(cli, path, cmd, args):
+            pytest.skip(f"{' '.join(path)} with these values does not control the engine")
+        argv, line = [*path, *invocation(cmd, values, dict(values, for_s="0", yes=True, fmt="jsonl"))], None
+    with start_zk(speed=10, transport="pty") as ecu:
+        proc, watchdog = spawn([*argv, "-p", ecu.url], line, stdout=subprocess.PIPE)
+        try:
+            _until_controlled(ecu, proc)
+            proc.stdout.read(1)
+            _abort_follows(ecu, proc.stdout.close, "the close")      # the reader goes away
+            if line is not None:
+                proc.stdin.close()
+            proc.wait(timeout=30)
+            err = proc.stderr.read()
+        finally:
+            watchdog.cancel()
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        assert "Traceback" not in err
+        assert proc.returncode in (0, 130) if cmd is None else proc.returncode == 0, err
