@@ -54,3 +54,21 @@ def test_an_exception_reply_is_a_named_error_exit_5(cli):
     assert r.exit_code == 2
     r = cli("zap", "load", "--protocol", "modbus", "indirect-data-0", "--id", "1", "--sim", "--length", "12")
     assert r.exit_code == 5 and "illegal-data-address" in r.stderr and r.stdout == ""
+
+
+def test_detect_says_protocol_and_baud_of_a_17lf_on_a_pty(sh):
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[4, 6], protocol="modbus", baud=19200, transport="pty") as sim:
+        r = sh("zap", "detect", "-p", sim.url, "-b", "57600,19200", "-f", "jsonl", timeout=120)
+    assert r.exit_code == 0, r
+    assert [json.loads(x) for x in r.stdout.splitlines()] == [{"protocol": "modbus", "baud": 19200, "ids": [4, 6],
+                                                               "found": 2}]
+
+
+def test_detect_nothing_answers_exit_3(sh):
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[4], protocol="modbus", baud=9600, transport="pty") as sim:
+        r = sh("zap", "detect", "-p", sim.url, "-b", "115200", timeout=120)
+    assert r.exit_code == 3 and r.stdout == "" and "nothing answered" in r.stderr

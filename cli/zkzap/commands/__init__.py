@@ -254,6 +254,7 @@ ZAP_COMMANDS = {
     "raw": (".zap.compose", "raw", "Send any instruction with hex parameters."),
     "decode": (".zap.decode", "decode", "Decode mightyZAP packets from hex or a binary capture."),
     "scan": (".zap.scan", "scan", "Find every actuator on the bus (IDs and baud rates)."),
+    "detect": (".zap.scan", "detect", "Say which protocol (IR or Modbus) and baud rate the bus speaks."),
     "dump": (".zap.scan", "dump", "Read back the whole register map of one actuator."),
     "move": (".zap.scan", "move", "Move to a position, optionally waiting until it stops."),
     "set-id": (".zap.scan", "set_id", "Give an actuator a new ID, verified by read-back."),

@@ -416,3 +416,60 @@ def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
         note(f"ID {ident}: baud rate {baud} stored (verified); it takes effect at the next restart")
         return
     note(f"ID {ident} now talks at {baud} baud (verified); use -b {baud} from now on")
+
+
+# -- detect --------------------------------------------------------------------------------------
+
+DETECT_COLUMNS = ["protocol", "baud", "ids", "found"]
+
+
+@exits({NO_REPLY: "nothing answers on either protocol at any baud rate tried"})
+@click.command(cls=Command, context_settings=CONTEXT)
+@click.option("--all", "every", is_flag=True,
+              help="Go on after the first protocol and baud rate that answer: every combination is tried.")
+@format_option()
+@link_options(baud_type=actuator_bauds(), baud_help="Baud rates to try: one, a list like 57600,115200, or 'all' "
+                                              "(the default: 57600, 115200, 38400, 19200, 9600).")
+def detect(every, fmt, **common):
+    """Say which protocol (IR or Modbus RTU) and baud rate the actuators on a bus speak.
+
+    At each baud rate in turn (the factory default first), the IR protocol is scanned (IDs
+    0-253) and then Modbus RTU (IDs 1-247), as 'zap scan' does; the first combination where
+    an actuator answers is the answer (--all: every combination). Records: protocol, baud,
+    ids (the IDs that answered) and found (how many). Exit status 3 when nothing answers.
+
+    \b
+    Examples:
+      zap detect -p /dev/ttyUSB0
+      zap detect -p /dev/ttyUSB0 --all -f json
+    """
+    from ...codec import modbus
+    from ...io.writers import make_writer
+
+    ctx = click.get_current_context()
+    bauds = list(ALL_BAUDS) if ctx.get_parameter_source("baud") == click.core.ParameterSource.DEFAULT \
+        else common["baud"]
+    fmt = resolve_format(fmt)
+    writer = make_writer(fmt, sys.stdout, DETECT_COLUMNS, title="mightyZAP bus")
+    found = []
+    t0 = time.monotonic()
+    ids_for = {"ir": list(range(zap.MAX_ID + 1)), "modbus": list(range(1, modbus.MAX_ID + 1))}
+    try:
+        for baud in bauds:
+            for protocol in ("ir", "modbus"):
+                args = _link_args(common)
+                args.update(return_mode="1", baud=baud, protocol=protocol, regmap=None)
+                with open_link(ids=[0 if protocol == "ir" else 1], **args) as link:
+                    recs = list(Bus.over(link).scan(ids_for[protocol], [baud], retries=common["retries"],
+                                                    on_warning=warn))
+                if recs:
+                    rec = {"protocol": protocol, "baud": baud, "ids": [r["id"] for r in recs], "found": len(recs)}
+                    found.append(rec)
+                    writer.write(dict(rec, ids=_ranges(rec["ids"])) if fmt == "table" else rec)
+                    if not every:
+                        return
+    finally:
+        writer.close()
+    if not found:
+        raise NoReply(f"nothing answered on the IR protocol or Modbus RTU at {', '.join(map(str, bauds))} baud "
+                      f"({time.monotonic() - t0:.2f} s)")
