@@ -131,3 +131,60 @@ def test_a_move_waited_for_ends_where_the_rod_stopped(rig):
     for goal in (3000, 1200, 2900):
         final = bus.move(1, goal, poll=0)
         assert final == _truth(sim, 1, "present-position") == goal
+
+
+# -- a stateful model: random reads and writes under random faults, on both protocols ------------
+
+from hypothesis import settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.stateful import RuleBasedStateMachine, initialize, rule  # noqa: E402
+
+from zkzap import DeviceError  # noqa: E402
+
+FAULTS = ["corrupt", "truncate", "wrong-id", "silent", "delay"]
+VOLATILE = ["goal-speed", "goal-current"]
+
+
+def _machine(protocol):
+    class BusTruth(RuleBasedStateMachine):
+        """Every value a read returns is the simulator's; every write the bus says it made is in
+        the simulator; a fault gives an error, never a wrong value."""
+
+        @initialize()
+        def start(self):
+            self.sim = start_zap(ids=[1, 2], protocol=protocol)
+            self.bus = Bus(self.sim.url, protocol=protocol, timeout=0.02, retries=1)
+
+        def teardown(self):
+            if hasattr(self, "bus"):
+                self.bus.close()
+                self.sim.close()
+
+        @rule(ident=st.sampled_from([1, 2]), kind=st.sampled_from(FAULTS), count=st.integers(1, 3))
+        def fault(self, ident, kind, count):
+            with self.sim.lock:
+                self.sim.device.inject(ident, kind, 35 if kind == "delay" else None, count=count)
+
+        @rule(ident=st.sampled_from([1, 2]), name=st.sampled_from(VOLATILE))
+        def read(self, ident, name):
+            try:
+                value = self.bus.read(ident, name)
+            except (NoReply, BadReply, DeviceError):
+                return
+            assert value == _truth(self.sim, ident, name)
+
+        @rule(ident=st.sampled_from([1, 2]), name=st.sampled_from(VOLATILE), value=st.integers(0, 1000))
+        def write(self, ident, name, value):
+            try:
+                self.bus.store(ident, name, value)
+            except (NoReply, BadReply, DeviceError):
+                return                          # unconfirmed: the value may or may not be there
+            if protocol == "modbus":            # acknowledged: it is there
+                assert _truth(self.sim, ident, name) == value
+
+    BusTruth.TestCase.settings = settings(max_examples=6, stateful_step_count=12, deadline=None)
+    return BusTruth.TestCase
+
+
+TestBusTruthIr = _machine("ir")
+TestBusTruthModbus = _machine("modbus")
