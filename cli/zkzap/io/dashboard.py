@@ -9,7 +9,8 @@ Usage::
 ``snapshot`` holds the latest value of every status key (:data:`zkzap.codec.zk.STATUS_KEYS`,
 None until seen) plus ``time_s`` (seconds since the start of monitoring); ``health`` holds
 ``frames``, ``frames_per_s``, ``crc_errors``, ``skipped``, ``stale``, ``protocol_version`` and
-``version_source``. With ``duration`` (a session's planned length) the time left is shown too. :meth:`Dashboard.update` only records the values (cheap enough for every
+``version_source`` (and ``limits``, ``bridges``, ``alarms``: the stand's alarm list, newest
+first, as :meth:`zkzap.api.alarms.Alarms.to_list` gives it). With ``duration`` (a session's planned length) the time left is shown too. :meth:`Dashboard.update` only records the values (cheap enough for every
 frame at 100 Hz); the screen is redrawn by rich's refresh thread a few times a second, so the
 "last frame ... ago" age keeps counting when frames stop arriving.
 
@@ -305,6 +306,12 @@ class Dashboard(LiveView):
         for line in h.get("limits") or ():          # limit events: (level, text), newest state
             link.add_row("Limit" if line[0] == "violated" else "Warn",
                          Text(line[1], style="bold white on red" if line[0] == "violated" else "bold yellow"))
+        for i, a in enumerate(a for a in (h.get("alarms") or ()) if a["level"] == "alarm"):
+            # the stand's alarm list (newest first): latched until acknowledged
+            state = "LATCHED" if a["latched"] else f"acknowledged by {a['acked_by']}"
+            line = Text(f"{a['time'][11:19]}  {state}  ", style="bold white on red" if a["latched"] else "dim")
+            line.append(a["text"], style="bold red" if a["latched"] else "")
+            link.add_row("Alarm" if i == 0 else "", line)
         for name, b in (h.get("bridges") or {}).items():
             line = Text(f"{name}: {b.get('submitted', 0):,} records")
             if "published" in b:

@@ -167,6 +167,14 @@ def _dashboard(title):
     return Dashboard(sys.stdout, title)
 
 
+def _with_alarms(on_update, alarms):
+    """The live view's callback, the newest alarms added (the dashboard lists them)."""
+    def update(snapshot, health):
+        on_update(snapshot, dict(health, alarms=alarms.to_list()[:4]) if alarms.entries else health)
+
+    return update
+
+
 def session_output(fmt, output, append, snapshot, ids, title, stand, *, controls, view=True) -> Output:
     """The :class:`Output` of a session's records: their columns with the stand's (limits, sensors,
     corrected values) and, for a session that controls the engine, ``trip`` (a trip and the
@@ -319,6 +327,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             alarms = current() or Alarms(tell_limits=False, notify=notify)
             if stand is not None and stand.limits is not None:
                 alarms.settings(conditions=stand.limits.conditions)
+            if on_update is not None:
+                on_update = _with_alarms(on_update, alarms)
         session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort, alarms=alarms,
                           count=count, duration=duration,
                           silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
