@@ -295,6 +295,12 @@ def _make_zk():
                 record = session_output(None, output, append, None, None, f"zkzap web zk on {url}", stand,
                                         controls=True, view=False)
                 record.path = output
+                # written off the worker's path (zkzap.offload): a stalled file never holds up the
+                # engine; a full queue ends the session that runs (with its abort), never waits
+                from ..offload import Lane, Proxy
+
+                record.offload(Lane(f"--output {output}", wait=False))
+                record = Proxy(record, record.lane, ("write",))
             ecu = Ecu(url, baud=baud, protocol_version=protocol_version, stop_bits=stop_bits, silence=silence)
         except BaseException:
             stand.close()
