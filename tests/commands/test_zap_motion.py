@@ -256,3 +256,50 @@ def test_a_backup_onto_the_fleet_file_keeps_the_calibration(cli, tmp_path):
     doc = json.load(open(fleet))["actuators"]["1"]
     assert doc["motion"]["calibration"]["extended"] == 3686 and "stored" in doc
     assert "motion entries of 1 kept" in r.stderr
+
+
+# -- several buses -----------------------------------------------------------------------------
+
+def _fleet_with_buses(tmp_path, right="sim://zap?ids=1,3&speed=2"):
+    fleet = tmp_path / "buses.json"
+    fleet.write_text(json.dumps({"format": "zkzap-fleet/1", "actuators": {"1": {}}, "buses": {
+        "left": {"port": "sim://zap?ids=1,2&speed=2", "ids": [1, 2]}, "right": {"port": right, "ids": [1, 3]}}}))
+    return str(fleet)
+
+
+def test_play_on_two_buses_each_on_its_thread(cli, tmp_path, path):
+    fleet = _fleet_with_buses(tmp_path)
+    p = path('t,id,position,bus\n0,"1,2",1000,left\n0,"1,3",2000,right\n0.3,3,500,\n')
+    r = cli("zap", "play", p, "--buses", "all", "--fleet", fleet, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    rows = jsonl(r.stdout)
+    last = {(x["bus"], x["id"]): x for x in rows}
+    assert set(last) == {("left", 1), ("left", 2), ("right", 1), ("right", 3)}
+    assert abs(last[("right", 3)]["present"] - 500) <= 7 and abs(last[("left", 2)]["present"] - 1000) <= 7
+    assert "bus left: 1 of 1 steps" in r.stderr and "bus right: 2 of 2 steps" in r.stderr
+    r = cli("zap", "play", path("t,id,position\n0,1,100\n", "amb.csv"), "--buses", "all", "--fleet", fleet)
+    assert r.exit_code == 2 and "ID 1 is on buses left, right: give the row's bus" in r.stderr
+    r = cli("zap", "play", p, "--buses", "middle", "--fleet", fleet)
+    assert r.exit_code == 2 and "no bus 'middle'" in r.stderr
+
+
+def test_an_error_on_one_bus_stops_every_bus(cli, tmp_path, path):
+    fleet = _fleet_with_buses(tmp_path, right="sim://zap?ids=1,3&faults=3:overload")
+    p = path('t,id,position,bus\n0,"1,2",3000,left\n0,"1,3",3000,right\n5,"1,2",0,left\n')
+    r = cli("zap", "play", p, "--buses", "all", "--fleet", fleet, "-f", "jsonl")
+    assert r.exit_code == 5, r.stderr
+    assert "bus right: stopped every actuator (ID 3 reports overload)" in r.stderr
+    assert "bus left: stopped every actuator (another bus stopped)" in r.stderr
+
+
+def test_watch_two_buses(cli, tmp_path):
+    fleet = _fleet_with_buses(tmp_path)
+    r = cli("zap", "watch", "present-position", "--buses", "left,right", "--fleet", fleet, "-c", "2", "-f", "csv")
+    assert r.exit_code == 0, r.stderr
+    import csv
+    import io
+
+    rows = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert sorted({(x["bus"], x["id"]) for x in rows}) == [("left", "1"), ("left", "2"), ("right", "1"),
+                                                          ("right", "3")]
+    assert len(rows) == 8

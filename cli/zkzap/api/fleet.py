@@ -224,8 +224,12 @@ def check_document(doc, name="document") -> dict:
     if fmt != FORMAT:
         fail("format", f"{fmt!r} is not {FORMAT!r}" if fmt is not None else f"missing; expected {FORMAT!r}")
     for key in doc:
-        if key not in ("format", "zkzap", "time", "port", "actuators"):
-            fail(key, "unknown key; allowed format, zkzap, time, port, actuators")
+        if key not in ("format", "zkzap", "time", "port", "actuators", "buses"):
+            fail(key, "unknown key; allowed format, zkzap, time, port, actuators, buses")
+    if doc.get("buses") is not None:
+        from .buses import check_buses
+
+        check_buses(doc["buses"], fail)
     actuators = doc.get("actuators")
     if not isinstance(actuators, dict) or not actuators:
         fail("actuators", "missing or empty; expected an object of actuators by ID")

@@ -69,7 +69,7 @@ LOG_COLUMNS = ["time", "t", "loop", "id", "goal", "present", "tracking_error", "
                "errors", "status"]
 MM_COLUMNS = ["goal_mm", "present_mm", "tracking_error_mm"]
 STOP_MODES = ("hold", "off")
-PATH_FIELDS = ("t", "id", "position", "speed", "current")
+PATH_FIELDS = ("t", "id", "position", "speed", "current", "bus")
 _ALIASES = {"time": "t", "ids": "id", "goal": "position", "goal-position": "position", "goal_position": "position",
             "goal-speed": "speed", "goal_speed": "speed", "goal-current": "current", "goal_current": "current"}
 
@@ -78,11 +78,12 @@ class Row:
     """One checked row of a path: ``t``, ``ids`` (a tuple), ``position``, ``speed``, ``current``
     (raw register values; None where not given) and ``line`` (where it was read)."""
 
-    __slots__ = ("t", "ids", "position", "speed", "current", "line")
+    __slots__ = ("t", "ids", "position", "speed", "current", "line", "bus")
 
-    def __init__(self, t, ids, position, speed=None, current=None, line=0):
+    def __init__(self, t, ids, position, speed=None, current=None, line=0, bus=None):
         self.t, self.ids, self.position, self.speed, self.current, self.line = t, tuple(ids), position, speed, \
             current, line
+        self.bus = bus
 
     def __repr__(self):
         return f"Row(t={self.t}, ids={self.ids}, position={self.position}, speed={self.speed}, current={self.current})"
@@ -223,7 +224,7 @@ def read_path(source, *, unit: str = "counts", scales=None, name=None) -> list:
         rec = {_ALIASES.get(str(k).lower(), str(k).lower()): v for k, v in rec.items()}
         for k in rec:
             if k not in PATH_FIELDS:
-                _fail(name, line, f"unknown field {k!r}; allowed t, id, position, speed, current")
+                _fail(name, line, f"unknown field {k!r}; allowed t, id, position, speed, current, bus")
         for k in ("t", "id", "position"):
             if rec.get(k) in (None, ""):
                 _fail(name, line, f"{k}: missing")
@@ -258,24 +259,53 @@ def read_path(source, *, unit: str = "counts", scales=None, name=None) -> list:
             if not reg.lo <= v <= reg.hi:
                 _fail(name, line, f"{key}: {v} is out of range; allowed {reg.lo}..{reg.hi}")
             values[key] = v
+        bus = rec.get("bus")
+        if bus is not None and (not isinstance(bus, str) or not bus.strip()):
+            _fail(name, line, f"bus: {bus!r} is not a bus name")
+        bus = bus.strip() if bus else None
         if any(isinstance(v, dict) for v in values.values()):
             for ident in ids:
                 rows.append(Row(t, (ident,), *[v[ident] if isinstance(v, dict) else v
                                                for v in (values["position"], values["speed"], values["current"])],
-                                line=line))
+                                line=line, bus=bus))
         else:
-            rows.append(Row(t, ids, values["position"], values["speed"], values["current"], line=line))
+            rows.append(Row(t, ids, values["position"], values["speed"], values["current"], line=line, bus=bus))
     if not rows:
         _fail(name, 0, "no rows (expected t, id, position)")
     rows.sort(key=lambda r: r.t)
     seen = {}
     for r in rows:
         for ident in r.ids:
-            key = (r.t, ident)
+            key = (r.t, r.bus, ident)
             if key in seen:
                 _fail(name, r.line, f"ID {ident} is given twice at t={r.t:g} (line {seen[key]} too)")
             seen[key] = r.line
     return rows
+
+
+def rows_for_bus(rows, spec, specs, name="path") -> list:
+    """The rows of ``rows`` that bus ``spec`` plays (:class:`zkzap.api.buses.BusSpec`): those
+    naming it, and those naming no bus whose IDs are on it (an ID on several of ``specs`` needs
+    the row's bus: UsageError)."""
+    names = {s.name for s in specs}
+    out = []
+    for r in rows:
+        if r.bus is not None:
+            if r.bus not in names:
+                _fail(name, r.line, f"bus: no bus {r.bus!r} (the buses: {', '.join(sorted(names))})")
+            if r.bus == spec.name:
+                out.append(r)
+            continue
+        for ident in r.ids:
+            on = [s.name for s in specs if ident in s.ids]
+            if not on:
+                _fail(name, r.line, f"ID {ident} is on none of the buses ({', '.join(sorted(names))})")
+            if len(on) > 1:
+                _fail(name, r.line, f"ID {ident} is on buses {', '.join(on)}: give the row's bus")
+        mine = tuple(i for i in r.ids if i in spec.ids)
+        if mine:
+            out.append(Row(r.t, mine, r.position, r.speed, r.current, r.line, spec.name))
+    return out
 
 
 def write_path(stream, rows, *, fmt: str = "csv") -> None:
@@ -477,12 +507,16 @@ class Player:
     ``scales`` the mm columns too); ``log=False`` reads nothing between steps. ``limit``: the
     current (mA) that stops everything; ``stop_mode``: ``hold`` or ``off``; ``on_progress(done,
     total)`` after every step; ``settle``: how long after the last step the log goes on until
-    every rod is at its goal. After it: :attr:`lateness` (seconds, one per step), :attr:`sent`
+    every rod is at its goal; ``cancel``: a threading.Event that stops it (and every actuator)
+    when set — another bus's failure; ``start``: the wall-clock moment (time.time()) step 0 is
+    due, shared by several buses. After it: :attr:`lateness` (seconds, one per step), :attr:`sent`
     (steps), :attr:`stopped` (a :class:`Stopped`, or None when the plan ran to its end)."""
 
     def __init__(self, bus, plan, *, loops: int = 1, log: bool = True, limit=None, stop_mode: str = "hold",
-                 scales=None, on_progress=None, clock=None, settle: float = 5.0):
+                 scales=None, on_progress=None, clock=None, settle: float = 5.0, cancel=None, start=None):
         self.link = getattr(bus, "link", bus)
+        self.cancel = cancel
+        self._start = start
         self.plan = plan
         self.loops = loops
         self.log = log
@@ -538,6 +572,9 @@ class Player:
 
     def _wait(self, due) -> None:
         clock = self.clock
+        if self.cancel is not None:          # wake for a cancel while waiting long
+            while due - clock.now() > 0.1 * clock.speed and not self.cancel.is_set():
+                clock.sleep(0.05 * clock.speed)
         left = due - clock.now()
         if left > SPIN * clock.speed:
             clock.sleep(left - SPIN * clock.speed)
@@ -622,6 +659,8 @@ class Player:
                 except ZkzapError:
                     pass            # its reads fail in the log too, and say so there
         start = self.clock.now()
+        if self._start is not None:         # a time shared with other buses' players
+            start += (self._start - time.time()) * self.clock.speed
         done = 0
         try:
             for loop in range(1, self.loops + 1):
@@ -629,6 +668,9 @@ class Player:
                 for k, step in enumerate(steps):
                     due = base + step.t
                     self._wait(due)
+                    if self.cancel is not None and self.cancel.is_set():
+                        self._stop("cancelled", "another bus stopped")
+                        return
                     self.lateness.append((self.clock.now() - due) / self.clock.speed)
                     self._send(step)
                     self.sent += 1

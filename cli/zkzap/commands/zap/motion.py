@@ -41,12 +41,12 @@ def _plan_lines(plan, fmt):
     out.flush()
 
 
-def _summary(player, seconds):
+def _summary(player, seconds, prefix=""):
     s = player.summary()
     late = (f"lateness p50 {s['lateness_p50_ms']:.2f} ms, p99 {s['lateness_p99_ms']:.2f} ms, "
             f"max {s['lateness_max_ms']:.2f} ms" if s["lateness_max_ms"] is not None else "no step sent")
     reads = f"{s['reads']} log reads" + (f" ({s['read_failures']} unanswered)" if s["read_failures"] else "")
-    note(f"{s['steps']} of {player.total} steps in {seconds:.2f} s; {late}; {reads}")
+    note(f"{prefix}{s['steps']} of {player.total} steps in {seconds:.2f} s; {late}; {reads}")
 
 
 def _raise_stopped(stopped):
@@ -81,12 +81,15 @@ def _raise_stopped(stopped):
 @click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Log format (default: by the suffix of -o; JSON Lines in a pipe; none on a terminal). With "
                    "-n: text lines, or the steps as json/jsonl.")
+@click.option("--buses", "bus_names", default=None, metavar="NAMES",
+              help="Play on the buses the --fleet file names (all, or NAMES like left,right), each on its own "
+                   "thread, instead of -p; a row may name its bus (a bus column); the log rows name it.")
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
 @dry_run_option
 @link_options
-def play(path, interpolate, rate, loops, limit, stop_mode, no_log, fmt, output, append, unit, fleet_file, dry_run,
-         **common):
+def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fmt, output, append, unit, fleet_file,
+         dry_run, **common):
     """Play a timed path: FILE rows of t (seconds), id (one, or several like "1,2"),
     position, and optionally speed and current.
 
@@ -121,6 +124,9 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, fmt, output, 
     scales = unit_scales(unit, fleet_file, _path_ids(path, text) if unit == "mm" else [])
     rows = motion.read_path(io.StringIO(text) if text is not None else path, unit=unit, scales=scales,
                             name="stdin" if path == "-" else path)
+    if bus_names is not None:
+        return _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loops, limit, stop_mode, no_log,
+                           fmt, output, append, dry_run, common)
     p = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"], interpolate=interpolate, rate=rate)
     if dry_run:
         check_sim_args(common["port"], common["sim"], common["sim_ids"])
@@ -179,6 +185,122 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, fmt, output, 
                 _raise_stopped(player.stopped)
     if player.stopped is not None:
         _raise_stopped(player.stopped)
+
+
+def bus_specs(bus_names, fleet_file, common, unit):
+    """The buses of ``--buses`` (exit 2 with -p or --sim, without --fleet, with --unit mm)."""
+    from ...api.buses import buses_of
+
+    if not fleet_file:
+        raise UsageError("--buses: needs --fleet FILE (the fleet file naming the buses)")
+    if common["port"] or common["sim"]:
+        raise UsageError("--buses: the ports are the fleet file's; not with -p or --sim")
+    if unit == "mm":
+        raise UsageError("--buses: --unit mm is for one bus (an ID's stroke is per bus)")
+    names = None if bus_names.strip().lower() == "all" else [n.strip() for n in bus_names.split(",") if n.strip()]
+    return buses_of(fleet_file, names)
+
+
+def open_spec(common):
+    """Opens a :class:`~zkzap.api.buses.BusSpec` with the command's link options."""
+    from ...link.zap_bus import open_bus
+
+    mode = 1 if common["return_mode"] == "auto" else int(common["return_mode"])
+    latency = None if common.get("latency") is None else common["latency"] / 1000.0
+
+    def opener(spec):
+        return open_bus(spec.port, spec.baud, timeout=common["timeout"], return_mode=mode, retries=common["retries"],
+                        stop_bits=common["stop_bits"], latency=latency)
+    return opener
+
+
+def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loops, limit, stop_mode, no_log, fmt,
+                output, append, dry_run, common):
+    """zap play --buses: one player a bus, each on its own thread, their step 0 at one moment."""
+    import time
+
+    from ...api import buses, motion
+
+    specs = bus_specs(bus_names, fleet_file, common, unit)
+    plans = {}
+    for spec in specs:
+        mine = motion.rows_for_bus(rows, spec, specs, "stdin" if path == "-" else path)
+        if mine:
+            plans[spec.name] = motion.plan(mine, baud=spec.baud, stop_bits=common["stop_bits"],
+                                           interpolate=interpolate, rate=rate)
+    specs = [s for s in specs if s.name in plans]
+    if dry_run:
+        for spec in specs:
+            p = plans[spec.name]
+            note(f"bus {spec.name} ({spec.port}): {p.note}; {len(p.steps)} steps, {p.frames} frames")
+        if fmt in ("json", "jsonl"):
+            from ...io.writers import make_writer
+
+            writer = make_writer(fmt, sys.stdout, ["bus", "t", "goals", "speeds", "currents", "frames"])
+            for spec in specs:
+                for step in plans[spec.name].steps:
+                    writer.write({"bus": spec.name, **step.record()})
+            writer.close()
+        else:
+            for spec in specs:
+                for step in plans[spec.name].steps:
+                    for frame in step.frames:
+                        sys.stdout.write(f"{spec.name:>8s} {step.t:9.3f}  {frame.hex(' ').upper()}\n")
+        return
+    if common["return_mode"] == "0" and not no_log:
+        raise UsageError("--return-mode 0: the log reads are never answered; give --no-log")
+    columns = ["bus"] + list(motion.LOG_COLUMNS)
+    record_fmt = None if no_log else output_format(fmt if fmt != "table" else None, output, ("jsonl", "json", "csv"))
+    if record_fmt == "table":
+        record_fmt = "jsonl"
+    stream, had = (None, False)
+    if record_fmt is not None:
+        stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
+    players = {}
+    at = time.time() + 0.3 + 0.05 * len(specs)          # every port open by then: step 0 on every bus
+
+    def work(link, spec, emit, cancel):
+        player = players[spec.name] = motion.Player(link, plans[spec.name], loops=loops, log=not no_log, limit=limit,
+                                                    stop_mode=stop_mode, cancel=cancel, start=at)
+        player.run(emit)
+        if player.stopped is not None and player.stopped.reason != "cancelled":
+            cancel.set()                       # one bus stopped: every bus stops
+
+    writer = None
+    if record_fmt is not None:
+        from ...io.writers import make_writer
+
+        writer = make_writer(record_fmt, stream, columns, header=not had)
+    started = time.monotonic()
+    try:
+        for row in buses.run(specs, work, open_bus=open_spec(common)):
+            if writer is not None:
+                writer.write(row)
+    finally:
+        if writer is not None:
+            close_output(writer, stream)
+        for spec in specs:
+            player = players.get(spec.name)
+            if player is not None:
+                _summary(player, time.monotonic() - started, f"bus {spec.name}: ")
+    first = None
+    for spec in specs:
+        player = players.get(spec.name)
+        if player is not None and player.stopped is not None:
+            from ...api.motion import describe_stop
+
+            warn(f"bus {spec.name}: stopped every actuator ({player.stopped.message}): "
+                 f"{describe_stop(player.stopped.positions, player.stopped.mode)}")
+            if player.stopped.reason != "cancelled" and first is None:
+                first = player.stopped
+    if first is not None:
+        if first.reason == "interrupted":
+            raise KeyboardInterrupt
+        if first.reason == "device-error":
+            from ...errors import DeviceError
+
+            raise DeviceError(f"stopped: {first.message}")
+        raise CheckFailed(f"stopped: {first.message}")
 
 
 def _path_ids(path, text=None):

@@ -34,10 +34,13 @@ FORMATS = ("table", "jsonl", "json", "csv")
 @click.option("-f", "--format", "fmt", type=Choice(FORMATS), default=None,
               help="Record format (default: the live table on a terminal, else by the suffix of -o: .csv, .json, .jsonl; "
                    "jsonl in a pipe).")
+@click.option("--buses", "bus_names", default=None, metavar="NAMES",
+              help="Watch the buses the --fleet file names (all, or NAMES like left,right; their IDs, not "
+                   "--ids), each on its own thread, instead of -p; every row names its bus.")
 @output_options
 @unit_options
 @link_options
-def watch(registers, ids, rate, count, duration, until, fmt, output, append, unit, fleet_file, **common):
+def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus_names, unit, fleet_file, **common):
     """Poll REGISTER... of every actuator listed, as fast as the line allows or at --rate.
 
     One Load Data per actuator and poll reads the registers as one contiguous block (the IR
@@ -70,6 +73,9 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, uni
     reads = plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
                        common["baud"])
     shown = [r for _, _, regs in reads for r in regs]
+    if bus_names is not None:
+        return _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit,
+                            fleet_file, common)
     from ...api.watch import MM_REGISTERS
 
     scales = unit_scales(unit, fleet_file, ids)
@@ -140,3 +146,49 @@ def _summary(w, rate):
     why = {"until": ", condition met", "count": "", "duration": ""}.get(w.stopped_by, "")
     note(f"{w.polls} polls in {w.elapsed:.2f} s: {w.achieved:.1f} polls/s ({asked}; wire limit {limit}/s){why}; "
          f"reads answered: {health}")
+
+
+def _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit, fleet_file,
+                 common):
+    """zap watch --buses: one watcher a bus, each on its own thread; rows name their bus."""
+    from ...api import buses
+    from ...api.watch import Watcher
+    from ..options import output_format
+    from .motion import bus_specs, open_spec
+
+    if fmt == "table":
+        raise UsageError("--format table: with --buses the rows are written as jsonl, json or csv")
+    specs = bus_specs(bus_names, fleet_file, common, unit)
+    record_fmt = output_format(fmt, output, ("jsonl", "json", "csv"))
+    if record_fmt == "table":
+        record_fmt = "jsonl"
+    columns = ["bus", "time", "t", "poll", "id"] + [r.name for r in shown] + ["errors", "status", "rtt_ms"]
+    stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
+    watchers = {}
+
+    def work(link, spec, emit, cancel):
+        w = watchers[spec.name] = Watcher(link, spec.ids, list(registers), rate=rate, count=count, duration=duration,
+                                          until=conds, retries=common["retries"])
+        for row in w.rows():
+            if cancel.is_set():
+                break
+            emit(row)
+
+    from ...io.writers import make_writer
+
+    writer = make_writer(record_fmt, stream, columns, header=not had)
+    try:
+        for row in buses.run(specs, work, open_bus=open_spec(common)):
+            writer.write(row)
+    finally:
+        close_output(writer, stream)
+        for spec in specs:
+            w = watchers.get(spec.name)
+            if w is not None and w.started is not None:
+                health = "; ".join(f"ID {i} {h.answered}/{h.asked}" for i, h in w.health.items())
+                note(f"bus {spec.name}: {w.polls} polls in {w.elapsed:.2f} s: {w.achieved:.1f} polls/s (wire limit "
+                     f"{w.limit():.1f}/s); reads answered: {health}")
+    silent = [f"{s.name} ID {i}" for s in specs for i, h in (watchers[s.name].health.items() if s.name in watchers
+                                                              else ()) if h.answered == 0]
+    if silent:
+        raise NoReply(f"no reply during the watch from {', '.join(silent)}")
