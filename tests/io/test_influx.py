@@ -149,3 +149,18 @@ def test_monitor_snapshot_rows_in_line_protocol(cli):
     assert r.exit_code == 0, r
     first = lpp.parse_line(r.stdout.splitlines()[-1] + "\n")
     assert first["measurement"] == "status" and "rpm" in first["fields"] and "egt_c" in first["fields"]
+
+
+def test_every_line_of_a_series_gets_its_own_time():
+    import io as _io
+
+    from zkzap.io.writers import InfluxWriter
+
+    buf = _io.StringIO()
+    w = InfluxWriter(buf)
+    for rpm in (1, 2, 3):                       # three records of one series within one millisecond
+        w.write({"time": "2026-01-01T00:00:00.123Z", "t": 0.1, "kind": "status", "id": 1, "rpm": rpm})
+    w.write({"time": "2026-01-01T00:00:00.123Z", "t": 0.1, "kind": "status", "id": 2, "rpm": 4})
+    stamps = [line.rsplit(" ", 1)[1] for line in buf.getvalue().splitlines()]
+    base = 1767225600123000000
+    assert stamps == [str(base), str(base + 1), str(base + 2), str(base)]     # another series keeps its own

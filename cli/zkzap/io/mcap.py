@@ -126,6 +126,7 @@ class McapWriter:
         self._channels = {}
         self._seq = {}
         self._last_ns = 0
+        self._ch_ns = {}                   # channel -> its last log time (ns)
         self.count = 0
         self._closed = False
         self._ns = IsoNs()
@@ -212,6 +213,10 @@ class McapWriter:
             try:
                 ns = self._time_ns(rec)       # before the channel: a time MCAP cannot hold starts no file
                 ch = self._channel(rec)
+                last = self._ch_ns.get(ch)
+                if last is not None and ns <= last:
+                    ns = last + 1             # each message of a channel its own time (within the ms of `time`)
+                self._ch_ns[ch] = ns
                 seq = self._seq[ch]
                 self._seq[ch] = seq + 1
                 self._w.add_message(channel_id=ch, log_time=ns, data=data, publish_time=ns, sequence=seq)

@@ -492,6 +492,7 @@ class InfluxWriter(LineWriter):
         self.default_measurement = default_measurement
         self._ns = IsoNs()
         self._keys = {}
+        self._last = {}            # series (measurement and tags) -> its last timestamp (ns)
 
     def line(self, rec) -> str:
         kind = rec.get("kind")
@@ -515,6 +516,13 @@ class InfluxWriter(LineWriter):
         if not fields:          # a line needs a field
             fields.append("present=true")
         ns = self._ns(rec.get("time"))
+        if ns is not None:
+            # a series keeps one point per timestamp: two records of one series within the
+            # time's resolution get the next nanosecond, never the same time
+            last = self._last.get(head)
+            if last is not None and ns <= last:
+                ns = last + 1
+            self._last[head] = ns
         return f"{head} {','.join(fields)}" + (f" {ns}" if ns is not None else "")
 
     def write(self, rec):

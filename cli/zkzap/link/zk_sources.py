@@ -20,6 +20,9 @@ from .zk_port import READ_SIZE, READ_SLICE_S, ZkLink
 
 #: Pause between two attempts to reopen a vanished port (seconds).
 REOPEN_INTERVAL = 0.25
+#: The least time between two frames' stamps (session seconds): the resolution of a record's
+#: ``t`` and ``time``, so that no two records share a time.
+MIN_SPACING_S = 0.001
 
 
 class LiveSource:
@@ -52,6 +55,8 @@ class LiveSource:
         self.reconnects = 0
         self._error = None
         self._next_try = 0.0
+        self._wire_s = None
+        self._last_t = None
 
     @property
     def wall0(self) -> float:
@@ -65,6 +70,7 @@ class LiveSource:
     def restart(self) -> None:
         """Make now the session's time 0 (a session begins after listening first)."""
         self.clock.start()
+        self._last_t = None
 
     def pace(self, period: float) -> None:
         """Read in slices short enough for something due every ``period`` session seconds:
@@ -86,7 +92,33 @@ class LiveSource:
             return []
         t = self.now()
         frames = self.framer.feed(data)
-        return self.signal.admit(len(data), frames, [(t, f) for f in frames])
+        return self.signal.admit(len(data), frames, self._stamp(t, frames))
+
+    def _stamp(self, t, frames):
+        """Each frame of one read with its own time: the last one ends at the read, each one
+        before it a frame's time on the wire earlier (they came back to back, or they would not
+        share a read); never before the session's start, nor within :data:`MIN_SPACING_S` of the
+        frame before it (the records' times resolve milliseconds: each gets its own)."""
+        n = len(frames)
+        if not n:
+            return []
+        wire = self._wire_s
+        if wire is None:
+            ser = self.link.ser
+            baud = getattr(ser, "baudrate", None) or 115200
+            bits = 1 + 8 + (2 if getattr(ser, "stopbits", 1) == 2 else 1)
+            # session seconds per frame on the wire, and at least the records' time resolution
+            wire = self._wire_s = max(MIN_SPACING_S, 7 * bits / baud * self.speed)
+        out = []
+        last = self._last_t
+        for k, f in enumerate(frames):
+            tk = max(0.0, t - (n - 1 - k) * wire)
+            if last is not None and tk < last + MIN_SPACING_S:
+                tk = last + MIN_SPACING_S
+            out.append((tk, f))
+            last = tk
+        self._last_t = last
+        return out
 
     def noise_facts(self) -> dict:
         """What the line carried when no status frame came: ``bytes`` received and
