@@ -164,3 +164,40 @@ def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
     with Ecu(url, baud=115200) as ecu:                          # what the ECU says it was left in
         state = next(rec for rec in ecu.status() if rec.id == 1).sw_state_name
     assert state in ("standby", "stop"), (signals.name(sig), moment, err)
+
+
+def test_a_terminal_that_hangs_up_leaves_the_ecu_in_standby_and_the_status_of_sighup():
+    """The terminal closes under the live dashboard (ssh dropped): SIGHUP ends the session with
+    its abort, and the writes to the dead terminal afterwards (the dashboard's last frame, the
+    summary) end the program quietly with 129."""
+    import os
+    import pty
+
+    from zkzap.sim import start_zk
+
+    with start_zk(speed=10, transport="pty") as ecu:
+        master, slave = pty.openpty()
+        proc = subprocess.Popen([executable("zk"), "send", "control", "--state", "run", "--throttle", "30",
+                                 "--for", "0", "--yes", "-p", ecu.url], stdin=slave, stdout=slave, stderr=slave,
+                                start_new_session=True, env=clean_env())
+        os.close(slave)
+        try:
+            end = time.monotonic() + 30
+            while True:
+                with ecu.lock:
+                    last = ecu.device._last_frame
+                if last is not None and zk.ControlFrame(last).controls_engine:
+                    break
+                assert proc.poll() is None and time.monotonic() < end, "never controlled the engine"
+                time.sleep(0.02)
+            time.sleep(0.5)
+            os.read(master, 1 << 20)
+            os.close(master)                                    # the terminal goes away
+            proc.send_signal(signal.SIGHUP)                     # what the kernel sends its session
+            assert proc.wait(timeout=30) == 129
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        with ecu.lock:
+            assert ecu.device.effective_sw() == "standby"

@@ -418,6 +418,14 @@ def run(cmd, prog_name=None, args=None, **extra) -> int:
         _error(with_hint(e), prog_name or "zkzap")
         return e.code
     except OSError as e:
+        if not debug and _terminal_gone(e):
+            # the terminal hung up (its SIGHUP ended the session, whose abort went out first):
+            # nothing can be said on it any more
+            _quiet_stdout()
+            from ..errors import OUTPUT_ERROR
+
+            first = _signals.first()
+            return _signals.status(first) if first is not None else OUTPUT_ERROR
         # stdout on a full disk (> /dev/full): a dry run, a table, --help, a completion script
         if debug or not _output_full(e):
             raise
@@ -447,6 +455,13 @@ def _quiet_stdout():
         os.dup2(devnull, sys.stdout.fileno())
     except (OSError, ValueError):
         pass
+
+
+def _terminal_gone(e) -> bool:
+    """A write to a terminal that hung up (EIO): the terminal closed, ssh dropped."""
+    import errno
+
+    return e.errno == errno.EIO
 
 
 def _output_full(e) -> bool:
