@@ -291,3 +291,16 @@ def test_an_unanswered_air_pressure_request_is_said_once(cli):
     assert "nothing answers it: --air-pressure HPA" in r.stderr
     r = cli("zk", "monitor", "-p", SIM + "&esr=1", "--duration", "3", "-f", "jsonl", "--air-pressure", "1013")
     assert r.exit_code == 0 and "nothing answers it" not in r.stderr and "answering 1013 hPa" in r.stderr
+
+
+def test_a_limit_on_a_sensors_field_and_on_a_rate(cli, tmp_path):
+    aux = tmp_path / "load.txt"
+    aux.write_text("load_kg=1.0\nload_kg=2.0\nload_kg=25.0\n")
+    r = cli("zk", "monitor", "-p", SIM, "--duration", "2", "-f", "jsonl", "--aux", str(aux), "--limit", "load_kg<=20")
+    assert r.exit_code == 5 and "limit violated: load_kg=25" in r.stderr, r
+    assert jsonl(r.stdout)[-1]["limit"] == ["load_kg<=20"]
+    r = cli("zk", "monitor", "-p", SIM, "--duration", "2", "-f", "jsonl", "--aux", str(aux), "--limit", "thrust<=20")
+    assert r.exit_code == 2 and "unknown field 'thrust'" in r.stderr and r.stdout == ""
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "30", "-p", SIM, "-f", "jsonl",
+            "--limit", "egt_c/s<=60", "--limit", "egt_c<=640,when=running")
+    assert r.exit_code == 5 and "limit violated: egt_c/s=" in r.stderr and "(egt_c/s<=60)" in r.stderr, r

@@ -325,6 +325,8 @@ class Alarms:
                 cond = self.by_text.get(text)
                 field = cond.field if cond is not None else None
                 value = rec.get(field) if field is not None else None
+                if getattr(cond, "rate", False):
+                    field, value = f"{field}/s", None       # the record holds the field, not its rate
                 said = f"{field}={value:g}" if isinstance(value, (int, float)) else (field or text)
                 what = "violated" if level == "alarm" else "in its warning band"
                 self._active[text] = self.raise_alarm(

@@ -20,13 +20,16 @@ from __future__ import annotations
 
 from ..codec import zk
 from ..errors import DeviceError, UsageError
-from .expr import parse, parse_lines
+import re
+
+from .expr import Condition, ExpressionError, parse
+
+_RATE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_\-]*)/s\s*(?=[<>=!])")
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from typing import Optional
 
-    from .expr import Condition
 
 #: What a violation does: abort or exit (end the session, exit 5; one that controls the engine
 #: sends its abort either way), warn (go on).
@@ -49,28 +52,102 @@ class LimitViolation(DeviceError):
         self.value = value
 
 
-def read_limits(exprs=(), files=()) -> list:
-    """Conditions from ``--limit EXPR`` options and ``--limits FILE`` files (``-`` is stdin)."""
-    from .textfile import read_text
+#: Engine-state groups a limit's ``when=`` may name (besides any one engine state's name):
+#: ``running`` (the running and learning states), ``start`` (ignition, preheat, fuel ramp,
+#: restart), and ``stop``, ``standby``, ``cooling``.
+WHEN = {"running": frozenset({6, 7, 8, 9, 10, 11}), "start": frozenset({2, 3, 4, 5, 13}),
+        "stop": frozenset({0}), "standby": frozenset({1}), "cooling": frozenset({12})}
+#: A rate-of-change limit (``egt_c/s<=50``: EGT rise per second) compares the change over the
+#: last RATE_WINDOW_S seconds of frames that carry its field, once they span half of it.
+RATE_WINDOW_S = 1.0
+
+
+class Limit(Condition):
+    """A :class:`~zkzap.api.expr.Condition` with what only a limit has: ``rate`` (it limits the
+    field's change per second, ``FIELD/s``) and ``when`` (the engine states it applies in, None:
+    always; ``when=running``, ``when=start``, ``when=cooling|standby``, or a state's name)."""
+
+    __slots__ = ("rate", "when", "when_text")
+
+    def __init__(self, cond, rate=False, when=None, when_text=None):
+        super().__init__(cond.text, cond.field, cond.op, cond.threshold, cond.warn)
+        self.rate = rate
+        self.when = when
+        self.when_text = when_text
+
+
+def parse_limit(text, fields=FIELDS, *, where="limit") -> Limit:
+    """One limit: ``FIELD OP NUMBER[,warn=NUMBER][,when=STATES]``, or ``FIELD/s OP NUMBER`` for
+    its rate of change (per second). ``fields``: the allowed names (a collection or predicate)."""
+    raw = str(text).strip()
+    parts = raw.split(",")
+    when = when_text = None
+    keep = []
+    for part in parts[1:]:
+        key, sep, value = part.partition("=")
+        if key.strip().lower() == "when" and sep:
+            if when is not None:
+                raise ExpressionError(f"{where}: {raw!r}: when= given twice")
+            when, when_text = _when(value, raw, where), value.strip()
+        else:
+            keep.append(part)
+    head = parts[0]
+    rate = False
+    m = _RATE.match(head)
+    if m:
+        rate, head = True, m.group(1) + head[m.end(1) + 2:]
+    cond = parse(",".join([head] + keep), fields, where=where)
+    cond.text = raw
+    return Limit(cond, rate, when, when_text)
+
+
+def _when(value, raw, where):
+    by_name = {v: k for k, v in zk.ENGINE_STATES.items()}
+    states = set()
+    for name in value.strip().lower().split("|"):
+        name = name.strip()
+        if name in WHEN:
+            states |= WHEN[name]
+        elif name in by_name:
+            states.add(by_name[name])
+        else:
+            from ..errors import did_you_mean
+
+            names = sorted(WHEN) + sorted(by_name)
+            raise ExpressionError(f"{where}: {raw!r}: when={name!r} is no engine state"
+                                  f"{did_you_mean(name, names, otherwise='; allowed ' + ', '.join(sorted(WHEN)) + ' or a state name')}")
+    return frozenset(states)
+
+
+def read_limits(exprs=(), files=(), fields=FIELDS) -> list:
+    """Limits (:class:`Limit`) from ``--limit EXPR`` options and ``--limits FILE`` files (``-`` is
+    stdin). ``fields``: the names a limit may name (the status keys; a stand with sensors or
+    corrected values allows theirs too)."""
+    from .textfile import lines_of, read_text
 
     out = []
     for path in files:
         text, name = read_text(path, "limits", "FIELD OP NUMBER lines")
-        got = parse_lines(text, FIELDS, name=name)
+        got = []
+        for lineno, line in enumerate(lines_of(text), 1):
+            line = line.split("#", 1)[0].strip().lstrip("\ufeff")
+            if line:
+                got.append(parse_limit(line, fields, where=f"{name}:{lineno}"))
         if not got:
             raise UsageError(f"limits: {name} has no limit (only comments or blank lines); expected FIELD OP "
                              f"NUMBER lines such as egt_c<=850,warn=800")
         out += got
     for e in exprs:
-        out.append(parse(e, FIELDS, where="limit"))
+        out.append(parse_limit(e, fields, where="limit"))
     return out
 
 
 class _State:
     __slots__ = ("checked", "extreme", "extreme_t", "first_warn", "first_violation", "warnings", "violations",
-                 "band")
+                 "band", "seen")
 
     def __init__(self):
+        self.seen = None                 # a rate limit's recent (t, value) of its field
         self.checked = 0
         self.extreme = None
         self.extreme_t = None
@@ -98,18 +175,37 @@ class LimitSet:
         self.tripped = None
         self._by_id = {sid: [i for i, c in enumerate(self.conditions) if c.field in keys]
                        for sid, keys in KEYS_BY_ID.items()}
+        #: limits of fields no status frame carries (external sensors, corrected values): tested
+        #: on the values each record gets
+        self._other = [i for i, c in enumerate(self.conditions) if c.field not in FIELDS]
+        self._engine_state = None
 
     def __bool__(self):
         return bool(self.conditions)
 
-    def check(self, t, rec) -> dict:
-        """Evaluate the conditions whose field ``rec`` (one decoded status frame) carries.
-        Returns the record's extra entries: ``{"warnings": [...], "limit": [...]}`` (only the
-        non-empty ones)."""
+    def check(self, t, rec, more=None) -> dict:
+        """Evaluate the conditions whose field ``rec`` (one decoded status frame) carries, and
+        those of fields in ``more`` (the record's sensor and corrected values). A limit with
+        ``when=`` is tested only while the engine is in one of its states; a rate limit on the
+        field's change per second. Returns the record's extra entries: ``{"warnings": [...],
+        "limit": [...]}`` (only the non-empty ones)."""
         extra = {}
-        for i in self._by_id.get(rec.get("id"), ()):
+        state = rec.get("engine_state")
+        if state is not None:
+            self._engine_state = state
+        todo = self._by_id.get(rec.get("id"), ())
+        if more and self._other:
+            todo = list(todo) + [i for i in self._other if more.get(self.conditions[i].field) is not None]
+        for i in todo:
             cond = self.conditions[i]
-            value = rec.get(cond.field)
+            value = rec.get(cond.field) if cond.field in FIELDS else (more or {}).get(cond.field)
+            when = getattr(cond, "when", None)
+            if getattr(cond, "rate", False):
+                value = self._rate(i, t, value)
+            if when is not None and self._engine_state not in when:
+                if self.state[i].band != "ok" and self.state[i].checked:
+                    self.state[i].band = "ok"     # out of its states: a new entry is told again
+                continue
             verdict = cond.check(value)
             if verdict is None:
                 continue
@@ -124,7 +220,7 @@ class LimitSet:
                     st.first_warn = t
                 extra.setdefault("warnings", []).append(cond.text)
                 if st.band != "warn":
-                    self.notify(f"limit warning: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})")
+                    self.notify(f"limit warning: {_name(cond)}={_v(value)} at t={t:.2f} s ({cond.text})")
             elif verdict == "violated":
                 st.violations += 1
                 if st.first_violation is None:
@@ -132,12 +228,31 @@ class LimitSet:
                 extra.setdefault("limit", []).append(cond.text)
                 if st.band != "violated":
                     if self.on_limit == "warn":
-                        self.notify(f"limit violated: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})")
+                        self.notify(f"limit violated: {_name(cond)}={_v(value)} at t={t:.2f} s ({cond.text})")
                 if self.tripped is None and self.on_limit != "warn":
                     self.tripped = LimitViolation(
-                        f"limit violated: {cond.field}={_v(value)} at t={t:.2f} s ({cond.text})", cond, t, value)
+                        f"limit violated: {_name(cond)}={_v(value)} at t={t:.2f} s ({cond.text})", cond, t, value)
             st.band = verdict
         return extra
+
+    def _rate(self, i, t, value):
+        """The field's change per second over the last :data:`RATE_WINDOW_S` (None until the
+        frames span half of it)."""
+        if value is None or isinstance(value, (str, list, dict)):
+            return None
+        from collections import deque
+
+        st = self.state[i]
+        seen = st.seen
+        if seen is None:
+            seen = st.seen = deque()
+        seen.append((t, value))
+        while len(seen) > 2 and seen[1][0] <= t - RATE_WINDOW_S:
+            seen.popleft()
+        t0, v0 = seen[0]
+        if t - t0 < RATE_WINDOW_S / 2:
+            return None
+        return round((value - v0) / (t - t0), 3)
 
     def verdict(self, i) -> str:
         st = self.state[i]
@@ -152,7 +267,7 @@ class LimitSet:
         for i, c in enumerate(self.conditions):
             st = self.state[i]
             out.append({
-                "limit": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn,
+                "limit": c.text, "field": _name(c), "op": c.op, "threshold": c.threshold, "warn": c.warn,
                 "verdict": self.verdict(i), "checked": st.checked, "extreme": st.extreme,
                 "extreme_t": None if st.extreme_t is None else round(st.extreme_t, 3),
                 "warnings": st.warnings,
@@ -177,6 +292,11 @@ class LimitSet:
 
     def violated(self) -> list:
         return [c.text for i, c in enumerate(self.conditions) if self.state[i].violations]
+
+
+def _name(cond):
+    """The quantity a limit tests, as a message names it (``egt_c``, ``egt_c/s``)."""
+    return f"{cond.field}/s" if getattr(cond, "rate", False) else cond.field
 
 
 def _v(value):

@@ -57,6 +57,15 @@ class Stand:
             quantities += [c.temperature, c.pressure, c.thrust, c.flow]
         if self.answer is not None:
             quantities.append(getattr(self.answer, "quantity", None))
+        if self.limits is not None:
+            from .ambient import RecordCorrections
+            from .limits import FIELDS
+
+            for c in self.limits.conditions:
+                if c.field not in FIELDS and c.field not in RecordCorrections.KEYS and c.field not in self.aux.fields:
+                    self.close()
+                    raise unknown_name("limit", c.field, list(FIELDS) + list(self.aux.fields), noun="field",
+                                       otherwise=f"; the --aux sensors give {', '.join(self.aux.fields) or 'no field'}")
         for q in quantities:
             if q is not None and q.field is not None and q.field not in self.aux.fields:
                 self.close()
@@ -114,11 +123,14 @@ class Stand:
         self.stats.feed(t, rec)
         if self.averager is not None:
             self.averager.feed(t, rec)
-        extra = self.limits.check(t, rec) if self.limits is not None else {}
+        more = {}
         if aux is not None:
-            extra.update(aux.merge(t))
+            more.update(aux.merge(t))
         if self.corrections is not None:
-            extra.update(self.corrections.record(t, rec, aux.value if aux is not None else None))
+            more.update(self.corrections.record(t, rec, aux.value if aux is not None else None))
+        # the limits see the record's sensor and corrected values too (thrust<=20, ...)
+        extra = self.limits.check(t, rec, more) if self.limits is not None else {}
+        extra.update(more)
         if self.answer is not None:
             frame = self.answer.on_frame(t, rec)
             if frame is not None and self.write is not None:

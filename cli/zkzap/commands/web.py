@@ -191,8 +191,9 @@ def _ids(text):
 
 
 LIMIT_HELP = ("A limit the engine must stay within: FIELD OP NUMBER with an optional warning band "
-              "(egt_c<=850,warn=800; power_voltage_v>=7.2). Shown on the page; a violation while the console "
-              "runs the engine ends it with the abort (see --on-limit). Repeatable.")
+              "(egt_c<=850,warn=800; power_voltage_v>=7.2), as on the command line (FIELD/s: its change per "
+              "second; ,when=running: only in those engine states; an --aux field). Shown on the page; a "
+              "violation while the console runs the engine ends it with the abort (see --on-limit). Repeatable.")
 
 
 def _recording_options(f):

@@ -357,7 +357,8 @@ class ZkConsole(Console):
         out.update({
             "rate": self.rate, "abort": self.abort_kind, "abort_text": describe_abort(self.abort_kind),
             "deadman_s": DEADMAN_S, "silence_s": self.silence, "rpm_max": RPM_MAX,
-            "limits": [{"text": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn}
+            "limits": [{"text": c.text, "field": c.field, "op": c.op, "threshold": c.threshold, "warn": c.warn,
+                        "rate": getattr(c, "rate", False), "when": getattr(c, "when_text", None)}
                        for c in (self.limits.conditions if self.limits else ())],
             "on_limit": self.limits.on_limit if self.limits else None,
             "states": zk.ENGINE_STATES, "errors": zk.ERRORS,
@@ -408,6 +409,9 @@ class ZkConsole(Console):
             return
         latest = self.tel.latest
         for c in self.limits.conditions:
+            when = getattr(c, "when", None)
+            if getattr(c, "rate", False) or (when is not None and latest.get("engine_state") not in when):
+                continue                        # a rate, or a limit of other engine states: not now
             value = latest.get(c.field)
             if value is not None and c.check(value) == "violated":
                 raise UsageError(f"start: limit {c.text} is violated now ({c.field}={value:g}); not started")

@@ -103,7 +103,8 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
     if list(run_files).count("-") > 1:
         raise UsageError("run: '-' given twice; standard input is one run")
     conditions = L.read_limits(limit, limits_files)
-    limits = [(c.text, c.field, c.op, c.threshold, c.warn) for c in conditions]
+    # a rate limit (FIELD/s) is no level of its field: no line on the field's plot
+    limits = [(c.text, c.field, c.op, c.threshold, c.warn) for c in conditions if not c.rate]
     if terminal:
         if output or fmt:
             raise UsageError(f"{'output' if output else 'format'}: not with --terminal (it draws on the terminal)")

@@ -15,7 +15,9 @@ from ..options import Choice, FiniteRange, InputPath, OutputPath, apply_options,
 
 LIMIT_HELP = ("Stop when a status field leaves a limit: FIELD OP NUMBER with OP one of < <= > >= == != "
               "and an optional warning band (egt_c<=850,warn=800; power_voltage_v>=7.2; error_code==0). "
-              "Evaluated on every frame that carries the field. Repeatable.")
+              "Evaluated on every frame that carries the field. FIELD may be an --aux sensor's field or a "
+              "corrected value, FIELD/s its change per second (egt_c/s<=60), and ,when=running (start, "
+              "cooling, a state's name; a|b) limits it to those engine states. Repeatable.")
 
 
 #: The finite float range every float option uses (one definition, in the options module).
@@ -197,13 +199,27 @@ def write_summary(path, *, command, port, outcome, tel, session, stand):
     write_whole(path, text, what="summary-json")
 
 
+def _limit_fields(sensors):
+    """What a limit may name: a status key; a corrected value (with --ambient-temp); with --aux
+    any name, checked against the sensors' fields once their first lines came."""
+    from ...api.ambient import RecordCorrections
+    from ...api.limits import FIELDS
+
+    if sensors.specs:
+        return None
+    if sensors.ambient is not None:
+        return FIELDS | set(RecordCorrections.KEYS)
+    return FIELDS
+
+
 def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, controls=False, averager=None,
                 force=False, sensors=None, engine=None, density=None):
     """A Stand for these options (None when none applies); raises UsageError (exit 2) first."""
     from ...api import limits as L
     from ...api.stand import Stand
 
-    conditions = L.read_limits(limit, limits_files)
+    sensors = sensors or Sensors()
+    conditions = L.read_limits(limit, limits_files, fields=_limit_fields(sensors))
     if on_limit is not None and not conditions:
         raise UsageError("on-limit: give --limit EXPR or --limits FILE with it")
     if on_limit == "abort" and not controls:
@@ -218,7 +234,6 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
         lb.check_writable(logbook)
     if engine is not None and not engine.strip():
         raise UsageError("engine: an empty name; give the engine's name or serial (--engine K100-1234)")
-    sensors = sensors or Sensors()
     if not conditions and not logbook and averager is None and not force and not sensors and engine is None:
         return None
     aux = corrections = answer = None

@@ -68,7 +68,8 @@
     const [x1, y1] = [CX + (R + 11) * Math.cos(a * Math.PI / 180), CY + (R + 11) * Math.sin(a * Math.PI / 180)];
     return `M${x0.toFixed(1)} ${y0.toFixed(1)} L${x1.toFixed(1)} ${y1.toFixed(1)}`;
   };
-  const fieldLimits = (key) => Z.hello && limitsByField[key] ? Z.hello.limits.filter(l => l.field === key) : [];
+  // a rate limit (FIELD/s) is no level of the field: not drawn on its gauge or plot
+  const fieldLimits = (key) => Z.hello && limitsByField[key] ? Z.hello.limits.filter(l => l.field === key && !l.rate) : [];
   // the limit's tick (red) and its warning band's start (amber), for every limit of the field
   const limitMark = (key, max) => fieldLimits(key).map(c => tick(c.threshold, max)).join(" ");
   const bandMark = (key, max) => fieldLimits(key).filter(c => c.warn !== null && c.warn !== undefined).map(c => tick(c.warn, max)).join(" ");
@@ -167,7 +168,7 @@
     const out = [];
     lines[name] = [];
     for (const c of (Z.hello && Z.hello.limits) || []) {
-      if (PLOT_OF[c.field] !== name) continue;
+      if (PLOT_OF[c.field] !== name || c.rate) continue;
       out.push({ label: `limit ${c.text}`, color: "#ff5d5d", dash: [6, 4], width: 1.2 });
       lines[name].push(c.threshold);
       if (c.warn !== null && c.warn !== undefined) {
