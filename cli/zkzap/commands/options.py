@@ -215,7 +215,7 @@ def exit_statuses(cmd) -> list:
                           PORT_ERROR, TERMINATED, USAGE)
 
     meanings = {OK: "success", USAGE: "bad usage or input (nothing was sent)",
-                OUTPUT_ERROR: "the output could not be written (disk full)", INTERRUPTED: "Ctrl-C",
+                OUTPUT_ERROR: "the output could not be written (disk full) or stalled", INTERRUPTED: "Ctrl-C",
                 TERMINATED: "SIGTERM (128+N: another signal N, 129 SIGHUP)"}
     port = next((p for p in cmd.params if p.name == "port" and isinstance(p, click.Option)), None)
     if port is not None:
