@@ -122,7 +122,7 @@ def zk_case(driver, seconds):
             "delivered_per_s": got, "lat": lat, "render": ren, "dropped": dropped}
 
 
-LIVE = ["goal-position", "present-position", "present-current", "present-voltage", "moving"]
+LIVE = ["goal-position", "goal-speed", "goal-current", "present-position", "present-current", "present-voltage", "moving"]
 
 
 def watch_rate(port, seconds):

@@ -182,3 +182,17 @@ def test_no_errors_in_the_browser_console(opened):
     assert console_errors(page) == []
     assert js(page, "return window.zkzapStats.errors") == 0
     assert js(page, "return window.zkzapStats.samples") > 0
+
+
+def test_speed_and_current_goals_beside_the_slider(page, bus):
+    until(lambda: js(page, "return document.querySelector('#act-3 input.goal-speed').value") != "",
+          "the goal speed the actuator holds")
+    assert js(page, "return document.querySelector('#act-3 input.goal-speed').value") == \
+        str(register(bus, 3, "goal-speed"))
+    set_value(page, "#act-3 input.goal-speed", 300)
+    set_value(page, "#act-3 input.goal-current", 650)
+    until(lambda: register(bus, 3, "goal-speed") == 300 and register(bus, 3, "goal-current") == 650,
+          "the actuator's goal speed and current")
+    until(lambda: js(page, "return document.querySelector('#act-3 input.goal-speed').value") == "300"
+          and js(page, "return document.querySelector('#act-3 input.goal-current').value") == "650",
+          "the page to show what the actuator holds now")

@@ -26,12 +26,13 @@ from .console import Console, number
 
 R = zap.REGISTER_BY_NAME
 #: What the live view polls, in one Load Data per actuator (goal-position .. moving).
-LIVE = [R[n] for n in ("goal-position", "present-position", "present-current", "present-voltage", "moving")]
+LIVE = [R[n] for n in ("goal-position", "goal-speed", "goal-current", "present-position", "present-current",
+                       "present-voltage", "moving")]
 #: Short keys of a live sample, by register.
-SHORT = {"goal-position": "goal", "present-position": "pos", "present-current": "cur", "present-voltage": "volt",
-         "moving": "moving"}
+SHORT = {"goal-position": "goal", "goal-speed": "gspeed", "goal-current": "gcur", "present-position": "pos",
+         "present-current": "cur", "present-voltage": "volt", "moving": "moving"}
 #: Requests that move actuators (refused while a job runs: it has the bus).
-MOVES = ("move", "sync", "stop")
+MOVES = ("move", "sync", "stop", "goals")
 #: Progress messages per second, at most.
 PROGRESS_HZ = 20
 
@@ -265,6 +266,20 @@ class ZapConsole(Console):
         pos = number(msg, "position", int, 0, R["goal-position"].hi, "goal-position")
         self.bus.move(ident, pos, wait=False)
         self.reply(ctx, id=ident, position=pos)
+
+    def op_goals(self, ctx, msg):
+        """goal-speed and/or goal-current of one actuator (volatile: no consent)."""
+        ident = self._known(msg)
+        wrote = {}
+        for key, name in (("speed", "goal-speed"), ("current", "goal-current")):
+            if msg.get(key) is not None:
+                wrote[name] = number(msg, key, int, R[name].lo, R[name].hi, name)
+        if not wrote:
+            raise UsageError("goals: give speed or current")
+        for name, value in wrote.items():
+            self.bus.store(ident, name, value)
+        self.log(f"{ctx.label}: ID {ident} " + ", ".join(f"{n} {v}" for n, v in wrote.items()))
+        self.reply(ctx, id=ident, **{n.replace("goal-", ""): v for n, v in wrote.items()})
 
     def op_sync(self, ctx, msg):
         targets = msg.get("targets")

@@ -36,6 +36,12 @@
       range.addEventListener("input", () => { num.value = range.value; touched = true; mover(Number(range.value)); });
       range.addEventListener("change", () => { touched = false; });
       num.addEventListener("change", () => { range.value = num.value; Z.send("move", { id, position: Number(num.value) }); });
+      const gspeed = el("input", { type: "number", class: "ctl goal-speed", min: 0, max: 1023, placeholder: "speed",
+        title: "goal-speed 0..1023", "aria-label": `goal speed of ID ${id}` });
+      const gcur = el("input", { type: "number", class: "ctl goal-current", min: 0, max: 1600, placeholder: "mA",
+        title: "goal-current 0..1600 mA", "aria-label": `goal current of ID ${id}` });
+      gspeed.addEventListener("change", () => Z.send("goals", { id, speed: Number(gspeed.value) }));
+      gcur.addEventListener("change", () => Z.send("goals", { id, current: Number(gcur.value) }));
       const pos = el("span", { class: "num big", text: "–" });
       const bar = el("div", { class: "posbar" }, el("b"), el("i"));
       const moving = el("span", { class: "moving", title: "moving" });
@@ -50,10 +56,12 @@
         el("td", { class: "mono", text: a.model === null ? "–" : "0x" + a.model.toString(16).toUpperCase().padStart(4, "0") }),
         el("td", { class: "num", text: a.firmware ?? "–" }), el("td", { class: "num", text: a.baud }),
         el("td", { class: "num", text: a.return_mode ?? "–" }), status,
-        el("td", { class: "pos" }, pos, moving, bar), el("td", { class: "goal" }, el("div", { class: "row" }, range, num)),
+        el("td", { class: "pos" }, pos, moving, bar), el("td", { class: "goal" }, el("div", { class: "row" }, range, num),
+          el("div", { class: "row goals" }, el("span", { class: "dim small", text: "speed" }), gspeed,
+            el("span", { class: "dim small", text: "current" }), gcur)),
         el("td", {}, cur, el("span", { class: "dim", text: " mA" })), el("td", {}, volt, el("span", { class: "dim", text: " V" })), btns);
       tb.append(tr);
-      rows[id] = { a, tr, range, num, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
+      rows[id] = { a, tr, range, num, gspeed, gcur, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
       status.append(statusTag(a, null));
     }
     $("#act-note").textContent = actuators.length ? `${actuators.length} found · bus at ${busBaud} baud` : "none found yet: scan";
@@ -71,6 +79,8 @@
       if (s.pos !== null) r.bar.lastChild.style.left = `calc(${(s.pos / 4095 * 100).toFixed(2)}% - 1px)`;
       if (s.goal !== null) r.bar.firstChild.style.left = `${(s.goal / 4095 * 100).toFixed(2)}%`;
       if (!r.seeded && s.goal !== null && !r.touched()) { r.range.value = s.goal; r.num.value = s.goal; r.seeded = true; }
+      for (const [input, v] of [[r.gspeed, s.gspeed], [r.gcur, s.gcur]])   // what the actuator holds, unless being edited
+        if (v !== null && v !== undefined && document.activeElement !== input && String(v) !== input.value) input.value = v;
       const sig = `${r.a.baud}|${busBaud}|${r.a.polled}|${s.status}|${(s.errors || []).join()}`;
       if (r.sig !== sig) { r.sig = sig; r.status.replaceChildren(statusTag(r.a, s)); }
     }
