@@ -72,3 +72,23 @@ def test_detect_nothing_answers_exit_3(sh):
     with start_zap(ids=[4], protocol="modbus", baud=9600, transport="pty") as sim:
         r = sh("zap", "detect", "-p", sim.url, "-b", "115200", timeout=120)
     assert r.exit_code == 3 and r.stdout == "" and "nothing answered" in r.stderr
+
+
+def test_watch_modbus_reads_each_run_of_the_table(cli):
+    r = cli("zap", "watch", "--protocol", "modbus", "present-position", "present-current", "moving", "--ids", "1,2",
+            "--sim", "--count", "2", "-f", "jsonl")
+    assert r.exit_code == 0, r
+    rows = [json.loads(x) for x in r.stdout.splitlines()]
+    assert [(x["poll"], x["id"], x["status"]) for x in rows] == [(1, 1, "ok"), (1, 2, "ok"), (2, 1, "ok"), (2, 2, "ok")]
+    assert all(x["present-current"] == 15 and x["moving"] == 0 for x in rows)
+
+
+def test_watch_plan_never_reads_across_a_gap():
+    from zkzap.api.watch import plan_reads
+    from zkzap.codec.regmap import builtin
+
+    m = builtin("17lf-modbus")
+    regs = [m.by_name[n] for n in ("present-position", "present-current", "moving", "goal-position")]
+    reads = [(a, n, [r.name for r in rs]) for a, n, rs in plan_reads(regs, 57600, m)]
+    assert reads == [(205, 1, ["goal-position"]), (210, 2, ["present-position", "present-current"]),
+                     (215, 1, ["moving"])]

@@ -46,11 +46,15 @@ def split_gap(baud: int) -> int:
     return LOAD_BYTES + REPLY_BYTES + int(TURNAROUND * baud / 10)
 
 
-def plan_reads(registers, baud: int = 57600) -> list:
-    """[(address, length, [Register, ...]), ...]: the Load Data reads covering ``registers``."""
+def plan_reads(registers, baud: int = 57600, regmap=None) -> list:
+    """[(address, length, [Register, ...]), ...]: the Load Data reads covering ``registers``.
+    On a Modbus map (``regmap``, 16-bit registers): ``length`` counts registers, and a read spans
+    only addresses the map has (a gap would be answered with an exception)."""
     regs = sorted(set(registers), key=lambda r: r.address)
     if not regs:
         raise UsageError("watch: no register given")
+    if regmap is not None and regmap.protocol == "modbus":
+        return _modbus_reads(regs, regmap)
     gap = split_gap(baud)
     reads = []
     for reg in regs:
@@ -66,9 +70,32 @@ def plan_reads(registers, baud: int = 57600) -> list:
     return [tuple(r) for r in reads]
 
 
+def _modbus_reads(regs, regmap):
+    from ..codec.modbus import MAX_READ
+
+    reads = []
+    for reg in regs:
+        if reads:
+            start, count, got = reads[-1]
+            between = range(start + count, reg.address)
+            if all(a in regmap.owner for a in between) and reg.address - start < MAX_READ:
+                reads[-1][1] = reg.address + 1 - start
+                got.append(reg)
+                continue
+        reads.append([reg.address, 1, [reg]])
+    return [tuple(r) for r in reads]
+
+
+def _read_bytes(length, regs):
+    """Bytes of one read on the wire, request and reply: Load Data, or Read Holding Registers."""
+    if regs and regs[0].byteorder == "big":
+        return 8 + 5 + 2 * length
+    return LOAD_BYTES + REPLY_BYTES + length
+
+
 def poll_time(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> float:
     """Seconds one poll of ``n_ids`` actuators takes on the wire (no host overhead)."""
-    per_id = sum(wire_time(LOAD_BYTES + REPLY_BYTES + length, baud) + turnaround for _, length, _ in reads)
+    per_id = sum(wire_time(_read_bytes(length, regs), baud) + turnaround for _, length, regs in reads)
     return per_id * n_ids
 
 
@@ -112,7 +139,8 @@ class Watcher:
         self.registers = list(dict.fromkeys(registers))
         for c in until:
             c.field = c.field.replace("_", "-")
-        self.reads = plan_reads(self.registers + [zap.REGISTER_BY_NAME[c.field] for c in until], bus.baud)
+        regmap = bus.family.regmap
+        self.reads = plan_reads(self.registers + [regmap.register(c.field) for c in until], bus.baud, regmap)
         self.shown = [r for _, _, regs in self.reads for r in regs]
         self.rate = rate
         self.count = count
@@ -152,7 +180,7 @@ class Watcher:
         status, errors, rtt = "ok", [], 0.0
         for address, length, regs in self.reads:
             try:
-                reply = self.bus.load(ident, address, length, check=False, retries=self.retries)
+                reply, values = self.bus.read_block(ident, address, length, check=False, retries=self.retries)
             except NoReply:
                 status = "no-reply"
             except BadReply:
@@ -160,7 +188,7 @@ class Watcher:
             else:
                 rtt += reply.rtt
                 errors = sorted(set(errors) | set(reply.errors))
-                for reg, raw in zap._register_values(address, reply.data):
+                for reg, raw in values:
                     if reg.name in row:
                         row[reg.name] = raw
                 continue
@@ -226,6 +254,7 @@ def _iso(t: float) -> str:
 
 
 def until_fields(registers=None):
-    """Names allowed in ``--until``: every register of the map (kebab or snake case)."""
-    names = {r.name for r in zap.REGISTERS}
+    """Names allowed in ``--until``: every register of the map (``registers``; default the
+    12Lf's), in kebab or snake case."""
+    names = {r.name for r in (zap.REGISTERS if registers is None else registers)}
     return names | {n.replace("-", "_") for n in names}

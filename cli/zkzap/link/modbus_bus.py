@@ -195,7 +195,7 @@ class ModbusBus(ZapBus):
             require(needs, self.allow | as_permission(allow), simulated=self.simulated,
                     what=req.describe(self.regmap), frame=pkt)
 
-    def command(self, pkt: bytes, *, check=True, optional=None, allow=None):
+    def command(self, pkt: bytes, *, check=True, optional=None, allow=None, retries=None):
         """Send any request frame (after its permissions) and wait for its reply (None for a
         broadcast). An exception reply raises :class:`~zkzap.codec.modbus.ExceptionReply`
         unless ``check=False``; a reply with another function raises ReplyMismatch."""
@@ -210,7 +210,7 @@ class ModbusBus(ZapBus):
                 kw["accept_ids"] = {pkt[0], req.values[ids.address - req.address]}
         if optional is not None:
             kw["optional"] = optional
-        reply = self.transact(pkt, check=False, **kw)
+        reply = self.transact(pkt, check=False, retries=retries, **kw)
         if reply is None:
             return None
         if reply.exception:
@@ -238,6 +238,10 @@ class ModbusBus(ZapBus):
             reg = self.regmap.by_address.get(address + i)
             out.append((reg if reg is not None else _anonymous(address + i), v))
         return reply, out
+
+    def read_block(self, ident: int, address: int, count: int, **kw):
+        """(Reply, [(Register, raw), ...]): ``count`` registers from ``address`` (a watch's read)."""
+        return self.read_registers(ident, address, count, **kw)
 
     def read(self, ident: int, reg, **kw) -> int:
         return self.read_values(ident, self.regmap.register(reg).address, 1, **kw)[0]

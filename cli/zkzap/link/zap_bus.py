@@ -157,6 +157,7 @@ class IrFamily:
     a reply is a copy of its request."""
 
     name = "ir"
+    regmap = zap.MAP
     BROADCAST = zap.BROADCAST
     #: Bytes of a reply besides its data (header, ID, SIZE, error, checksum).
     OVERHEAD = 7
@@ -1004,6 +1005,11 @@ class ZapBus:
     def read(self, ident: int, reg, **kw) -> int:
         reg = zap.register(reg)
         return self.load(ident, reg.address, reg.size, **kw).value
+
+    def read_block(self, ident: int, address: int, length: int, **kw):
+        """(Reply, [(Register, raw), ...]): the block a watch reads (:func:`zkzap.api.watch.plan_reads`):
+        ``length`` bytes from ``address`` in one Load Data."""
+        return self.read_registers(ident, address, length, **kw)
 
     def read_registers(self, ident: int, address: int, length: int, **kw):
         """(Reply, [(Register, raw), ...]): registers from one multi-byte Load Data."""

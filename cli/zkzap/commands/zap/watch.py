@@ -10,7 +10,7 @@ from ...codec import zap
 from ...errors import NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
 from ..options import (Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options,
-                       unit_options, unit_scales)
+                       protocol_options, unit_options, unit_scales, zap_map)
 from .compose import _link_args, link_options, open_link
 from .params import REGISTER
 from .scan import IdList
@@ -40,6 +40,7 @@ FORMATS = ("table", "jsonl", "json", "csv")
 @output_options
 @unit_options
 @link_options
+@protocol_options
 def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus_names, unit, fleet_file, **common):
     """Poll REGISTER... of every actuator listed, as fast as the line allows or at --rate.
 
@@ -59,6 +60,10 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
       zap watch present-position present-current moving --ids 1-4 -p /dev/ttyUSB0
       zap watch present-position --ids 1,2 --rate 20 --duration 10 -o run.csv -p /dev/ttyUSB0
       zap move 3000 --id 1 -p /dev/ttyUSB0 && zap watch present-position --ids 1 --until moving==0 -p /dev/ttyUSB0
+      zap watch --protocol modbus present-position present-current --ids 1,2 -p /dev/ttyUSB0
+
+    With --protocol modbus each actuator is read with Read Holding Registers, one read per run
+    of asked registers without a gap in the control table between them.
     """
     from ...api import expr
     from ...api.watch import Watcher, plan_reads, until_fields
@@ -66,14 +71,18 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
 
     if count is not None and duration is not None:
         raise UsageError("--count and --duration: give one of them")
-    conds = [expr.parse(u, until_fields(), where="--until", allow_warn=False,
+    regmap = zap_map()
+    modbus = common["protocol"] == "modbus"
+    conds = [expr.parse(u, until_fields(regmap.registers if modbus else None), where="--until", allow_warn=False,
                         example="moving==0") for u in until]
-    if common["return_mode"] == "0":
+    if common["return_mode"] == "0" and not modbus:
         raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
-    reads = plan_reads(list(registers) + [zap.REGISTER_BY_NAME[c.field.replace("_", "-")] for c in conds],
-                       common["baud"])
+    reads = plan_reads(list(registers) + [regmap.register(c.field.replace("_", "-")) for c in conds],
+                       common["baud"], regmap if modbus else None)
     shown = [r for _, _, regs in reads for r in regs]
     if bus_names is not None:
+        if modbus:
+            raise UsageError("--buses: not with --protocol modbus yet (a fleet file's buses speak the IR protocol)")
         return _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit,
                             fleet_file, common)
     from ...api.watch import MM_REGISTERS
