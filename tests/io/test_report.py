@@ -230,3 +230,20 @@ def test_runs_aligned_at_start_keep_their_session_time_and_first_at_their_first_
     assert (early.offset, late.offset) == (0.0, 0.0)
     R.align([early, late], "first")
     assert (early.offset, late.offset) == (0.5, 4.0)
+
+
+def test_an_aborted_run_draws_its_targets_and_windows_until_the_trip_only():
+    """The rundown after a trip is recorded; the schedule's targets stop where it tripped."""
+    from zkzap.io import report as R
+
+    run = R.Run("tripped")
+    for k in range(40):                                        # the run, then its rundown to t=20
+        t = k * 0.5
+        if t == 10.0:
+            run.add({"time": "", "t": 10.0, "kind": "trip", "trip": "limit violated; sent standby, throttle 0"})
+        run.add({"t": t, "kind": "status", "id": 1, "rpm": 50000 if t < 10 else 20000})
+    run.add({"t": 19.9, "trip": "rundown 9.9 s: the engine at rest (state standby)"})     # a CSV row's trip column
+    assert run.trip_t == 10.0 and len(run.t) == 40 and R._sent_until(run) == 10.0
+    untripped = R.Run("whole")
+    untripped.add({"t": 3.0, "kind": "status", "id": 1, "rpm": 1})
+    assert R._sent_until(untripped) == 3.0

@@ -79,6 +79,7 @@ class Run:
         self.outside = 0             # records with a value outside the protocol's range
         self.first_outside = None    # (t, column, value, (lo, hi))
         self.sensors = []            # the columns of external sensors (numbers no status field holds)
+        self.trip_t = None           # when the run tripped (its trip record): nothing was sent after it
         self._looked = 0
 
     def add(self, rec, where=None):
@@ -93,8 +94,14 @@ class Run:
         t = _float(rec.get("t"))
         if t is None:
             return
+        trip = rec.get("trip")
+        if trip or rec.get("kind") in ("trip", "rundown"):
+            # a trip's record, or the rundown's end after it (a CSV row with only its trip column)
+            if self.trip_t is None and rec.get("kind") != "rundown" and not str(trip or "").startswith("rundown"):
+                self.trip_t = t
+            return
         if rec.get("kind") not in (None, "", "status"):
-            return                   # a control frame, a gap, a trip: no status values
+            return                   # a control frame, a gap: no status values
         if self._looked < 100:
             self._looked += 1
             self._discover(rec)
@@ -707,6 +714,14 @@ def _declared_units(runs):
     return out
 
 
+def _sent_until(run) -> float:
+    """Until when the run's schedule was sent: its trip (the rundown after it is recorded, and
+    no target was sent then), else its last record."""
+    if run.trip_t is not None:
+        return run.trip_t
+    return run.t[-1] if len(run.t) else 0.0
+
+
 def _targets(steps):
     """Target step lines from the steps file: {column: [(t0, t1, value)]}."""
     out = {}
@@ -862,7 +877,7 @@ def _history_axes(fig, grid, runs, panels, limits):
                     if many and k:
                         continue                     # the targets of the reference run
                     xs, ys = [], []
-                    end = run.t[-1] if len(run.t) else 0.0
+                    end = _sent_until(run)
                     for a, b, v in targets[c]:
                         if a >= end:
                             continue                 # after the run ended (an abort): never sent
@@ -937,7 +952,7 @@ def _shade_windows(ax, run, label=True, numbers=True):
     tr = blended_transform_factory(ax.transData, ax.transAxes)
     first = True
     shown = set()
-    end = run.t[-1] if len(run.t) else 0.0
+    end = _sent_until(run)
     for r in run.steps:
         a, w0, w1 = (_float(r.get(k)) for k in ("step_start_s", "window_start_s", "window_end_s"))
         if a is None or w0 is None or w1 is None or a >= end:
