@@ -92,3 +92,10 @@ def test_watch_plan_never_reads_across_a_gap():
     reads = [(a, n, [r.name for r in rs]) for a, n, rs in plan_reads(regs, 57600, m)]
     assert reads == [(205, 1, ["goal-position"]), (210, 2, ["present-position", "present-current"]),
                      (215, 1, ["moving"])]
+
+
+def test_set_baud_modbus_writes_the_maps_code_and_verifies(cli):
+    r = cli("zap", "set-baud", "--protocol", "modbus", "19200", "--id", "1", "--sim")
+    assert r.exit_code == 0 and "19200 baud (verified)" in r.stderr, r
+    r = cli("zap", "set-baud", "--protocol", "modbus", "19200", "--id", "1", "--sim", "--no-restart")
+    assert r.exit_code == 2 and r.stdout == ""

@@ -395,6 +395,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
               help="How long to wait for the actuator to answer after the change.")
 @yes_option
 @link_options
+@protocol_options
 def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
     """Change the actuator's baud rate to BAUD (9600, 19200, 38400, 57600, 115200), verified.
 
@@ -407,8 +408,14 @@ def set_baud(new_baud, ident, no_restart, ready_timeout, yes, **common):
     Examples:
       zap set-baud 115200 --id 1 -p /dev/ttyUSB0 --yes
       zap set-baud 57600 --id 1 -b 115200 -p /dev/ttyUSB0 --yes
+      zap set-baud --protocol modbus 115200 --id 1 -p /dev/ttyUSB0 --yes
+
+    With --protocol modbus the map's code for BAUD is written (the 17Lf's codes differ from the
+    12Lf's) and the actuator answers at BAUD after its reply: there is no restart.
     """
     baud = int(new_baud)
+    if common["protocol"] == "modbus" and no_restart:
+        raise UsageError("--no-restart: a Modbus actuator takes its new baud rate after the reply (no restart)")
     allow = stored_consent(common, yes, f"change ID {ident}'s baud rate to {baud}", "baud-rate")
     with open_link(ids=[ident], probe=ident, allow=allow, **_link_args(common)) as link:
         Bus.over(link).set_baud(ident, baud, restart=not no_restart, ready_timeout=ready_timeout)
