@@ -8,13 +8,16 @@ RECORD_FORMATS = FORMATS + ("influx",)
 LOG_FORMATS = RECORD_FORMATS + ("mcap",)
 #: Formats of a logging session's ``-o`` that also carry the steps and the summary (a workbook).
 SESSION_FORMATS = LOG_FORMATS + ("xlsx",)
+#: Columnar files a session's ``-o`` also writes (:mod:`.columnar`): Apache Parquet, ASAM MDF 4.
+COLUMNAR_FORMATS = ("parquet", "mf4")
+SESSION_FORMATS += COLUMNAR_FORMATS
 
 #: File-name suffix -> format: what ``-o FILE`` names when ``-f`` is not given. Each command
 #: takes the suffixes of its own formats; a suffix not known here (or not one of the command's
 #: formats) is refused rather than guessed.
 SUFFIXES = {
     ".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".ndjson": "jsonl", ".lp": "influx", ".mcap": "mcap",
-    ".xlsx": "xlsx", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml", ".png": "png", ".svg": "svg",
+    ".xlsx": "xlsx", ".parquet": "parquet", ".mf4": "mf4", ".toml": "toml", ".yaml": "yaml", ".yml": "yaml", ".png": "png", ".svg": "svg",
     ".pdf": "pdf", ".html": "html", ".htm": "html",
 }
 

@@ -12,7 +12,7 @@ import click
 
 from ...codec import zk
 from ...errors import DeviceError, UsageError
-from ...io import SESSION_FORMATS, format_for_path
+from ...io import COLUMNAR_FORMATS, SESSION_FORMATS, format_for_path
 from .. import CONTEXT, Command
 from ..options import (FiniteRange, InputPath, IntRange, note, output_file, port_options, protocol_version_option,
                        rate_option)
@@ -38,10 +38,15 @@ class Output:
             fmt = format_for_path(path, SESSION_FORMATS)
         self.file = None
         self._xlsx = fmt == "xlsx"
+        self._columnar = fmt in COLUMNAR_FORMATS          # written whole like a workbook
         if self._xlsx:
             from ...io import xlsx
 
             xlsx.check(output, append)
+        if self._columnar:
+            from ...io import columnar
+
+            columnar.check(fmt, output, append)
         if fmt == "mcap":
             from .mcap_output import open_mcap
 
@@ -61,7 +66,7 @@ class Output:
         elif path and stdout_tty:
             self.dashboard = _dashboard(title)
         if snapshot is None:
-            snapshot = fmt in ("csv", "xlsx")        # spreadsheets: every field's latest value on each row
+            snapshot = fmt in ("csv", "xlsx") + COLUMNAR_FORMATS   # tables: every field's latest value on each row
         if fmt == "table" and self.dashboard is not None and not path:
             snapshot = False
         self.snapshot = snapshot
@@ -72,7 +77,7 @@ class Output:
         had = False
         if path:
             self.file = output_file(path, append, fmt=fmt, columns=self._columns, inputs=inputs)
-            if self._xlsx:
+            if self._xlsx or self._columnar:
                 return                 # the workbook is made by the first record (see write)
             from ...outfile import LazyOutput
 
@@ -88,6 +93,8 @@ class Output:
 
     #: The :class:`~zkzap.offload.Lane` the records are written in (None: in the caller's thread).
     lane = None
+    #: Declared units of columns the protocol tables do not know (external sensors' channels).
+    units = None
 
     def offload(self, lane):
         """Write the records (and close) in ``lane`` from now on; returns the session's sink."""
@@ -111,6 +118,10 @@ class Output:
             from ...io.xlsx import XlsxWriter
 
             self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
+        if self.writer is None and self._columnar and self.file is not None:
+            from ...io.columnar import writer
+
+            self.writer = writer(self.fmt, self.file.path, self._columns, self.units)
         if self.writer is not None:
             if self._table:
                 from .decode import summary
@@ -188,7 +199,10 @@ def session_output(fmt, output, append, snapshot, ids, title, stand, *, controls
         def columns(snapshot, ids=None):
             return base(snapshot, ids) + ["trip"]
 
-    return Output(fmt, output, append, snapshot, ids, title, columns, view=view)
+    out = Output(fmt, output, append, snapshot, ids, title, columns, view=view)
+    if stand is not None and stand.aux is not None:
+        out.units = stand.aux.units()         # a sensor's declared units, for the files that keep units
+    return out
 
 
 def capture_lane():
