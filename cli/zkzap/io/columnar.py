@@ -51,6 +51,11 @@ def check(fmt, output, append) -> None:
         raise UsageError(f"append: a {fmt} file cannot be appended to; give a new -o FILE.{fmt}")
     if not output or output == "-":
         raise UsageError(f"format {fmt}: needs a file; give -o FILE.{fmt}")
+    import importlib
+
+    # imported now, before the session: the first record's write is no second-long import that
+    # the output's queue would take for a stalled disk
+    importlib.import_module("pyarrow.parquet" if fmt == "parquet" else "asammdf")
 
 
 def _number(v):

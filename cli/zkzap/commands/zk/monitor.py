@@ -152,6 +152,12 @@ class Output:
         stays blocked is abandoned, see :mod:`zkzap.offload`)."""
         if self.lane is not None:
             lane, self.lane = self.lane, None
+            if self._columnar:
+                # a columnar file is assembled at its close, which takes as long as the run is
+                # long: the queued records are written in the lane, the file made here
+                if lane.finish(None):
+                    self._close()
+                return
             lane.finish(self._close)
         else:
             self._close()
