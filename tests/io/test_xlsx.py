@@ -57,3 +57,19 @@ def test_a_killed_runs_journal_is_never_overwritten(cli, tmp_path):
     r = cli("zk", "monitor", "-p", "sim://zk?speed=20", "--count", "3", "-o", str(book))
     assert r.exit_code == 2 and "m.xlsx.partial.csv holds the rows of a run killed" in r.stderr
     assert journal.read_text() == "time,t\n" and not book.exists() and r.stdout == ""
+
+
+def test_a_workbook_keeps_its_header_in_view_its_milliseconds_and_every_unit(cli, tmp_path):
+    openpyxl = pytest.importorskip("openpyxl")
+    cell = tmp_path / "cell.log"
+    cell.write_text("thrust_n=98.0665\n" * 5)
+    book = tmp_path / "run.xlsx"
+    r = cli("zk", "monitor", "--sim", "--duration", "2", "-o", str(book), "--aux", f"{cell},thrust_n:N",
+            "--ambient-temp", "20")
+    assert r.exit_code == 0, r
+    ws = openpyxl.load_workbook(book)["records"]
+    assert ws.freeze_panes == "A3"
+    header = [c.value for c in ws[1]]
+    units = dict(zip(header, [c.value for c in ws[2]]))
+    assert units["thrust_n"] == "N" and units["rpm_corrected"] == "rpm" and units["thrust_corrected_kg"] == "kgf"
+    assert ws.cell(row=3, column=header.index("time") + 1).number_format == "yyyy-mm-dd hh:mm:ss.000"

@@ -27,6 +27,8 @@ from ..errors import OutputError, UsageError
 PARTIAL = ".partial.csv"
 #: The extra that provides openpyxl.
 EXTRA = "xlsx"
+#: How a record's time is shown: to the millisecond it holds.
+TIME_FORMAT = "yyyy-mm-dd hh:mm:ss.000"
 #: Rows of a sheet (Excel's limit).
 MAX_ROWS = 1_048_576
 #: Units of the columns that are not status fields (status fields take theirs from the tables).
@@ -56,7 +58,7 @@ def unit_of(column) -> str:
     units = _status_units()
     if column in units:
         return units[column]
-    for tail in ("_mean", "_min", "_max"):
+    for tail in ("_mean", "_min", "_max", "_std"):
         if column.endswith(tail):
             return unit_of(column[: -len(tail)])
     if column.startswith("tsfc_corrected_"):
@@ -129,13 +131,14 @@ class XlsxWriter:
     :meth:`sheets` gives the steps (``columns``, ``rows``) and the summary (a dict) before the
     close; without them those sheets say so."""
 
-    def __init__(self, path, columns):
+    def __init__(self, path, columns, units=None):
         from openpyxl import Workbook
 
         from .writers import CsvWriter
 
         self.path = path
         self.columns = list(columns)
+        self.units = dict(units or {})        # declared units (an external sensor's channels)
         self.partial = path + PARTIAL
         try:
             stream = open(self.partial, "x", encoding="utf-8", newline="")
@@ -153,16 +156,27 @@ class XlsxWriter:
     def _new_sheet(self):
         self._n += 1
         self._sheet = self.book.create_sheet("records" if self._n == 1 else f"records {self._n}")
+        self._sheet.freeze_panes = "A3"        # the header and units stay in view
         self._sheet.append(self.columns)
-        self._sheet.append([unit_of(c) for c in self.columns])
+        self._sheet.append([self.units.get(c) or unit_of(c) for c in self.columns])
         self._rows = 2
 
     def write(self, rec) -> None:
         if self._rows >= MAX_ROWS:
             self._new_sheet()
-        self._sheet.append([cell(rec.get(c), c) for c in self.columns])
+        self._sheet.append([self._cell(rec.get(c), c) for c in self.columns])
         self._rows += 1
         self._journal.write(rec)
+
+    def _cell(self, value, column):
+        v = cell(value, column)
+        if isinstance(v, datetime.datetime):
+            from openpyxl.cell import WriteOnlyCell
+
+            c = WriteOnlyCell(self._sheet, value=v)
+            c.number_format = TIME_FORMAT          # the milliseconds shown, not only kept
+            return c
+        return v
 
     def sheets(self, steps=None, summary=None) -> None:
         """The steps (``(columns, rows)``) and the summary of the run, written at the close."""
@@ -176,8 +190,10 @@ class XlsxWriter:
         steps = book.create_sheet("steps")
         if self._steps:
             cols, rows = self._steps
+            steps.freeze_panes = "B3"
             steps.append(list(cols))
-            steps.append([unit_of(c) for c in cols])
+            steps.append([self.units.get(c[:-5] if c.endswith(("_mean", "_min", "_max")) else c[:-4]
+                                         if c.endswith("_std") else c) or unit_of(c) for c in cols])
             for r in rows:
                 steps.append([cell(r.get(c), c) for c in cols])
         else:

@@ -117,7 +117,7 @@ class Output:
         if self.writer is None and self._xlsx and self.file is not None:
             from ...io.xlsx import XlsxWriter
 
-            self.writer = XlsxWriter(self.file.path, self._columns)    # renamed over the file at the close
+            self.writer = XlsxWriter(self.file.path, self._columns, self.units)   # renamed over the file at the close
         if self.writer is None and self._columnar and self.file is not None:
             from ...io.columnar import writer
 
