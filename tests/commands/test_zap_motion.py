@@ -303,3 +303,17 @@ def test_watch_two_buses(cli, tmp_path):
     assert sorted({(x["bus"], x["id"]) for x in rows}) == [("left", "1"), ("left", "2"), ("right", "1"),
                                                           ("right", "3")]
     assert len(rows) == 8
+
+
+def test_scan_every_bus_at_its_baud_rate(cli, tmp_path):
+    fleet = tmp_path / "buses.json"
+    fleet.write_text(json.dumps({"format": "zkzap-fleet/1", "actuators": {"1": {}}, "buses": {
+        "left": {"port": "sim://zap?ids=1,2", "ids": [1, 2]},
+        "right": {"port": "sim://zap?ids=1,3&baud=115200", "baud": 115200, "ids": [1, 3, 4]}}}))
+    r = cli("zap", "scan", "--buses", "all", "--fleet", str(fleet), "--ids", "0-10", "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    assert sorted((x["bus"], x["id"], x["baud"]) for x in jsonl(r.stdout)) == [
+        ("left", 1, 57600), ("left", 2, 57600), ("right", 1, 115200), ("right", 3, 115200)]
+    assert "bus right (sim://zap?ids=1,3&baud=115200): ID 4 of the fleet file did not answer" in r.stderr
+    r = cli("zap", "scan", "--buses", "all", "-p", "sim://zap", "--fleet", str(fleet))
+    assert r.exit_code == 2 and "not with -p" in r.stderr

@@ -373,14 +373,26 @@ def zap_map(ctx=None):
     return regmap
 
 
+def fleet_option(f, help="The fleet file giving each actuator's stroke (motion.part, motion.stroke_mm or a zap "
+                          "calibrate calibration), for --unit mm [env ZKZAP_ZAP_FLEET]."):
+    """``--fleet FILE``: the fleet file of the actuators' strokes and the machine's buses."""
+    return click.option("--fleet", "fleet_file", type=InputPath("fleet"), default=None, envvar="ZKZAP_ZAP_FLEET",
+                        metavar="FILE", help=help)(f)
+
+
+def buses_option(what):
+    """``--buses NAMES``: work on the buses the --fleet file names, each on its own thread
+    (:mod:`zkzap.api.buses`); ``what`` says what is done on each."""
+    return click.option("--buses", "bus_names", default=None, metavar="NAMES",
+                        help=f"{what} on the buses the --fleet file names (all, or NAMES like left,right), each on "
+                             "its own thread, instead of -p; every record names its bus.")
+
+
 def unit_options(f):
     """``--unit counts|mm`` and ``--fleet FILE`` (the fleet file that gives each actuator's
     stroke, see :mod:`zkzap.api.units`): positions in counts (the default) or millimetres, and
     speeds in mm/s; tables show counts beside millimetres."""
-    f = click.option("--fleet", "fleet_file", type=InputPath("fleet"), default=None, envvar="ZKZAP_ZAP_FLEET",
-                     metavar="FILE",
-                     help="The fleet file giving each actuator's stroke (motion.part, motion.stroke_mm or a "
-                          "zap calibrate calibration), for --unit mm [env ZKZAP_ZAP_FLEET].")(f)
+    f = fleet_option(f)
     f = click.option("--unit", type=Choice(["counts", "mm"]), default="counts", show_default=True,
                      help="Positions in counts (0..4095) or millimetres (and speeds in mm/s), by the strokes "
                           "of --fleet.")(f)

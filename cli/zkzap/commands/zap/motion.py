@@ -12,8 +12,9 @@ import click
 
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, CheckFailed, UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, FiniteRange, InputPath, IntRange, OutputPath, close_output, dry_run_option, exits,
-                       note, open_output, output_format, output_options, unit_options, unit_scales, warn)
+from ..options import (Choice, FiniteRange, InputPath, IntRange, OutputPath, buses_option, close_output,
+                       dry_run_option, exits, note, open_output, output_format, output_options, unit_options,
+                       unit_scales, warn)
 from .compose import _link_args, check_sim_args, link_options, open_link
 from .scan import IdList, _progress
 
@@ -81,9 +82,7 @@ def _raise_stopped(stopped):
 @click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Log format (default: by the suffix of -o; JSON Lines in a pipe; none on a terminal). With "
                    "-n: text lines, or the steps as json/jsonl.")
-@click.option("--buses", "bus_names", default=None, metavar="NAMES",
-              help="Play on the buses the --fleet file names (all, or NAMES like left,right), each on its own "
-                   "thread, instead of -p; a row may name its bus (a bus column); the log rows name it.")
+@buses_option("Play (a row may name its bus: a bus column)")
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
 @dry_run_option
@@ -301,6 +300,47 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
 
             raise DeviceError(f"stopped: {first.message}")
         raise CheckFailed(f"stopped: {first.message}")
+
+
+def scan_buses(ids, fmt, bus_names, fleet_file, common):
+    """zap scan --buses: every bus of the fleet file scanned at its baud rate, one thread each;
+    an ID the file puts on a bus that does not answer there is said."""
+    from ...api import buses
+    from ...api.zap import Bus
+    from ...io.writers import make_writer
+    from ..options import resolve_format
+    from .scan import SCAN_COLUMNS, SCAN_TABLE, _emit
+
+    if common["protocol"] != "ir":
+        raise UsageError("--buses: the IR protocol's buses (--protocol ir)")
+    specs = bus_specs(bus_names, fleet_file, common, "counts")
+    fmt = resolve_format(fmt)
+    writer = make_writer(fmt, sys.stdout, ["bus"] + SCAN_COLUMNS, table_columns=[("bus", "bus")] + SCAN_TABLE,
+                         title="mightyZAP actuators")
+    found = []
+
+    def work(link, spec, emit, cancel):
+        for rec in Bus.over(link).scan(ids, [spec.baud], retries=common["retries"],
+                                       on_warning=lambda text: warn(f"bus {spec.name}: {text}")):
+            if cancel.is_set():
+                return
+            emit(rec)
+
+    try:
+        for rec in buses.run(specs, work, open_bus=open_spec(common)):
+            _emit(writer, rec, found, fmt)
+    finally:
+        writer.close()
+    for spec in specs:
+        missing = sorted(set(spec.ids) - {r["id"] for r in found if r["bus"] == spec.name and r["status"] == "ok"})
+        if missing:
+            warn(f"bus {spec.name} ({spec.port}): ID{'s' if len(missing) > 1 else ''} "
+                 f"{', '.join(map(str, missing))} of the fleet file did not answer")
+    if not found:
+        from ...errors import NoReply
+
+        raise NoReply(f"no actuator answered on bus{'es' if len(specs) > 1 else ''} "
+                      f"{', '.join(s.name for s in specs)}")
 
 
 def _path_ids(path, text=None):

@@ -16,8 +16,8 @@ from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks  # noqa: F401
 from ...codec import zap
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, exits, format_option, id_option, note,
-                       protocol_options, resolve_format, unit_options, unit_scales, warn, zap_map,
+from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, buses_option, exits, fleet_option,
+                       format_option, id_option, note, protocol_options, resolve_format, unit_options, unit_scales, warn, zap_map,
                        zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .params import INT, NUMBER, IdType
@@ -85,7 +85,9 @@ def stored_consent(common, yes, action, registers):
 @link_options(baud_type=actuator_bauds(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
                                               "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
 @protocol_options(protocols=("ir", "modbus", "auto"))
-def scan(ids, fmt, **common):
+@buses_option("Scan (each at its baud rate)")
+@fleet_option
+def scan(ids, fmt, bus_names=None, fleet_file=None, **common):
     """Find every actuator on the bus: Echo to each ID at each baud rate, then read the model,
     firmware and return mode of those that answer.
 
@@ -115,6 +117,11 @@ def scan(ids, fmt, **common):
     from ...codec import modbus
     from ...io.writers import make_writer
 
+    if bus_names is not None:
+        from .motion import scan_buses
+
+        return scan_buses(ids, fmt, bus_names, fleet_file, common)
+    unit_scales("counts", fleet_file, [])         # a --fleet given is read all the same: a bad one refused
     bauds = common["baud"]
     fmt = resolve_format(fmt)
     protocols = ["ir", "modbus"] if common["protocol"] == "auto" else [common["protocol"]]

@@ -9,8 +9,8 @@ import click
 from ...codec import zap
 from ...errors import NO_REPLY, NoReply, UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, FiniteRange, IntRange, close_output, exits, note, open_output, output_options,
-                       protocol_options, unit_options, unit_scales, zap_map)
+from ..options import (Choice, FiniteRange, IntRange, buses_option, close_output, exits, note, open_output,
+                       output_options, protocol_options, unit_options, unit_scales, zap_map)
 from .compose import _link_args, link_options, open_link
 from .params import REGISTER
 from .scan import IdList
@@ -34,9 +34,7 @@ FORMATS = ("table", "jsonl", "json", "csv")
 @click.option("-f", "--format", "fmt", type=Choice(FORMATS), default=None,
               help="Record format (default: the live table on a terminal, else by the suffix of -o: .csv, .json, .jsonl; "
                    "jsonl in a pipe).")
-@click.option("--buses", "bus_names", default=None, metavar="NAMES",
-              help="Watch the buses the --fleet file names (all, or NAMES like left,right; their IDs, not "
-                   "--ids), each on its own thread, instead of -p; every row names its bus.")
+@buses_option("Watch the IDs of the fleet file's buses (not --ids)")
 @output_options
 @unit_options
 @link_options
