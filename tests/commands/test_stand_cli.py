@@ -304,3 +304,15 @@ def test_a_limit_on_a_sensors_field_and_on_a_rate(cli, tmp_path):
     r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "30", "-p", SIM, "-f", "jsonl",
             "--limit", "egt_c/s<=60", "--limit", "egt_c<=640,when=running")
     assert r.exit_code == 5 and "limit violated: egt_c/s=" in r.stderr and "(egt_c/s<=60)" in r.stderr, r
+
+
+def test_a_hung_start_ends_the_session_with_the_abort(cli):
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "-p", SIM, "-f", "jsonl",
+            "--hung-start", "2")
+    assert r.exit_code == 5, r
+    assert "ALARM: hung start: the ECU has been starting for 2 s" in r.stderr and "sent standby" in r.stderr
+    recs = jsonl(r.stdout)
+    assert [x["kind"] for x in recs].count("trip") == 1 and recs[-1]["kind"] == "rundown"
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "-p", SIM, "-f", "jsonl",
+            "--hung-start", "0", "--hot-start", "0", "--ids", "1")
+    assert r.exit_code == 0, r                                   # 0: not watched

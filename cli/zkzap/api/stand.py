@@ -28,6 +28,7 @@ class Stand:
         self.corrections = corrections
         self.answer = answer
         self.engine = engine
+        self.alarm_settings = {}                           # api.alarms.Alarms keywords the session's alarms take
         self.stats = _logbook.RunStats()
         self.clock = None                                  # the session's (link.clock)
         self.write = None                                  # how an ESR answer is sent (the session's source)

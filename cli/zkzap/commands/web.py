@@ -200,7 +200,7 @@ def _recording_options(f):
     """Where a console's records go and what it records them with, as on the command line."""
     from ..io import SESSION_FORMATS
     from .options import OutputPath, apply_options
-    from .zk.stand import logbook_option, sensor_options
+    from .zk.stand import alarm_options, logbook_option, sensor_options
 
     opts = [
         click.option("-o", "--output", type=OutputPath("records", formats=SESSION_FORMATS), default=None,
@@ -209,15 +209,7 @@ def _recording_options(f):
                           "(.csv, .json, .jsonl, .lp, .mcap, .xlsx; JSON Lines without one), as 'zk monitor -o' "
                           "does: created or replaced by the first record, trips and rundowns marked."),
         click.option("--append", is_flag=True, help="Append to --output (a CSV gets no second header)."),
-        click.option("--restart-egt", type=FiniteRange(0, 1000), default=None, metavar="DEGC",
-                     help="After a trip a start waits for the ECU's stop or standby with the rotor stopped and EGT "
-                          "below DEGC (default 150)."),
-        click.option("--hung-start", type=FiniteRange(0, 3600), default=None, metavar="S",
-                     help="A start still in ignition, preheat or the fuel ramp after S seconds is a hung start: an "
-                          "alarm, and a run of this console ends with the abort (default 90; 0: not watched)."),
-        click.option("--hot-start", type=FiniteRange(0, 2000), default=None, metavar="DEGC",
-                     help="EGT above DEGC during ignition, preheat or the fuel ramp is a hot start: an alarm, and a "
-                          "run of this console ends with the abort (default 850; 0: not watched)."),
+        alarm_options,
         sensor_options,
         logbook_option,
     ]
@@ -276,7 +268,7 @@ def _make_zk():
         from .. import web as webpkg
         from ..api.zk import Ecu
         from .zk.monitor import session_output
-        from .zk.stand import build_stand, session_sensors
+        from .zk.stand import alarm_settings, build_stand, session_sensors
         from .zk.telemetry import resolve_port
 
         webpkg.require()
@@ -285,8 +277,7 @@ def _make_zk():
         sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
                             controls=True, sensors=sensors, engine=engine, force=True)
-        alarms = {k: v for k, v in (("restart_egt_c", restart_egt), ("hung_start_s", hung_start),
-                                    ("hot_start_egt_c", hot_start)) if v is not None}
+        alarms = alarm_settings(restart_egt, hung_start, hot_start)
         url = resolve_port(port, sim)
         silence = timeout if timeout is not None else 2.0
         stand.start(silence)             # the external sensors' first lines: a silent one is exit 3

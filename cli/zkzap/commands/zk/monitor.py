@@ -345,8 +345,9 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             from ...api.alarms import Alarms, current
 
             alarms = current() or Alarms(tell_limits=False, notify=notify)
-            if stand is not None and stand.limits is not None:
-                alarms.settings(conditions=stand.limits.conditions)
+            if stand is not None:
+                alarms.settings(conditions=stand.limits.conditions if stand.limits is not None else (),
+                                **stand.alarm_settings)
             if on_update is not None:
                 on_update = _with_alarms(on_update, alarms)
         session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort, alarms=alarms,

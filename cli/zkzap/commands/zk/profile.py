@@ -10,8 +10,8 @@ from ...errors import USAGE, UsageError, ZkzapError
 from .. import CONTEXT, Command
 from ..options import (Choice, InputPath, OutputPath, abort_option, authorize, close_output,
                        dry_run_option, note, port_options, protocol_version_option, rate_option, yes_option)
-from .stand import (Finite, build_stand, check_output_dir, limit_options, logbook_option, raise_for_status, report,
-                    sensor_options, session_sensors)
+from .stand import (Finite, alarm_options, alarm_settings, build_stand, check_output_dir, limit_options,
+                    logbook_option, raise_for_status, report, sensor_options, session_sensors)
 from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -65,13 +65,15 @@ def example_text(kind="throttle") -> str:
 @protocol_version_option
 @log_options
 @limit_options
+@alarm_options
 @sensor_options
 @logbook_option
 @reconnect_option
 def profile(schedule, example, interpolate, rate, abort, summary_json, settle, average, steps_csv, fuel_density,
             dry_run, port, baud, stop_bits, timeout, sim, yes, protocol_version, fmt, output, append, snapshot, ids,
             stale_after, raw_log, limit, limits_files, on_limit, logbook, reconnect=None, aux=(), thrust_from=None,
-            fuel_flow_from=None, ambient_temp=None, ambient_pressure=None, air_pressure=None, engine=None):
+            fuel_flow_from=None, ambient_temp=None, ambient_pressure=None, air_pressure=None, engine=None,
+            restart_egt=None, hung_start=None, hot_start=None):
     """Run a throttle or RPM schedule on the engine while its telemetry is logged.
 
     SCHEDULE.csv has rows 'time_s,throttle_pct[,state]' or 'time_s,rpm=N[,state]' (an optional
@@ -129,7 +131,9 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
     if dry_run:
         extra = [n for n, v in (("limit", limit), ("limits", limits_files), ("on-limit", on_limit),
                                 ("logbook", logbook), ("steps-csv", steps_csv), ("settle", settle),
-                                ("average", average), ("fuel-density", fuel_density), ("engine", engine))
+                                ("average", average), ("fuel-density", fuel_density), ("engine", engine),
+                                ("restart-egt", restart_egt is not None), ("hung-start", hung_start is not None),
+                                ("hot-start", hot_start is not None))
                  if v] + list(sensors.given())
         if extra:
             raise UsageError(f"{extra[0]}: not with -n/--dry-run (nothing is run)")
@@ -154,7 +158,8 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
                                 ambient=sensors.ambient)
     summary_file = _check_summary(summary_json, schedule, output, raw_log)
     stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook, controls=True,
-                        averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density)
+                        averager=averager, force=True, sensors=sensors, engine=engine, density=fuel_density,
+                        alarms=alarm_settings(restart_egt, hung_start, hot_start))
     from ...codec import zk
 
     allow = authorize([zk.ControlFrame(f) for f in sched.frames()], what=f"schedule {name} on {url}",

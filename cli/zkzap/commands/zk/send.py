@@ -17,8 +17,8 @@ from ..complete import raw_fields
 from ..options import (Choice, FiniteFloat, FiniteRange, Integer, IntRange, SignedCommand, abort_option, apply_options,
                        authorize, dry_run_option, note, port_options, protocol_version_option, rate_option, warn,
                        yes_option)
-from .stand import (build_stand, check_output_dir, limit_options, logbook_option, raise_for_status, report,
-                    sensor_options, session_sensors, summarizer, summary_option)
+from .stand import (alarm_options, alarm_settings, build_stand, check_output_dir, limit_options, logbook_option,
+                    raise_for_status, report, sensor_options, session_sensors, summarizer, summary_option)
 from .telemetry import (TIMEOUT_HELP, errors_text, log_options, reconnect_option, resolve_port, session_exits,
                         zk_timeout_help)
 
@@ -49,7 +49,8 @@ _FOR_ONLY = {"rate": "--rate", "abort": "--abort", "end": "--end", "fmt": "--for
              "limit": "--limit", "limits_files": "--limits", "on_limit": "--on-limit", "logbook": "--logbook",
              "summary_json": "--summary-json", "reconnect": "--reconnect", "aux": "--aux",
              "thrust_from": "--thrust-from", "fuel_flow_from": "--fuel-flow-from", "ambient_temp": "--ambient-temp",
-             "ambient_pressure": "--ambient-pressure", "air_pressure": "--air-pressure", "engine": "--engine"}
+             "ambient_pressure": "--ambient-pressure", "air_pressure": "--air-pressure", "engine": "--engine",
+             "restart_egt": "--restart-egt", "hung_start": "--hung-start", "hot_start": "--hot-start"}
 
 
 def format_hex(frame) -> str:
@@ -81,6 +82,7 @@ def send_options(f):
                      help="Send once and exit without waiting for a status frame (TX-only wiring)."),
         log_options,
         limit_options,
+        alarm_options,
         sensor_options,
         logbook_option,
         summary_option,
@@ -100,7 +102,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
             rate=None, abort=None, end=None, no_wait=False, fmt=None, output=None, append=False, snapshot=None,
             ids=None, stale_after=3, raw_log=None, limit=(), limits_files=(), on_limit=None, logbook=None,
             summary_json=None, reconnect=None, aux=(), thrust_from=None, fuel_flow_from=None, ambient_temp=None,
-            ambient_pressure=None, air_pressure=None, engine=None, rpm_factor=None):
+            ambient_pressure=None, air_pressure=None, engine=None, rpm_factor=None, restart_egt=None, hung_start=None,
+            hot_start=None):
     """Print the frame (dry run), send it once, or keep sending it ``for_s`` seconds while logging
     the status frames (as ``zk monitor``). Everything is checked before the port is opened; on a
     real port a frame that can start the engine or run hardware needs consent; a frame that needs
@@ -114,7 +117,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
                                ("reconnect", reconnect), ("aux", aux or None), ("thrust_from", thrust_from),
                                ("fuel_flow_from", fuel_flow_from), ("ambient_temp", ambient_temp),
                                ("ambient_pressure", ambient_pressure), ("air_pressure", air_pressure),
-                               ("engine", engine)) if v is not None}
+                               ("engine", engine), ("restart_egt", restart_egt), ("hung_start", hung_start),
+                               ("hot_start", hot_start)) if v is not None}
     if dry_run:
         if for_s is not None:
             raise UsageError("for: not with -n/--dry-run (nothing is sent)")
@@ -154,7 +158,8 @@ def deliver(frame: bytes, *, dry_run: bool, port, baud, timeout, sim, yes, proto
     if for_s is not None:
         sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
-                            controls=controls, sensors=sensors, engine=engine)
+                            controls=controls, sensors=sensors, engine=engine,
+                            alarms=alarm_settings(restart_egt, hung_start, hot_start))
         check_output_dir(summary_json, "summary-json", records_to_stdout=output in (None, "-"))
     allow = authorize([zk.ControlFrame(frame)], what=f"{format_hex(frame)} to {url}", yes=yes, force=False,
                       simulated=is_simulator(url))

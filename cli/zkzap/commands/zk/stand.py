@@ -39,6 +39,36 @@ def limit_options(f):
     return apply_options(f, opts)
 
 
+ALARM_HELP = {
+    "restart_egt": "After a trip a start waits for the ECU's stop or standby with the rotor stopped and EGT below DEGC "
+                   "(default 150; in a shell, a batch and the browser console, where sessions follow one another).",
+    "hung_start": "A start still in ignition, preheat, the fuel ramp or restart after S seconds is a hung start: an "
+                  "alarm, and a session that controls the engine ends with its abort, exit 5 (default 90; 0: not "
+                  "watched).",
+    "hot_start": "EGT above DEGC during ignition, preheat or the fuel ramp is a hot start: an alarm, and a session "
+                 "that controls the engine ends with its abort, exit 5 (default 850; 0: not watched).",
+}
+
+
+def alarm_options(f):
+    """The start watches and the restart rule of the stand's alarms (zkzap.api.alarms)."""
+    opts = [
+        click.option("--restart-egt", type=FiniteRange(0, 1000), default=None, metavar="DEGC",
+                     help=ALARM_HELP["restart_egt"]),
+        click.option("--hung-start", type=FiniteRange(0, 3600), default=None, metavar="S",
+                     help=ALARM_HELP["hung_start"]),
+        click.option("--hot-start", type=FiniteRange(0, 2000), default=None, metavar="DEGC",
+                     help=ALARM_HELP["hot_start"]),
+    ]
+    return apply_options(f, opts)
+
+
+def alarm_settings(restart_egt=None, hung_start=None, hot_start=None) -> dict:
+    """The options given, as :class:`~zkzap.api.alarms.Alarms` keywords."""
+    return {k: v for k, v in (("restart_egt_c", restart_egt), ("hung_start_s", hung_start),
+                              ("hot_start_egt_c", hot_start)) if v is not None}
+
+
 def logbook_option(f):
     opts = [
         click.option("--logbook", type=OutputPath("database"), default=None, metavar="FILE",
@@ -213,7 +243,7 @@ def _limit_fields(sensors):
 
 
 def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, controls=False, averager=None,
-                force=False, sensors=None, engine=None, density=None):
+                force=False, sensors=None, engine=None, density=None, alarms=None):
     """A Stand for these options (None when none applies); raises UsageError (exit 2) first."""
     from ...api import limits as L
     from ...api.stand import Stand
@@ -234,7 +264,8 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
         lb.check_writable(logbook)
     if engine is not None and not engine.strip():
         raise UsageError("engine: an empty name; give the engine's name or serial (--engine K100-1234)")
-    if not conditions and not logbook and averager is None and not force and not sensors and engine is None:
+    if (not conditions and not logbook and averager is None and not force and not sensors and engine is None
+            and not alarms):
         return None
     aux = corrections = answer = None
     if sensors.specs:
@@ -258,8 +289,10 @@ def build_stand(*, limit=(), limits_files=(), on_limit=None, logbook=None, contr
                 return q.convert(aux.value(q.field, t))
         answer = PressureAnswer(pressure, q.describe(), notify=note)
         answer.quantity = q
-    return Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook,
-                 aux=aux, corrections=corrections, answer=answer, engine=engine.strip() if engine else None)
+    stand = Stand(L.LimitSet(conditions, on_limit, notify=note) if conditions else None, averager, logbook,
+                  aux=aux, corrections=corrections, answer=answer, engine=engine.strip() if engine else None)
+    stand.alarm_settings = dict(alarms or {})       # --restart-egt, --hung-start, --hot-start
+    return stand
 
 
 def raise_for_status(outcome, stand) -> None:
