@@ -99,3 +99,11 @@ def test_set_baud_modbus_writes_the_maps_code_and_verifies(cli):
     assert r.exit_code == 0 and "19200 baud (verified)" in r.stderr, r
     r = cli("zap", "set-baud", "--protocol", "modbus", "19200", "--id", "1", "--sim", "--no-restart")
     assert r.exit_code == 2 and r.stdout == ""
+
+
+def test_an_ir_only_command_refuses_the_modbus_environment(cli, monkeypatch):
+    monkeypatch.setenv("ZKZAP_ZAP_PROTOCOL", "modbus")
+    r = cli("zap", "echo", "--id", "1", "--sim")
+    assert r.exit_code == 2 and r.stdout == "" and "IR protocol only" in r.stderr
+    r = cli("zap", "load", "present-position", "--id", "1", "--sim")      # takes it: speaks Modbus
+    assert r.exit_code == 0 and r.stdout == "0\n", r

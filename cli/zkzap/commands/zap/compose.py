@@ -9,6 +9,7 @@ options (:func:`link_options`) are shared with ``zap scan``/``dump``/``move``/``
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
@@ -186,12 +187,19 @@ def _lent():
 
 
 def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0,), probe=None, stop_bits=1,
-              latency=None, low_latency=False, allow=None, protocol="ir", regmap=None, **_):
+              latency=None, low_latency=False, allow=None, protocol=None, regmap=None, **_):
     """Open the bus for a command; ``return_mode='auto'`` asks actuator ``probe`` first;
     ``allow``: the permissions its packets are given (see :func:`authorize`). When the command
     ends, a note says once how to lower a USB adapter's latency timer if the measured latency
     shows it."""
     lent = _lent()
+    if protocol is None:                  # a command that speaks the IR protocol only
+        from ..options import PROTOCOL_ENV
+
+        if os.environ.get(PROTOCOL_ENV, "ir").strip().lower() not in ("", "ir"):
+            raise UsageError(f"{PROTOCOL_ENV}={os.environ[PROTOCOL_ENV]}: this command speaks the IR protocol only "
+                             "(not yet Modbus RTU); unset it for this command")
+        protocol = "ir"
     mode = 1 if return_mode == "auto" else int(return_mode)
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
     if protocol == "modbus":
