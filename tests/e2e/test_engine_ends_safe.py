@@ -161,6 +161,8 @@ def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
             proc.communicate()
     assert proc.returncode == signals.status(sig), (signals.name(sig), moment, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    if sig in signals.INTERRUPT_SIGNALS and not early:          # Ctrl-C in control: the rundown is recorded
+        assert "rundown recorded" in err or "recording the rundown" in err, (signals.name(sig), moment, err)
     with Ecu(url, baud=115200) as ecu:                          # what the ECU says it was left in
         state = next(rec for rec in ecu.status() if rec.id == 1).sw_state_name
     assert state in ("standby", "stop"), (signals.name(sig), moment, err)
