@@ -103,7 +103,16 @@ def test_set_baud_modbus_writes_the_maps_code_and_verifies(cli):
 
 def test_an_ir_only_command_refuses_the_modbus_environment(cli, monkeypatch):
     monkeypatch.setenv("ZKZAP_ZAP_PROTOCOL", "modbus")
-    r = cli("zap", "echo", "--id", "1", "--sim")
+    r = cli("zap", "sync-move", "1:100", "--sim")
     assert r.exit_code == 2 and r.stdout == "" and "IR protocol only" in r.stderr
     r = cli("zap", "load", "present-position", "--id", "1", "--sim")      # takes it: speaks Modbus
     assert r.exit_code == 0 and r.stdout == "0\n", r
+
+
+def test_echo_modbus_is_a_read_of_the_model_number(cli):
+    r = cli("zap", "echo", "--protocol", "modbus", "--id", "1", "-n")
+    assert r.exit_code == 0 and r.stdout == "01 03 00 00 00 01 84 0A\n"
+    r = cli("zap", "echo", "--protocol", "modbus", "--id", "3", "--sim", "--count", "2")
+    assert r.exit_code == 0 and r.stdout.count("reply from ID 3") == 2, r
+    r = cli("zap", "echo", "--protocol", "modbus", "--id", "4", "--sim", "--sim-ids", "3", "--retries", "0")
+    assert r.exit_code == 3 and r.stdout == ""

@@ -271,8 +271,9 @@ class ModbusBus(ZapBus):
         return self.transact(modbus.read_registers(ident, first, 1), reply=True, data_len=3, timeout=timeout,
                              retries=retries, optional=True, check=False, quick=quick, early=early, window=window)
 
-    def echo(self, ident: int, **kw):
-        r = self.ping(ident, retries=self.retries)
+    def echo(self, ident: int, *, retries=None, **kw):
+        """:meth:`ping`, whose silence is :class:`~zkzap.errors.NoReply` (the connection check)."""
+        r = self.ping(ident, retries=self.retries if retries is None else retries)
         if r is None:
             from ..errors import NoReply
 

@@ -346,6 +346,7 @@ PROTOCOL_KEYS = ("protocol", "regmap")
 @_format("text", ("text", "table", "json", "jsonl", "csv"),
          "'text' prints one line per reply; the others give records with id, seq, error, errors, rtt_ms")
 @wire_options
+@protocol_options
 def echo(ident, count, interval, fmt, **common):
     """Echo (0xF1): the actuator answers with a feedback packet (connection check).
 
@@ -359,11 +360,21 @@ def echo(ident, count, interval, fmt, **common):
       zap echo -n                 # FF FF FF 00 02 F1 0C
       zap echo --id 3 -p /dev/ttyUSB0
       zap echo --id 3 --count 100 -p /dev/ttyUSB0 -f jsonl | jq .rtt_ms
+      zap echo --protocol modbus --id 1 -p /dev/ttyUSB0
+
+    With --protocol modbus (no Echo there) the connection check is a read of the map's first
+    register (the model number); an exception reply is an answer, its name in errors.
     """
-    pkt = zap.echo(ident)
-    if common["dry_run"]:
-        return deliver([pkt], **common)
-    if ident == zap.BROADCAST:
+    modbus = common["protocol"] == "modbus"
+    if modbus:
+        from ...codec import modbus as mb
+
+        pkt = mb.read_registers(ident, zap_map().registers[0].address, 1) if ident else b""
+    else:
+        pkt = zap.echo(ident)
+    if common["dry_run"] and pkt:
+        return deliver([pkt], **{k: v for k, v in common.items() if k not in PROTOCOL_KEYS})
+    if ident == (0 if modbus else zap.BROADCAST):
         raise UsageError("id: a broadcast Echo is never answered; give one actuator's ID")
     from ...errors import BadReply, NoReply
     from ...io.writers import make_writer
