@@ -116,6 +116,12 @@ class ZkConsole(Console):
         #: (``record.write(rec)``, closed with the console): as on the command line.
         self.stand = stand
         self.record = record
+        self._write = None            # the records' writes, made off the worker (zkzap.offload)
+        if record is not None:
+            from ..offload import Lane
+
+            # a full queue ends the console safely (its run with the abort), never the worker blocked
+            self._write = record.offload(Lane(f"--output {getattr(record, 'path', '')}", wait=False))
         self.command_name = command
         if stand is not None and stand.limits is not None:
             self.limits = stand.limits
@@ -219,7 +225,7 @@ class ZkConsole(Console):
                 from ..api.session import Outcome, trip_record
 
                 src = self.ecu.source
-                self.record.write(trip_record(Outcome(self._cut_as, aborted=sent), src.now(), src.clock, why=why))
+                self._write(trip_record(Outcome(self._cut_as, aborted=sent), src.now(), src.clock, why=why))
         self._engine_message()
         if not outcome.ok:
             self.log(f"engine control ended: {why}", "error")
@@ -287,8 +293,8 @@ class ZkConsole(Console):
     # -- session hooks (on the worker) ----------------------------------------------------------
 
     def _sink(self, rec):
-        if self.record is not None:
-            self.record.write(rec)            # whole records, as the command line writes them
+        if self._write is not None:
+            self._write(rec)                  # whole records, as the command line writes them
         if rec.get("kind") in ("trip", "rundown", "gap"):
             return                            # a session's event: the file's only
         now = time.time()
