@@ -442,6 +442,93 @@ def test_an_output_that_no_file_can_be_is_refused(path, name, where, files, port
     assert port.data == sent, f"{' '.join(argv)} sent to the port"
 
 
+# --- every input file can be a named pipe or a process substitution -------------------------
+
+def _inputs():
+    """(command path, input parameter name): one per command group and what the input holds
+    (the sub-commands of a group share their options' code), but a database (SQLite reads a
+    file of its own)."""
+    seen, out = set(), []
+    for path, cmd in commands():
+        if "listen" in {p.name for p in cmd.params} or path[0] == "sim":
+            continue                          # a server runs until stopped
+        for p in _params(cmd):
+            if type(p.type).__name__ != "InputPath" or p.type.holds in ("logbook",):
+                continue
+            key = (path[:-1], p.type.holds, isinstance(p, click.Option))
+            if key not in seen:
+                seen.add(key)
+                out.append((path, p.name))
+    return out
+
+
+INPUTS = _inputs()
+
+
+def test_the_input_walk_finds_every_kind():
+    kinds = {(" ".join(p), n) for p, n in INPUTS}
+    for expected in [("zk decode", "inputs"), ("zk report", "run_files"), ("zk monitor", "replay"),
+                     ("zk profile", "schedule")]:
+        assert expected in kinds, sorted(kinds)
+
+
+def _feed(fifo, data):
+    """A writer that opens the FIFO (waiting for its reader), writes ``data`` and closes it."""
+    import threading
+
+    def write():
+        try:
+            with open(fifo, "wb") as f:
+                f.write(data)
+        except OSError:
+            pass
+
+    thread = threading.Thread(target=write, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("path,name", INPUTS, ids=[f"{' '.join(p)} {n}" for p, n in INPUTS])
+def test_an_input_that_is_a_fifo_reads_as_its_file(path, name, files, port, tmp_path):
+    import os
+
+    cmd = dict(commands())[tuple(path)]
+    param = next(p for p in cmd.params if p.name == name)
+    line = Line(path, cmd)
+    base = _valid_line(path, cmd, files, port)
+    line.args = dict(base.args)
+    line.opts = {k: v for k, v in base.opts.items() if type(v[0].type).__name__ != "OutputPath"}
+    by = {p.name: p for p in cmd.params}
+    for pname in ("port", "ports"):
+        if pname in line.opts:
+            if name == "replay":
+                del line.opts[pname]          # a replay is the port
+            else:
+                line.opts[pname] = (by[pname], _sim_for(path))
+    for pname, value in [("count", "3"), ("for_s", "0.5"), ("duration", "0.5"), ("fast", True), ("dry_run", True),
+                         ("terminal", True)]:
+        if pname in by and pname not in line.opts:
+            line.opts[pname] = (by[pname], value)
+            if _invoke(line.argv(), check=True)[0]:
+                del line.opts[pname]
+    source = files[param.type.holds]
+    with open(source, "rb") as f:
+        data = f.read()
+    argv = line.argv((param, source))
+    code, out, err = _invoke(argv, check=False)
+    fifo = tmp_path / ("in" + os.path.splitext(source)[1])
+    os.mkfifo(fifo)
+    writer = _feed(fifo, data)
+    fargv = line.argv((param, str(fifo)))
+    fcode, fout, ferr = _invoke(fargv, check=False)
+    writer.join(10 if code == 0 else 0.5)
+    if writer.is_alive():
+        os.close(os.open(fifo, os.O_RDONLY | os.O_NONBLOCK))     # let the writer go
+    assert code != 0 or not writer.is_alive(), f"{' '.join(fargv)}: never read the FIFO"
+    assert fcode == code, f"{' '.join(fargv)}: exit {fcode} (the file: {code}): {ferr}"
+    assert bool(fout) == bool(out), (out, fout)
+
+
 def _serve_briefly(argv):
     """Run a serving command (a simulator) as a process until it says where it serves, then
     stop it with SIGTERM; its exit status (2: refused before it served)."""

@@ -12,6 +12,7 @@ capture could not tell: a sniffer on a half-duplex line) and, for mightyZAP feed
 from __future__ import annotations
 
 from ..codec import zap, zk
+from ..infile import open_input
 from ..link.capture import CaptureFrames
 from ..link.clock import iso_utc  # noqa: F401 - the one rendering of a date, re-exported
 from ..link.pcapng import INBOUND, OUTBOUND, Reader
@@ -88,17 +89,17 @@ def capture_inputs(inputs, binary: bool):
     paths = [p for p in inputs if p != "-"]
     if not paths or len(paths) != len(inputs):
         return None
-    import os
+    from ..infile import is_input
 
     flags = []
     for p in paths:
-        if not os.path.isfile(p):
+        if not is_input(p):
             if binary:
                 return None           # the raw reader names the unreadable file
             return None if not p.lower().endswith(CAPTURE_SUFFIXES) else _missing(p)
         pc = is_pcapng(p)
         if not pc and p.lower().endswith(CAPTURE_SUFFIXES):
-            with open(p, "rb") as f:
+            with open_input(p) as f:
                 raise CaptureError(f"{p}: not a pcapng capture: {describe_start(f.read(64))}")
         flags.append(pc)
     if not any(flags):
@@ -181,6 +182,6 @@ def replay_source(path, fast=False):
     if path.lower().endswith(CAPTURE_SUFFIXES):
         from ..link.pcapng import CaptureError, describe_start
 
-        with open(path, "rb") as f:
+        with open_input(path) as f:
             raise CaptureError(f"{path}: not a pcapng capture: {describe_start(f.read(64))}")
     return ReplaySource(path, fast=fast)

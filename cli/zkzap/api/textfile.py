@@ -18,6 +18,7 @@ first bad byte: ``schedule: run.csv:3: not UTF-8 text (byte 0xFF at byte 41)``.
 from __future__ import annotations
 
 from ..errors import UsageError
+from ..infile import open_input
 
 #: The largest document read whole (bytes): far above any schedule, limits, batch, fleet or
 #: summary file (a backup of 254 actuators is about 0.5 MB); /dev/zero is refused, not read.
@@ -79,7 +80,7 @@ def read_bytes(path, what: str, limit: int = MAX_DOCUMENT) -> tuple:
     else:
         name = str(path)
         try:
-            with open(path, "rb") as f:
+            with open_input(path) as f:
                 data = _read_limited(f, limit, what, name)
         except OSError as e:
             raise UsageError(f"{what}: cannot read {path}: {e.strerror or e}") from None
@@ -150,7 +151,7 @@ def iter_lines(path, what: str, expected: str = "", max_line: int = MAX_LINE):
     else:
         name = str(path)
         try:
-            stream = open(path, "rb")
+            stream = open_input(path)
         except OSError as e:
             raise UsageError(f"{what}: cannot read {path}: {e.strerror or e}") from None
         close = True

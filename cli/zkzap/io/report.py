@@ -21,6 +21,7 @@ from array import array
 
 from ..codec.fields import beyond_float, quote_value
 from ..errors import UsageError, clip
+from ..infile import open_input
 
 #: Time-history panels: (title, unit label, [(column, legend label)]).
 PANELS = (
@@ -268,7 +269,7 @@ def load_run(path, extra=()) -> Run:
     if path == "-":
         return _load_stdin(extra)
     try:
-        with open(path, "rb") as f:
+        with open_input(path) as f:
             head = f.read(4096)
     except OSError as e:
         raise UsageError(f"run: cannot read {path}: {e.strerror}") from None
@@ -482,7 +483,7 @@ def _load_mcap(path, run):
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader
 
-    with open(path, "rb") as f:
+    with open_input(path) as f:
         try:
             for _schema, channel, message in NonSeekingReader(f).iter_messages():
                 if not channel.topic.startswith("/zk/status/"):

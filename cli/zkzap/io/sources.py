@@ -12,6 +12,7 @@ import sys
 
 from ..codec.hexfmt import HexError, HexSkips, iter_hex_stream, parse_hex
 from ..errors import UsageError
+from ..infile import open_input
 
 CHUNK = 1 << 16
 
@@ -23,7 +24,7 @@ def binary_chunks(paths):
     for path in paths:
         if path != "-":
             try:
-                open(path, "rb").close()
+                open_input(path).close()
             except OSError as e:
                 raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
     return _binary_chunks(paths)
@@ -36,7 +37,7 @@ def _binary_chunks(paths):
             close = False
         else:
             try:
-                stream = open(path, "rb")
+                stream = open_input(path)
             except OSError as e:
                 raise UsageError(f"input: cannot read {path}: {e.strerror}") from None
             close = True

@@ -29,6 +29,7 @@ import struct
 import threading
 
 from ..errors import OutputError, UsageError
+from ..infile import open_input
 from ..signals import held
 
 MAGIC = b"\x0a\x0d\x0d\x0a"
@@ -230,7 +231,7 @@ def is_pcapng(path: str) -> bool:
     if not path or path == "-":
         return False
     try:
-        with open(path, "rb") as f:
+        with open_input(path) as f:
             return f.read(4) == MAGIC
     except OSError:
         return False
@@ -287,7 +288,7 @@ class Reader:
         self.packets = 0
         self.interfaces = []          # (protocol, name, tsresol divisor), or None: skipped
         try:
-            self._f = open(path, "rb")
+            self._f = open_input(path)
         except OSError as e:
             raise UsageError(f"capture: cannot read {path}: {e.strerror}") from None
         try:

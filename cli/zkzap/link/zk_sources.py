@@ -15,6 +15,7 @@ from collections import deque
 from ..codec import zk
 from ..codec.framing import SignalLock, ZkFramer
 from ..errors import PortError, UsageError
+from ..infile import open_input
 from .clock import ReplayClock, SessionClock
 from .zk_port import READ_SIZE, READ_SLICE_S, ZkLink
 
@@ -237,7 +238,7 @@ class ReplaySource(PacedReplay):
 
     def __init__(self, path, fast=False):
         try:
-            self.file = open(path, "rb")
+            self.file = open_input(path)
         except OSError as e:
             raise UsageError(f"replay: cannot read {path}: {e.strerror}") from None
         self.path = path

@@ -461,7 +461,9 @@ def monitor(port, baud, stop_bits, timeout, sim, replay, fast, fmt, output, appe
             raise UsageError("replay: give --replay FILE or a port (-p/--sim), not both")
         if keepalive or raw_log:
             raise UsageError(f"{'keepalive' if keepalive else 'raw-log'}: not with --replay")
-        if not os.path.isfile(replay):
+        from ...infile import is_input
+
+        if not is_input(replay):
             raise UsageError(f"replay: cannot read {replay}: no such file")
         if baud == "auto":
             raise UsageError("baud: auto makes no sense with --replay (a recording has no line settings); "

@@ -1,0 +1,131 @@
+"""Every input file zkzap reads by name is opened here, so that one it cannot open twice is read
+once.
+
+A regular file can be opened as often as a reader likes: a peek at its first bytes (is it a
+pcapng capture? text or bytes?) and then the reading itself. A named pipe, a process
+substitution (``<(cat run.csv)``: ``/dev/fd/63``, a pipe) or a character device cannot: a second
+``open()`` of a FIFO waits for a second writer, a pipe's bytes go to whoever read them first, and
+the peeked bytes were lost. :func:`open_input` gives every reader of such an input its own view
+of the same stream, from its first byte: what the stream gave is kept for the later views up to
+:data:`HEAD` bytes (what a peek reads), and the view that reads on past that reads the stream
+itself, as it comes — so a live pipe is still decoded as its bytes arrive, in constant memory.
+A view that would need bytes another view already took beyond :data:`HEAD` is an ``OSError``
+naming it (no reader of zkzap does that).
+
+:func:`is_input` says whether a path names something to read (a file, a FIFO, a device: not a
+directory, not missing) — never ``os.path.isfile``, which says no to a pipe.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import stat
+
+#: The bytes of a stream kept for its later readers (a peek and a capture's first blocks).
+HEAD = 1 << 16
+
+_shared: dict = {}
+
+
+def is_input(path) -> bool:
+    """Whether ``path`` names something that can be read: not missing and not a directory."""
+    try:
+        return not stat.S_ISDIR(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
+
+
+def regular(path) -> bool:
+    """Whether ``path`` is a regular file (which may be opened and read again)."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
+
+
+def open_input(path):
+    """``path`` opened for reading bytes (a buffered binary stream); see the module's text. An
+    ``OSError`` as from :func:`open`."""
+    if regular(path) or not is_input(path):
+        return open(path, "rb")           # a regular file, or open's own error (missing, a directory)
+    st = os.stat(path)
+    key = (st.st_dev, st.st_ino, st.st_rdev)
+    shared = _shared.get(key)
+    if shared is None or shared.closed:
+        shared = _shared[key] = _Shared(open(path, "rb", buffering=0), str(path))
+    return io.BufferedReader(_View(shared), buffer_size=1 << 16)
+
+
+class _Shared:
+    """One stream read once, its first :data:`HEAD` bytes kept for every view."""
+
+    def __init__(self, raw, name):
+        self.raw, self.name = raw, name
+        self.head = bytearray()
+        self.taken = 0                    # bytes of the stream read so far (beyond head: not kept)
+        self.views = 0
+        self.closed = False
+
+    def read_at(self, pos: int, n: int) -> bytes:
+        if pos < len(self.head):
+            return bytes(self.head[pos:pos + n])
+        if pos != self.taken:
+            raise OSError(f"{self.name}: a stream read once, and its bytes at {pos} were read by another reader")
+        block = self.raw.read(n)
+        if block:
+            if self.taken < HEAD and len(self.head) == self.taken:
+                self.head += block[:HEAD - len(self.head)]
+            self.taken += len(block)
+        return block or b""
+
+    def release(self):
+        self.views -= 1
+        if self.views <= 0 and self.taken > HEAD:
+            self.close()                  # nothing later can read it from its start
+
+    def close(self):
+        if not self.closed:
+            self.closed = True
+            self.raw.close()
+
+
+class _View(io.RawIOBase):
+    """One reader's view of a :class:`_Shared` stream, from its first byte."""
+
+    def __init__(self, shared):
+        super().__init__()
+        self._s = shared
+        self._pos = 0
+        shared.views += 1
+
+    def readable(self):
+        return True
+
+    def seekable(self):
+        return True
+
+    def fileno(self):
+        return self._s.raw.fileno()
+
+    def readinto(self, b):
+        data = self._s.read_at(self._pos, len(b))
+        b[:len(data)] = data
+        self._pos += len(data)
+        return len(data)
+
+    def tell(self):
+        return self._pos
+
+    def seek(self, pos, whence=0):
+        if whence == 1:
+            pos += self._pos
+        if whence == 2 or pos < 0 or (pos != self._pos and pos > len(self._s.head)):
+            raise io.UnsupportedOperation(f"{self._s.name}: a stream is read once, in order")
+        self._pos = pos
+        return pos
+
+    def close(self):
+        if not self.closed:
+            self._s.release()
+        super().close()
