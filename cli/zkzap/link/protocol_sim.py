@@ -17,7 +17,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..sim import make_device
 from ..errors import InvalidValue
-from ..sim.base import Clock, keep_wire_time, parse_number
+from ..sim.base import Clock, VirtualClock, keep_wire_time, parse_number
 
 
 class Serial(SerialBase):
@@ -39,7 +39,11 @@ class Serial(SerialBase):
             self._device, self._clock = found
         else:
             try:
-                self._clock = Clock(parse_number("speed", options.pop("speed", "1"), 0.001, 10000))
+                kind_of_clock = options.pop("clock", "real")
+                if kind_of_clock not in ("real", "virtual"):
+                    raise ValueError(f"clock: {kind_of_clock!r}; allowed real, virtual")
+                speed = parse_number("speed", options.pop("speed", "1"), 0.001, 10000)
+                self._clock = VirtualClock() if kind_of_clock == "virtual" else Clock(speed)
                 self._device = keep_wire_time(make_device(kind, **options), self._clock)
             except (TypeError, ValueError) as e:
                 # bad input (exit 2 naming the option), not a port failure
@@ -81,6 +85,8 @@ class Serial(SerialBase):
     def read(self, size=1):
         if not self.is_open:
             raise PortNotOpenError()
+        if self._clock.virtual:
+            return self._read_virtual(size)
         deadline = None if self._timeout is None else time.monotonic() + self._timeout
         while True:
             self._pump()
@@ -94,6 +100,22 @@ class Serial(SerialBase):
             if deadline is not None:
                 delay = min(delay, deadline - now)
             time.sleep(max(delay, 0.0005))
+        data = bytes(self._rx[:size])
+        del self._rx[:size]
+        return data
+
+    def _read_virtual(self, size):
+        """On a virtual clock: what is there, else the clock moves on to the device's next byte
+        (or the timeout) and what came by then; returns as soon as any byte is there."""
+        clock = self._clock
+        end = clock.now() + (1.0 if self._timeout is None else max(0.0, self._timeout))
+        while True:
+            self._pump()
+            now = clock.now()
+            if self._rx or now >= end:
+                break
+            wake = self._device.next_wakeup(now)
+            clock.advance((end if wake is None or wake > end else wake) - now)
         data = bytes(self._rx[:size])
         del self._rx[:size]
         return data

@@ -39,6 +39,9 @@ def parse_number(key: str, value, lo=None, hi=None) -> float:
 class Clock:
     """Model time: real monotonic time scaled by ``speed`` (``speed=10`` runs ten times faster)."""
 
+    #: Whether time passes only when a reader waits on it (:class:`VirtualClock`).
+    virtual = False
+
     def __init__(self, speed: float = 1.0):
         if not isinstance(speed, (int, float)) or speed != speed or not 0 < speed < float("inf"):
             raise InvalidValue(f"speed: {speed} is out of range; allowed a finite number > 0")
@@ -53,6 +56,32 @@ class Clock:
         """Real seconds until ``model_seconds`` of model time have passed."""
         return max(0.0, model_seconds / self.speed)
 
+
+
+class VirtualClock(Clock):
+    """Model time that passes only when the host waits (``sim://zap?clock=virtual``): a read
+    that finds nothing moves the clock on to the device's next byte or the read's timeout,
+    whichever is sooner, and a sleep of the host is a jump. A program that waits 150 ms for a
+    reply that never comes takes microseconds; every time it measures (round trips, windows,
+    latencies) is the model's, exact and the same on every run, however loaded the machine.
+    The clock is the host's too: a bus on such a port reads it instead of the system's."""
+
+    virtual = True
+
+    def __init__(self, start: float = 0.0):
+        self.speed = 1.0
+        self._t = float(start)
+
+    def now(self) -> float:
+        return self._t
+
+    def advance(self, seconds: float) -> None:
+        """Let ``seconds`` of model time pass."""
+        if seconds > 0:
+            self._t += seconds
+
+    def real_delay(self, model_seconds: float) -> float:
+        return 0.0
 
 
 def keep_wire_time(device, clock: "Clock"):

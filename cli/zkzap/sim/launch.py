@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 
 from . import INSTANCES
 from ..errors import InvalidValue
-from .base import Clock, keep_wire_time
+from .base import Clock, VirtualClock, keep_wire_time
 
 __all__ = ["Simulator", "start", "start_zk", "start_zap"]
 
@@ -181,7 +181,7 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
               faults: Sequence[Fault] = (), state: Optional[str] = None, turnaround: Optional[float] = None,
               gap: Optional[float] = None, speed: float = 1.0, transport: Transport = "inprocess",
               host: str = "127.0.0.1", port: int = 0, replay: Optional[CapturePath] = None,
-              protocol: Literal["ir", "modbus"] = "ir") -> Simulator:
+              protocol: Literal["ir", "modbus"] = "ir", virtual: bool = False) -> Simulator:
     """Start the actuator-bus simulator (an :class:`~zkzap.sim.zap_actuators.ActuatorBus`):
     actuators with ``ids`` (integers, or ``(id, baud)`` pairs for one at another rate; default
     ID 0, or with ``replay`` the IDs that answered in the capture) at
@@ -191,6 +191,9 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
     keeping stored registers across runs), the reply timing — ``turnaround`` (milliseconds from
     a command's last byte to the reply's first, 0..1000, default 2) and ``gap`` (milliseconds
     between two reply bytes, 0..100, default 0), as ``zkzap sim zap --turnaround --gap``.
+    ``virtual`` (in-process only): its model time passes only while the host waits
+    (:class:`~zkzap.sim.base.VirtualClock`), and a :class:`zkzap.Bus` on it reads that clock:
+    a window that closes in silence costs no real time, and every run is the same.
     InvalidValue (a UsageError and a ValueError) names a bad argument.
 
     ``replay`` (the path of a zkzap mightyZAP capture) answers as recorded, as ``zkzap sim zap
@@ -266,7 +269,9 @@ def start_zap(*, ids: Union[Iterable[Union[int, tuple[int, int]]], str, None] = 
         clock = Clock(speed)
         return Simulator("zap", keep_wire_time(ZapReplay(replay, bus, recorded), clock), clock, transport, host,
                          port)
-    clock = Clock(speed)
+    if virtual and transport != "inprocess":
+        raise InvalidValue("virtual: only an in-process simulator has a virtual clock")
+    clock = VirtualClock() if virtual else Clock(speed)
     return Simulator("zap", keep_wire_time(bus, clock), clock, transport, host, port)
 
 

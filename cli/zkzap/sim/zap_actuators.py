@@ -35,6 +35,9 @@ corrupt        replies with a wrong checksum (alias: checksum)
 truncate[=N]   replies cut short by N bytes (default 2)
 wrong-id[=ID]  replies carry another ID (default ID + 1)
 delay=MS       replies MS model milliseconds late (default 20)
+noise[=N]      N stray bytes (default 1) on the line before each reply (a line fault)
+drop[=N]       N bytes (default 1) of each reply lost on the line, from its middle
+twice          each reply sent twice (two replies where one was due)
 stuck          the rod is blocked: ``moving`` stays 1 and the position does not change
 echo           the adapter echoes the host's bytes back, like a half-duplex adapter (bus-wide)
 =============  ===========================================================================
@@ -46,6 +49,7 @@ import bisect
 import json
 import math
 import os
+import random
 from collections import deque
 
 from ..codec import zap
@@ -107,12 +111,12 @@ FAULT_KINDS = {
     "overload": "overload", "voltage": "voltage", "silent": "silent", "no-reply": "silent",
     "noreply": "silent", "mute": "silent", "corrupt": "corrupt", "checksum": "corrupt",
     "truncate": "truncate", "truncated": "truncate", "wrong-id": "wrong-id", "delay": "delay",
-    "stuck": "stuck", "echo": "echo", "locked": "locked",
+    "stuck": "stuck", "echo": "echo", "locked": "locked", "noise": "noise", "drop": "drop", "twice": "twice",
 }
 FAULT_HELP = ("overload, voltage[=V], silent, corrupt, truncate[=N], wrong-id[=ID], delay=MS, stuck, "
-              "echo, locked (Modbus)")
+              "echo, locked (Modbus), noise[=N], drop[=N], twice")
 #: Faults that change replies (COUNT applies to them).
-REPLY_FAULTS = ("silent", "corrupt", "truncate", "wrong-id", "delay")
+REPLY_FAULTS = ("silent", "corrupt", "truncate", "wrong-id", "delay", "drop", "noise", "twice")
 
 
 class NoActuator(InvalidValue, KeyError):
@@ -180,11 +184,13 @@ def parse_fault(text: str):
             raise InvalidValue(f"fault {text!r}: voltage {value} is out of range; allowed 0..25.5 V")
         if kind == "delay" and not 0 <= value <= 60000:
             raise InvalidValue(f"fault {text!r}: delay {value} is out of range; allowed 0..60000 ms")
+        if kind in ("noise", "drop") and not 1 <= value <= 255:
+            raise InvalidValue(f"fault {text!r}: {kind} {value} is out of range; allowed 1..255 bytes")
         if kind == "truncate" and not 1 <= value <= 255:
             raise InvalidValue(f"fault {text!r}: truncate {value} is out of range; allowed 1..255 bytes")
         if kind == "wrong-id" and not 0 <= value <= 254:
             raise InvalidValue(f"fault {text!r}: wrong-id {value} is out of range; allowed 0..254")
-        if kind in ("overload", "silent", "corrupt", "stuck", "echo"):
+        if kind in ("overload", "silent", "corrupt", "stuck", "echo", "twice"):
             raise InvalidValue(f"fault {text!r}: {kind} takes no value")
     return ident, kind, value, count
 
@@ -254,6 +260,11 @@ class Actuator:
         self.faults = {}                  # kind -> Fault (reply faults)
         self.nv_dirty = False             # stored registers changed since the last save
         self.turnaround = TURNAROUND      # processing time before a reply starts (model seconds)
+        self.own_turnaround = None        # this actuator's own (None: the bus's)
+        self.jitter = 0.0                 # up to this much more, at random, on every reply
+        self.fast = False                 # behind a link that is not a UART at the baud rate (USB-CDC,
+        #                                   a TCP bridge, a microcontroller): it hears a request as it
+        #                                   is written and its reply takes no time on the wire
         self.power_on(0.0)
 
     # -- registers ----------------------------------------------------------------------------
@@ -516,6 +527,14 @@ class Actuator:
             elif kind == "truncate":
                 cut = 2 if f.value is None else int(f.value)
                 reply = reply[:max(0, len(reply) - cut)]
+            elif kind == "drop":
+                cut = 1 if f.value is None else int(f.value)
+                mid = max(3, len(reply) // 2)
+                reply = reply[:mid] + reply[mid + cut:]
+            elif kind == "noise":
+                reply = bytes([0x55] * (1 if f.value is None else int(f.value))) + reply
+            elif kind == "twice":
+                reply = reply + reply
         return t, reply
 
     # -- persistence --------------------------------------------------------------------------
@@ -546,6 +565,27 @@ _REG_AT = {}
 for _r in zap.REGISTERS:
     for _a in range(_r.address, _r.address + _r.size):
         _REG_AT[_a] = _r
+
+
+#: A reply of an actuator behind a link that is not a UART takes this share of its wire time.
+FAST_SHARE = 0.02
+
+
+class Heard:
+    """One command an actuator heard (the simulator's ground truth): ``t`` (model time),
+    ``slot`` (which actuator, stable across ID changes), ``ident`` (its ID when it heard it),
+    ``packet``, ``reply`` (what it answered, before any fault; None: no reply), ``sent`` (what
+    went on the line after the faults; None: nothing) and ``at`` (when that reply starts)."""
+
+    __slots__ = ("t", "slot", "ident", "packet", "reply", "sent", "at")
+
+    def __init__(self, t, slot, ident, packet, reply, sent, at):
+        self.t, self.slot, self.ident, self.packet, self.reply, self.sent, self.at = \
+            t, slot, ident, packet, reply, sent, at
+
+    def __repr__(self):
+        return (f"Heard(t={self.t:.6f}, slot={self.slot}, id={self.ident}, {self.packet.hex(' ')}, "
+                f"reply={self.reply.hex(' ') if self.reply else None})")
 
 
 class _Byte:
@@ -592,8 +632,19 @@ class ActuatorBus:
         self.on_collision = None
         self._framers = {}
         self._line = []                   # _Byte not yet delivered to the host, by due time
+        #: The ground truth (None until :meth:`record_truth`): a :class:`Heard` for every command
+        #: an actuator heard, with what it answered.
+        self.truth = None
+        self._rng = random.Random(0)      # reply jitter and fault bytes: the same on every run
 
     # -- Python API for tests -----------------------------------------------------------------
+
+    def record_truth(self, seed=0) -> list:
+        """Keep the ground truth of the line from now on (:attr:`truth`, a list of
+        :class:`Heard`), and seed the randomness of jitter and fault bytes with ``seed``."""
+        self.truth = []
+        self._rng = random.Random(seed)
+        return self.truth
 
     def actuator(self, ident: int) -> Actuator:
         """The first actuator whose ID is ``ident`` (:class:`NoActuator`, a KeyError, if none)."""
@@ -729,34 +780,44 @@ class ActuatorBus:
         replies = []
         stored = False
         for a in targets:
-            a.turnaround = self.turnaround
-            r = a.handle(pkt, now)
+            a.turnaround = self.turnaround if a.own_turnaround is None else a.own_turnaround
+            if a.jitter:
+                a.turnaround += self._rng.random() * a.jitter
+            heard = now - (len(pkt) - 1) * wire_time(1, baud or a.baud) * self.wire_scale if a.fast else now
+            was = a.ident
+            r = a.handle(pkt, heard)
             if a.nv_dirty:
                 stored = True
                 a.nv_dirty = False
+            faulted = None
             if r is not None:
                 faulted = a.apply_faults(r[0], r[1])
                 if faulted is not None and faulted[1]:
                     replies.append((faulted[0], faulted[1], r[2], a))
+            if self.truth is not None:
+                self.truth.append(Heard(heard, a.slot, was, bytes(pkt), r[1] if r is not None else None,
+                                        faulted[1] if faulted is not None else None,
+                                        faulted[0] if faulted is not None else None))
         if stored:
             self.save()
         replies.sort(key=lambda r: r[0])
         starts = []
         for t, data, rbaud, a in replies:
-            byte = wire_time(1, rbaud) * self.wire_scale
+            byte = wire_time(1, rbaud) * self.wire_scale * (FAST_SHARE if a.fast else 1.0)
             start = max(t, a.tx_free)     # one actuator sends one reply at a time
             # two transmitters are never in step: a reply that starts with another is a byte behind
             if any(abs(start - s) < byte for s in starts):
                 start = max(starts) + byte
             starts.append(start)
-            self._send(start, data, rbaud, a.ident)
+            self._send(start, data, rbaud, a.ident, byte)
             a.tx_free = start + len(data) * (byte + self.gap)
 
-    def _send(self, start, data, baud, ident) -> None:
+    def _send(self, start, data, baud, ident, byte=None) -> None:
         """An actuator's reply on the line from ``start``: the host's UART delivers its first
         byte when that has crossed, the rest when the reply has (a receive FIFO); with ``gap``
         every byte on its own. A byte that meets another reply's garbles both."""
-        byte = wire_time(1, baud) * self.wire_scale
+        if byte is None:
+            byte = wire_time(1, baud) * self.wire_scale
         step = byte + self.gap
         n = len(data)
         last_end = start + (n - 1) * step + byte
