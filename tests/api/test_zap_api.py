@@ -206,6 +206,11 @@ def test_the_late_window_and_the_latency_hint_from_python():
             assert bus.echo(1).rtt >= 0.3
         with Bus(sim.url, retries=0, timeout=0.5) as bus:                  # or a wider window
             assert bus.echo(1).rtt >= 0.3
+        with Bus(sim.url, retries=0) as bus:
+            # what was learned of the port serves the next Bus on it: an actuator known to answer
+            # after the window is waited for as long as it takes
+            assert bus.echo(1).rtt >= 0.3
+    with start_zap(ids=[1], turnaround=300) as sim:
         with Bus(sim.url, retries=0) as bus:                               # the default window: 150 ms
             with pytest.raises(NoReply) as e:
                 bus.echo(1)

@@ -31,7 +31,6 @@ imported when the port opens.
 
 from __future__ import annotations
 
-import time
 TYPE_CHECKING = False
 
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
@@ -536,7 +535,7 @@ class Bus:
         margin = self.load(ident, "end-compliance-margin")
         if goal != position and notify is not None:
             notify(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits")
-        start = time.monotonic()
+        start = self.link.now()
         first = None
         while True:
             pos, moving = self._position_moving(ident)
@@ -551,11 +550,11 @@ class Bus:
                 why = "; the force is off" if not force else ""
                 raise CheckFailed(f"ID {ident} stopped at {pos}, {abs(pos - goal)} away from the goal {goal}{why}",
                                   ident=ident, position=pos, goal=goal)
-            if time.monotonic() - start >= timeout:
+            if self.link.now() - start >= timeout:
                 raise NoReply(f"ID {ident} still moving after {timeout:g} s (position {pos}, goal {goal})",
                               ident=ident, position=pos, goal=goal, timeout=timeout)
             if poll:
-                time.sleep(poll)
+                self.link.sleep(poll)
 
     def _position_moving(self, ident: int) -> tuple[int, int]:
         """present-position and moving, read in one Load Data (present-position .. moving)."""

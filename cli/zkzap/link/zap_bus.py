@@ -68,8 +68,9 @@ from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, Usa
 from . import stop
 from .devices import Devices
 from .port import close_port, wire_time
-from .zap_timing import (FLOOR, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE, QUICK_MARGIN,
-                         RESTART_PAUSE, RETRIES, host_margin, policy_for, usb_latency, window_for)
+from .zap_timing import (FLOOR, HORIZON, K, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE,
+                         QUICK_MARGIN, RESTART_PAUSE, RETRIES, horizon_for, host_margin, policy_for, usb_latency,
+                         window_for)
 
 __all__ = ["ZapBus", "Reply", "open_bus", "device_error", "error_message", "stored_writes", "leaves_protocol",
            "writes_id", "is_simulated", "host_margin", "usb_latency", "wire_time", "FLOOR", "INTER_BYTE",
@@ -82,6 +83,10 @@ READ_CHUNK = 4096
 #: How long after its window closed a reply is still recognised as the answer of an old attempt
 #: (and never taken for another's), as a multiple of the window.
 MEMORY = 2.0
+#: How long past an unanswered attempt's window the bus listens on before a retry, as a share of
+#: the attempt's whole wait (a reply a little late is then the request's own, its latency known,
+#: and no retry meets it on the line).
+RETRY_GRACE = 0.5
 #: Spare time: work handed to :meth:`ZapBus.spare` starts after a write only within this share of
 #: the request's own time on the wire. No reply byte can come before the request has crossed the
 #: line, so work done by then delays nothing; work that runs past it (a blocked output) makes the
@@ -102,19 +107,26 @@ def is_simulated(url) -> bool:
     return bool(url) and str(url).startswith(("sim://", "loop://"))
 
 
+#: Why a reply marked :attr:`Reply.doubt` may not answer the request it came after.
+DOUBT = "it may answer an earlier request that went unanswered in its window"
+
+
 class Reply:
     """A checked feedback packet: ``ident``, ``error`` (bits), ``data`` (parameter bytes),
     ``packet`` (the whole packet), ``rtt`` (seconds from just before the write of the attempt it
     answers to the reply's last byte read) and ``latency`` (seconds from the request's last byte
     leaving to the reply's first byte read: what the actuator and the adapter took; None when
-    not measured)."""
+    not measured). ``doubt`` is None for the answer to this very request, else why it may
+    answer an earlier one (only where any reply of the ID will do: whether an ID answers at all;
+    its ``rtt`` is then not that request's)."""
 
-    __slots__ = ("ident", "error", "data", "packet", "rtt", "latency")
+    __slots__ = ("ident", "error", "data", "packet", "rtt", "latency", "doubt")
 
     def __init__(self, ident: int, error: int, data: bytes, packet: bytes, rtt: float = 0.0,
-                 latency: Optional[float] = None) -> None:
+                 latency: Optional[float] = None, doubt: Optional[str] = None) -> None:
         self.ident, self.error, self.data, self.packet, self.rtt = ident, error, data, packet, rtt
         self.latency = latency
+        self.doubt = doubt
 
     @property
     def errors(self) -> list[str]:
@@ -230,18 +242,27 @@ class IrFamily:
 
 
 class _Owed:
-    """An attempt whose reply has not come: it may still come until ``until`` (its window),
-    and is recognised as that attempt's until ``keep``. ``kind`` is ``reply`` (an expected
-    reply) or ``ack`` (a write an actuator in another return mode may acknowledge)."""
+    """An attempt whose reply has not come: it may still come until ``until`` (its window);
+    before ``keep`` (its grace) nothing is sent whose reply could be taken for it; and until
+    ``horizon`` a reply that fits it is recognised as possibly its, never taken for another
+    request's answer. ``kind`` is ``reply`` (an expected reply) or ``ack`` (a write an actuator
+    in another return mode may acknowledge)."""
 
-    __slots__ = ("token", "ids", "data_len", "t0", "sent", "until", "keep", "kind")
+    __slots__ = ("token", "ids", "data_len", "t0", "sent", "until", "keep", "horizon", "kind")
 
-    def __init__(self, token, ids, data_len, t0, sent, until, keep, kind="reply"):
+    def __init__(self, token, ids, data_len, t0, sent, until, keep, kind="reply", horizon=None):
         self.token, self.ids, self.data_len, self.t0, self.sent = token, ids, data_len, t0, sent
         self.until, self.keep, self.kind = until, keep, kind
+        self.horizon = keep if horizon is None else max(keep, horizon)
 
     def matches(self, p, family=IrFamily) -> bool:
         return family.ident(p) in self.ids and family.fits(p, self.data_len)
+
+    def conflicts(self, ids, data_len) -> bool:
+        """Whether a reply to a request to ``ids`` carrying ``data_len`` bytes could be taken
+        for this attempt's (or this one's for it): same ID, same length (or either unknown)."""
+        return self.kind == "reply" and not self.ids.isdisjoint(ids) and (
+            self.data_len is None or data_len is None or self.data_len == data_len)
 
 
 class Event:
@@ -276,6 +297,12 @@ class ZapBus:
     def __init__(self, port, *, return_mode: int = 1, timeout=None, retries: int = RETRIES, margin=None,
                  url=None, latency=None, policy=None):
         self.port = port
+        # the port's own clock where it has a virtual one (a simulator whose time passes only
+        # while the host waits), else the system's
+        clock = getattr(port, "clock", None)
+        self.virtual = bool(getattr(clock, "virtual", False))
+        self.now = clock.now if self.virtual else time.monotonic
+        self._sleep = clock.advance if self.virtual else time.sleep
         self.url = url if url is not None else getattr(port, "port", None) or getattr(port, "portstr", "")
         self.allow = Permission.NONE       # the permissions given to every command (see command())
         self.simulated = is_simulated(self.url)
@@ -289,11 +316,13 @@ class ZapBus:
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
         self._unechoed = {}                # write time -> packet, until its clean echo came back
         self._owed = deque()               # attempts whose reply may still come
+        self._current = None               # the request in hand (the token of its attempts)
+        self._caught = None                # its earlier attempt's reply, heard between attempts
         self._spare = deque()              # work for the time a reply is on its way (spare())
         self._framer = self.family.framer()     # bytes read between transactions
         self._held = None                  # [lo, hi]: when the bytes the framer holds were read
         self._quiet_until = 0.0
-        self._seen_empty = time.monotonic()
+        self._seen_empty = self.now()
         self._port_timeout = object()
         self._line = (None, 0.0)           # (baud, one byte's time on the line)
         fd = getattr(port, "fd", None)
@@ -373,6 +402,11 @@ class ZapBus:
         self._framer = self.family.framer()
         self._held = None
 
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass on the bus's clock (model time on a virtual simulator)."""
+        if seconds > 0:
+            self._sleep(seconds)
+
     def close(self) -> None:
         self.run_spare()
         close_port(self.port)
@@ -448,16 +482,18 @@ class ZapBus:
         try:
             if self._fd is not None:
                 self._set_timeout(0)
-                left = deadline - time.monotonic()
+                left = deadline - self.now()
                 ready, _, _ = select.select([self._fd], [], [], max(0.0, left))
                 if not ready:
-                    self._seen_empty = time.monotonic()
+                    self._seen_empty = self.now()
                     return b""
                 data = self._read_fd() if self._raw else self.port.read(max(1, self.port.in_waiting))
             else:
-                left = deadline - time.monotonic()
-                before = time.monotonic()
-                self._set_timeout(QUANTUM if left > 0 else 0)
+                left = deadline - self.now()
+                before = self.now()
+                # (on a virtual clock a read moves time on by what it waits: never by less than a
+                # nanosecond, which a float could round away)
+                self._set_timeout((max(left, 1e-9) if self.virtual else QUANTUM) if left > 0 else 0)
                 data = self.port.read(n)
                 if not data:
                     self._seen_empty = before
@@ -502,7 +538,7 @@ class ZapBus:
         except Exception:  # noqa: BLE001 - a port without in_waiting (or a vanished one)
             return None
         if not n:
-            self._seen_empty = time.monotonic()
+            self._seen_empty = self.now()
         return n
 
     def _event(self, kind, ident, lo, hi, t0=None, packet=None) -> None:
@@ -517,8 +553,42 @@ class ZapBus:
         return out
 
     def _expire(self, now) -> None:
-        while self._owed and self._owed[0].keep < now:
-            self._owed.popleft()
+        owed = self._owed
+        if owed and any(o.horizon <= now for o in owed):
+            self._owed = deque(o for o in owed if o.horizon > now)
+
+    def _owe(self, token, accept, data_len, t0, tx, span) -> None:
+        """An attempt sent at ``t0`` went unanswered through its window (``span``): its reply may
+        still come. The bus listens through its grace before sending a request whose reply
+        could be taken for it, and recognises a reply that fits it until its horizon."""
+        self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, t0 + span, t0 + span * (1 + MEMORY),
+                                horizon=t0 + horizon_for(span)))
+
+    def _await_conflicts(self, accept, data_len, token) -> None:
+        """Listen until no unanswered attempt of another request, whose reply this request's
+        could be taken for, is in its grace: a late reply lands where it belongs (an event, the
+        attempt's) instead of in this request's window."""
+        while self._owed:
+            now = self.now()
+            self._expire(now)
+            due = [o.keep for o in self._owed if o.keep > now and o.token is not token
+                   and o.conflicts(accept, data_len)]
+            if not due:
+                return
+            self._listen(min(due))
+
+    def settle(self, ident: int) -> None:
+        """Listen until no reply to an unanswered attempt to ``ident`` can come any more (every
+        one's horizon has passed, or its reply came): after that, silence from ``ident`` is
+        certain (see :meth:`answers`)."""
+        while True:
+            now = self.now()
+            self._expire(now)
+            due = [o.horizon for o in self._owed if o.kind == "reply" and ident in o.ids]
+            if not due:
+                break
+            self._listen(min(due))
+        self._drain()
 
     def _open_windows(self, now):
         return [o for o in self._owed if o.until > now]
@@ -535,9 +605,11 @@ class ZapBus:
 
     def _stray(self, p: bytes, lo: float, hi: float, token=None):
         """Account for a packet that is not the answer in hand: our own echo, another master's
-        command, a reply to an earlier attempt (late: counted, an event; for ``token``, an earlier
-        attempt of the same request, returned as ``(owed, p)``), an acknowledgement nobody waited
-        for, or a reply nobody asked for (stray)."""
+        command, a reply to an earlier attempt (late: counted, an event; for ``token``, or the
+        request in hand (:attr:`_current`), an earlier attempt of the same request: returned as
+        ``(owed, p)`` and kept in :attr:`_caught` for that request), an acknowledgement nobody
+        waited for, or a reply nobody asked for (stray)."""
+        token = token if token is not None else self._current
         if self._echoed(p):
             self.adapter_echo = True
             return None
@@ -553,20 +625,37 @@ class ZapBus:
             self.stale += 1                # an acknowledgement nobody waited for
             return None
         if token is not None and owed.token is token:
+            if self._caught is None:
+                self._caught = (owed, p, lo, hi)
             return owed, p
-        self.late += 1
-        self._event("late", family.ident(p), lo, hi, owed.t0, p)
+        self._late(p, lo, hi, owed)
         return None
+
+    def _late(self, p, lo, hi, owed) -> None:
+        """``p`` is (or may be) the late reply of the earlier attempt ``owed``: counted (for the
+        bus and for that actuator), an event."""
+        ident = self.family.ident(p)
+        self.late += 1
+        self.devices[ident].late += 1
+        self._event("late", ident, lo, hi, owed.t0, p)
 
     def _take_owed(self, p, now):
         """The attempt a stray packet answers: one whose window is open first, else the oldest
         one still recognised."""
-        found = [o for o in self._owed if o.keep >= now and o.matches(p, self.family)]
+        found = [o for o in self._owed if o.horizon >= now and o.matches(p, self.family)]
         if not found:
             return None
         owed = next((o for o in found if o.until > now), found[0])
         self._owed.remove(owed)
+        self._resolve(self.family.ident(p), owed.t0)
         return owed
+
+    def _resolve(self, ident: int, t0: float) -> None:
+        """``ident`` answered the attempt sent at ``t0``: an actuator answers in the order it
+        was asked, so no reply to an earlier unanswered attempt to it will come any more."""
+        owed = self._owed
+        if owed and any(o.t0 < t0 and ident in o.ids for o in owed):
+            self._owed = deque(o for o in owed if not (o.t0 < t0 and ident in o.ids))
 
     def _account(self, data: bytes, lo: float, hi: float) -> None:
         """Bytes read between transactions, through the idle framer. What they make is dated
@@ -588,10 +677,10 @@ class ZapBus:
             return False
         data = self._read(64, until)
         if not data:
-            if self._framer.pending and time.monotonic() >= until:
+            if self._framer.pending and self.now() >= until:
                 self._flush_idle()
             return False
-        self._account(data, self._seen_empty, time.monotonic())
+        self._account(data, self._seen_empty, self.now())
         return True
 
     def _flush_idle(self) -> None:
@@ -600,7 +689,7 @@ class ZapBus:
         framer = self._framer
         if not framer.pending:
             return
-        lo, hi = self._held if self._held is not None else (self._seen_empty, time.monotonic())
+        lo, hi = self._held if self._held is not None else (self._seen_empty, self.now())
         self._held = None
         bad, skipped = framer.bad, framer.skipped
         for p in framer.flush():
@@ -623,11 +712,11 @@ class ZapBus:
             if waiting is None:
                 self._reset_input()
                 return
-            now = time.monotonic()
+            now = self.now()
             if waiting:
                 data = self._read(waiting, now)
                 if data:
-                    self._account(data, self._seen_empty, time.monotonic())
+                    self._account(data, self._seen_empty, self.now())
                 continue
             if self._framer.pending:
                 end = now + self.wire(1) + INTER_BYTE + self.margin
@@ -637,9 +726,9 @@ class ZapBus:
             return
 
     def _settle(self) -> None:
-        wait = self._quiet_until - time.monotonic()
+        wait = self._quiet_until - self.now()
         if wait > 0:
-            time.sleep(wait)
+            self._sleep(wait)
 
     def quiet(self) -> None:
         """Listen until no reply may still come: every open window closed (replies that come
@@ -652,7 +741,7 @@ class ZapBus:
         """Listen until every open window has closed (what :meth:`quiet` does before the
         drain; a transaction's write drains what came)."""
         while self._owed:
-            now = time.monotonic()
+            now = self.now()
             self._expire(now)
             open_ = self._open_windows(now)
             if not open_:
@@ -661,8 +750,8 @@ class ZapBus:
 
     def linger(self, seconds: float) -> None:
         """Keep listening for ``seconds`` (late replies are accounted for; see :attr:`events`)."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
+        end = self.now() + seconds
+        while self.now() < end:
             self._listen(end)
         self._drain()
 
@@ -680,7 +769,7 @@ class ZapBus:
         (round trips are measured from there, so a host that is preempted after writing never
         shortens them)."""
         self._drain()
-        t0 = time.monotonic()
+        t0 = self.now()
         try:
             if self._raw:
                 self._write_fd(pkt)
@@ -701,7 +790,8 @@ class ZapBus:
     # -- one transaction ----------------------------------------------------------------------
 
     def transact(self, pkt: bytes, *, reply=None, data_len=None, extra=0.0, timeout=None, retries=None,
-                 accept_ids=None, check=True, optional=False, quick=False, early=False, window=None):
+                 accept_ids=None, check=True, optional=False, quick=False, early=False, window=None,
+                 any_answer=False, persist=False):
         """Send ``pkt``; return its checked :class:`Reply`, or None when none is expected.
 
         ``reply``: whether a reply comes (default: from the instruction and ``return_mode``);
@@ -712,7 +802,17 @@ class ZapBus:
         (None, without a retry: the command may have been carried out); ``quick``: wait only a
         scan's first-pass time for the first byte (:meth:`quick_timeout`; the window stays open
         and a later reply is an event); ``early``: transmit without waiting for earlier windows
-        to close (a scan's first pass only).
+        to close (a scan's first pass only); ``any_answer``: any reply of the ID will do, even
+        one that may answer an earlier request (whether an ID answers at all; the reply is
+        marked :attr:`Reply.doubt`); ``persist``: with ``optional``, silence is tried again
+        ``retries`` times before it is taken for an answer.
+
+        Attribution: before an attempt goes out the bus listens through the grace of every
+        unanswered attempt of another request whose reply this one's could be taken for (same
+        ID and length); a reply that fits an unanswered attempt is that attempt's (an event,
+        counted late), and while such a reply may still come (its horizon,
+        :func:`~zkzap.link.zap_timing.horizon_for`) a fitting reply is never returned as this
+        request's value: this attempt waits on for its own.
         """
         stop.check()                       # a stop requested (a batch's Ctrl-C) ends the command here
         pkt = bytes(pkt)
@@ -726,6 +826,8 @@ class ZapBus:
         tries = 1 + (self.retries if retries is None else retries)
         accept = set(accept_ids) if accept_ids else {ident}
         win = timeout if timeout is not None else (window if window is not None else self.window)
+        if self.policy.estimators and not quick:
+            win = self.policy.window_of(ident, win)   # an actuator learned to be slower than it
         tx = self.wire(len(pkt))
         if not reply:
             if not early:
@@ -745,35 +847,117 @@ class ZapBus:
         token = object()
         problems = []
         limit = span
-        for attempt in range(tries):
-            if attempt:
-                self.retried += 1
-                self._idle()
-            if not early:
-                self._close_windows()      # then the quiet time; the write drains what came
-                self._settle()
-            t0 = self._write(pkt)
-            limit = (self.quick_timeout(len(pkt), ident) + extra) if quick else span
-            got = self._await(pkt, accept, data_len, rx_len, t0, limit, family.copy_reply(pkt), token)
-            if isinstance(got, Reply):
-                return self._answered(got, pkt, restart, stored, check, win)
-            if got[0] == "none":
-                # its window (still open after a quick probe) and then some: a reply that comes
-                # is this attempt's, never the answer to another request
-                self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, t0 + span, t0 + span * (1 + MEMORY)))
-                if quick or optional:
+        outer = self._current, self._caught      # (a sync Echo runs inside a request)
+        self._current, self._caught = token, None
+        try:
+            for attempt in range(tries):
+                if attempt:
+                    if problems[-1][0] != "none":
+                        self._idle()       # after a garbled reply: the rest of it has passed
+                    else:
+                        # after silence, listen on for half a window more: a reply a little
+                        # later than the window is this request's, and its latency is known
+                        self._linger_for(token, span * RETRY_GRACE)
+                    if not early:
+                        self._close_windows()
+                        if not any_answer:
+                            self._await_conflicts(accept, data_len, token)
+                        self._settle()
+                    self._drain()
+                    if self._caught is not None:
+                        # the late reply of an earlier attempt came before this one went out: the
+                        # answer, and no retry meets it on the line
+                        owed, p, lo, hi = self._caught
+                        got = self._reply(p, hi - owed.t0, self._only(token, owed, lo))
+                        return self._answered(got, pkt, restart, stored, check, win)
+                    self.retried += 1
+                elif not early:
+                    self._close_windows()  # then the quiet time; the write drains what came
+                    if not any_answer:
+                        self._await_conflicts(accept, data_len, token)
+                        if self._owed:
+                            self._sync(accept, data_len, token)
+                    self._settle()
+                got = self._attempt(pkt, accept, data_len, rx_len, tx, span, quick, extra, restart, token,
+                                    any_answer)
+                if isinstance(got, Reply):
+                    return self._answered(got, pkt, restart, stored, check, win)
+                if got[0] == "none" and (quick or (optional and not persist)):
                     return None            # silence is a legitimate answer: do not repeat the command
-            problems.append(got)
-        return self._fail(pkt, problems, limit, tries, optional)
+                problems.append(got)
+                limit = got[3]
+        finally:
+            self._current, self._caught = outer
+        return self._fail(pkt, [p[:3] for p in problems], limit, tries, optional)
+
+    def _linger_for(self, token, seconds) -> None:
+        """Listen up to ``seconds`` past the window of the latest attempt of ``token``, or until
+        the reply of an attempt of it came."""
+        owed = [o for o in self._owed if o.token is token]
+        if not owed:
+            return
+        end = owed[-1].until + seconds
+        while self._caught is None and self.now() < end:
+            self._listen(end)
+
+    def _sync(self, accept, data_len, token) -> None:
+        """Before a request whose reply could be taken for that of an unanswered attempt of
+        another request (past its grace: a lost request, or an actuator slower than that), ask
+        each such ID for an Echo, whose reply cannot be taken for it (another length): an
+        actuator answers in order, so its Echo reply means no reply to those attempts will come
+        any more. Echo attempts unanswered are no obstacle to this (an Echo reply that may
+        answer one is marked, not taken for a value). Nothing is done where nothing is owed."""
+        if data_len == 0:
+            return
+        for ident in sorted(accept):
+            for _ in range(3):
+                if not any(o.token is not token and o.kind == "reply" and ident in o.ids and
+                           o.conflicts(accept, data_len) for o in self._owed):
+                    break
+                r = self.transact(zap.echo(ident), reply=True, data_len=0, retries=0, optional=True,
+                                  check=False, any_answer=True)
+                if r is None:
+                    break                  # it does not answer now: the request will say so
+
+    def _timely(self, ident: int, now_latency: float, old_latency: float) -> bool:
+        """Whether a reply is this attempt's by the latency learned of ``ident``: within its
+        timeout after this attempt, and far beyond it after the earlier attempt it could also
+        answer. False before anything was learned of ``ident`` (then it is a doubt)."""
+        est = self.policy.estimators.get(ident)
+        if est is None or not est.samples or est.srtt is None:
+            return False
+        limit = est.srtt + max(MARGIN, K * est.rttvar) + self.margin
+        return now_latency <= limit and old_latency > 2 * limit + self.margin
+
+    def _only(self, token, owed, lo):
+        """The latency of a reply to ``owed`` heard between attempts (its first byte when ``lo``
+        is known): None while another attempt of the same request is unanswered (either may be
+        the one it answers)."""
+        if any(o.token is token for o in self._owed):
+            return None
+        return max(0.0, lo - owed.sent)
+
+    def _attempt(self, pkt, accept, data_len, rx_len, tx, span, quick, extra, restart, token, any_answer):
+        """One attempt: write, wait; a Reply or a problem ``(kind, detail, bytes, limit)``."""
+        t0 = self._write(pkt)
+        limit = (self.quick_timeout(len(pkt), self.family.ident(pkt)) + extra) if quick else span
+        got = self._await(pkt, accept, data_len, rx_len, t0, limit, self.family.copy_reply(pkt), token, any_answer)
+        if isinstance(got, Reply):
+            return got
+        if got[0] == "none":
+            # its window (still open after a quick probe) and then some: a reply that comes is
+            # this attempt's, never the answer to another request
+            self._owe(token, accept, data_len, t0, tx, span)
+        return got + (limit,)
 
     def _answered(self, got, pkt, restart, stored, check, win):
         self.replies += 1
         if got.latency is not None and self.policy.learn(got.ident, got.latency, win):
             self.late += 1                 # after its actuator's learned timeout: still the answer
         if restart:
-            self._quiet_until = time.monotonic() + RESTART_PAUSE
+            self._quiet_until = self.now() + RESTART_PAUSE
         elif stored:
-            self._quiet_until = time.monotonic() + NV_PAUSE
+            self._quiet_until = self.now() + NV_PAUSE
         if check and got.error:
             raise device_error(got)
         return got
@@ -781,31 +965,31 @@ class ZapBus:
     def _idle(self) -> None:
         """Before a retry after a garbled reply: listen until the line has been idle for one
         inter-byte allowance (the rest of a collision has passed)."""
-        while self._listen(time.monotonic() + self.wire(1) + INTER_BYTE + self.margin):
+        while self._listen(self.now() + self.wire(1) + INTER_BYTE + self.margin):
             pass
         self._flush_idle()
 
-    def _await(self, pkt, accept, data_len, rx_len, t0, limit, copy_reply, token):
+    def _await(self, pkt, accept, data_len, rx_len, t0, limit, copy_reply, token, any_answer=False):
         """Read until a valid reply or the deadline (``limit`` after ``t0``, for the first reply
         byte; extended while reply bytes trickle in). Returns a Reply (``rtt`` from the attempt
         that was answered, ``latency`` its first byte after the request left) or a problem tuple
         (kind, detail, received bytes)."""
         tx = self.wire(len(pkt))
         overran = False
-        if self._spare and time.monotonic() - t0 < tx * SPARE_SHARE:
+        if self._spare and self.now() - t0 < tx * SPARE_SHARE:
             self.run_spare()               # the request is still on the wire: the host's time is free
-            overran = time.monotonic() - t0 > tx       # a reply byte may have waited for the work
+            overran = self.now() - t0 > tx       # a reply byte may have waited for the work
         family = self.family
         ident_of = family.ident
         framer = family.framer()
         received = bytearray()
         echo_known = self.adapter_echo
         state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
-                 "explained": 0, "first": None, "lo": self._seen_empty, "hi": None}
+                 "explained": 0, "first": None, "lo": self._seen_empty, "hi": None, "doubted": 0,
+                 "doubt_reply": None}
         wrong = []
         deadline = base = t0 + limit
         gap = self.policy.inter_byte(ident_of(pkt), self.window)
-        physical = self.wire(len(pkt) + rx_len)
 
         def examine(packets, lo, hi):
             for p in packets:
@@ -820,27 +1004,47 @@ class ZapBus:
                 if p in self._recent or family.is_request(p):
                     self._echoed(p)
                     continue                      # a late echo of an earlier packet, another master
-                now = time.monotonic()
-                # an earlier attempt's: its window was still open when this one went out (a
-                # scan's first pass), or it came too early to be this attempt's reply
-                # (a reply that cannot be this one's answer is any recognised earlier attempt's)
+                now = self.now()
+                # A reply that fits an unanswered earlier attempt is that attempt's first: an
+                # actuator answers in the order it was asked, so the oldest such attempt it may
+                # answer is the one it does (whatever the time: a link that is not a UART at its
+                # baud rate answers sooner than the wire could carry it). An acknowledgement
+                # nobody waited for is only ever another request's when this one's cannot fit it.
                 ours = ident_of(p) in accept and family.fits(p, data_len)
-                owed = next((o for o in self._owed if o.matches(p, family) and o.keep >= now
-                             and (not ours or o.until > t0 or now - t0 < physical)), None) if self._owed else None
+                owed = next((o for o in self._owed if o.matches(p, family) and o.horizon >= now), None) \
+                    if self._owed else None
+                if owed is not None and ours and owed.kind == "reply" and owed.token is not token:
+                    f = state["first"] if state["first"] is not None else hi
+                    if self._timely(ident_of(p), f - t0 - tx, f - owed.sent):
+                        # what the actuator is known to take says it answers this attempt: the
+                        # earlier one was lost (and so is every one before it)
+                        self._resolve(ident_of(p), t0)
+                        owed = None
                 if owed is not None:
                     self._owed.remove(owed)
+                    self._resolve(ident_of(p), owed.t0)
                     if owed.kind == "ack":
                         self.stale += 1           # the acknowledgement of an earlier write
+                        if ours:
+                            # ... or this attempt's answer: not a value; its own may follow
+                            self.devices[ident_of(p)].doubts += 1
+                            state["doubted"] += 1
+                            state["doubt_reply"] = (p, hi)
                     elif owed.token is token:
                         # the earlier attempt's late reply answers this request (this attempt's
                         # reply, when it comes, is recognised as late)
                         span = deadline - t0
                         self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
-                                                deadline + span * MEMORY))
+                                                deadline + span * MEMORY, horizon=t0 + horizon_for(span)))
                         return self._reply(p, hi - owed.t0, None)
                     else:
-                        self.late += 1
-                        self._event("late", ident_of(p), lo, hi, owed.t0, p)
+                        self._late(p, lo, hi, owed)
+                        if ours:
+                            # it may be this attempt's answer, or that attempt's late one: never a
+                            # value; this attempt's own reply, if it comes, follows it
+                            self.devices[ident_of(p)].doubts += 1
+                            state["doubted"] += 1
+                            state["doubt_reply"] = (p, hi)
                     state["want"] = len(received) + rx_len
                     continue
                 if ident_of(p) not in accept:
@@ -857,11 +1061,13 @@ class ZapBus:
                     # bytes that made no packet came first: a collision, for scans
                     self._event("garbled", None, state["lo"], hi, None, bytes(received))
                 first = state["first"] if state["first"] is not None else hi
+                self._resolve(ident_of(p), t0)    # this attempt's answer: earlier ones are lost
                 if any(o.token is token for o in self._owed):
                     # an earlier attempt of this request is still owed: this may be its reply, so
                     # this attempt's may still come; the line stays quiet for its window
                     self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, deadline,
-                                            deadline + (deadline - t0) * MEMORY))
+                                            deadline + (deadline - t0) * MEMORY,
+                                            horizon=t0 + horizon_for(deadline - t0)))
                     return self._reply(p, hi - t0, None)
                 return self._reply(p, hi - t0, None if overran else first - t0 - tx - self.wire(1))
             return None
@@ -870,10 +1076,10 @@ class ZapBus:
             lo = self._seen_empty
             chunk = self._read(max(1, state["want"] - len(received)), deadline)
             if not chunk:
-                if time.monotonic() >= deadline:
+                if self.now() >= deadline:
                     break
                 continue
-            hi = state["hi"] = time.monotonic()
+            hi = state["hi"] = self.now()
             if state["first"] is None and not (echo_known and len(received) + len(chunk) <= len(pkt)
                                                and pkt.startswith(bytes(received) + chunk)):
                 state["first"] = hi               # the first byte that is not our own echo
@@ -883,20 +1089,24 @@ class ZapBus:
             if got is not None:
                 return got
             # bytes of an incomplete packet: give the rest time to trickle in (only while they do)
-            deadline = max(base, time.monotonic() + self.wire(1) + gap + self.margin) if framer.pending else base
+            deadline = max(base, self.now() + self.wire(1) + gap + self.margin) if framer.pending else base
         pending, bad_before = framer.pending, framer.bad
         # what the bytes held make is dated when they were read, not at the deadline
-        last = state["hi"] if state["hi"] is not None else time.monotonic()
+        last = state["hi"] if state["hi"] is not None else self.now()
         got = examine(framer.flush(), state["lo"], last)   # a packet held back to rule out a rival
         if framer.bad or len(received) > state["explained"]:
             self._event("garbled", None, state["lo"], last, None, bytes(received))   # a collision or a line fault
         if got is not None:
             return got
+        if any_answer and state["doubt_reply"] is not None:
+            # an ID that answers at all is what was asked: the reply, marked
+            p, hi = state["doubt_reply"]
+            return self._reply(p, hi - t0, None, doubt=DOUBT)
         copies = state["copies"]
         # The documented Restart feedback is a copy of the command itself: accept a copy that
         # is more than the adapter's known echo.
         if copy_reply and not wrong and copies >= (2 if echo_known else 1):
-            return self._reply(pkt, time.monotonic() - t0, None, copy=True)
+            return self._reply(pkt, self.now() - t0, None, copy=True)
         if wrong:
             ids = ", ".join(str(ident_of(p)) for p in wrong)
             return ("wrong-id", f"reply from ID {ids}, expected ID {min(accept)}", bytes(received))
@@ -912,10 +1122,15 @@ class ZapBus:
         if len(received) > state["explained"]:
             return ("garbage", "unreadable bytes instead of a reply (a collision, a line fault or a wrong "
                                "baud rate)", bytes(received))
+        if state["doubted"]:
+            return ("none", "doubt", bytes(received))
         return ("none", "echo only" if copies else "", bytes(received))
 
-    def _reply(self, p, rtt, latency, copy=False):
-        return self.family.reply(p, rtt, latency, copy)
+    def _reply(self, p, rtt, latency, copy=False, doubt=None):
+        r = self.family.reply(p, rtt, latency, copy)
+        if doubt is not None:
+            r.doubt = doubt
+        return r
 
     def _fail(self, pkt, problems, limit, tries, optional):
         ident = self.family.ident(pkt)
@@ -992,6 +1207,10 @@ class ZapBus:
         return self.transact(pkt, check=check, **kw)
 
     def echo(self, ident: int, **kw) -> Reply:
+        """Echo: the reply of ``ident`` (one that may answer an earlier unanswered Echo or Load
+        of it is marked :attr:`Reply.doubt`: an Echo carries no value, and its round trip is
+        then not known)."""
+        kw.setdefault("any_answer", True)
         return self.transact(zap.echo(ident), reply=True, data_len=0, **kw)
 
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
@@ -1041,25 +1260,29 @@ class ZapBus:
     def ping(self, ident: int, *, timeout=None, retries=0, quick=False, early=False, window=None):
         """Echo that returns None when nothing answers (for scans); a corrupted reply is
         retried ``retries`` times and then raised as BadReply. ``quick``/``early``: a scan's
-        first-pass probe (see :meth:`transact`); ``window``: this probe's late window."""
+        first-pass probe (see :meth:`transact`); ``window``: this probe's late window. Any reply
+        of the ID answers the question (whether it answers): one that may answer an earlier
+        request is returned marked :attr:`Reply.doubt`."""
         return self.transact(zap.echo(ident), reply=True, data_len=0, timeout=timeout, retries=retries,
-                             optional=True, check=False, quick=quick, early=early, window=window)
+                             optional=True, check=False, quick=quick, early=early, window=window,
+                             any_answer=True)
 
     def answers(self, ident: int, *, tries: int = 3) -> bool:
         """Whether any actuator answers to ``ident``: Echo with the whole window up to ``tries``
         times; a reply with error bits, a garbled reply or a late reply from ``ident`` all count
-        as an answer. Only ``tries`` silences in a row say it is free."""
-        self.take_events()
-        for _ in range(tries):
-            try:
-                if self.ping(ident) is not None:
-                    return True
-            except BadReply:
+        as an answer. Only ``tries`` silences in a row, and then no reply to any of them until
+        no reply can come any more (:meth:`settle`: the horizon of every attempt to ``ident``),
+        say it is free: an actuator slower than the window is not taken for a free ID."""
+        dev = self.devices[ident]
+        late = dev.late
+        try:
+            if self.transact(zap.echo(ident), reply=True, data_len=0, retries=tries - 1, optional=True,
+                             persist=True, check=False, any_answer=True) is not None:
                 return True
-            if any(e.kind == "late" and e.ident == ident for e in self.events):
-                return True
-        self.quiet()
-        return any(e.kind == "late" and e.ident == ident for e in self.take_events())
+        except BadReply:
+            return True
+        self.settle(ident)
+        return dev.late > late
 
     def detect_return_mode(self, ident: int) -> int:
         """Ask the actuator: Load feedback-return-mode (answered in modes 1 and 2); no answer
@@ -1077,14 +1300,14 @@ class ZapBus:
     def wait_ready(self, ident: int, within: float = 2.0, check=False) -> Reply:
         """Echo ``ident`` until it answers (after a restart or a baud change) or ``within``
         seconds pass (NoReply). Every Echo waits its whole window."""
-        end = time.monotonic() + within
+        end = self.now() + within
         while True:
             r = self.ping(ident, retries=1)
             if r is not None:
                 if check and r.error:
                     raise device_error(r)
                 return r
-            if time.monotonic() >= end:
+            if self.now() >= end:
                 raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s",
                               ident=ident, baud=self.baud, timeout=within, protocol="zap")
 

@@ -57,11 +57,10 @@ Records: ``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status`` 
 
 from __future__ import annotations
 
-import time
 
 from ..codec import zap
 from ..errors import BadReply, NoReply
-from .zap_timing import QUICK_FACTOR
+from .zap_timing import QUICK_FACTOR, horizon_for
 
 #: The order ``--baud all`` tries: the factory default first, then the others fastest first.
 ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
@@ -122,6 +121,8 @@ class _Scan:
         self.held = []                 # (ID, [events]) found, not yet released
         self.echo_errors = {}          # ID -> the error bits of the Echo that found it
         self.bursts = []               # (lo, hi) of the garbled bytes heard since the last round
+        self.all_bursts = []           # (lo, hi) of every burst of garbled bytes heard
+        self.prompt = set()            # IDs that answered their first-pass probe in its wait
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -132,6 +133,7 @@ class _Scan:
             r = self._probe(ident)
             if r is not None:
                 self._found(ident, r)
+                self.prompt.add(ident)
             self._judge()
             yield from self._release()
         self._identify_found()
@@ -140,6 +142,14 @@ class _Scan:
             if len(todo) < REPLAY_MIN:
                 break
             yield from self._replay(todo, spaced=round_ > 0)
+            self._identify_found()
+        far = self._far_doubt()
+        if far:
+            # garbled bytes no actuator found explains: one later than the window may have sent
+            # them (a reply is recognised up to its horizon): a spaced round over every ID
+            # probed within that reach, with the line free where they would come again
+            self.bursts = list(self.all_bursts)
+            yield from self._replay(far, spaced=True, reach=self._reach())
             self._identify_found()
         while True:                    # every ID is asked again at most once: this ends
             todo = sorted(self.doubt - set(self.records) - self.asked)
@@ -186,7 +196,28 @@ class _Scan:
         self.bus.quiet()
         self._judge()
 
-    def _replay(self, todo, spaced):
+    def _reach(self) -> float:
+        """How many first-pass windows back a reply may still come: to its horizon."""
+        bus = self.bus
+        span = bus.wire(bus.family.PROBE_LEN) + bus.window + bus.wire(bus.family.PROBE_LEN) + bus.margin
+        return horizon_for(span) / span
+
+    def _far_doubt(self) -> list:
+        """The IDs not found that may have sent a burst of garbled bytes no actuator found
+        explains (no actuator found late, one that did not answer its probe at once, was probed
+        a window before): every ID probed up to its reach before."""
+        found = [self.probes[i] for i in self.records if i in self.probes and i not in self.prompt]
+        reach = self._reach()
+        out = set()
+        for lo, hi in self.all_bursts:
+            if any(p.t0 <= hi and p.t0 + p.span >= lo for p in found):
+                continue
+            out |= {p.ident for p in self.probes.values()
+                    if p.ident not in self.records and p.t0 <= hi and p.t0 + p.span * reach >= lo}
+        self.all_bursts = []
+        return sorted(out - self.asked)
+
+    def _replay(self, todo, spaced, reach=1.0):
         """A quick round over ``todo`` (the IDs in doubt), in first-pass order, keeping the line
         free where the bytes that raised the doubt would come again: if one of these IDs sent
         them, its reply comes as long after its new probe as they came after its first one, and
@@ -200,7 +231,7 @@ class _Scan:
         for lo, hi in self.bursts:
             for ident in todo:
                 p = self.probes.get(ident)
-                if p is not None and p.t0 <= hi and p.t0 + p.span >= lo:
+                if p is not None and p.t0 <= hi and p.t0 + p.span * reach >= lo:
                     offsets.setdefault(ident, []).append((lo - p.t0 - guard, hi - p.t0 + bus.margin))
         self.bursts = []
         free = []                       # (from, to): where a reply may come on the line: no probe then
@@ -211,7 +242,7 @@ class _Scan:
             yield ("probe", self.baud, ident, self.found[0], "round")
             self.doubt.discard(ident)
             while True:
-                now = time.monotonic()
+                now = bus.now()
                 block = [b for a, b in free if a < now + tx + bus.margin and b > now]
                 if not block:
                     break
@@ -227,7 +258,7 @@ class _Scan:
                 typical = bus.policy.typical() or 0.0
                 end = t0 + tx + max(typical * QUICK_FACTOR, bus.policy.quick(bus.latency, bus.window)) \
                     + bus.wire(bus.family.PROBE_LEN) * 2 + bus.margin
-                left = end - time.monotonic()
+                left = end - bus.now()
                 if left > 0:
                     bus.linger(left)
             self._judge()
@@ -324,6 +355,7 @@ class _Scan:
                 continue
             lo, hi = ev.lo - slack - bus.wire(bus.family.PROBE_LEN), ev.hi
             self.bursts.append((ev.lo, ev.hi))
+            self.all_bursts.append((ev.lo, ev.hi))
             self._collided(lo, hi)
             # whoever sent them may be any ID whose window they fell in
             self.doubt |= {p.ident for p in self.probes.values()
@@ -332,7 +364,7 @@ class _Scan:
     def _release(self, final=False):
         # in ID order: a record waits while a lower ID may still turn out to be there
         self.held.sort(key=lambda h: h[0])
-        now = time.monotonic()
+        now = self.bus.now()
         while self.held:
             ident, events = self.held[0]
             if not final and any(self._open(i, now) for i in self.ids if i < ident):
@@ -417,7 +449,13 @@ def identify(bus, rec, retries=2, early=False) -> None:
 
 
 def _echo_answers(bus, ident, retries, early=False) -> bool:
-    try:
-        return bus.ping(ident, retries=retries, early=early) is not None
-    except BadReply:
-        return False
+    """Whether ``ident`` answers an Echo now: its own reply (one that may answer an earlier
+    request says nothing of this one: it does not make the actuator one in return mode 0)."""
+    for _ in range(3):                      # each doubt settles one earlier unanswered Echo
+        try:
+            r = bus.ping(ident, retries=retries, early=early)
+        except BadReply:
+            return False
+        if r is None or r.doubt is None:
+            return r is not None
+    return False

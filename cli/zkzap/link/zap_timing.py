@@ -56,6 +56,11 @@ QUICK_MARGIN = 0.0005
 NV_PAUSE = 0.008
 #: Quiet time after Restart / Factory Reset before the next command in the same run.
 RESTART_PAUSE = 0.1
+#: How long after its request a reply is still recognised as possibly that request's, and so
+#: never taken for another's answer (seconds; three times an attempt's whole wait when longer):
+#: the slowest reply the bus is built to attribute. A reply later still is a device the bus
+#: cannot vouch for at that window: give a longer ``--timeout``.
+HORIZON = 1.5
 #: Default number of retries after a failed attempt.
 RETRIES = 2
 #: The smoothing of the estimators (RFC 6298: alpha 1/8, beta 1/4, K 4).
@@ -178,6 +183,17 @@ class Policy:
             return max(FLOOR, min(window, hint * QUICK_FACTOR + MARGIN))
         return window
 
+    def window_of(self, ident, window: float) -> float:
+        """The late window for ``ident``: ``window``, or, for an actuator learned to answer later
+        than that (its replies came after the window and were still known to be its answers),
+        its latency stretched by :data:`QUICK_FACTOR` plus 4x its variation, at most a third
+        of the horizon: a slow actuator is waited for as long as it takes, not asked again
+        while its reply is on its way."""
+        est = self.estimators.get(ident)
+        if est is None or est.srtt is None or est.srtt + K * est.rttvar + MARGIN <= window:
+            return window
+        return min(max(window, HORIZON / 3), est.srtt * QUICK_FACTOR + K * est.rttvar + MARGIN)
+
     def inter_byte(self, ident, window=LATE_WINDOW) -> float:
         """How long a reply's bytes may pause before the rest counts as missing (a truncated
         reply): :data:`INTER_BYTE`, or 4x the variation of ``ident``'s latency when larger (an
@@ -221,6 +237,12 @@ class Policy:
         return {i: {"latency_ms": round(e.srtt * 1000, 3), "variation_ms": round(e.rttvar * 1000, 3),
                     "samples": e.samples, "late": e.late}
                 for i, e in sorted(self.estimators.items()) if e.srtt is not None}
+
+
+def horizon_for(span: float) -> float:
+    """How long after an attempt its reply is still recognised as that attempt's (see
+    :data:`HORIZON`), for an attempt that waits ``span`` seconds."""
+    return max(HORIZON, 3 * span)
 
 
 def window_for(timeout=None, hint=None) -> float:

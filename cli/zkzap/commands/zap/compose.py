@@ -405,14 +405,17 @@ def echo(ident, count, interval, fmt, **common):
                     _say(f"seq {sent}: {e}")
                     continue
                 answered += 1
-                rtts.append(r.rtt)
+                if r.doubt is None:
+                    rtts.append(r.rtt)
                 if r.error and flagged is None:
                     flagged = r
+                # a reply that may answer an earlier echo: answered, its round trip not known
                 rec = {"id": r.ident, "seq": sent, "error": r.error, "errors": r.errors,
-                       "rtt_ms": round(r.rtt * 1000, 3)}
+                       "rtt_ms": None if r.doubt else round(r.rtt * 1000, 3)}
                 if writer is None:
                     state = ", ".join(r.errors) if r.error else "ok"
-                    _emit(f"reply from ID {r.ident}: seq={sent} {state} {rec['rtt_ms']:.1f} ms")
+                    took = f"{rec['rtt_ms']:.1f} ms" if r.doubt is None else f"round trip unknown ({r.doubt})"
+                    _emit(f"reply from ID {r.ident}: seq={sent} {state} {took}")
                 else:
                     writer.write(rec)
     finally:                   # Ctrl-C (130) and SIGTERM (143) too: the summary, then the status
