@@ -106,6 +106,17 @@ def _write(fmt, recs, tmp_path):
             w.write(r)
         w.close()
         return path
+    if fmt in ("parquet", "mf4"):
+        from zkzap.io.columnar import writer
+
+        path = tmp_path / f"x.{fmt}"
+        if path.exists():
+            path.unlink()
+        w = writer(fmt, str(path), COLUMNS)
+        for r in recs:
+            w.write(r)
+        w.close()
+        return path
     out = io.StringIO()
     w = make_writer(fmt, out, COLUMNS)
     for r in recs:
@@ -135,10 +146,32 @@ def _check_xlsx(path, recs):
             assert not (isinstance(v, str) and _NOT_NUMBERS.match(v)), row
 
 
+def _check_parquet(path, recs):
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path)
+    assert table.num_rows == len(recs)
+    for column in table.columns:
+        for v in column.to_pylist():
+            assert not isinstance(v, float) or math.isfinite(v), column
+            assert not (isinstance(v, str) and any(_NOT_NUMBERS.match(p) for p in re.split(r"[;=]", v))), column
+
+
+def _check_mf4(path, recs):
+    from asammdf import MDF
+
+    with MDF(str(path)) as mdf:
+        for name in mdf.channels_db:
+            s = mdf.get(name)
+            assert len(s.samples) == len(recs)
+            # NaN is MDF's sample without a value; an infinity would be a wrong one
+            assert all(not math.isinf(float(v)) for v in s.samples), name
+
+
 CHECKS = {"jsonl": _check_jsonl, "json": _check_json, "csv": _check_csv, "influx": _check_influx,
-          "mcap": _check_mcap, "xlsx": _check_xlsx}
+          "mcap": _check_mcap, "xlsx": _check_xlsx, "parquet": _check_parquet, "mf4": _check_mf4}
 WRITTEN = [f for f in SESSION_FORMATS if f != "table"]
-NEEDS = {"mcap": "mcap", "xlsx": "openpyxl"}
+NEEDS = {"mcap": "mcap", "xlsx": "openpyxl", "parquet": "pyarrow", "mf4": "asammdf"}
 
 
 def test_every_format_has_a_strict_reader_here():

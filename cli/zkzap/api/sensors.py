@@ -436,12 +436,13 @@ class Probe:
                     return
                 self._time.sleep(0.02)
 
-    def measure(self, name, seconds) -> dict:
+    def measure(self, name, seconds, settle=0.5) -> dict:
         """The mean, standard deviation and count of channel ``name``'s valid values that arrive in
-        the next ``seconds`` (none from before); UsageError when none came."""
+        the ``seconds`` after ``settle`` seconds (what came before, and the lines still on their way
+        from before — a serial driver's buffer — are not of it); UsageError when none came."""
         import statistics
 
-        start = self.hub._clock()            # what came before the measurement is not of it
+        start = self.hub._clock() + settle
         values = [r.values[name] for t, r in self.readings(duration=start + seconds) if t >= start and name in r.values]
         if not values:
             raise UsageError(f"sensor: no valid value of {name} in {seconds:g} s")

@@ -13,7 +13,11 @@ with the channel names of the CSV's columns and the units of the workbook's unit
   memory stays flat whatever the run's length.
 - **MDF 4**: one channel group, its master channel ``t`` (session seconds), a channel per
   numeric CSV column with its unit (booleans as 0/1; text columns, such as the state names, are
-  left out: their numbers are there); the measurement's start time is the session's time 0.
+  left out: their numbers are there; a sample without a value is NaN, MDF's own); the
+  measurement's start time is the session's time 0.
+
+In both, a number the file cannot hold (NaN, ±Infinity, an integer beyond a float64) is no
+value, never a wrong one.
   Samples are appended per :data:`CHUNK` records.
 
 The file is written beside ``-o FILE`` and renamed over it when the session ends (a run that
@@ -59,11 +63,16 @@ def check(fmt, output, append) -> None:
 
 
 def _number(v):
+    """A record's value as a float64, or None: not a number, or one a float64 cannot hold
+    (NaN, ±Infinity, an integer beyond its range) — no value, never a wrong one."""
     if isinstance(v, bool):
         return float(v)
     if isinstance(v, (int, float)):
-        f = float(v)
-        return f if math.isfinite(f) else math.nan
+        try:
+            f = float(v)
+        except OverflowError:             # an integer of hundreds of digits
+            return None
+        return f if math.isfinite(f) else None
     return None
 
 

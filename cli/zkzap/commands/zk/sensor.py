@@ -18,6 +18,8 @@ _PICK = [click.option("--sensor", "sensor_name", default=None, metavar="NAME|N",
                       help="The channel (when the sensor declares several).")]
 _AVERAGE = click.option("--average", type=FiniteRange(0, 600, min_open=True), default=3.0, show_default=True,
                         metavar="SECONDS", help="Average each measurement over this long.")
+_SETTLE = click.option("--settle", type=FiniteRange(0, 600), default=0.5, show_default=True, metavar="SECONDS",
+                       help="Wait this long before each measurement (the lines still on their way are not of it).")
 
 
 class PointType(click.ParamType):
@@ -176,8 +178,9 @@ _WRITE_EXITS = {OK: "measured and written into the sensors file", USAGE: "bad us
 @click.argument("sensors_file", metavar="FILE", type=InputPath("sensors"))
 @_pick
 @_AVERAGE
+@_SETTLE
 @_TIMEOUT
-def tare(sensors_file, sensor_name, channel, average, timeout):
+def tare(sensors_file, sensor_name, channel, average, settle, timeout):
     """Measure a channel's zero (its raw reading with no load) and write it as the tare.
 
     The raw readings over --average seconds are averaged; the calibration's scale or curve is
@@ -195,7 +198,7 @@ def tare(sensors_file, sensor_name, channel, average, timeout):
     old = c.calibration or Calibration()
     probe = Probe([decl], timeout=timeout, raw=True, notify=note)
     try:
-        got = probe.measure(c.name, average)
+        got = probe.measure(c.name, average, settle)
     finally:
         probe.close()
     new = Calibration(got["mean"], old.scale, old.points, _now(), measured=old.measured)
@@ -213,8 +216,9 @@ def tare(sensors_file, sensor_name, channel, average, timeout):
                    "the scale, two or more a curve. Repeatable.")
 @_pick
 @_AVERAGE
+@_SETTLE
 @_TIMEOUT
-def calibrate(sensors_file, points, sensor_name, channel, average, timeout):
+def calibrate(sensors_file, points, sensor_name, channel, average, settle, timeout):
     """Calibrate a channel against known references and write the calibration.
 
     For each --point REF the command asks (on stderr) for that reference to be applied and
@@ -249,7 +253,7 @@ def calibrate(sensors_file, points, sensor_name, channel, average, timeout):
                 click.echo(f"point {n}: apply {ref:g}{_unit(c)} to {c.name}, then press Enter", err=True)
                 if not sys.stdin.readline():
                     raise UsageError(f"point: standard input ended before point {n} ({ref:g}); nothing written")
-                got = probe.measure(c.name, average)
+                got = probe.measure(c.name, average, settle)
                 raw = got["mean"]
                 note(f"point {n}: {ref:g}{_unit(c)} = raw {raw:.6g} (mean of {got['n']} readings, std {got['std']:.3g})")
             measured.append((raw, ref))
