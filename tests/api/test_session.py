@@ -110,6 +110,25 @@ def test_sigterm_is_terminated_with_stop_abort():
     assert list(ecu.received)[-1]["state"] == "stop"
 
 
+def test_once_the_abort_went_out_the_session_sends_nothing_else():
+    def sink(rec):
+        out.append(rec)
+        if len(out) == 10:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    out = []
+    s, tel, _, link = session("sim://zk?speed=20", control=lambda t: RUN30, sink=sink, abort="standby")
+    outcome = s.run()
+    ecu = link.device
+    assert outcome.aborted == "standby" and s.sealed == frozenset(abort_frames("standby", tel.decoder.known))
+    before = len(ecu.received)
+    s._send(RUN30)                                     # a control frame with the old setpoint, late
+    s._send(STANDBY0)                                  # the abort's own state still goes
+    got = list(ecu.received)[before:]
+    link.close()
+    assert [(r["state"], r["throttle_pct"]) for r in got] == [("standby", 0.0)]
+
+
 def test_new_ecu_error_ends_the_session_with_the_abort():
     s, tel, out, link = session("sim://zk?speed=20&error=egt-high&error_after=14", control=lambda t: RUN30,
                                 stop_on_error=True, duration=20)

@@ -229,6 +229,8 @@ class Session:
         self._started = False             # a state-run frame went out (the interlock passed)
         self.interrupted = None           # PortError text when a reconnect cut engine control
         self.abort_error = None           # the PortError that kept the abort from going out
+        #: Once the abort went out: its frames, the only ones :meth:`_send` still sends.
+        self.sealed: Optional[frozenset] = None
 
     def _check_ids(self, sid):
         cycle = self._cycle
@@ -260,6 +262,7 @@ class Session:
         self._back_t = up
         if self.controlling and self.abort != "none":
             frames = abort_frames(self.abort, self.telemetry.decoder.known, pump=self.pump_on)
+            self.sealed = frozenset(frames)
             for f in frames:
                 self.source.write(f)
             self.notify(f"port back after {up - down:.1f} s: sent {describe_abort(self.abort)}; "
@@ -279,6 +282,8 @@ class Session:
         self.sink(rec)
 
     def _send(self, frame):
+        if self.sealed is not None and frame not in self.sealed:
+            return                            # after the abort nothing but the abort leaves the port
         if self.alarms is not None and not self._started and frame[1] >> 4 in (1, 6):
             c = zk.ControlFrame(frame)
             if c.sw == 3:                     # state run: a start (refused: nothing sent)
@@ -588,6 +593,7 @@ class Session:
             return
         known = self.telemetry.decoder.known
         frames = abort_frames(kind, known, pump=self.pump_on)
+        self.sealed = frozenset(frames)
         try:
             for f in frames:
                 self.source.write(f)
