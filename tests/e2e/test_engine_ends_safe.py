@@ -21,6 +21,7 @@ import time
 import pytest
 
 from zkzap import Ecu, signals
+from zkzap.api.session import abort_frames
 from zkzap.codec import zk
 
 from cmdargs import has, invocation
@@ -120,6 +121,15 @@ def test_every_signal_that_ends_a_program_ends_the_session_safely(start_sim, tmp
     _signal_ends_it_safely(start_sim, tmp_path, argv, sig, random.Random(signals.name(sig)), None)
 
 
+def test_an_ecu_that_reads_the_abort_late_is_left_in_standby(start_sim, tmp_path):
+    """The simulator is not scheduled while the session sends its abort and exits: once it runs
+    again it first sends the status frames of the time before it read the abort (still run),
+    then standby. The ECU is judged by the state it settles in, and the capture shows that
+    nothing but the abort left the port after it."""
+    argv = ["zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "0", "--yes", "-f", "jsonl"]
+    _signal_ends_it_safely(start_sim, tmp_path, argv, signal.SIGTERM, random.Random("lagging"), None, lagging=True)
+
+
 def spawn(argv, line=None, *, stdout=subprocess.DEVNULL, env=None):
     """``zkzap ARGV`` as a process (fed ``line`` on a stdin kept open, the shell's way), killed
     by a watchdog after 60 s; returns it and the watchdog (to cancel)."""
@@ -134,13 +144,16 @@ def spawn(argv, line=None, *, stdout=subprocess.DEVNULL, env=None):
     return proc, watchdog
 
 
-def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
+def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line, *, lagging=False):
     """Run ``argv`` (fed ``line`` on a stdin kept open), send ``sig`` at a moment ``rng`` picks,
-    and check the exit status and the state the ECU was left in."""
+    and check the exit status, the frames sent after the abort and the state the ECU was left
+    in. ``lagging``: the simulator's process is stopped from just before the signal until the
+    ECU is opened again (a loaded machine that did not schedule it: it reads the abort late)."""
     capture = tmp_path / "wire.pcapng"
-    early = rng.random() < 0.3                                  # during start-up, or once it runs
+    early = rng.random() < 0.3 and not lagging                  # during start-up, or once it runs
     moment = rng.uniform(0.0, 0.3 if early else 0.6)
-    url, _ = start_sim(["zk", "--pty", "--speed", "10"])
+    url, sim = start_sim(["zk", "--pty", "--speed", "10"])
+    opened = (lambda: sim.send_signal(signal.SIGCONT)) if lagging else None
     env = clean_env(PYTHONPROFILEIMPORTTIME="1") if early else clean_env()
     proc, watchdog = spawn([*argv, "--capture", str(capture), "-p", url], line, env=env)
     try:
@@ -152,6 +165,8 @@ def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
         else:
             _until_in_control(capture, proc)                    # ready: it controls the engine
         time.sleep(moment)
+        if lagging:
+            sim.send_signal(signal.SIGSTOP)
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=30)
     finally:
@@ -159,13 +174,78 @@ def _signal_ends_it_safely(start_sim, tmp_path, argv, sig, rng, line):
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
+    if lagging and proc.returncode != signals.status(sig):
+        sim.send_signal(signal.SIGCONT)                         # failing: the simulator runs on to its end
     assert proc.returncode == signals.status(sig), (signals.name(sig), moment, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     if sig in signals.INTERRUPT_SIGNALS and not early:          # Ctrl-C in control: the rundown is recorded
         assert "rundown recorded" in err or "recording the rundown" in err, (signals.name(sig), moment, err)
-    with Ecu(url, baud=115200) as ecu:                          # what the ECU says it was left in
-        state = next(rec for rec in ecu.status() if rec.id == 1).sw_state_name
-    assert state in ("standby", "stop"), (signals.name(sig), moment, err)
+    _nothing_but_the_abort_after_it(capture, (signals.name(sig), moment, err))
+    states = _left_in(url, opened=opened)
+    assert _confirmed(states), (signals.name(sig), moment, states, err)
+
+
+#: The host's state commands (status ID 1's SW state) an ECU may be left in.
+SAFE = ("standby", "stop")
+#: Every frame an abort sends (``zkzap.api.session.abort_frames``: both kinds, any version, with
+#: the pump-off): the only frames that may leave the port once the abort went out.
+ABORT_FRAMES = {f for kind in SAFE for version in (None, 3) for pump in (False, True)
+                for f in abort_frames(kind, version, pump=pump)}
+
+
+def _nothing_but_the_abort_after_it(capture, why):
+    """The capture of a session a signal ended: once an abort frame went out after a frame
+    that controlled the engine, every frame the host sent is an abort frame (no control
+    frame with the old setpoint, from whatever thread or loop, follows the abort)."""
+    from zkzap.link.capture import CaptureFrames
+    from zkzap.link.pcapng import OUTBOUND
+
+    if not capture.exists():
+        return                           # ended during start-up, before its port was opened
+    frames = CaptureFrames(str(capture), "zk", "control")
+    sent = [(t, f) for t, d, f in frames if d == OUTBOUND]
+    frames.reader.close()
+    controlled = aborted = None
+    for t, f in sent:
+        if f in ABORT_FRAMES:
+            if controlled is not None and aborted is None:
+                aborted = t
+        elif aborted is not None:
+            pytest.fail(f"{f.hex(' ')} sent at {t:.3f} s, after the abort at {aborted:.3f} s: {why}")
+        elif zk.ControlFrame(f).controls_engine:
+            controlled = t
+    if controlled is not None:
+        assert aborted is not None, f"the engine was controlled (at {controlled:.3f} s) and no abort went out: {why}"
+
+
+#: How many status ID 1 frames in a row must say standby or stop.
+CONFIRM = 8
+
+
+def _confirmed(states) -> bool:
+    return len(states) >= CONFIRM and all(s in SAFE for s in states[-CONFIRM:])
+
+
+def _left_in(url, *, within=10.0, opened=None):
+    """The host states the ECU reports (status ID 1), read until :data:`CONFIRM` of them in a
+    row are standby or stop (at most ``within`` s; ``opened()`` is called once the port is
+    open): what it was left in. The first ones may be a loaded machine's backlog: a simulator that saw the abort late (its process was not
+    scheduled) first sends the status frames of the model time before it, which still say
+    run; the abort's effect follows them. A state command that is not the abort (a run frame
+    after it) keeps the ECU in run for good, and that is never confirmed."""
+    states = []
+    end = time.monotonic() + within
+    with Ecu(url, baud=115200) as ecu:
+        if opened is not None:
+            opened()
+        for rec in ecu.status(duration=within):
+            if rec.id == 1:
+                states.append(rec.sw_state_name)
+                if _confirmed(states):
+                    break
+            if time.monotonic() > end:
+                break
+    return states or ["silent"]
 
 
 def test_a_terminal_that_hangs_up_leaves_the_ecu_in_standby_and_the_status_of_sighup():
