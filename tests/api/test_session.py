@@ -95,38 +95,27 @@ def test_sigint_stops_between_records_and_sends_the_abort():
         outcome.raise_for_status()
 
 
-def test_sigterm_is_terminated_with_stop_abort():
+@pytest.mark.parametrize("kind", ["stop", "standby"])
+def test_sigterm_is_terminated_with_the_abort_and_nothing_else_goes_after_it(kind):
     def sink(rec):
         out.append(rec)
         if len(out) == 10:
             os.kill(os.getpid(), signal.SIGTERM)
 
     out = []
-    s, tel, _, link = session("sim://zk?speed=20", control=lambda t: RUN30, sink=sink, abort="stop")
+    s, tel, _, link = session("sim://zk?speed=20", control=lambda t: RUN30, sink=sink, abort=kind)
     outcome = s.run()
     ecu = link.device
-    link.close()
-    assert outcome.reason == "terminated" and outcome.exit_code == 143 and outcome.aborted == "stop"
-    assert list(ecu.received)[-1]["state"] == "stop"
-
-
-def test_once_the_abort_went_out_the_session_sends_nothing_else():
-    def sink(rec):
-        out.append(rec)
-        if len(out) == 10:
-            os.kill(os.getpid(), signal.SIGTERM)
-
-    out = []
-    s, tel, _, link = session("sim://zk?speed=20", control=lambda t: RUN30, sink=sink, abort="standby")
-    outcome = s.run()
-    ecu = link.device
-    assert outcome.aborted == "standby" and s.sealed == frozenset(abort_frames("standby", tel.decoder.known))
+    assert outcome.reason == "terminated" and outcome.exit_code == 143 and outcome.aborted == kind
+    assert list(ecu.received)[-1]["state"] == kind
+    # once the abort went out, the session sends nothing but its frames
+    assert s.sealed == frozenset(abort_frames(kind, tel.decoder.known))
     before = len(ecu.received)
     s._send(RUN30)                                     # a control frame with the old setpoint, late
-    s._send(STANDBY0)                                  # the abort's own state still goes
+    s._send(STOP0 if kind == "stop" else STANDBY0)     # the abort's own state still goes
     got = list(ecu.received)[before:]
     link.close()
-    assert [(r["state"], r["throttle_pct"]) for r in got] == [("standby", 0.0)]
+    assert [(r["state"], r["throttle_pct"]) for r in got] == [(kind, 0.0)]
 
 
 def test_new_ecu_error_ends_the_session_with_the_abort():
