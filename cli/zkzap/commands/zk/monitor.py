@@ -192,6 +192,23 @@ def _with_alarms(on_update, alarms):
     return update
 
 
+def _header_without_trip(output, columns, snapshot, ids, fmt) -> bool:
+    """An existing CSV file appended to has the header of a run without the ``trip`` column (a
+    monitor's, or an older version's): the records keep its columns (a trip's row still has its
+    time and limit)."""
+    if not output or output == "-" or fmt not in (None, "csv") or not output.lower().endswith(".csv"):
+        return False
+    if not os.path.isfile(output):
+        return False                          # a FIFO or a device: nothing to read a header from
+    try:
+        with open(output, encoding="utf-8", errors="replace") as f:
+            head = f.readline().strip()
+    except OSError:
+        return False
+    rows = snapshot if snapshot is not None else True
+    return bool(head) and head == ",".join(columns(rows, ids))
+
+
 def session_output(fmt, output, append, snapshot, ids, title, stand, *, controls, view=True) -> Output:
     """The :class:`Output` of a session's records: their columns with the stand's (limits, sensors,
     corrected values) and, for a session that controls the engine, ``trip`` (a trip and the
@@ -199,7 +216,7 @@ def session_output(fmt, output, append, snapshot, ids, title, stand, *, controls
     from ...api.telemetry import record_columns
 
     columns = record_columns if stand is None else stand.columns(record_columns)
-    if controls:
+    if controls and not (append and _header_without_trip(output, columns, snapshot, ids, fmt)):
         base = columns
 
         def columns(snapshot, ids=None):
