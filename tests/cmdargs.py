@@ -38,7 +38,8 @@ def has(cmd, name) -> bool:
 def invocation(cmd, values, bounds=None) -> list:
     """Arguments for ``cmd``: every required parameter (and every argument) from ``values``
     (name -> str or list of str; a callable gets the command), then the options of ``bounds``
-    (name -> value) the command declares. Raises :class:`MissingValue`."""
+    (name -> value; a callable gets the command, and None leaves the option out) the command
+    declares. Raises :class:`MissingValue`."""
     positional, options = [], []
     for p in cmd.params:
         # an optional argument (a schedule, a batch file) is what such a command works on: give it
@@ -54,6 +55,9 @@ def invocation(cmd, values, bounds=None) -> list:
         else:
             options += [_flag(p)] + items
     for name, value in (bounds or {}).items():
+        value = value(cmd) if callable(value) else value
+        if value is None:
+            continue
         for p in cmd.params:
             if p.name == name and isinstance(p, click.Option) and not p.required:
                 options += [_flag(p)] + ([] if value is True else [str(value)])

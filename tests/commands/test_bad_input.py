@@ -37,7 +37,9 @@ CRC = [
     Bad("crc zap -", "stdin: 'zz' is not hex", input="zz\n"),
     Bad("crc check FF 14 64", "ZK frame: 3 bytes"),
     Bad("crc check FF 14", "ZK frame: 2 bytes"),
-    Bad("crc check 12 34 56 78 90 AB CD EF", "ZK frame: 8 bytes"),
+    Bad("crc check 12 34 56 78 90 AB CD EF", "ZK frame: 8 bytes"),      # function 34: no Modbus frame either
+    Bad("crc check 01 03 00 D2 00 01 24 34", "Modbus RTU frame: CRC mismatch: expected 24 33, found 24 34", code=1),
+    Bad("crc check F8 03 00 D2 00 01 24 34", "a Modbus RTU frame has a unit ID 0..247"),
     Bad("crc check 7F 14 64 D3", "control frame: head 7F; expected FF"),
     Bad("crc check 01 00 00 00 00 00 00", "status frame: head 01"),
     Bad("crc check FF 14 64 D4", "control frame: CRC mismatch: expected D3, found D4", code=1),

@@ -55,6 +55,9 @@ def test_every_float_param_is_finite_typed(path, param, flag):
 def test_non_finite_is_refused_naming_the_option(cli, path, param, flag, value):
     # --opt=VALUE: also right for an option whose value is optional (--reconnect [S])
     args = [*path, f"{flag[0]}={value}"] if flag else [*path, value]
+    if flag and param.nargs > 1:
+        # an option of several values (--between A B): the non-finite one first, finite ones after
+        args = [*path, flag[0], value, *["1"] * (param.nargs - 1)]
     r = cli(*args)
     assert r.exit_code == 2, r
     assert r.stdout == ""

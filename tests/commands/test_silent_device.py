@@ -13,6 +13,7 @@ The same walk checks that what is wrong with a port's name is said once by every
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import pytest
@@ -45,6 +46,9 @@ def values(tmp_path_factory):
     zk_batch, zap_batch = tmp_path / "zk.txt", tmp_path / "zap.txt"
     zk_batch.write_text("send keepalive\n")
     zap_batch.write_text("echo --id 1\n")
+    zap_path = tmp_path / "path.csv"
+    zap_path.write_text("t,id,position\n0,1,100\n1,1,200\n")
+    taught = itertools.count()
     fleet = tmp_path / "fleet.json"
     with CliRunner().isolation():
         assert run(root, "zkzap", ["zap", "backup", "--sim", "--ids", "1", "-o", str(fleet)]) == 0
@@ -56,15 +60,18 @@ def values(tmp_path_factory):
                 "new_baud": "115200", "ids": "1", "targets": "1:100", "registers": "present-position",
                 "instruction": "echo", "code": "echo",
                 "file": lambda cmd: str(zap_batch if cmd.name == "batch" else fleet),
-                "a": str(fleet), "b": "bus"},
+                "a": str(fleet), "b": "bus", "ident": "1", "fleet_file": str(fleet), "path": str(zap_path),
+                # a new file each time: what one run left must not make the next one's a refusal
+                "output": lambda cmd: str(tmp_path / f"{cmd.name}-{next(taught)}.csv")},
     }
 
 
 BOUNDS = {
     # every wait short: a silent device costs a timeout, nothing more
     "zk": {"timeout": "0.3", "budget": "0.3", "window": "0.1", "duration": "0.3"},
-    "zap": {"timeout": "0.01", "retries": "0", "duration": "0.3", "ids": "1", "find_ids": "1",
-            "find_baud": "57600"},
+    # (zap teach's --duration bounds its --rate mode only; its Enter mode ends with its input)
+    "zap": {"timeout": "0.01", "retries": "0", "duration": lambda cmd: None if cmd.name == "teach" else "0.3",
+            "ids": "1", "find_ids": "1", "find_baud": "57600"},
 }
 #: What a shell reads, and a command that asks reads (zap setup's Enter): a line that talks.
 STDIN = {"zk": "monitor --duration 0.3\n", "zap": "echo --id 1\n"}

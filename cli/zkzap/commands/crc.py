@@ -35,7 +35,9 @@ def crc():
 def check_any(frame: bytes) -> str:
     """Check a whole frame of any protocol; returns a description, raises on mismatch. A frame
     that is neither a mightyZAP IR packet nor a ZK frame but whose last two bytes are its
-    CRC-16/MODBUS is a Modbus RTU frame."""
+    CRC-16/MODBUS is a Modbus RTU frame; so is a longer one of a Modbus frame's form (unit ID
+    0..247, a function of the family or its exception), whose CRC is then checked. Bytes of no
+    protocol's form are bad input, never a "mismatch" of a protocol they are not."""
     if len(frame) >= 7 and frame[:3] == zap.HEADER:
         checked(zap.check_packet, frame)
         return f"mightyZAP packet: checksum {frame[-1]:02X} ok"
@@ -47,11 +49,19 @@ def check_any(frame: bytes) -> str:
                 return f"Modbus RTU frame: CRC {frame[-2]:02X} {frame[-1]:02X} ok"
         else:
             return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
-    elif len(frame) > 4 and frame[:3] != zap.HEADER:
+    elif len(frame) > 4 and frame[:3] != zap.HEADER and _modbus_form(frame):
         checked(modbus.check_frame, frame, "; a mightyZAP packet starts FF FF FF, a ZK frame has 4 or 7 bytes")
         return f"Modbus RTU frame: CRC {frame[-2]:02X} {frame[-1]:02X} ok"
-    kind = checked(zk.check_frame, frame, "; a mightyZAP packet starts FF FF FF")
+    kind = checked(zk.check_frame, frame, "; a mightyZAP packet starts FF FF FF, a Modbus RTU frame has "
+                                          "a unit ID 0..247 and function " +
+                                          ", ".join(f"{f:02X}" for f in sorted(modbus.FUNCTIONS)))
     return f"ZK {kind} frame: CRC {frame[-1]:02X} ok"
+
+
+def _modbus_form(frame: bytes) -> bool:
+    """Whether ``frame`` has a Modbus RTU frame's form: unit ID 0..247 (0 broadcast), then a
+    function of the family (its exception: the same with bit 7 set)."""
+    return frame[0] <= modbus.MAX_ID and (frame[1] & ~modbus.EXCEPTION_BIT) in modbus.FUNCTIONS
 
 
 def _run(hex_bytes, append, check, compute):

@@ -64,7 +64,8 @@ def _raise_stopped(stopped):
 
 
 @exits({DEVICE_ERROR: "an actuator reported error bits: every actuator was stopped",
-        CHECK_FAILED: "a current over --limit: every actuator was stopped"})
+        CHECK_FAILED: "a current over --limit: every actuator was stopped",
+        NO_REPLY: "no log read was answered: the goals went out unconfirmed"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("path", metavar="FILE", type=InputPath("zap path", label="FILE"))
 @click.option("--interpolate", type=Choice(["linear"]), default=None,
@@ -184,6 +185,16 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
                 _raise_stopped(player.stopped)
     if player.stopped is not None:
         _raise_stopped(player.stopped)
+    _raise_unanswered(player)
+
+
+def _raise_unanswered(player):
+    """A play whose every log read went unanswered never passes: nothing confirmed a goal."""
+    from ...errors import NoReply
+
+    s = player.summary()
+    if s["reads"] and s["read_failures"] == s["reads"]:
+        raise NoReply(f"no actuator answered: {s['reads']} log reads unanswered, the goals went out unconfirmed")
 
 
 def bus_specs(bus_names, fleet_file, common, unit):
@@ -300,6 +311,8 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
 
             raise DeviceError(f"stopped: {first.message}")
         raise CheckFailed(f"stopped: {first.message}")
+    for player in players.values():
+        _raise_unanswered(player)
 
 
 def scan_buses(ids, fmt, bus_names, fleet_file, common):
