@@ -163,7 +163,11 @@ def test_send_for_ecu_error_aborts_with_exit_5(cli):
     assert "ECU error 8 (egt-high: Exhaust temperature is high)" in r.stderr
     assert "ECU error: sent stop, throttle 0" in r.stderr
     rows = list(csv.DictReader(io.StringIO(r.stdout)))
-    assert rows[-1]["error_code"] == "8"
+    # the frame of the error, then the trip record marking it, then the rundown to the end
+    tripped = next(i for i, row in enumerate(rows) if row["trip"])
+    assert rows[tripped - 1]["error_code"] == "8"
+    assert rows[tripped]["trip"].startswith("ECU error 8 (egt-high") and "sent stop" in rows[tripped]["trip"]
+    assert rows[-1]["trip"].startswith("rundown ")
 
 
 def test_send_for_harmless_command_keeps_going_through_errors(cli):
@@ -275,7 +279,7 @@ class FakeDashboard:
     made = []
 
     def __init__(self, stream, title):
-        self.title, self.updates, self.entered = title, [], False
+        self.title, self.updates, self.notes, self.entered = title, [], [], False
         FakeDashboard.made.append(self)
 
     def __enter__(self):
@@ -288,6 +292,10 @@ class FakeDashboard:
 
     def update(self, snapshot, health):
         self.updates.append((snapshot, health))
+
+    def note(self, text):
+        """What the session says while the view is up goes above it, through here."""
+        self.notes.append(text)
 
 
 @pytest.mark.parametrize("extra,file_records", [([], False), (["-o", "log.csv"], True)])
@@ -311,6 +319,7 @@ def test_terminal_gets_the_dashboard(cli, monkeypatch, tmp_path, extra, file_rec
                            "version_source"}
     assert health["frames"] > 50 and health["protocol_version"] == 6 and health["version_source"] == "frame"
     assert snapshot["max_rpm"] == 160000
+    assert all(text.startswith(("note: ", "warning: ")) for text in dash.notes), dash.notes
     if file_records:
         rows = list(csv.DictReader(open(tmp_path / "log.csv")))
         assert len(rows) == health["frames"]
