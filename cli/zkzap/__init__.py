@@ -39,6 +39,7 @@ _LAZY = {
     "DeviceError": "zkzap.errors",
     "BadReply": "zkzap.errors",
     "OutputError": "zkzap.errors",
+    "Stalled": "zkzap.offload",
     "PermissionNeeded": "zkzap.errors",
     "MoreToDo": "zkzap.errors",
     "Interrupted": "zkzap.errors",
@@ -97,6 +98,7 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
                          PermissionNeeded as PermissionNeeded, PortError as PortError, UsageError as UsageError,
                          ZkzapError as ZkzapError)
     from .link.pcapng import CaptureError as CaptureError
+    from .offload import Stalled as Stalled
     from .sim.serve import PtyUnsupported as PtyUnsupported
     from .sim.zap_actuators import NoActuator as NoActuator
 else:

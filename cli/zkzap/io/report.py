@@ -20,7 +20,7 @@ import os
 from array import array
 
 from ..codec.fields import beyond_float, quote_value
-from ..errors import UsageError, clip
+from ..errors import InvalidValue, UsageError, clip
 from ..infile import open_input
 
 #: Time-history panels: (title, unit label, [(column, legend label)]).
@@ -87,7 +87,7 @@ class Run:
         """Take the record ``rec`` (read at ``where``, ``FILE:LINE``)."""
         try:
             self._add(rec)
-        except _Beyond as e:
+        except InvalidValue as e:
             key = next((c for c in ("t", *self.keep) if _beyond(rec.get(c))), "?")
             raise UsageError(f"run: {where or self.name}: {key}: {e}") from None
 
@@ -148,10 +148,6 @@ class Run:
         return next((t for t, name in self.states if name in RUNNING_STATES), None)
 
 
-class _Beyond(UsageError):
-    """A number written in full that no float holds (an integer of 400 digits, ``1e400``)."""
-
-
 _RANGES = None
 _KNOWN = None
 
@@ -205,6 +201,8 @@ def check_run(run, path, min_records=1) -> None:
 
 
 def _float(v):
+    """A record's number, or None (empty, not a number, not finite); InvalidValue for a number
+    written in full that no float holds (an integer of 400 digits, ``1e400``)."""
     if v is None or v == "" or isinstance(v, bool):
         return None
     try:
@@ -212,16 +210,16 @@ def _float(v):
     except (TypeError, ValueError):
         return None
     except OverflowError:                     # an int beyond a float's range
-        raise _Beyond(f"{quote_value(v)} is beyond a float's range (1.8e308)") from None
+        raise InvalidValue(f"{quote_value(v)} is beyond a float's range (1.8e308)") from None
     if isinstance(v, str) and beyond_float(v, f):
-        raise _Beyond(f"{clip(repr(v))} is beyond a float's range (1.8e308)")
+        raise InvalidValue(f"{clip(repr(v))} is beyond a float's range (1.8e308)")
     return f if math.isfinite(f) else None
 
 
 def _beyond(v) -> bool:
     try:
         _float(v)
-    except _Beyond:
+    except InvalidValue:
         return True
     return False
 
