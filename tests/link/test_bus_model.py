@@ -28,7 +28,7 @@ class BusMachine(RuleBasedStateMachine):
 
     @initialize(seed=st.integers(0, 2**31 - 1))
     def bus(self, seed):
-        self.world = busmodel.World(seed)
+        self.world = busmodel.World(seed, faults=busmodel.SUITE_FAULTS)
 
     def teardown(self):
         if self.world is not None:
@@ -62,7 +62,7 @@ class BusMachine(RuleBasedStateMachine):
         self._run(self.world.cli_load)
 
 
-BusMachine.TestCase.settings = settings(max_examples=40, stateful_step_count=12, deadline=None,
+BusMachine.TestCase.settings = settings(max_examples=12, stateful_step_count=8, deadline=None,
                                         derandomize=True, suppress_health_check=list(HealthCheck))
 test_the_bus_against_its_model = BusMachine.TestCase
 

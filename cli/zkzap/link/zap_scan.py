@@ -123,6 +123,7 @@ class _Scan:
         self.bursts = []               # (lo, hi) of the garbled bytes heard since the last round
         self.all_bursts = []           # (lo, hi) of every burst of garbled bytes heard
         self.prompt = set()            # IDs that answered their first-pass probe in its wait
+        self.tried = {}                # ID -> every _Probe of it (first pass and rounds)
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -184,7 +185,8 @@ class _Scan:
         finally:
             t0 = bus.last_sent
             tx = bus.wire(bus.family.PROBE_LEN)
-            self.probes[ident] = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(bus.family.PROBE_LEN) + bus.margin)
+            self.probes[ident] = probe = _Probe(ident, t0, t0 + tx, tx + bus.window + bus.wire(bus.family.PROBE_LEN) + bus.margin)
+            self.tried.setdefault(ident, []).append(probe)
 
     def _identify_found(self):
         """Identify the actuators found and not identified yet while the last windows close (one
@@ -206,7 +208,7 @@ class _Scan:
         """The IDs not found that may have sent a burst of garbled bytes no actuator found
         explains (no actuator found late, one that did not answer its probe at once, was probed
         a window before): every ID probed up to its reach before."""
-        found = [self.probes[i] for i in self.records if i in self.probes and i not in self.prompt]
+        found = [p for i in self.records if i not in self.prompt for p in self.tried.get(i, ())]
         reach = self._reach()
         out = set()
         for lo, hi in self.all_bursts:
