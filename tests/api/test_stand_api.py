@@ -85,19 +85,13 @@ def test_step_averages_windows_and_settling():
     assert cut["window_end_s"] == 10 and "window cut to 2 s" in cut["note"] and cut["settled"] is None
 
 
-def _write_runs(path, n, tag):
-    for i in range(n):
-        lb.record(path, {"started": "2026-01-01T00:00:00Z", "ended": "2026-01-01T00:01:00Z", "duration_s": 60.0,
-                         "running_s": 30.0, "starts": 1, "max_rpm": 100000, "max_egt_c": 700, "fuel_used_l": 0.25,
-                         "errors": [], "limits_violated": [], "command": tag, "port": "sim://zk", "schedule": None,
-                         "files": [], "outcome": "duration", "exit_status": 0})
-
-
 def test_logbook_two_concurrent_writers(tmp_path):
     path = str(tmp_path / "engine.db")
     lb.check_writable(path)
     ctx = multiprocessing.get_context("spawn")
-    procs = [ctx.Process(target=_write_runs, args=(path, 25, f"stand {k}")) for k in (1, 2)]
+    from logbook_writer import write_runs
+
+    procs = [ctx.Process(target=write_runs, args=(path, 25, f"stand {k}")) for k in (1, 2)]
     for p in procs:
         p.start()
     for p in procs:
