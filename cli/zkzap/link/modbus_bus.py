@@ -108,6 +108,11 @@ class ModbusFamily:
         return pkt[1] == modbus.WRITE_SINGLE
 
     @staticmethod
+    def ack_len(pkt):
+        """Data bytes of a write's reply: its address and count (or value), 4."""
+        return 4
+
+    @staticmethod
     def cut_short(tail: bytes) -> bool:
         return True
 

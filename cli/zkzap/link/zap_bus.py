@@ -202,6 +202,12 @@ class IrFamily:
         return pkt[5] in zap.RESTART_CODES
 
     @staticmethod
+    def ack_len(pkt):
+        """Data bytes of the acknowledgement a write may get from an actuator in another return
+        mode: none (a status packet), or None where it is a copy of the request (Restart)."""
+        return None if pkt[5] in zap.RESTART_CODES else 0
+
+    @staticmethod
     def cut_short(tail: bytes) -> bool:
         """Whether bytes held at the end look like the start of a reply (not line noise)."""
         return tail.startswith(b"\xff")
@@ -840,7 +846,8 @@ class ZapBus:
                 # its learned latency (the bus-typical one before it was measured), and that
                 # acknowledgement is skipped when it comes
                 until = t0 + tx + self.courtesy(ident, win) + self.wire(family.OVERHEAD) + self.margin
-                self._owed.append(_Owed(None, accept, None, t0, t0 + tx, until + pause, until + win, "ack"))
+                self._owed.append(_Owed(None, accept, family.ack_len(pkt), t0, t0 + tx, until + pause, until + win,
+                                         "ack"))
             return None
         rx_len = family.OVERHEAD + (data_len or 0)
         span = tx + win + self.wire(rx_len) + self.margin + extra      # the whole window of an attempt
