@@ -127,6 +127,11 @@ class ModbusFamily:
     #: A scan's probe (a one-register read: 8 bytes; its reply 7).
     PROBE_LEN = 8
 
+    def probe(self, ident):
+        """``(request, data_len)`` asking only whether ``ident`` answers: a read of the map's first
+        register (Modbus RTU has no Echo)."""
+        return modbus.read_registers(ident, self.regmap.registers[0].address, 1), 3
+
     def _run(self, *names):
         """``(address, count)`` of the adjacent registers ``names`` that the map has, from the first."""
         regs = [self.regmap.by_name.get(n) for n in names]
@@ -272,8 +277,8 @@ class ModbusBus(ZapBus):
     def ping(self, ident: int, *, timeout=None, retries=0, quick=False, early=False, window=None):
         """A read of register 0 (the model number) that returns None when nothing answers; an
         exception reply is an answer too (somebody is there)."""
-        first = self.regmap.registers[0].address
-        return self.transact(modbus.read_registers(ident, first, 1), reply=True, data_len=3, timeout=timeout,
+        probe, n = self.family.probe(ident)
+        return self.transact(probe, reply=True, data_len=n, timeout=timeout,
                              retries=retries, optional=True, check=False, quick=quick, early=early, window=window)
 
     def echo(self, ident: int, *, retries=None, **kw):

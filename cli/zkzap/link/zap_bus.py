@@ -222,6 +222,11 @@ class IrFamily:
 
     #: A scan's probe (Echo) and its reply, in bytes.
     PROBE_LEN = 7
+
+    @staticmethod
+    def probe(ident):
+        """``(request, data_len)`` asking only whether ``ident`` answers: Echo."""
+        return zap.echo(ident), 0
     _INFO = (zap.REGISTER_BY_NAME["model-number"], zap.REGISTER_BY_NAME["feedback-return-mode"])
     _LIVE = (zap.REGISTER_BY_NAME["present-position"], zap.REGISTER_BY_NAME["present-voltage"])
 
@@ -921,7 +926,8 @@ class ZapBus:
                 if not any(o.token is not token and o.kind == "reply" and ident in o.ids and
                            o.conflicts(accept, data_len) for o in self._owed):
                     break
-                r = self.transact(zap.echo(ident), reply=True, data_len=0, retries=0, optional=True,
+                probe, n = self.family.probe(ident)
+                r = self.transact(probe, reply=True, data_len=n, retries=0, optional=True,
                                   check=False, any_answer=True)
                 if r is None:
                     break                  # it does not answer now: the request will say so
@@ -1283,7 +1289,8 @@ class ZapBus:
         dev = self.devices[ident]
         late = dev.late
         try:
-            if self.transact(zap.echo(ident), reply=True, data_len=0, retries=tries - 1, optional=True,
+            probe, n = self.family.probe(ident)
+            if self.transact(probe, reply=True, data_len=n, retries=tries - 1, optional=True,
                              persist=True, check=False, any_answer=True) is not None:
                 return True
         except BadReply:
