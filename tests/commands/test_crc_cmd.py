@@ -55,3 +55,23 @@ def test_installed_entry_point(sh):
     assert (r.exit_code, r.stdout) == (0, "D3\n")
     r = sh("zkzap", "crc", "check", "FF 14 64 D4")
     assert r.exit_code == 1 and "expected D3, found D4" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("args,out", [
+    (["zap", "FF FF FF 01 05 F3 86 FF 07"], "7A\n"),            # the packet up to its checksum
+    (["zap", "FF FF FF 01 05 F3 86 FF 07 7A"], "7A\n"),         # whole: the checksum it should end with
+    (["zap", "-a", "FF FF FF 01 05 F3 86 FF 07"], "FF FF FF 01 05 F3 86 FF 07 7A\n"),
+])
+def test_a_zap_packet_with_its_header_is_summed_from_its_id(cli, args, out):
+    """The header is never summed (once FF FF FF 01 05 F3 86 FF 07 printed 7D)."""
+    r = cli("crc", *args)
+    assert r.exit_code == 0 and r.stdout == out and r.stderr == ""
+
+
+@pytest.mark.parametrize("args,words", [
+    (["zap", "FF FF FF 01 05 F3"], "is no packet: SIZE 5 means 10 bytes"),
+    (["zap", "-a", "FF FF FF 01 05 F3 86 FF 07 7A"], "already ends with its checksum"),
+])
+def test_bytes_with_the_header_that_are_no_packet_are_refused(cli, args, words):
+    r = cli("crc", *args)
+    assert r.exit_code == 2 and r.stdout == "" and words in r.stderr

@@ -64,7 +64,26 @@ def _modbus_form(frame: bytes) -> bool:
     return frame[0] <= modbus.MAX_ID and (frame[1] & ~modbus.EXCEPTION_BIT) in modbus.FUNCTIONS
 
 
-def _run(hex_bytes, append, check, compute):
+def _zap_covered(data: bytes, append: bool) -> bytes:
+    """The bytes a mightyZAP checksum covers: ID to the last parameter. Bytes given with the
+    packet's header FF FF FF (which the checksum never covers) must be a packet: up to its
+    checksum, or whole (its checksum then left out, and nothing to append)."""
+    if data[:3] != zap.HEADER or len(data) < 5:
+        return data
+    body, size = data[3:], data[4]
+    if len(body) == 1 + size:                # ID SIZE CMD params: the packet without its checksum
+        return body
+    if len(body) == 2 + size and not append:  # a whole packet: the checksum its last byte should be
+        return body[:-1]
+    if len(body) == 2 + size:
+        raise UsageError(f"{format_hex(data)}: a whole packet already ends with its checksum "
+                         f"({format_hex(body[-1:])}); --check checks it")
+    raise UsageError(f"{format_hex(data)}: starts with the header FF FF FF but is no packet: SIZE {size} "
+                     f"means {size + 5} bytes in all (or {size + 4} before the checksum), {len(data)} given; "
+                     f"give the bytes from ID to the last parameter, or the packet")
+
+
+def _run(hex_bytes, append, check, compute, cover=None):
     data = read_hex_input(hex_bytes)
     if check:
         if append:
@@ -74,7 +93,7 @@ def _run(hex_bytes, append, check, compute):
     if not data:
         source = "stdin" if not hex_bytes or list(hex_bytes) == ["-"] else "hex input"
         raise UsageError(f"{source}: no bytes given")
-    value = compute(data)
+    value = compute(cover(data, append) if cover else data)
     if isinstance(value, int):
         value = bytes((value,))
     click.echo(format_hex(data + value) if append else format_hex(value))
@@ -107,12 +126,16 @@ def crc_zk(hex_bytes, append, check):
 def crc_zap(hex_bytes, append, check):
     """mightyZAP checksum of the bytes from ID to the last parameter.
 
+    Bytes that start with the header FF FF FF are taken as a packet, up to its checksum or
+    whole, and the header is not summed; anything else with that header is refused (exit 2).
+
     \b
     Examples:
       zkzap crc zap 00 02 F1                  # 0C
       zkzap crc zap --append 01 05 F3 88 00 02 # 01 05 F3 88 00 02 7C
+      zkzap crc zap FF FF FF 01 05 F3 86 FF 07 # 7A
     """
-    _run(hex_bytes, append, check, crcs.zap_checksum)
+    _run(hex_bytes, append, check, crcs.zap_checksum, _zap_covered)
 
 
 @exits({CHECK_FAILED: "with --check, the frame's CRC does not match"})
