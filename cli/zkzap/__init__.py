@@ -34,6 +34,7 @@ _LAZY = {
     "InvalidValue": "zkzap.errors",
     "MissingExtra": "zkzap.errors",
     "CheckFailed": "zkzap.errors",
+    "IdTaken": "zkzap.errors",
     "NoReply": "zkzap.errors",
     "PortError": "zkzap.errors",
     "DeviceError": "zkzap.errors",
@@ -92,6 +93,7 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .codec.permissions import Permission as Permission
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError
+    from .errors import IdTaken as IdTaken
     from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
                          Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
                          MoreToDo as MoreToDo, NoReply as NoReply, OutputError as OutputError,

@@ -135,6 +135,13 @@ class CheckFailed(ZkzapError):
     code = CHECK_FAILED
 
 
+class IdTaken(CheckFailed):
+    """The ID asked for answers already (another actuator has it): refused before anything was
+    written, so a refusal (exit 2) rather than a failed check; still a :class:`CheckFailed`."""
+
+    code = USAGE
+
+
 class NoReply(ZkzapError):
     """The device did not answer within the timeout, after every try."""
 

@@ -7,7 +7,7 @@ import pytest
 import zkzap
 from zkzap import Bus, Permission, Reading
 from zkzap.codec import zap
-from zkzap.errors import CheckFailed, DeviceError, NoReply, UsageError
+from zkzap.errors import CheckFailed, DeviceError, IdTaken, NoReply, UsageError
 
 
 @pytest.mark.zap_sim(ids=[1, 2])
@@ -105,7 +105,8 @@ def test_set_id_verified_and_refused_when_taken(zap_sim):
         assert bus[7].id == 7
         with pytest.raises(CheckFailed, match="ID 2 is already taken") as e:
             bus.set_id(7, 2)
-    assert e.value.taken and e.value.code == 1
+    # a refusal before anything was written: IdTaken, a CheckFailed whose exit status is 2
+    assert isinstance(e.value, IdTaken) and e.value.taken and e.value.code == 2
 
 
 def test_set_baud_switches_the_port(zap_sim):

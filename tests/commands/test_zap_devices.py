@@ -93,7 +93,7 @@ def test_direct_id_writes_need_force(cli, args):
 def test_set_id_refuses_a_taken_id_even_when_its_owner_is_slow(cli):
     url = sim_url("zap", ids="1,2", faults="2:delay=30")           # answers after the first wait
     r = cli("zap", "set-id", "2", "--id", "1", "-p", url)
-    assert r.exit_code == 1 and "already taken" in r.stderr, r
+    assert r.exit_code == 2 and "already taken" in r.stderr, r
     r = cli("zap", "set-id", "3", "--id", "1", "-p", url)
     assert r.exit_code == 0 and "verified" in r.stderr, r
 

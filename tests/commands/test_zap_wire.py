@@ -282,7 +282,7 @@ def test_set_id_verified(cli, tmp_path):
     assert r.exit_code == 0 and "ID 0 is now ID 3 (verified)" in r.stderr
     assert cli("zap", "echo", "--id", "3", "-p", port).exit_code == 0
     r = cli("zap", "set-id", "5", "--id", "3", "-p", port)
-    assert r.exit_code == 1 and "ID 5 is already taken" in r.stderr
+    assert r.exit_code == 2 and "ID 5 is already taken" in r.stderr
     r = cli("zap", "set-id", "4", "--id", "9", "-p", port)
     assert r.exit_code == 3
 

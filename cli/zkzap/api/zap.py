@@ -47,7 +47,7 @@ else:
 
 from ..codec import zap
 from ..codec.permissions import FORCE, Permission, as_permission
-from ..errors import BadReply, CheckFailed, NoReply, UsageError, did_you_mean
+from ..errors import BadReply, CheckFailed, IdTaken, NoReply, UsageError, did_you_mean
 
 __all__ = ["Bus", "Actuator", "Reading", "Permission", "ALL_BAUDS", "register_records", "map_blocks"]
 
@@ -590,7 +590,7 @@ class Bus:
             raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
                               ident=ident, duplicate=True)
         if not force and self.link.answers(new):           # three full waits: never a guess
-            raise CheckFailed(f"ID {new} is already taken by another actuator", ident=new, taken=True)
+            raise IdTaken(f"ID {new} is already taken by another actuator", ident=new, taken=True)
         self.link.store(ident, ID_REG, new, allow=Permission.IDENTITY)   # the checked way: set_id itself
         value = self._read_back(new, ID_REG, ready_timeout,
                                 f"set-id: ID {new} does not answer after the change", "id")

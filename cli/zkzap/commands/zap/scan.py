@@ -14,7 +14,7 @@ import click
 
 from ...api.zap import ALL_BAUDS, POSITION, SPEED, Bus, map_blocks  # noqa: F401 - re-exported
 from ...codec import zap
-from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, NoReply, UsageError
+from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, USAGE, NoReply, UsageError
 from .. import CONTEXT, Command
 from ..options import (BaudList, Choice, FiniteRange, SignedCommand, authorize, buses_option, exits, fleet_option,
                        format_option, id_option, note, protocol_options, resolve_format, unit_options, unit_scales, warn, zap_map,
@@ -358,7 +358,8 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_
 
 # -- set-id / set-baud ---------------------------------------------------------------------------
 
-@exits({CHECK_FAILED: "NEW is taken, the read-back differs, NEW does not answer or --id still answers"})
+@exits({USAGE: "bad usage or input, or NEW is taken (refused: nothing is written)",
+        CHECK_FAILED: "the read-back differs, NEW does not answer or --id still answers"})
 @click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
 @id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).")
@@ -374,8 +375,8 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
     Checks first that --id answers and that NEW is free: NEW is probed up to three times with
     the full reply allowance, and any reply (error bits, garbled or late) means taken (two
     actuators with one ID garble every reply; --force skips that check). Afterwards NEW must
-    read back its ID and --id must be silent. Exit status 1 when NEW is taken, the read-back
-    differs, NEW does not answer or --id still answers. On a real port it asks for consent
+    read back its ID and --id must be silent. Exit status 2 when NEW is taken (nothing is
+    written), 1 when the read-back differs, NEW does not answer or --id still answers. On a real port it asks for consent
     (--yes).
 
     \b
