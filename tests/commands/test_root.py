@@ -56,7 +56,9 @@ def test_every_command_builds_its_help_option_without_gettext(monkeypatch, cli):
     for group, mapping in MAPS:
         for name, spec in mapping.items():
             cmd = getattr(importlib.import_module(spec[0], "zkzap.commands"), spec[1])
-            ctx = click.Context(cmd, info_name=name)
+            # the context as click makes it for the command (its settings name -h): a bare one
+            # passed only where another test had already built the option in this process
+            ctx = click.Context(cmd, info_name=name, **cmd.context_settings)
             option = cmd.get_help_option(ctx)
             assert option.opts == ["-h", "--help"] and option.help == "Show this message and exit."
             assert option is cmd.get_help_option(ctx)

@@ -26,7 +26,7 @@ def recorded(tmp_path_factory):
 @pytest.fixture(scope="module")
 def console(recorded):
     out, book = recorded
-    c = WebConsole("zk", "-p", "sim://zk?speed=4", "--limit", LIMIT, "-o", str(out), "--logbook", str(book),
+    c = WebConsole("zk", "-p", "sim://zk?speed=2", "--limit", LIMIT, "-o", str(out), "--logbook", str(book),
                    "--engine", "K100-1")
     yield c
     c.close()
