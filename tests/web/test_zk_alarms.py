@@ -41,14 +41,17 @@ def page(browser, console):
 
 
 def toast_after(page, before):
-    """The first toast newer than the ``before`` count of toasts."""
-    return until(lambda: js(page, "const t = [...document.querySelectorAll('#toasts .toast')].map(e => e.innerText);"
-                                  "return t.length > arguments[0] ? t[t.length - 1] : null;", before),
+    """The newest toast that came after :func:`toasts` marked those on the page (``before``).
+    Toasts leave after 6 s, so a count would miss a new one that came as an old one left."""
+    return until(lambda: js(page, "const t = [...document.querySelectorAll('#toasts .toast:not([data-seen])')]"
+                                  ".map(e => e.innerText); return t.length ? t[t.length - 1] : null;"),
                  "a toast")
 
 
 def toasts(page):
-    return js(page, "return document.querySelectorAll('#toasts .toast').length")
+    """Mark the toasts on the page now (see :func:`toast_after`); returns how many there are."""
+    return js(page, "const t = document.querySelectorAll('#toasts .toast');"
+                    "t.forEach(e => { e.dataset.seen = '1'; }); return t.length;")
 
 
 def start_refused(page, why):

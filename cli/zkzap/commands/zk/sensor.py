@@ -7,7 +7,7 @@ from __future__ import annotations
 import click
 
 from ...errors import NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR, USAGE, UsageError
-from .. import CONTEXT, Command
+from .. import CONTEXT, Command, Group
 from ..options import FiniteRange, InputPath, IntRange, exits, format_option, note
 
 _TIMEOUT = click.option("--timeout", type=FiniteRange(0, 3600, min_open=True), default=2.0, show_default=True,
@@ -48,7 +48,7 @@ def _pick(f):
     return f
 
 
-@click.group(cls=click.Group, context_settings=CONTEXT)
+@click.group(cls=Group, context_settings=CONTEXT)
 def sensor():
     """An external sensor of the stand on its own: read, tare, calibrate.
 
