@@ -80,6 +80,15 @@ class WebConsole:
         os.unlink(self.log.name)
 
 
+def open_console(driver, url) -> None:
+    """Open ``url`` afresh: the page before it (another test's, whose console may have ended, so
+    that its reconnection attempts fail) is left first and the browser log it filled is dropped,
+    so that :func:`console_errors` speaks of this page only."""
+    driver.get("about:blank")
+    driver.get_log("browser")
+    driver.get(url)
+
+
 def console_errors(driver) -> list:
     """The browser console's errors since the last call (and the page's own error count)."""
     return [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]

@@ -14,7 +14,8 @@ import pytest
 
 from zkzap.sim import start_zap
 
-from webpage import WebConsole, click, console_errors, consent_dialog, css, js, set_value, text_of, until
+from webpage import (WebConsole, click, console_errors, consent_dialog, css, js, open_console, set_value, text_of,
+                     until)
 
 
 
@@ -36,7 +37,7 @@ def console(bus):
 def opened(browser, console):
     """The browser on this module's console (opened with its token when it is elsewhere)."""
     if not browser.current_url.startswith(console.base):
-        browser.get(console.url)
+        open_console(browser, console.url)
     until(lambda: len(css(browser, "#actuators tbody tr")) == 3, "the first scan's three actuators")
     return browser
 

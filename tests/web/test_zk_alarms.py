@@ -12,7 +12,7 @@ import sqlite3
 
 import pytest
 
-from webpage import WebConsole, click, console_errors, js, set_value, take_control, text_of, until
+from webpage import WebConsole, click, console_errors, open_console, js, set_value, take_control, text_of, until
 
 LIMIT = "egt_c<=650,warn=620"
 
@@ -34,7 +34,7 @@ def console(recorded):
 
 @pytest.fixture
 def page(browser, console):
-    browser.get(console.url)
+    open_console(browser, console.url)
     take_control(browser)
     until(lambda: "frames/s" in text_of(browser, "#link"), "the status stream")
     return browser

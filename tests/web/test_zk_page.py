@@ -14,7 +14,7 @@ import pytest
 from zkzap.sim import start_zk
 
 from webpage import (WebConsole, click, console_errors, consent_dialog, css, js, set_value, take_control, text_of,
-                     until)
+                     open_console, until)
 
 
 
@@ -37,7 +37,7 @@ def console(ecu):
 def opened(browser, console):
     """The browser on this module's console (opened with its token when it is elsewhere)."""
     if not browser.current_url.startswith(console.base):
-        browser.get(console.url)
+        open_console(browser, console.url)
     return browser
 
 
