@@ -70,6 +70,7 @@ def test_a_zap_packet_with_its_header_is_summed_from_its_id(cli, args, out):
 
 @pytest.mark.parametrize("args,words", [
     (["zap", "FF FF FF 01 05 F3"], "is no packet: SIZE 5 means 10 bytes"),
+    (["zap", "FF FF FF 01"], "too short for a packet"),          # once summed with its header
     (["zap", "-a", "FF FF FF 01 05 F3 86 FF 07 7A"], "already ends with its checksum"),
 ])
 def test_bytes_with_the_header_that_are_no_packet_are_refused(cli, args, words):

@@ -68,8 +68,11 @@ def _zap_covered(data: bytes, append: bool) -> bytes:
     """The bytes a mightyZAP checksum covers: ID to the last parameter. Bytes given with the
     packet's header FF FF FF (which the checksum never covers) must be a packet: up to its
     checksum, or whole (its checksum then left out, and nothing to append)."""
-    if data[:3] != zap.HEADER or len(data) < 5:
+    if data[:3] != zap.HEADER:
         return data
+    if len(data) < 5:
+        raise UsageError(f"{format_hex(data)}: starts with the header FF FF FF but is too short for a packet "
+                         f"(the header, ID and SIZE are 5 bytes); give the bytes from ID to the last parameter")
     body, size = data[3:], data[4]
     if len(body) == 1 + size:                # ID SIZE CMD params: the packet without its checksum
         return body
