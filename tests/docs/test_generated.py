@@ -254,3 +254,12 @@ def test_what_a_help_text_says_of_exit_statuses_is_declared():
         assert said <= declared, (path, sorted(said - declared))
         checked += bool(said)
     assert checked >= 10
+
+
+def test_committed_command_reference_is_current(tmp_path):
+    """docs/reference/commands/*.md, committed so that links to it resolve outside the site too."""
+    from zkzap.docs import site
+
+    site.generate(str(tmp_path))
+    diff = _differences(os.path.join(REPO, "docs", site.COMMANDS_DIR), str(tmp_path / site.COMMANDS_DIR))
+    assert not diff, f"the command reference differs from the application: {', '.join(diff)}; {REGENERATE}"

@@ -6,7 +6,8 @@ import os
 import sys
 
 USAGE = "usage: python -m zkzap.docs {all [ROOT] | man OUTDIR | completions OUTDIR | protocol OUTDIR}"
-# all: also share/wireshark/zkzap.lua, docs/protocol.md and cli/zkzap/api/_registers.pyi
+# all: also share/wireshark/zkzap.lua, docs/protocol.md, docs/reference/commands/*.md and
+# cli/zkzap/api/_registers.pyi
 
 
 def main(argv=None) -> int:
@@ -15,13 +16,13 @@ def main(argv=None) -> int:
         print(USAGE, file=sys.stderr if not args else sys.stdout)
         return 2 if not args else 0
     what, rest = args[0], args[1:]
-    from . import completions, man, protocol, stubs, wireshark
+    from . import completions, man, protocol, site, stubs, wireshark
 
     if what == "all" and len(rest) <= 1:
         root = rest[0] if rest else os.getcwd()
         written = man.generate(os.path.join(root, "man")) + completions.generate(os.path.join(root, "completions"))
         written += wireshark.generate(root) + stubs.generate(root)
-        written += protocol.generate(os.path.join(root, "docs"))
+        written += protocol.generate(os.path.join(root, "docs")) + site.generate(os.path.join(root, "docs"))
     elif what == "protocol" and len(rest) == 1:
         written = protocol.generate(rest[0])
     elif what == "man" and len(rest) == 1:

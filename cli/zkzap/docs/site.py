@@ -4,9 +4,12 @@ generated while it builds, and the docstring dialect of the API reference.
     pip install '.[docs]' && mkdocs build --strict        # the site, into site/
     mkdocs serve                                           # the same, live
 
-``mkdocs.yml`` names this file as a hook: :func:`on_files` adds the command reference (one
-page per command group, written from the click application, as the man pages are; the
-protocol reference ``docs/protocol.md`` is written from the codec's tables and committed).
+The command reference (one page per command group, ``docs/reference/commands/*.md``) is written
+from the click application as the man pages are, by :func:`generate` (``python -m zkzap.docs
+all``), and committed like them: the README's and the manual's links to it resolve on GitHub and
+in a clone as well as in the built site (the tests fail when a committed page differs). The
+protocol reference ``docs/protocol.md`` is written from the codec's tables and committed too.
+``mkdocs.yml`` names this file as a hook for the docstrings' dialect below.
 :class:`SphinxRoles` is a griffe extension that
 reads the docstrings' reStructuredText roles (``:class:`Bus```, ``:meth:`~Bus.move```) as
 cross-references, their ``>>>`` sessions and ``.. code-block::`` directives as code blocks.
@@ -122,15 +125,25 @@ def command_pages() -> dict:
     return pages
 
 
-# --- MkDocs hook -----------------------------------------------------------------------------------
+def generate(docs_dir) -> list:
+    """Write the command reference under ``DOCS_DIR/reference/commands`` (a page no group has any
+    more is removed); returns the paths written."""
+    import os
 
-def on_files(files, config):
-    """Add the generated pages to the site."""
-    from mkdocs.structure.files import File
-
-    for src, text in command_pages().items():
-        files.append(File.generated(config, src, content=text))
-    return files
+    pages = command_pages()
+    folder = os.path.join(docs_dir, COMMANDS_DIR)
+    os.makedirs(folder, exist_ok=True)
+    keep = {os.path.basename(src) for src in pages}
+    for old in os.listdir(folder):
+        if old.endswith(".md") and old not in keep:
+            os.remove(os.path.join(folder, old))
+    written = []
+    for src, text in pages.items():
+        path = os.path.join(docs_dir, src)
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text if text.endswith("\n") else text + "\n")
+        written.append(path)
+    return written
 
 
 # --- the docstrings' dialect -----------------------------------------------------------------------
