@@ -17,7 +17,7 @@ def stand_port():
     """The simulator served over TCP: a real port to the logbook (an engine's hours are counted)."""
     from zkzap.sim import start_zk
 
-    with start_zk(speed=20, transport="tcp") as sim:
+    with start_zk(speed=50, transport="tcp") as sim:
         yield sim.url
 
 
@@ -140,7 +140,7 @@ def test_rpm_schedule_reaches_its_target_and_leaves_rpm_mode(cli, tmp_path):
 def test_logbook_from_send_and_monitor_and_totals(cli, tmp_path, stand_port):
     book = str(tmp_path / "engine.db")
     cli("zk", "monitor", "-p", stand_port, "--count", "5", "-f", "jsonl", "--logbook", book)
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", stand_port,
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "6", "-p", stand_port,
             "--yes", "-f", "jsonl", "--logbook", book)
     assert r.exit_code == 0 and "run 2 recorded" in r.stderr
     r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "20", "-p", SIM, "-f", "jsonl",
@@ -260,12 +260,12 @@ def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_p
     old.execute(SCHEMA.replace(",\n    engine TEXT,\n    throttle_s TEXT", ""))
     old.close()
     for throttle, engine in ((90, "K100-1"), (50, "K100-2")):
-        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "25", "-p",
+        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "6", "-p",
                 stand_port, "--yes", "-f", "jsonl", "--logbook", book, "--engine", engine)
         assert r.exit_code == 0, r
     r = cli("zk", "logbook", book, "--service", "K100-1", "--note", "25 h inspection")
     assert r.exit_code == 0 and "service 1 of K100-1 recorded" in r.stderr
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "25", "-p", stand_port,
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "6", "-p", stand_port,
             "--yes", "-f", "jsonl", "--logbook", book, "--engine", "K100-1")
     assert r.exit_code == 0, r
     doc = json.loads(cli("zk", "logbook", book, "--engine", "K100-1", "--above", "80", "--above", "55",
