@@ -186,8 +186,29 @@ def test_plan_rules(bus_of):
     assert [(x.register.name, x.old, x.new) for x in w] == [("goal-speed", 700, 1023)]   # volatile: when named
     with pytest.raises(UsageError, match="--only id: .*--force"):
         fleet.plan(entry, 5, current, only=[R["id"]])
-    w, _ = fleet.plan(entry, 5, current, only=[R["id"], R["speed-limit"]], force=True)
+    with pytest.raises(UsageError, match="would give bus ID 5 the ID 1"):    # a clone: id is the file's key
+        fleet.plan(entry, 5, current, only=[R["id"], R["speed-limit"]], force=True)
+    w, _ = fleet.plan(entry, 5, current, only=[R["speed-limit"]], force=True)
+    assert [x.register.name for x in w] == ["speed-limit"]
+    w, _ = fleet.plan(entry, 1, dict(current, id=5), only=[R["id"], R["speed-limit"]], force=True)
     assert [x.register.name for x in w] == ["speed-limit", "id"]               # id last
+
+
+def test_an_id_write_through_apply_is_checked_free_like_set_id(bus_of):
+    from zkzap.errors import IdTaken
+
+    bus = bus_of()
+    mark = len(bus.port.device.received)
+    taken = fleet.Write(1, 1, R["id"], 1, 2)
+    done = []
+    with pytest.raises(IdTaken):
+        fleet.execute(bus, [taken], done, allow="identity")
+    assert done == [] and taken.status == "refused" and stores(bus, mark) == []
+    assert sorted(a.ident for a in bus.port.device.actuators) == [1, 2, 3]
+    free = fleet.Write(1, 1, R["id"], 1, 7)
+    fleet.execute(bus, [free], done, allow="identity")
+    assert (free.status, free.read_back) == ("verified", 7) and done == [free]
+    assert sorted(a.ident for a in bus.port.device.actuators) == [2, 3, 7]
     with pytest.raises(UsageError, match="--only: .*read-only"):
         fleet.registers_option(["present-position"], "--only")
     with pytest.raises(UsageError, match="unknown name"):

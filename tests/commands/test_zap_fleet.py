@@ -129,7 +129,36 @@ def test_apply_only_skip_and_protected(cli, buses):
     r = cli("zap", "apply", f, "--only", "id", "-p", b)
     assert (r.exit_code, r.stdout) == (2, "") and "--force" in r.stderr
     r = cli("zap", "apply", f, "--map", "1:2", "--ids", "1", "--only", "id", "--force", "--plan", "-p", b)
-    assert r.exit_code == 0 and [(x["id"], x["register"], x["new"]) for x in jsonl(r.stdout)] == [(2, "id", 1)]
+    assert (r.exit_code, r.stdout) == (2, "") and "would give bus ID 2 the ID 1" in r.stderr
+
+
+@pytest.mark.parametrize("how", [["--to", "2-3"], ["--map", "1:3"]])
+def test_a_clone_never_makes_two_actuators_with_one_id(cli, buses, how):
+    """Regression: a clone's plan listed "ID 2 id (2 on the bus, 1 in the file)" and hinted
+    --only NAME --force, which gave ID 2 the ID 1."""
+    a, b, tmp = buses
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1", "-p", a, "-o", f)
+    r = cli("zap", "apply", f, "--ids", "1", *how, "--plan", "-p", b)
+    assert r.exit_code == 0, r
+    assert "id" not in {x["register"] for x in jsonl(r.stdout)} and " id (" not in r.stderr
+    r = cli("zap", "apply", f, "--ids", "1", *how, "--only", "id", "--force", "-p", b)
+    assert (r.exit_code, r.stdout) == (2, "") and "zap set-id" in r.stderr
+    r = cli("zap", "apply", f, "--ids", "1", *how, "--yes", "-p", b)
+    assert r.exit_code == 0, r
+    assert sorted(state_of(tmp / "b.json")) == [1, 2, 3]           # every actuator keeps its own ID
+
+
+def test_apply_of_a_baud_rate_says_when_it_takes_effect(cli, buses):
+    a, b, tmp = buses
+    make_bus(tmp / "a.json", settings={1: {"baud-rate": 16}})
+    f = str(tmp / "fleet.json")
+    cli("zap", "backup", "--ids", "1", "-p", a, "-b", "115200", "-o", f)
+    r = cli("zap", "apply", f, "--only", "baud-rate", "--force", "-p", b)
+    assert r.exit_code == 0, r
+    rows = jsonl(r.stdout)
+    assert [(x["register"], x["new"], x["status"]) for x in rows] == [("baud-rate", 16, "verified")]
+    assert "115200 baud from its next restart" in rows[0]["note"] and "at 57600 baud until then" in r.stderr
 
 
 def _bad_file(tmp, text, name="bad.json"):

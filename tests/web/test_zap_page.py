@@ -138,11 +138,14 @@ def test_backup_diff_and_apply_of_a_fleet_file(page, bus, tmp_path):
     doc = json.loads(js(page, "return (await Z.request('backup', {format: 'json'})).text;"))
     assert sorted(doc["actuators"]) == ["1", "2", "3"]
     doc["actuators"]["2"]["stored"]["acceleration"] = 33
+    del doc["actuators"]["3"]                         # ID 3 is then on the bus only: a row of the diff too
     path = tmp_path / "fleet.json"
     path.write_text(json.dumps(doc))
     css(page, "#fleet-file")[0].send_keys(str(path))
     click(page, "#diff")
     until(lambda: "acceleration" in text_of(page, "#fleet-out"), "the diff table")
+    rows = [r.text.split() for r in css(page, "#fleet-out tbody tr")]
+    assert ["3", "(actuator)", "absent", "present"] in [r[:2] + r[3:5] for r in rows], rows
     assert register(bus, 2, "acceleration") != 33
     click(page, "#apply")
     assert "survive power-off" in consent_dialog(page)

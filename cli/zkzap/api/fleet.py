@@ -435,26 +435,28 @@ class Write:
     """One planned register write: on bus ID ``target`` (from the document's ``source``),
     ``register`` from ``old`` (the bus's value now) to ``new``."""
 
-    __slots__ = ("target", "source", "register", "old", "new", "status", "read_back", "errors")
+    __slots__ = ("target", "source", "register", "old", "new", "status", "read_back", "errors", "note")
 
     def __init__(self, target, source, register, old, new):
         self.target, self.source, self.register, self.old, self.new = target, source, register, old, new
         self.status = "planned"
         self.read_back = None
         self.errors = []
+        self.note = ""
 
     def record(self) -> dict:
         reg = self.register
         return {"id": self.target, "source": self.source, "register": reg.name, "address": reg.address,
                 "memory": reg.memory, "old": self.old, "new": self.new, "unit": unit_of(reg),
-                "status": self.status, "read_back": self.read_back, "errors": list(self.errors)}
+                "status": self.status, "read_back": self.read_back, "errors": list(self.errors),
+                "note": self.note}
 
     def __repr__(self):
         return f"Write(ID {self.target}: {self.register.name} {self.old} -> {self.new}, {self.status})"
 
 
 PLAN_COLUMNS = ["id", "source", "register", "address", "memory", "old", "new", "unit", "status", "read_back",
-                "errors"]
+                "errors", "note"]
 
 
 def registers_option(names, what) -> list:
@@ -529,9 +531,13 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
                                  "add --force to write it")
             if reg not in entry.values:
                 raise UsageError(f"--only {reg.name}: ID {entry.ident} of the file has no {reg.name}")
+            if reg.name == "id" and target != entry.ident:
+                raise UsageError(cloned_id(entry.ident, target), source=entry.ident, target=target)
         chosen = [r for r in zap.REGISTERS if r in only]
     else:
         chosen = [r for r in zap.REGISTERS if r.stored and r.name not in PROTECTED and r in entry.values]
+    if target != entry.ident:                 # a clone: the file's ID is its key, never a setting to copy
+        chosen = [r for r in chosen if r.name != "id"]
     writes, unchanged = [], 0
     for reg in chosen:
         if reg in skip:
@@ -547,6 +553,23 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
     return writes, unchanged
 
 
+def check_only(only, pairs) -> None:
+    """UsageError, before the bus is touched, for ``--only id`` on a clone (a pair whose bus ID is
+    not the file's: :func:`cloned_id`)."""
+    if only and any(r.name == "id" for r in only):
+        for source, target in pairs:
+            if source != target:
+                raise UsageError(cloned_id(source, target), source=source, target=target)
+
+
+def cloned_id(source: int, target: int) -> str:
+    """Why an apply that sends the file's actuator ``source`` to bus ID ``target`` never writes
+    the ``id`` register: it would give ``target`` the ID ``source``."""
+    return (f"--only id: the file's ID {source} goes to bus ID {target} (--map or --to), so its id is the "
+            f"file's key, not a setting to copy: writing it would give bus ID {target} the ID {source}, "
+            f"a second actuator with one ID; 'zap set-id' gives an actuator another ID, checked free first")
+
+
 def left_out(entries: dict, pairs, current: dict, *, only=None, skip=()) -> list:
     """The differences an apply does not write, so a plan can say so: ``[(target, register,
     bus value, file value, why)]`` with ``why`` ``"protected"`` (id, baud-rate, protocol-type,
@@ -559,8 +582,8 @@ def left_out(entries: dict, pairs, current: dict, *, only=None, skip=()) -> list
         entry = entries[source]
         values = current.get(target, {})
         for reg in zap.REGISTERS:
-            if not reg.stored or reg not in entry.values:
-                continue
+            if not reg.stored or reg not in entry.values or (reg.name == "id" and source != target):
+                continue                      # (a clone's id is the file's key: never a difference)
             new, old = entry.values[reg], values.get(reg.name)
             if old == new:
                 continue
@@ -643,6 +666,15 @@ def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCED
     return records
 
 
+def bus_entries(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> dict:
+    """{ID: Entry} of the live bus, as ``zap diff`` and the browser console compare it with a
+    file: the actuators :func:`survey` finds (every one that answers, without ``ids``: an actuator
+    that is only on the bus is in it, so a diff names it), each read whole at the baud rate it
+    answered at. A bus where two actuators answer to one ID is refused (:class:`SharedId`)."""
+    found = survey(bus, ids, bauds, scan=scan, retries=retries, procedures=procedures)
+    return read_entries(bus, found, procedures=procedures)
+
+
 def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), force=False, on_mismatch=None,
              procedures=PROCEDURES) -> tuple:
     """(writes, unchanged, current) that make the bus match ``entries`` for each (document ID,
@@ -687,7 +719,13 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
     read-back did not complete) or ``unverifiable`` (feedback-return-mode 0 never answers a read).
     ``on_write(write)`` is called after each read-back. Each write needs what its packet needs
     (:meth:`zkzap.codec.zap.Command.needs`): the bus's permissions, or ``allow``; every write is
-    checked before the first is sent."""
+    checked before the first is sent.
+
+    An ``id`` write is made the way ``zap set-id`` makes it (:meth:`zkzap.api.zap.Bus.set_id`):
+    the new ID is checked free first (:class:`~zkzap.errors.IdTaken` when another actuator
+    answers to it: nothing sent, status ``refused``) and read back from the new ID. A
+    ``baud-rate`` write gets a ``note`` saying when the new rate takes effect
+    (:func:`baud_note`)."""
     from ..codec.permissions import as_permission
 
     allow = as_permission(allow)
@@ -695,6 +733,11 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
         bus.authorize(zap.store(w.target, w.register, w.new), allow)
     for w in writes:
         reg = w.register
+        if reg.name == "id":
+            _set_id(bus, w, done)
+            if on_write is not None:
+                on_write(w)
+            continue
         w.status = "sending"
         # (a new feedback-return-mode is that actuator's from now on: the bus keeps it per ID)
         reply = bus.store(w.target, reg, w.new, check=False, allow=allow)
@@ -707,18 +750,44 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
             if on_write is not None:
                 on_write(w)
             continue
-        where = w.target
-        if reg.name == "id":
-            where = w.new
-            bus.wait_ready(where, within=2.0)
         # a new baud rate takes effect at the next restart: the stored code reads back at once
-        r = bus.load(where, reg.address, reg.size, check=False)
+        r = bus.load(w.target, reg.address, reg.size, check=False)
         w.read_back = r.value
         if r.error:
             w.errors = sorted(set(w.errors) | set(r.errors))
         w.status = "verified" if r.value == w.new else "mismatch"
+        if reg.name == "baud-rate" and w.status == "verified":
+            w.note = baud_note(w.target, w.old, w.new, bus.baud)
         if on_write is not None:
             on_write(w)
+
+
+def _set_id(bus, w, done) -> None:
+    """An ``id`` write of :func:`execute`, made by the one checked procedure for it."""
+    from ..errors import IdTaken
+    from .zap import Bus
+
+    w.status = "checking"
+    try:
+        Bus.over(bus).set_id(w.target, w.new)       # checks the new ID is free, then stores and reads back
+    except IdTaken:
+        w.status = "refused"                        # nothing was sent
+        raise
+    except BaseException:
+        w.status = "sending"                        # the Store may have gone out
+        raise
+    done.append(w)
+    w.read_back, w.status = w.new, "verified"
+
+
+def baud_note(target: int, old, new: int, line: int) -> str:
+    """When a stored baud-rate code ``new`` (read back equal) takes effect: the IR actuator
+    (12Lf) keeps answering at the rate it runs at until its next restart."""
+    rate = zap.MAP.baud_codes.get(new)
+    was = zap.MAP.baud_codes.get(old) if old is not None else None
+    return (f"ID {target}: baud-rate {new} ({rate} baud) stored and read back; the actuator answers at {rate} "
+            f"baud from its next restart (power-up, or 'zap restart --id {target}'), at {was or line} baud until "
+            "then")
 
 
 # -- guided ID setup -------------------------------------------------------------------------
@@ -830,12 +899,14 @@ def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROC
     if bus.baud != baud:
         bus.set_baud(baud)
     if ident != target:
-        from ..codec.permissions import Permission
+        from ..errors import IdTaken
+        from .zap import Bus
 
-        # the checked way to give an ID (found alone, target free): IDENTITY is the procedure's own
-        bus.store(ident, REG["id"], target, check=False, allow=Permission.IDENTITY)
+        try:                                  # set-id's procedure: the target checked free, read back
+            Bus.over(bus).set_id(ident, target)
+        except IdTaken:
+            raise TwoAnswer(f"ID {target} answers as well as ID {ident}; connect one actuator alone") from None
         record["writes"] += 1
-        bus.wait_ready(target, within=2.0)
     got = bus.read(target, REG["id"], check=False)
     if got != target:
         raise CheckFailed(f"setup: the actuator reads back ID {got}, expected {target}")

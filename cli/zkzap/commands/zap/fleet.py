@@ -236,10 +236,9 @@ def diff(a, b, ids, everything, compare, fmt, **common):
         bauds = common["baud"]
         args = dict(_link_args(common), baud=bauds[0])
         with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
-            found = fleet.survey(bus, ids, bauds, retries=common["retries"])
-            if common["return_mode"] == "auto" and found:
-                bus.detect_return_mode(found[0]["id"])
-            live = fleet.read_entries(bus, found)
+            if common["return_mode"] == "auto":
+                bus.detect_return_mode((ids or sorted(other))[0])
+            live = fleet.bus_entries(bus, ids, bauds, retries=common["retries"])
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:
@@ -297,8 +296,10 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
     old (the bus's value), new (FILE's), status (verified, mismatch; planned with --plan),
     read_back. Volatile settings are written only when named in --only; id, baud-rate,
     protocol-type and feedback-return-mode only with --only and --force: the plan and the
-    summary name every difference left out and why, so "0 writes" never hides one. A file from
-    another model or firmware is refused unless --force.
+    summary name every difference left out and why, so "0 writes" never hides one. A clone
+    (--to, --map) never copies the file's id (it would give two actuators one ID); an id write
+    is checked free first, as set-id does. A baud-rate write says when the rate takes effect. A
+    file from another model or firmware is refused unless --force.
 
     An interrupted apply (Ctrl-C, a vanished port, a silent actuator) prints the writes that
     were made and says which; running the same command again makes the rest. Exit status 0
@@ -322,6 +323,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         for reg in only_regs:
             if reg.name in fleet.PROTECTED and not force:
                 raise UsageError(f"--only {reg.name}: this changes how the actuator is reached; add --force")
+    fleet.check_only(only_regs, pairs)
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
     targets = [t for _, t in pairs]
@@ -380,6 +382,8 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
         if w.status == "unverifiable":
             warn(f"ID {w.target}: feedback-return-mode {w.new} written; in mode 0 it answers Echo only, so it "
                  "cannot be read back")
+        elif w.note:
+            note(w.note)
     bad = [w for w in writes if w.status not in ("verified", "unverifiable")]
     if bad:
         raise CheckFailed("; ".join(f"ID {w.target}: {w.register.name} reads back {w.read_back}, wrote {w.new}"
@@ -533,9 +537,6 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                     raise fleet.TwoAnswer(f"the actuator found answers as ID {found[0]} at {found[1]} baud, "
                                           f"which this setup gave already; connect the next one "
                                           f"(or --redo {found[0]})")
-                if found[0] != target and bus.ping(target, retries=1) is not None:
-                    raise fleet.TwoAnswer(f"ID {target} answers as well as ID {found[0]}; connect one "
-                                          "actuator alone")
                 record = fleet.setup_one(bus, target, found=found, config=entry)
                 if record.get("warning"):
                     warn(f"ID {target}: {record['warning']}")
