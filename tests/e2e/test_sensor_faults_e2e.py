@@ -128,6 +128,8 @@ def test_a_sensor_that_dies_goes_stale_in_session_time(cli, tmp_path):
     writer.start()
     try:
         rows, (step,), s, r = _run(cli, tmp_path, f"{fifo},thrust_n:N,stale=2", "--thrust-from", "thrust_n")
+        # the run ended with its schedule, while the silent sensor still held its FIFO open
+        assert writer.is_alive()
     finally:
         done.set()
         writer.join(5)

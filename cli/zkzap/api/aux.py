@@ -348,19 +348,45 @@ class _Reader(threading.Thread):
 
             stream = sys.stdin.buffer
         else:
-            stream = self._file = open(self.spec.path, "rb")      # a FIFO: blocks until a writer opens
+            stream = self._file = open(self.spec.path, "rb", buffering=0)  # a FIFO: blocks until a writer opens
         buf = b""
+        for chunk in self._chunks(stream):
+            buf += chunk
+            while b"\n" in buf or len(buf) >= MAX_LINE:
+                line, nl, rest = buf.partition(b"\n")
+                if not nl:
+                    line, rest = buf[:MAX_LINE], buf[MAX_LINE:]
+                buf = rest
+                yield (line + nl).decode("utf-8", "replace")
+        # a last line without its newline is dropped: its writer may have died in mid-number
+
+    def _chunks(self, stream):
+        """What the source sends, as it comes; the stop is seen within 0.1 s even while a pipe
+        or FIFO stays open and silent (a blocking read would hold the session's end until its
+        writer closed it)."""
+        import select
+
+        try:
+            fd = stream.fileno()
+        except (AttributeError, OSError, ValueError):
+            fd = None
         while not self.stop.is_set():
-            chunk = stream.readline(MAX_LINE)
+            if fd is not None:
+                try:
+                    ready, _, _ = select.select([fd], [], [], 0.1)
+                except (OSError, ValueError):          # a descriptor select cannot wait on
+                    ready, fd = [fd], None
+                if not ready:
+                    continue
+                chunk = os.read(fd, MAX_LINE) if fd is not None else stream.read(MAX_LINE)
+            else:
+                chunk = stream.read(MAX_LINE)
             if not chunk:
-                if kind == "file" and self.spec.follow:
+                if self.spec.kind == "file" and self.spec.follow:
                     time.sleep(0.05)                              # followed as it grows
                     continue
                 return                                            # a FIFO's writer or stdin closed
-            buf += chunk
-            if buf.endswith(b"\n") or len(buf) >= MAX_LINE:
-                yield buf.decode("utf-8", "replace")
-                buf = b""
+            yield chunk
 
     def _serial(self):
         from ..link.port import open_port
