@@ -44,15 +44,15 @@ class ModbusBus(Bus):
                  allow: Any = None, regmap: Optional[RegisterMap] = None, protocol: str = "modbus",
                  return_mode: Any = None, _link: Any = None) -> None:
         if _link is None:
-            from ..link.modbus_bus import open_modbus_bus
+            from ..link.zap_bus import open_bus
 
             url = getattr(port, "url", port)
             if not url:
                 raise UsageError("no port given", baud=baud)
             if regmap is not None and regmap.protocol != "modbus":
                 raise UsageError(f"regmap: {regmap.path or regmap.model} describes the {regmap.protocol} protocol")
-            _link = open_modbus_bus(url, baud, timeout=timeout, retries=retries, latency=latency,
-                                    low_latency=low_latency, regmap=regmap)
+            _link = open_bus(url, baud, timeout=timeout, retries=retries, latency=latency, protocol="modbus",
+                             low_latency=low_latency, regmap=regmap)
             if getattr(port, "kind", None) == "zap" and getattr(port, "device", None) is not None:
                 _link.simulated = True
         super().__init__(_link=_link, allow=allow)

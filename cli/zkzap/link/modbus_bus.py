@@ -30,9 +30,9 @@ from ..codec.framing import RtuFramer
 from ..codec.permissions import as_permission, require
 from ..codec.regmap import RegisterMap, default_map
 from ..errors import UsageError
-from .zap_bus import RETRIES, Reply, ZapBus
+from .zap_bus import Reply, ZapBus
 
-__all__ = ["ModbusBus", "ModbusFamily", "ModbusReply", "open_modbus_bus"]
+__all__ = ["ModbusBus", "ModbusFamily", "ModbusReply"]
 
 
 class ModbusReply(Reply):
@@ -320,20 +320,3 @@ def _anonymous(address):
     from ..codec.regmap import Register
 
     return Register(address, str(address), 2, "R", help="not in the map", documented=False, byteorder="big")
-
-
-def open_modbus_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, retries=RETRIES,
-                    regmap=None, stop_bits=1, latency=None, low_latency=False, allow=None, **_) -> ModbusBus:
-    """Open ``port`` (any pyserial URL or device, or the in-process simulated 17Lf with ``sim``)
-    and return a :class:`ModbusBus`."""
-    from .port import sim_url
-    from .zap_bus import open_on
-
-    if sim:
-        url = sim_url("zap", protocol="modbus", ids=sim_ids or "1", baud=str(baud))
-    else:
-        if not port:
-            raise UsageError("no port", no_port="zap")
-        url = port
-    return open_on(url, baud, stop_bits, allow, low_latency, ModbusBus, regmap=regmap, timeout=timeout,
-                   retries=retries, latency=latency)

@@ -1348,23 +1348,31 @@ def set_low_latency(port):
 
 def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, return_mode=1,
              retries=RETRIES, sim_options=None, stop_bits=1, latency=None, low_latency=False,
-             allow=None) -> ZapBus:
+             allow=None, protocol="ir", regmap=None) -> ZapBus:
     """Open ``port`` (any pyserial URL or device, or the in-process simulator with ``sim``;
-    ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus`. ``latency``
+    ``sim_ids`` are the simulated bus's actuator IDs) and return a :class:`ZapBus` of the
+    ``protocol`` family (``"modbus"``: a :class:`~zkzap.link.modbus_bus.ModbusBus` on ``regmap``,
+    default the 17Lf's; ``return_mode`` and ``sim_options`` are the IR bus's). ``latency``
     (seconds) is the actuators' known latency before any is measured; ``low_latency`` asks the
     driver for its low-latency mode (:attr:`ZapBus.low_latency` says whether it could)."""
     from .port import sim_url
 
+    modbus = protocol == "modbus"
     if sim:
-        opts = dict(sim_options or {})
-        opts.setdefault("ids", sim_ids or "0")
-        if baud in zap.BAUD_TO_CODE:
+        opts = dict(sim_options or {}) if not modbus else {"protocol": "modbus"}
+        opts.setdefault("ids", sim_ids or ("1" if modbus else "0"))
+        if modbus or baud in zap.BAUD_TO_CODE:
             opts.setdefault("baud", str(baud))
         url = sim_url("zap", **opts)
     else:
         if not port:
             raise UsageError("no port", no_port="zap")
         url = port
+    if modbus:
+        from .modbus_bus import ModbusBus
+
+        return open_on(url, baud, stop_bits, allow, low_latency, ModbusBus, regmap=regmap, timeout=timeout,
+                       retries=retries, latency=latency)
     return open_on(url, baud, stop_bits, allow, low_latency, ZapBus, return_mode=return_mode, timeout=timeout,
                    retries=retries, latency=latency)
 

@@ -200,57 +200,44 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
             raise UsageError(f"{PROTOCOL_ENV}={os.environ[PROTOCOL_ENV]}: this command speaks the IR protocol only "
                              "(not yet Modbus RTU); unset it for this command")
         protocol = "ir"
-    mode = 1 if return_mode == "auto" else int(return_mode)
+    modbus = protocol == "modbus"
+    mode = 1 if return_mode == "auto" or modbus else int(return_mode)
     latency = None if latency is None else latency / 1000.0      # --latency is in ms
-    if protocol == "modbus":
-        return _open_modbus(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, retries=retries,
-                            ids=ids, stop_bits=stop_bits, latency=latency, low_latency=low_latency, allow=allow,
-                            regmap=regmap, lent=lent)
     if lent is not None:            # a batch: every command over the one open port
         # (the batch checked its port, and said so once)
+        lent_protocol = getattr(getattr(lent, "family", None), "name", "ir")
+        if lent_protocol != protocol:
+            raise UsageError(f"--protocol {protocol}: this batch's port speaks {lent_protocol} (give the batch "
+                             f"--protocol {protocol})")
+        if modbus and regmap is not None and regmap is not lent.regmap:
+            raise UsageError("--map: give it to the batch (its port reads one register map)")
         _CHECKING().effect("port", ids=list(ids))
-        bus = _SHARED().Borrowed(lent, return_mode=mode, retries=_ZAP_BUS().RETRIES if retries is None else retries,
+        bus = _SHARED().Borrowed(lent, return_mode=lent.return_mode if modbus else mode,
+                                 retries=_ZAP_BUS().RETRIES if retries is None else retries,
                                  timeout=timeout, latency=latency if latency is not None else lent.latency,
                                  allow=_PERMISSIONS().as_permission(allow))
-        if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
+        if not modbus and return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
             lent.detect_return_mode(probe)
         return bus
     require_port(port, sim, sim_ids)
     _CHECKING().effect("port", ids=list(ids))
     if sim and port:
         port = None                      # an explicit --sim beats the environment's default port
-    default_ids = ",".join(str(i) for i in ids)
+    default_ids = ",".join(str(i) for i in ids if i or not modbus)
     sim_opts = {"return_mode": return_mode} if sim and return_mode in ("0", "2") else None
     bus = _ZAP_BUS().open_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, timeout=timeout,
                               return_mode=mode, retries=retries, sim_options=sim_opts, stop_bits=stop_bits,
-                              latency=latency, low_latency=low_latency, allow=allow)
+                              latency=latency, low_latency=low_latency, allow=allow, protocol=protocol,
+                              regmap=regmap)
     from ..hints import adapter_notes
 
     adapter_notes(bus)
-    if return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
+    if not modbus and return_mode == "auto" and probe is not None and probe != zap.BROADCAST:
         try:
             bus.detect_return_mode(probe)
         except BaseException:
             bus.close()
             raise
-    return bus
-
-
-def _open_modbus(*, port, baud, sim, sim_ids, ids, regmap, lent, **kw):
-    """The Modbus RTU bus of a command (``--protocol modbus``), on the port or the simulated 17Lf."""
-    if lent is not None:
-        raise UsageError("--protocol modbus: not in a batch or shell yet (their port speaks the IR protocol)")
-    require_port(port, sim, sim_ids)
-    _CHECKING().effect("port", ids=list(ids))
-    from ...link.modbus_bus import open_modbus_bus
-
-    if sim:
-        port = None
-    default_ids = ",".join(str(i) for i in ids if i) or "1"
-    bus = open_modbus_bus(port, baud, sim=sim, sim_ids=sim_ids or default_ids, regmap=regmap, **kw)
-    from ..hints import adapter_notes
-
-    adapter_notes(bus)
     return bus
 
 
