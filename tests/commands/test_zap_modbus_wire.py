@@ -103,8 +103,10 @@ def test_set_baud_modbus_writes_the_maps_code_and_verifies(cli):
 
 def test_an_ir_only_command_refuses_the_modbus_environment(cli, monkeypatch):
     monkeypatch.setenv("ZKZAP_ZAP_PROTOCOL", "modbus")
-    r = cli("zap", "sync-move", "1:100", "--sim")
-    assert r.exit_code == 2 and r.stdout == "" and "IR protocol only" in r.stderr
+    r = cli("zap", "execute", "--sim")
+    assert r.exit_code == 2 and r.stdout == "" and "IR protocol only" in r.stderr and "ZKZAP_ZAP_PROTOCOL" in r.stderr
+    r = cli("zap", "execute", "--sim", "--protocol", "ir")               # the command line beats it
+    assert r.exit_code == 0, r
     r = cli("zap", "load", "present-position", "--id", "1", "--sim")      # takes it: speaks Modbus
     assert r.exit_code == 0 and r.stdout == "0\n", r
 
@@ -116,3 +118,53 @@ def test_echo_modbus_is_a_read_of_the_model_number(cli):
     assert r.exit_code == 0 and r.stdout.count("reply from ID 3") == 2, r
     r = cli("zap", "echo", "--protocol", "modbus", "--id", "4", "--sim", "--sim-ids", "3", "--retries", "0")
     assert r.exit_code == 3 and r.stdout == ""
+
+
+@pytest.mark.parametrize("args,out", [
+    (["sync-move", "1:1000", "2:2000", "-n"], "01 10 00 CD 00 01 02 03 E8 B6 F3\n02 10 00 CD 00 01 02 07 D0 A1 11\n"),
+    (["sync-move", "0:1000", "-r", "goal-speed", "-n"], "00 10 00 D0 00 01 02 03 E8 B8 EE\n"),
+    (["raw", "read", "00", "D2", "00", "01", "--id", "1", "-n"], "01 03 00 D2 00 01 24 33\n"),
+    (["raw", "0x10", "00 D0 00 02 04 03 E8 03 20", "--id", "1", "-n"], "01 10 00 D0 00 02 04 03 E8 03 20 7F AB\n"),
+    (["raw", "write", "00CD03E8", "--id", "1", "-n"], "01 06 00 CD 03 E8 18 8B\n"),
+])
+def test_sync_move_and_raw_dry_run_the_spec_frames(cli, args, out):
+    r = cli("zap", args[0], "--protocol", "modbus", *args[1:])
+    assert r.exit_code == 0 and r.stdout == out, r
+
+
+@pytest.mark.parametrize("args,fault", [
+    (["sync-move", "0:1000", "--sim"], "BROADCAST"),                    # every actuator, none answers
+    (["sync-move", "1:100", "0:5", "-n"], "give it alone"),
+    (["sync-move", "1:100", "1:5", "-n"], "twice"),
+    (["sync-move", "1:10001", "-n"], "out of range"),
+    (["sync-move", "248:1", "-n"], "1..247"),
+    (["sync-move", "0:1000", "--sim", "--force", "--verify"], "broadcast"),
+    (["raw", "echo", "--id", "1", "-n"], "IR protocol instruction"),
+    (["raw", "0x83", "00", "--id", "1", "-n"], "0x01..0x7F"),
+    (["raw", "0x2B", "0E", "--id", "1", "--sim"], "UNDOCUMENTED"),    # a function the 17Lf does not know
+    (["raw", "write", "00 04 00 05", "--id", "1", "--sim"], "IDENTITY"),
+    (["raw", "write-multiple", "00 0B 00 01 02 00 05", "--id", "1", "-p", "socket://127.0.0.1:9"], "--yes"),
+    (["execute", "--sim"], "no Execution"),
+    (["restart", "--id", "1", "-n"], "restart"),
+    (["factory-reset", "--id", "1", "-n"], "factory reset"),
+    (["send", "goal-position", "5", "--id", "1", "-n"], "no Send Data"),
+])
+def test_sync_move_raw_and_ir_only_refusals_exit_2(cli, args, fault):
+    r = cli("zap", args[0], "--protocol", "modbus", *args[1:])
+    assert r.exit_code == 2 and r.stdout == "" and fault in r.stderr, r
+
+
+def test_sync_move_writes_each_actuator_and_verifies(cli):
+    r = cli("zap", "sync-move", "--protocol", "modbus", "1:1000", "2:2000", "--sim", "--verify", "-v")
+    assert r.exit_code == 0 and "ID 2: goal-position reads back 2000" in r.stderr, r
+    r = cli("zap", "sync-move", "--protocol", "modbus", "0:3000", "--sim", "--sim-ids", "1,2", "--force", "-v")
+    assert r.exit_code == 0 and "never answered" in r.stderr, r
+
+
+def test_raw_prints_the_reply_and_an_exception_is_exit_5(cli):
+    r = cli("zap", "raw", "--protocol", "modbus", "read", "00 D2 00 01", "--id", "1", "--sim")
+    assert r.exit_code == 0 and r.stdout == "01 03 02 00 00 B8 44\n", r
+    r = cli("zap", "raw", "--protocol", "modbus", "read", "00 D4 00 01", "--id", "1", "--sim")   # 212: a gap
+    assert r.exit_code == 5 and r.stdout == "01 83 02 C0 F1\n" and "illegal-data-address" in r.stderr, r
+    r = cli("zap", "raw", "--protocol", "modbus", "0x2B", "0E", "--id", "1", "--sim", "--force")
+    assert r.exit_code == 5 and "illegal-function" in r.stderr, r

@@ -22,7 +22,7 @@ from .fields import FieldValueError
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:  # for the annotations only: typing costs start-up
-    from typing import Any, Mapping, Optional, Sequence, Union
+    from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 
     from .permissions import Permission
     from .regmap import Register, RegisterMap
@@ -285,6 +285,31 @@ def write_frames(ident: int, values: Mapping[Union[str, int], int], regmap: Opti
     for f in write_block(ident, values, regmap, force=force):
         r = Request(f)
         out.append(write_registers(ident, r.address, r.values) if r.function == WRITE_SINGLE else f)
+    return out
+
+
+def sync_frames(reg: Union[str, int, Register], targets: Union[Mapping[int, int], Iterable[tuple[int, int]]],
+                regmap: Optional[RegisterMap] = None, *, force: bool = False) -> list[bytes]:
+    """The frames that write one register of several actuators (``targets``: ID -> value, or
+    pairs): Modbus RTU has no multi-actuator write, so one Write Multiple Registers per ID, in
+    the given order. ID 0 (broadcast: every actuator, answered by none) is one frame that serves
+    them all, given alone."""
+    m = _map(regmap)
+    r = m.register(reg)
+    items = list(targets.items() if hasattr(targets, "items") else targets)
+    if not items:
+        raise FieldValueError("targets: none given; expected ID:VALUE pairs")
+    seen: set = set()
+    for ident, _ in items:
+        check_id(ident)
+        if ident in seen:
+            raise FieldValueError(f"id: {ident} is given twice")
+        seen.add(ident)
+    if BROADCAST in seen and len(items) > 1:
+        raise FieldValueError("id: 0 (broadcast) reaches every actuator; give it alone, not beside other IDs")
+    out = []
+    for ident, value in items:
+        out += write_frames(ident, {r.name: value}, m, force=force)
     return out
 
 

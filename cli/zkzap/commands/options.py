@@ -331,26 +331,41 @@ def _map_callback(ctx, param, value):
     return load_map(value)                 # MapError: exit 2, FILE:LINE
 
 
-def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS):
+def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS, ir_only=None):
     """``--protocol ir|modbus`` and ``--map FILE``, the one definition for every zap command.
     Both are eager: a REGISTER argument is read against the map they choose
-    (:func:`zap_map`)."""
+    (:func:`zap_map`). ``ir_only``: why the command has no Modbus RTU form (``--protocol
+    modbus``, or the environment saying it, is then refused with that reason, exit 2)."""
     if f is None:
-        return lambda g: protocol_options(g, protocols=protocols)
+        return lambda g: protocol_options(g, protocols=protocols, ir_only=ir_only)
     f = click.option("--map", "regmap", metavar="FILE", default=None, is_eager=True, callback=_map_callback,
                      help="A register map file for a model zkzap does not ship (format: the manual's "
                           "Modbus page); its 'protocol:' line must agree with --protocol.")(f)
-    return protocol_option(f, protocols=protocols)
+    return protocol_option(f, protocols=protocols, ir_only=ir_only)
 
 
-def protocol_option(f=None, *, protocols=ZAP_PROTOCOLS):
-    """``--protocol ir|modbus`` alone (the simulator, which has no map to choose)."""
+def _protocol_callback(ir_only):
+    def callback(ctx, param, value):
+        if ir_only and value != "ir":
+            source = ctx.get_parameter_source(param.name)
+            given = f"{PROTOCOL_ENV}={value}" if source == click.core.ParameterSource.ENVIRONMENT \
+                else f"--protocol {value}"
+            raise UsageError(f"{given}: zap {ctx.info_name} speaks the IR protocol only: {ir_only}")
+        return value
+
+    return callback
+
+
+def protocol_option(f=None, *, protocols=ZAP_PROTOCOLS, ir_only=None):
+    """``--protocol ir|modbus`` alone (the simulator, which has no map to choose); see
+    :func:`protocol_options` for ``ir_only``."""
     if f is None:
-        return lambda g: protocol_option(g, protocols=protocols)
+        return lambda g: protocol_option(g, protocols=protocols, ir_only=ir_only)
     return click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True,
-                        is_eager=True, envvar=PROTOCOL_ENV,
+                        is_eager=True, envvar=PROTOCOL_ENV, callback=_protocol_callback(ir_only),
                         help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
-                             f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}].")(f)
+                             f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}]."
+                             + (f" IR only: {ir_only}." if ir_only else ""))(f)
 
 
 def zap_map(ctx=None):

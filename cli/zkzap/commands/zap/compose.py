@@ -258,10 +258,15 @@ def acknowledgement(pkt: bytes, reply, bus) -> str:
 
 
 def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, sim_ids=None, return_mode="1",
-            retries=2, force=False, show_reply=False, verify=False, **wire):
+            retries=2, force=False, show_reply=False, verify=False, protocol=None, regmap=None, **wire):
     """Print the packets (dry run) or send them, each waiting for the reply the return mode
     gives. Error bits in a reply end with exit status 5 after every packet went out. ``verify``
-    reads every written value back (exit 3 when nothing answers: the write is unconfirmed)."""
+    reads every written value back (exit 3 when nothing answers: the write is unconfirmed).
+    ``protocol`` "modbus": the packets are Modbus RTU frames (:func:`deliver_modbus`)."""
+    if protocol == "modbus":
+        return deliver_modbus(packets, dry_run=dry_run, port=port, baud=baud, timeout=timeout, sim=sim, yes=yes,
+                              verbose=verbose, sim_ids=sim_ids, return_mode=return_mode, retries=retries,
+                              force=force, show_reply=show_reply, verify=verify, regmap=regmap, **wire)
     if dry_run:
         check_sim_args(port, sim, sim_ids)
         refuse_with_dry_run()
@@ -281,7 +286,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
     with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode=return_mode,
                    retries=retries, ids=targets_of(packets), probe=probe,
                    stop_bits=wire.get("stop_bits", 1), latency=wire.get("latency"),
-                   low_latency=wire.get("low_latency", False), allow=allow) as bus:
+                   low_latency=wire.get("low_latency", False), allow=allow, protocol=protocol) as bus:
         for p in packets:
             reply = bus.command(p, check=False)
             if show_reply and reply is not None:
@@ -298,6 +303,89 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
                     _say(f"ID {ident}: {name} reads back {value}")
     if bad is not None:
         raise device_error(bad)
+
+
+def deliver_modbus(frames, *, dry_run, port, baud, timeout, sim, yes, verbose=False, sim_ids=None, retries=2,
+                   force=False, show_reply=False, verify=False, regmap=None, needs=None, **wire):
+    """:func:`deliver` for Modbus RTU frames (``--protocol modbus``), against the map
+    (``--map``, else the 17Lf's): printed with -n, else their permissions decided before the
+    port opens (``needs``: the command's own, ``{Permission: reason}``, beside the frames'), then
+    sent one at a time, each unicast reply checked. An exception reply ends with exit status 5
+    after every frame went out; ``verify`` reads every unicast write back."""
+    from ...codec import modbus
+
+    if dry_run:
+        check_sim_args(port, sim, sim_ids)
+        refuse_with_dry_run()
+        for f in frames:
+            _emit(format_hex(f))
+        return
+    require_port(port, sim, sim_ids)                     # before any consent
+    regmap = regmap or zap_map()
+    from ...link.zap_bus import is_simulated
+    from ..options import authorize
+
+    reqs = [modbus.Request(f) for f in frames]
+    if verify:
+        for r in reqs:
+            if not r.writes or r.malformed:
+                raise UsageError(f"--verify: {r.describe(regmap)} writes nothing that can be read back")
+            if r.broadcast:
+                raise UsageError("--verify: a broadcast (ID 0) write cannot be read back from every actuator; "
+                                 "give the IDs")
+    wanted = dict(needs or {})
+    for r in reqs:
+        for p, why in r.needs(regmap).items():
+            wanted.setdefault(p, why)
+    stored = []
+    for r in reqs:
+        for address, values in r.blocks():
+            for a in range(address, address + len(values)):
+                reg = regmap.owner.get(a)
+                if reg is not None and reg.stored and reg.name not in stored:
+                    stored.append(reg.name)
+    what = reqs[0].describe(regmap) + (f" (and {len(reqs) - 1} more frames)" if len(reqs) > 1 else "")
+    allow = authorize(wanted, what=what, yes=yes, force=force, simulated=sim or is_simulated(port),
+                      consent_text=(f"this writes stored settings on {port} ({', '.join(stored)}); they survive "
+                                    "power-off and each write wears the actuator's memory") if stored else None,
+                      brief=", ".join(stored) or None)
+    ids = sorted({r.ident for r in reqs if not r.broadcast}) or [0]
+    bad = None
+    with open_link(port=port, baud=baud, timeout=timeout, sim=sim, sim_ids=sim_ids, return_mode="1",
+                   retries=retries, ids=ids, stop_bits=wire.get("stop_bits", 1), latency=wire.get("latency"),
+                   low_latency=wire.get("low_latency", False), allow=allow, protocol="modbus",
+                   regmap=regmap) as bus:
+        for r in reqs:
+            # a frame whose reply cannot be foretold (an unknown function) may go unanswered
+            reply = bus.command(r.frame, check=False, optional=True if r.reply_length() is None else None)
+            if show_reply and reply is not None:
+                _emit(format_hex(reply.packet))
+            if reply is not None and reply.exception:
+                if verbose or len(reqs) > 1:
+                    _say(f"sent {r.describe(regmap)}: exception {reply.error} "
+                         f"({modbus.exception_meaning(reply.error)})")
+                bad = bad or (reply, r)
+            elif verbose:
+                _say(f"sent {r.describe(regmap)}: " + (
+                    "not acknowledged (a broadcast is never answered)" if r.broadcast
+                    else "no reply" if reply is None else f"acknowledged in {reply.rtt * 1000:.1f} ms"))
+        if verify and bad is None:
+            from ...errors import CheckFailed
+
+            for r in reqs:
+                for address, values in r.blocks():
+                    back = bus.read_values(r.ident, address, len(values))
+                    for i, (want, got) in enumerate(zip(values, back)):
+                        reg = regmap.owner.get(address + i)
+                        name = reg.name if reg is not None else str(address + i)
+                        if want != got:
+                            raise CheckFailed(f"ID {r.ident}: {name} reads back {got}, not {want}", ident=r.ident,
+                                              register=name, value=got)
+                        if verbose:
+                            _say(f"ID {r.ident}: {name} reads back {got}")
+    if bad is not None:
+        reply, r = bad
+        raise modbus.ExceptionReply(reply.ident, r.function, reply.error)
 
 
 # -- echo ----------------------------------------------------------------------------------------
@@ -554,6 +642,15 @@ def _verify_option(name):
                              "unconfirmed), 1 when it reads back different.")
 
 
+#: Why an IR instruction has no Modbus RTU form (``--protocol modbus`` refused with it).
+NO_MODBUS = {
+    "send": "Modbus RTU has no Send Data (writes apply at once: zap store --protocol modbus)",
+    "execute": "Modbus RTU has no Execution (writes apply at once: zap store --protocol modbus)",
+    "factory-reset": "no source gives the 17Lf's factory reset a register or function",
+    "restart": "no source gives the 17Lf's restart a register or function (a new baud rate applies at once)",
+}
+
+
 def _write_command(name, builder, doc):
     @click.command(name, cls=SignedCommand, context_settings=CONTEXT, help=doc)
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
@@ -562,12 +659,10 @@ def _write_command(name, builder, doc):
     @force_option
     @_verify_option(name)
     @wire_options
-    @(protocol_options if name == "store" else (lambda f: f))
+    @(protocol_options if name == "store" else protocol_options(ir_only=NO_MODBUS[name]))
     def command(reg, value, ident, force, verify=False, **common):
         if common.get("protocol") == "modbus":
             return _modbus_store(reg, value, ident, force, verify, common)
-        common.pop("protocol", None)
-        common.pop("regmap", None)
         deliver([builder(ident, reg, value)], force=force, verify=verify, **common)
 
     return command
@@ -578,39 +673,11 @@ def _modbus_store(reg, value, ident, force, verify, common):
     decisions), its permissions as on the IR protocol, the reply checked; ``--verify`` reads
     the value back."""
     from ...codec import modbus
-    from ...link.zap_bus import is_simulated
-    from ..options import authorize
 
-    regmap = zap_map()
-    frames = modbus.write_frames(ident, {reg.name: value}, regmap, force=force)
-    if common["dry_run"]:
-        return deliver(frames, **{k: v for k, v in common.items() if k not in PROTOCOL_KEYS})
-    require_port(common["port"], common["sim"], common["sim_ids"])
-    reqs = [modbus.Request(f) for f in frames]
-    needs = {}
-    for r in reqs:
-        for p, why in r.needs(regmap).items():
-            needs.setdefault(p, why)
-    what = reqs[0].describe(regmap)
-    allow = authorize(needs, what=what, yes=common["yes"], force=force,
-                      simulated=common["sim"] or is_simulated(common["port"]),
-                      consent_text=f"{what} on {common['port']}: a stored setting that survives power-off"
-                      if any(regmap.owner[a].stored for a in [reqs[0].address]) else None)
-    with open_link(ids=[ident], allow=allow, **_link_args(common)) as bus:
-        for f in frames:
-            reply = bus.command(f)
-            if common["verbose"]:
-                _say(f"sent {what}: " + ("not acknowledged (a broadcast is never answered)" if reply is None
-                                         else f"acknowledged in {reply.rtt * 1000:.1f} ms"))
-        if verify and ident != modbus.BROADCAST:
-            back = bus.read(ident, reg)
-            if back != value:
-                from ...errors import CheckFailed
-
-                raise CheckFailed(f"ID {ident}: {reg.name} reads back {back}, not {value}", ident=ident,
-                                  register=reg.name, value=back)
-            if common["verbose"]:
-                _say(f"ID {ident}: {reg.name} reads back {back}")
+    if verify and ident == modbus.BROADCAST:
+        raise UsageError("--verify: a broadcast (ID 0) write cannot be read back; give one actuator's ID")
+    frames = modbus.write_frames(ident, {reg.name: value}, zap_map(), force=force)
+    deliver_modbus(frames, force=force, verify=verify, **{k: v for k, v in common.items() if k != "protocol"})
 
 
 _WIRE_NOTE = """
@@ -650,6 +717,7 @@ Examples:
 @click.command(cls=Command, context_settings=CONTEXT)
 @id_option(default="broadcast")
 @wire_options
+@protocol_options(ir_only=NO_MODBUS["execute"])
 def execute(ident, **common):
     """Execution (0xF5): apply the writes staged by 'zap send' (default: every actuator).
 
@@ -667,6 +735,7 @@ def execute(ident, **common):
 @id_option()
 @force_option
 @wire_options
+@protocol_options(ir_only=NO_MODBUS["factory-reset"])
 def factory_reset(reset_id, reset_baud, ident, force, **common):
     """Factory Reset (0xF6): restore the factory settings (the actuator then restarts).
 
@@ -684,6 +753,7 @@ def factory_reset(reset_id, reset_baud, ident, force, **common):
 @click.command(cls=Command, context_settings=CONTEXT)
 @id_option()
 @wire_options
+@protocol_options(ir_only=NO_MODBUS["restart"])
 def restart(ident, **common):
     """Restart (0xF8) the actuator (a stored baud-rate change takes effect).
 
@@ -702,17 +772,37 @@ def restart(ident, **common):
 @force_option
 @_verify_option("sync-move")
 @wire_options
+@protocol_options
 def sync_move(targets, reg, force, verify, **common):
     """Symmetric Store (0x73) to broadcast: write one register of several actuators at once.
 
     One packet carries at most (255 - 4) / (1 + size) actuators (83 for a 2-byte register);
     more are split over as many packets as needed. A broadcast is never answered.
 
+    With --protocol modbus (no multi-actuator write there) each ID gets one Write Multiple
+    Registers, each answered and checked, every frame's permissions decided before the first
+    goes out; 0:VALUE is one broadcast frame that moves every actuator on the bus, named or
+    not, and is never answered: it needs --force.
+
     \b
     Examples:
       zap sync-move 1:1023 2:2047 -n    # FF FF FF FE 0A 73 86 02 01 FF 03 02 FF 07 F1
       zap sync-move 1:300 2:300 3:300 --register goal-speed -p /dev/ttyUSB0
+      zap sync-move --protocol modbus 1:1000 2:2000 -n
+      zap sync-move --protocol modbus 0:5000 --force --sim
     """
+    if common["protocol"] == "modbus":
+        from ...codec import modbus
+        from ...codec.permissions import Permission
+
+        regmap = zap_map()
+        frames = modbus.sync_frames(reg, list(targets), regmap, force=force)
+        needs = {}
+        if any(i == modbus.BROADCAST for i, _ in targets):
+            needs[Permission.BROADCAST] = ("0:VALUE is a broadcast: it reaches every actuator on the bus, named or "
+                                           "not, and none answers")
+        return deliver_modbus(frames, force=force, verify=verify, needs=needs,
+                              **{k: v for k, v in common.items() if k != "protocol"})
     deliver(zap.symmetric_store(reg, list(targets)), force=force, verify=verify, **common)
 
 
@@ -722,6 +812,7 @@ def sync_move(targets, reg, force, verify, **common):
 @id_option()
 @force_option
 @wire_options
+@protocol_options
 def raw(code, params, ident, force, **common):
     """Send any instruction with raw parameter bytes, for one-off crafting.
 
@@ -736,11 +827,31 @@ def raw(code, params, ident, force, **common):
     values the map does not document, part of a multi-byte register, and any undocumented
     instruction but system-write.
 
+    With --protocol modbus INSTRUCTION is a function: read (0x03), write (0x06),
+    write-multiple (0x10) or any code 0x01..0x7F, and PARAMs are the bytes between the
+    function and the CRC (which is appended). A frame that is not one of the three requests
+    the actuator knows, or that writes what the map does not document, needs --force; the
+    reply (an exception reply too, then exit 5) is printed as hex.
+
     \b
     Examples:
       zap raw load 8C 02 -n          # FF FF FF 00 04 F2 8C 02 7B
       zap raw 0xF3 03 01 -n          # FF FF FF 00 04 F3 03 01 04
       zap raw load 00 03 --id 1 -p /dev/ttyUSB0 | zap decode
+      zap raw --protocol modbus read 00 D2 00 01 --id 1 -n   # 01 03 00 D2 00 01 24 33
+      zap raw --protocol modbus 0x10 00 D0 00 02 04 03 E8 03 20 --id 1 -n
     """
     data = parse_hex(" ".join(params), what="params") if params else b""
+    if common["protocol"] == "modbus":
+        from ...codec import modbus
+
+        if not 1 <= code <= 0x7F:
+            raise UsageError(f"instruction: function 0x{code:02X} is out of range; a Modbus function is "
+                             "0x01..0x7F (0x80 and up mark exception replies)")
+        if len(data) + 4 > modbus.MAX_FRAME:
+            raise UsageError(f"params: {len(data)} bytes; a Modbus RTU frame carries at most "
+                             f"{modbus.MAX_FRAME - 4} between function and CRC")
+        frame = modbus.frame(ident, bytes([code]) + data)
+        return deliver_modbus([frame], force=force, show_reply=True,
+                              **{k: v for k, v in common.items() if k != "protocol"})
     deliver([zap.packet(ident, code, data)], force=force, show_reply=True, **common)

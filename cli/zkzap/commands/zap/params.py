@@ -110,6 +110,17 @@ class InstructionType(click.ParamType):
         if isinstance(value, int):
             return value
         key = str(value).strip().lower()
+        if ctx is not None and ctx.params.get("protocol") == "modbus":
+            from ...codec import modbus
+
+            by_name = {name: code for code, (name, _) in modbus.FUNCTIONS.items()}
+            if key in by_name:
+                return by_name[key]
+            if key in zap.INSTRUCTION_BY_NAME:
+                from ...errors import UsageError
+
+                raise UsageError(f"instruction: {value!r} is an IR protocol instruction; a Modbus function is "
+                                 f"{', '.join(by_name)} or a code 0x01..0x7F")
         ins = zap.INSTRUCTION_BY_NAME.get(key)
         if ins is not None:
             return ins.code
@@ -130,6 +141,11 @@ class InstructionType(click.ParamType):
     def shell_complete(self, ctx, param, incomplete):
         from click.shell_completion import CompletionItem
 
+        if ctx is not None and ctx.params.get("protocol") == "modbus":
+            from ...codec import modbus
+
+            return [CompletionItem(name, help=f"{full} (0x{code:02X})") for code, (name, full) in
+                    modbus.FUNCTIONS.items() if name.startswith(incomplete)]
         return [CompletionItem(i.cli, help=i.help) for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS
                 if i.cli.startswith(incomplete)]
 
@@ -152,6 +168,10 @@ class TargetType(click.ParamType):
             v = int(raw, 0)
         except ValueError:
             raise UsageError(f"target: value {raw!r} of {value!r} is not an integer") from None
+        if ctx is not None and ctx.params.get("protocol") == "modbus":
+            from ...codec import modbus
+
+            return modbus.check_id(ident), v       # 1..247, 0 the broadcast (sync-move decides)
         return zap.check_id(ident, allow_broadcast=False), v
 
 
