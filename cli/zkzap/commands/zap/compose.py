@@ -257,6 +257,14 @@ def acknowledgement(pkt: bytes, reply, bus) -> str:
     return f"not acknowledged (feedback-return-mode {mode}: {meaning})"
 
 
+def _print_dry(packets, port, sim, sim_ids) -> None:
+    """-n: the packets as hex, one a line, nothing sent (options about sending refused)."""
+    check_sim_args(port, sim, sim_ids)
+    refuse_with_dry_run()
+    for p in packets:
+        _emit(format_hex(p))
+
+
 def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, sim_ids=None, return_mode="1",
             retries=2, force=False, show_reply=False, verify=False, protocol=None, regmap=None, **wire):
     """Print the packets (dry run) or send them, each waiting for the reply the return mode
@@ -268,11 +276,7 @@ def deliver(packets, *, dry_run, port, baud, timeout, sim, yes, verbose=False, s
                               verbose=verbose, sim_ids=sim_ids, return_mode=return_mode, retries=retries,
                               force=force, show_reply=show_reply, verify=verify, regmap=regmap, **wire)
     if dry_run:
-        check_sim_args(port, sim, sim_ids)
-        refuse_with_dry_run()
-        for p in packets:
-            _emit(format_hex(p))
-        return
+        return _print_dry(packets, port, sim, sim_ids)
     require_port(port, sim, sim_ids)                     # before any consent
     if verify:
         from ...link.zap_safety import check_verifiable
@@ -315,11 +319,7 @@ def deliver_modbus(frames, *, dry_run, port, baud, timeout, sim, yes, verbose=Fa
     from ...codec import modbus
 
     if dry_run:
-        check_sim_args(port, sim, sim_ids)
-        refuse_with_dry_run()
-        for f in frames:
-            _emit(format_hex(f))
-        return
+        return _print_dry(frames, port, sim, sim_ids)
     require_port(port, sim, sim_ids)                     # before any consent
     regmap = regmap or zap_map()
     from ...link.zap_bus import is_simulated
