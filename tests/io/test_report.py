@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -136,6 +137,36 @@ def test_missing_columns_say_which_plots_were_skipped(cli, run, tmp_path):
 def test_terminal_view(cli, run):
     r = cli("zk", "report", run["tel"], "--terminal")
     assert r.exit_code == 0 and "Engine speed — rpm" in r.stdout and "Voltages" in r.stdout and "█" in r.stdout
+
+
+@pytest.mark.parametrize("width", [100, 80])
+def test_terminal_comparison_overlays_runs_and_fits_its_table(run, other, width):
+    """Two runs on a real terminal: one panel per quantity with both runs overlaid (each in its
+    mark), and their steps side by side with every value whole."""
+    from tmuxterm import have_tmux, run_in_terminal, zk
+
+    if not have_tmux():
+        pytest.skip("tmux is not installed (apt-get install tmux); it is the terminal this test reads")
+    status, lines = run_in_terminal(zk("report", run["tel"], other["tel"], "--steps", run["steps"], "--steps",
+                                       other["steps"], "--label", "serial-1", "--label", "serial-2",
+                                       "--terminal"), width=width, height=200)
+    screen = "\n".join(lines)
+    assert status == 0, screen
+    assert all(len(line) <= width for line in lines) and "…" not in screen, screen
+    assert screen.count("Engine speed — rpm") == 1 and screen.count("Thrust — thrust (kgf)") == 1, screen
+    assert "#1 • serial-1" in screen and "#2 × serial-2" in screen
+    chart = screen[screen.index("Engine speed"):screen.index("Exhaust gas")]
+    assert "•" in chart and "×" in chart                 # both runs drawn on the one panel
+    table = screen[screen.index("Steps side by side"):]
+    assert re.search(r"step\s+.\s+target\s+.\s+quantity\s+.\s+#1\s+.\s+#2\s+.\s+Δ #2", table), table
+    runs = [R.load_run(p) for p in (run["tel"], other["tel"])]
+    for x, p in zip(runs, (run["steps"], other["steps"])):
+        x.steps = R.load_steps(p)
+    for n, target, quantities in R.compared_steps(runs):
+        for label, values, diffs in quantities:
+            for v in values + [d.split()[0] for d in diffs]:
+                assert re.search(rf"(?<![\w.]){re.escape(v)}(?![\w.])", table), (label, v, table)
+    assert R.UNSETTLED_NOTE in " ".join(x.strip(" │") for x in lines)
 
 
 def test_without_matplotlib_names_the_extra(cli, run, monkeypatch):

@@ -778,8 +778,43 @@ COMPARED = (("rpm_mean", "rpm", 0), ("egt_c_mean", "EGT °C", 0), ("thrust_kg_me
             ("fuel_flow_l_min_mean", "fuel L/min", 3), ("tsfc_g_kn_s", "TSFC g/(kN·s)", 2))
 
 
+def compared_steps(runs):
+    """The runs' steps side by side by step number: ``[(step, target, [(label, values,
+    differences)])]``, one entry per quantity of :data:`COMPARED`: each run's value (an unsettled
+    step's starred) and each later run's difference from the first run (value and %)."""
+    numbers = []
+    for run in runs:
+        for r in run.steps or ():
+            if r.get("step") not in numbers:
+                numbers.append(r.get("step"))
+    out = []
+    by_run = [{r.get("step"): r for r in run.steps or ()} for run in runs]
+    cols_of = {col: [_thrust_column(run.steps) if col == "thrust_kg_mean" else col for run in runs]
+               for col, _, _ in COMPARED}
+    for n in numbers:
+        targets = [(b.get(n) or {}).get("target") for b in by_run]
+        target = targets[0] or next((t for t in targets if t), "")
+        if len({t for t in targets if t}) > 1:
+            target = " / ".join(t or "-" for t in targets)
+        marks = ["" if settled(b.get(n) or {"settled": True}) else "*" for b in by_run]
+        quantities = []
+        for col, label, dec in COMPARED:
+            values = [_float((b.get(n) or {}).get(c)) for b, c in zip(by_run, cols_of[col])]
+            ref = values[0]
+            diffs = []
+            for v in values[1:]:
+                if v is None or ref is None:
+                    diffs.append("-")
+                else:
+                    pct = f" ({_signed((v - ref) / ref * 100, 1)} %)" if ref else ""
+                    diffs.append(f"{_signed(v - ref, dec)}{pct}")
+            quantities.append((label, [_fmt(v, dec) + m for v, m in zip(values, marks)], diffs))
+        out.append((n, target, quantities))
+    return out
+
+
 def step_comparison(runs, short=False):
-    """``(header, rows)``: the runs' steps side by side by step number, each quantity of
+    """``(header, rows)``: :func:`compared_steps` as one row per step, each quantity of
     :data:`COMPARED` per run and its difference from the first run (value and %). ``short``
     names the runs by their number (#1, #2: the header lists them)."""
     names = [f"#{k + 1}" if short else run.label for k, run in enumerate(runs)]
@@ -788,32 +823,13 @@ def step_comparison(runs, short=False):
         header += [f"{label} {names[0]}"]
         for name in names[1:]:
             header += [f"{label} {name}", f"Δ {name}"]
-    numbers = []
-    for run in runs:
-        for r in run.steps or ():
-            if r.get("step") not in numbers:
-                numbers.append(r.get("step"))
     rows = []
-    by_run = [{r.get("step"): r for r in run.steps or ()} for run in runs]
-    for n in numbers:
-        targets = [(b.get(n) or {}).get("target") for b in by_run]
-        target = targets[0] or next((t for t in targets if t), "")
-        if len({t for t in targets if t}) > 1:
-            target = " / ".join(t or "-" for t in targets)
+    for n, target, quantities in compared_steps(runs):
         row = [n, target]
-        marks = ["" if settled(b.get(n) or {"settled": True}) else "*" for b in by_run]
-        for col, _, dec in COMPARED:
-            cols = [_thrust_column(run.steps) if col == "thrust_kg_mean" else col for run in runs]
-            ref = _float((by_run[0].get(n) or {}).get(cols[0]))
-            row.append(_fmt(ref, dec) + marks[0])
-            for k, b in enumerate(by_run[1:], 1):
-                v = _float((b.get(n) or {}).get(cols[k]))
-                row.append(_fmt(v, dec) + marks[k])
-                if v is None or ref is None:
-                    row.append("-")
-                else:
-                    pct = f" ({_signed((v - ref) / ref * 100, 1)} %)" if ref else ""
-                    row.append(f"{_signed(v - ref, dec)}{pct}")
+        for _, values, diffs in quantities:
+            row.append(values[0])
+            for v, d in zip(values[1:], diffs):
+                row += [v, d]
         rows.append(row)
     return header, rows
 
@@ -1248,61 +1264,170 @@ def _html(runs, panels, step_plots, limits, title, meta):
 
 # --- terminal ------------------------------------------------------------------------------------
 
-def terminal(runs, console, width=None, height=6):
-    """Draw the time histories with block characters (rich), one panel per quantity and run;
-    comparing runs, their steps side by side as a table."""
+#: A compared run's mark in the terminal's overlays (its colour is its colour in the PNG); a cell
+#: that several runs pass through shows :data:`SHARED_MARK`.
+RUN_MARKS = ("•", "×", "+", "o", "*", "#", "~", "^")
+SHARED_MARK = "◆"
+_BLOCKS = " ▁▂▃▄▅▆▇█"
+_LABEL = 11                                          # the value labels' column
+
+
+def _bins(t, s, t0, span, width, offset=0.0):
+    """The mean of series ``s`` in each of ``width`` time bins from ``t0`` over ``span`` (NaN: none)."""
+    total, count = [0.0] * width, [0] * width
+    for i in range(len(t)):
+        v = s[i]
+        if v == v:
+            x = min(width - 1, max(0, int((t[i] - offset - t0) / span * (width - 1))))
+            total[x] += v
+            count[x] += 1
+    return [total[x] / count[x] if count[x] else math.nan for x in range(width)]
+
+
+def _axis_text(t0, t_end, width):
     from rich.text import Text
 
+    end = f"{t_end:.6g} s"
+    return Text(" " * _LABEL + f"{t0:<.6g} s".ljust(max(width - len(end), 1)) + end, style="dim")
+
+
+def _value_label(row, height, lo, hi):
+    return f"{hi:>10.6g} " if row == height else f"{lo:>10.6g} " if row == 1 else " " * _LABEL
+
+
+def _single_panel(console, run, c, title, unit, width, height):
+    """One run's quantity as block characters (the maximum of each column)."""
+    from rich.text import Text
+
+    t = run.t
+    # a file appended to by two runs starts its t again: the panel spans every t it holds
+    t0 = min(t) if len(t) else 0.0
+    t_end = max(t) if len(t) else 0.0
+    span = (t_end - t0) or 1.0
+    col = [math.nan] * width
+    s = run.series[c]
+    for i in range(len(t)):
+        v = s[i]
+        if v == v:
+            x = min(width - 1, int((t[i] - t0) / span * (width - 1)))
+            col[x] = v if col[x] != col[x] else max(col[x], v)
+    vals = [v for v in col if v == v]
+    lo, hi = min(vals), max(vals)
+    rng = (hi - lo) or 1.0
+    console.print(Text(f"{title} — {unit}", style="bold"))
+    for row in range(height, 0, -1):
+        line = []
+        for v in col:
+            if v != v:
+                line.append(" ")
+                continue
+            level = (v - lo) / rng * height
+            cell = min(max(level - (row - 1), 0.0), 1.0)
+            line.append(_BLOCKS[int(round(cell * 8))])
+        console.print(Text(_value_label(row, height, lo, hi), style="dim") + Text("".join(line), style="cyan"))
+    console.print(_axis_text(t0 - run.offset, t_end - run.offset, width))
+
+
+def _overlay_panel(console, runs, lines, title, unit, width, height):
+    """Several runs' quantity overlaid on one aligned time axis and one value scale: each run's
+    bin means as its mark, in its colour; a cell two runs share as :data:`SHARED_MARK`."""
+    from rich.text import Text
+
+    drawn = []
+    for k, run in enumerate(runs):
+        c = next((c for c, _ in lines if c in run.present), None)
+        if c is not None and len(run.t):
+            drawn.append((k, run, c))
+    if not drawn:
+        return
+    t0 = min(min(run.t) - run.offset for _, run, _ in drawn)
+    t_end = max(max(run.t) - run.offset for _, run, _ in drawn)
+    span = (t_end - t0) or 1.0
+    means = [(k, _bins(run.t, run.series[c], t0, span, width, run.offset)) for k, run, c in drawn]
+    vals = [v for _, m in means for v in m if v == v]
+    lo, hi = min(vals), max(vals)
+    rng = (hi - lo) or 1.0
+    grid = [[set() for _ in range(width)] for _ in range(height)]
+    for k, m in means:
+        for x, v in enumerate(m):
+            if v == v:
+                grid[min(height - 1, int(round((v - lo) / rng * (height - 1))))][x].add(k)
+    names = {c for _, _, c in drawn}
+    console.print(Text(f"{title} — {unit}" + ("" if len(names) == 1 else f" ({', '.join(sorted(names))})"),
+                       style="bold"))
+    for row in range(height, 0, -1):
+        text = Text(_value_label(row, height, lo, hi), style="dim")
+        for cell in grid[row - 1]:
+            if not cell:
+                text.append(" ")
+            elif len(cell) == 1:
+                k = next(iter(cell))
+                text.append(RUN_MARKS[k % len(RUN_MARKS)], style=RUN_COLOURS[k % len(RUN_COLOURS)])
+            else:
+                text.append(SHARED_MARK, style="bold")
+        console.print(text)
+    console.print(_axis_text(t0, t_end, width))
+
+
+def _legend(runs):
+    from rich.text import Text
+
+    text = Text("runs: ", style="bold")
+    for k, run in enumerate(runs):
+        text.append(f"#{k + 1} ")
+        text.append(RUN_MARKS[k % len(RUN_MARKS)], style=RUN_COLOURS[k % len(RUN_COLOURS)])
+        text.append(f" {run.label}   ")
+    text.append(f"{SHARED_MARK} several; t = 0 at ", style="dim")
+    text.append(", ".join(f"{r.offset:g} s of #{k + 1}" for k, r in enumerate(runs)), style="dim")
+    return text
+
+
+def comparison_table(runs, width):
+    """The steps of ``runs`` side by side for a terminal of ``width`` columns: a row per step and
+    quantity, a column per run (``#1``, ``#2``: the title names them) and per difference from
+    the first run; no value cut (the differences are left out first when the runs do not fit)."""
+    from .term import fitted_table
+
+    headings = ["step", "target", "quantity", "#1"]
+    priority = [0, 0, 0, 0]
+    for k in range(2, len(runs) + 1):
+        headings += [f"#{k}", f"Δ #{k}"]
+        priority += [0, -1]
+    rows, sections = [], []
+    for n, target, quantities in compared_steps(runs):
+        sections.append(len(rows))
+        for j, (label, values, diffs) in enumerate(quantities):
+            row = [str(n) if j == 0 else "", str(target or "") if j == 0 else "", label, values[0]]
+            for v, d in zip(values[1:], diffs):
+                row += [v, d.replace(" %)", "%)")]           # "(+3.4%)": one word, never split at a wrap
+            rows.append(row)
+    names = ", ".join(f"#{k + 1} {r.label}" for k, r in enumerate(runs))
+    return fitted_table(headings, rows, width, title=f"Steps side by side: {names} (Δ: the difference from #1)",
+                        caption=UNSETTLED_NOTE, priority=priority, sections=sections)
+
+
+def terminal(runs, console, width=None, height=6):
+    """Draw the time histories with characters (rich): one run's quantities as block charts;
+    several runs overlaid on their common (aligned) time axis, one panel per quantity, each run
+    in its mark and colour; comparing runs, their steps side by side as a table that fits the
+    terminal."""
     if isinstance(runs, Run):
         runs = [runs]
     panels, _, skipped = plan_many(runs, [r.steps for r in runs])
     skipped = [s for s in skipped if not s.startswith("steady-state")]
-    width = width or max(20, min(console.width, 160) - 16)
-    blocks = " ▁▂▃▄▅▆▇█"
+    width = width or max(20, min(console.width, 160) - _LABEL - 1)
+    many = len(runs) > 1
+    if many:
+        console.print(_legend(runs))
     for title, unit, lines in panels:
-        for run in runs:
-            c = next((c for c, _ in lines if c in run.present), None)
-            if c is None:
-                continue
-            t = run.t
-            # a file appended to by two runs starts its t again: the panel spans every t it holds
-            t0 = min(t) if len(t) else 0.0
-            t_end = max(t) if len(t) else 0.0
-            span = (t_end - t0) or 1.0
-            col = [math.nan] * width
-            s = run.series[c]
-            for i in range(len(t)):
-                v = s[i]
-                if v == v:
-                    x = min(width - 1, int((t[i] - t0) / span * (width - 1)))
-                    col[x] = v if col[x] != col[x] else max(col[x], v)
-            vals = [v for v in col if v == v]
-            lo, hi = min(vals), max(vals)
-            rng = (hi - lo) or 1.0
-            console.print(Text(f"{title} — {unit}" + (f" — {run.label}" if len(runs) > 1 else ""), style="bold"))
-            for row in range(height, 0, -1):
-                line = []
-                for v in col:
-                    if v != v:
-                        line.append(" ")
-                        continue
-                    level = (v - lo) / rng * height
-                    cell = min(max(level - (row - 1), 0.0), 1.0)
-                    line.append(blocks[int(round(cell * 8))])
-                label = f"{hi:>10.6g} " if row == height else f"{lo:>10.6g} " if row == 1 else " " * 11
-                console.print(Text(label, style="dim") + Text("".join(line), style="cyan"))
-            console.print(Text(" " * 11 + f"{t0 - run.offset:<.6g} s".ljust(width - 10)
-                               + f"{t_end - run.offset:.6g} s", style="dim"))
-    if len(runs) > 1 and any(r.steps for r in runs):
-        from rich.table import Table
-
-        header, body = step_comparison(runs)
-        table = Table(title=f"Steps side by side (Δ: difference from {runs[0].label})", caption=UNSETTLED_NOTE)
-        for h in header:
-            table.add_column(str(h))
-        for r in body:
-            table.add_row(*[str(c) for c in r])
-        console.print(table)
+        if many:
+            _overlay_panel(console, runs, lines, title, unit, width, height + 2)
+            continue
+        c = next((c for c, _ in lines if c in runs[0].present), None)
+        if c is not None:
+            _single_panel(console, runs[0], c, title, unit, width, height)
+    if many and any(r.steps for r in runs):
+        console.print(comparison_table(runs, console.width))
     return skipped
 
 

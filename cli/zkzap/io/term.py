@@ -42,3 +42,120 @@ def style(text: str, stream=None, **kw) -> str:
     import click
 
     return click.style(text, **kw)
+
+
+def fill(text: str, stream=None, indent: str = "  ") -> str:
+    """``text`` wrapped at spaces to the width of the terminal ``stream`` is (continued lines
+    indented), so that the terminal does not break a number in two; as it is elsewhere."""
+    stream = stream if stream is not None else sys.stdout
+    if not is_tty(stream):
+        return text
+    try:
+        width = os.get_terminal_size(stream.fileno()).columns
+    except (AttributeError, ValueError, OSError):
+        return text
+    import re
+    import textwrap
+
+    # a number keeps its unit on its line ("80 %", "745.5 °C")
+    text = re.sub(r"(\d) (?=(?:%|°C|[LhsV]|rpm|kgf)(?:[^\w°]|$))", "\\1\u00a0", text)
+    return "\n".join(textwrap.fill(line, width, subsequent_indent=indent, break_long_words=False,
+                                    break_on_hyphens=False) for line in text.splitlines() or [""])
+
+
+# --- tables that fit the terminal ----------------------------------------------------------------
+
+#: A word no table breaks: a number (with a sign, a unit mark or a star), a time, an ISO timestamp.
+_WHOLE = r"[-+±]?[\d.,:/%°]*\d[\d.,:/%°]*[*!]?|\d{4}-\d\d-\d\d(?:[T ][\d:.]+Z?)?"
+#: A word of text longer than this (a path, a long command line) may be broken at this width, never cut;
+#: shorter ones (names, JSON keys) stay whole.
+TEXT_MIN = 20
+
+
+def _words(text: str):
+    return text.split() or [""]
+
+
+def column_layout(headings, rows, width, priority=None):
+    """How a table of ``headings`` and ``rows`` (strings) fits ``width`` terminal columns without
+    cutting a value: ``(style, keep, widths)``. ``style`` is ``"boxed"`` (rich's default: every
+    column 3 wide more, and one), ``"compact"`` (no box: 2 between columns) — the boxed one when
+    every column fits its narrowest there; ``keep`` the indices of the columns shown (those of the
+    lowest ``priority`` — of equal ones the last — are left out until the rest fit); ``widths``
+    each kept column's width, None when the table fits as it is.
+
+    A column is never narrower than its longest number or time (:data:`_WHOLE`) or its heading's
+    longest word; text wraps at spaces, and only a word of text longer than :data:`TEXT_MIN` is
+    broken (folded onto the next line, nothing lost)."""
+    import re
+
+    from rich.cells import cell_len               # the terminal's columns: a wide character takes two
+
+    whole = re.compile(_WHOLE)
+    n = len(headings)
+    most, least = [], []
+    for i, h in enumerate(headings):
+        cells = [str(r[i]) for r in rows]
+        most.append(max([cell_len(line) for c in [h, *cells] for line in c.splitlines() or [""]]))
+        lo = max(cell_len(w) for w in _words(h))
+        for c in cells:
+            for w in _words(c):
+                lo = max(lo, cell_len(w) if cell_len(w) <= TEXT_MIN or whole.fullmatch(w) else TEXT_MIN)
+        least.append(lo)
+    rank = list(priority) if priority is not None else [0] * n
+
+    def need(cols, style, sizes):
+        k = len(cols)
+        return sum(sizes[i] for i in cols) + (3 * k + 1 if style == "boxed" else 2 * max(k - 1, 0))
+
+    keep = list(range(n))
+    if need(keep, "boxed", most) <= width:
+        return "boxed", keep, None
+    style = "boxed" if need(keep, "boxed", least) <= width else "compact"
+    while len(keep) > 1 and need(keep, style, least) > width:
+        keep.remove(min(keep, key=lambda i: (rank[i], -i)))
+    if need(keep, style, most) <= width:
+        return style, keep, [most[i] for i in keep]
+    sizes = {i: least[i] for i in keep}
+    spare = width - need(keep, style, least)
+    want = {i: most[i] - least[i] for i in keep}
+    total = sum(want.values())
+    if spare > 0 and total:
+        for i in keep:
+            sizes[i] += min(want[i], spare * want[i] // total)
+        left = spare - sum(sizes[i] - least[i] for i in keep)
+        for i in sorted(keep, key=lambda i: -(most[i] - sizes[i])):
+            if left <= 0:
+                break
+            if sizes[i] < most[i]:
+                sizes[i] += 1
+                left -= 1
+    return style, keep, [sizes[i] for i in keep]
+
+
+def fitted_table(headings, rows, width, *, title=None, caption=None, priority=None, header_style="bold",
+                 sections=()):
+    """A rich Table of ``headings`` and ``rows`` (strings) laid out by :func:`column_layout` for
+    ``width`` columns: no value cut; the columns left out named in the caption. ``sections``:
+    the indices of the rows that start a new group (a line is drawn above them)."""
+    from rich import box
+    from rich.table import Table
+
+    style, keep, widths = column_layout(headings, rows, width, priority)
+    dropped = [headings[i] for i in range(len(headings)) if i not in keep]
+    notes = [caption] if caption else []
+    if dropped:
+        notes.append(f"left out at {width} columns: {', '.join(' '.join(h.split()) for h in dropped)} "
+                     "(a wider terminal, or -f csv/json, shows them)")
+    kw = {} if style == "boxed" else dict(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False,
+                                                       padding=(0, 1, 0, 0))
+    table = Table(title=title, title_justify="left", header_style=header_style, caption="; ".join(notes) or None,
+                  caption_justify="left", **kw)
+    for k, i in enumerate(keep):
+        table.add_column(headings[i], overflow="fold", width=None if widths is None else widths[k])
+    starts = set(sections)
+    for j, r in enumerate(rows):
+        if j in starts and j:
+            table.add_section()
+        table.add_row(*(str(r[i]) for i in keep))
+    return table

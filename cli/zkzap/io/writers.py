@@ -381,11 +381,15 @@ class CsvWriter(LineWriter):
 
 class TableWriter(Writer):
     """A rich table for a terminal. Rows are buffered and printed in blocks of ``block`` rows
-    so a long stream still shows progress; ``columns`` is a list of (key, heading)."""
+    so a long stream still shows progress; ``columns`` is a list of (key, heading) or (key,
+    heading, priority: default 0). A table wider than the terminal is laid out by
+    :func:`~zkzap.io.term.column_layout`: values wrap, none is cut, and the columns of the lowest
+    priority (the last of equal ones first) are left out, named under the table, until the rest fit."""
 
     def __init__(self, stream, columns, title=None, block=500, console=None):
         super().__init__(stream, True)
-        self.columns = [(c, c) if isinstance(c, str) else c for c in columns]
+        self.columns = [(c, c) if isinstance(c, str) else tuple(c) for c in columns]
+        self.priority = [c[2] if len(c) > 2 else 0 for c in self.columns]
         self.title = title
         self.block = block
         self.rows = []
@@ -400,17 +404,12 @@ class TableWriter(Writer):
     def _emit(self):
         if not self.rows:
             return
-        from rich.table import Table
-
-        from .term import console_for
+        from .term import console_for, fitted_table
 
         console = self._console or console_for(self.stream)
-        table = Table(title=self.title, title_justify="left", header_style="bold")
-        for _, heading in self.columns:
-            table.add_column(heading)
-        for rec in self.rows:
-            table.add_row(*(csv_cell(rec.get(k)) for k, _ in self.columns))
-        console.print(table)
+        rows = [[csv_cell(rec.get(k)) for k, *_ in self.columns] for rec in self.rows]
+        console.print(fitted_table([c[1] for c in self.columns], rows, console.width, title=self.title,
+                                   priority=self.priority))
         self.rows = []
         self.title = None
 

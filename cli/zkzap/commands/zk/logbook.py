@@ -7,12 +7,15 @@ from __future__ import annotations
 import click
 
 from ...errors import OK, OUTPUT_ERROR, USAGE, UsageError
+from ...io.term import fill
 from .. import CONTEXT, Command
 from ..options import FiniteRange, InputPath, IntRange, exits, format_option
 
-TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "s"),
-         ("running_s", "run s"), ("starts", "starts"), ("max_rpm", "max rpm"), ("max_egt_c", "EGT °C"),
-         ("fuel_used_l", "fuel L"), ("command", "command"), ("outcome", "outcome")]
+#: The terminal table: (key, heading, priority). A narrow terminal leaves out the lowest first
+#: (named under the table): the command, the session's duration, fuel, EGT, rpm, starts.
+TABLE = [("id", "run"), ("started", "started UTC"), ("engine", "engine"), ("duration_s", "time s", -5),
+         ("running_s", "running s"), ("starts", "starts", -1), ("max_rpm", "max rpm", -2), ("max_egt_c", "EGT °C", -3),
+         ("fuel_used_l", "fuel L", -4), ("command", "command", -6), ("outcome", "outcome")]
 #: Throttle (%) above which an engine's running hours are given by default.
 DEFAULT_ABOVE = (80.0,)
 
@@ -91,7 +94,7 @@ def logbook(logbook_file, fmt, only_totals, last, engine, above, service, note):
         return
     _runs(recs, fmt, f"logbook {logbook_file}: {len(recs)} runs")
     if fmt == "table":
-        click.echo("totals: " + _totals_text(totals), err=True)
+        click.echo(fill("totals: " + _totals_text(totals), sys.stderr), err=True)
 
 
 def _runs(recs, fmt, title):
@@ -101,7 +104,8 @@ def _runs(recs, fmt, title):
     if fmt == "table":
         rows = [dict(r, errors=", ".join(r["errors"]), limits_violated=", ".join(r["limits_violated"]),
                      started=r["started"].replace("T", " ").rstrip("Z"), duration_s=round(r["duration_s"]),
-                     running_s=round(r["running_s"]), command=r["command"].replace("zk ", ""),
+                     running_s=round(r["running_s"]),
+                     fuel_used_l=None if r["fuel_used_l"] is None else round(r["fuel_used_l"], 3), command=r["command"].replace("zk ", ""),
                      outcome=r["outcome"] + (" !" if r["errors"] or r["limits_violated"] else ""),
                      engine=r.get("engine") or "-")
                 for r in recs]
@@ -127,6 +131,7 @@ def _totals_text(t) -> str:
 
 def _engine(path, engine, above, fmt, only_totals, last):
     import json
+    import sys
 
     from ...api import logbook as lb
     from ..options import write_rows
@@ -155,7 +160,7 @@ def _engine(path, engine, above, fmt, only_totals, last):
         write_rows(rows, list(rows[0]), fmt)
         return
     _runs(doc["runs"], fmt, f"engine {engine}: {len(doc['runs'])} runs")
-    click.echo(f"engine {engine}: " + _totals_text(doc["totals"]), err=True)
+    click.echo(fill(f"engine {engine}: " + _totals_text(doc["totals"]), sys.stderr), err=True)
     where = f"since the service of {svc['at']}" + (f" ({svc['note']})" if svc and svc.get("note") else "") \
         if svc else "no service recorded"
-    click.echo(f"  {where}: " + _totals_text(doc["since_service"]), err=True)
+    click.echo(fill(f"  {where}: " + _totals_text(doc["since_service"]), sys.stderr), err=True)
