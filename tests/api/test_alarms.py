@@ -96,3 +96,20 @@ def test_a_session_that_starts_the_engine_ends_a_hung_or_hot_start_with_the_abor
     link.close()
     assert outcome.reason == "refused" and isinstance(outcome.error, StartRefused) and outcome.exit_code == 5
     assert not any(r["command"] == "control" for r in sent)
+
+
+@pytest.mark.parametrize("settings,kind", [({"hung_start_s": 2.0}, "hung start"),
+                                           ({"hot_start_egt_c": 300.0}, "hot start")])
+def test_the_start_watches_see_the_ecu_whatever_the_records_hold(settings, kind):
+    """--ids 2,3 writes no record of status ID 1 (the engine state and EGT): the watches see every
+    decoded frame, not the records."""
+    link = ZkLink.open("sim://zk?speed=20", 115200, allow=Permission.ENGINE)
+    src = LiveSource(link)
+    tel = Telemetry(None, {2, 3}, False, wall0=src.wall0)
+    out = []
+    alarms = Alarms(**settings)
+    outcome = Session(src, tel, out.append, control=lambda t: RUN30, duration=60, alarms=alarms).run()
+    link.close()
+    assert outcome.reason == "alarm" and kind in str(outcome.error) and outcome.aborted == "standby"
+    assert {r["id"] for r in out if r.get("kind") not in ("trip", "rundown")} <= {2, 3}
+    assert tel.on_frame is None                      # the session's watch is not left on the telemetry

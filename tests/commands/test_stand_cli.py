@@ -316,3 +316,6 @@ def test_a_hung_start_ends_the_session_with_the_abort(cli):
     r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "-p", SIM, "-f", "jsonl",
             "--hung-start", "0", "--hot-start", "0", "--ids", "1")
     assert r.exit_code == 0, r                                   # 0: not watched
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "-p", SIM, "-f", "jsonl",
+            "--hung-start", "2", "--ids", "2,3")                  # the watch needs ID 1, the records leave it out
+    assert r.exit_code == 5 and "ALARM: hung start" in r.stderr and "sent standby" in r.stderr, r

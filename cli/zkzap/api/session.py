@@ -191,11 +191,6 @@ class Session:
         self.restart = restart   # False: the source's clock goes on (one of a console's sessions)
         self.answers_esr = answers_esr   # something answers the ECU's ESR request (an air pressure)
         self._esr_said = False
-        if alarms is not None:
-            def sink(rec, _sink=sink, _observe=alarms.observe):
-                _sink(rec)
-                if rec.get("kind") in ("status", "snapshot", None) and "t" in rec:
-                    _observe(rec["t"], rec)
         self.sink = sink
         self.control = control
         self.period = 1.0 / rate
@@ -327,6 +322,28 @@ class Session:
         first_poll = None
         if self.control is not None:
             src.pace(self.period)           # reads never hold a control frame up
+        hooked = tel.on_frame
+        if self.alarms is not None:
+            tel.on_frame = self._observing(hooked)
+        try:
+            return self._run(src, tel, written, next_send, next_update, outcome, told, first_poll)
+        finally:
+            tel.on_frame = hooked
+
+    def _observing(self, hooked):
+        """The telemetry's frame hook with the alarms' watch added: every decoded status frame
+        (those ``--ids`` writes no record for too: the start watches need ID 1's state and EGT
+        whatever is recorded) with the limits' entries the stand's hooks gave it."""
+        observe = self.alarms.observe
+
+        def on_frame(t, rec):
+            extra = hooked(t, rec) if hooked is not None else None
+            observe(t, dict(rec, **extra) if extra else rec)
+            return extra
+
+        return on_frame
+
+    def _run(self, src, tel, written, next_send, next_update, outcome, told, first_poll):
         with SignalGuard() as guard:
             try:
                 if self.plan is not None and self.plan.needs_ecu and src.live:
