@@ -1,10 +1,14 @@
-"""Test-stand hooks for a ZK logging session: limits, per-step averages and logbook statistics,
-fed every decoded status frame through :attr:`zkzap.api.telemetry.Telemetry.on_frame`.
+"""The engine stand: its hooks (:class:`Stand`: limits, per-step averages, external sensors,
+corrected values, the ESR answer, logbook statistics, fed every decoded status frame through
+:attr:`zkzap.api.telemetry.Telemetry.on_frame`) and the one stand session every front end runs
+(:class:`StandSession`: the hooks, the alarm list and start interlock, the records' sink and the
+session loop with its ends).
 
-One :class:`Stand` is built from the command's options before any port opens, handed to the
-session (``run_telemetry(stand=...)``) and asked afterwards for the summary entries and the
-logbook row. ``zk batch`` plugs in the same way: build a Stand per step (or one for the batch)
-and pass it to the session that step runs.
+A front end — ``zk monitor``, ``zk send --for``, ``zk profile``, a batch's or a shell's line,
+the browser console — builds a :class:`Stand` from its options before any port opens, wraps it
+in a :class:`StandSession` with where its records go (a writer object of :mod:`zkzap.io`, made
+by the front end: the library does not import the writers), runs it, renders what it reports
+and hands it the operator's input (a start, an acknowledgement).
 """
 
 from __future__ import annotations
@@ -192,3 +196,153 @@ class Stand:
             "throttle_s": self.stats.throttle_s,
         }
         return _logbook.record(self.logbook, run)
+
+
+class StandSession:
+    """One engine stand's session: the same object under every front end.
+
+    It carries the stand's hooks (``stand``, a :class:`Stand` or None: limits, external sensors,
+    corrected values, the ESR answer, the logbook and the engine's name), the alarm list and
+    start interlock (``alarms``, an :class:`~zkzap.api.alarms.Alarms`; by default the one
+    installed for the process by a shell or a batch, :func:`zkzap.api.alarms.current`, else its
+    own), the records' sink (given to :meth:`attach`: the front end's writer, every output
+    format of :mod:`zkzap.io`), and runs the :class:`~zkzap.api.session.Session` loop with the
+    ends every engine session keeps: the abort on every abnormal end, the signal-safe end (every
+    terminating signal reaches the abort), the trip latched as an alarm and the rundown
+    recorded after it.
+
+    Its life::
+
+        ss = StandSession(stand, notify=print)        # before any port opens (options checked)
+        ss.start(timeout)                             # the sensors' first lines: a silent one is exit 3
+        on_update = ss.attach(source, telemetry, sink, on_update)
+        outcome = ss.run(control=..., duration=...)   # again for each session of a console
+        ss.close()                                    # the sensors stop: one count for every summary
+        ss.summary(), ss.log_run(...)                 # the run's entries, its logbook row
+
+    ``notify(message)``: how the session's, the limits' and the alarms' messages are said (a
+    front end puts them above its live view). A console's sessions follow one another on one
+    clock (``restart=False`` to :meth:`run`).
+    """
+
+    def __init__(self, stand=None, *, alarms=None, notify=None):
+        from .alarms import Alarms, current
+
+        self.stand = stand
+        self.notify = notify or (lambda message: None)
+        #: the alarm list and start interlock (shared with the process's shell or batch when one
+        #: is installed: a trip in one command latches for the next)
+        self.alarms = alarms if alarms is not None else (current() or Alarms(tell_limits=False, notify=self.notify))
+        if stand is not None:
+            self.alarms.settings(conditions=self.limits.conditions if self.limits is not None else (),
+                                 **stand.alarm_settings)
+        self.source = None
+        self.telemetry = None
+        self.sink = None
+        self.session = None            # the last Session run
+        self._closed = False
+
+    @property
+    def limits(self):
+        """The stand's :class:`~zkzap.api.limits.LimitSet` (None: no limits)."""
+        return self.stand.limits if self.stand is not None else None
+
+    @property
+    def answers_esr(self) -> bool:
+        """Something answers the ECU's request for the air pressure (``--air-pressure``)."""
+        return self.stand is not None and self.stand.answer is not None
+
+    def start(self, timeout) -> None:
+        """Before the port opens: the external sensors' readers and their first lines (a silent
+        sensor is exit 3 with nothing sent)."""
+        if self.stand is not None:
+            try:
+                self.stand.start(timeout)
+            except BaseException:
+                self.close()
+                raise
+
+    def attach(self, source, telemetry, sink, on_update=None):
+        """Run on ``source`` (a live or replayed ZK source) through ``telemetry`` into ``sink``
+        (``sink(record)``: the front end's writer; None: records are not kept); returns the live
+        view's callback with the stand's limit lines and the alarm list added (None stays None)."""
+        self.source, self.telemetry, self.sink = source, telemetry, sink or (lambda rec: None)
+        if self.stand is not None:
+            on_update = self.stand.attach(telemetry, source, on_update)
+        if on_update is not None and getattr(source, "live", True):
+            alarms, inner = self.alarms, on_update
+
+            def on_update(snapshot, health):
+                inner(snapshot, dict(health, alarms=alarms.to_list()[:4]) if alarms.entries else health)
+
+        return on_update
+
+    def rebind(self, source) -> None:
+        """The source is wrapped (a tap that copies every frame to a capture or a bridge): ESR
+        answers go out through it, recorded like every control frame."""
+        self.source = source
+        if self.stand is not None:
+            self.stand.write = source.write
+
+    def run(self, **options):
+        """One :class:`~zkzap.api.session.Session` over the attached source, with the stand's
+        alarms (a live source only: a replay starts nothing), limits and ESR answer; ``options``
+        are the Session's (control, rate, abort, count, duration, silence, end, rundown, ...).
+        Returns its :class:`~zkzap.api.session.Outcome`; :attr:`session` is the Session."""
+        self.session = self.make_session(**options)
+        return self.session.run()
+
+    def make_session(self, **options):
+        """The :class:`~zkzap.api.session.Session` :meth:`run` runs (for a front end that needs
+        it before it runs: a console cuts it short from its requests)."""
+        from .session import Session
+
+        source = options.pop("source", None) or self.source
+        options.setdefault("notify", self.notify)
+        options.setdefault("limits", self.limits)
+        options.setdefault("answers_esr", self.answers_esr)
+        if getattr(source, "live", True):
+            options.setdefault("alarms", self.alarms)
+        return Session(source, self.telemetry, self.sink, **options)
+
+    def acknowledge(self, who, ids=None) -> list:
+        """The operator ``who`` acknowledges the latched alarms (``ids``: only these); returns the
+        :class:`~zkzap.api.alarms.Alarm` entries acknowledged (each says who and when). A trip's
+        restart rule holds on until the engine is at rest and cool."""
+        return self.alarms.acknowledge(who, ids)
+
+    def refusal(self, setpoint=None):
+        """Why a start is refused now (None: it may start), by the ECU's latest values."""
+        latest = self.telemetry.latest if self.telemetry is not None else None
+        return self.alarms.refusal(latest, setpoint)
+
+    def close(self) -> None:
+        """Stop the external sensors (at the session's end, before any summary). Twice is once."""
+        if self.stand is not None and not self._closed:
+            self._closed = True
+            self.stand.close()
+
+    def summary(self) -> dict:
+        """The stand's entries of a run summary (:meth:`Stand.summary`) and the alarm list."""
+        out = self.stand.summary() if self.stand is not None else {}
+        if self.alarms.entries:
+            out["alarms"] = self.alarms.to_list()
+        return out
+
+    def exit_status(self, outcome) -> int:
+        """The run's exit status (5 for a run that went on through a violated limit)."""
+        return self.stand.exit_status(outcome) if self.stand is not None else outcome.exit_code
+
+    def log_run(self, *, command, port, schedule=None, files=(), outcome, ended_t=None):
+        """Append the run to the logbook (when one was given); returns the run's ID."""
+        if self.stand is None:
+            return None
+        session = self.session
+        if ended_t is not None:
+            class _Ended:                   # a console's whole time: one run of the logbook
+                pass
+
+            session = _Ended()
+            session.ended_t = ended_t
+        return self.stand.log_run(command=command, port=port, schedule=schedule, files=files, outcome=outcome,
+                                  tel=self.telemetry, session=session)

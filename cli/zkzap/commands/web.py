@@ -276,8 +276,8 @@ def _make_zk():
         check_access(listen, token)
         sensors = session_sensors(aux, thrust_from, fuel_flow_from, ambient_temp, ambient_pressure, air_pressure)
         stand = build_stand(limit=limit, limits_files=limits_files, on_limit=on_limit, logbook=logbook,
-                            controls=True, sensors=sensors, engine=engine, force=True)
-        alarms = alarm_settings(restart_egt, hung_start, hot_start)
+                            controls=True, sensors=sensors, engine=engine, force=True,
+                            alarms=alarm_settings(restart_egt, hung_start, hot_start))
         url = resolve_port(port, sim)
         silence = timeout if timeout is not None else 2.0
         stand.start(silence)             # the external sensors' first lines: a silent one is exit 3
@@ -301,8 +301,9 @@ def _make_zk():
             raise
         from ..web.zk_console import ZkConsole
 
-        console = ZkConsole(ecu, on_limit=on_limit or "abort", rate=rate, silence=silence, alarms=alarms,
-                            stand=stand, record=record)
+        from ..api.stand import StandSession
+
+        console = ZkConsole(ecu, session=StandSession(stand), rate=rate, silence=silence, record=record)
         _serve(console, listen, token, "zk", "sim" if sim else url)
 
     for p in zk_web.params:

@@ -1,8 +1,9 @@
 """The ZK console: an ECU's status stream to every page, and engine control for the page that
 controls, as ``zk monitor`` and ``zk send control --for`` do it.
 
-The worker runs :class:`zkzap.api.session.Session` over the :class:`~zkzap.api.zk.Ecu`'s source
-and telemetry, one after the other: a monitoring session (sends nothing) while nobody runs the
+The worker runs the console's :class:`~zkzap.api.stand.StandSession` (the stand's hooks, its
+alarm list and the records' sink, as every front end runs it) over the
+:class:`~zkzap.api.zk.Ecu`'s source and telemetry, one session after the other: a monitoring session (sends nothing) while nobody runs the
 engine, a control session (the live command at ``rate`` Hz) from a start until the engine
 command ends. A control session ends like every command's session: on a stop (it sends stop,
 throttle 0), on the abort (standby, throttle 0, out of RPM mode, pump off), and also when the
@@ -26,7 +27,7 @@ from collections import deque
 
 from ..api.prestart import EcuLimits, Plan
 from ..api.schedule import RPM_MAX, rpm_factor_for
-from ..api.session import DEFAULT_SILENCE_S, Session, describe_abort
+from ..api.session import DEFAULT_SILENCE_S, describe_abort
 from ..codec import zk
 from ..errors import UsageError
 from .console import Console, number
@@ -91,17 +92,21 @@ class _Cuttable:
 
 
 class ZkConsole(Console):
-    """The console over ``ecu`` (an open :class:`~zkzap.api.zk.Ecu`). ``conditions`` and
-    ``on_limit`` (``abort`` or ``warn``) are the limits (``--limit``/``--limits``); ``rate`` the
-    control rate (Hz); ``silence`` the longest an ECU may be silent while controlled."""
+    """The console over ``ecu`` (an open :class:`~zkzap.api.zk.Ecu`). ``session``: the
+    :class:`~zkzap.api.stand.StandSession` it runs (the stand's hooks and alarm list, made by the
+    front end from its options); without one, ``conditions`` and ``on_limit`` (``abort`` or
+    ``warn``) are the limits and ``alarms`` the alarm list's settings. ``record``: where the
+    records go (``record.write(rec)``, closed with the console); ``rate`` the control rate (Hz);
+    ``silence`` the longest an ECU may be silent while controlled."""
 
     kind = "zk"
     watch_ops = frozenset({"abort"})
 
-    def __init__(self, ecu, *, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S, alarms=None,
-                 stand=None, record=None, command="zkzap web zk"):
+    def __init__(self, ecu, *, session=None, conditions=(), on_limit="abort", rate=20.0, silence=DEFAULT_SILENCE_S,
+                 alarms=None, record=None, command="zkzap web zk"):
         from ..api.alarms import Alarms
         from ..api.limits import LimitSet
+        from ..api.stand import Stand, StandSession
         from ..link.zk_port import is_simulator
 
         super().__init__(ecu.url, simulated=is_simulator(ecu.url))
@@ -111,10 +116,18 @@ class ZkConsole(Console):
         self.rate = rate
         self.silence = silence
         self.abort_kind = ecu.abort_kind
-        #: The test-stand hooks (:class:`~zkzap.api.stand.Stand`: limits, external sensors,
-        #: corrected values, the ESR answer, the logbook's figures) and where the records go
-        #: (``record.write(rec)``, closed with the console): as on the command line.
-        self.stand = stand
+        if session is None:
+            limits = LimitSet(conditions, on_limit) if conditions else None
+            stand = Stand(limits) if limits is not None else None
+            if stand is not None:
+                stand.alarm_settings = dict(alarms or {})
+            session = StandSession(stand, alarms=Alarms(**(alarms if stand is None and alarms else {})))
+        #: The stand session (:class:`~zkzap.api.stand.StandSession`: the test-stand hooks —
+        #: limits, external sensors, corrected values, the ESR answer, the logbook's figures —
+        #: and the alarm list) and where the records go (``record.write(rec)``, closed with the
+        #: console): as on the command line.
+        self.stand_session = session
+        self.stand = session.stand
         self.record = record
         self._write = None            # the records' writes, made off the worker (zkzap.offload)
         if record is not None:
@@ -123,19 +136,17 @@ class ZkConsole(Console):
             # a full queue ends the console safely (its run with the abort), never the worker blocked
             self._write = record.offload(Lane(f"--output {getattr(record, 'path', '')}", wait=False))
         self.command_name = command
-        if stand is not None and stand.limits is not None:
-            self.limits = stand.limits
+        self.limits = session.limits
+        if self.limits is not None:
             self.limits.notify = lambda m: self.log(m, "warn")
-        else:
-            self.limits = LimitSet(conditions, on_limit, notify=lambda m: self.log(m, "warn")) if conditions else None
-        if stand is not None:
-            stand.attach(self.tel, ecu.source, None)        # every frame: limits, sensors, ESR answers
-        elif self.limits is not None:
-            self.tel.on_frame = self.limits.check
-        #: The stand's alarm list and start interlock (``alarms``: its settings, the keywords of
-        #: :class:`~zkzap.api.alarms.Alarms`), shared by every session of the console.
-        self.alarms = Alarms(self.limits.conditions if self.limits else (), notify=lambda m: self.log(m, "error"),
-                             on_change=self._alarms_changed, **(alarms or {}))
+        # every frame: limits, sensors, ESR answers; the records into the console's sink
+        session.attach(ecu.source, self.tel, self._sink, None)
+        #: The stand's alarm list and start interlock, shared by every session of the console;
+        #: the console says and shows what it raises.
+        self.alarms = session.alarms
+        self.alarms.tell_limits = True
+        self.alarms.notify = lambda m: self.log(m, "error")
+        self.alarms.on_change = self._alarms_changed
         self._cut_as = None           # how a request ended the control session: abort, dead-man
         self._esr_said = False        # the ECU's unanswered request for the air pressure was said
         self.history = deque(maxlen=HISTORY_MAX)
@@ -168,9 +179,10 @@ class ZkConsole(Console):
 
     def _session_for(self, control=None, **kw):
         self._source = _Cuttable(self.ecu.source)
-        s = Session(self._source, self.tel, self._sink, control=control, rate=self.rate, abort=self.abort_kind,
-                    on_update=self._update, notify=self._note, update_interval=0.02, alarms=self.alarms,
-                    restart=False, answers_esr=self.stand is not None and self.stand.answer is not None, **kw)
+        kw.setdefault("limits", None)       # a monitoring session ends on no limit
+        s = self.stand_session.make_session(source=self._source, control=control, rate=self.rate,
+                                            abort=self.abort_kind, on_update=self._update, notify=self._note,
+                                            update_interval=0.02, restart=False, **kw)
         s._esr_said = self._esr_said       # said once for the console, not once a session
         # the source goes on from session to session: a session's silence counts from the last
         # frame any of them saw, not from the source's start
@@ -270,8 +282,8 @@ class ZkConsole(Console):
         finally:
             if self.record is not None:
                 self.record.close()
+            self.stand_session.close()
             if self.stand is not None:
-                self.stand.close()
                 self._log_run(ended)
 
     def _log_run(self, ended):
@@ -281,12 +293,9 @@ class ZkConsole(Console):
         f = self.failure
         outcome = Outcome("end") if f is None else Outcome(getattr(f, "reason", None) or "port", f)
 
-        class Served:                    # what the logbook takes of a session: its length
-            ended_t = ended
-
         files = (getattr(self.record, "path", None),)
-        run_id = self.stand.log_run(command=self.command_name, port=self.url, schedule=None, files=files,
-                                    outcome=outcome, tel=self.tel, session=Served)
+        run_id = self.stand_session.log_run(command=self.command_name, port=self.url, files=files, outcome=outcome,
+                                            ended_t=ended)
         if run_id is not None:
             self.log(f"logbook {self.stand.logbook}: run {run_id} recorded")
 

@@ -184,14 +184,6 @@ def _dashboard(title):
     return Dashboard(sys.stdout, title)
 
 
-def _with_alarms(on_update, alarms):
-    """The live view's callback, the newest alarms added (the dashboard lists them)."""
-    def update(snapshot, health):
-        on_update(snapshot, dict(health, alarms=alarms.to_list()[:4]) if alarms.entries else health)
-
-    return update
-
-
 def _header_without_trip(output, columns, snapshot, ids, fmt) -> bool:
     """An existing CSV file appended to has the header of a run without the ``trip`` column (a
     monitor's, or an older version's): the records keep its columns (a trip's row still has its
@@ -278,7 +270,8 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
     :class:`~zkzap.api.prestart.Plan` of the frames ``control`` sends (checked against the ECU's
     reported limits before the first).
     """
-    from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S, Session
+    from ...api.session import DEFAULT_RATE, DEFAULT_SILENCE_S
+    from ...api.stand import StandSession
     from ...api.telemetry import Telemetry, parse_ids
     from ...outfile import OutFile, refuse_same_files
     from contextlib import nullcontext
@@ -303,16 +296,17 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         from .mcap_output import check_mcap
 
         check_mcap(output, append, snapshot)
-    if stand is not None:
-        # external sensors first (their first lines name the fields the records get): a silent
-        # load cell is found before the ECU is sent anything
-        stand.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
+    # the one stand session (zkzap.api.stand): hooks, alarms, the session loop and its ends;
+    # this function makes what it writes to and reads from (the writers, the port, the bridges)
+    stand_session = StandSession(stand, notify=note)
+    # external sensors first (their first lines name the fields the records get): a silent
+    # load cell is found before the ECU is sent anything
+    stand_session.start(timeout if timeout is not None else DEFAULT_SILENCE_S)
     try:
         out = session_output(fmt, output, append, snapshot, id_set, title or f"ZK ECU on {url or replay}", stand,
                              controls=control is not None and abort in ("standby", "stop"))
     except BaseException:
-        if stand is not None:
-            stand.close()
+        stand_session.close()
         raise
     # opened by the first bytes received: a port that fails to open leaves an old log as it was
     raw = OutFile(raw_log, append=append, binary=True, what="raw-log").check() if raw_log else None
@@ -321,8 +315,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             bridges.start()          # an unreachable peer is exit 4 before the port opens or a file is written
     except BaseException:
         bridges.close()
-        if stand is not None:
-            stand.close()
+        stand_session.close()
         out.close()
         raise
     source = None
@@ -347,33 +340,18 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
         sink = out.offload(Lane("stdout" if output in (None, "-") else f"--output {output}"))
         on_update = out.update if out.dashboard is not None else None
-        if stand is not None:
-            on_update = stand.attach(tel, source, on_update)
+        on_update = stand_session.attach(source, tel, sink, on_update)
         if bridges or out.fmt == "mcap":
             from .taps import tap_session
 
             source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
-            if stand is not None:
-                stand.write = source.write       # ESR answers are recorded like every control frame
-        alarms = None
-        if replay is None:
-            # the stand's alarm list: a shell's or a batch's (a trip latches for the next command),
-            # else this session's own (hung and hot starts)
-            from ...api.alarms import Alarms, current
-
-            alarms = current() or Alarms(tell_limits=False, notify=notify)
-            if stand is not None:
-                alarms.settings(conditions=stand.limits.conditions if stand.limits is not None else (),
-                                **stand.alarm_settings)
-            if on_update is not None:
-                on_update = _with_alarms(on_update, alarms)
-        session = Session(source, tel, sink, control=control, rate=rate or DEFAULT_RATE, abort=abort, alarms=alarms,
-                          count=count, duration=duration,
-                          silence=timeout if timeout is not None else DEFAULT_SILENCE_S,
-                          stop_on_error=stop_on_error, abort_at_end=abort_at_end, end=end, end_label=end_label,
-                          on_update=on_update, notify=notify, plan=plan,
-                          answers_esr=stand is not None and stand.answer is not None,
-                          limits=stand.limits if stand is not None else None)
+            stand_session.rebind(source)         # ESR answers are recorded like every control frame
+            stand_session.sink = sink
+        session = stand_session.make_session(
+            control=control, rate=rate or DEFAULT_RATE, abort=abort, count=count, duration=duration,
+            silence=timeout if timeout is not None else DEFAULT_SILENCE_S, stop_on_error=stop_on_error,
+            abort_at_end=abort_at_end, end=end, end_label=end_label, on_update=on_update, notify=notify, plan=plan)
+        stand_session.session = session
         session.bridges = bridges.stats() if bridges else None
         lanes = [lane for lane in (out.lane, raw_lane, capture_lane()) if lane is not None]
         from ..options import notes_above
@@ -381,13 +359,11 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
         with out, notes_above(out.dashboard.note) if out.dashboard is not None else nullcontext():
             with urgent() if control is not None else nullcontext():
                 outcome = session.run()
-            if stand is not None:
-                stand.close()            # the sensors stop with the session: one count for every summary
+            stand_session.close()        # the sensors stop with the session: one count for every summary
             if summarize and out.fmt == "xlsx" and outcome.reason != "refused":
                 out.finish(summarize(outcome, tel, session))
     finally:
-        if stand is not None:
-            stand.close()
+        stand_session.close()
         if source is not None:
             source.close()
         out.close()
