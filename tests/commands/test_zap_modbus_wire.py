@@ -168,3 +168,43 @@ def test_raw_prints_the_reply_and_an_exception_is_exit_5(cli):
     assert r.exit_code == 5 and r.stdout == "01 83 02 C0 F1\n" and "illegal-data-address" in r.stderr, r
     r = cli("zap", "raw", "--protocol", "modbus", "0x2B", "0E", "--id", "1", "--sim", "--force")
     assert r.exit_code == 5 and "illegal-function" in r.stderr, r
+
+
+def test_batch_on_modbus_every_line_speaks_it(cli, tmp_path):
+    lines = "store goal-speed 500 --id 1\nload goal-speed --id 1\nsync-move 1:100 2:200\nraw read 00 D2 00 01 --id 2\n"
+    r = cli("zap", "batch", "--protocol", "modbus", "--sim", "--sim-ids", "1,2", input=lines)
+    assert r.exit_code == 0, r
+    recs = [json.loads(x) for x in r.stdout.splitlines()]
+    assert [x["exit"] for x in recs] == [0, 0, 0, 0] and recs[1]["result"] == 500
+    assert recs[3]["result"].startswith("02 03 02 ")
+
+
+@pytest.mark.parametrize("line,fault", [
+    ("load goal-speed --id 1 --protocol ir", "speaks ir"),         # another protocol than the port's
+    ("execute", "IR protocol only"),
+    ("store goal-position 10001 --id 1", "out of range"),          # the 17Lf's map, not the 12Lf's
+])
+def test_batch_on_modbus_refuses_a_line_before_anything_is_sent(cli, line, fault):
+    r = cli("zap", "batch", "--protocol", "modbus", "--sim", input=f"load goal-speed --id 1\n{line}\n")
+    assert r.exit_code == 2 and r.stdout == "" and "stdin:2" in r.stderr and fault in r.stderr, r
+
+
+def test_batch_on_modbus_asks_one_consent_for_stored_writes(cli, tmp_path):
+    f = tmp_path / "b.txt"
+    f.write_text("store speed-limit 800 --id 1\n")
+    r = cli("zap", "batch", str(f), "--protocol", "modbus", "-p", "socket://127.0.0.1:9")
+    assert r.exit_code == 2 and "speed-limit" in r.stderr and "--yes" in r.stderr, r
+
+
+def test_batch_with_a_map_file_gives_it_to_every_line(cli, tmp_path):
+    m = tmp_path / "q.map"
+    m.write_text("model: Q\nprotocol: modbus\n210 | where | 16 | V | R | | | | | the position\n")
+    r = cli("zap", "batch", "--protocol", "modbus", "--map", str(m), "--sim", input="load where --id 1\n")
+    assert r.exit_code == 0 and json.loads(r.stdout)["result"] == 0, r
+
+
+def test_shell_on_modbus(cli):
+    r = cli("shell", "zap", "--protocol", "modbus", "--sim",
+            input="load goal-speed --id 1\nmove 300 --id 1 --wait\nload present-position --id 1\nexecute\n")
+    assert r.stdout.splitlines()[:3] == ["1000", "300", "300"], r
+    assert "IR protocol only" in r.stderr

@@ -279,6 +279,7 @@ ZAP_SHELL_EXITS = exits({**_SHELL_MEANINGS,
 
 
 def _make_zap():
+    from .options import protocol_options
     from .zap.compose import link_options
 
     @ZAP_SHELL_EXITS
@@ -287,20 +288,20 @@ def _make_zap():
 \b
 Examples:
   zkzap shell zap -p /dev/ttyUSB0
-  zkzap shell zap --sim --sim-ids 1,2""")
+  zkzap shell zap --sim --sim-ids 1,2
+  zkzap shell zap --protocol modbus -p /dev/ttyUSB0   # every line speaks Modbus RTU""")
     @link_options
+    @protocol_options
     def zap_shell(**common):
         from ..link.shared import sharing
         from .zap import zap as group
-        from .zap.compose import _link_args, open_link
+        from .zap.compose import line_defaults, open_link, shared_bus_args
 
-        defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                           "verbose", "latency")}
-        ids = common["sim_ids"] or "0"
-        args = _link_args(common)
-        args["sim_ids"] = ids if common["sim"] else None
-        args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
-        with open_link(ids=[0], **args) as bus, sharing("zap", bus), _batch_capture():
+        defaults = line_defaults(common)
+        args = shared_bus_args(common, [0])
+        if common["sim"]:
+            args["sim_ids"] = common["sim_ids"] or ",".join(map(str, args["ids"]))
+        with open_link(**args) as bus, sharing("zap", bus), _batch_capture():
             code = loop(group, "zap", defaults, interactive=_interactive())
         if code:
             raise click.exceptions.Exit(code)

@@ -10,7 +10,8 @@ from ...codec import zap
 from .. import CONTEXT, Command
 from ..batch import ZAP_BATCH_EXITS
 from ..options import InputPath, consent, zap_yes_option as yes_option
-from .compose import _link_args, link_options, open_link
+from ..options import protocol_options
+from .compose import line_defaults, link_options, open_link, shared_bus_args
 
 
 @ZAP_BATCH_EXITS
@@ -20,6 +21,7 @@ from .compose import _link_args, link_options, open_link
               help="Run past a failed command; the batch still exits with the first failure's status.")
 @yes_option
 @link_options
+@protocol_options
 def batch(file, keep_going, yes, **common):
     """Run the zap commands of FILE (or stdin: '-', the default) over one open port.
 
@@ -48,6 +50,11 @@ def batch(file, keep_going, yes, **common):
       printf 'load present-position --id 1\\nmove 2000 --id 1 --wait\\n' | zap batch --sim --sim-ids 1
       zap batch setup.txt -p /dev/ttyUSB0 --yes
       zap batch moves.txt -p /dev/ttyUSB0 --keep-going | jq -c 'select(.exit != 0)'
+      printf 'store goal-speed 500 --id 1\nload goal-speed --id 1\n' | zap batch --protocol modbus --sim
+
+    With --protocol modbus every line speaks Modbus RTU (the batch's --protocol and --map are
+    every line's; a line giving another protocol, or a command that speaks the IR protocol only,
+    is refused before anything is sent).
     """
     from .. import zap as _  # noqa: F401 - the group, for the lines
     from ...link.shared import sharing
@@ -57,10 +64,16 @@ def batch(file, keep_going, yes, **common):
 
     text, name = read_source(file)
     lines = read_lines(text, name)
-    defaults = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries",
-                                       "verbose", "latency")}
+    defaults = line_defaults(common)
     defaults["yes"] = True
     check_lines(group, lines, "zap", defaults)
+    for line in lines:                     # every line speaks the batch's protocol, or is refused now
+        spoken = line.params.get("protocol", "ir")
+        if spoken != defaults["protocol"]:
+            from ...errors import UsageError
+
+            raise UsageError(f"{line.where}: {' '.join(line.path)}: speaks {spoken}; this batch's port speaks "
+                             f"{defaults['protocol']} (--protocol is the batch's)")
     if not lines:
         return
     if not (common["sim"] or is_simulated(common["port"])):
@@ -69,9 +82,7 @@ def batch(file, keep_going, yes, **common):
             consent(f"this batch writes stored settings on {common['port']}; they survive power-off: "
                     + "; ".join(items), yes)
     ids = {i for line in lines for i in line_ids(line) if i != zap.BROADCAST}
-    args = _link_args(common)
-    args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
-    with open_link(ids=sorted(ids) or [0], **args) as bus, sharing("zap", bus):
+    with open_link(**shared_bus_args(common, sorted(ids) or [0])) as bus, sharing("zap", bus):
         code = run_lines(group, "zap", lines, defaults, sys.stdout, keep_going=keep_going,
                          keep_baud_after=("set-baud",))
     if code:

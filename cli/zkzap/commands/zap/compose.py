@@ -209,8 +209,8 @@ def open_link(*, port, baud, timeout, sim, sim_ids, return_mode, retries, ids=(0
         if lent_protocol != protocol:
             raise UsageError(f"--protocol {protocol}: this batch's port speaks {lent_protocol} (give the batch "
                              f"--protocol {protocol})")
-        if modbus and regmap is not None and regmap is not lent.regmap:
-            raise UsageError("--map: give it to the batch (its port reads one register map)")
+        if modbus and regmap is not None and regmap.path != lent.regmap.path:
+            raise UsageError("--map: give it to the batch or shell (its port reads one register map)")
         _CHECKING().effect("port", ids=list(ids))
         bus = _SHARED().Borrowed(lent, return_mode=lent.return_mode if modbus else mode,
                                  retries=_ZAP_BUS().RETRIES if retries is None else retries,
@@ -403,6 +403,28 @@ def _link_args(common):
     out = {k: common[k] for k in LINK_KEYS}
     out.update((k, common[k]) for k in PROTOCOL_KEYS if k in common)
     return out
+
+
+def line_defaults(common) -> dict:
+    """The defaults a batch or a shell gives each of its lines: its link options, its
+    ``--protocol`` and its ``--map`` (by path)."""
+    out = {k: common[k] for k in ("port", "baud", "timeout", "sim", "sim_ids", "return_mode", "retries", "verbose",
+                                  "latency")}
+    out["protocol"] = common.get("protocol") or "ir"
+    regmap = common.get("regmap")
+    if regmap is not None:
+        out["regmap"] = regmap.path
+    return out
+
+
+def shared_bus_args(common, ids) -> dict:
+    """open_link's arguments for the one bus a batch or a shell lends its lines."""
+    args = _link_args(common)
+    args["return_mode"] = "1" if common["return_mode"] == "auto" else common["return_mode"]
+    if args.get("protocol") == "modbus":
+        ids = [i for i in ids if i] or [1]
+    args["ids"] = ids
+    return args
 
 
 #: The link options of every zap command, as open_link takes them (and --protocol, --map where the
