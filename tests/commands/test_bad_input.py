@@ -132,16 +132,16 @@ ZK_DECODE = [
 ]
 
 ZAP_COMPOSE = [
-    Bad("zap store goal-position 4096 -n", "goal-position: 4096 is out of range; allowed 0..4095"),
-    Bad("zap store goal-speed 1024 -n", "goal-speed: 1024 is out of range; allowed 0..1023"),
-    Bad("zap store current-limit 1601 -n", "current-limit: 1601 is out of range; allowed 0..1600 mA"),
-    Bad("zap store id 254 -n", "id: 254 is out of range; allowed 0..253"),
-    Bad("zap store baud-rate 100 -n", "baud-rate: 100 is not allowed; allowed 16 (115200 bps)"),
-    Bad("zap store feedback-return-mode 3 -n", "feedback-return-mode: 3 is not allowed"),
-    Bad("zap store led 8 -n", "led: 8 is out of range; allowed bits 0 (all off), 1 (red), 2 (green): 0..7"),
-    Bad("zap store alarm-led 2 -n", "alarm-led: 2 is not allowed; allowed bits 0 (input voltage), 5 (overload): "
+    Bad("zap store goal-position 4096 --id 1 -n", "goal-position: 4096 is out of range; allowed 0..4095"),
+    Bad("zap store goal-speed 1024 --id 1 -n", "goal-speed: 1024 is out of range; allowed 0..1023"),
+    Bad("zap store current-limit 1601 --id 1 -n", "current-limit: 1601 is out of range; allowed 0..1600 mA"),
+    Bad("zap store id 254 --id 1 -n", "id: 254 is out of range; allowed 0..253"),
+    Bad("zap store baud-rate 100 --id 1 -n", "baud-rate: 100 is not allowed; allowed 16 (115200 bps)"),
+    Bad("zap store feedback-return-mode 3 --id 1 -n", "feedback-return-mode: 3 is not allowed"),
+    Bad("zap store led 8 --id 1 -n", "led: 8 is out of range; allowed bits 0 (all off), 1 (red), 2 (green): 0..7"),
+    Bad("zap store alarm-led 2 --id 1 -n", "alarm-led: 2 is not allowed; allowed bits 0 (input voltage), 5 (overload): "
                                     "0, 1, 32, 33"),
-    Bad("zap store alarm-shutdown 30 -n", "alarm-shutdown: 30 is not allowed"),
+    Bad("zap store alarm-shutdown 30 --id 1 -n", "alarm-shutdown: 30 is not allowed"),
     # what --force allows, refused on the simulator too (consent is for a real port)
     Bad("zap store id 7 --id 1 --sim", "needs permission IDENTITY"),
     Bad("zap store baud-rate 16 --id 1 --sim", "needs permission IDENTITY"),
@@ -150,14 +150,14 @@ ZAP_COMPOSE = [
     Bad("zap store lock 1 --id 1 --sim", "needs permission UNDOCUMENTED"),
     Bad("zap raw store 11 1E --id 1 --sim", "alarm-led 30 is outside its documented values"),
     Bad("zap factory-reset --id broadcast --sim", "needs permission BROADCAST"),
-    Bad("zap store present-position 1 -n", "present-position: read-only register (0x8C)"),
-    Bad("zap send model-number 1 -n", "model-number: read-only register (0x00)"),
-    Bad("zap store goal-position abc -n", "value: 'abc' is not an integer"),
-    Bad("zap store no-such-register 1 -n", "register: unknown name 'no-such-register'"),
-    Bad("zap store goal 1 -n", "register: unknown name 'goal'; did you mean goal-position"),
-    Bad("zap store 0x100 1 -n", "register: address 256 is out of range; allowed 0x00..0xFF"),
-    Bad("zap store protocol-type 0 --sim", "protocol-type 0: the actuator switches to Modbus RTU"),
-    Bad("zap store goal-position -n", "Missing argument 'VALUE'"),
+    Bad("zap store present-position 1 --id 1 -n", "present-position: read-only register (0x8C)"),
+    Bad("zap send model-number 1 --id 1 -n", "model-number: read-only register (0x00)"),
+    Bad("zap store goal-position abc --id 1 -n", "value: 'abc' is not an integer"),
+    Bad("zap store no-such-register 1 --id 1 -n", "register: unknown name 'no-such-register'"),
+    Bad("zap store goal 1 --id 1 -n", "register: unknown name 'goal'; did you mean goal-position"),
+    Bad("zap store 0x100 1 --id 1 -n", "register: address 256 is out of range; allowed 0x00..0xFF"),
+    Bad("zap store protocol-type 0 --id 1 --sim", "protocol-type 0: the actuator switches to Modbus RTU"),
+    Bad("zap store goal-position --id 1 -n", "Missing argument 'VALUE'"),
     Bad("zap load -n", "Missing argument 'REGISTER...'"),
     Bad("zap load goal-position --length 0 -n", "'-l' / '--length': 0 is out of range; allowed 1.."),
     Bad("zap load goal-position --length 256 -n", "'-l' / '--length'"),
@@ -173,11 +173,11 @@ ZAP_COMPOSE = [
     Bad("zap sync-move 1:5000 -n", "goal-position: 5000 is out of range; allowed 0..4095"),
     Bad("zap sync-move 1:1 1:2 -n", "id: 1 is given twice"),
     Bad("zap sync-move -r present-position 1:1 -n", "present-position: read-only register"),
-    Bad("zap raw jump -n", "instruction: unknown 'jump'"),
-    Bad("zap raw 0x1FF -n", "instruction: code 0x1FF is out of range; allowed 0x00..0xFF"),
-    Bad("zap raw load 8 -n", "params: '8' has an odd number of hex digits"),
-    Bad("zap raw load ZZ -n", "params: 'ZZ' is not hex"),
-    Bad(["zap", "raw", "store"] + ["00"] * 254 + ["-n"], "params: 254 bytes do not fit one packet; at most 253"),
+    Bad("zap raw jump --id 1 -n", "instruction: unknown 'jump'"),
+    Bad("zap raw 0x1FF --id 1 -n", "instruction: code 0x1FF is out of range; allowed 0x00..0xFF"),
+    Bad("zap raw load 8 --id 1 -n", "params: '8' has an odd number of hex digits"),
+    Bad("zap raw load ZZ --id 1 -n", "params: 'ZZ' is not hex"),
+    Bad(["zap", "raw", "store"] + ["00"] * 254 + ["--id", "1", "-n"], "params: 254 bytes do not fit one packet; at most 253"),
     Bad("zap jump -n", "No such command 'jump'"),
     # missing port
     Bad("zap echo", "no port"),
@@ -208,9 +208,9 @@ WIRE = [
     Bad("zk send raw 1 throttle_pct=1001 -p {port}", "throttle_pct: raw value 1001 is out of range"),
     Bad("zk send rpm 500 --rpm-factor 9 -p {port}", "'--rpm-factor'"),
     Bad("zap store goal-position 5000 --id 1 -p {port}", "goal-position: 5000 is out of range"),
-    Bad("zap store present-position 1 -p {port}", "present-position: read-only register"),
+    Bad("zap store present-position 1 --id 1 -p {port}", "present-position: read-only register"),
     Bad("zap echo --id 255 -p {port}", "id: 255 is out of range"),
-    Bad("zap raw load 8 -p {port}", "params: '8' has an odd number of hex digits"),
+    Bad("zap raw load 8 --id 1 -p {port}", "params: '8' has an odd number of hex digits"),
     Bad("zap sync-move 1:1 1:2 -p {port}", "id: 1 is given twice"),
 ]
 
@@ -226,8 +226,8 @@ NEGATIVE = [
     Bad("zk send rpm -100 --rpm-factor 1 -n", "rpm: -100 is out of range"),
     Bad("zk send pressure -1 -n", "pressure: -1 is out of range"),
     Bad("zk send control --state run --throttle -5 -n", "throttle: -5 is out of range"),
-    Bad("zap store goal-position -1 -n", "goal-position: -1 is out of range"),
-    Bad("zap send goal-position -0x10 -n", "goal-position: -16 is out of range"),
+    Bad("zap store goal-position -1 --id 1 -n", "goal-position: -1 is out of range"),
+    Bad("zap send goal-position -0x10 --id 1 -n", "goal-position: -16 is out of range"),
 ]
 
 

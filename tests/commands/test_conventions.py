@@ -79,7 +79,7 @@ def test_force_color_reaches_tables_in_a_pipe():
 @pytest.mark.parametrize("args,code,message", [
     (("zk", "decode", "ZZ"), 2, b"zk: error: hex input: 'ZZ' is not hex"),
     (("zkzap", "crc", "check", "FF", "14", "64", "D4"), 1, b"zkzap: error: control frame: CRC mismatch: expected D3"),
-    (("zap", "store", "goal-position", "5000", "-n"), 2, b"zap: error: goal-position: 5000 is out of range"),
+    (("zap", "store", "goal-position", "5000", "--id", "1", "-n"), 2, b"zap: error: goal-position: 5000 is out of range"),
     (("zk", "send", "control", "--bogus"), 2, b"zk: error: No such option"),
     (("zk", "send", "control", "--state", "stop", "-p", "/nonexistent/tty"), 4, b"zk: error: port /nonexistent/tty"),
 ])

@@ -145,13 +145,13 @@ def test_ids_lists_split_on_spaces_and_commas(text, ids):
                                         ("10", "FF FF FF 00 02 0A F3"), ("0x0A", "FF FF FF 00 02 0A F3"),
                                         ("echo", "FF FF FF 00 02 F1 0C")])
 def test_instruction_codes_read_decimal_and_hex_as_register_addresses_do(cli, code, frame):
-    r = cli("zap", "raw", code, "-n")
+    r = cli("zap", "raw", code, "--id", "0", "-n")
     assert r.exit_code == 0 and r.stdout.strip() == frame, r
 
 
 @pytest.mark.parametrize("code", ["256", "0x100", "999"])
 def test_instruction_codes_out_of_range(cli, code):
-    r = cli("zap", "raw", code, "-n")
+    r = cli("zap", "raw", code, "--id", "0", "-n")
     assert r.exit_code == 2 and f"code {code} is out of range" in r.stderr
 
 

@@ -188,7 +188,7 @@ def _valid_line(path, cmd, files, port):
             line.opts[p.name] = (p, port.url)
         elif p.name == "yes" and p.is_flag:
             line.opts[p.name] = (p, True)
-        elif p.required:
+        elif p.required or (p.name == "ident" and p.default is None):   # an ID a write needs given
             v = valid_value(p, files)
             if v is None:
                 pytest.fail(f"{' '.join(path)}: no valid value for {spelling(p)} from its type {p.type!r}")
@@ -629,3 +629,77 @@ def test_stdout_that_is_the_port_is_refused(tmp_path):
     finally:
         os.close(master)
         os.close(slave)
+
+
+# --- a command that writes names its actuator ---------------------------------------------------
+
+#: Commands with an actuator ID option (``-i/--id``), found by walking the tree.
+ID_COMMANDS = [path for path, cmd in commands() if any(p.name == "ident" for p in cmd.params)]
+#: Writes the detection below must find (it would otherwise pass by finding none).
+KNOWN_WRITERS = {("zap", "store"), ("zap", "move"), ("zap", "factory-reset")}
+
+
+def _acting(packet: bytes) -> bool:
+    """Whether a command packet writes to or acts on an actuator: anything but Echo and Load Data."""
+    from zkzap.codec import zap
+
+    return len(packet) > 5 and packet[5] not in (zap.ECHO, zap.LOAD_DATA)
+
+
+@pytest.mark.parametrize("path", ID_COMMANDS, ids=" ".join)
+def test_a_command_that_writes_has_no_default_id(path, files, port):
+    """Run on a simulator (its ground truth: what the actuator heard) with ``--id``, a command
+    that wrote to or acted on the actuator has no default ID: without ``--id`` it is bad usage
+    (exit 2, nothing on stdout, the port never reached), in a batch's check too."""
+    from zkzap.sim import start_zap
+
+    cmd = dict(commands())[tuple(path)]
+    by = {p.name: p for p in cmd.params}
+    ident = by["ident"]
+    base = _valid_line(path, cmd, files, port)
+    line = Line(path, cmd)
+    line.args = dict(base.args)
+    line.opts = {k: v for k, v in base.opts.items()                     # no output: the walk's files stay
+                 if type(v[0].type).__name__ != "OutputPath"}
+    for p in cmd.params:                     # an instruction that acts (the walk's example reads)
+        if type(p.type).__name__ == "InstructionType":
+            line.args[p.name] = (p, "restart")
+    line.opts["ident"] = (ident, "2")        # another ID than the examples' 1 (set-id's NEW)
+    with start_zap(ids=[2], virtual=True) as sim:
+        truth = sim.device.record_truth()
+        line.opts["port"] = (by["port"], sim.url)
+        code, out, err = _invoke(line.argv(), check=False)
+        assert "Traceback" not in err, err
+        wrote = [h.packet.hex(" ") for h in truth if _acting(h.packet)]
+    if tuple(path) in KNOWN_WRITERS:
+        assert wrote, f"{' '.join(line.argv())}: no write seen (exit {code}: {err})"
+    no_default = ident.required or ident.default is None
+    if wrote:
+        assert no_default, f"{' '.join(path)} writes ({wrote[0]}) but --id defaults to {ident.default!r}"
+    if not no_default:
+        return
+    del line.opts["ident"]
+    line.opts["port"] = (by["port"], port.url)
+    before = port.seen()
+    for check in (True, False):
+        code, out, err = _invoke(line.argv(), check=check)
+        assert code == 2 and out == "", f"{' '.join(line.argv())} (check={check}): exit {code}: {out!r} {err}"
+        assert "--id" in err and "Traceback" not in err, err
+    assert port.seen() == before, f"{' '.join(line.argv())}: the port was reached"
+
+
+@pytest.mark.parametrize("argv,code", [
+    (["zap", "move", "100", "--id", "broadcast"], 0),                          # given: a broadcast goes out
+    (["zap", "store", "goal-speed", "500", "--id", "broadcast"], 0),
+    (["zap", "factory-reset", "--id", "broadcast", "--yes"], 2),             # its rules: --force too
+    (["zap", "factory-reset", "--id", "broadcast", "--yes", "--force"], 0),
+])
+def test_broadcast_is_given_explicitly_under_its_rules(argv, code):
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[1, 2], virtual=True) as sim:
+        truth = sim.device.record_truth()
+        got, out, err = _invoke([*argv, "-p", sim.url], check=False)
+        assert got == code, err
+        heard = [h for h in truth if _acting(h.packet)]
+        assert (len(heard) == 2) == (code == 0), heard           # both actuators heard it, or neither

@@ -127,25 +127,25 @@ def test_error_bits_in_an_acknowledgement_exit_5(cli):
 
 def test_stored_writes_need_consent_on_a_real_port(cli):
     # checked before the port is opened: a missing device gives 2 (not sent), not 4
-    for args in (["store", "long-stroke-limit", "3000"], ["factory-reset"], ["raw", "store", "06", "64", "00"],
-                 ["sync-move", "1:100", "--register", "speed-limit"]):
+    for args in (["store", "long-stroke-limit", "3000", "--id", "1"], ["factory-reset", "--id", "1"],
+                 ["raw", "store", "06", "64", "00", "--id", "1"], ["sync-move", "1:100", "--register", "speed-limit"]):
         r = cli("zap", *args, "-p", "/dev/zkzap-no-such-port")
         assert r.exit_code == 2, (args, r)
         assert "pass --yes to confirm" in r.stderr and r.stdout == ""
-    r = cli("zap", "store", "long-stroke-limit", "3000", "-p", "/dev/zkzap-no-such-port", "--yes")
+    r = cli("zap", "store", "long-stroke-limit", "3000", "--id", "1", "-p", "/dev/zkzap-no-such-port", "--yes")
     assert r.exit_code == 4
     # volatile registers, the simulator and loop:// never ask
-    assert cli("zap", "store", "goal-position", "5", "-p", "/dev/zkzap-no-such-port").exit_code == 4
-    assert cli("zap", "store", "long-stroke-limit", "3000", "--sim").exit_code == 0
-    assert cli("zap", "store", "long-stroke-limit", "3000", "-p", "loop://").exit_code == 0
+    assert cli("zap", "store", "goal-position", "5", "--id", "1", "-p", "/dev/zkzap-no-such-port").exit_code == 4
+    assert cli("zap", "store", "long-stroke-limit", "3000", "--id", "1", "--sim").exit_code == 0
+    assert cli("zap", "store", "long-stroke-limit", "3000", "--id", "1", "-p", "loop://").exit_code == 0
 
 
 def test_protocol_type_0_needs_force_everywhere(cli):
-    for args in (["store", "protocol-type", "0"], ["raw", "store", "0A", "00"],
+    for args in (["store", "protocol-type", "0", "--id", "1"], ["raw", "store", "0A", "00", "--id", "1"],
                  ["sync-move", "1:0", "--register", "protocol-type"]):
         r = cli("zap", *args, "--sim")
         assert r.exit_code == 2 and "pass --force" in r.stderr, args
-    assert cli("zap", "raw", "store", "0A", "00", "--sim", "--force").exit_code == 0
+    assert cli("zap", "raw", "store", "0A", "00", "--id", "1", "--sim", "--force").exit_code == 0
 
 
 def test_stored_value_survives_in_a_state_file(cli, tmp_path):
@@ -170,7 +170,7 @@ def test_sync_move_and_execute_are_broadcasts(cli):
     r = cli("zap", "sync-move", "1:100", "2:200", "--sim", "-v")
     assert r.exit_code == 0
     assert "sync-move goal-position 1:100 2:200 to every actuator (broadcast): not acknowledged" in r.stderr
-    r = cli("zap", "execute", "--sim", "-v")
+    r = cli("zap", "execute", "--id", "broadcast", "--sim", "-v")
     assert r.exit_code == 0 and "never answered" in r.stderr
 
 
@@ -224,8 +224,8 @@ def test_scan_nothing_found_exit_3(cli):
     (["scan", "--ids", "5-1"], "runs backwards"),
     (["scan", "--ids", "254"], "out of range"),
     (["scan", "-b", "1200"], "not an actuator baud rate"),
-    (["move", "5000"], "goal-position: 5000 is out of range; allowed 0..4095"),
-    (["move", "100", "--speed", "2000"], "goal-speed: 2000 is out of range"),
+    (["move", "5000", "--id", "1"], "goal-position: 5000 is out of range; allowed 0..4095"),
+    (["move", "100", "--id", "1", "--speed", "2000"], "goal-speed: 2000 is out of range"),
     (["move", "100", "--id", "broadcast", "--wait"], "--wait: a broadcast"),
     (["set-id", "254"], "id: 254 is out of range"),
     (["set-baud", "1200"], "1200"),
@@ -278,7 +278,7 @@ def test_move_wait_timeout_and_stops(cli):
 def test_set_id_verified(cli, tmp_path):
     state = str(tmp_path / "bus.json")
     port = url(ids="0,5", state=state)
-    r = cli("zap", "set-id", "3", "-p", port)
+    r = cli("zap", "set-id", "3", "--id", "0", "-p", port)
     assert r.exit_code == 0 and "ID 0 is now ID 3 (verified)" in r.stderr
     assert cli("zap", "echo", "--id", "3", "-p", port).exit_code == 0
     r = cli("zap", "set-id", "5", "--id", "3", "-p", port)

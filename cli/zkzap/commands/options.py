@@ -307,12 +307,20 @@ def abort_option(help, default=None):
                         show_default=default is not None, help=help)
 
 
-def id_option(default=0, allow_broadcast=True, help=None):
-    """``-i/--id``: a mightyZAP actuator ID 0..253, and 254/'broadcast' where allowed."""
+def id_option(default=0, allow_broadcast=True, help=None, *, writes=False):
+    """``-i/--id``: a mightyZAP actuator ID 0..253, and 254/'broadcast' where allowed.
+
+    ``writes``: the command writes to (or acts on) the actuator it names: the option has no
+    default, so a forgotten ``--id`` is bad usage (exit 2, nothing sent) instead of a write to
+    whatever answers at ID 0 (on Modbus, 0 is the broadcast). Broadcast stays possible, given
+    explicitly (``--id broadcast``), under its own permission rules."""
     from .zap.params import IdType
 
     if help is None:
         help = "Actuator ID 0..253" + (" (254 or 'broadcast': all, never answered)." if allow_broadcast else ".")
+    if writes:
+        help = help.rstrip(".") + "; required: a write has no default ID."
+        return click.option("-i", "--id", "ident", type=IdType(allow_broadcast), required=True, help=help)
     return click.option("-i", "--id", "ident", type=IdType(allow_broadcast), default=default, show_default=True,
                         help=help)
 

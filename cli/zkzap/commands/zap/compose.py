@@ -677,7 +677,7 @@ def _write_command(name, builder, doc):
     @click.command(name, cls=SignedCommand, context_settings=CONTEXT, help=doc)
     @click.argument("reg", metavar="REGISTER", type=REGISTER)
     @click.argument("value", metavar="VALUE", type=INT)
-    @id_option()
+    @id_option(writes=True)
     @force_option
     @_verify_option(name)
     @wire_options
@@ -737,16 +737,17 @@ Examples:
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@id_option(default="broadcast")
+@id_option(writes=True)
 @wire_options
 @protocol_options(ir_only=NO_MODBUS["execute"])
 def execute(ident, **common):
-    """Execution (0xF5): apply the writes staged by 'zap send' (default: every actuator).
+    """Execution (0xF5): apply the writes staged by 'zap send' (--id broadcast: every actuator
+    at once; --id has no default).
 
     \b
     Examples:
-      zap execute -n              # FF FF FF FE 02 F5 0A
-      zap execute --id 1 -n       # FF FF FF 01 02 F5 07
+      zap execute --id broadcast -n    # FF FF FF FE 02 F5 0A
+      zap execute --id 1 -n            # FF FF FF 01 02 F5 07
     """
     deliver([zap.execute(ident)], **common)
 
@@ -754,7 +755,7 @@ def execute(ident, **common):
 @click.command("factory-reset", cls=Command, context_settings=CONTEXT)
 @click.option("--reset-id", is_flag=True, help="Also reset the ID to 0 (option bit 0).")
 @click.option("--reset-baud", is_flag=True, help="Also reset the baud rate to 57600 (option bit 1).")
-@id_option()
+@id_option(writes=True)
 @force_option
 @wire_options
 @protocol_options(ir_only=NO_MODBUS["factory-reset"])
@@ -773,7 +774,7 @@ def factory_reset(reset_id, reset_baud, ident, force, **common):
 
 
 @click.command(cls=Command, context_settings=CONTEXT)
-@id_option()
+@id_option(writes=True)
 @wire_options
 @protocol_options(ir_only=NO_MODBUS["restart"])
 def restart(ident, **common):
@@ -781,7 +782,7 @@ def restart(ident, **common):
 
     \b
     Examples:
-      zap restart -n              # FF FF FF 00 02 F8 05
+      zap restart --id 0 -n       # FF FF FF 00 02 F8 05
       zap restart --id 1 -p /dev/ttyUSB0
     """
     deliver([zap.restart(ident)], **common)
@@ -831,7 +832,7 @@ def sync_move(targets, reg, force, verify, **common):
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("code", metavar="INSTRUCTION", type=INSTRUCTION)
 @click.argument("params", nargs=-1, metavar="[PARAM...]")
-@id_option()
+@id_option(writes=True)
 @force_option
 @wire_options
 @protocol_options
@@ -857,8 +858,8 @@ def raw(code, params, ident, force, **common):
 
     \b
     Examples:
-      zap raw load 8C 02 -n          # FF FF FF 00 04 F2 8C 02 7B
-      zap raw 0xF3 03 01 -n          # FF FF FF 00 04 F3 03 01 04
+      zap raw load 8C 02 --id 0 -n   # FF FF FF 00 04 F2 8C 02 7B
+      zap raw 0xF3 03 01 --id 0 -n   # FF FF FF 00 04 F3 03 01 04
       zap raw load 00 03 --id 1 -p /dev/ttyUSB0 | zap decode
       zap raw --protocol modbus read 00 D2 00 01 --id 1 -n   # 01 03 00 D2 00 01 24 33
       zap raw --protocol modbus 0x10 00 D0 00 02 04 03 E8 03 20 --id 1 -n

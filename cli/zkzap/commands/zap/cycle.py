@@ -29,8 +29,9 @@ def _given(name) -> bool:
         CHECK_FAILED: "a stall, a current over --limit or a leg over --leg-timeout (it was stopped)",
         NO_REPLY: "the actuator stopped answering"})
 @click.command(cls=Command, context_settings=CONTEXT)
-@click.option("-i", "--id", "ident", type=IdList(), default="0", show_default=True, metavar="ID",
-              help="The actuator to cycle.")
+@click.option("-i", "--id", "ident", type=IdList(), default=None, metavar="ID",
+              help="The actuator to cycle (required with --between or the stroke limits: a write has no default "
+                   "ID; a --path names its own, a --resume state file keeps it).")
 @click.option("--between", nargs=2, type=FINITE, default=None, metavar="A B",
               help="The two ends of each cycle (counts, or mm with --unit mm): A -> B -> A (default: the "
                    "actuator's short and long stroke limits).")
@@ -90,9 +91,9 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     from ...api import cycle as api
 
     cycles = count
-    if len(ident) != 1:
+    if ident is not None and len(ident) != 1:
         raise UsageError("--id: one actuator")
-    ident = ident[0] if _given("ident") or not path_file else None
+    ident = ident[0] if ident is not None else None
     params = {"id": ident, "between": list(between) if between else None, "path": path_file, "dwell": dwell,
               "cycles": cycles, "speed": speed, "stall": stall, "limit": limit, "timeout": leg_timeout,
               "unit": unit}
@@ -140,6 +141,8 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
         raise UsageError("--between and --path: give one")
     if path_file is not None and (ident is not None or params["speed"] is not None):
         raise UsageError("--path: the path names its actuators and speeds; --id and --speed apply to --between")
+    if path_file is None and ident is None:
+        raise UsageError("--id: give the actuator to cycle (a write has no default ID)")
     if common["return_mode"] == "0":
         raise UsageError("--return-mode 0: the actuator's position is never answered in feedback-return-mode 0")
     scales = None

@@ -182,8 +182,8 @@ INSTRUCTION = InstructionType()
 TARGET = TargetType()
 
 
-def id_option(default=0, allow_broadcast=True, help=None):
+def id_option(default=0, allow_broadcast=True, help=None, *, writes=False):
     """``-i/--id`` (defined once, in :func:`zkzap.commands.options.id_option`)."""
     from ..options import id_option as option
 
-    return option(default, allow_broadcast, help)
+    return option(default, allow_broadcast, help, writes=writes)

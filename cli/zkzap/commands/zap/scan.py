@@ -243,7 +243,7 @@ def dump(ident, fmt, **common):
         DEVICE_ERROR: "a reply carried error bits (overload: the force is cut)"})
 @click.command(cls=SignedCommand, context_settings=CONTEXT)
 @click.argument("position", type=NUMBER, metavar="POSITION")
-@id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).")
+@id_option(help="Actuator ID 0..253 (254 or 'broadcast': all, then --wait is not possible).", writes=True)
 @click.option("-s", "--speed", type=NUMBER, default=None,
               help=f"Goal speed {SPEED.lo}..{SPEED.hi} (mm/s with --unit mm), written first (default: leave as it is).")
 @click.option("-w", "--wait", is_flag=True,
@@ -362,7 +362,7 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_
         CHECK_FAILED: "the read-back differs, NEW does not answer or --id still answers"})
 @click.command("set-id", cls=Command, context_settings=CONTEXT)
 @click.argument("new", type=IdType(allow_broadcast=False), metavar="NEW")
-@id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).")
+@id_option(allow_broadcast=False, help="The actuator's present ID 0..253 (factory default 0).", writes=True)
 @click.option("--force", is_flag=True, help="Go ahead even if another actuator already answers to NEW.")
 @click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
               help="How long to wait for the actuator to answer after the change.")
@@ -396,7 +396,7 @@ def set_id(new, ident, force, ready_timeout, yes, **common):
 @exits({CHECK_FAILED: "it does not answer at BAUD or reads back another rate"})
 @click.command("set-baud", cls=Command, context_settings=CONTEXT)
 @click.argument("new_baud", type=Choice([str(b) for b in ALL_BAUDS]), metavar="BAUD")
-@id_option(allow_broadcast=False)
+@id_option(allow_broadcast=False, writes=True)
 @click.option("--no-restart", is_flag=True,
               help="Only store the new rate (it takes effect at the next restart or power-up).")
 @click.option("--ready-timeout", type=FiniteRange(0.01, 60), default=2.0, show_default=True, metavar="SECONDS",
