@@ -103,9 +103,9 @@ def test_set_baud_modbus_writes_the_maps_code_and_verifies(cli):
 
 def test_an_ir_only_command_refuses_the_modbus_environment(cli, monkeypatch):
     monkeypatch.setenv("ZKZAP_ZAP_PROTOCOL", "modbus")
-    r = cli("zap", "execute", "--sim")
+    r = cli("zap", "execute", "--id", "broadcast", "--sim")
     assert r.exit_code == 2 and r.stdout == "" and "IR protocol only" in r.stderr and "ZKZAP_ZAP_PROTOCOL" in r.stderr
-    r = cli("zap", "execute", "--sim", "--protocol", "ir")               # the command line beats it
+    r = cli("zap", "execute", "--id", "broadcast", "--sim", "--protocol", "ir")             # the command line beats it
     assert r.exit_code == 0, r
     r = cli("zap", "load", "present-position", "--id", "1", "--sim")      # takes it: speaks Modbus
     assert r.exit_code == 0 and r.stdout == "0\n", r
