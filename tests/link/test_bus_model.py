@@ -142,21 +142,17 @@ def test_the_simulator_logs_its_ground_truth():
     assert [(h.ident, h.packet, h.reply) for h in truth] == [(1, zap.echo(1), zap.packet(1, 0))]
 
 
-# -- what the model still finds (the benchmark's open findings; docs/reference/timing.md) ------
-# Each seed is a random bus on which the bus gives a wrong answer today (OPEN_FINDINGS says
-# which): a strict xfail, so the day one is fixed this test says so, and none of them is hidden
-# by the suite's smaller budget.
-OPEN_FINDINGS = {
-    5: "a baud change makes two actuators of one ID at a rate the host is not listening at",
-    7: "set-id onto an ID an actuator at another baud rate has",
-    11: "backup reads an ID two actuators have, whose replies do not overlap",
-    13: "a scan reports return mode 0 for an actuator slower than the window",
-    130: "a baud change makes two actuators of one ID",
-    163: "backup reads an ID two actuators have, whose replies do not overlap",
+# -- what the model once found (random buses, each a seed that reproduced it) -----------------
+FOUND = {
+    5: "a baud change made two actuators of one ID at a rate the host was not listening at",
+    7: "set-id moved two actuators sharing an ID (their replies did not meet) onto another",
+    11: "backup read an ID two actuators have, whose replies do not meet, as one's",
+    13: "a scan reported return mode 0 for an actuator slower than the window",
+    130: "a baud change made two actuators of one ID",
+    163: "backup read an ID two actuators have, whose replies do not meet, as one's",
 }
 
 
-@pytest.mark.parametrize("seed", sorted(OPEN_FINDINGS), ids=lambda s: f"seed{s}")
-@pytest.mark.xfail(strict=True, raises=busmodel.Violation, reason="an open finding of the bus model")
-def test_an_open_finding_of_the_model(seed):
+@pytest.mark.parametrize("seed", sorted(FOUND), ids=lambda s: f"seed{s}")
+def test_what_the_model_once_found(seed):
     busmodel.run(seed, 200)

@@ -145,6 +145,22 @@ def refuse_shared(records) -> None:
                        "(their replies collide)", ids=[r["id"] for r in shared], shared=True)
 
 
+def refuse_census(bus, ids) -> None:
+    """Raise :class:`SharedId` when more replies than were due come from any of ``ids`` (two
+    actuators with one ID whose replies do not meet, so no scan sees them garbled; see
+    :meth:`zkzap.link.zap_bus.ZapBus.census`): nothing of such an ID is read as one actuator's."""
+    ids = list(ids)
+    census = getattr(bus, "census", None)
+    if not ids or census is None:
+        return
+    shared = [i for i, seen in census(ids).items() if seen == "shared"]
+    if shared:
+        where = ", ".join(f"ID {i}" for i in shared)
+        raise SharedId(f"{where} at {bus.baud} baud: two replies came where one was due (two actuators seem to "
+                       f"answer to {'this ID' if len(shared) == 1 else 'these IDs'}, or the line is faulty)",
+                       ids=shared, shared=True)
+
+
 def read_fleet(bus, records, *, procedures=PROCEDURES, on_actuator=None) -> dict:
     """A backup document of the actuators of ``records`` (as :meth:`Procedures.discover` gives
     them), each read at the baud rate it answered at."""
@@ -184,6 +200,7 @@ def read_bus(bus, ids, *, procedures=PROCEDURES, on_actuator=None) -> dict:
     from .. import __version__
 
     doc = {"format": FORMAT, "zkzap": __version__, "time": now_iso(), "actuators": {}}
+    refuse_census(bus, ids)
     for ident in ids:
         values, error = procedures.read_map(bus, ident)
         doc["actuators"][str(ident)] = entry_from_values(values, baud=bus.baud, error=error)
@@ -630,6 +647,7 @@ def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
     answered at. ``required``: every ID must answer (else NoReply); otherwise IDs that do not
     answer an Echo are left out (records were found: they are read)."""
     entries = {}
+    refuse_census(bus, [i for i in ids if not isinstance(i, dict)])
     for item in ids:
         if isinstance(item, dict):
             ident = item["id"]

@@ -569,6 +569,27 @@ class Bus:
         except NoReply:
             raise CheckFailed(message, ident=ident, baud=self.baud, timeout=within, after_change=change) from None
 
+    def _single(self, what: str, ident: int, free: Iterable[int] = ()) -> None:
+        """Before an identity change: exactly one actuator answers to ``ident`` and none to
+        any of ``free``, at the bus's baud rate, as far as the line can tell
+        (:meth:`zkzap.link.zap_bus.ZapBus.census`: one horizon in all). Raises NoReply,
+        CheckFailed (``duplicate``: two replies where one was due, or replies that stay
+        garbled) or IdTaken; nothing is written."""
+        free = [i for i in free if i != ident]
+        seen = self.link.census([ident, *free])
+        if seen[ident] == "none":
+            raise NoReply(f"{what}: no reply from ID {ident} at {self.baud} baud", ident=ident, baud=self.baud,
+                          protocol="zap")
+        if seen[ident] == "shared":
+            raise CheckFailed(f"{what}: replies from ID {ident} at {self.baud} baud collide or come twice where "
+                              "one was due: two actuators seem to answer to it (or the line is faulty); nothing "
+                              "was written",
+                              ident=ident, duplicate=True, baud=self.baud)
+        taken = [i for i in free if seen[i] != "none"]
+        if taken:
+            raise IdTaken(f"ID {taken[0]} is already taken by another actuator at {self.baud} baud",
+                          ident=taken[0], taken=True, baud=self.baud)
+
     def set_id(self, ident: int, new: int, *, force: bool = False, ready_timeout: float = 2.0) -> int:
         """Give the actuator at ``ident`` the ID ``new``, verified by reading it back from
         ``new``. Checks first that ``ident`` answers and that ``new`` is free (two actuators with
@@ -581,16 +602,10 @@ class Bus:
             return new
         from ..link.zap_scan import collides
 
-        try:
-            self.link.echo(ident)
-        except BadReply:          # every reply garbled: two actuators answer at once
-            raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
-                              ident=ident, duplicate=True) from None
+        self._single("set-id", ident, [] if force else [new])
         if self.link.mode_of(ident) and collides(self.link, ident):
             raise CheckFailed(f"set-id: replies from ID {ident} collide: two actuators seem to answer to it",
                               ident=ident, duplicate=True)
-        if not force and self.link.answers(new):           # three full waits: never a guess
-            raise IdTaken(f"ID {new} is already taken by another actuator", ident=new, taken=True)
         self.link.store(ident, ID_REG, new, allow=Permission.IDENTITY)   # the checked way: set_id itself
         value = self._read_back(new, ID_REG, ready_timeout,
                                 f"set-id: ID {new} does not answer after the change", "id")
@@ -612,7 +627,18 @@ class Bus:
             raise UsageError(f"baud: {baud} is not an actuator baud rate; allowed "
                              f"{', '.join(str(b) for b in ALL_BAUDS)}", baud=baud)
         code = zap.BAUD_TO_CODE[baud]
-        self.link.echo(ident)
+        was = self.baud
+        self._single("set-baud", ident)
+        if restart and baud != was:
+            # an actuator that already has this ID at the new rate is heard only there
+            self.link.set_baud(baud)
+            try:
+                taken = self.link.census([ident], asks=1)[ident] != "none"
+            finally:
+                self.link.set_baud(was)
+            if taken:
+                raise IdTaken(f"set-baud: ID {ident} is already taken by another actuator at {baud} baud; "
+                              "nothing was written", ident=ident, taken=True, baud=baud)
         self.link.store(ident, BAUD_REG, code, allow=Permission.IDENTITY)   # the checked way: set_baud itself
         if not restart:
             value = self.link.read(ident, BAUD_REG)
@@ -622,12 +648,35 @@ class Bus:
             return baud
         self.link.restart(ident)
         self.link.set_baud(baud)
-        value = self._read_back(ident, BAUD_REG, ready_timeout,
-                                f"set-baud: ID {ident} does not answer at {baud} baud after the restart", "baud")
+        try:
+            value = self._read_back(ident, BAUD_REG, ready_timeout,
+                                    f"set-baud: ID {ident} does not answer at {baud} baud after the restart", "baud")
+        except CheckFailed as e:
+            self._roll_back_baud(ident, was, e)
+            raise
         if value != code:
             raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})",
                               ident=ident, value=value)
         return baud
+
+
+    def _roll_back_baud(self, ident: int, was: int, failed: CheckFailed) -> None:
+        """A baud change whose actuator does not answer at the new rate: back at ``was``, where
+        it answers still (its restart did not take), its stored baud-rate is written back, so it
+        does not vanish at its next power-up. ``failed`` is told what was done
+        (``rolled_back``: True, False where it does not answer at the old rate either)."""
+        self.link.set_baud(was)
+        failed.facts["rolled_back"] = failed.rolled_back = False
+        try:
+            if self.link.ping(ident, retries=2) is None:
+                return
+            self.link.store(ident, BAUD_REG, zap.BAUD_TO_CODE[was], allow=Permission.IDENTITY)
+            if self.link.read(ident, BAUD_REG) == zap.BAUD_TO_CODE[was]:
+                failed.facts["rolled_back"] = failed.rolled_back = True
+                failed.args = (f"{failed.args[0]}; it still answers at {was} baud: its baud-rate was set back "
+                               f"to {was}",) + failed.args[1:]
+        except (NoReply, BadReply):
+            pass
 
 
 def _given(allow: AllowSpec, force: bool) -> Permission:

@@ -24,11 +24,12 @@ __all__ = ["Device", "Devices"]
 class Device:
     """One device on a bus: ``ident`` (its address), ``return_mode`` (how it answers, as
     learned: None until the bus learned it, then the device's own), ``baud`` (the line speed it
-    last answered at, None before), ``late`` (replies that came after their attempt's window)
-    and ``doubts`` (replies the bus could not attribute with certainty: never taken for an
-    answer)."""
+    last answered at, None before), ``late`` (replies that came after their attempt's window),
+    ``doubts`` (replies the bus could not attribute with certainty: never taken for an
+    answer) and ``extra`` (replies with its address that no request was owed: two where one
+    was due, from two devices sharing the address or a line fault)."""
 
-    __slots__ = ("ident", "return_mode", "baud", "late", "doubts")
+    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra")
 
     def __init__(self, ident: int) -> None:
         self.ident = ident
@@ -36,10 +37,11 @@ class Device:
         self.baud: Optional[int] = None
         self.late = 0
         self.doubts = 0
+        self.extra = 0
 
     def __repr__(self) -> str:
         return (f"Device(id={self.ident}, return_mode={self.return_mode}, baud={self.baud}, "
-                f"late={self.late}, doubts={self.doubts})")
+                f"late={self.late}, doubts={self.doubts}, extra={self.extra})")
 
 
 class Devices:

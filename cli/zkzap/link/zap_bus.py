@@ -327,6 +327,7 @@ class ZapBus:
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
         self._unechoed = {}                # write time -> packet, until its clean echo came back
         self._owed = deque()               # attempts whose reply may still come
+        self._owed_at = {}                 # baud -> those of the other line speeds
         self._current = None               # the request in hand (the token of its attempts)
         self._caught = None                # its earlier attempt's reply, heard between attempts
         self._spare = deque()              # work for the time a reply is on its way (spare())
@@ -398,6 +399,9 @@ class ZapBus:
         """Switch the port's line speed, once nothing said at the old one may still be answered
         and what was sent has left."""
         self.quiet()
+        was = self.port.baudrate
+        if baud == was:
+            return
         try:
             self.port.flush()
         except Exception:  # noqa: BLE001 - a port without tcdrain; the pause below covers it
@@ -409,7 +413,12 @@ class ZapBus:
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
         except Exception as e:  # serial.SerialException
             raise PortError(f"port {self.url}: cannot set {baud} baud: {e}") from None
-        self._owed.clear()                 # nothing said at the old speed is heard at the new one
+        # what was said at the old speed is answered at it: those attempts are remembered with
+        # it (a reply that comes after the host has switched back is still theirs), and none of
+        # them is heard at the new one
+        self._owed_at[was] = self._owed
+        self._owed = self._owed_at.pop(baud, deque())
+        self._expire(self.now())
         self._framer = self.family.framer()
         self._held = None
 
@@ -595,7 +604,7 @@ class ZapBus:
         while True:
             now = self.now()
             self._expire(now)
-            due = [o.horizon for o in self._owed if o.kind == "reply" and ident in o.ids]
+            due = [o.horizon for o in self._owed if ident in o.ids]
             if not due:
                 break
             self._listen(min(due))
@@ -630,6 +639,7 @@ class ZapBus:
         owed = self._take_owed(p, hi)
         if owed is None:
             self.stale += 1
+            self.devices[family.ident(p)].extra += 1     # a reply where none was due
             self._event("stray", family.ident(p), lo, hi, None, p)
             return None
         if owed.kind == "ack":
@@ -651,12 +661,13 @@ class ZapBus:
         self._event("late", ident, lo, hi, owed.t0, p)
 
     def _take_owed(self, p, now):
-        """The attempt a stray packet answers: one whose window is open first, else the oldest
-        one still recognised."""
+        """The attempt a stray packet answers: the oldest one still recognised (an actuator
+        answers in the order it was asked; a reply in a later attempt's open window may still
+        be an earlier one's, slower than that window)."""
         found = [o for o in self._owed if o.horizon >= now and o.matches(p, self.family)]
         if not found:
             return None
-        owed = next((o for o in found if o.until > now), found[0])
+        owed = min(found, key=lambda o: o.t0)
         self._owed.remove(owed)
         self._resolve(self.family.ident(p), owed.t0)
         return owed
@@ -999,13 +1010,25 @@ class ZapBus:
         echo_known = self.adapter_echo
         state = {"copies": 0, "want": rx_len + (len(pkt) if echo_known else 0), "mismatch": None,
                  "explained": 0, "first": None, "lo": self._seen_empty, "hi": None, "doubted": 0,
-                 "doubt_reply": None}
+                 "doubt_reply": None, "at": 0}
         wrong = []
         deadline = base = t0 + limit
         gap = self.policy.inter_byte(ident_of(pkt), self.window)
 
         def examine(packets, lo, hi):
-            for p in packets:
+            got = judge(packets, lo, hi)
+            if isinstance(got, Reply):
+                # what came with the answer (a second reply where one was due, a late one) is
+                # accounted for by the idle framer, never thrown away unseen
+                rest = b"".join(bytes(p) for p in packets[state["at"] + 1:])
+                if framer.pending:
+                    rest += bytes(received[-framer.pending:])
+                if rest:
+                    self._account(rest, hi, hi)
+            return got
+
+        def judge(packets, lo, hi):
+            for state["at"], p in enumerate(packets):
                 p = bytes(p)
                 state["explained"] += len(p)
                 if p == pkt:
@@ -1062,6 +1085,7 @@ class ZapBus:
                     continue
                 if ident_of(p) not in accept:
                     wrong.append(p)
+                    self.devices[ident_of(p)].extra += 1     # a reply where none was due
                     self._event("stray", ident_of(p), lo, hi, None, p)
                     state["want"] = len(received) + rx_len
                     continue
@@ -1297,6 +1321,49 @@ class ZapBus:
             return True
         self.settle(ident)
         return dev.late > late
+
+    def census(self, ids, *, asks: int = 2, tries: int = 3) -> dict:
+        """How many actuators answer to each of ``ids`` at this baud rate, as far as the line can
+        tell: ``{ID: "none" | "one" | "shared"}``. Each ID is asked ``asks`` Echoes (each with
+        the whole window and ``tries`` attempts) once no reply to an earlier attempt to it can
+        come, and the bus listens on until the horizon of the last has passed
+        (:func:`~zkzap.link.zap_timing.horizon_for`): an ID is ``shared`` when its replies came
+        garbled every time, or when more replies came than were due (two actuators answering
+        one request, however far apart: a second unit slower than the window; or a reply
+        sent twice); ``none`` when nothing answered until the horizon. Costs about the horizon
+        (1.5 s) in all, whatever the number of IDs."""
+        ids = list(dict.fromkeys(ids))
+        for ident in ids:
+            self.settle(ident)
+        extra = {i: self.devices[i].extra for i in ids}
+        late = {i: self.devices[i].late for i in ids}
+        got = {i: 0 for i in ids}
+        garbled = {i: 0 for i in ids}
+        last = self.now()
+        for _ in range(asks):
+            for ident in ids:
+                probe, n = self.family.probe(ident)
+                try:
+                    r = self.transact(probe, reply=True, data_len=n, retries=tries - 1, optional=True,
+                                      persist=True, check=False, any_answer=True)
+                except BadReply:
+                    garbled[ident] += 1
+                    r = None
+                if r is not None:
+                    got[ident] += 1
+                last = self.last_sent
+        span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
+        self.linger(max(0.0, last + horizon_for(span) - self.now()))
+        out = {}
+        for ident in ids:
+            dev = self.devices[ident]
+            if dev.extra > extra[ident] or garbled[ident] == asks or (garbled[ident] and got[ident]):
+                out[ident] = "shared"
+            elif got[ident] or dev.late > late[ident]:
+                out[ident] = "one"
+            else:
+                out[ident] = "none"
+        return out
 
     def detect_return_mode(self, ident: int) -> int:
         """Ask the actuator: Load feedback-return-mode (answered in modes 1 and 2); no answer

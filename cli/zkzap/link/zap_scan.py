@@ -124,6 +124,7 @@ class _Scan:
         self.all_bursts = []           # (lo, hi) of every burst of garbled bytes heard
         self.prompt = set()            # IDs that answered their first-pass probe in its wait
         self.tried = {}                # ID -> every _Probe of it (first pass and rounds)
+        self.twice = set()             # IDs found whose replies came where none was due
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -273,6 +274,8 @@ class _Scan:
         try:
             r = self.bus.ping(ident, retries=self.retries)
         except BadReply as e:
+            if e.kind == "wrong-id":
+                return                 # only another ID's reply came (named: an event): none here
             rec = _record(ident, self.baud)
             rec["status"] = "garbled"
             rec["errors"] = [str(e)]
@@ -294,7 +297,17 @@ class _Scan:
         self.doubt.discard(ident)
 
     def _final(self, ident, events):
-        """A record is final: held for release in ID order."""
+        """A record is final: held for release in ID order (one whose ID sent replies where
+        none was due is a duplicate: two actuators answering one request, whose replies did not
+        meet, or a line fault)."""
+        if ident in self.twice:
+            for ev in events:
+                rec = ev[1] if ev[0] == "record" else None
+                if rec is not None and rec["status"] in ("ok", "error"):
+                    rec["status"] = "duplicate"
+                    rec["errors"] = rec["errors"] + [f"ID {ident}: two replies came where one was due"]
+                    events = events + [("warning", duplicate_warning(ident, self.baud))]
+                    break
         self.identified.add(ident)
         self.found[0] += 1
         self.held.append((ident, events))
@@ -344,6 +357,8 @@ class _Scan:
         for ev in bus.take_events():
             if ev.kind in ("late", "stray") and ev.packet is not None:
                 ident = ev.ident
+                if ev.kind == "stray" and ident in self.records:
+                    self.twice.add(ident)     # two replies where one was due
                 if ident not in self.records and (ev.kind == "late" or ident in self.probes):
                     if ev.packet[4] == 2:             # an Echo reply (no data): the actuator is there
                         self._found(ident, bus.family.reply(ev.packet, 0.0, None))
@@ -430,6 +445,7 @@ def identify(bus, rec, retries=2, early=False) -> None:
     reason in ``errors``."""
     ident = rec["id"]
     pkt, length = bus.family.info_request(ident)
+    mark = len(bus.events)
     try:
         r = bus.transact(pkt, reply=True, data_len=length, retries=retries, check=False, early=early)
     except BadReply as e:
@@ -437,7 +453,9 @@ def identify(bus, rec, retries=2, early=False) -> None:
         rec["errors"] = rec["errors"] + [str(e)]
         return
     except NoReply as e:
-        if _echo_answers(bus, ident, retries, early):
+        # an actuator answers in the order it is asked: once its Echo (asked after the Load) is
+        # answered, a reply to the Load has come already, late, or never will (return mode 0)
+        if _echo_answers(bus, ident, retries, early) and not _answered_late(bus, mark, ident, length):
             rec["return_mode"] = 0                 # answers Echo, never Load Data: Echo only
             bus.devices.learn_mode(ident, 0)       # that actuator's from now on
             return
@@ -448,6 +466,15 @@ def identify(bus, rec, retries=2, early=False) -> None:
     rec.update(bus.family.info_values(r))
     if rec["return_mode"] in (0, 1, 2):
         bus.devices.learn_mode(ident, rec["return_mode"])   # that actuator's from now on
+
+
+def _answered_late(bus, mark, ident, length) -> bool:
+    """Whether a reply of ``ident`` carrying ``length`` data bytes (a Load's) came after its
+    window among the bus's events since ``mark``: the actuator answers Load Data, later than
+    the window."""
+    family = bus.family
+    return any(ev.kind in ("late", "stray") and ev.ident == ident and ev.packet is not None
+               and family.fits(ev.packet, length) for ev in bus.events[mark:])
 
 
 def _echo_answers(bus, ident, retries, early=False) -> bool:
