@@ -520,8 +520,12 @@ class Actuator:
             if kind == "delay":
                 t += (20.0 if f.value is None else f.value) / 1000.0
             elif kind == "wrong-id":
+                if len(reply) < 4:
+                    continue               # cut short before its ID (truncate came first)
                 other = (self._sender(reply) + 1) % 254 if f.value is None else int(f.value)
-                reply = self._repack(reply, other)
+                # a reply cut short keeps its length: the ID byte changed, its checksum no more
+                reply = self._repack(reply, other) if len(reply) >= 7 and reply[4] + 5 == len(reply) \
+                    else reply[:3] + bytes((other,)) + reply[4:]
             elif kind == "corrupt":
                 reply = reply[:-1] + bytes(((reply[-1] ^ 0x5A),))
             elif kind == "truncate":
