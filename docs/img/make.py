@@ -1,6 +1,6 @@
 """Make the screenshots of docs/web.md: the consoles on the simulators, in headless Chromium.
 
-    python docs/img/make.py            # writes docs/img/web-*.png (or: make.py zk alarms)
+    python docs/img/make.py            # writes docs/img/web-*.png (or: make.py zap-tools zk alarms)
 
 Needs the extra 'web', selenium, and Debian's chromium and chromium-driver (the test suite's
 setup). Each picture is a console after a few real actions (a scan and moves, a start).
@@ -85,6 +85,43 @@ def zap_shots():
             p.wait()
 
 
+def zap_tools_shots():
+    """The register plot, the packet panel with the bytes on the bus, and a cycle run."""
+    with start_zap(ids=[1, 2, 3], transport="tcp") as sim:
+        p, url = console("zap", "-p", sim.url, "--scan-ids", "0-10")
+        d = browser(1440, 1750)
+        try:
+            d.get(url)
+            wait(d, "return document.querySelectorAll('#actuators tbody tr').length === 3")
+            wait(d, "return document.querySelectorAll('#rplot-reg option').length > 10")
+            d.execute_script("const s = document.querySelector('#rplot-reg'); s.value = 'present-current';"
+                             "s.dispatchEvent(new Event('change'));")
+            for ident, pos in ((1, 3000), (2, 1200), (3, 2500)):
+                move(d, ident, pos)
+            time.sleep(2.0)
+            for ident, pos in ((1, 900), (2, 3400), (3, 600)):
+                move(d, ident, pos)
+            time.sleep(2.5)
+            d.execute_script(
+                "const set = (s, v) => { const e = document.querySelector(s); e.value = v;"
+                " e.dispatchEvent(new Event('change', {bubbles: true})); };"
+                "set('#pkt-ins', 'load'); set('#pkt-id', 2); set('#pkt-reg', 'present-position');"
+                "document.querySelector('#pkt-send').click();"
+                "set('#cycle-id', 3); set('#cycle-a', 800); set('#cycle-b', 3200); set('#cycle-n', 8);"
+                "set('#cycle-dwell', 0.2);")
+            time.sleep(1.0)
+            d.execute_script("document.querySelector('#cycle-go').click();")
+            wait(d, "return /8 cycles in/.test(document.querySelector('#cycle-sum').textContent)", timeout=90)
+            d.execute_script("document.querySelector('#rplot-card').scrollIntoView({block: 'start'});"
+                             "window.scrollBy(0, -60);")
+            time.sleep(1.5)                   # the live view polls again
+            shoot(d, "web-zap-tools.png")
+        finally:
+            d.quit()
+            p.terminate()
+            p.wait()
+
+
 def zk_shots():
     with start_zk(speed=1, transport="tcp") as sim:
         p, url = console("zk", "-p", sim.url, "--limit", "egt_c<=900,warn=700", "--limit", "power_voltage_v>=11")
@@ -140,7 +177,7 @@ def alarm_shots():
             p.wait()
 
 
-SHOTS = {"zap": zap_shots, "zk": zk_shots, "alarms": alarm_shots}
+SHOTS = {"zap": zap_shots, "zap-tools": zap_tools_shots, "zk": zk_shots, "alarms": alarm_shots}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or SHOTS:     # python docs/img/make.py [zap] [zk] [alarms]

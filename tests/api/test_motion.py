@@ -232,3 +232,38 @@ def test_the_cycle_state_round_trips(tmp_path):
     (tmp_path / "bad.json").write_text('{"format": "zkzap-cycle/1", "params": {}, "done": 1}')
     with pytest.raises(UsageError, match="params: missing"):
         CycleState.load(str(tmp_path / "bad.json"))
+
+
+def test_a_cancelled_cycle_run_holds_the_rod_and_says_why():
+    import threading
+
+    from zkzap.api.cycle import Cycler
+
+    with start_zap(ids=[1], speed=4) as sim, Bus(sim) as bus:
+        cancel = threading.Event()
+        c = Cycler(bus, 1, 500, 3500, cycles=1000, dwell=0.05, cancel=cancel, cancel_why="cancelled from the page")
+        recs = []
+        for rec in c.run():
+            recs.append(rec)
+            if len(recs) == 2:
+                cancel.set()            # mid-leg of cycle 3: the rod stops where it is
+        assert c.reason == "cancelled" and c.why == "cancelled from the page" and c.done == 2
+        assert [r["status"] for r in recs] == ["ok", "ok", "cancelled"]
+        assert c.held is not None and sim.device.actuator(1).get("goal-position") == c.held
+
+
+def test_a_cancelled_play_stops_every_actuator_with_the_words_it_was_given():
+    import threading
+
+    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
+        cancel = threading.Event()
+        rows = motion.read_path(io.StringIO('t,id,position\n0,"1,2",500\n0.5,"1,2",3500\n5,"1,2",500\n'))
+        p = motion.plan(rows, baud=bus.baud)
+        player = motion.Player(bus, p, cancel=cancel, cancel_why="cancelled from the page")
+        for row in player.rows():
+            if row["present"] is not None and row["present"] > 1500:
+                cancel.set()
+        assert player.stopped.reason == "cancelled" and player.stopped.message == "cancelled from the page"
+        assert player.sent == 2 and set(player.stopped.positions) == {1, 2}
+        for i in (1, 2):
+            assert sim.device.actuator(i).get("goal-position") == player.stopped.positions[i] < 3500

@@ -43,7 +43,8 @@ STATE_FORMAT = "zkzap-cycle/1"
 COLUMNS = ["cycle", "time", "t", "reach_b_s", "reach_a_s", "overshoot_b", "overshoot_a", "peak_current_ma",
            "mean_current_ma", "min_voltage_v", "errors", "polls", "status"]
 MM_COLUMNS = ["overshoot_b_mm", "overshoot_a_mm"]
-REASONS = ("done", "duration", "device-error", "stall", "current-limit", "timeout", "no-reply", "interrupted")
+REASONS = ("done", "duration", "device-error", "stall", "current-limit", "timeout", "no-reply", "interrupted",
+           "cancelled")
 
 
 class Leg:
@@ -70,11 +71,15 @@ class Cycler:
     link). :meth:`run` yields one record per cycle, from cycle ``first`` to ``cycles``;
     afterwards :attr:`reason`/:attr:`why` say why it ended and :attr:`held` where the rod was
     stopped. ``speed``: goal-speed written first; ``scale`` (a :class:`zkzap.api.units.Scale`)
-    adds the overshoot in mm; ``on_cycle(record)`` after each cycle (the state is saved there)."""
+    adds the overshoot in mm; ``cancel``: a threading.Event (anything with ``is_set()``) that,
+    once set, stops the rod and ends the run at the next poll (reason ``cancelled``,
+    ``cancel_why`` its words: another bus stopped, a console's Cancel)."""
 
     def __init__(self, bus, ident, a, b, *, dwell=0.5, cycles=10, first=1, speed=None, stall=1.0, limit=None,
-                 timeout=10.0, scale=None, clock=None, duration=None):
+                 timeout=10.0, scale=None, clock=None, duration=None, cancel=None, cancel_why="cancelled"):
         self.link = getattr(bus, "link", bus)
+        self.cancel = cancel
+        self.cancel_why = cancel_why
         self.ident = zap.check_id(ident, allow_broadcast=False)
         for v in (a, b):
             POSITION.check(v)
@@ -174,6 +179,9 @@ class Cycler:
                                                             f"{self.timeout:g} s (at {pos})")
                             return leg
                 if reached_at is not None and now - reached_at >= self.dwell:
+                    return leg
+                if self.cancel is not None and self.cancel.is_set():
+                    leg.stop, leg.why = "cancelled", self.cancel_why
                     return leg
                 if self._end is not None and now >= self._end:
                     leg.stop, leg.why = "duration", f"stopped after {self.duration:g} s (--duration)"

@@ -508,14 +508,17 @@ class Player:
     current (mA) that stops everything; ``stop_mode``: ``hold`` or ``off``; ``on_progress(done,
     total)`` after every step; ``settle``: how long after the last step the log goes on until
     every rod is at its goal; ``cancel``: a threading.Event that stops it (and every actuator)
-    when set — another bus's failure; ``start``: the wall-clock moment (time.time()) step 0 is
-    due, shared by several buses. After it: :attr:`lateness` (seconds, one per step), :attr:`sent`
+    when set — another bus's failure, a console's Cancel (``cancel_why``: the words of
+    :attr:`stopped`); ``start``: the wall-clock moment (time.time()) step 0 is due, shared by
+    several buses. After it: :attr:`lateness` (seconds, one per step), :attr:`sent`
     (steps), :attr:`stopped` (a :class:`Stopped`, or None when the plan ran to its end)."""
 
     def __init__(self, bus, plan, *, loops: int = 1, log: bool = True, limit=None, stop_mode: str = "hold",
-                 scales=None, on_progress=None, clock=None, settle: float = 5.0, cancel=None, start=None):
+                 scales=None, on_progress=None, clock=None, settle: float = 5.0, cancel=None, start=None,
+                 cancel_why: str = "another bus stopped"):
         self.link = getattr(bus, "link", bus)
         self.cancel = cancel
+        self.cancel_why = cancel_why
         self._start = start
         self.plan = plan
         self.loops = loops
@@ -669,7 +672,7 @@ class Player:
                     due = base + step.t
                     self._wait(due)
                     if self.cancel is not None and self.cancel.is_set():
-                        self._stop("cancelled", "another bus stopped")
+                        self._stop("cancelled", self.cancel_why)
                         return
                     self.lateness.append((self.clock.now() - due) / self.clock.speed)
                     self._send(step)
@@ -685,6 +688,9 @@ class Player:
                         nxt = self.clock.now() + self.settle
                     settled = set()
                     while self._fits(nxt):
+                        if self.cancel is not None and self.cancel.is_set():
+                            self._stop("cancelled", self.cancel_why)       # now, not at the next step
+                            return
                         row, reply = self._read_one(loop)
                         yield row
                         bad = self._check(row, reply)

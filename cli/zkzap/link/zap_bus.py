@@ -344,6 +344,7 @@ class ZapBus:
         posix = sys.modules.get("serial.serialposix")
         self._raw = self._fd is not None and posix is not None and type(port) is posix.Serial
         self.events = []                   # Event: late, stray and garbled, for scans
+        self.monitor = None                # monitor(direction "tx"/"rx", bytes): every write and read
         self.last_sent = 0.0               # when the last write began
         self.sent = 0
         self.replies = 0
@@ -517,6 +518,8 @@ class ZapBus:
                 data = self.port.read(n)
                 if not data:
                     self._seen_empty = before
+            if data and self.monitor is not None:
+                self.monitor("rx", data)
             return data
         except Exception as e:
             if isinstance(e, (KeyboardInterrupt, PortError, OutputError)):   # OutputError: the capture's
@@ -803,6 +806,8 @@ class ZapBus:
             raise self._port_error(e) from None
         self.sent += 1
         self.last_sent = t0
+        if self.monitor is not None:
+            self.monitor("tx", bytes(pkt))
         self._recent.append(bytes(pkt))
         if len(self._unechoed) > 512:
             self._unechoed.pop(next(iter(self._unechoed)))

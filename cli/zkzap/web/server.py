@@ -189,6 +189,7 @@ class Hub:
         self.clients = {}
         self.controller = None
         self._samples = []
+        self._traffic = []               # the bus's bytes both ways (a console that shows them)
         self._lock = threading.Lock()
         self._flush_due = False
         self.produced = 0
@@ -204,9 +205,17 @@ class Hub:
 
     def sample(self, item: dict) -> None:
         """A live sample (a status record, a poll row): batched, at most :data:`BATCH_S` late."""
-        with self._lock:
-            self._samples.append(item)
-            self.produced += 1
+        self._batch("_samples", item, 1)
+
+    def traffic(self, item: dict) -> None:
+        """A packet seen on the device's line: batched as the live samples are (and, like them,
+        the first thing a page that cannot keep up loses)."""
+        self._batch("_traffic", item, 0)
+
+    def _batch(self, name, item, produced):
+        with self._lock:                  # the list by name: a flush replaces it
+            getattr(self, name).append(item)
+            self.produced += produced
             if self._flush_due:
                 return
             self._flush_due = True
@@ -226,7 +235,10 @@ class Hub:
     def _flush(self):
         with self._lock:
             items, self._samples = self._samples, []
+            traffic, self._traffic = self._traffic, []
             self._flush_due = False
+        if traffic:
+            self._broadcast(dumps({"type": "traffic", "items": traffic}), True, 0)
         if items:
             self._broadcast(dumps({"type": "samples", "s": round(time.time() * 1000, 1), "items": items}), True,
                             len(items))

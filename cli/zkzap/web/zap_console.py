@@ -23,6 +23,8 @@ from ..codec.fields import FieldValueError
 from ..errors import NoReply, UsageError
 from .consent import needs_force
 from .console import Console, number
+from .zap_motion import MotionTools
+from .zap_packets import PacketTools
 
 R = zap.REGISTER_BY_NAME
 #: What the live view polls, in one Load Data per actuator (goal-position .. moving).
@@ -32,7 +34,7 @@ LIVE = [R[n] for n in ("goal-position", "goal-speed", "goal-current", "present-p
 SHORT = {"goal-position": "goal", "goal-speed": "gspeed", "goal-current": "gcur", "present-position": "pos",
          "present-current": "cur", "present-voltage": "volt", "moving": "moving"}
 #: Requests that move actuators (refused while a job runs: it has the bus).
-MOVES = ("move", "sync", "stop", "goals")
+MOVES = ("move", "sync", "stop", "goals", "packet", "teach", "teach-take")
 #: Progress messages per second, at most.
 PROGRESS_HZ = 20
 
@@ -41,7 +43,7 @@ class Cancelled(Exception):
     """A job the page cancelled."""
 
 
-class ZapConsole(Console):
+class ZapConsole(PacketTools, MotionTools, Console):
     """The console over ``bus`` (an open :class:`~zkzap.api.zap.Bus`); ``rate``: polls per
     second at most (None: as fast as the line allows); ``scan_ids`` the IDs the first scan
     searches (None: no scan at the start)."""
@@ -59,6 +61,8 @@ class ZapConsole(Console):
         self._progress_t = 0.0
         self._first_scan = list(scan_ids) if scan_ids is not None else None
         self.polls = 0
+        self.tools_init()
+        self.motion_init()
 
     @contextlib.contextmanager
     def granting(self, allow):
@@ -76,6 +80,7 @@ class ZapConsole(Console):
             self._job(None, "scan", lambda: self._scan(None, self._first_scan, [self.bus.baud]))
         while not self.closing_now:
             self.handle_requests()
+            self.teach_tick()
             polled = [i for i, a in self.actuators.items() if a["baud"] == self.bus.baud and a["polled"]]
             if polled and not self.closing_now:
                 self._watch(polled)
@@ -84,20 +89,30 @@ class ZapConsole(Console):
 
     def _watch(self, ids):
         """Poll ``ids`` until a request comes (between two polls) or the console closes."""
-        w = Watcher(self.bus.link, ids, LIVE, rate=self.rate, retries=0)
-        for row in w.rows():
-            self._sample(row)
-            if row["id"] == ids[-1]:
-                self.polls += 1
-                if self.pending() or self.closing_now:
-                    break
+        plotted = self.plotted
+        w = Watcher(self.bus.link, ids, LIVE + ([plotted] if plotted is not None else []), rate=self.rate, retries=0)
+        self._polling = True
+        try:
+            for row in w.rows():
+                self._polling = False
+                self._sample(row, plotted)
+                if row["id"] == ids[-1]:
+                    self.polls += 1
+                    if self.pending() or self.closing_now or self.teach_due() or plotted is not self.plotted:
+                        break
+                self._polling = True
+        finally:
+            self._polling = False
 
-    def _sample(self, row):
+    def _sample(self, row, plotted=None):
         item = {"w": round(time.time() * 1000, 1), "id": row["id"], "status": row["status"],
                 "errors": row["errors"], "rtt": row["rtt_ms"]}
         for reg in LIVE:
             v = row.get(reg.name)
             item[SHORT[reg.name]] = reg.physical(v) if v is not None else None
+        if plotted is not None:
+            v = row.get(plotted.name)
+            item["reg"] = plotted.physical(v) if v is not None else None
         a = self.actuators.get(row["id"])
         if a is not None:
             if row["status"] == "ok" and a["errors"] != row["errors"]:
@@ -137,7 +152,7 @@ class ZapConsole(Console):
 
     def handle(self, ctx):
         op = ctx.msg.get("op")
-        if op in JOBS:
+        if op in JOBS or op in MOTION_JOBS:
             self._job(ctx, op, lambda: Console.handle(self, ctx))
         else:
             super().handle(ctx)
@@ -180,10 +195,11 @@ class ZapConsole(Console):
         out.update({"baud": self.bus.baud, "bauds": list(zap.BAUD_TO_CODE), "rate": self.rate,
                     "return_mode": self.bus.return_mode, "registers": [_register_info(r) for r in zap.REGISTERS],
                     "protected": list(fleet.PROTECTED), "formats": list(fleet.SUFFIXES.values())})
+        out.update(self.tools_hello())
         return out
 
     def snapshot(self):
-        return super().snapshot() + [self._table_message(), {"type": "busy", "job": self.busy}]
+        return super().snapshot() + [self._table_message(), {"type": "busy", "job": self.busy}] + self.motion_snapshot()
 
     def _table_message(self):
         return {"type": "actuators", "baud": self.bus.baud, "items": list(self.actuators.values())}
@@ -447,6 +463,8 @@ class ZapConsole(Console):
 
 #: Requests that take the bus for a while (the pages show them as busy).
 JOBS = ("scan", "backup", "diff", "apply", "check")
+#: The motion requests that are jobs too (see :mod:`.zap_motion`).
+MOTION_JOBS = ("play", "cycle")
 
 
 def _register_info(reg) -> dict:

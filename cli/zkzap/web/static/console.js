@@ -95,7 +95,11 @@ const Z = (() => {
     }
     const fn = handlers[msg.type];
     if (fn) fn(msg);
+    for (const f of listeners[msg.type] || []) f(msg);
   }
+  // more handlers of a message type, beside the page's own (a page's further panels)
+  const listeners = {};
+  function on(type, f) { (listeners[type] = listeners[type] || []).push(f); }
 
   // a request: resolves with the reply; a consent reply asks the person and sends it again
   function request(op, fields = {}, grant = []) {
@@ -163,6 +167,7 @@ const Z = (() => {
     document.body.classList.toggle("viewonly", !controlling());
     document.querySelectorAll(".ctl").forEach(e => { if ("disabled" in e) e.disabled = !controlling() || e.dataset.off === "1"; });
     if (handlers.controlchange) handlers.controlchange({ controlling: controlling(), controller });
+    for (const f of listeners.controlchange || []) f({ controlling: controlling(), controller });
   }
   function release() {
     const warn = hello && hello.kind === "zk" ? "Releasing control sends the engine to standby if this page runs it. " : "";
@@ -217,10 +222,12 @@ const Z = (() => {
       wrap.append(area);
       box.append(wrap);
       const axis = { stroke: "#8b9bab", grid: { stroke: "#2c3a48", width: 1 }, ticks: { stroke: "#2c3a48" } };
-      const scales = { x: { time: true } };
+      this.rolling = opts.rolling !== false;   // a rolling time window, or x any number (a cycle's) shown whole
+      const scales = { x: { time: this.rolling } };
       const hhmmss = (u, v) => v.map(x => new Date(x * 1000).toLocaleTimeString("en-GB", { hour12: false }));
       const short = (x) => Math.abs(x) >= 10000 ? `${fmt(x / 1000)}k` : fmt(x, opts.digits ?? 0);
-      const axes = [{ ...axis, values: hhmmss, space: 70 }, { ...axis, size: 56, values: (u, v) => v.map(short) }];
+      const counted = { values: (u, v) => v.map(short), incrs: [1, 2, 5, 10, 20, 50, 100, 200, 500, 1e3, 2e3, 5e3, 1e4, 1e5, 1e6, 1e7] };
+      const axes = [{ ...axis, ...(this.rolling ? { values: hhmmss } : counted), space: 70 }, { ...axis, size: 56, values: (u, v) => v.map(short) }];
       if (opts.right) {
         scales.r = { range: opts.rightRange || undefined };
         axes.push({ ...axis, scale: "r", side: 1, grid: { show: false }, size: 50 });
@@ -229,7 +236,8 @@ const Z = (() => {
       this.u = new uPlot({
         width: Math.max(area.clientWidth || wrap.clientWidth || 300, 200), height: opts.height || 170,
         scales, axes, legend: { show: false },
-        cursor: { drag: { x: false, y: false } },
+        cursor: { drag: { x: !!opts.zoom, y: false, setScale: false } },
+        hooks: opts.zoom ? { setSelect: [(u) => this.zoomTo(u)] } : {},
         series: [{}, ...series.map(s => ({ label: s.label, stroke: s.color, width: s.width || 1.6, dash: s.dash, scale: s.scale || "y", spanGaps: true,
                                             points: { show: false }, value: (u, v) => fmt(v, s.digits ?? opts.digits ?? 0) }))],
       }, this.data, area);
@@ -256,9 +264,10 @@ const Z = (() => {
     }
     // a plot repaints at most PLOT_FPS times a second: live enough, and the page stays free to
     // take the next updates at once (software rendering on a small machine)
-    due(now) { return this.dirty && now - this.drawn >= 1 / PLOT_FPS; }
+    due(now) { return this.dirty && !this.paused && now - this.drawn >= 1 / PLOT_FPS; }
     draw(now) {
       this.drawn = now;
+      if (!this.rolling) { this.u.setData(this.data, true); this.dirty = false; return; }
       const d = this.data, cut = now - this.window;
       let k = 0;
       while (k < d[0].length && d[0][k] < cut) k++;
@@ -268,6 +277,65 @@ const Z = (() => {
       this.u.setScale("x", { min: now - this.window, max: now });
       this.dirty = false;
     }
+    // a paused plot keeps its data coming but is no longer redrawn; a drag over it zooms in
+    // (and pauses it), a double click shows everything it holds; live again: the rolling window
+    pause(on) { this.paused = on; if (!on) { this.dirty = true; } if (this.onpause) this.onpause(on); }
+    zoomTo(u) {
+      const sel = u.select;
+      if (!sel || sel.width < 3) return;
+      const min = u.posToVal(sel.left, "x"), max = u.posToVal(sel.left + sel.width, "x");
+      this.pause(true);
+      u.setSelect({ left: 0, top: 0, width: 0, height: 0 }, false);
+      u.setScale("x", { min, max });
+    }
+    // the points shown (the x range of the view): [t, v1, v2, ...] rows
+    shown() {
+      const d = this.data, x = this.u.scales.x, lo = x.min ?? -Infinity, hi = x.max ?? Infinity, out = [];
+      for (let k = 0; k < d[0].length; k++) if (d[0][k] >= lo && d[0][k] <= hi) out.push(d.map(col => col[k]));
+      return out;
+    }
+    csv(labels) {
+      const esc = (v) => /[",\n]/.test(v) ? `"${v.replace(/"/g, '""')}"` : v;
+      const lines = [["time", "t", ...labels].map(esc).join(",")];
+      for (const [t, ...vs] of this.shown())
+        lines.push([new Date(t * 1000).toISOString(), t.toFixed(3), ...vs.map(v => v === null || v === undefined ? "" : String(v))].join(","));
+      return lines.join("\n") + "\n";
+    }
+    // the plot as a PNG (a data URL): its title and keys above the canvas uPlot draws
+    png(title, series) {
+      const src = this.u.ctx.canvas, k = src.width / Math.max(1, this.u.width), head = Math.round(26 * k);
+      const c = document.createElement("canvas");
+      c.width = src.width; c.height = src.height + head;
+      const g = c.getContext("2d");
+      g.fillStyle = getComputedStyle(document.body).backgroundColor || "#0f1419";
+      g.fillRect(0, 0, c.width, c.height);
+      g.font = `${Math.round(13 * k)}px sans-serif`; g.textBaseline = "middle";
+      g.fillStyle = "#e6edf3"; g.fillText(title, 8 * k, head / 2);
+      let x = 16 * k + g.measureText(title).width;
+      for (const s of series) {
+        g.fillStyle = s.color; g.fillRect(x, head / 2 - 4 * k, 10 * k, 8 * k); x += 14 * k;
+        g.fillStyle = "#8b9bab"; g.fillText(s.label, x, head / 2); x += g.measureText(s.label).width + 12 * k;
+      }
+      g.drawImage(src, 0, head);
+      return c.toDataURL("image/png");
+    }
+  }
+  // the text of the file chosen in a file input (null, said, when none is chosen)
+  function readFile(input, hint) {
+    return new Promise((resolve) => {
+      const f = input.files[0];
+      if (!f) { toast(hint); resolve(null); return; }
+      const rd = new FileReader();
+      rd.onload = () => resolve({ name: f.name, text: rd.result });
+      rd.readAsText(f);
+    });
+  }
+  // a file the browser saves: text, or a data URL
+  function download(name, content, type = "text/plain") {
+    const url = content.startsWith && content.startsWith("data:") ? content : URL.createObjectURL(new Blob([content], { type }));
+    const a = el("a", { href: url, download: name });
+    document.body.append(a); a.click(); a.remove();
+    if (!url.startsWith("data:")) setTimeout(() => URL.revokeObjectURL(url), 10000);
   }
 
   // repaint at most once per frame; record how late the newest sample is drawn
@@ -309,5 +377,5 @@ const Z = (() => {
   if (nm) nm.addEventListener("click", name);
 
   return { $, el, fmt, clock, setText, setClass, connect, request, send, toast, banner, controlling, Plot, onFrame, sawSample,
-           throttle, stats, get hello() { return hello; }, renderControl };
+           throttle, stats, on, download, readFile, get hello() { return hello; }, renderControl };
 })();

@@ -170,15 +170,7 @@
     return el("table", {}, el("thead", {}, el("tr", {}, cols.map(([, h]) => el("th", { text: h })))),
       el("tbody", {}, items.map(it => el("tr", {}, cols.map(([k]) => el("td", { text: it[k] === null || it[k] === undefined ? "–" : Array.isArray(it[k]) ? it[k].join(", ") : it[k] }))))));
   }
-  function readFile() {
-    return new Promise((resolve) => {
-      const f = $("#fleet-file").files[0];
-      if (!f) { Z.toast("choose a fleet file first (.json, .toml, .yaml)"); resolve(null); return; }
-      const rd = new FileReader();
-      rd.onload = () => resolve({ name: f.name, text: rd.result });
-      rd.readAsText(f);
-    });
-  }
+  const readFile = () => Z.readFile($("#fleet-file"), "choose a fleet file first (.json, .toml, .yaml)");
   async function backup() {
     const r = await Z.send("backup", { format: $("#bk-format").value });
     if (!r) return;
