@@ -83,3 +83,34 @@ def test_exit_status_help_from_the_table():
     assert text == "Exit status: 0 done; 130 Ctrl-C; 143 SIGTERM. End."
     with pytest.raises(ValueError, match="42"):
         exit_status_help({42: "the answer"})
+
+
+def test_a_zk_batch_acknowledges_a_trip_and_a_start_is_refused_while_it_is_latched(cli):
+    run = "send control --state run --throttle {} --for {} --ids 1 -f jsonl"
+    text = "\n".join([run.format(40, 20) + " --limit 'egt_c<=500'",   # trips: latched
+                      run.format(0, 0.5),                              # refused, with the reason
+                      "alarms",
+                      "ack 99",                                        # no such alarm: exit 2
+                      "ack --by 'bench 2'",
+                      "ack",                                           # nothing latched any more
+                      run.format(0, 0.5)]) + "\n"                     # allowed: at rest and cool, setpoint 0
+    r = cli("zk", "batch", "-", "-p", "sim://zk?speed=20", "--keep-going", input=text)
+    recs = records(r.stdout)
+    assert [x["exit"] for x in recs] == [5, 5, 0, 2, 0, 0, 0], r.stderr
+    assert recs[1]["error"].startswith("start refused: alarm latched: limit egt_c<=500 violated: egt_c=")
+    assert "acknowledge it first" in recs[1]["error"] and recs[1]["result"] is None   # nothing sent or recorded
+    listed = recs[2]["result"]
+    assert listed["alarms"][0]["latched"] and listed["start"].startswith("start refused: alarm latched")
+    assert "no alarm 99 in the list" in recs[3]["error"]
+    (acked,) = recs[4]["result"]
+    assert acked["acked_by"] == "bench 2" and acked["acked_at"].endswith("Z") and "egt_c<=500" in acked["text"]
+    assert recs[5]["result"] == [] and "stdin:6: note: ack: no alarm is latched" in r.stderr
+    assert "stdin:5: note: bench 2 acknowledged 1 alarm: limit egt_c<=500 violated" in r.stderr
+    assert r.exit_code == 5                                            # the first failure's
+
+
+@pytest.mark.parametrize("line,said", [("ack x", "ack: 'x' is no alarm number"), ("ack --by", "ack: --by needs"),
+                                       ("alarms 3", "alarms: takes no argument")])
+def test_a_bad_stand_line_is_refused_before_anything_is_sent(cli, line, said):
+    r = cli("zk", "batch", "-", "-p", "sim://zk", input=f"send keepalive\n{line}\n")
+    assert r.exit_code == 2 and f"stdin:2: {said}" in r.stderr and r.stdout == "", r.stderr

@@ -48,11 +48,76 @@ _encode = json.JSONEncoder(ensure_ascii=False).encode
 #: Commands a batch line cannot run.
 EXCLUDED = {"zap": {"batch", "decode"}, "zk": {"batch", "decode"}}
 
+#: The zk batch's and shell's own lines: the stand's alarm list (its sessions share one) and its
+#: acknowledgement. ``ack [ID ...] [--by NAME]``; ``alarms``.
+STAND_BUILTINS = {"zk": ("alarms", "ack")}
+
+
+def parse_builtin(tokens) -> dict:
+    """The arguments of a stand line (``alarms``; ``ack [ID ...] [--by NAME]``); UsageError for
+    anything else."""
+    name, args = tokens[0], list(tokens[1:])
+    if name == "alarms":
+        if args:
+            raise UsageError("alarms: takes no argument")
+        return {"op": "alarms"}
+    ids, by = [], None
+    while args:
+        a = args.pop(0)
+        if a == "--by" or a.startswith("--by="):
+            value = a[5:] if a.startswith("--by=") else (args.pop(0) if args else None)
+            if value is None or not value.strip():
+                raise UsageError("ack: --by needs the operator's name (--by NAME)")
+            by = value.strip()
+        elif a.isascii() and a.isdigit() and 0 < int(a) < 10 ** 9:
+            ids.append(int(a))
+        else:
+            raise UsageError(f"ack: {a!r} is no alarm number; 'ack' acknowledges every latched alarm, "
+                             f"'ack N ...' those numbered (see 'alarms'), --by NAME says who")
+    return {"op": "ack", "ids": ids or None, "by": by}
+
+
+def operator(where=None) -> str:
+    """Who acknowledges: the user's name (and where the line is: ``alice (zk batch run.txt:4)``)."""
+    import getpass
+
+    try:
+        who = getpass.getuser()
+    except Exception:  # noqa: BLE001 - no user name in this environment
+        who = "the user"
+    return f"{who} ({where})" if where else who
+
+
+def run_builtin(parsed, who) -> tuple:
+    """Run a stand line on the process's alarm list (:func:`zkzap.api.alarms.current`): returns
+    ``(exit status, result)``; ``ack``'s result lists the alarms acknowledged (who and when),
+    ``alarms``'s the list and whether a start is allowed (``start``: null, or the refusal)."""
+    from ..api.alarms import current
+
+    alarms = current()
+    if parsed["op"] == "ack":
+        ids = parsed["ids"]
+        if ids is not None:
+            known = {a.id for a in alarms.entries}
+            unknown = [i for i in ids if i not in known]
+            if unknown:
+                from . import _error
+
+                _error(f"ack: no alarm {', '.join(map(str, unknown))} in the list (its numbers: "
+                       f"{', '.join(str(a.id) for a in alarms.entries) or 'none, it is empty'})", "zk")
+                return USAGE, None
+        done = alarms.acknowledge(parsed["by"] or who, ids)
+        if not done:
+            note("ack: no alarm is latched")
+        return OK, [{k: a.to_dict()[k] for k in ("id", "kind", "text", "acked_by", "acked_at")} for a in done]
+    return OK, {"alarms": alarms.to_list(), "start": alarms.refusal()}
+
 
 class Line:
     """One command of a batch: where it is, its text, its tokens and its command path."""
 
-    __slots__ = ("where", "number", "text", "tokens", "path", "params", "consents", "effect", "leaf", "checked")
+    __slots__ = ("where", "number", "text", "tokens", "path", "params", "consents", "effect", "leaf", "checked",
+                 "builtin")
 
     def __init__(self, where, number, text, tokens):
         self.where, self.number, self.text, self.tokens = where, number, text, tokens
@@ -62,6 +127,7 @@ class Line:
         self.effect = None      # (what, facts) of the first effect its check stopped at
         self.leaf = None
         self.checked = False    # its command ran in check mode (its files' checks included)
+        self.builtin = None     # a stand line's arguments (see STAND_BUILTINS)
 
 
 #: The longest batch line (characters): a real one is a command and its options, and the
@@ -166,8 +232,16 @@ def _check_lines(group, lines, protocol, defaults):
         if twin is not None:               # the same text checks the same: reuse the first's findings
             line.path, line.params, line.leaf = twin.path, twin.params, twin.leaf
             line.consents, line.effect, line.checked = twin.consents, twin.effect, twin.checked
+            line.builtin = twin.builtin
             continue
         seen[tuple(line.tokens)] = line
+        if line.tokens[0] in STAND_BUILTINS.get(protocol, ()):
+            try:
+                line.builtin = parse_builtin(line.tokens)
+            except UsageError as e:
+                raise UsageError(f"{line.where}: {e}") from None
+            line.path, line.checked = [line.tokens[0]], True
+            continue
         bad = port_tokens(line.tokens)
         if bad:
             raise UsageError(f"{line.where}: {bad[0]}: the port is the batch's; give it to "
@@ -405,7 +479,12 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 saved = sys.stdout, sys.stderr
                 sys.stdout, sys.stderr = buf, err
                 try:
-                    code = invoke(line, protocol, contexts)
+                    if line.builtin is not None:
+                        code, result = run_builtin(line.builtin, operator(f"{protocol} batch {line.where}"))
+                        if result is not None:
+                            buf.write(_encode(result) + "\n")
+                    else:
+                        code = invoke(line, protocol, contexts)
                 finally:
                     sys.stdout, sys.stderr = saved
                     Borrowed.keep_baud = False

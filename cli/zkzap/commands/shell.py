@@ -14,9 +14,9 @@ import sys
 
 import click
 
-from ..errors import MORE_TO_DO, OK
+from ..errors import MORE_TO_DO, OK, UsageError
 from . import CONTEXT, Command, Group
-from .batch import EXCLUDED, PORT_TOKENS, _batch_capture, port_tokens
+from .batch import EXCLUDED, PORT_TOKENS, STAND_BUILTINS, _batch_capture, port_tokens
 from .options import exits, port_options
 
 BUILTINS = ("help", "exit", "quit")
@@ -53,7 +53,7 @@ class Completer:
         if not args:
             names = [n for n in self.group.list_commands(click.Context(self.group))
                      if n not in EXCLUDED[self.protocol]]
-            own = list(BUILTINS) + (list(ZK_BUILTINS) if self.protocol == "zk" else [])
+            own = list(BUILTINS) + list(STAND_BUILTINS.get(self.protocol, ()))
             return sorted(n for n in list(names) + own if n.startswith(text))
         comp = ShellComplete(self.group, {}, self.protocol, "_ZKZAP_COMPLETE")
         try:
@@ -164,7 +164,7 @@ def loop(group, protocol, defaults, *, interactive) -> int:
             if tokens[0] == "help":
                 _help(group, protocol)
                 continue
-            if protocol == "zk" and tokens[0] in ZK_BUILTINS:
+            if tokens[0] in STAND_BUILTINS.get(protocol, ()):
                 failed = _alarm_builtin(tokens) or failed
                 continue
             bad = port_tokens(tokens)
@@ -192,42 +192,28 @@ def loop(group, protocol, defaults, *, interactive) -> int:
     return 0 if interactive else failed
 
 
-#: The zk shell's own commands: the alarm list of its sessions, and its acknowledgement.
-ZK_BUILTINS = ("alarms", "ack")
-
-
 def _alarm_builtin(tokens) -> int:
-    """``alarms``: the list (newest first) and whether a start is allowed; ``ack``: acknowledge
-    the latched alarms. Returns an exit status (2: bad usage)."""
-    from ..api.alarms import current
-
-    alarms = current()
-    if len(tokens) > 1:
-        click.echo(f"zk: error: {tokens[0]}: takes no argument", err=True)
-        return 2
-    if tokens[0] == "ack":
-        done = alarms.acknowledge(_operator())
-        if not done:
-            click.echo("no alarm is latched", err=True)
-        return 0
-    for a in alarms.to_list():
-        state = "LATCHED" if a["latched"] else ("acknowledged" if a["acked_by"] else a["level"])
-        by = f" (by {a['acked_by']} at {a['acked_at']})" if a["acked_by"] else ""
-        click.echo(f"{a['time']}  {state:<12}  {a['text']}{by}")
-    if not alarms.entries:
-        click.echo("no alarm", err=True)
-    why = alarms.refusal()
-    click.echo(why if why else "a start is allowed", err=True)
-    return 0
-
-
-def _operator() -> str:
-    import getpass
+    """``alarms``: the list (newest first) and whether a start is allowed; ``ack [ID ...] [--by
+    NAME]``: acknowledge the latched alarms (as in a batch, :func:`..batch.run_builtin`).
+    Returns an exit status (2: bad usage)."""
+    from .batch import operator, parse_builtin, run_builtin
 
     try:
-        return getpass.getuser()
-    except Exception:  # noqa: BLE001 - no user name in this environment
-        return "the shell's user"
+        parsed = parse_builtin(tokens)
+    except UsageError as e:
+        click.echo(f"zk: error: {e}", err=True)
+        return 2
+    code, result = run_builtin(parsed, operator())
+    if parsed["op"] == "ack" or code:
+        return code
+    for a in result["alarms"]:
+        state = "LATCHED" if a["latched"] else ("acknowledged" if a["acked_by"] else a["level"])
+        by = f" (by {a['acked_by']} at {a['acked_at']})" if a["acked_by"] else ""
+        click.echo(f"{a['id']:>3}  {a['time']}  {state:<12}  {a['text']}{by}")
+    if not result["alarms"]:
+        click.echo("no alarm", err=True)
+    click.echo(result["start"] or "a start is allowed", err=True)
+    return 0
 
 
 def _exit_code(tokens, protocol):

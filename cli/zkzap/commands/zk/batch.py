@@ -42,6 +42,11 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
     (143) with the records gathered so far, no further line starts, and the batch exits 130
     (143); a batch that stops early after controlling the engine also sends --abort.
 
+    The lines share one alarm list: a trip latches an alarm, and a later start (with
+    --keep-going) is refused, its line failing with the reason, until an 'ack' line acknowledges it
+    ('ack', 'ack N ...', '--by NAME'; who and when are recorded) and the engine is at rest and
+    cool. An 'alarms' line gives the list and whether a start is allowed.
+
     \b
     Examples:
       printf 'send keepalive\\nmonitor --count 5\\n' | zk batch --sim
