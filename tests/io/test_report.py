@@ -4,6 +4,7 @@ raw log; skipped plots named; matplotlib optional; the terminal view."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import subprocess
@@ -169,15 +170,43 @@ def test_terminal_comparison_overlays_runs_and_fits_its_table(run, other, width)
     assert R.UNSETTLED_NOTE in " ".join(x.strip(" │") for x in lines)
 
 
-def test_without_matplotlib_names_the_extra(cli, run, monkeypatch):
+def _without(monkeypatch, package):
+    """``package`` made unimportable, as when its extra is not installed."""
     for name in list(sys.modules):
-        if name == "matplotlib" or name.startswith("matplotlib."):
+        if name == package or name.startswith(package + "."):
             monkeypatch.delitem(sys.modules, name)
-    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    monkeypatch.setitem(sys.modules, package, None)
+
+
+def test_without_matplotlib_names_the_extra(cli, run, monkeypatch):
+    _without(monkeypatch, "matplotlib")
     out = run["dir"] / "none.png"
     r = cli("zk", "report", run["tel"], "-o", str(out))
     assert r.exit_code == 2 and "pip install 'zkzap[plot]'" in r.stderr and not out.exists()
     assert cli("zk", "report", run["tel"], "--terminal").exit_code == 0
+
+
+def test_interactive_without_plotly_names_the_extra(cli, run, monkeypatch):
+    _without(monkeypatch, "plotly")
+    out = run["dir"] / "none.html"
+    r = cli("zk", "report", run["tel"], "-o", str(out), "--interactive")
+    assert r.exit_code == 2 and "pip install 'zkzap[interactive]'" in r.stderr and not out.exists(), r
+    assert r.stdout == ""
+    r = cli("zk", "report", run["tel"], "-o", str(run["dir"] / "x.png"), "--interactive")
+    assert r.exit_code == 2 and "interactive: an HTML report" in r.stderr
+    assert cli("zk", "report", run["tel"], "--terminal", "--interactive").exit_code == 2
+
+
+def test_interactive_page_thins_a_long_series_keeping_its_peaks():
+    pytest.importorskip("plotly")
+    from zkzap.io.report_interactive import thin
+
+    t = [i * 0.01 for i in range(100_000)]
+    v = [math.sin(x) + (5.0 if i == 54_321 else 0.0) for i, x in enumerate(t)]
+    xs, ys, cut = thin(t, v, limit=2_000)
+    assert cut and len(xs) <= 2_000 and xs == sorted(xs)
+    assert max(ys) == max(v) and min(ys) == min(v) and xs[ys.index(max(ys))] == t[54_321]
+    assert thin(t[:10], [1.0, math.nan] * 5)[1:] == ([1.0, None] * 5, False)
 
 
 def test_other_commands_never_import_plotting_or_sqlite(tmp_path):

@@ -891,13 +891,7 @@ def _history_axes(fig, grid, runs, panels, limits):
                 if c in targets:
                     if many and k:
                         continue                     # the targets of the reference run
-                    xs, ys = [], []
-                    end = _sent_until(run)
-                    for a, b, v in targets[c]:
-                        if a >= end:
-                            continue                 # after the run ended (an abort): never sent
-                        xs += [a - run.offset, min(b, end) - run.offset, math.nan]
-                        ys += [v, v, math.nan]
+                    xs, ys = target_line(run, targets[c])
                     ax.plot(xs, ys, color="black", linestyle="--", linewidth=1.0, label=label)
                 elif c in run.present:
                     style = {"color": RUN_COLOURS[k % len(RUN_COLOURS)]} if many else {}
@@ -949,6 +943,46 @@ def _history_axes(fig, grid, runs, panels, limits):
     return axes
 
 
+def target_line(run, segments):
+    """``(xs, ys)``: a target's steps (``[(t0, t1, value)]``) on the run's aligned axis, NaN
+    between them; none after the run ended (an abort: never sent)."""
+    xs, ys = [], []
+    end = _sent_until(run)
+    for a, b, v in segments:
+        if a >= end:
+            continue
+        xs += [a - run.offset, min(b, end) - run.offset, math.nan]
+        ys += [v, v, math.nan]
+    return xs, ys
+
+
+def step_windows(run):
+    """``[(step, start, window start, window end, settled)]`` of the run's steps on its aligned
+    axis, cut at the end of what was sent."""
+    out = []
+    end = _sent_until(run)
+    for r in run.steps or ():
+        a, w0, w1 = (_float(r.get(k)) for k in ("step_start_s", "window_start_s", "window_end_s"))
+        if a is None or w0 is None or w1 is None or a >= end:
+            continue
+        w0, w1 = min(w0, end), min(w1, end)
+        out.append((r.get("step"), a - run.offset, w0 - run.offset, w1 - run.offset, settled(r)))
+    return out
+
+
+def state_spans(run, t_end):
+    """``[(t0, t1, group, colour)]``: the run's engine states by :data:`STATE_GROUPS` on its
+    aligned axis (the last until ``t_end``, on the run's own axis)."""
+    group_of = {name: (g, colour) for g, names, colour in STATE_GROUPS for name in names}
+    out = []
+    for i, (t0, name) in enumerate(run.states):
+        t1 = run.states[i + 1][0] if i + 1 < len(run.states) else t_end
+        g = group_of.get(name)
+        if g is not None and t1 > t0:
+            out.append((t0 - run.offset, t1 - run.offset, g[0], g[1]))
+    return out
+
+
 def _line_label(ax, y, text, colour, above=True):
     from matplotlib.transforms import blended_transform_factory
 
@@ -967,14 +1001,7 @@ def _shade_windows(ax, run, label=True, numbers=True):
     tr = blended_transform_factory(ax.transData, ax.transAxes)
     first = True
     shown = set()
-    end = _sent_until(run)
-    for r in run.steps:
-        a, w0, w1 = (_float(r.get(k)) for k in ("step_start_s", "window_start_s", "window_end_s"))
-        if a is None or w0 is None or w1 is None or a >= end:
-            continue
-        w0, w1 = min(w0, end), min(w1, end)
-        a, w0, w1 = a - run.offset, w0 - run.offset, w1 - run.offset
-        ok = settled(r)
+    for step, a, w0, w1, ok in step_windows(run):
         if w0 > a:
             ax.axvspan(a, w0, facecolor="none", edgecolor="#9aa7b8", hatch="///", linewidth=0, zorder=0.5,
                        label="settling" if label and first else None)
@@ -984,22 +1011,16 @@ def _shade_windows(ax, run, label=True, numbers=True):
                        label=what if label and what not in shown else None)
             shown.add(what)
         if numbers:
-            ax.text((a + max(w1, a)) / 2, 1.0, f"{r.get('step')}{'' if ok else '*'}", transform=tr, ha="center",
+            ax.text((a + max(w1, a)) / 2, 1.0, f"{step}{'' if ok else '*'}", transform=tr, ha="center",
                     va="bottom", fontsize=7, color="#34495e" if ok else "#a61c00", fontweight="bold")
         first = False
 
 
 def _shade_states(ax, run, t_end, legend=True):
-    group_of = {name: (g, colour) for g, names, colour in STATE_GROUPS for name in names}
     used = set()
-    for i, (t0, name) in enumerate(run.states):
-        t1 = run.states[i + 1][0] if i + 1 < len(run.states) else t_end
-        g = group_of.get(name)
-        if g is None or t1 <= t0:
-            continue
-        ax.axvspan(t0 - run.offset, t1 - run.offset, color=g[1], zorder=0,
-                   label=f"state: {g[0]}" if legend and g[0] not in used else None)
-        used.add(g[0])
+    for t0, t1, group, colour in state_spans(run, t_end):
+        ax.axvspan(t0, t1, color=colour, zorder=0, label=f"state: {group}" if legend and group not in used else None)
+        used.add(group)
 
 
 def _step_axes(fig, grid, step_plots):
@@ -1170,9 +1191,10 @@ def _clip(text, width=110):
     return text if len(text) <= width else text[:width - 1] + "…"
 
 
-def render(path, fmt, runs, limits=(), title="zkzap run report", meta=()):
+def render(path, fmt, runs, limits=(), title="zkzap run report", meta=(), interactive=False):
     """Write the report of ``runs`` (one, or several compared; each :class:`Run` with its
-    ``steps``, ``summary`` and ``offset``) to ``path`` in ``fmt``; returns the skipped plots."""
+    ``steps``, ``summary`` and ``offset``) to ``path`` in ``fmt``; returns the skipped plots.
+    ``interactive`` (HTML only): plotly figures instead of SVG (:mod:`.report_interactive`)."""
     if isinstance(runs, Run):
         runs = [runs]
     limits = list(limits) + [x for run in runs for x in summary_limits(run.summary)
@@ -1187,7 +1209,12 @@ def render(path, fmt, runs, limits=(), title="zkzap run report", meta=()):
         warnings.filterwarnings("ignore", message=".*constrained.*", category=UserWarning)
         warnings.filterwarnings("ignore", message=".*[Tt]ight.*", category=UserWarning)
         if fmt == "html":
-            text = _html(runs, panels, step_plots, limits, title, meta)
+            if interactive:
+                from .report_interactive import page
+
+                text = page(runs, panels, step_plots, limits, title, meta)
+            else:
+                text = _html(runs, panels, step_plots, limits, title, meta)
             with open(path, "w", encoding="utf-8") as f:
                 f.write(text)
             return skipped
@@ -1227,37 +1254,47 @@ def _table(rows, header=None, ident=None):
 def _html(runs, panels, step_plots, limits, title, meta):
     from html import escape
 
+    figures = []
+    if panels:
+        fig = figure_histories(runs, panels, limits, None)
+        figures.append(f"<figure id=\"time-histories\"><figcaption>Time histories: "
+                       f"{escape(', '.join(p[0] for p in panels))}</figcaption>{_svg(fig)}</figure>")
+    if step_plots:
+        fig = figure_steps(step_plots, None)
+        figures.append(f"<figure id=\"steady-state\"><figcaption>Steady state (step means): "
+                       f"{escape(', '.join(p[0] for p in step_plots))}</figcaption>{_svg(fig)}</figure>")
+    return html_page(runs, title, meta, figures)
+
+
+def html_page(runs, title, meta, figures, head=""):
+    """The HTML report's page: the title, the summary table, ``figures`` (HTML), the steps side by
+    side (comparing runs) and each run's step table; ``head``: more for the page's head."""
+    from html import escape
+
     parts = [f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>",
              "<style>body{font-family:sans-serif;margin:1.5em;max-width:1300px}table{border-collapse:collapse;"
              "font-size:0.9em;margin:0.5em 0 1em}td,th{border-bottom:1px solid #ccc;padding:2px 8px;text-align:left}"
-             "figure{margin:1em 0}svg{max-width:100%;height:auto}</style></head><body>",
+             "figure{margin:1em 0}svg{max-width:100%;height:auto}</style>" + head + "</head><body>",
              f"<h1>{escape(title)}</h1>"]
     rows = header_rows(runs, meta)
     if rows:
-        head = "" if len(runs) == 1 else "<tr><th></th>" + "".join(f"<th>{escape(r.label)}</th>" for r in runs) + \
+        top = "" if len(runs) == 1 else "<tr><th></th>" + "".join(f"<th>{escape(r.label)}</th>" for r in runs) + \
             "</tr>"
-        parts.append("<table id=\"summary\">" + head + "".join(
+        parts.append("<table id=\"summary\">" + top + "".join(
             "<tr><th>" + escape(str(r[0])) + "</th>" + "".join(f"<td>{escape(str(v))}</td>" for v in r[1:]) + "</tr>"
             for r in rows) + "</table>")
-    if panels:
-        fig = figure_histories(runs, panels, limits, None)
-        parts.append(f"<figure id=\"time-histories\"><figcaption>Time histories: "
-                     f"{escape(', '.join(p[0] for p in panels))}</figcaption>{_svg(fig)}</figure>")
-    if step_plots:
-        fig = figure_steps(step_plots, None)
-        parts.append(f"<figure id=\"steady-state\"><figcaption>Steady state (step means): "
-                     f"{escape(', '.join(p[0] for p in step_plots))}</figcaption>{_svg(fig)}</figure>")
+    parts += figures
     if len(runs) > 1 and any(r.steps for r in runs):
         header, body = step_comparison(runs)
         parts.append(f"<h2>Steps side by side</h2><p>Δ: the difference from {escape(runs[0].label)}. "
                      f"{escape(UNSETTLED_NOTE)}.</p>" + _table(body, header, "step-comparison"))
     for run in runs:
         if run.steps:
-            cols, head = step_table(run.steps)
+            cols, heads = step_table(run.steps)
             name = f"Steps: {run.label}" if len(runs) > 1 else "Steps"
             ident = "steps" if run is runs[0] else None
-            parts.append(f"<h2>{escape(name)}</h2>" + _table([[_cell(r, c) for c in cols] for r in run.steps], head,
-                                                            ident))
+            parts.append(f"<h2>{escape(name)}</h2>" + _table([[_cell(r, c) for c in cols] for r in run.steps],
+                                                            heads, ident))
     parts.append("</body></html>\n")
     return "\n".join(parts)
 

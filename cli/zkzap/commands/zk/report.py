@@ -26,7 +26,8 @@ class AlignType(click.ParamType):
         self.fail(f"{value!r}; allowed start, first, running or step:N (N a step number, 1 or more)", param, ctx)
 
 
-@exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]')",
+@exits({OK: "written", USAGE: "bad usage, an unreadable input, or matplotlib missing (pip install 'zkzap[plot]'; "
+                            "plotly for --interactive: pip install 'zkzap[interactive]')",
         OUTPUT_ERROR: "the report could not be written"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("run_files", metavar="RUN...", nargs=-1, required=True, type=InputPath("run", label="RUN"))
@@ -57,8 +58,12 @@ class AlignType(click.ParamType):
               help="A line of run metadata in the header (engine=K-100 serial=1234 ...). Repeatable.")
 @click.option("--terminal", is_flag=True, help="Draw the time histories in the terminal instead (no matplotlib "
                                                "needed).")
+@click.option("--interactive", is_flag=True,
+              help="With -o REPORT.html: interactive plots (zoom and pan on one time axis, every line's value at "
+                   "the cursor) through plotly, an optional extra: pip install 'zkzap[interactive]'. One "
+                   "self-contained file (plotly.js inlined, about 5 MB).")
 def report(run_files, steps_files, summary_files, limit, limits_files, labels, align, output, fmt, title, meta,
-           terminal):
+           terminal, interactive):
     """Render a run's telemetry as a report with plots, or compare several runs.
 
     RUN is what 'zk monitor', 'zk send --for' or 'zk profile' wrote (CSV snapshot rows, JSON
@@ -75,7 +80,9 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
     legend naming each run (--label), the steady-state curves of each, and their steps side by
     side with the differences from the first run.
 
-    Needs matplotlib (pip install 'zkzap[plot]'), except --terminal.
+    Needs matplotlib (pip install 'zkzap[plot]'), except --terminal; --interactive writes an
+    HTML page of plotly figures instead (zoom, pan, a readout at the cursor; pip install
+    'zkzap[interactive]').
 
     \b
     Examples:
@@ -83,6 +90,7 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
       zk report tel.csv --steps steps.csv --summary sum.json -o report.html --meta engine=K-100
       zk report before.csv after.csv --summary before.json --summary after.json --align step:1 -o cmp.png
       zk report tel.csv --limits engine.limits -o run.pdf
+      zk report tel.csv --steps steps.csv -o run.html --interactive
       zk report run.bin -o run.png
       zk monitor --sim --duration 20 | zk report - --terminal
     """
@@ -106,8 +114,9 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
     # a rate limit (FIELD/s) is no level of its field: no line on the field's plot
     limits = [(c.text, c.field, c.op, c.threshold, c.warn) for c in conditions if not c.rate]
     if terminal:
-        if output or fmt:
-            raise UsageError(f"{'output' if output else 'format'}: not with --terminal (it draws on the terminal)")
+        if output or fmt or interactive:
+            raise UsageError(f"{'output' if output else 'format' if fmt else 'interactive'}: not with --terminal "
+                             "(it draws on the terminal)")
     else:
         if not output:
             raise UsageError("output: give -o REPORT.png|svg|pdf|html, or --terminal")
@@ -117,7 +126,14 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
         from ...outfile import check_path
 
         check_path(output, "output")                  # its inputs: the options' own check
-        R._mpl()                                      # refuse early (exit 2) without matplotlib
+        if interactive:
+            if fmt != "html":
+                raise UsageError(f"interactive: an HTML report (-o REPORT.html); {output} names {fmt}")
+            from ...io.report_interactive import require
+
+            require()                                 # refuse early (exit 2) without plotly
+        else:
+            R._mpl()                                  # refuse early (exit 2) without matplotlib
     steps = [R.load_steps(p) for p in steps_files] or [None] * n
     summaries = [R.load_summary(p) for p in summary_files] or [None] * n
     fields = {x[1] for x in limits} | {x[1] for s in summaries for x in R.summary_limits(s)}
@@ -145,6 +161,6 @@ def report(run_files, steps_files, summary_files, limit, limits_files, labels, a
         from ...outfile import replacing
 
         with replacing(output, suffix=os.path.splitext(output)[1]) as tmp:
-            skipped = R.render(tmp, fmt, runs, limits, title, pairs)
+            skipped = R.render(tmp, fmt, runs, limits, title, pairs, interactive=interactive)
     for s in skipped:
         note(f"skipped {s}")
