@@ -114,3 +114,30 @@ def test_a_zk_batch_acknowledges_a_trip_and_a_start_is_refused_while_it_is_latch
 def test_a_bad_stand_line_is_refused_before_anything_is_sent(cli, line, said):
     r = cli("zk", "batch", "-", "-p", "sim://zk", input=f"send keepalive\n{line}\n")
     assert r.exit_code == 2 and f"stdin:2: {said}" in r.stderr and r.stdout == "", r.stderr
+
+
+def test_a_lines_large_output_is_streamed_into_its_record_not_kept(cli, monkeypatch):
+    from zkzap.commands import batch
+
+    monkeypatch.setattr(batch, "STREAM_AFTER", 4096)
+    kept = []
+    write = batch._LineOutput.write
+
+    def spy(self, text):
+        n = write(self, text)
+        kept.append(self.tell())            # what the line's output holds in memory
+        return n
+
+    monkeypatch.setattr(batch._LineOutput, "write", spy)
+    r = cli("zk", "batch", "-", "-p", "sim://zk?speed=50",
+            input="monitor --count 600 -f jsonl\nsend keepalive\nfields -f csv\nmonitor --count 2 --ids 1\n")
+    assert r.exit_code == 0, r.stderr
+    recs = records(r.stdout)                                # every record is one whole JSON line
+    assert [x["line"] for x in recs] == [1, 2, 3, 4] and [x["exit"] for x in recs] == [0, 0, 0, 0]
+    assert len(recs[0]["result"]) == 600 and all(x["kind"] == "status" for x in recs[0]["result"])
+    assert len(r.stdout.splitlines()[0]) > 20 * 4096        # streamed: far more than was ever kept
+    assert max(kept) <= 4096 + 1000                         # at most the limit and one write
+    assert recs[1]["result"] is None                        # a small output: as before
+    csv = recs[2]["result"]                                 # streamed text: a line each, as a string
+    assert csv[0].startswith("kind,id,frame,") and all(isinstance(x, str) for x in csv) and len(csv) > 20
+    assert len(recs[3]["result"]) == 2

@@ -21,6 +21,7 @@ import os
 import shlex
 import signal
 import sys
+import threading
 
 import click
 
@@ -393,6 +394,97 @@ def run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_b
                           keep_baud_after=keep_baud_after)
 
 
+def _error_of(messages):
+    """The last error message a line said (None: none)."""
+    errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
+    return errors[-1] if errors else None
+
+
+#: A line's output is kept (and its record written whole, its result parsed as a whole) up to this
+#: many characters; beyond, the record is streamed: written as the output comes, its result the
+#: list of the output's lines, each its JSON value or, where it is none, its text.
+STREAM_AFTER = 1 << 16
+
+
+def _json_item(text):
+    """One line of a streamed result as JSON: the line itself where it is a JSON value, else
+    the line as a string."""
+    text = text.strip()
+    try:
+        json.loads(text, parse_constant=_no_constant)
+    except ValueError:
+        return _encode(text)
+    return text
+
+
+def _no_constant(name):
+    raise ValueError(f"{name} is no JSON value")
+
+
+class _LineOutput(io.StringIO):
+    """What a batch line prints (its stdout): kept up to :data:`STREAM_AFTER` characters, then
+    streamed into its record (:meth:`_Records.begin`), so that memory stays bounded whatever a
+    line prints (a long ``monitor``, a ``send --for`` of hours). A write may come from another
+    thread (an output's lane)."""
+
+    def __init__(self, records, limit=None):
+        super().__init__()
+        self._records = records
+        self._limit = STREAM_AFTER if limit is None else limit
+        self._lock = threading.Lock()
+        self.line = None
+        self._reset()
+
+    def _reset(self):
+        self.streamed = False
+        self._size = 0
+        self._tail = ""
+        self._first = True
+
+    def start(self, line) -> None:
+        """A new line runs: its output starts empty."""
+        self.seek(0)
+        self.truncate()
+        self.line = line
+        self._reset()
+
+    def write(self, text):
+        with self._lock:
+            if not self.streamed:
+                n = super().write(text)
+                self._size += len(text)
+                if self._size > self._limit:
+                    kept = self.getvalue()
+                    self.seek(0)
+                    self.truncate()
+                    self.streamed = True
+                    self._records.begin(self.line)
+                    self._stream(kept)
+                return n
+            self._stream(text)
+            return len(text)
+
+    def _stream(self, text):
+        parts = (self._tail + text).split("\n")
+        self._tail = parts.pop()
+        values = [_json_item(p) for p in parts if p.strip()]
+        if values:
+            self._records.items(values, self._first)
+            self._first = False
+
+    def finish(self, code, messages):
+        """The line ended: ``(True, None)`` when its record was streamed (now ended), else
+        ``(False, what it printed)``."""
+        with self._lock:
+            if not self.streamed:
+                return False, self.getvalue()
+            if self._tail.strip():
+                self._records.items([_json_item(self._tail)], self._first)
+            self._tail = ""
+            self._records.end(code, messages)
+            return True, None
+
+
 class _Records:
     """The batch's records on ``out``, in order. A line's record is written in the bus's next
     spare moment (:meth:`zkzap.link.zap_bus.ZapBus.spare`: the next line's request is on the
@@ -410,6 +502,24 @@ class _Records:
         self.held = None               # (line, exit, printed, messages) not written yet
         self.queued = False            # the bus holds a call of _write (at most one)
         self.failed = None             # what writing raised in the bus's spare time
+
+    def begin(self, line) -> None:
+        """A line's output outgrew :data:`STREAM_AFTER`: its record is written as it comes (the
+        records before it first), from its head: ``{"line": N, "command": "...", "result": [``."""
+        self.flush()
+        head = _encode({"line": line.number, "command": line.text})
+        self.lane.call(self._emit, head[:-1] + ', "result": [')
+
+    def items(self, values, first) -> None:
+        """Values of a streamed record's result (JSON texts), after those written."""
+        self.lane.call(self._emit, ("" if first else ", ") + ", ".join(values))
+
+    def end(self, code, messages) -> None:
+        """The end of a streamed record: its exit status (and error)."""
+        tail = {"exit": code}
+        if code:
+            tail["error"] = _error_of(messages)
+        self.lane.call(self._emit, "], " + _encode(tail)[1:] + "\n")
 
     def put(self, line, code, printed, messages) -> None:
         self.flush()
@@ -434,8 +544,7 @@ class _Records:
         self.held = None
         rec = {"line": line.number, "command": line.text, "exit": code, "result": parse_result(printed)}
         if code:
-            errors = [m.split("error: ", 1)[1] for m in messages.splitlines() if "error: " in m]
-            rec["error"] = errors[-1] if errors else None
+            rec["error"] = _error_of(messages)
         self.lane.call(self._emit, _encode(rec) + "\n")
 
     def _emit(self, text) -> None:
@@ -466,8 +575,9 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
 
     first = 0
     last = None
-    buf, err = io.StringIO(), io.StringIO()   # what a line prints: emptied for the next line
     records = _Records(out, shared(protocol))
+    # what a line prints, emptied for the next line (its output streamed when it grows large)
+    buf, err = _LineOutput(records), io.StringIO()
     contexts = {}
     with stop.deferring():
         try:
@@ -477,6 +587,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 last = line
                 Borrowed.keep_baud = line.path[0] in keep_baud_after
                 saved = sys.stdout, sys.stderr
+                buf.start(line)
                 sys.stdout, sys.stderr = buf, err
                 try:
                     if line.builtin is not None:
@@ -488,10 +599,9 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 finally:
                     sys.stdout, sys.stderr = saved
                     Borrowed.keep_baud = False
-                printed, messages = buf.getvalue(), err.getvalue()
-                for b in (buf, err):
-                    b.seek(0)
-                    b.truncate()
+                messages = err.getvalue()
+                err.seek(0)
+                err.truncate()
                 signum = stop.requested()
                 if signum is not None and stop.pending() is None and not code:
                     code = signals.status(signum)   # stopped, though the command returned
@@ -500,7 +610,9 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                     records.lane.drain()
                     sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
                     sys.stderr.flush()
-                records.put(line, code, printed, messages)
+                streamed, printed = buf.finish(code, messages)
+                if not streamed:
+                    records.put(line, code, printed, messages)
                 if code and not first:
                     first = code
                 if code == INTERRUPTED or signals.terminated_status(code) or (code and not keep_going):

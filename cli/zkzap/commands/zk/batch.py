@@ -35,7 +35,10 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
 
     Each command gives one JSON Lines record on stdout: line, command, exit, result (what it
     printed) and error when it failed; the status records of a 'send --for' or 'monitor' line
-    are its result. The batch stops at the first failure unless --keep-going and exits with
+    are its result. A line that prints more than 64 KiB has its record streamed as it prints
+    (memory stays bounded however long it runs): its result is then the list of what it printed,
+    a value per line (a line that is no JSON as its text), and exit follows result. The batch
+    stops at the first failure unless --keep-going and exits with
     the first failure's status. Ctrl-C (or SIGTERM) stops the running line after its current
     transaction (a frame is never cut in half; a 'send --for', 'profile' or 'monitor' session
     stops between two records and sends its abort command as usual): its record says exit 130
