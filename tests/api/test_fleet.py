@@ -7,7 +7,8 @@ import pytest
 
 from zkzap.api import fleet
 from zkzap.codec import zap
-from zkzap.errors import NoReply, UsageError
+from zkzap.codec.permissions import FORCE
+from zkzap.errors import NoReply, PermissionNeeded, UsageError
 from zkzap.link.zap_bus import open_bus
 from zkzap.sim.zap_actuators import Actuator
 
@@ -336,7 +337,9 @@ def test_return_mode_changes_are_protected_and_keep_the_link_usable(bus_of):
               + fleet.plan(entries[2], 2, cur[2], only=[mode], force=True)[0])
     assert [w.register.name for w in writes] == ["speed-limit", "feedback-return-mode", "feedback-return-mode"]
     done = []
-    fleet.execute(b, writes, done)
+    with pytest.raises(PermissionNeeded):                   # mode 0 stops the actuator answering: force
+        fleet.execute(b, writes, [])
+    fleet.execute(b, writes, done, allow=FORCE)
     assert [w.status for w in done] == ["verified", "verified", "unverifiable"]     # mode 0 cannot be read back
     assert b.return_mode == 1 and b.read(3, R["speed-limit"]) == 1023       # the link still talks mode 1
     assert b.port.device.actuator(2).get(mode) == 0 and b.port.device.actuator(1).get(mode) == 2

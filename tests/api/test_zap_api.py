@@ -143,7 +143,7 @@ def test_protocol_change_refused_without_force(zap_sim):
     with Bus(zap_sim) as bus:
         with pytest.raises(UsageError, match="Modbus RTU") as e:
             bus.store(1, "protocol-type", 0)
-        assert e.value.missing == Permission.IDENTITY
+        assert e.value.missing == Permission.IDENTITY | Permission.SILENCING
 
 
 @pytest.mark.zap_sim(return_mode=0)

@@ -177,7 +177,7 @@ def zap_captures(tmp_path_factory):
         ["store", "goal-position", "2000", "--id", "1", "-p", sim, "--return-mode", "2"],
         ["load", "present-voltage", "--id", "2", "-p", sim],
         ["sync-move", "1:1000", "2:3000", "-p", sim],
-        ["factory-reset", "--id", "1", "--reset-id", "-p", sim, "--yes", "--return-mode", "2"],
+        ["factory-reset", "--id", "1", "--reset-id", "-p", sim, "--yes", "--force", "--return-mode", "2"],
         ["load", "model-number", "--length", "4", "--id", "1", "-p", sim],
     ]):
         path = d / f"c{n}.pcapng"

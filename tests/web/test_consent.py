@@ -9,7 +9,7 @@ import pytest
 from zkzap import Bus, Permission, PermissionNeeded
 from zkzap.codec import permissions, zap, zk
 from zkzap.sim import start_zap
-from zkzap.web.consent import ENGINE, FORCE, MOVE, STORED, Needed, Policy, needs_force
+from zkzap.web.consent import ENGINE, FORCE, MOVE, STORED, Needed, Policy, force_values, needs_force
 
 REAL, SIM = "socket://127.0.0.1:9", "sim://zap?ids=1"
 
@@ -32,6 +32,11 @@ def needs(fn, *args):
     (SIM, zap.store(1, "protocol-type", 1), (), FORCE),                   # force on every port
     (SIM, zap.store(1, "feedback-return-mode", 2), (), None),            # a stored setting, not identity
     (REAL, zap.store(1, "feedback-return-mode", 2), (), STORED),
+    (SIM, zap.store(1, "feedback-return-mode", 0), (), FORCE),           # Echo only: it stops answering
+    (REAL, zap.store(1, "feedback-return-mode", 0), (), FORCE),
+    (REAL, zap.store(1, "feedback-return-mode", 0), (FORCE,), STORED),
+    (SIM, zap.factory_reset(1, True, False), (), FORCE),                   # it moves to ID 0
+    (REAL, zap.factory_reset(1, True, False), (FORCE,), STORED),
     (REAL, zap.store(1, "id", 5, force=True), (), FORCE),                 # force is asked first
     (REAL, zap.store(1, "id", 5, force=True), (FORCE,), STORED),
     (SIM, zap.store(1, 0x97, 1, force=True), (), FORCE),                  # IR Robot's undocumented lock
@@ -47,6 +52,22 @@ def test_grants_are_the_library_permissions():
     assert Policy.allow((FORCE,)) == permissions.FORCE and Policy.allow((ENGINE,)) == Permission.ENGINE
     assert Policy("loop://").simulated and not Policy(REAL).simulated
     assert [r.name for r in zap.REGISTERS if needs_force(r)] == ["protocol-type"]   # id, baud: the checked ways
+    # the values the page marks are the library's rule, from the same table
+    assert {r.name: force_values(r) for r in zap.REGISTERS if force_values(r)} == \
+        {"protocol-type": [0, 1], "feedback-return-mode": [0]}
+
+
+def test_the_page_marks_exactly_what_the_library_refuses():
+    """For every writable register and every value of its domain the page knows (its choices, or
+    the ends of its range), the page marks force exactly where the library refuses the write
+    without it (PermissionNeeded naming a FORCE permission): one table for both."""
+    for reg in zap.REGISTERS:
+        if not reg.writable or reg.name in ("id", "baud-rate"):
+            continue
+        for value in (sorted(reg.choices) if reg.choices else sorted({reg.lo, reg.hi})):
+            pkt = zap.store(1, reg, value)
+            asked = needs(Policy(SIM).zap_packets, [pkt], ())
+            assert (asked == FORCE) == needs_force(reg, value) == (value in force_values(reg)), (reg.name, value)
 
 
 def test_the_library_refusal_is_the_question():

@@ -415,6 +415,10 @@ class Request:
                     need(P.STORED, f"writes {reg.name}, a stored setting (it survives power-off)")
                 if reg.identity:
                     need(P.IDENTITY, _identity_why(reg, value, m))
+                if value in reg.silencing:
+                    from .zap import silencing_why
+
+                    need(P.SILENCING, silencing_why(reg, value))
         if self.broadcast and out:
             need(P.BROADCAST, "sent to every actuator at once (broadcast ID 0)")
         return out

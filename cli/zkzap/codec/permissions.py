@@ -10,9 +10,17 @@ Two kinds:
 
 - :data:`CONSENT` (``ENGINE``, ``STORED``, ``FACTORY``): what can harm real hardware. Needed on a
   real port only; a simulator (``sim://``, ``loop://`` for mightyZAP) never needs it.
-- :data:`FORCE` (``IDENTITY``, ``UNDOCUMENTED``, ``PARTIAL``, ``BROADCAST``): deliberate acts
-  that skip a safer way or leave the documentation. Needed everywhere, the simulator too: they
-  are as surprising there as on a bench.
+- :data:`FORCE` (``IDENTITY``, ``SILENCING``, ``UNDOCUMENTED``, ``PARTIAL``, ``BROADCAST``):
+  deliberate acts that skip a safer way, leave the documentation or can leave an actuator that
+  no longer answers. Needed everywhere, the simulator too: they are as surprising there as on a
+  bench.
+
+The rule for a write that can make an actuator stop answering is one entry of this table
+(``SILENCING``), decided from the register map (a register's ``silences=V`` values:
+feedback-return-mode 0, after which the actuator answers Echo only, and protocol-type 0, after
+which it answers Modbus RTU only) and, for Factory Reset, from its flags (resetting the ID or the
+baud rate moves the actuator to ID 0 or 57600 baud: ``IDENTITY``). The command line, the Python
+API, ``zap apply`` and the browser console all ask the typed frame, so they cannot disagree.
 """
 
 from __future__ import annotations
@@ -38,6 +46,8 @@ class Permission(enum.Flag):
     STORED = enum.auto()
     #: Changes where or how the actuator answers: its ID, baud rate or protocol type.
     IDENTITY = enum.auto()
+    #: Can make the actuator stop answering (feedback-return-mode 0: Echo only; protocol-type 0).
+    SILENCING = enum.auto()
     #: Factory reset (0xF6) or IR Robot's system write (0xF9, their library's factory reset).
     FACTORY = enum.auto()
     #: An address, instruction or value the 12Lf documentation does not give (0x05, 0x97 lock,
@@ -59,7 +69,8 @@ else:
 #: What ``--yes`` grants: hazards to real hardware, never needed on a simulator.
 CONSENT = Permission.ENGINE | Permission.STORED | Permission.FACTORY
 #: What ``--force`` grants: deliberate acts, needed everywhere.
-FORCE = Permission.IDENTITY | Permission.UNDOCUMENTED | Permission.PARTIAL | Permission.BROADCAST
+FORCE = (Permission.IDENTITY | Permission.SILENCING | Permission.UNDOCUMENTED | Permission.PARTIAL
+         | Permission.BROADCAST)
 #: Every permission.
 ALL = CONSENT | FORCE
 
@@ -68,6 +79,7 @@ NAMES = {
     Permission.ENGINE: "engine start",
     Permission.STORED: "stored write",
     Permission.IDENTITY: "identity change",
+    Permission.SILENCING: "stops answering",
     Permission.FACTORY: "factory reset",
     Permission.UNDOCUMENTED: "undocumented",
     Permission.PARTIAL: "partial register",
@@ -85,7 +97,11 @@ WHAT = {
     Permission.FACTORY: "Factory Reset (0xF6), and IR Robot's system write (0xF9), which their Python "
                         "library sends as its factory reset",
     Permission.IDENTITY: "a direct write of id, baud-rate or protocol-type: it changes where or how the "
-                         "actuator answers (set-id and set-baud are the checked ways)",
+                         "actuator answers (set-id and set-baud are the checked ways); a Factory Reset that "
+                         "resets the ID or the baud rate",
+    Permission.SILENCING: "a write after which the actuator stops answering: feedback-return-mode 0 (it then "
+                          "answers Echo only, never a read) and protocol-type 0 (Modbus RTU only); the map "
+                          "marks such values (silences=V)",
     Permission.UNDOCUMENTED: "an address the 12Lf map does not give (0x05, IR Robot's lock 0x97), a read-only "
                              "register, a value outside a register's documented range, bits or choices, an "
                              "instruction the 12Lf does not document (but 0xF9)",

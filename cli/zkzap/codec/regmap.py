@@ -18,8 +18,10 @@ line, ten cells separated by ``|``::
   ``bits 0=input voltage; 5=overload``;
 - unit: empty, a unit (``mA``) or a scale and a unit (``0.1 V``: raw tenths, shown in volts);
 - default: empty or a value inside the range;
-- permissions: empty, or words among ``identity`` (changes where or how the actuator answers)
-  and ``undocumented`` (an address the maker's documentation does not give);
+- permissions: empty, or words among ``identity`` (changes where or how the actuator answers),
+  ``undocumented`` (an address the maker's documentation does not give) and ``silences=V``
+  (``silences=0``, several as ``silences=0/3``: writing one of these values makes the actuator
+  stop answering, or answer Echo only; such a write needs the SILENCING permission, a force);
 - help: the rest of the line.
 
 Every fault is a :class:`MapError` (exit 2) naming ``FILE:LINE``: overlapping registers, a
@@ -43,7 +45,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
 PROTOCOLS = {"ir": (0xFF, (8, 16, 32), "little"), "modbus": (0xFFFF, (16,), "big")}
 MEMORY_KINDS = ("NV", "V", "-")
 ACCESS_KINDS = ("R", "RW")
-PERMISSION_WORDS = ("identity", "undocumented")
+PERMISSION_WORDS = ("identity", "undocumented", "silences=V")
 #: The directory of the maps zkzap ships.
 MAPS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "maps")
 #: Shipped maps by (model, protocol) key: the file in :data:`MAPS_DIR`.
@@ -70,17 +72,19 @@ class Register:
     ``size`` is in bytes. ``byteorder`` is how the value lies on the wire: ``"little"`` on the IR
     protocol (byte addresses), ``"big"`` on Modbus RTU (16-bit registers, one address each:
     :attr:`span` is the number of addresses the register takes). ``identity`` marks a register
-    that decides where or how the actuator answers (its ID, baud rate, protocol).
+    that decides where or how the actuator answers (its ID, baud rate, protocol); ``silencing``
+    the values after whose write the actuator stops answering (feedback-return-mode 0: Echo
+    only; protocol-type 0: it leaves the IR protocol).
     """
 
     __slots__ = ("address", "name", "size", "access", "stored", "default", "lo", "hi", "unit",
-                 "scale", "choices", "bits", "help", "documented", "byteorder", "identity")
+                 "scale", "choices", "bits", "help", "documented", "byteorder", "identity", "silencing")
 
     def __init__(self, address: int, name: str, size: int, access: str, default: Optional[int] = None,
                  lo: Optional[int] = None, hi: Optional[int] = None, unit: str = "", scale: float = 1,
                  choices: Optional[Mapping[int, str]] = None, bits: Optional[Mapping[int, str]] = None,
                  help: str = "", documented: bool = True, byteorder: str = "little",
-                 identity: bool = False) -> None:
+                 identity: bool = False, silencing: Sequence[int] = ()) -> None:
         self.address = address
         self.name = name
         self.size = size
@@ -99,6 +103,7 @@ class Register:
         self.documented = documented
         self.byteorder = byteorder
         self.identity = identity
+        self.silencing = frozenset(silencing)
 
     @property
     def span(self) -> int:
@@ -304,12 +309,20 @@ def _register(cells, protocol, where):
         if scale == int(scale):
             scale = int(scale)
     words = perms_t.replace(",", " ").split()
+    silencing = []
     for w in words:
-        if w not in PERMISSION_WORDS:
+        if w.startswith("silences="):
+            for v in w[len("silences="):].split("/"):
+                silencing.append(_int(v.strip(), "silences", where))
+        elif w not in PERMISSION_WORDS:
             raise _fault(where, f"{name}: unknown permission {w!r}; allowed {', '.join(PERMISSION_WORDS)}")
     reg = Register(address, name, size, access if memory == "-" else f"{access} {memory}",
                    None, lo, hi, unit=unit, scale=scale, choices=choices, bits=bits, help=help_t,
-                   documented="undocumented" not in words, byteorder=order, identity="identity" in words)
+                   documented="undocumented" not in words, byteorder=order, identity="identity" in words,
+                   silencing=silencing)
+    for v in silencing:
+        if not reg.allows(v):
+            raise _fault(where, f"{name}: silences={v} is outside its range ({reg.describe_range()})")
     if default_t:
         default = _int(default_t, "default", where)
         if not reg.allows(default):

@@ -470,6 +470,12 @@ class Command:
         code = self.code
         if code == FACTORY_RESET:
             need(P.FACTORY, "factory reset: every stored setting is overwritten")
+            flags = self.params[0] if self.params else 0
+            if flags & 3:
+                moved = " and ".join(w for bit, w in ((1, "to ID 0"), (2, "at 57600 baud")) if flags & bit)
+                need(P.IDENTITY, f"factory reset of the {'ID' if flags & 1 else ''}"
+                                 f"{' and ' if flags & 3 == 3 else ''}{'baud rate' if flags & 2 else ''}: "
+                                 f"the actuator then answers {moved} only")
         elif code == SYSTEM_WRITE:
             need(P.FACTORY, "system write (0xF9): IR Robot's library sends it as a factory reset")
         elif self.instruction is None:
@@ -522,6 +528,15 @@ _IDENTITY_WHY = {
 }
 
 
+def silencing_why(reg: Register, value: int) -> str:
+    """Why writing ``value`` to ``reg`` (one of its :attr:`~zkzap.codec.regmap.Register.silencing`
+    values) needs the SILENCING permission, in words."""
+    meaning = reg.choices.get(value) if reg.choices else None
+    return (f"writes {reg.name} {value}" + (f" ({meaning})" if meaning else "") +
+            ": the actuator then no longer answers a read (nothing can confirm the write, and only a write "
+            "back or a factory reset brings its answers back)")
+
+
 def _block_needs(address: int, data: bytes):
     """``[(Permission, reason)]`` for writing ``data`` at ``address``: stored memory, identity
     registers, bytes the map does not document, registers written in part, values outside a
@@ -561,6 +576,10 @@ def _block_needs(address: int, data: bytes):
         if reg.name in IDENTITY_REGISTERS:
             value = int.from_bytes(data[max(first, address) - address:min(last, end) - address], "little")
             out.append((P.IDENTITY, _IDENTITY_WHY[reg.name](value)))
+        if reg.silencing and first >= address and last <= end:
+            value = int.from_bytes(data[first - address:last - address], "little")
+            if value in reg.silencing:
+                out.append((P.SILENCING, silencing_why(reg, value)))
         a = last
     return out
 

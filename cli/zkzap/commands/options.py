@@ -725,9 +725,10 @@ zap_yes_option = click.option(
 #: :mod:`zkzap.codec.permissions` (``--yes`` is the consent on a real port; this is needed on
 #: the simulator too).
 FORCE_HELP = ("Allow deliberate writes that --yes does not cover, simulator included: the id, baud-rate "
-              "or protocol-type register (set-id and set-baud check and verify instead), addresses and "
-              "values the 12Lf map does not document, a write to part of a multi-byte register, and "
-              "such writes to every actuator (broadcast).")
+              "or protocol-type register (set-id and set-baud check and verify instead), a write after "
+              "which the actuator stops answering (feedback-return-mode 0), a factory reset of the ID or "
+              "baud rate, addresses and values the 12Lf map does not document, a write to part of a "
+              "multi-byte register, and such writes to every actuator (broadcast).")
 
 force_option = click.option("--force", is_flag=True, help=FORCE_HELP)
 

@@ -7,7 +7,8 @@ enforced where every frame goes out (the bus and the ZK link), for the command l
 library and the consoles alike: a stored write, a factory reset and a ZK frame that can start
 the engine or run ECU hardware need consent on a real port (a simulator waives it); a direct
 write of id, baud-rate or protocol-type, an undocumented address or value, a partial register
-and a broadcast of those need force on every port. ``zap set-id`` and ``zap set-baud``, the
+a write after which the actuator stops answering (feedback-return-mode 0, protocol-type 0) and
+a broadcast of those need force on every port. ``zap set-id`` and ``zap set-baud``, the
 checked ways, need the stored-write consent only.
 
 This module is the one adapter between the pages and that mechanism: :meth:`Policy.allow`
@@ -65,14 +66,30 @@ def simulated(url: str) -> bool:
     return is_simulated(url)
 
 
-def needs_force(reg) -> bool:
-    """Whether the console's write of register ``reg`` needs force (the library's rule for a
-    direct write; id and baud-rate are written the checked way, which does not)."""
+def _direct_write(reg, value) -> bytes:
+    return zap.packet(1, zap.STORE_DATA, bytes((reg.address,)) + reg.to_bytes(value))
+
+
+def force_values(reg) -> list:
+    """The values of register ``reg`` whose direct write from the console needs force, as the
+    library decides it on the packet (:meth:`zkzap.codec.zap.Command.needs`): every value of a
+    register whose write changes where or how the actuator answers (protocol-type), the values
+    after which it stops answering (feedback-return-mode 0), none of most. id and baud-rate are
+    written the checked way (set-id, set-baud), which does not need force. A register with a
+    range (no choices) is asked at both ends."""
     if reg.name in CHECKED or not reg.writable:
-        return False
-    value = min(reg.choices) if reg.choices else reg.lo
-    packet = zap.packet(1, zap.STORE_DATA, bytes((reg.address,)) + reg.to_bytes(value))
-    return bool(zap.Command(packet).permissions & P.FORCE)
+        return []
+    values = sorted(reg.choices) if reg.choices else sorted({reg.lo, reg.hi})
+    return [v for v in values if zap.Command(_direct_write(reg, v)).permissions & P.FORCE]
+
+
+def needs_force(reg, value=None) -> bool:
+    """Whether the console's direct write of register ``reg`` needs force: of ``value``, or
+    (None) whatever value is written (protocol-type: the page marks its button)."""
+    if value is not None:
+        return reg.name not in CHECKED and bool(zap.Command(_direct_write(reg, value)).permissions & P.FORCE)
+    values = sorted(reg.choices) if reg.choices else sorted({reg.lo, reg.hi})
+    return bool(values) and force_values(reg) == values
 
 
 class Policy:

@@ -21,7 +21,7 @@ from ..api.watch import Watcher
 from ..codec import zap
 from ..codec.fields import FieldValueError
 from ..errors import NoReply, UsageError
-from .consent import needs_force
+from .consent import force_values, needs_force
 from .console import Console, number
 from .zap_motion import MotionTools
 from .zap_packets import PacketTools
@@ -472,7 +472,7 @@ def _register_info(reg) -> dict:
             "memory": reg.memory, "lo": reg.lo, "hi": reg.hi, "unit": reg.unit, "scale": reg.scale,
             "choices": {str(k): v for k, v in reg.choices.items()} if reg.choices else None,
             "range": reg.describe_range(), "help": reg.help, "default": reg.default,
-            "protected": needs_force(reg)}
+            "protected": needs_force(reg), "force_values": force_values(reg)}
 
 
 def _ranges(ids) -> str:

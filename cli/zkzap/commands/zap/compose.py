@@ -715,7 +715,8 @@ store = _write_command("store", zap.store, """Store Data (0xF3): write VALUE to 
 VALUE is an integer in the register's units ('zap registers' lists ranges, bits and
 choices), written little-endian in the register's size. Read-only registers and values outside
 what the register documents are refused. Writing id, baud-rate or protocol-type needs --force
-('zap set-id' and 'zap set-baud' check and verify instead), as do addresses the map does not
+('zap set-id' and 'zap set-baud' check and verify instead), as does a value after which the
+actuator stops answering (feedback-return-mode 0: Echo only) and addresses the map does not
 document (0x05, lock) and an address inside a multi-byte register (0x87, goal-position's high
 byte).
 """ + _WIRE_NOTE + """
@@ -762,8 +763,10 @@ def execute(ident, **common):
 def factory_reset(reset_id, reset_baud, ident, force, **common):
     """Factory Reset (0xF6): restore the factory settings (the actuator then restarts).
 
-    On a real port it asks for consent (--yes): every stored setting is overwritten. To every
-    actuator at once (--id broadcast) it needs --force too.
+    On a real port it asks for consent (--yes): every stored setting is overwritten. With
+    --reset-id or --reset-baud it needs --force too (the actuator then answers at ID 0 or at
+    57600 baud only, as a direct id or baud-rate write), and to every actuator at once (--id
+    broadcast).
 
     \b
     Examples:

@@ -132,12 +132,16 @@
                Object.entries(info.choices).map(([k, v]) => el("option", { value: k, selected: Number(k) === rec.value }, `${k} ${v}`)))
           : el("input", { type: "number", class: "ctl", value: rec.value, min: info.lo, max: info.hi, "aria-label": rec.register,
                           "data-register": rec.register });
-        const btn = el("button", { class: "btn small ctl" + (info.protected ? " danger" : ""), "data-register": rec.register,
+        // force: the library's rule for this register and value (info.force_values, from the same table)
+        const forced = () => info.protected || (info.force_values || []).includes(Number(input.value));
+        const btn = el("button", { class: "btn small ctl" + (forced() ? " danger" : ""), "data-register": rec.register,
           onclick: async () => {
             const d = await Z.send("write", { id, register: rec.register, value: Number(input.value) });
             if (d) { Z.toast(`${rec.register} = ${d.value} written` + (d.read_back !== undefined && d.read_back !== null ? ` (reads back ${d.read_back})` : ""), "info");
                      readRegisters(d.id); }
-          } }, info.protected ? "Write (force)" : "Write");
+          } }, forced() ? "Write (force)" : "Write");
+        input.addEventListener("change", () => { btn.textContent = forced() ? "Write (force)" : "Write";
+                                                 btn.classList.toggle("danger", forced()); });
         edit = el("div", { class: "row" }, input, btn);
       }
       const phys = rec.physical !== undefined ? `${rec.physical} ${rec.unit}` : rec.meaning ? rec.meaning : rec.unit ? `${rec.value} ${rec.unit}` : "";
