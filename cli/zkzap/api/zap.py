@@ -639,7 +639,14 @@ class Bus:
             if taken:
                 raise IdTaken(f"set-baud: ID {ident} is already taken by another actuator at {baud} baud; "
                               "nothing was written", ident=ident, taken=True, baud=baud)
-        self.link.store(ident, BAUD_REG, code, allow=Permission.IDENTITY)   # the checked way: set_baud itself
+        try:
+            self.link.store(ident, BAUD_REG, code, allow=Permission.IDENTITY)   # the checked way: set_baud itself
+        except NoReply as e:
+            # its acknowledgement did not come, but the write may have been heard (an actuator in
+            # another return mode than was assumed): the old rate is written back, unanswered or not
+            self.link.store(ident, BAUD_REG, zap.BAUD_TO_CODE[was], allow=Permission.IDENTITY, optional=True)
+            e.facts["rolled_back"] = e.rolled_back = True
+            raise
         if not restart:
             value = self.link.read(ident, BAUD_REG)
             if value != code:
@@ -651,8 +658,13 @@ class Bus:
         try:
             value = self._read_back(ident, BAUD_REG, ready_timeout,
                                     f"set-baud: ID {ident} does not answer at {baud} baud after the restart", "baud")
-        except CheckFailed as e:
-            self._roll_back_baud(ident, was, e)
+        except (CheckFailed, UsageError) as e:     # (UsageError: return mode 0 never answers a read)
+            if isinstance(e, CheckFailed) or self.link.ping(ident, retries=1) is None:
+                failed = e if isinstance(e, CheckFailed) else CheckFailed(
+                    f"set-baud: ID {ident} cannot be read back at {baud} baud: {e}", ident=ident, baud=baud,
+                    after_change="baud")
+                self._roll_back_baud(ident, was, failed)
+                raise failed from None
             raise
         if value != code:
             raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})",
@@ -671,7 +683,7 @@ class Bus:
             if self.link.ping(ident, retries=2) is None:
                 return
             self.link.store(ident, BAUD_REG, zap.BAUD_TO_CODE[was], allow=Permission.IDENTITY)
-            if self.link.read(ident, BAUD_REG) == zap.BAUD_TO_CODE[was]:
+            if self.link.mode_of(ident) == 0 or self.link.read(ident, BAUD_REG) == zap.BAUD_TO_CODE[was]:
                 failed.facts["rolled_back"] = failed.rolled_back = True
                 failed.args = (f"{failed.args[0]}; it still answers at {was} baud: its baud-rate was set back "
                                f"to {was}",) + failed.args[1:]

@@ -1061,6 +1061,7 @@ class ZapBus:
                         # earlier one was lost (and so is every one before it)
                         self._resolve(ident_of(p), t0)
                         owed = None
+                        state["guessed"] = True   # judged by the estimator: never taught to it
                 if owed is not None:
                     self._owed.remove(owed)
                     self._resolve(ident_of(p), owed.t0)
@@ -1111,7 +1112,8 @@ class ZapBus:
                                             deadline + (deadline - t0) * MEMORY,
                                             horizon=t0 + horizon_for(deadline - t0)))
                     return self._reply(p, hi - t0, None)
-                return self._reply(p, hi - t0, None if overran else first - t0 - tx - self.wire(1))
+                guessed = overran or state.get("guessed")
+                return self._reply(p, hi - t0, None if guessed else first - t0 - tx - self.wire(1))
             return None
 
         while True:
