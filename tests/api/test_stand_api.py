@@ -162,3 +162,49 @@ def test_settling_is_the_drift_across_the_window_on_rpm_egt_and_thrust():
     assert egt["settled"] is False and "EGT drifted +16.0 °C across the window (more than 10 °C)" in egt["note"]
     thrust = _fed(lambda t: 100000, thrust=lambda t: 5.0 + 0.05 * t)         # +0.4 kgf on 5.2
     assert thrust["settled"] is False and "thrust drifted +7." in thrust["note"]
+
+
+def test_one_stand_session_runs_a_trip_its_rundown_and_the_interlock_over_sessions(tmp_path):
+    """StandSession, as a console runs it: sessions one after the other on one source and one
+    alarm list; a trip latches, the rundown is recorded, a start waits for the acknowledgement
+    and a cool engine, and the logbook gets the run."""
+    from zkzap.api.alarms import StartRefused
+    from zkzap.api.stand import Stand, StandSession
+    from zkzap.api.telemetry import Telemetry
+    from zkzap.codec import zk
+    from zkzap.codec.permissions import Permission
+    from zkzap.link.zk_port import ZkLink
+    from zkzap.link.zk_sources import LiveSource
+
+    said = []
+    limits = L.LimitSet([L.parse("egt_c<=500", L.FIELDS)], "abort")
+    book = tmp_path / "engine.db"
+    ss = StandSession(Stand(limits, logbook=str(book), engine="K100-1"), notify=said.append)
+    ss.start(2.0)
+    link = ZkLink.open("sim://zk?speed=20", 115200, allow=Permission.ENGINE)
+    src = LiveSource(link)
+    records = []
+    ss.attach(src, Telemetry(None, {2, 3}, False, clock=src.clock), records.append)
+    run = zk.encode_control("control", sw="run", throttle_pct=40)[0]
+    try:
+        outcome = ss.run(control=lambda t: run, duration=60, stop_on_error=True)
+        assert outcome.reason == "limit" and outcome.aborted == "standby" and outcome.exit_code == 5
+        kinds = [r.get("kind") for r in records]
+        assert kinds.count("trip") == 1 and kinds[-1] == "rundown"
+        assert ss.alarms.latched and "egt_c<=500" in ss.alarms.latched[0].text
+        assert ss.refusal().startswith("start refused: alarm latched")
+        again = ss.run(control=lambda t: run, duration=1, restart=False)
+        assert again.reason == "refused" and isinstance(again.error, StartRefused)
+        (acked,) = ss.acknowledge("bench")
+        assert acked.acked_by == "bench" and ss.alarms.latched == []
+        zero = zk.encode_control("control", sw="run", throttle_pct=0)[0]
+        assert ss.refusal(setpoint=0) is None                # the rundown ended at rest, and cool
+        assert ss.run(control=lambda t: zero, duration=0.5, restart=False).ok
+        summary = ss.summary()
+        assert summary["engine"] == "K100-1" and summary["alarms"][0]["acked_by"] == "bench"
+    finally:
+        link.close()
+        ss.close()
+    assert ss.log_run(command="test", port="sim://zk", outcome=outcome) == 1
+    with sqlite3.connect(book) as db:
+        assert db.execute("select engine, limits_violated from runs").fetchone() == ("K100-1", '["egt_c<=500"]')

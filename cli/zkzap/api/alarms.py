@@ -28,6 +28,10 @@ import time
 
 from ..errors import DeviceError
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Callable, Iterable, Mapping, Optional
+
 #: EGT below which an engine that tripped may be started again (degC, ``--restart-egt``): well
 #: below the usual 700-850 degC running limits, and above the 100 degC an ECU's cool-down ends at.
 RESTART_EGT_C = 150.0
@@ -54,19 +58,19 @@ class installed:
     """``with installed(alarms):`` the sessions of this process share ``alarms`` (a shell's or a
     batch's: a trip in one command latches for the next); :func:`current` gives it."""
 
-    def __init__(self, alarms):
+    def __init__(self, alarms: Alarms) -> None:
         self.alarms = alarms
 
-    def __enter__(self):
+    def __enter__(self) -> Alarms:
         _stand.append(self.alarms)
         return self.alarms
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> bool:
         _stand.remove(self.alarms)
         return False
 
 
-def current():
+def current() -> Optional[Alarms]:
     """The alarm list installed for this process's sessions (:class:`installed`), or None."""
     return _stand[-1] if _stand else None
 
@@ -89,7 +93,9 @@ class Alarm:
     __slots__ = ("id", "level", "kind", "text", "limit", "field", "value", "t", "wall", "active", "acked_by",
                  "acked_at")
 
-    def __init__(self, id, level, kind, text, *, limit=None, field=None, value=None, t=None, wall=None):
+    def __init__(self, id: int, level: str, kind: str, text: str, *, limit: Optional[str] = None,
+                 field: Optional[str] = None, value: Any = None, t: Optional[float] = None,
+                 wall: Optional[float] = None) -> None:
         self.id = id
         self.level = level
         self.kind = kind
@@ -125,8 +131,10 @@ class Alarms:
     field and value; ``notify(message)`` is told of every alarm raised and acknowledged;
     ``on_change()`` whenever the list changes (a view redraws it)."""
 
-    def __init__(self, conditions=(), *, restart_egt_c=RESTART_EGT_C, hung_start_s=HUNG_START_S,
-                 hot_start_egt_c=HOT_START_EGT_C, notify=None, on_change=None, keep=200, tell_limits=True):
+    def __init__(self, conditions: Iterable[Any] = (), *, restart_egt_c: float = RESTART_EGT_C,
+                 hung_start_s: float = HUNG_START_S, hot_start_egt_c: float = HOT_START_EGT_C,
+                 notify: Optional[Callable[[str], None]] = None, on_change: Optional[Callable[[], None]] = None,
+                 keep: int = 200, tell_limits: bool = True) -> None:
         self.by_text = {c.text: c for c in conditions}
         self.tell_limits = tell_limits    # False: a limit's alarm is not told (its LimitSet tells it)
         self.restart_egt_c = restart_egt_c
@@ -146,7 +154,8 @@ class Alarms:
 
     # -- raising and acknowledging ---------------------------------------------------------------
 
-    def raise_alarm(self, kind, text, *, level="alarm", limit=None, field=None, value=None, t=None) -> Alarm:
+    def raise_alarm(self, kind: str, text: str, *, level: str = "alarm", limit: Optional[str] = None,
+                    field: Optional[str] = None, value: Any = None, t: Optional[float] = None) -> Alarm:
         """Add an entry; an alarm also marks a trip (see :meth:`refusal`)."""
         a = Alarm(self._next, level, kind, text, limit=limit, field=field, value=value, t=t)
         self._next += 1
@@ -164,7 +173,8 @@ class Alarms:
         self.on_change()
         return a
 
-    def trip(self, kind, text, *, t=None, limit=None, **kw) -> Alarm:
+    def trip(self, kind: str, text: str, *, t: Optional[float] = None, limit: Optional[str] = None,
+             **kw: Any) -> Alarm:
         """A trip (an abort, an ECU error, the dead-man rule...): a latched alarm, unless the same
         trip is already listed and latched (a violated limit or a start alarm raised it as it
         happened)."""
@@ -178,7 +188,7 @@ class Alarms:
             kw["limit"] = limit
         return self.raise_alarm(kind, text, t=t, **kw)
 
-    def acknowledge(self, who, ids=None) -> list:
+    def acknowledge(self, who: str, ids: Optional[Iterable[int]] = None) -> list[Alarm]:
         """Acknowledge the latched alarms (``ids``: only these), recording ``who`` and when; returns
         those acknowledged. The trip's restart rule still holds until the engine is at rest and
         cool."""
@@ -204,7 +214,8 @@ class Alarms:
 
     # -- the interlock --------------------------------------------------------------------------
 
-    def settings(self, restart_egt_c=None, hung_start_s=None, hot_start_egt_c=None, conditions=()) -> None:
+    def settings(self, restart_egt_c: Optional[float] = None, hung_start_s: Optional[float] = None,
+                 hot_start_egt_c: Optional[float] = None, conditions: Iterable[Any] = ()) -> None:
         """Take a session's options (those given) and its limits' conditions (to name them)."""
         if restart_egt_c is not None:
             self.restart_egt_c = restart_egt_c
@@ -215,7 +226,7 @@ class Alarms:
         for c in conditions:
             self.by_text.setdefault(c.text, c)
 
-    def restartable(self, latest=None) -> bool:
+    def restartable(self, latest: Optional[Mapping[str, Any]] = None) -> bool:
         """The engine is at rest (stop or standby, rotor stopped) and EGT below the restart level."""
         from .session import at_rest
 
@@ -223,7 +234,7 @@ class Alarms:
         egt = latest.get("egt_c")
         return at_rest(latest) and egt is not None and egt < self.restart_egt_c
 
-    def refusal(self, latest=None, setpoint=None):
+    def refusal(self, latest: Optional[Mapping[str, Any]] = None, setpoint: Optional[float] = None) -> Optional[str]:
         """Why a start is refused now (None: it may start). ``latest``: the ECU's latest values (the
         alarm list's own when not given); ``setpoint``: the throttle (%) or rpm target asked for."""
         latched = self.latched
@@ -254,7 +265,7 @@ class Alarms:
             self.zero_setpoint = False
             self.on_change()
 
-    def check_start(self, latest=None, setpoint=None) -> None:
+    def check_start(self, latest: Optional[Mapping[str, Any]] = None, setpoint: Optional[float] = None) -> None:
         """Raise :class:`StartRefused` with the reason when a start is refused now."""
         why = self.refusal(latest, setpoint)
         if why is not None:
@@ -262,7 +273,7 @@ class Alarms:
 
     # -- the records ----------------------------------------------------------------------------
 
-    def seen(self, latest) -> None:
+    def seen(self, latest: Mapping[str, Any]) -> None:
         """The engine's state, rpm and EGT as last seen (a telemetry's latest values: those of
         frames no record was written for, under --ids, too)."""
         for k in ("engine_state", "engine_state_name", "rpm", "egt_c"):
@@ -270,7 +281,7 @@ class Alarms:
             if v is not None:
                 self.latest[k] = v
 
-    def observe(self, t, rec) -> None:
+    def observe(self, t: float, rec: Mapping[str, Any]) -> None:
         """One status record: its limit entries, and the start's hung and hot watches."""
         self.seen(rec)
         violated = rec.get("limit") or ()

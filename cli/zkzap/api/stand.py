@@ -15,6 +15,19 @@ from __future__ import annotations
 
 from . import logbook as _logbook
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # for the annotations only: typing costs start-up
+    from typing import Any, Callable, Iterable, Optional
+
+    from .alarms import Alarm, Alarms
+    from .limits import LimitSet
+    from .session import Outcome, Session
+    from .telemetry import Telemetry
+
+    Notify = Callable[[str], None]
+    Sink = Callable[[dict], None]
+    OnUpdate = Callable[[dict, dict], None]
+
 
 class Stand:
     """The hooks of one session (see the module's text). ``aux``: an :class:`~zkzap.api.aux.AuxHub`
@@ -23,8 +36,8 @@ class Stand:
     :class:`~zkzap.api.esr.PressureAnswer` (control ID 8 frames for the ECU's ESR request);
     ``engine``: the engine's name in the logbook and the summary."""
 
-    def __init__(self, limits=None, averager=None, logbook=None, *, aux=None, corrections=None, answer=None,
-                 engine=None):
+    def __init__(self, limits: Optional[LimitSet] = None, averager: Any = None, logbook: Optional[str] = None, *,
+                 aux: Any = None, corrections: Any = None, answer: Any = None, engine: Optional[str] = None) -> None:
         self.limits = limits if limits else None          # api.limits.LimitSet (None: no limits)
         self.averager = averager                           # api.steady.StepAverager
         self.logbook = logbook                             # path of the logbook file
@@ -38,7 +51,7 @@ class Stand:
         self.write = None                                  # how an ESR answer is sent (the session's source)
         self._started = False
 
-    def start(self, timeout) -> None:
+    def start(self, timeout: float) -> None:
         """Before the port opens: the external sensors' readers, and their first lines (their
         field names; a silent sensor is exit 3 with nothing sent)."""
         if self.aux is not None and not self._started:
@@ -167,12 +180,13 @@ class Stand:
 
         return LimitViolation(f"limit violated (--on-limit warn: the run went on): {', '.join(limits.violated())}")
 
-    def exit_status(self, outcome) -> int:
+    def exit_status(self, outcome: Outcome) -> int:
         """The run's exit status: the outcome's, or 5 for a limit violated under ``--on-limit warn``."""
         err = self.warned_violation(outcome)
         return err.code if err is not None else outcome.exit_code
 
-    def log_run(self, *, command, port, schedule, files, outcome, tel, session):
+    def log_run(self, *, command: str, port: Optional[str], schedule: Optional[str], files: Iterable[Optional[str]],
+                outcome: Outcome, tel: Telemetry, session: Any) -> Optional[int]:
         """Append this run to the logbook (when one was given); returns the run's ID."""
         if not self.logbook:
             return None
@@ -225,7 +239,8 @@ class StandSession:
     clock (``restart=False`` to :meth:`run`).
     """
 
-    def __init__(self, stand=None, *, alarms=None, notify=None):
+    def __init__(self, stand: Optional[Stand] = None, *, alarms: Optional[Alarms] = None,
+                 notify: Optional[Notify] = None) -> None:
         from .alarms import Alarms, current
 
         self.stand = stand
@@ -243,7 +258,7 @@ class StandSession:
         self._closed = False
 
     @property
-    def limits(self):
+    def limits(self) -> Optional[LimitSet]:
         """The stand's :class:`~zkzap.api.limits.LimitSet` (None: no limits)."""
         return self.stand.limits if self.stand is not None else None
 
@@ -252,7 +267,7 @@ class StandSession:
         """Something answers the ECU's request for the air pressure (``--air-pressure``)."""
         return self.stand is not None and self.stand.answer is not None
 
-    def start(self, timeout) -> None:
+    def start(self, timeout: float) -> None:
         """Before the port opens: the external sensors' readers and their first lines (a silent
         sensor is exit 3 with nothing sent)."""
         if self.stand is not None:
@@ -262,7 +277,8 @@ class StandSession:
                 self.close()
                 raise
 
-    def attach(self, source, telemetry, sink, on_update=None):
+    def attach(self, source: Any, telemetry: Telemetry, sink: Optional[Sink],
+               on_update: Optional[OnUpdate] = None) -> Optional[OnUpdate]:
         """Run on ``source`` (a live or replayed ZK source) through ``telemetry`` into ``sink``
         (``sink(record)``: the front end's writer; None: records are not kept); returns the live
         view's callback with the stand's limit lines and the alarm list added (None stays None)."""
@@ -277,14 +293,14 @@ class StandSession:
 
         return on_update
 
-    def rebind(self, source) -> None:
+    def rebind(self, source: Any) -> None:
         """The source is wrapped (a tap that copies every frame to a capture or a bridge): ESR
         answers go out through it, recorded like every control frame."""
         self.source = source
         if self.stand is not None:
             self.stand.write = source.write
 
-    def run(self, **options):
+    def run(self, **options: Any) -> Outcome:
         """One :class:`~zkzap.api.session.Session` over the attached source, with the stand's
         alarms (a live source only: a replay starts nothing), limits and ESR answer; ``options``
         are the Session's (control, rate, abort, count, duration, silence, end, rundown, ...).
@@ -292,7 +308,7 @@ class StandSession:
         self.session = self.make_session(**options)
         return self.session.run()
 
-    def make_session(self, **options):
+    def make_session(self, **options: Any) -> Session:
         """The :class:`~zkzap.api.session.Session` :meth:`run` runs (for a front end that needs
         it before it runs: a console cuts it short from its requests)."""
         from .session import Session
@@ -305,13 +321,13 @@ class StandSession:
             options.setdefault("alarms", self.alarms)
         return Session(source, self.telemetry, self.sink, **options)
 
-    def acknowledge(self, who, ids=None) -> list:
+    def acknowledge(self, who: str, ids: Optional[Iterable[int]] = None) -> list[Alarm]:
         """The operator ``who`` acknowledges the latched alarms (``ids``: only these); returns the
         :class:`~zkzap.api.alarms.Alarm` entries acknowledged (each says who and when). A trip's
         restart rule holds on until the engine is at rest and cool."""
         return self.alarms.acknowledge(who, ids)
 
-    def refusal(self, setpoint=None):
+    def refusal(self, setpoint: Optional[float] = None) -> Optional[str]:
         """Why a start is refused now (None: it may start), by the ECU's latest values."""
         latest = self.telemetry.latest if self.telemetry is not None else None
         return self.alarms.refusal(latest, setpoint)
@@ -329,11 +345,12 @@ class StandSession:
             out["alarms"] = self.alarms.to_list()
         return out
 
-    def exit_status(self, outcome) -> int:
+    def exit_status(self, outcome: Outcome) -> int:
         """The run's exit status (5 for a run that went on through a violated limit)."""
         return self.stand.exit_status(outcome) if self.stand is not None else outcome.exit_code
 
-    def log_run(self, *, command, port, schedule=None, files=(), outcome, ended_t=None):
+    def log_run(self, *, command: str, port: Optional[str], schedule: Optional[str] = None,
+                files: Iterable[Optional[str]] = (), outcome: Outcome, ended_t: Optional[float] = None) -> Optional[int]:
         """Append the run to the logbook (when one was given); returns the run's ID."""
         if self.stand is None:
             return None
