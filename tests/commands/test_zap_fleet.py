@@ -1,5 +1,7 @@
 """zap backup / diff / apply / setup / watch / check through the CLI, against simulated buses
-whose stored registers live in state files (one file per bus, kept across commands)."""
+whose stored registers live in state files (one file per bus, kept across commands). The fleet
+tests run over both mightyZAP protocol families (the ``rig`` fixture: IR 12Lf and Modbus RTU
+17Lf), the same test for each."""
 
 import csv
 import io
@@ -8,6 +10,7 @@ import os
 
 import pytest
 
+from zkzap.codec.regmap import default_map
 from zkzap.sim.zap_actuators import from_options
 
 
@@ -15,14 +18,39 @@ def jsonl(text):
     return [json.loads(line) for line in text.splitlines()]
 
 
-def make_bus(path, ids="1,2,3", settings=None):
+def make_bus(path, ids="1,2,3", settings=None, protocol="ir"):
     """A simulated bus in state file ``path``; ``settings``: {ID: {register: value}}."""
-    bus = from_options(ids=ids, state=str(path))
+    bus = from_options(ids=ids, state=str(path), protocol=protocol)
     for ident, regs in (settings or {}).items():
         for name, value in regs.items():
             bus.actuator(ident).set(name, value)
     bus.save()
-    return f"sim://zap?state={path}"
+    return f"sim://zap?state={path}" + ("&protocol=modbus" if protocol == "modbus" else "")
+
+
+class Rig:
+    """One protocol family's side of a fleet test: its buses, its backup option, its factory ID."""
+
+    def __init__(self, protocol):
+        self.protocol = protocol
+        self.map = default_map(protocol)
+        self.option = ["--protocol", protocol]          # backup's (diff, apply, setup read it from the file)
+        self.factory = self.map.by_name["id"].default or 0
+
+    def bus(self, path, ids="1,2,3", settings=None):
+        return make_bus(path, ids, settings, self.protocol)
+
+    def url(self, query):
+        return f"sim://zap?{query}" + ("&protocol=modbus" if self.protocol == "modbus" else "")
+
+    def order(self, items):
+        """(id, register, ...) rows in the order an apply writes them: by ID, then address."""
+        return sorted(items, key=lambda x: (x[0], self.map.by_name[x[1]].address))
+
+
+@pytest.fixture(params=["ir", "modbus"])
+def rig(request):
+    return Rig(request.param)
 
 
 def state_of(path):
@@ -40,11 +68,25 @@ def buses(tmp_path):
     return a, b, tmp_path
 
 
+@pytest.fixture
+def fleets(cli, rig, tmp_path):
+    """Bus A configured (A_SETTINGS), bus B factory fresh, and A's backup (fleet.json), on ``rig``'s protocol."""
+    a = rig.bus(tmp_path / "a.json", settings=A_SETTINGS)
+    b = rig.bus(tmp_path / "b.json")
+    f = str(tmp_path / "fleet.json")
+    r = cli("zap", "backup", "--ids", "1-3", *rig.option, "-p", a, "-o", f)
+    assert r.exit_code == 0, r
+    return a, b, f, tmp_path
+
+
 @pytest.mark.parametrize("suffix", [".json", ".toml", ".yaml"])
-def test_backup_a_apply_to_fresh_b_then_diff_is_empty(cli, buses, suffix):
-    a, b, tmp = buses
+def test_backup_a_apply_to_fresh_b_then_diff_is_empty(cli, rig, tmp_path, suffix):
+    a = rig.bus(tmp_path / "a.json", settings=A_SETTINGS)
+    b = rig.bus(tmp_path / "b.json")
+    tmp = tmp_path
+    fresh = state_of(tmp / "b.json")
     fleet_file = str(tmp / f"fleet{suffix}")
-    r = cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", fleet_file)
+    r = cli("zap", "backup", "--ids", "1-3", *rig.option, "-p", a, "-o", fleet_file)
     assert (r.exit_code, r.stdout) == (0, ""), r
     assert "3 actuators (1-3) backed up" in r.stderr
     r = cli("zap", "diff", fleet_file, "bus", "-p", b)
@@ -52,14 +94,12 @@ def test_backup_a_apply_to_fresh_b_then_diff_is_empty(cli, buses, suffix):
     assert "error" not in r.stderr                  # a result, not an error
     r = cli("zap", "apply", fleet_file, "--plan", "-p", b)
     assert r.exit_code == 0 and [x["status"] for x in jsonl(r.stdout)] == ["planned"] * 5
-    assert state_of(tmp / "b.json")[1]["speed-limit"] == 1023          # --plan writes nothing
+    assert state_of(tmp / "b.json") == fresh                            # --plan writes nothing
     r = cli("zap", "apply", fleet_file, "-p", b)
     assert r.exit_code == 0, r
     rows = jsonl(r.stdout)
-    assert [(x["id"], x["register"], x["old"], x["new"], x["status"]) for x in rows] == [
-        (1, "speed-limit", 1023, 500, "verified"), (1, "acceleration", 20, 40, "verified"),
-        (2, "current-limit", 800, 600, "verified"), (3, "long-stroke-limit", 3686, 3000, "verified"),
-        (3, "alarm-led", 33, 1, "verified")]
+    assert [(x["id"], x["register"], x["old"], x["new"], x["status"]) for x in rows] == rig.order(
+        [(i, name, fresh[i][name], value, "verified") for i, regs in A_SETTINGS.items() for name, value in regs.items()])
     assert "5 writes made and verified" in r.stderr
     r = cli("zap", "diff", fleet_file, "bus", "-p", b)
     assert (r.exit_code, r.stdout) == (0, ""), r
@@ -74,7 +114,7 @@ def test_backup_to_stdout_and_scan(cli, buses):
     doc = json.loads(r.stdout)
     assert sorted(doc["actuators"]) == ["1", "2", "3"]
     r = cli("zap", "backup", "--ids", "2", "-p", a, "-f", "yaml")
-    assert r.stdout.startswith('format: "zkzap-fleet/1"') and "current-limit: 600" in r.stdout
+    assert r.stdout.startswith('format: "zkzap-fleet/2"\n') and 'protocol: "ir"' in r.stdout and "current-limit: 600" in r.stdout
 
 
 def test_backup_of_a_silent_id_writes_nothing(cli, buses):
@@ -103,21 +143,22 @@ def test_diff_formats_and_all(cli, buses):
     assert (r.exit_code, r.stdout) == (2, "") and "ID 9 is in neither" in r.stderr
 
 
-def test_apply_clone_with_to_and_map(cli, buses):
-    a, b, tmp = buses
-    f = str(tmp / "fleet.json")
-    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+def test_apply_clone_with_to_and_map(cli, rig, fleets):
+    a, b, f, tmp = fleets
+    fresh = state_of(tmp / "b.json")
     r = cli("zap", "apply", f, "--ids", "1", "--to", "1-3", "-p", b)
     assert r.exit_code == 0, r
-    assert [(x["id"], x["register"]) for x in jsonl(r.stdout)] == [
-        (i, reg) for i in (1, 2, 3) for reg in ("speed-limit", "acceleration")]
+    assert [(x["id"], x["register"]) for x in jsonl(r.stdout)] == rig.order(
+        [(i, reg) for i in (1, 2, 3) for reg in ("speed-limit", "acceleration")])
     st = state_of(tmp / "b.json")
     assert all(st[i]["speed-limit"] == 500 for i in (1, 2, 3))
     r = cli("zap", "apply", f, "--map", "2:3", "-p", b)
     assert r.exit_code == 2 and "bus ID 3 would get the settings of two actuators" in r.stderr
     r = cli("zap", "apply", f, "--ids", "2", "--map", "2:3", "-p", b)
     assert r.exit_code == 0 and [(x["id"], x["source"], x["register"], x["new"]) for x in jsonl(r.stdout)] == [
-        (3, 2, "speed-limit", 1023), (3, 2, "acceleration", 20), (3, 2, "current-limit", 600)]
+        (3, 2, name, v) for _, name, v in rig.order([(3, "speed-limit", fresh[2]["speed-limit"]),
+                                                     (3, "acceleration", fresh[2]["acceleration"]),
+                                                     (3, "current-limit", 600)])]
 
 
 def test_apply_only_skip_and_protected(cli, buses):
@@ -133,12 +174,10 @@ def test_apply_only_skip_and_protected(cli, buses):
 
 
 @pytest.mark.parametrize("how", [["--to", "2-3"], ["--map", "1:3"]])
-def test_a_clone_never_makes_two_actuators_with_one_id(cli, buses, how):
+def test_a_clone_never_makes_two_actuators_with_one_id(cli, fleets, how):
     """Regression: a clone's plan listed "ID 2 id (2 on the bus, 1 in the file)" and hinted
     --only NAME --force, which gave ID 2 the ID 1."""
-    a, b, tmp = buses
-    f = str(tmp / "fleet.json")
-    cli("zap", "backup", "--ids", "1", "-p", a, "-o", f)
+    a, b, f, tmp = fleets
     r = cli("zap", "apply", f, "--ids", "1", *how, "--plan", "-p", b)
     assert r.exit_code == 0, r
     assert "id" not in {x["register"] for x in jsonl(r.stdout)} and " id (" not in r.stderr
@@ -149,16 +188,56 @@ def test_a_clone_never_makes_two_actuators_with_one_id(cli, buses, how):
     assert sorted(state_of(tmp / "b.json")) == [1, 2, 3]           # every actuator keeps its own ID
 
 
-def test_apply_of_a_baud_rate_says_when_it_takes_effect(cli, buses):
-    a, b, tmp = buses
-    make_bus(tmp / "a.json", settings={1: {"baud-rate": 16}})
-    f = str(tmp / "fleet.json")
-    cli("zap", "backup", "--ids", "1", "-p", a, "-b", "115200", "-o", f)
+def test_apply_of_a_baud_rate_says_when_it_takes_effect(cli, rig, tmp_path):
+    code = {b: c for c, b in rig.map.baud_codes.items()}[115200]
+    a = rig.bus(tmp_path / "a.json", ids="1", settings={1: {"baud-rate": code}})
+    b = rig.bus(tmp_path / "b.json", ids="1,2")
+    f = str(tmp_path / "fleet.json")
+    assert cli("zap", "backup", "--ids", "1", *rig.option, "-p", a, "-b", "115200", "-o", f).exit_code == 0
     r = cli("zap", "apply", f, "--only", "baud-rate", "--force", "-p", b)
     assert r.exit_code == 0, r
     rows = jsonl(r.stdout)
-    assert [(x["register"], x["new"], x["status"]) for x in rows] == [("baud-rate", 16, "verified")]
-    assert "115200 baud from its next restart" in rows[0]["note"] and "at 57600 baud until then" in r.stderr
+    assert [(x["register"], x["new"], x["status"]) for x in rows] == [("baud-rate", code, "verified")]
+    if rig.protocol == "ir":      # the 12Lf: the stored code applies at the next restart
+        assert "115200 baud from its next restart" in rows[0]["note"] and "at 57600 baud until then" in r.stderr
+    else:                         # the 17Lf answers at the new rate at once: read back there
+        assert "read back at 115200 baud" in rows[0]["note"] and "answers at 115200 baud now" in r.stderr
+    r = cli("zap", "load", "baud-rate", "--id", "2", *rig.option, "-p", b)      # the other actuator: as it was
+    assert (r.exit_code, r.stdout.strip()) == (0, str({v: k for k, v in rig.map.baud_codes.items()}[57600]))
+
+
+def test_a_file_of_one_protocol_is_never_applied_to_the_other(cli, rig, fleets):
+    a, b, f, tmp = fleets
+    other = "modbus" if rig.protocol == "ir" else "ir"
+    fresh = (tmp / "b.json").read_bytes()
+    for cmd in (("apply", f, "--yes"), ("diff", f, "bus"), ("setup", "--ids", "1", "--config", f, "--config-id", "1",
+                                                             "--state", str(tmp / "s.json"))):
+        r = cli("zap", *cmd, "--protocol", other, "-p", b)
+        assert (r.exit_code, r.stdout) == (2, ""), r
+        assert "their register maps differ" in r.stderr and f"--protocol {rig.protocol} talks to it" in r.stderr
+    assert (tmp / "b.json").read_bytes() == fresh and not (tmp / "s.json").exists()
+    doc = json.loads(open(f).read())
+    assert (doc["format"], doc["protocol"], doc["map"]) == ("zkzap-fleet/2", rig.protocol, rig.map.model)
+    r = cli("zap", "diff", f, str(_other_file(cli, tmp, other)))
+    assert (r.exit_code, r.stdout) == (2, "") and "their register maps differ" in r.stderr
+
+
+def _other_file(cli, tmp, protocol):
+    out = tmp / f"{protocol}.json"
+    r = cli("zap", "backup", "--ids", "1", "--protocol", protocol, "--sim", "-o", str(out))
+    assert r.exit_code == 0, r
+    return out
+
+
+def test_a_file_of_the_first_format_is_read_as_ir(cli, buses):
+    a, b, tmp = buses
+    f = tmp / "old.json"
+    f.write_text('{"format":"zkzap-fleet/1","actuators":{"1":{"stored":{"speed-limit":5}}}}')
+    r = cli("zap", "apply", str(f), "--plan", "-p", b)
+    assert r.exit_code == 0 and [(x["register"], x["new"]) for x in jsonl(r.stdout)] == [("speed-limit", 5)]
+    f.write_text('{"format":"zkzap-fleet/1","protocol":"modbus","actuators":{"1":{}}}')
+    r = cli("zap", "apply", str(f), "--plan", "-p", b)
+    assert (r.exit_code, r.stdout) == (2, "") and "holds IR actuators of the 12Lf only" in r.stderr
 
 
 def _bad_file(tmp, text, name="bad.json"):
@@ -212,10 +291,8 @@ def test_apply_ids_not_in_the_file(cli, tmp_path):
     assert (r.exit_code, r.stdout) == (2, "") and "--ids: ID 9 is not in the file; it has 1" in r.stderr
 
 
-def test_interrupted_apply_reports_and_rerun_finishes(cli, buses, monkeypatch):
-    a, b, tmp = buses
-    f = str(tmp / "fleet.json")
-    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
+def test_interrupted_apply_reports_and_rerun_finishes(cli, rig, fleets, monkeypatch):
+    a, b, f, tmp = fleets
     from zkzap.api import fleet
 
     real = fleet.execute
@@ -229,41 +306,40 @@ def test_interrupted_apply_reports_and_rerun_finishes(cli, buses, monkeypatch):
     monkeypatch.setattr(fleet, "execute", interrupted)
     r = cli("zap", "apply", f, "-p", b)
     assert r.exit_code == 130
-    assert [(x["id"], x["register"], x["status"]) for x in jsonl(r.stdout)] == [
-        (1, "speed-limit", "verified"), (1, "acceleration", "verified")]
-    assert "2 of 5 writes made: ID 1 speed-limit, ID 1 acceleration; 3 not made" in r.stderr
+    first = rig.order([(1, "speed-limit"), (1, "acceleration")])
+    assert [(x["id"], x["register"], x["status"]) for x in jsonl(r.stdout)] == [(i, n, "verified") for i, n in first]
+    assert (f"2 of 5 writes made: ID 1 {first[0][1]}, ID 1 {first[1][1]}; 3 not made") in r.stderr
     monkeypatch.setattr(fleet, "execute", real)
     r = cli("zap", "apply", f, "-p", b)
-    assert r.exit_code == 0 and [(x["id"], x["register"]) for x in jsonl(r.stdout)] == [
-        (2, "current-limit"), (3, "long-stroke-limit"), (3, "alarm-led")]
+    assert r.exit_code == 0 and [(x["id"], x["register"]) for x in jsonl(r.stdout)] == rig.order([
+        (2, "current-limit"), (3, "long-stroke-limit"), (3, "alarm-led")])
 
 
-def test_apply_to_a_silent_actuator_writes_nothing(cli, buses):
-    a, _, tmp = buses
-    f = str(tmp / "fleet.json")
-    cli("zap", "backup", "--ids", "1-3", "-p", a, "-o", f)
-    r = cli("zap", "apply", f, "-p", "sim://zap?ids=1,2")
+def test_apply_to_a_silent_actuator_writes_nothing(cli, rig, fleets):
+    a, _, f, tmp = fleets
+    r = cli("zap", "apply", f, "-p", rig.url("ids=1,2"))
     assert r.exit_code == 3 and r.stdout == "" and "no reply from ID 3" in r.stderr
 
 
 # -- setup -------------------------------------------------------------------------------------
 
-def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, tmp_path):
+def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, rig, tmp_path):
     state = str(tmp_path / "setup.json")
     cfg = tmp_path / "cfg.json"
-    src = make_bus(tmp_path / "src.json", ids="1", settings={1: {"speed-limit": 700}})
-    cli("zap", "backup", "--ids", "1", "-p", src, "-o", str(cfg))
-    first = make_bus(tmp_path / "n1.json", ids="0")
-    second = make_bus(tmp_path / "n2.json", ids="0")
+    src = rig.bus(tmp_path / "src.json", ids="1", settings={1: {"speed-limit": 700}})
+    cli("zap", "backup", "--ids", "1", *rig.option, "-p", src, "-o", str(cfg))
+    new = str(rig.factory)                          # a factory-fresh actuator's ID
+    first = rig.bus(tmp_path / "n1.json", ids=new)
+    second = rig.bus(tmp_path / "n2.json", ids=new)
     args = ("zap", "setup", "--ids", "4-5", "--state", state, "--find-ids", "0-7", "--find-baud", "57600",
             "--config", str(cfg))
     r = cli(*args, "-p", first, input="\n")        # Enter once, then stdin ends: more to do (8)
     assert r.exit_code == 8 and r.stdout == ""
-    assert "ID 4 done: found at ID 0, 57600 baud; 1 settings from" in r.stderr
+    assert f"ID 4 done: found at ID {new}, 57600 baud; 1 settings from" in r.stderr
     assert "stopped before ID 5" in r.stderr and "more to do: ID 5 not set up yet" in r.stderr
     assert state_of(tmp_path / "n1.json")[4]["speed-limit"] == 700
     # the same actuator again is refused: it was set up already
-    r = cli(*args, "-p", f"sim://zap?state={tmp_path / 'n1.json'}", input="\n")
+    r = cli(*args, "-p", first, input="\n")
     assert r.exit_code == 1 and "answers as ID 4" in r.stderr and "gave already" in r.stderr
     r = cli(*args, "-p", second, input="\n")
     assert r.exit_code == 0, r
@@ -272,7 +348,7 @@ def test_setup_one_actuator_per_run_resumes_from_the_state_file(cli, tmp_path):
     r = cli(*args, "-p", second, input="")
     assert r.exit_code == 0 and "every ID of 4-5 is done" in r.stderr
     saved = json.load(open(state))
-    assert sorted(saved["done"]) == ["4", "5"] and saved["done"]["5"]["from_id"] == 0
+    assert sorted(saved["done"]) == ["4", "5"] and saved["done"]["5"]["from_id"] == rig.factory
 
 
 def test_setup_skip_redo_and_two_actuators(cli, tmp_path):
@@ -436,9 +512,9 @@ def test_backup_and_diff_find_what_scan_finds_at_every_baud(cli, tmp_path):
 
 @pytest.mark.parametrize("args", [["backup", "-o", "{tmp}/x.json"], ["diff", "{tmp}/f.json", "bus"]],
                          ids=["backup", "diff"])
-def test_a_bus_where_two_actuators_share_an_id_is_refused(cli, tmp_path, args):
-    (tmp_path / "f.json").write_text(cli("zap", "backup", "--ids", "1", "--sim").stdout)
-    r = cli("zap", *[a.format(tmp=tmp_path) for a in args], "-p", "sim://zap?ids=1,4,4")
+def test_a_bus_where_two_actuators_share_an_id_is_refused(cli, rig, tmp_path, args):
+    (tmp_path / "f.json").write_text(cli("zap", "backup", "--ids", "1", *rig.option, "--sim").stdout)
+    r = cli("zap", *[a.format(tmp=tmp_path) for a in args], *rig.option, "-p", rig.url("ids=1,4,4"))
     assert (r.exit_code, r.stdout) == (1, "")
     assert "ID 4 at 57600 baud: two actuators answer to this ID" in r.stderr and "set-id" in r.stderr
     assert not (tmp_path / "x.json").exists()

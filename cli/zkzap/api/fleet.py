@@ -46,7 +46,12 @@ from ..errors import CheckFailed, UsageError, did_you_mean
 from . import documents
 from .documents import DocumentError
 
-FORMAT = "zkzap-fleet/1"
+#: The format a backup is written in: ``zkzap-fleet/2`` names the protocol family and the
+#: register map (``protocol``, ``map``); a ``zkzap-fleet/1`` file (before Modbus) is read as
+#: IR actuators of the 12Lf map.
+FORMAT = "zkzap-fleet/2"
+#: Every format this version reads.
+FORMATS = ("zkzap-fleet/1", FORMAT)
 SETUP_FORMAT = "zkzap-setup/1"
 SECTIONS = ("stored", "volatile", "read-only")
 #: Entry keys besides the sections.
@@ -60,8 +65,69 @@ SUFFIXES = documents.SUFFIXES
 REG = zap.REGISTER_BY_NAME
 
 
+def map_named(protocol: str, model=None, given=None):
+    """The register map of a document's ``protocol`` and ``map`` (its model's name): ``given``
+    (a :class:`~zkzap.codec.regmap.RegisterMap`, the command's ``--map``) when its model and
+    protocol are those, else the shipped map of that model; None when zkzap ships none."""
+    from ..codec.regmap import BUILTIN, builtin, default_map
+
+    if given is not None and given.protocol == protocol and (model is None or given.model == model):
+        return given
+    if model is None:
+        return default_map(protocol)
+    key = f"{str(model).lower()}-{protocol}"
+    return builtin(key) if key in BUILTIN else None
+
+
+def regmap_of(bus):
+    """The register map of the actuators on ``bus`` (a link): the Modbus link's, or the 12Lf's
+    IR map."""
+    m = getattr(bus, "regmap", None)
+    return m if m is not None else zap.MAP
+
+
+def all_ids(regmap) -> list:
+    """Every unicast ID of the map's protocol: 0..253 on IR, 1..247 on Modbus RTU."""
+    if regmap.protocol == "modbus":
+        from ..codec import modbus
+
+        return list(range(1, modbus.MAX_ID + 1))
+    return list(range(zap.MAX_ID + 1))
+
+
+def check_ident(regmap, value) -> int:
+    """An actuator ID of the map's protocol (FieldValueError otherwise)."""
+    if regmap.protocol == "modbus":
+        from ..codec import modbus
+
+        return modbus.check_id(value, allow_broadcast=False)
+    return zap.check_id(value, allow_broadcast=False)
+
+
+def describe_map(regmap) -> str:
+    """``IR (12Lf)``, ``Modbus RTU (17Lf)``: a map's protocol and model, as messages name them."""
+    return f"{'Modbus RTU' if regmap.protocol == 'modbus' else 'IR'} ({regmap.model})"
+
+
+def same_map(regmap, other, name="the file", bus="the bus") -> None:
+    """UsageError when a document of map ``regmap`` meets a bus (or document) of map ``other``:
+    the protocols' maps differ in addresses, ranges and baud codes (a 12Lf position is 0..4095, a
+    17Lf one 0..10000), so a value copied by register name could be a wrong number."""
+    if regmap is other or (regmap.protocol, regmap.model) == (other.protocol, other.model):
+        return
+    hint = (f"; --protocol {regmap.protocol} talks to it" if regmap.protocol != other.protocol
+            else "; --map FILE gives another model's map")
+    raise UsageError(f"{name} holds {describe_map(regmap)} actuators but {bus} is {describe_map(other)}: "
+                     f"their register maps differ (addresses, ranges, baud codes), so no value is copied "
+                     f"across{hint}", protocol=regmap.protocol, other=other.protocol)
+
+
 def section_of(reg) -> str:
-    """The document section a register belongs to."""
+    """The document section a register belongs to: ``read-only`` for every register that is not
+    written (the 17Lf's map gives the memory of some: its model number is NV, its present
+    position V), else ``stored`` (NV) or ``volatile`` (V)."""
+    if not reg.writable:
+        return "read-only"
     return {"NV": "stored", "V": "volatile", "": "read-only"}[reg.memory]
 
 
@@ -107,14 +173,27 @@ class Procedures:
 
     @staticmethod
     def read_map(bus, ident):
-        """``({register name: raw}, error bits)`` of one actuator: every mapped register."""
+        """``({register name: raw}, error bits)`` of one actuator: every register of the bus's
+        map (``regmap_of(bus)``), in as few reads as it has blocks. The error bits are the replies'
+        on IR, the hardware-error register on Modbus RTU (whose replies carry none; an exception
+        reply raises)."""
+        regmap = regmap_of(bus)
         values, error = {}, 0
-        for address, length in map_blocks():
-            reply, regs = bus.read_registers(ident, address, length, check=False)
-            error |= reply.error
+        modbus = regmap.protocol == "modbus"
+        if modbus:
+            from .zap_modbus import runs
+
+            blocks = runs(regmap)
+        else:
+            blocks = map_blocks()
+        for address, length in blocks:
+            reply, regs = bus.read_registers(ident, address, length, check=modbus)
+            error |= 0 if modbus else reply.error
             for reg, raw in regs:
-                if zap.REGISTER_BY_ADDRESS.get(reg.address) is reg:
+                if regmap.by_address.get(reg.address) is reg:
                     values[reg.name] = raw
+        if modbus:
+            error = values.get("hardware-error", 0)
         return values, error
 
 
@@ -181,15 +260,26 @@ def now_iso() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
 
-def entry_from_values(values: dict, *, baud, error=0, when=None) -> dict:
-    """A document entry for one actuator from its register values."""
+def error_names(regmap, error: int) -> list:
+    """The names of the error bits ``error``: the feedback packet's on IR, the hardware-error
+    register's on Modbus RTU."""
+    reg = regmap.by_name.get("hardware-error") if regmap.protocol == "modbus" else None
+    if reg is None or not reg.bits:
+        return zap.error_names(error)
+    return [reg.bits.get(b, f"bit {b}") for b in range(16) if error >> b & 1]
+
+
+def entry_from_values(values: dict, *, baud, error=0, when=None, regmap=None) -> dict:
+    """A document entry for one actuator from its register values (of ``regmap``, default the
+    12Lf's)."""
+    regmap = regmap or zap.MAP
     entry = {"model": values.get("model-number"), "firmware": values.get("firmware-version"), "baud": baud,
              "time": when or now_iso()}
     if error:
-        entry["errors"] = zap.error_names(error)
+        entry["errors"] = error_names(regmap, error)
     for section in SECTIONS:
         entry[section] = {}
-    for reg in zap.REGISTERS:
+    for reg in regmap.registers:
         if reg.name in values:
             entry[section_of(reg)][reg.name] = values[reg.name]
     return entry
@@ -199,11 +289,13 @@ def read_bus(bus, ids, *, procedures=PROCEDURES, on_actuator=None) -> dict:
     """A backup document of actuators ``ids`` on ``bus`` (each must answer)."""
     from .. import __version__
 
-    doc = {"format": FORMAT, "zkzap": __version__, "time": now_iso(), "actuators": {}}
+    regmap = regmap_of(bus)
+    doc = {"format": FORMAT, "zkzap": __version__, "time": now_iso(), "protocol": regmap.protocol,
+           "map": regmap.model, "actuators": {}}
     refuse_census(bus, ids)
     for ident in ids:
         values, error = procedures.read_map(bus, ident)
-        doc["actuators"][str(ident)] = entry_from_values(values, baud=bus.baud, error=error)
+        doc["actuators"][str(ident)] = entry_from_values(values, baud=bus.baud, error=error, regmap=regmap)
         if on_actuator is not None:
             on_actuator(ident, doc["actuators"][str(ident)])
     return doc
@@ -213,14 +305,16 @@ def read_bus(bus, ids, *, procedures=PROCEDURES, on_actuator=None) -> dict:
 
 class Entry:
     """One checked actuator of a document: ``ident``, ``model``, ``firmware``, ``baud``,
-    ``values`` ({Register: raw}, every section) and ``motion`` (its stroke and calibration, see
-    :mod:`zkzap.api.units`; None when the file gives none)."""
+    ``values`` ({Register: raw}, every section), ``motion`` (its stroke and calibration, see
+    :mod:`zkzap.api.units`; None when the file gives none) and ``regmap`` (the register map of
+    its protocol and model: the 12Lf's IR map, the 17Lf's Modbus map, or a user's)."""
 
-    __slots__ = ("ident", "model", "firmware", "baud", "values", "motion")
+    __slots__ = ("ident", "model", "firmware", "baud", "values", "motion", "regmap")
 
-    def __init__(self, ident, model, firmware, baud, values, motion=None):
+    def __init__(self, ident, model, firmware, baud, values, motion=None, regmap=None):
         self.ident, self.model, self.firmware, self.baud, self.values = ident, model, firmware, baud, values
         self.motion = motion
+        self.regmap = regmap or zap.MAP
 
     def settings(self, section):
         return {r: v for r, v in self.values.items() if section_of(r) == section}
@@ -230,19 +324,53 @@ def _is_int(v) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def check_document(doc, name="document") -> dict:
-    """{ID: :class:`Entry`} from a parsed document; DocumentError naming ``name`` and the key."""
+TOP_KEYS = ("format", "zkzap", "time", "port", "protocol", "map", "actuators", "buses")
+
+
+def document_map(doc, name="document", regmap=None):
+    """The register map a parsed document's actuators are of: its ``protocol`` (default ``ir``)
+    and ``map`` (the model's name; default the protocol's shipped model), ``regmap`` (a user's map
+    file, ``--map``) when it is that model. DocumentError when zkzap has no such map."""
+    from ..codec.regmap import PROTOCOLS
+
+    def fail(key, text):
+        raise DocumentError(f"{name}: {key}: {text}")
+
+    if not isinstance(doc, dict):
+        return zap.MAP
+    protocol = doc.get("protocol", "ir")
+    if protocol not in PROTOCOLS:
+        fail("protocol", f"{protocol!r}; allowed {', '.join(PROTOCOLS)}")
+    model = doc.get("map")
+    if model is not None and not isinstance(model, str):
+        fail("map", f"{model!r} is not a model's name (like 12Lf or 17Lf)")
+    if doc.get("format") == FORMATS[0] and (protocol != "ir" or model not in (None, zap.MAP.model)):
+        fail("protocol", f"a {FORMATS[0]} file holds IR actuators of the {zap.MAP.model} only; use {FORMAT}")
+    found = map_named(protocol, model, regmap)
+    if found is None:
+        fail("map", f"zkzap ships no {protocol} map of the {model}; give its map file with --map FILE")
+    return found
+
+
+def check_document(doc, name="document", regmap=None) -> dict:
+    """{ID: :class:`Entry`} from a parsed document; DocumentError naming ``name`` and the key.
+    Its register names, IDs and baud rates are checked against the map of its protocol and
+    model (:func:`document_map`; ``regmap``: a user's map the document may name)."""
     def fail(key, text):
         raise DocumentError(f"{name}: {key}: {text}" if key else f"{name}: {text}")
 
     if not isinstance(doc, dict):
         fail("", f"not a zkzap fleet document (expected an object with format {FORMAT!r})")
     fmt = doc.get("format")
-    if fmt != FORMAT:
-        fail("format", f"{fmt!r} is not {FORMAT!r}" if fmt is not None else f"missing; expected {FORMAT!r}")
+    if fmt not in FORMATS:
+        fail("format", f"{fmt!r} is not {FORMAT!r}" + (f" (nor {FORMATS[0]!r})" if fmt is not None else "")
+             if fmt is not None else f"missing; expected {FORMAT!r}")
     for key in doc:
-        if key not in ("format", "zkzap", "time", "port", "actuators", "buses"):
-            fail(key, "unknown key; allowed format, zkzap, time, port, actuators, buses")
+        if key not in TOP_KEYS:
+            fail(key, f"unknown key; allowed {', '.join(TOP_KEYS)}")
+    regmap = document_map(doc, name, regmap)
+    by_name = regmap.by_name
+    bauds = sorted(regmap.baud_codes.values())
     if doc.get("buses") is not None:
         from .buses import check_buses
 
@@ -253,12 +381,13 @@ def check_document(doc, name="document") -> dict:
     out = {}
     for key, entry in actuators.items():
         where = f"actuators.{key}"
+        ids = all_ids(regmap)
         try:
-            ident = zap.check_id(str(key), allow_broadcast=False) if re.fullmatch(r"\s*\d+\s*", str(key)) else None
+            ident = check_ident(regmap, str(key)) if re.fullmatch(r"\s*\d+\s*", str(key)) else None
         except FieldValueError:
             ident = None
         if ident is None:
-            fail(where, f"{key!r} is not an actuator ID; allowed 0..253")
+            fail(where, f"{key!r} is not an actuator ID; allowed {ids[0]}..{ids[-1]}")
         if ident in out:
             fail(where, f"ID {ident} is given twice")
         if not isinstance(entry, dict):
@@ -271,9 +400,8 @@ def check_document(doc, name="document") -> dict:
             if v is not None and not _is_int(v):
                 fail(f"{where}.{k}", f"{v!r} is not an integer")
         baud = entry.get("baud")
-        if baud is not None and baud not in zap.BAUD_TO_CODE:
-            fail(f"{where}.baud", f"{baud} is not an actuator baud rate; allowed "
-                                  f"{', '.join(str(b) for b in sorted(zap.BAUD_TO_CODE))}")
+        if baud is not None and baud not in bauds:
+            fail(f"{where}.baud", f"{baud} is not an actuator baud rate; allowed {', '.join(map(str, bauds))}")
         values = {}
         for section in SECTIONS:
             regs = entry.get(section, {})
@@ -283,9 +411,10 @@ def check_document(doc, name="document") -> dict:
                 fail(f"{where}.{section}", "expected an object of register names and values")
             for rname, value in regs.items():
                 rkey = f"{where}.{section}.{rname}"
-                reg = REG.get(str(rname))
+                reg = by_name.get(str(rname))
                 if reg is None:
-                    fail(rkey, "unknown register" + did_you_mean(rname, REG, otherwise="; see 'zap registers'"))
+                    see = "'zap registers'" + (" --protocol modbus" if regmap.protocol == "modbus" else "")
+                    fail(rkey, "unknown register" + did_you_mean(rname, by_name, otherwise=f"; see {see}"))
                 if section_of(reg) != section:
                     fail(rkey, f"{reg.name} is a {section_of(reg)} register, not {section}")
                 if not _is_int(value):
@@ -299,7 +428,7 @@ def check_document(doc, name="document") -> dict:
                     except FieldValueError as e:
                         fail(rkey, str(e).split(": ", 1)[-1])
                 values[reg] = value
-        stored_id = values.get(REG["id"])
+        stored_id = values.get(by_name.get("id"))
         if stored_id is not None and stored_id != ident:
             fail(f"{where}.stored.id", f"{stored_id} differs from the actuator's key {ident}")
         motion = entry.get("motion")
@@ -307,7 +436,7 @@ def check_document(doc, name="document") -> dict:
             from .units import check_motion
 
             check_motion(motion, f"{where}.motion", fail)
-        out[ident] = Entry(ident, entry.get("model"), entry.get("firmware"), baud, values, motion)
+        out[ident] = Entry(ident, entry.get("model"), entry.get("firmware"), baud, values, motion, regmap)
     return out
 
 
@@ -346,11 +475,17 @@ def loads(text: str, fmt: str, name: str):
     return documents.loads(text, fmt, name)
 
 
-def read_document(path: str) -> dict:
-    """{ID: Entry} from a backup file (``-``: JSON on stdin)."""
+def read_document(path: str, regmap=None) -> dict:
+    """{ID: Entry} from a backup file (``-``: JSON on stdin); ``regmap``: a user's map the file
+    may name (see :func:`check_document`)."""
     fmt = "json" if path == "-" else format_of(path)
     doc, name = documents.read(path, "fleet", fmt)
-    return check_document(doc, name)
+    return check_document(doc, name, regmap)
+
+
+def map_of(entries: dict):
+    """The register map of checked entries ({ID: Entry}: one document's, so one map)."""
+    return next(iter(entries.values())).regmap if entries else zap.MAP
 
 
 _BARE = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -421,8 +556,12 @@ COMPARE = {"stored": ("stored",), "settings": ("stored", "volatile"), "all": SEC
 
 def diff(a: dict, b: dict, *, compare="stored", ids=None, everything=False) -> list:
     """Rows (id, register, address, memory, a, b, unit, equal) comparing two {ID: Entry}. An
-    actuator present on one side only gives one row with register ``"(actuator)"``."""
+    actuator present on one side only gives one row with register ``"(actuator)"``. Two sides of
+    different register maps (protocols or models) are refused (:func:`same_map`)."""
     sections = COMPARE[compare]
+    regmap = map_of(a) if a else map_of(b)
+    if a and b:
+        same_map(map_of(a), map_of(b), "A", "B")
     rows = []
     wanted = sorted(set(a) | set(b)) if ids is None else list(ids)
     for ident in wanted:
@@ -432,7 +571,7 @@ def diff(a: dict, b: dict, *, compare="stored", ids=None, everything=False) -> l
                          "a": "present" if ea else "absent", "b": "present" if eb else "absent", "unit": "",
                          "equal": False})
             continue
-        for reg in zap.REGISTERS:
+        for reg in regmap.registers:
             if section_of(reg) not in sections:
                 continue
             va, vb = ea.values.get(reg), eb.values.get(reg)
@@ -476,15 +615,17 @@ PLAN_COLUMNS = ["id", "source", "register", "address", "memory", "old", "new", "
                 "errors", "note"]
 
 
-def registers_option(names, what) -> list:
-    """Registers named in ``--only``/``--skip`` (UsageError for an unknown or read-only one)."""
+def registers_option(names, what, regmap=None) -> list:
+    """Registers of ``regmap`` (default the 12Lf's) named in ``--only``/``--skip`` (UsageError
+    for an unknown or read-only one)."""
+    regmap = regmap or zap.MAP
     out = []
     for n in names or ():
         try:
-            reg = zap.register(n)
+            reg = regmap.register(n)
         except FieldValueError as e:
             raise UsageError(f"{what}: {e}") from None
-        if zap.REGISTER_BY_ADDRESS.get(reg.address) is not reg:
+        if regmap.by_address.get(reg.address) is not reg:
             raise UsageError(f"{what}: {n!r} is not a register of the map; see 'zap registers'")
         if not reg.writable:
             raise UsageError(f"{what}: {reg.name} is read-only; it is never written")
@@ -550,9 +691,10 @@ def plan(entry: Entry, target: int, current: dict, *, only=None, skip=(), force=
                 raise UsageError(f"--only {reg.name}: ID {entry.ident} of the file has no {reg.name}")
             if reg.name == "id" and target != entry.ident:
                 raise UsageError(cloned_id(entry.ident, target), source=entry.ident, target=target)
-        chosen = [r for r in zap.REGISTERS if r in only]
+        chosen = [r for r in entry.regmap.registers if r in only]
     else:
-        chosen = [r for r in zap.REGISTERS if r.stored and r.name not in PROTECTED and r in entry.values]
+        chosen = [r for r in entry.regmap.registers
+                  if r.stored and r.writable and r.name not in PROTECTED and r in entry.values]
     if target != entry.ident:                 # a clone: the file's ID is its key, never a setting to copy
         chosen = [r for r in chosen if r.name != "id"]
     writes, unchanged = [], 0
@@ -598,8 +740,8 @@ def left_out(entries: dict, pairs, current: dict, *, only=None, skip=()) -> list
     for source, target in pairs:
         entry = entries[source]
         values = current.get(target, {})
-        for reg in zap.REGISTERS:
-            if not reg.stored or reg not in entry.values or (reg.name == "id" and source != target):
+        for reg in entry.regmap.registers:
+            if not (reg.stored and reg.writable) or reg not in entry.values or (reg.name == "id" and source != target):
                 continue                      # (a clone's id is the file's key: never a difference)
             new, old = entry.values[reg], values.get(reg.name)
             if old == new:
@@ -658,15 +800,17 @@ def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
             if not required and bus.ping(ident, retries=1) is None:
                 continue
         values, error = procedures.read_map(bus, ident)
-        entry = entry_from_values(values, baud=bus.baud, error=error)
-        doc = {"format": FORMAT, "actuators": {str(ident): entry}}
-        entries[ident] = check_document(doc, f"bus ID {ident}")[ident]
+        entry = entry_from_values(values, baud=bus.baud, error=error, regmap=regmap_of(bus))
+        doc = {"format": FORMAT, "protocol": regmap_of(bus).protocol, "map": regmap_of(bus).model,
+               "actuators": {str(ident): entry}}
+        entries[ident] = check_document(doc, f"bus ID {ident}", regmap_of(bus))[ident]
     return entries
 
 
 def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> list:
     """Scan records (``id``, ``baud``, ...) of the live bus's actuators, as a fleet operation
-    compares or backs them up. Without ``ids`` (every ID 0..253), at several ``bauds``, or with
+    compares or backs them up. Without ``ids`` (every ID of the protocol: 0..253 on IR, 1..247
+    on Modbus RTU), at several ``bauds``, or with
     ``scan``, the actuators are found as ``zap scan`` finds them (:meth:`Procedures.discover`),
     and a bus where two actuators answer to one ID is refused (:class:`SharedId`, naming it),
     never read without one of them; otherwise ``ids`` are asked for one by one, an ordinary Echo
@@ -678,7 +822,7 @@ def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCED
         if bus.baud != bauds[0]:
             bus.set_baud(bauds[0])
         return [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=retries) is not None]
-    wanted = list(ids) if ids is not None else list(range(zap.MAX_ID + 1))
+    wanted = list(ids) if ids is not None else all_ids(regmap_of(bus))
     records = procedures.discover(bus, wanted, bauds, retries=retries)
     refuse_shared(records)
     return records
@@ -701,6 +845,8 @@ def plan_bus(bus, entries: dict, pairs, *, name="the file", only=None, skip=(), 
     model or firmware than its entry raises UsageError unless ``force`` (then
     ``on_mismatch(text)`` is told); ``name`` names the document in messages."""
     current, writes, unchanged = {}, [], 0
+    if entries:
+        same_map(map_of(entries), regmap_of(bus), name)
     for source, target in pairs:
         values, _ = procedures.read_map(bus, target)
         current[target] = values
@@ -747,8 +893,11 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
     from ..codec.permissions import as_permission
 
     allow = as_permission(allow)
+    modbus = regmap_of(bus).protocol == "modbus"
     for w in writes:
-        bus.authorize(zap.store(w.target, w.register, w.new), allow)
+        for frame in (bus.write_frames(w.target, {w.register.name: w.new}) if modbus else
+                      [zap.store(w.target, w.register, w.new)]):
+            bus.authorize(frame, allow)
     for w in writes:
         reg = w.register
         if reg.name == "id":
@@ -757,8 +906,9 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
                 on_write(w)
             continue
         w.status = "sending"
-        # (a new feedback-return-mode is that actuator's from now on: the bus keeps it per ID)
-        reply = bus.store(w.target, reg, w.new, check=False, allow=allow)
+        # (a new feedback-return-mode is that actuator's from now on: the bus keeps it per ID;
+        # on Modbus RTU an exception reply raises: the write was refused, not made)
+        reply = bus.store(w.target, reg, w.new, check=modbus, allow=allow)
         w.status = "sent"
         done.append(w)
         if reply is not None and reply.error:
@@ -768,16 +918,38 @@ def execute(bus, writes, done: list, *, on_write=None, allow=None) -> None:
             if on_write is not None:
                 on_write(w)
             continue
-        # a new baud rate takes effect at the next restart: the stored code reads back at once
-        r = bus.load(w.target, reg.address, reg.size, check=False)
-        w.read_back = r.value
-        if r.error:
-            w.errors = sorted(set(w.errors) | set(r.errors))
-        w.status = "verified" if r.value == w.new else "mismatch"
+        line = bus.baud
+        if modbus and reg.name == "baud-rate":
+            # the 17Lf answers at its new rate right after the reply: read back there, then go on at
+            # the rate the other actuators still answer at
+            rate = regmap_of(bus).baud_codes.get(w.new)
+            bus.set_baud(rate)
+            try:
+                bus.wait_ready(w.target, within=2.0)
+                value, errors = _read_back(bus, w.target, reg)
+            finally:
+                bus.set_baud(line)
+        else:
+            # on IR a new baud rate takes effect at the next restart: the stored code reads back at once
+            value, errors = _read_back(bus, w.target, reg)
+        w.read_back = value
+        if errors:
+            w.errors = sorted(set(w.errors) | set(errors))
+        w.status = "verified" if value == w.new else "mismatch"
         if reg.name == "baud-rate" and w.status == "verified":
-            w.note = baud_note(w.target, w.old, w.new, bus.baud)
+            w.note = baud_note(regmap_of(bus), w.target, w.old, w.new, line)
         if on_write is not None:
             on_write(w)
+
+
+def _read_back(bus, ident, reg) -> tuple:
+    """``(value, error names)`` of one register read back: a Load Data on IR (its error bits),
+    a read on Modbus RTU (an exception reply raises)."""
+    if regmap_of(bus).protocol == "modbus":
+        _, regs = bus.read_registers(ident, reg.address, reg.span)
+        return regs[0][1], []
+    r = bus.load(ident, reg.address, reg.size, check=False)
+    return r.value, r.errors
 
 
 def _set_id(bus, w, done) -> None:
@@ -798,11 +970,15 @@ def _set_id(bus, w, done) -> None:
     w.read_back, w.status = w.new, "verified"
 
 
-def baud_note(target: int, old, new: int, line: int) -> str:
-    """When a stored baud-rate code ``new`` (read back equal) takes effect: the IR actuator
-    (12Lf) keeps answering at the rate it runs at until its next restart."""
-    rate = zap.MAP.baud_codes.get(new)
-    was = zap.MAP.baud_codes.get(old) if old is not None else None
+def baud_note(regmap, target: int, old, new: int, line: int) -> str:
+    """When a stored baud-rate code ``new`` (read back equal) takes effect: an IR actuator (the
+    12Lf) keeps answering at the rate it runs at until its next restart; a Modbus RTU one (the
+    17Lf) answers at the new rate from the write's reply on (it was read back there)."""
+    rate = regmap.baud_codes.get(new)
+    if regmap.protocol == "modbus":
+        return (f"ID {target}: baud-rate {new} ({rate} baud) written and read back at {rate} baud: the actuator "
+                f"answers at {rate} baud now, no longer at {line}")
+    was = regmap.baud_codes.get(old) if old is not None else None
     return (f"ID {target}: baud-rate {new} ({rate} baud) stored and read back; the actuator answers at {rate} "
             f"baud from its next restart (power-up, or 'zap restart --id {target}'), at {was or line} baud until "
             "then")
@@ -925,7 +1101,7 @@ def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROC
         except IdTaken:
             raise TwoAnswer(f"ID {target} answers as well as ID {ident}; connect one actuator alone") from None
         record["writes"] += 1
-    got = bus.read(target, REG["id"], check=False)
+    got = bus.read(target, regmap_of(bus).by_name["id"], check=False)
     if got != target:
         raise CheckFailed(f"setup: the actuator reads back ID {got}, expected {target}")
     if config is not None:

@@ -14,13 +14,42 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, MORE_TO_DO, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, InputPath, OutputPath, consent, exits, note, plural, resolve_format, warn,
-                       zap_yes_option as yes_option)
+from ..options import (Choice, InputPath, OutputPath, consent, exits, note, plural, protocol_options, resolve_format,
+                       protocol_option, warn, zap_map, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
 DOC_FORMATS = ("json", "toml", "yaml")
 ROW_FORMATS = ("table", "json", "jsonl", "csv")
+
+
+def _from_file(common, entries) -> None:
+    """A fleet file's protocol and map are the bus's where --protocol (or its environment
+    variable) does not say one: ``zap apply modbus-fleet.json`` talks Modbus RTU. Where it does
+    and they differ, the apply or diff refuses (:func:`zkzap.api.fleet.same_map`)."""
+    from click.core import ParameterSource
+
+    from ...codec.regmap import default_map
+
+    fm = fleet.map_of(entries)
+    ctx = click.get_current_context()
+    if ctx.get_parameter_source("protocol") in (None, ParameterSource.DEFAULT) and common.get("regmap") is None:
+        common["protocol"] = fm.protocol
+        if fm is not default_map(fm.protocol):
+            common["regmap"] = fm
+
+
+def _ir_return_mode(common, why) -> None:
+    """--return-mode 0 refused on IR (Load Data is never answered there); Modbus has no return mode."""
+    if common["return_mode"] == "0" and common.get("protocol", "ir") == "ir":
+        raise UsageError(f"--return-mode 0: {why}")
+
+
+def zap_map_of(common):
+    """The register map of the bus ``common`` (the link options, as the command resolved them) talks to."""
+    from ...codec.regmap import default_map
+
+    return common.get("regmap") or default_map(common.get("protocol") or "ir")
 
 
 def _real(common) -> bool:
@@ -112,6 +141,7 @@ SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search:
 @click.option("-f", "--format", "fmt", type=Choice(DOC_FORMATS), default=None,
               help="Document format (default: from --output's suffix; JSON on stdout).")
 @link_options(**SEARCH_BAUDS)
+@protocol_options
 def backup(ids, scan_, output, fmt, **common):
     """Back up every readable register of every actuator: a fleet document.
 
@@ -131,6 +161,10 @@ def backup(ids, scan_, output, fmt, **common):
       zap backup --ids 1-4 -p /dev/ttyUSB0 -o fleet.toml
       zap backup --ids 1 -p /dev/ttyUSB0 -f yaml > one.yaml
       zap backup -b all -p /dev/ttyUSB0 -o fleet.json          # every actuator at any baud rate
+      zap backup --protocol modbus -p /dev/ttyUSB0 -o fleet.json   # 17Lf actuators (Modbus RTU)
+
+    The document names its protocol and register map (protocol, map): a Modbus RTU fleet's file
+    is read back as one, and never applied to an IR bus (nor the other way round).
     """
     if output and output != "-":
         doc_fmt = fmt or fleet.format_of(output)
@@ -139,11 +173,10 @@ def backup(ids, scan_, output, fmt, **common):
         check_path(output, "output")          # before the bus is read: the file is written at the end
     else:
         doc_fmt = fmt or "json"
-    if common["return_mode"] == "0":
-        raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
+    _ir_return_mode(common, "Load Data is never answered in feedback-return-mode 0")
     bauds = common["baud"]
     search = scan_ or ids is None or len(bauds) > 1
-    targets = ids if ids is not None else list(range(zap.MAX_ID + 1))
+    targets = ids if ids is not None else fleet.all_ids(zap_map())
     sim_ids = ids if ids is not None else [0]
     args = dict(_link_args(common), baud=bauds[0])
     with open_link(ids=sim_ids, probe=None if search else sim_ids[0], **args) as bus:
@@ -156,7 +189,7 @@ def backup(ids, scan_, output, fmt, **common):
             if missing:
                 raise NoReply(f"no reply from ID{'s' if len(missing) > 1 else ''} {fleet._ranges(missing)} at "
                               f"{', '.join(map(str, bauds))} baud")
-            if common["return_mode"] == "auto":
+            if common["return_mode"] == "auto" and common.get("protocol", "ir") == "ir":
                 bus.detect_return_mode(found[0]["id"])
         else:
             found = [{"id": i, "baud": bus.baud} for i in targets]
@@ -207,6 +240,7 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
 @click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @link_options(**SEARCH_BAUDS)
+@protocol_options
 def diff(a, b, ids, everything, compare, fmt, **common):
     """Compare two fleets: A and B are backup files or 'bus' (the live bus on -p).
 
@@ -228,15 +262,16 @@ def diff(a, b, ids, everything, compare, fmt, **common):
     sides = {}
     for label, src in (("A", a), ("B", b)):
         if src != "bus":
-            sides[label] = fleet.read_document(src)
+            sides[label] = fleet.read_document(src, common.get("regmap"))
     if "bus" in (a, b):
-        if common["return_mode"] == "0":
-            raise UsageError("--return-mode 0: Load Data is never answered in feedback-return-mode 0")
         other = next(iter(sides.values()))
+        _from_file(common, other)
+        _ir_return_mode(common, "Load Data is never answered in feedback-return-mode 0")
+        fleet.same_map(fleet.map_of(other), zap_map_of(common), a if a != "bus" else b, "the bus")
         bauds = common["baud"]
         args = dict(_link_args(common), baud=bauds[0])
         with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
-            if common["return_mode"] == "auto":
+            if common["return_mode"] == "auto" and common["protocol"] == "ir":
                 bus.detect_return_mode((ids or sorted(other))[0])
             live = fleet.bus_entries(bus, ids, bauds, retries=common["retries"])
         sides["A" if a == "bus" else "B"] = live
@@ -287,6 +322,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options
+@protocol_option
 def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **common):
     """Make the bus match FILE: write the stored settings that differ, read each back.
 
@@ -314,18 +350,20 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
       zap apply old.json --map 1:5,2:6 --skip current-limit -p /dev/ttyUSB0 --yes
       zap apply fleet.json --only goal-speed,led -p /dev/ttyUSB0       # volatile settings
     """
-    entries = fleet.read_document(file)
+    entries = fleet.read_document(file, common.get("regmap"))
     file = "stdin" if file == "-" else file
+    _from_file(common, entries)
+    fleet.same_map(fleet.map_of(entries), zap_map_of(common), file, "the bus")
     pairs = fleet.assignments(entries, ids=ids, mapping=mapping, to=to)
-    only_regs = fleet.registers_option(only, "--only") if only is not None else None
-    skip_regs = fleet.registers_option(skip, "--skip")
+    regmap = fleet.map_of(entries)
+    only_regs = fleet.registers_option(only, "--only", regmap) if only is not None else None
+    skip_regs = fleet.registers_option(skip, "--skip", regmap)
     if only_regs is not None:
         for reg in only_regs:
             if reg.name in fleet.PROTECTED and not force:
                 raise UsageError(f"--only {reg.name}: this changes how the actuator is reached; add --force")
     fleet.check_only(only_regs, pairs)
-    if common["return_mode"] == "0":
-        raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be compared or read back")
+    _ir_return_mode(common, "Load Data is never answered, so nothing can be compared or read back")
     targets = [t for _, t in pairs]
     from ...codec.permissions import FORCE, Permission
     from ...io.term import is_tty
@@ -451,6 +489,7 @@ def _report_interrupted(writes, done, fmt, file, exc):
                    "exit status 8 when IDs remain pending.")
 @yes_option
 @link_options
+@protocol_options
 def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, no_wait, yes, **common):
     """Guided ID setup: one actuator at a time, each gets the next ID of --ids.
 
@@ -474,7 +513,9 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
     """
     entry = None
     if config:
-        entries = fleet.read_document(config)
+        entries = fleet.read_document(config, common.get("regmap"))
+        _from_file(common, entries)
+        fleet.same_map(fleet.map_of(entries), zap_map_of(common), config, "the bus")
         if config_id is not None:
             if len(config_id) != 1 or config_id[0] not in entries:
                 raise UsageError(f"--config-id: give one ID of {config} ({', '.join(map(str, sorted(entries)))})")
@@ -489,8 +530,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
         for i in lst or ():
             if i not in ids:
                 raise UsageError(f"{opt}: ID {i} is not in --ids")
-    if common["return_mode"] == "0":
-        raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be verified")
+    _ir_return_mode(common, "Load Data is never answered, so nothing can be verified")
     from ...outfile import check_state
 
     check_state(state_path)                   # read now and saved after each ID: a file it can rewrite
@@ -515,6 +555,9 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
         state.save()
     args = _link_args(common)
     args["baud"] = find_baud[0]
+    regmap = zap_map_of(common)
+    search = [i for i in find_ids if i in set(fleet.all_ids(regmap))]   # (no broadcast ID 0 on Modbus RTU)
+    factory = regmap.by_name["id"].default or 0                         # the ID a new actuator comes with
     stopped = refused = False
     with open_link(ids=[0], allow=allow, **args) as bus:
         while state.pending():
@@ -532,7 +575,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                     continue
             done_ids = set(state.done)
             try:
-                found = fleet.find_alone(bus, find_ids, find_baud, prefer=[0, target])
+                found = fleet.find_alone(bus, search, find_baud, prefer=[factory, target])
                 if found[0] in done_ids and found[0] != target:
                     raise fleet.TwoAnswer(f"the actuator found answers as ID {found[0]} at {found[1]} baud, "
                                           f"which this setup gave already; connect the next one "
