@@ -328,9 +328,46 @@ class StandSession:
         return self.alarms.acknowledge(who, ids)
 
     def refusal(self, setpoint: Optional[float] = None) -> Optional[str]:
-        """Why a start is refused now (None: it may start), by the ECU's latest values."""
+        """Why a start is refused now (None: it may start), by the ECU's latest values: an alarm
+        latched, an engine not yet at rest and cool after a trip, a setpoint but 0 for the first
+        start after one (:meth:`~zkzap.api.alarms.Alarms.refusal`), or a limit violated now (a
+        rate, or a limit of other engine states than the ECU's, is not judged here)."""
         latest = self.telemetry.latest if self.telemetry is not None else None
-        return self.alarms.refusal(latest, setpoint)
+        why = self.alarms.refusal(latest, setpoint)
+        if why is not None or self.limits is None or latest is None:
+            return why
+        for c in self.limits.conditions:
+            when = getattr(c, "when", None)
+            if getattr(c, "rate", False) or (when is not None and latest.get("engine_state") not in when):
+                continue
+            value = latest.get(c.field)
+            if value is not None and c.check(value) == "violated":
+                return f"start refused: limit {c.text} is violated now ({c.field}={value:g})"
+        return None
+
+    def check_start(self, setpoint: Optional[float] = None) -> None:
+        """Raise :class:`~zkzap.api.alarms.StartRefused` with the reason when a start is refused
+        now (:meth:`refusal`)."""
+        why = self.refusal(setpoint)
+        if why is not None:
+            from .alarms import StartRefused
+
+            raise StartRefused(why)
+
+    def mark_trip(self, kind: str, why: str, sent: Optional[str], t: Optional[float] = None) -> Alarm:
+        """A trip the front end made (an operator's abort, the dead-man rule: a session that
+        ended as asked, but as a trip): the alarm latched, and, when ``sent`` (the abort's
+        ``standby`` or ``stop``) went out, a trip record in the records, as a limit's or a
+        signal's trip is marked by the session itself. Returns the alarm."""
+        from .session import Outcome, describe_abort, trip_record
+
+        aborted = sent in ("standby", "stop")
+        said = f"{why}; sent {describe_abort(sent)}" if aborted else why
+        alarm = self.alarms.trip(kind, said, t=t)
+        if aborted and self.source is not None and self.sink is not None:
+            src = self.source
+            self.sink(trip_record(Outcome(kind, aborted=sent), src.now(), src.clock, why=why))
+        return alarm
 
     def close(self) -> None:
         """Stop the external sensors (at the session's end, before any summary). Twice is once."""

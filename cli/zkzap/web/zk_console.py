@@ -231,13 +231,8 @@ class ZkConsole(Console):
         self.ended = {"t": round(time.time(), 3), "reason": outcome.reason, "why": why,
                       "sent": describe_abort(sent) if sent and sent not in ("hold", "failed") else sent}
         if outcome.ok and self._cut_as is not None:      # an abort or the dead-man rule: a trip too
-            said = f"{why}; sent {self.ended['sent']}" if sent and sent not in ("hold", "failed") else why
-            self.alarms.trip(self._cut_as, said, t=s.ended_t)
-            if self.record is not None and sent in ("standby", "stop"):
-                from ..api.session import Outcome, trip_record
-
-                src = self.ecu.source
-                self._write(trip_record(Outcome(self._cut_as, aborted=sent), src.now(), src.clock, why=why))
+            self.stand_session.mark_trip(self._cut_as, why, sent if sent not in ("hold", "failed") else None,
+                                         t=s.ended_t)
         self._engine_message()
         if not outcome.ok:
             self.log(f"engine control ended: {why}", "error")
@@ -339,7 +334,7 @@ class ZkConsole(Console):
                "version_note": self.tel.version_note}
         if self.limits is not None:
             msg["limits"] = self.limits.summary()
-        msg["interlock"] = self.alarms.refusal(self.tel.latest) if self.command is None else None
+        msg["interlock"] = self.stand_session.refusal() if self.command is None else None
         return msg
 
     def _alarms(self) -> dict:
@@ -418,19 +413,6 @@ class ZkConsole(Console):
         if silent > self.silence:
             raise UsageError(f"start: the ECU is silent (no status frame for {silent:.1f} s)")
 
-    def _limits_hold(self):
-        """Refuse a start while a limit is violated now."""
-        if self.limits is None:
-            return
-        latest = self.tel.latest
-        for c in self.limits.conditions:
-            when = getattr(c, "when", None)
-            if getattr(c, "rate", False) or (when is not None and latest.get("engine_state") not in when):
-                continue                        # a rate, or a limit of other engine states: not now
-            value = latest.get(c.field)
-            if value is not None and c.check(value) == "violated":
-                raise UsageError(f"start: limit {c.text} is violated now ({c.field}={value:g}); not started")
-
     def _command_from(self, msg, rpm_used=False) -> LiveCommand:
         mode = msg.get("mode", "throttle")
         if mode == "throttle":
@@ -459,8 +441,7 @@ class ZkConsole(Console):
                              "or target instead")
         cmd = self._command_from(msg)
         self._ready()
-        self.alarms.check_start(self.tel.latest, cmd.throttle if cmd.mode == "throttle" else cmd.rpm)
-        self._limits_hold()
+        self.stand_session.check_start(cmd.throttle if cmd.mode == "throttle" else cmd.rpm)
         self.policy.zk_frames(cmd.frames, ctx.granted)      # refused before the session starts
         self._next = ("control", cmd, ctx.label, self.policy.allow(ctx.granted))
         self._cut()
