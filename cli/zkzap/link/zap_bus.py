@@ -972,6 +972,10 @@ class ZapBus:
         limit = (self.quick_timeout(len(pkt), self.family.ident(pkt)) + extra) if quick else span
         got = self._await(pkt, accept, data_len, rx_len, t0, limit, self.family.copy_reply(pkt), token, any_answer)
         if isinstance(got, Reply):
+            if got.doubt is not None:
+                # the reply may be an earlier attempt's: this one's own may still come, and is
+                # this attempt's, never another request's
+                self._owe(token, accept, data_len, t0, tx, span)
             return got
         if got[0] == "none":
             # its window (still open after a quick probe) and then some: a reply that comes is
@@ -1347,7 +1351,10 @@ class ZapBus:
         got = {i: 0 for i in ids}
         garbled = {i: 0 for i in ids}
         last = self.now()
-        for _ in range(asks):
+        rounds, noisy = asks, 0
+        while rounds > 0:
+            rounds -= 1
+            before = self.garbled
             for ident in ids:
                 probe, n = self.family.probe(ident)
                 try:
@@ -1359,12 +1366,16 @@ class ZapBus:
                 if r is not None:
                     got[ident] += 1
                 last = self.last_sent
+            if self.garbled != before and noisy < asks:
+                # bytes that made no packet may hide a second reply (one cut short): once more
+                noisy += 1
+                rounds += 1
         span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
         self.linger(max(0.0, last + horizon_for(span) - self.now()))
         out = {}
         for ident in ids:
             dev = self.devices[ident]
-            if dev.extra > extra[ident] or garbled[ident] == asks or (garbled[ident] and got[ident]):
+            if dev.extra > extra[ident] or garbled[ident] >= asks or (garbled[ident] and got[ident]):
                 out[ident] = "shared"
             elif got[ident] or dev.late > late[ident]:
                 out[ident] = "one"

@@ -487,4 +487,5 @@ def _echo_answers(bus, ident, retries, early=False) -> bool:
             return False
         if r is None or r.doubt is None:
             return r is not None
+        bus.settle(ident)                   # until no reply to an earlier attempt can come
     return False
