@@ -317,3 +317,54 @@ def test_scan_every_bus_at_its_baud_rate(cli, tmp_path):
     assert "bus right (sim://zap?ids=1,3&baud=115200): ID 4 of the fleet file did not answer" in r.stderr
     r = cli("zap", "scan", "--buses", "all", "-p", "sim://zap", "--fleet", str(fleet))
     assert r.exit_code == 2 and "not with -p" in r.stderr
+
+
+# -- several buses by -p given again ----------------------------------------------------------
+
+LEFT, RIGHT = "sim://zap?ids=1,2&speed=4", "sim://zap?ids=1&speed=4"
+
+
+def test_cycle_on_two_buses_by_their_ports(cli):
+    r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "--dwell", "0.05", "--cycles", "2",
+            "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    recs = jsonl(r.stdout)
+    assert sorted((x["bus"], x["cycle"]) for x in recs) == sorted([(LEFT, 1), (LEFT, 2), (RIGHT, 1), (RIGHT, 2)])
+    assert all(x["status"] == "ok" and x["reach_b_s"] > 0 for x in recs)
+    for port in (LEFT, RIGHT):
+        assert f"bus {port}: 2 cycles (1..2)" in r.stderr and "x the wire limit" in r.stderr
+
+
+def test_a_stall_on_one_bus_stops_the_cycle_on_every_bus(cli):
+    stuck = "sim://zap?ids=1&speed=4&faults=1:stuck"
+    r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "--dwell", "0.05", "--cycles", "50",
+            "--stall", "0.2", "-p", LEFT, "-p", stuck, "-f", "jsonl")
+    assert r.exit_code == 1, r.stderr
+    recs = jsonl(r.stdout)
+    assert {x["bus"]: x["status"] for x in recs if x["status"] != "ok"} == {stuck: "stall", LEFT: "cancelled"}
+    assert f"bus {stuck}: stopped: ID 1 stalled" in r.stderr and f"bus {LEFT}: stopped: another bus stopped" in r.stderr
+
+
+def test_several_ports_refuse_what_is_one_bus_s(cli, tmp_path):
+    r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "-p", LEFT, "-p", RIGHT,
+            "--resume", str(tmp_path / "s.json"))
+    assert r.exit_code == 2 and "--resume: for one bus" in r.stderr and not (tmp_path / "s.json").exists()
+    r = cli("zap", "cycle", "--id", "1", "-p", LEFT, "-p", LEFT)
+    assert r.exit_code == 2 and "is given twice" in r.stderr
+    r = cli("zap", "watch", "present-position", "--ids", "1", "-p", LEFT, "-p", RIGHT, "--unit", "mm")
+    assert r.exit_code == 2 and "--unit mm is for one bus" in r.stderr
+
+
+def test_play_scan_and_watch_on_two_buses_by_their_ports(cli, path):
+    p = path('t,id,position\n0,1,1000\n0.3,1,2000\n')
+    r = cli("zap", "play", p, "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    last = {x["bus"]: x for x in jsonl(r.stdout)}
+    assert set(last) == {LEFT, RIGHT} and all(abs(x["present"] - 2000) <= 7 for x in last.values())
+    r = cli("zap", "scan", "--ids", "0-3", "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    assert sorted((x["bus"], x["id"]) for x in jsonl(r.stdout)) == sorted([(LEFT, 1), (LEFT, 2), (RIGHT, 1)])
+    assert "did not answer" not in r.stderr
+    r = cli("zap", "watch", "present-position", "--ids", "1", "-c", "2", "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    assert sorted(x["bus"] for x in jsonl(r.stdout)) == sorted([LEFT, LEFT, RIGHT, RIGHT])

@@ -119,6 +119,10 @@ def run(specs, work, *, open_bus=None):
                             return
                         except queue.Full:
                             continue
+                    try:                 # after a cancel (the record of a run cut short): if there is room
+                        q.put_nowait(out)
+                    except queue.Full:
+                        pass
                 work(bus, spec, emit, cancel)
         except BaseException as e:  # noqa: BLE001 - raised again in the caller's thread
             errors.append((spec.name, e))

@@ -305,15 +305,18 @@ PATH_COLUMNS = ["cycle", "time", "t", "max_tracking_error", "peak_current_ma", "
 class PathCycler:
     """Cycles that each play ``plan`` (:class:`zkzap.api.motion.Plan`) once: one record per
     cycle (:data:`PATH_COLUMNS`): the largest tracking error, peak and mean current, lowest
-    voltage, error bits of the log reads. Stops (every actuator held) as a play stops."""
+    voltage, error bits of the log reads. Stops (every actuator held) as a play stops; ``cancel``
+    as :class:`zkzap.api.motion.Player`'s."""
 
-    def __init__(self, bus, plan, *, cycles=10, first=1, limit=None, scales=None, clock=None, duration=None):
+    def __init__(self, bus, plan, *, cycles=10, first=1, limit=None, scales=None, clock=None, duration=None,
+                 cancel=None, cancel_why="another bus stopped"):
         from .motion import Player
 
         self.bus, self.plan, self.cycles, self.first, self.limit = bus, plan, cycles, first, limit
         self.scales = scales
         self.duration = duration
-        self._player = lambda: Player(bus, plan, limit=limit, scales=scales, clock=clock, settle=1.0)
+        self._player = lambda: Player(bus, plan, limit=limit, scales=scales, clock=clock, settle=1.0, cancel=cancel,
+                                      cancel_why=cancel_why)
         self.reason = None
         self.why = ""
         self.held = None

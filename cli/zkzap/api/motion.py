@@ -283,10 +283,11 @@ def read_path(source, *, unit: str = "counts", scales=None, name=None) -> list:
     return rows
 
 
-def rows_for_bus(rows, spec, specs, name="path") -> list:
+def rows_for_bus(rows, spec, specs, name="path", *, shared=False) -> list:
     """The rows of ``rows`` that bus ``spec`` plays (:class:`zkzap.api.buses.BusSpec`): those
     naming it, and those naming no bus whose IDs are on it (an ID on several of ``specs`` needs
-    the row's bus: UsageError)."""
+    the row's bus: UsageError; with ``shared``, such a row is played on each of them: buses of
+    alike machines)."""
     names = {s.name for s in specs}
     out = []
     for r in rows:
@@ -300,7 +301,7 @@ def rows_for_bus(rows, spec, specs, name="path") -> list:
             on = [s.name for s in specs if ident in s.ids]
             if not on:
                 _fail(name, r.line, f"ID {ident} is on none of the buses ({', '.join(sorted(names))})")
-            if len(on) > 1:
+            if len(on) > 1 and not shared:
                 _fail(name, r.line, f"ID {ident} is on buses {', '.join(on)}: give the row's bus")
         mine = tuple(i for i in r.ids if i in spec.ids)
         if mine:

@@ -829,15 +829,41 @@ class BaudList(click.ParamType):
         return out
 
 
-def port_options(group: str, *, baud_auto: bool = False):
+PORTS_META = "zkzap.ports"
+
+
+def _several_ports(ctx, param, value):
+    """``-p`` given more than once: every port kept for :func:`ports_given`; the command's
+    ``port`` is the first (one bus), or None."""
+    ports = [v for v in (value or ()) if v]
+    ctx.meta.pop(PORTS_META, None)
+    if len(ports) > 1:
+        twice = sorted({p for p in ports if ports.count(p) > 1})
+        if twice:
+            raise UsageError(f"-p/--port: {twice[0]} is given twice")
+        ctx.meta[PORTS_META] = ports
+    return ports[0] if ports else None
+
+
+def ports_given():
+    """The ports of a ``-p`` given more than once (several buses), or None (one port or none)."""
+    ctx = click.get_current_context(silent=True)
+    return ctx.meta.get(PORTS_META) if ctx is not None else None
+
+
+def port_options(group: str, *, baud_auto: bool = False, several: bool = False):
     """``-p/--port``, ``-b/--baud``, ``--stop-bits``, ``--timeout`` and ``--sim`` for a protocol
-    group; ``baud_auto``: ``-b auto`` detects the line settings first."""
+    group; ``baud_auto``: ``-b auto`` detects the line settings first; ``several``: ``-p`` may
+    be given again for several buses at once (:func:`ports_given`)."""
     env = ENV[group]
     options = [
-        click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None,
+        click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None, multiple=several,
+                     callback=_several_ports if several else None,
                      shell_complete=lambda ctx, param, incomplete: _complete_ports(ctx, param, incomplete, group),
                      help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
-                          f"loop://, spy://, hwgrep://) [env {env['port']}]."),
+                          f"loop://, spy://, hwgrep://) [env {env['port']}]."
+                          + (" Again for several buses at once, each on its own thread (records name their "
+                             "bus by its port)." if several else "")),
         click.option("-b", "--baud", type=BaudType(baud_auto), envvar=env["baud"],
                      default=DEFAULT_BAUD[group], show_default=True,
                      help=(f"Baud rate, or auto to detect it (and the stop bits) first [env {env['baud']}]."

@@ -37,12 +37,12 @@ def _check_sim_ids(ctx, param, value):
     return value
 
 
-def link_options(f=None, *, baud_type=None, baud_help=None):
+def link_options(f=None, *, baud_type=None, baud_help=None, several=False):
     """Port, baud, timeout, --sim, return mode, retries, --sim-ids and -v for every command that
     talks to actuators. ``baud_type``/``baud_help`` replace -b/--baud's type (``zap scan``
-    takes a list)."""
+    takes a list); ``several``: -p may be given again, for several buses at once."""
     if f is None:
-        return lambda g: link_options(g, baud_type=baud_type, baud_help=baud_help)
+        return lambda g: link_options(g, baud_type=baud_type, baud_help=baud_help, several=several)
     f = click.option("-v", "--verbose", is_flag=True,
                      help="Say on stderr what was sent and how the actuator acknowledged it.")(f)
     f = click.option("--sim-ids", metavar="LIST", default=None, callback=_check_sim_ids,
@@ -62,7 +62,7 @@ def link_options(f=None, *, baud_type=None, baud_help=None):
                      help="The actuators' feedback-return-mode: 0 answers Echo only, 1 Load Data and "
                           "Echo, 2 every command; 'auto' asks the actuator first "
                           "[env ZKZAP_ZAP_RETURN_MODE].")(f)
-    f = port_options("zap")(f)
+    f = port_options("zap", several=several)(f)
     for param in f.__click_params__:
         if param.name == "timeout":
             param.help = ("The late window: how long after a request its reply may still begin, in seconds "

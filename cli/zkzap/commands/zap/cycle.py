@@ -11,8 +11,8 @@ import click
 
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, CheckFailed, UsageError
 from .. import CONTEXT, Command
-from ..options import (FINITE, Choice, FiniteRange, InputPath, IntRange, OutputPath, close_output, exits, note,
-                       open_output, output_format, output_options, unit_options, unit_scales, warn)
+from ..options import (FINITE, Choice, FiniteRange, InputPath, IntRange, OutputPath, buses_option, close_output,
+                       exits, note, open_output, output_format, output_options, unit_options, unit_scales, warn)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -60,11 +60,12 @@ def _given(name) -> bool:
                    ".pdf or .html (matplotlib: the 'plot' extra).")
 @click.option("-f", "--format", "fmt", type=Choice(["jsonl", "json", "csv"]), default=None,
               help="Record format (default: by the suffix of -o; JSON Lines otherwise).")
+@buses_option("Cycle --id (or --path)")
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
-@link_options
+@link_options(several=True)
 def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit, leg_timeout, resume_path,
-          report_path, fmt, output, append, unit, fleet_file, **common):
+          report_path, fmt, output, append, unit, fleet_file, bus_names, **common):
     """Run an actuator between two ends for many cycles, measuring each one.
 
     Each cycle moves A -> B -> A (--between; or plays --path once). Per leg the goal is written
@@ -80,6 +81,10 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     command again (or just --resume STATE) goes on at its next cycle, appending to its output. --report writes plots of
     the whole run (reach time and current per cycle, their histograms, voltage, overshoot).
 
+    Several buses at once: -p again (or --buses NAMES with --fleet): the same run on each bus,
+    each on its own thread, every record naming its bus; a bus that stops (a stall, a limit, an
+    error bit) stops every bus, each rod held. --resume and --report are for one bus.
+
     \b
     Examples:
       zap cycle --id 1 --between 200 3500 --dwell 0.5 --cycles 10000 -p /dev/ttyUSB0 \\
@@ -87,6 +92,7 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
       zap cycle --resume wear.json -p /dev/ttyUSB0 --report wear.png
       zap cycle --id 1 --between 2 25 --unit mm --fleet fleet.json --limit 900 -p /dev/ttyUSB0
       zap cycle --path wave.csv --cycles 100 -p /dev/ttyUSB0 -o wave-wear.jsonl
+      zap cycle --id 1 --between 200 3500 --cycles 1000 -p /dev/ttyUSB0 -p /dev/ttyUSB1 -o wear.csv
     """
     from ...api import cycle as api
 
@@ -100,6 +106,13 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     first = 1
     state = None
     import os
+
+    from .motion import several_buses
+
+    several = several_buses(bus_names)
+    if several and (resume_path is not None or report_path is not None):
+        raise UsageError(f"{'--resume' if resume_path is not None else '--report'}: for one bus (a run's state and "
+                         "report are one actuator's); with several buses write -o FILE, whose records name their bus")
 
     if resume_path is not None:
         from ...outfile import check_state
@@ -176,6 +189,10 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     columns = list(api.PATH_COLUMNS if plan is not None else api.COLUMNS)
     if plan is None and scales:
         columns += api.MM_COLUMNS
+    if several:
+        return _cycle_buses(bus_names, fleet_file, plan, ident, (a, b) if plan is None else None,
+                            raw_speed if plan is None else None, params, duration, record_fmt, columns, output,
+                            append, common)
     stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
     if state is not None:
         state.output = output if output and output != "-" else None
@@ -190,17 +207,8 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
 
         collected = CycleRun()
     with open_link(ids=ids, **_link_args(common)) as link:
-        if plan is not None:
-            runner = api.PathCycler(link, plan, cycles=params["cycles"], first=first, limit=params["limit"],
-                                    scales=scales, duration=duration)
-        else:
-            if a is None:
-                a, b = link.read(ident, "short-stroke-limit"), link.read(ident, "long-stroke-limit")
-                params["between"] = [a, b]
-                note(f"ID {ident}: cycling between its stroke limits, {a} and {b}")
-            runner = api.Cycler(link, ident, a, b, dwell=params["dwell"], cycles=params["cycles"], first=first,
-                                speed=raw_speed, stall=params["stall"], limit=params["limit"],
-                                timeout=params["timeout"], scale=(scales or {}).get(ident), duration=duration)
+        runner = _runner(link, plan, ident, (a, b) if plan is None else None, raw_speed if plan is None else None,
+                         params, first, scales, duration)
         writer = make_writer(record_fmt, stream, columns, header=not had)
         try:
             for rec in runner.run():
@@ -225,16 +233,87 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
                      + (f"; resume with --resume {state.path}" if state is not None else ""))
             if report_path is not None:
                 _report(report_path, output, collected, params, first)
-    if runner.reason in ("device-error",):
+    _raise_for(runner.reason, runner.why)
+
+
+def _runner(link, plan, ident, ends, raw_speed, params, first, scales, duration, cancel=None, what=""):
+    """The Cycler (--between) or PathCycler (--path) of one bus; the stroke limits read when no
+    --between was given. ``cancel``: another bus's stop (see :mod:`zkzap.api.buses`)."""
+    from ...api import cycle as api
+
+    if plan is not None:
+        return api.PathCycler(link, plan, cycles=params["cycles"], first=first, limit=params["limit"], scales=scales,
+                              duration=duration, cancel=cancel)
+    a, b = ends
+    if a is None:
+        a, b = link.read(ident, "short-stroke-limit"), link.read(ident, "long-stroke-limit")
+        params["between"] = [a, b]
+        note(f"{what}ID {ident}: cycling between its stroke limits, {a} and {b}")
+    return api.Cycler(link, ident, a, b, dwell=params["dwell"], cycles=params["cycles"], first=first, speed=raw_speed,
+                      stall=params["stall"], limit=params["limit"], timeout=params["timeout"],
+                      scale=(scales or {}).get(ident), duration=duration, cancel=cancel,
+                      cancel_why="another bus stopped")
+
+
+def _raise_for(reason, why):
+    """The exit of a run that ended for ``reason`` (none for done, a duration, a cancel)."""
+    if reason == "device-error":
         from ...errors import DeviceError
 
-        raise DeviceError(f"stopped: {runner.why}")
-    if runner.reason == "no-reply":
+        raise DeviceError(f"stopped: {why}")
+    if reason == "no-reply":
         from ...errors import NoReply
 
-        raise NoReply(f"stopped: {runner.why}")
-    if runner.reason not in (None, "done", "duration"):
-        raise CheckFailed(f"stopped: {runner.why}")
+        raise NoReply(f"stopped: {why}")
+    if reason not in (None, "done", "duration", "cancelled"):
+        raise CheckFailed(f"stopped: {why}")
+
+
+def _cycle_buses(bus_names, fleet_file, plan, ident, ends, raw_speed, params, duration, record_fmt, columns, output,
+                 append, common):
+    """zap cycle on several buses (--buses, -p again): the same cycle run on each bus, each on its
+    own thread (:mod:`zkzap.api.buses`); one record stream whose records name their bus. A bus
+    that stops (a stall, a limit, an error bit, Ctrl-C) stops every bus, each rod held."""
+    from ...api import buses
+    from ...io.writers import make_writer
+    from .motion import bus_specs, open_spec
+
+    specs = bus_specs(bus_names, fleet_file, common, params["unit"], plan.ids if plan is not None else [ident])
+    columns = ["bus"] + columns
+    stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
+    runners = {}
+
+    def work(link, spec, emit, cancel):
+        runner = runners[spec.name] = _runner(link, plan, ident, ends, raw_speed, dict(params), 1, None, duration,
+                                              cancel=cancel, what=f"bus {spec.name}: ")
+        try:
+            for rec in runner.run():
+                emit(rec)
+        finally:
+            if runner.reason not in ("done", "duration", "cancelled"):
+                cancel.set()                     # one bus stopped (or failed): every bus stops
+
+    writer = make_writer(record_fmt, stream, columns, header=not had)
+    started = time.monotonic()
+    try:
+        for rec in buses.run(specs, work, open_bus=open_spec(common)):
+            writer.write(rec)
+    except KeyboardInterrupt:
+        for runner in runners.values():
+            runner.halt()
+        raise
+    finally:
+        close_output(writer, stream)
+        for spec in specs:
+            runner = runners.get(spec.name)
+            if runner is None:
+                continue
+            _summary(runner, 1, time.monotonic() - started, plan is None, f"bus {spec.name}: ")
+            if runner.reason not in (None, "done", "duration"):
+                warn(f"bus {spec.name}: stopped: {runner.why}" + _held(runner))
+    first = next((r for r in runners.values() if r.reason not in (None, "done", "duration", "cancelled")), None)
+    if first is not None:
+        _raise_for(first.reason, first.why)
 
 
 def _speed(scale, speed):
@@ -258,7 +337,7 @@ def _held(runner):
     return f"; held at {held}"
 
 
-def _summary(runner, first, seconds, polled):
+def _summary(runner, first, seconds, polled, what=""):
     last = runner.done
     n = max(0, last - first + 1)
     text = f"{n} cycle{'s' if n != 1 else ''} ({first}..{last}) in {seconds:.1f} s" if n else "no cycle finished"
@@ -269,7 +348,7 @@ def _summary(runner, first, seconds, polled):
                      f"{limit:.1f}/s)")
         except ZeroDivisionError:
             pass
-    note(text)
+    note(what + text)
 
 
 def _report(path, output, collected, params, first):

@@ -13,8 +13,8 @@ import click
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, CheckFailed, UsageError
 from .. import CONTEXT, Command
 from ..options import (Choice, FiniteRange, InputPath, IntRange, OutputPath, buses_option, close_output,
-                       dry_run_option, exits, note, open_output, output_format, output_options, unit_options,
-                       unit_scales, warn)
+                       dry_run_option, exits, note, open_output, output_format, output_options, ports_given,
+                       unit_options, unit_scales, warn)
 from .compose import _link_args, check_sim_args, link_options, open_link
 from .scan import IdList, _progress
 
@@ -87,7 +87,7 @@ def _raise_stopped(stopped):
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
 @dry_run_option
-@link_options
+@link_options(several=True)
 def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fmt, output, append, unit, fleet_file,
          dry_run, **common):
     """Play a timed path: FILE rows of t (seconds), id (one, or several like "1,2"),
@@ -124,7 +124,7 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
     scales = unit_scales(unit, fleet_file, _path_ids(path, text) if unit == "mm" else [])
     rows = motion.read_path(io.StringIO(text) if text is not None else path, unit=unit, scales=scales,
                             name="stdin" if path == "-" else path)
-    if bus_names is not None:
+    if several_buses(bus_names):
         return _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loops, limit, stop_mode, no_log,
                            fmt, output, append, dry_run, common)
     p = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"], interpolate=interpolate, rate=rate)
@@ -197,10 +197,26 @@ def _raise_unanswered(player):
         raise NoReply(f"no actuator answered: {s['reads']} log reads unanswered, the goals went out unconfirmed")
 
 
-def bus_specs(bus_names, fleet_file, common, unit):
-    """The buses of ``--buses`` (exit 2 with -p or --sim, without --fleet, with --unit mm)."""
-    from ...api.buses import buses_of
+def several_buses(bus_names) -> bool:
+    """Whether the command works on several buses: --buses, or -p given more than once."""
+    return bus_names is not None or ports_given() is not None
 
+
+def bus_specs(bus_names, fleet_file, common, unit, ids=()):
+    """The buses of ``--buses`` (exit 2 with -p or --sim, without --fleet, with --unit mm), or
+    of ``-p`` given more than once: each port a bus named by its port, with ``ids``."""
+    from ...api.buses import BusSpec, buses_of
+
+    ports = ports_given()
+    if ports is not None:
+        if bus_names is not None:
+            raise UsageError("--buses: the ports are the fleet file's; not with -p given more than once")
+        if common["sim"]:
+            raise UsageError("-p given more than once: not with --sim (one simulated bus)")
+        if unit == "mm":
+            raise UsageError("-p given more than once: --unit mm is for one bus (an ID's stroke is per bus)")
+        baud = common["baud"][0] if isinstance(common["baud"], (list, tuple)) else common["baud"]
+        return [BusSpec(port, port, baud, list(ids)) for port in ports]
     if not fleet_file:
         raise UsageError("--buses: needs --fleet FILE (the fleet file naming the buses)")
     if common["port"] or common["sim"]:
@@ -231,10 +247,11 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
 
     from ...api import buses, motion
 
-    specs = bus_specs(bus_names, fleet_file, common, unit)
+    specs = bus_specs(bus_names, fleet_file, common, unit, sorted({i for r in rows for i in r.ids}))
     plans = {}
     for spec in specs:
-        mine = motion.rows_for_bus(rows, spec, specs, "stdin" if path == "-" else path)
+        mine = motion.rows_for_bus(rows, spec, specs, "stdin" if path == "-" else path,
+                                   shared=ports_given() is not None)
         if mine:
             plans[spec.name] = motion.plan(mine, baud=spec.baud, stop_bits=common["stop_bits"],
                                            interpolate=interpolate, rate=rate)
@@ -326,14 +343,15 @@ def scan_buses(ids, fmt, bus_names, fleet_file, common):
 
     if common["protocol"] != "ir":
         raise UsageError("--buses: the IR protocol's buses (--protocol ir)")
-    specs = bus_specs(bus_names, fleet_file, common, "counts")
+    specs = bus_specs(bus_names, fleet_file, common, "counts")    # -p again: no ID is expected anywhere
+    bauds = list(common["baud"]) if ports_given() is not None else None
     fmt = resolve_format(fmt)
     writer = make_writer(fmt, sys.stdout, ["bus"] + SCAN_COLUMNS, table_columns=[("bus", "bus")] + SCAN_TABLE,
                          title="mightyZAP actuators")
     found = []
 
     def work(link, spec, emit, cancel):
-        for rec in Bus.over(link).scan(ids, [spec.baud], retries=common["retries"],
+        for rec in Bus.over(link).scan(ids, bauds or [spec.baud], retries=common["retries"],
                                        on_warning=lambda text: warn(f"bus {spec.name}: {text}")):
             if cancel.is_set():
                 return

@@ -83,7 +83,8 @@ def stored_consent(common, yes, action, registers):
               help="IDs to probe, like 0-253 or 1,2,5-8.")
 @format_option()
 @link_options(baud_type=actuator_bauds(), baud_help="Baud rates to scan: one, a list like 57600,115200, or 'all' "
-                                              "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].")
+                                              "(57600, 115200, 38400, 19200, 9600) [env ZKZAP_ZAP_BAUD].",
+              several=True)
 @protocol_options(protocols=("ir", "modbus", "auto"))
 @buses_option("Scan (each at its baud rate)")
 @fleet_option
@@ -117,7 +118,9 @@ def scan(ids, fmt, bus_names=None, fleet_file=None, **common):
     from ...codec import modbus
     from ...io.writers import make_writer
 
-    if bus_names is not None:
+    from .motion import several_buses
+
+    if several_buses(bus_names):
         from .motion import scan_buses
 
         return scan_buses(ids, fmt, bus_names, fleet_file, common)

@@ -37,7 +37,7 @@ FORMATS = ("table", "jsonl", "json", "csv")
 @buses_option("Watch the IDs of the fleet file's buses (not --ids)")
 @output_options
 @unit_options
-@link_options
+@link_options(several=True)
 @protocol_options
 def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus_names, unit, fleet_file, **common):
     """Poll REGISTER... of every actuator listed, as fast as the line allows or at --rate.
@@ -78,11 +78,14 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
     reads = plan_reads(list(registers) + [regmap.register(c.field.replace("_", "-")) for c in conds],
                        common["baud"], regmap if modbus else None)
     shown = [r for _, _, regs in reads for r in regs]
-    if bus_names is not None:
+    from .motion import several_buses
+
+    if several_buses(bus_names):
         if modbus:
-            raise UsageError("--buses: not with --protocol modbus yet (a fleet file's buses speak the IR protocol)")
+            raise UsageError("--buses, -p again: not with --protocol modbus yet (several buses speak the IR "
+                             "protocol)")
         return _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit,
-                            fleet_file, common)
+                            fleet_file, common, ids)
     from ...api.watch import MM_REGISTERS
 
     scales = unit_scales(unit, fleet_file, ids)
@@ -156,7 +159,7 @@ def _summary(w, rate):
 
 
 def _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit, fleet_file,
-                 common):
+                 common, ids=()):
     """zap watch --buses: one watcher a bus, each on its own thread; rows name their bus."""
     from ...api import buses
     from ...api.watch import Watcher
@@ -164,8 +167,8 @@ def _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt,
     from .motion import bus_specs, open_spec
 
     if fmt == "table":
-        raise UsageError("--format table: with --buses the rows are written as jsonl, json or csv")
-    specs = bus_specs(bus_names, fleet_file, common, unit)
+        raise UsageError("--format table: with several buses the rows are written as jsonl, json or csv")
+    specs = bus_specs(bus_names, fleet_file, common, unit, ids)
     record_fmt = output_format(fmt, output, ("jsonl", "json", "csv"))
     if record_fmt == "table":
         record_fmt = "jsonl"
