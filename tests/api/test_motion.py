@@ -254,16 +254,19 @@ def test_a_cancelled_cycle_run_holds_the_rod_and_says_why():
 
 def test_a_cancelled_play_stops_every_actuator_with_the_words_it_was_given():
     import threading
+    import time
 
     with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
         cancel = threading.Event()
-        rows = motion.read_path(io.StringIO('t,id,position\n0,"1,2",500\n0.5,"1,2",3500\n5,"1,2",500\n'))
+        rows = motion.read_path(io.StringIO('t,id,position\n0,"1,2",500\n0.5,"1,2",3500\n60,"1,2",500\n'))
         p = motion.plan(rows, baud=bus.baud)
         player = motion.Player(bus, p, cancel=cancel, cancel_why="cancelled from the page")
+        started = time.monotonic()
         for row in player.rows():
-            if row["present"] is not None and row["present"] > 1500:
-                cancel.set()
+            if row["goal"] == 3500:
+                cancel.set()            # between the steps: the stop is now, not at the step due at t=60
+        assert time.monotonic() - started < 20
         assert player.stopped.reason == "cancelled" and player.stopped.message == "cancelled from the page"
         assert player.sent == 2 and set(player.stopped.positions) == {1, 2}
         for i in (1, 2):
-            assert sim.device.actuator(i).get("goal-position") == player.stopped.positions[i] < 3500
+            assert sim.device.actuator(i).get("goal-position") == player.stopped.positions[i]
