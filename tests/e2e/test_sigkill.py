@@ -1,6 +1,6 @@
 """SIGKILL (a power cut, the OOM killer, kill -9): no handler runs, nothing is finished or
 closed, and still every output format keeps what was written before the last second, readable
-(a workbook, assembled only at the end, in the CSV journal beside it).
+(a workbook, assembled only at the end, in the CSV journal beside it; an MDF file unfinalized).
 
 Each case is a real ``zk monitor`` logging the in-process simulator to ``-o`` in one format,
 with ``--raw-log`` and ``--capture`` beside it, killed once its capture spans a few seconds.
@@ -87,7 +87,20 @@ def _xlsx(path):
     return _csv(path.with_name(path.name + ".partial.csv"))
 
 
-FORMATS = {"csv": _csv, "jsonl": _jsonl, "json": _json, "lp": _influx, "mcap": _mcap, "xlsx": _xlsx}
+def _mf4(path):
+    """A killed run's MDF file is the unfinalized one beside the name, read (finalized) by asammdf."""
+    asammdf = pytest.importorskip("asammdf")
+    assert not path.exists()
+    (left,) = path.parent.glob(path.name + ".tmp*")
+    assert left.read_bytes()[:8] == b"UnFinMF "
+    with asammdf.MDF(str(left)) as mdf:
+        start = mdf.header.start_time.timestamp()
+        t = mdf.get("rpm").timestamps
+        assert len(mdf.get("egt_c").samples) == len(t) and list(t) == sorted(t)
+        return [start + float(x) for x in t]
+
+
+FORMATS = {"csv": _csv, "jsonl": _jsonl, "json": _json, "lp": _influx, "mcap": _mcap, "xlsx": _xlsx, "mf4": _mf4}
 
 
 @pytest.fixture(scope="module")

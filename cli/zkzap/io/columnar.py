@@ -14,16 +14,19 @@ with the channel names of the CSV's columns and the units of the workbook's unit
 - **MDF 4**: one channel group, its master channel ``t`` (session seconds), a channel per
   numeric CSV column with its unit (booleans as 0/1; text columns, such as the state names, are
   left out: their numbers are there; a sample without a value is NaN, MDF's own); the
-  measurement's start time is the session's time 0.
+  measurement's start time is the session's time 0. Written by :mod:`.mdf4` as the records come,
+  :attr:`Mf4Writer.chunk` records at a time, each flushed: the file on disk is an unfinalized MDF
+  (the standard's state of a logger's file cut short) until the close finalizes it, so a killed
+  run's ``FILE.tmpPID`` opens in asammdf with every record but the last chunk's. Writing needs no
+  extra (asammdf reads the files back).
 
 In both, a number the file cannot hold (NaN, ±Infinity, an integer beyond a float64) is no
 value, never a wrong one.
-  Samples are appended per :data:`CHUNK` records.
 
 The file is written beside ``-o FILE`` and renamed over it when the session ends (a run that
 wrote no record leaves an existing file as it was; ``--append`` is refused: neither format has
 an end to append to). A process killed without a word leaves the file beside it,
-``FILE.tmpPID``, unfinished.
+``FILE.tmpPID``: a Parquet file without its footer, an MDF file unfinalized (readable).
 """
 
 from __future__ import annotations
@@ -36,16 +39,17 @@ from ..errors import OutputError, UsageError
 
 #: Records per row group (Parquet) or per append (MDF).
 CHUNK = 4096
-#: Format -> (the module it needs, the extra that provides it).
-EXTRAS = {"parquet": ("pyarrow", "parquet"), "mf4": ("asammdf", "mdf")}
+#: Format -> (the module it needs, the extra that provides it); MDF 4 is written by zkzap itself.
+EXTRAS = {"parquet": ("pyarrow", "parquet")}
 
 
 def require(fmt) -> None:
     """Refuse (exit 2) without the format's library, naming the extra."""
     from .bridges import require_extra
 
-    module, extra = EXTRAS[fmt]
-    require_extra(module, extra, f"format {fmt}")
+    if fmt in EXTRAS:
+        module, extra = EXTRAS[fmt]
+        require_extra(module, extra, f"format {fmt}")
 
 
 def check(fmt, output, append) -> None:
@@ -59,7 +63,7 @@ def check(fmt, output, append) -> None:
 
     # imported now, before the session: the first record's write is no second-long import that
     # the output's queue would take for a stalled disk
-    importlib.import_module("pyarrow.parquet" if fmt == "parquet" else "asammdf")
+    importlib.import_module("pyarrow.parquet" if fmt == "parquet" else "zkzap.io.mdf4")
 
 
 def _number(v):
@@ -86,7 +90,9 @@ def _time(v):
 
 
 class _Columnar:
-    """Records buffered in chunks of :data:`CHUNK`, written to ``path`` beside, renamed at the close."""
+    """Records buffered in chunks of :attr:`chunk`, written to ``path`` beside, renamed at the close."""
+
+    chunk = CHUNK
 
     def __init__(self, path, columns, units=None):
         from .xlsx import unit_of
@@ -102,7 +108,7 @@ class _Columnar:
     def write(self, rec) -> None:
         self._rows.append(rec)
         self.count += 1
-        if len(self._rows) >= CHUNK:
+        if len(self._rows) >= self.chunk:
             self._flush()
 
     def write_many(self, recs) -> None:
@@ -199,47 +205,67 @@ class ParquetWriter(_Columnar):
 
 
 class Mf4Writer(_Columnar):
-    """Records into an ASAM MDF 4 file (see the module's text)."""
+    """Records into an ASAM MDF 4 file, streamed (:mod:`.mdf4`; see the module's text)."""
+
+    #: Records per append at most, and the seconds a record waits at most: each append is on
+    #: disk (flushed) before the next is gathered, so a killed run loses half a second at most.
+    chunk = 256
+    wait_s = 0.5
 
     def __init__(self, path, columns, units=None, start=None):
         super().__init__(path, columns, units)
         self._mdf = None
+        self._file = None
         self._numeric = None
+        self._since = 0.0              # when the oldest record not yet appended came (monotonic)
         self._start = start            # the wall time (POSIX) of the session's t = 0
 
+    def write(self, rec) -> None:
+        import time
+
+        now = time.monotonic()
+        if not self._rows:
+            self._since = now
+        super().write(rec)
+        if self._rows and now - self._since >= self.wait_s:
+            self._flush()
+
+    def _start_ns(self, rows):
+        import time
+
+        first = _time(rows[0].get("time")) if rows else None
+        if first is not None:
+            return int(round((first.timestamp() - float(rows[0]["t"])) * 1e9))
+        return int((self._start if self._start is not None else time.time()) * 1e9)
+
     def _chunk(self, rows):
-        import numpy as np
+        from .mdf4 import Mdf4Stream
 
         rows = [r for r in rows if _number(r.get("t")) is not None]
         if not rows:
             return
-        if self._numeric is None:
+        if self._mdf is None:
+            from .. import __version__
+
             self._numeric = [c for c in self.columns if c not in ("t", "time") and any(
                 _number(r.get(c)) is not None for r in rows)]
-        t = np.array([float(r["t"]) for r in rows], dtype=float)
-        cols = [np.array([_nan(r.get(c)) for r in rows], dtype=float) for c in self._numeric]
-        if self._mdf is None:
-            from asammdf import MDF, Signal
-
-            self._mdf = MDF(version="4.10")
-            first = _time(rows[0].get("time"))
-            if first is not None:
-                start = first - datetime.timedelta(seconds=float(rows[0]["t"]))
-                self._mdf.header.start_time = start
-            self._mdf.append([Signal(samples=v, timestamps=t, name=c, unit=self.units.get(c) or "")
-                              for c, v in zip(self._numeric, cols)], comment="zkzap: records of a zk session")
-        else:
-            self._mdf.extend(0, [(t, None)] + [(v, None) for v in cols])
+            self._file = open(self.tmp, "w+b")
+            self._mdf = Mdf4Stream(self._file, [(c, self.units.get(c) or "") for c in self._numeric],
+                                   self._start_ns(rows), tool_version=__version__,
+                                   comment="records of a zk session")
+        self._mdf.append([(float(r["t"]), *(_nan(r.get(c)) for c in self._numeric)) for r in rows])
 
     def _finish(self):
-        if self._mdf is None:
-            from asammdf import MDF
+        from .mdf4 import empty
 
-            self._mdf = MDF(version="4.10")
-        saved = self._mdf.save(self.tmp, overwrite=True)      # asammdf gives a name its suffix
-        self._mdf.close()
-        if str(saved) != self.tmp:
-            os.replace(str(saved), self.tmp)
+        if self._mdf is None:
+            with open(self.tmp, "wb") as f:
+                empty(f, self._start_ns([]))
+            return
+        try:
+            self._mdf.close()
+        finally:
+            self._file.close()
 
 
 def _nan(v):

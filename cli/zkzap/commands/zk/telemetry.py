@@ -42,7 +42,7 @@ def log_options(f):
                       help="Output format: table is the live dashboard on a terminal; influx is InfluxDB line "
                            "protocol; mcap an MCAP file (a channel per status ID and control command, needs "
                            "zkzap[mcap]); xlsx a workbook with sheets records, steps and summary (needs "
-                           "zkzap[xlsx]); parquet Apache Parquet (zkzap[parquet]) and mf4 ASAM MDF 4 (zkzap[mdf]), "
+                           "zkzap[xlsx]); parquet Apache Parquet (zkzap[parquet]) and mf4 ASAM MDF 4 (streamed, no extra), "
                            "with units; default table on a terminal, jsonl in a pipe, or by the suffix of -o."),
         click.option("-o", "--output", type=OutputPath("records", formats=SESSION_FORMATS),
                      help="Write records to FILE, in the format its suffix names (.csv, .json, .jsonl, .lp, .mcap, "
