@@ -1,10 +1,12 @@
 -- zkzap.lua: Wireshark dissector for zkzap's pcapng captures (zkzap ... --capture FILE).
 -- GENERATED from zkzap's protocol tables by `python -m zkzap.docs all`; do not edit.
 --
--- Link types: 147 (DLT_USER0) the ZK turbine ECU protocol, 148 (DLT_USER1) mightyZAP IR.
+-- Link types: 147 (DLT_USER0) the ZK turbine ECU protocol, 148 (DLT_USER1) mightyZAP IR,
+-- 149 (DLT_USER2) mightyZAP over Modbus RTU (the 17Lf's control table names the registers).
 -- Direction: the pcapng epb_flags (inbound = device -> host, outbound = host -> device);
 -- a capture of unknown direction (a sniffer on one line) is framed as a mixture.
--- Fields carry zkzap's own keys: zk.rpm, zk.egt_c, zk.engine_state_name, zap.register, ...
+-- Fields carry zkzap's own keys: zk.rpm, zk.egt_c, zk.engine_state_name, zap.register,
+-- zapmodbus.register, zapmodbus.exception, ...
 --
 -- Use: wireshark -X lua_script:zkzap.lua capture.pcapng, or copy this file to
 -- ~/.local/lib/wireshark/plugins/ (tshark -X lua_script:zkzap.lua -r capture.pcapng -V).
@@ -20,12 +22,20 @@ local ZAP_INSTRUCTIONS = {[241] = {name = "echo", title = "Echo"}, [242] = {name
 local ZAP_REGISTERS = {[0] = {name = "model-number", size = 2, scale = 1, unit = ""}, [2] = {name = "firmware-version", size = 1, scale = 1, unit = ""}, [3] = {name = "id", size = 1, scale = 1, unit = ""}, [4] = {name = "baud-rate", size = 1, scale = 1, unit = ""}, [6] = {name = "short-stroke-limit", size = 2, scale = 1, unit = ""}, [8] = {name = "long-stroke-limit", size = 2, scale = 1, unit = ""}, [10] = {name = "protocol-type", size = 1, scale = 1, unit = ""}, [12] = {name = "lowest-limit-voltage", size = 1, scale = 0.1, unit = "V"}, [13] = {name = "highest-limit-voltage", size = 1, scale = 0.1, unit = "V"}, [14] = {name = "motor-operating-rate-limit", size = 2, scale = 1, unit = ""}, [16] = {name = "feedback-return-mode", size = 1, scale = 1, unit = ""}, [17] = {name = "alarm-led", size = 1, scale = 1, unit = ""}, [18] = {name = "alarm-shutdown", size = 1, scale = 1, unit = ""}, [19] = {name = "start-compliance-margin", size = 1, scale = 1, unit = ""}, [20] = {name = "end-compliance-margin", size = 1, scale = 1, unit = ""}, [21] = {name = "speed-limit", size = 2, scale = 1, unit = ""}, [24] = {name = "calibration-short-stroke", size = 2, scale = 1, unit = ""}, [26] = {name = "calibration-long-stroke", size = 2, scale = 1, unit = ""}, [33] = {name = "acceleration", size = 1, scale = 1, unit = ""}, [34] = {name = "deceleration", size = 1, scale = 1, unit = ""}, [35] = {name = "current-i-gain", size = 1, scale = 1, unit = ""}, [36] = {name = "current-p-gain", size = 1, scale = 1, unit = ""}, [37] = {name = "speed-d-gain", size = 1, scale = 1, unit = ""}, [38] = {name = "speed-i-gain", size = 1, scale = 1, unit = ""}, [39] = {name = "speed-p-gain", size = 1, scale = 1, unit = ""}, [46] = {name = "min-position-calibration", size = 1, scale = 1, unit = ""}, [47] = {name = "max-position-calibration", size = 1, scale = 1, unit = ""}, [52] = {name = "current-limit", size = 2, scale = 1, unit = "mA"}, [128] = {name = "force-on-off", size = 1, scale = 1, unit = ""}, [129] = {name = "led", size = 1, scale = 1, unit = ""}, [134] = {name = "goal-position", size = 2, scale = 1, unit = ""}, [136] = {name = "goal-speed", size = 2, scale = 1, unit = ""}, [138] = {name = "goal-current", size = 2, scale = 1, unit = "mA"}, [140] = {name = "present-position", size = 2, scale = 1, unit = ""}, [142] = {name = "present-current", size = 2, scale = 1, unit = "mA"}, [144] = {name = "present-motor-operating-rate", size = 2, scale = 1, unit = ""}, [146] = {name = "present-voltage", size = 1, scale = 0.1, unit = "V"}, [150] = {name = "moving", size = 1, scale = 1, unit = ""}, [147] = {name = "present-temperature", size = 1, scale = 1, unit = ""}, [148] = {name = "registered-instruction", size = 1, scale = 1, unit = ""}, [151] = {name = "lock", size = 1, scale = 1, unit = ""}}
 local ZAP_ERROR_BITS = {[5] = "overload", [0] = "input-voltage"}
 local ZAP_BROADCAST = 254
+local LINKTYPE_MODBUS = 149
+local MB_MAP = "17Lf"
+local MB_REGISTERS = {[0] = {name = "model-number", scale = 1, unit = ""}, [1] = {name = "firmware-version", scale = 1, unit = ""}, [4] = {name = "id", scale = 1, unit = ""}, [5] = {name = "baud-rate", scale = 1, unit = ""}, [9] = {name = "alarm-led", scale = 1, unit = ""}, [10] = {name = "alarm-shutdown", scale = 1, unit = ""}, [11] = {name = "short-stroke-limit", scale = 1, unit = ""}, [12] = {name = "long-stroke-limit", scale = 1, unit = ""}, [13] = {name = "start-compliance-margin", scale = 1, unit = ""}, [14] = {name = "end-compliance-margin", scale = 1, unit = ""}, [15] = {name = "acceleration", scale = 1, unit = ""}, [16] = {name = "deceleration", scale = 1, unit = ""}, [17] = {name = "min-position-calibration", scale = 1, unit = ""}, [18] = {name = "max-position-calibration", scale = 1, unit = ""}, [19] = {name = "motor-operating-rate-limit", scale = 1, unit = ""}, [20] = {name = "speed-limit", scale = 1, unit = ""}, [21] = {name = "current-limit", scale = 1, unit = "mA"}, [22] = {name = "current-i-gain", scale = 1, unit = ""}, [23] = {name = "current-p-gain", scale = 1, unit = ""}, [24] = {name = "speed-d-gain", scale = 1, unit = ""}, [25] = {name = "speed-i-gain", scale = 1, unit = ""}, [26] = {name = "speed-p-gain", scale = 1, unit = ""}, [40] = {name = "indirect-address-0", scale = 1, unit = ""}, [41] = {name = "indirect-address-1", scale = 1, unit = ""}, [42] = {name = "indirect-address-2", scale = 1, unit = ""}, [43] = {name = "indirect-address-3", scale = 1, unit = ""}, [44] = {name = "indirect-address-4", scale = 1, unit = ""}, [45] = {name = "indirect-address-5", scale = 1, unit = ""}, [46] = {name = "indirect-address-6", scale = 1, unit = ""}, [47] = {name = "indirect-address-7", scale = 1, unit = ""}, [48] = {name = "indirect-address-8", scale = 1, unit = ""}, [49] = {name = "indirect-address-9", scale = 1, unit = ""}, [50] = {name = "extended-io-0", scale = 1, unit = ""}, [51] = {name = "extended-io-1", scale = 1, unit = ""}, [52] = {name = "extended-io-2", scale = 1, unit = ""}, [53] = {name = "extended-io-3", scale = 1, unit = ""}, [60] = {name = "action-0-type", scale = 1, unit = ""}, [61] = {name = "action-0-distance", scale = 1, unit = ""}, [62] = {name = "action-0-repeat-type", scale = 1, unit = ""}, [63] = {name = "action-0-repeat-count", scale = 1, unit = ""}, [64] = {name = "action-0-repeat-time", scale = 1, unit = ""}, [65] = {name = "action-0-goal-speed", scale = 1, unit = ""}, [66] = {name = "action-0-goal-current", scale = 1, unit = ""}, [67] = {name = "action-0-acceleration", scale = 1, unit = ""}, [68] = {name = "action-0-deceleration", scale = 1, unit = ""}, [69] = {name = "action-0-stop", scale = 1, unit = ""}, [70] = {name = "action-1-type", scale = 1, unit = ""}, [71] = {name = "action-1-distance", scale = 1, unit = ""}, [72] = {name = "action-1-repeat-type", scale = 1, unit = ""}, [73] = {name = "action-1-repeat-count", scale = 1, unit = ""}, [74] = {name = "action-1-repeat-time", scale = 1, unit = ""}, [75] = {name = "action-1-goal-speed", scale = 1, unit = ""}, [76] = {name = "action-1-goal-current", scale = 1, unit = ""}, [77] = {name = "action-1-acceleration", scale = 1, unit = ""}, [78] = {name = "action-1-deceleration", scale = 1, unit = ""}, [79] = {name = "action-1-stop", scale = 1, unit = ""}, [80] = {name = "action-2-type", scale = 1, unit = ""}, [81] = {name = "action-2-distance", scale = 1, unit = ""}, [82] = {name = "action-2-repeat-type", scale = 1, unit = ""}, [83] = {name = "action-2-repeat-count", scale = 1, unit = ""}, [84] = {name = "action-2-repeat-time", scale = 1, unit = ""}, [85] = {name = "action-2-goal-speed", scale = 1, unit = ""}, [86] = {name = "action-2-goal-current", scale = 1, unit = ""}, [87] = {name = "action-2-acceleration", scale = 1, unit = ""}, [88] = {name = "action-2-deceleration", scale = 1, unit = ""}, [89] = {name = "action-2-stop", scale = 1, unit = ""}, [90] = {name = "action-3-type", scale = 1, unit = ""}, [91] = {name = "action-3-distance", scale = 1, unit = ""}, [92] = {name = "action-3-repeat-type", scale = 1, unit = ""}, [93] = {name = "action-3-repeat-count", scale = 1, unit = ""}, [94] = {name = "action-3-repeat-time", scale = 1, unit = ""}, [95] = {name = "action-3-goal-speed", scale = 1, unit = ""}, [96] = {name = "action-3-goal-current", scale = 1, unit = ""}, [97] = {name = "action-3-acceleration", scale = 1, unit = ""}, [98] = {name = "action-3-deceleration", scale = 1, unit = ""}, [99] = {name = "action-3-stop", scale = 1, unit = ""}, [100] = {name = "action-4-type", scale = 1, unit = ""}, [101] = {name = "action-4-distance", scale = 1, unit = ""}, [102] = {name = "action-4-repeat-type", scale = 1, unit = ""}, [103] = {name = "action-4-repeat-count", scale = 1, unit = ""}, [104] = {name = "action-4-repeat-time", scale = 1, unit = ""}, [105] = {name = "action-4-goal-speed", scale = 1, unit = ""}, [106] = {name = "action-4-goal-current", scale = 1, unit = ""}, [107] = {name = "action-4-acceleration", scale = 1, unit = ""}, [108] = {name = "action-4-deceleration", scale = 1, unit = ""}, [109] = {name = "action-4-stop", scale = 1, unit = ""}, [200] = {name = "force-on-off", scale = 1, unit = ""}, [201] = {name = "pause", scale = 1, unit = ""}, [202] = {name = "stop", scale = 1, unit = ""}, [203] = {name = "led", scale = 1, unit = ""}, [204] = {name = "hardware-error", scale = 1, unit = ""}, [205] = {name = "goal-position", scale = 1, unit = ""}, [208] = {name = "goal-speed", scale = 1, unit = ""}, [209] = {name = "goal-current", scale = 1, unit = "mA"}, [210] = {name = "present-position", scale = 1, unit = ""}, [211] = {name = "present-current", scale = 1, unit = "mA"}, [213] = {name = "present-motor-operating-rate", scale = 1, unit = ""}, [214] = {name = "present-voltage", scale = 1, unit = ""}, [215] = {name = "moving", scale = 1, unit = ""}, [220] = {name = "action-enable", scale = 1, unit = ""}, [240] = {name = "indirect-data-0", scale = 1, unit = ""}, [241] = {name = "indirect-data-1", scale = 1, unit = ""}, [242] = {name = "indirect-data-2", scale = 1, unit = ""}, [243] = {name = "indirect-data-3", scale = 1, unit = ""}, [244] = {name = "indirect-data-4", scale = 1, unit = ""}, [245] = {name = "indirect-data-5", scale = 1, unit = ""}, [246] = {name = "indirect-data-6", scale = 1, unit = ""}, [247] = {name = "indirect-data-7", scale = 1, unit = ""}, [248] = {name = "indirect-data-8", scale = 1, unit = ""}, [249] = {name = "indirect-data-9", scale = 1, unit = ""}}
+local MB_FUNCTIONS = {[3] = "read", [6] = "write", [16] = "write-multiple"}
+local MB_FUNCTION_TITLES = {[3] = "Read Holding Registers", [6] = "Write Single Register", [16] = "Write Multiple Registers"}
+local MB_EXCEPTIONS = {[1] = {name = "illegal-function", meaning = "illegal function: the actuator does not know this function code"}, [2] = {name = "illegal-data-address", meaning = "illegal data address: no such register, or a block past the table"}, [3] = {name = "illegal-data-value", meaning = "illegal data value: a value or register count it does not take"}, [4] = {name = "slave-device-failure", meaning = "slave device failure (the manual: a parameter out of range)"}, [5] = {name = "acknowledge", meaning = "acknowledge (the manual: data not ready)"}, [6] = {name = "slave-device-busy", meaning = "slave device busy (the manual: parameters locked)"}}
+local MB_MAX_ID = 247
 
 -- ---------------------------------------------------------------------------------------------
 -- runtime
 
 local zk_proto = Proto("zk", "ZK turbine ECU protocol (zkzap)")
 local zap_proto = Proto("zap", "mightyZAP IR protocol (zkzap)")
+local mb_proto = Proto("zapmodbus", "mightyZAP Modbus RTU (zkzap)")
 
 local f_dir = Field.new("frame.packet_flags_direction")
 local f_if = Field.new("frame.interface_id")
@@ -141,10 +151,12 @@ local function reset_state()
   streams = {}
   ZK_STATE = {version = nil, known = nil, source = "default", rpm_factor = nil}
   ZAP_STATE = {load = {}, pending = {}, response_of = {}}
+  MB_STATE = {request = {}, pending = {}, response_of = {}}
 end
 reset_state()
 function zk_proto.init() reset_state() end
 function zap_proto.init() reset_state() end
+function mb_proto.init() reset_state() end
 
 local function direction(pinfo)
   local d = f_dir()
@@ -627,7 +639,360 @@ function zap_proto.dissector(tvb, pinfo, tree)
   return tvb:len()
 end
 
+-- mightyZAP over Modbus RTU ------------------------------------------------------------------
+
+local MB_F = {
+  frame = ProtoField.bytes("zapmodbus.frame", "Modbus RTU frame", base.SPACE),
+  kind = ProtoField.string("zapmodbus.kind", "kind"),
+  id = ProtoField.uint8("zapmodbus.id", "id"),
+  ["function"] = ProtoField.string("zapmodbus.function", "function"),
+  code = ProtoField.uint8("zapmodbus.code", "code", base.HEX),
+  exception = ProtoField.uint8("zapmodbus.exception", "exception"),
+  name = ProtoField.string("zapmodbus.name", "name"),
+  meaning = ProtoField.string("zapmodbus.meaning", "meaning"),
+  register = ProtoField.string("zapmodbus.register", "register"),
+  address = ProtoField.uint16("zapmodbus.address", "address"),
+  count = ProtoField.uint16("zapmodbus.count", "count"),
+  value = ProtoField.uint32("zapmodbus.value", "value"),
+  physical = ProtoField.double("zapmodbus.physical", "physical"),
+  unit = ProtoField.string("zapmodbus.unit", "unit"),
+  values = ProtoField.string("zapmodbus.values", "values"),
+  malformed = ProtoField.string("zapmodbus.malformed", "malformed"),
+  params = ProtoField.string("zapmodbus.params", "params"),
+  dir = ProtoField.string("zapmodbus.dir", "dir"),
+  crc = ProtoField.uint16("zapmodbus.crc", "crc", base.HEX),
+  crc_ok = ProtoField.bool("zapmodbus.crc_ok", "crc_ok"),
+  request_in = ProtoField.framenum("zapmodbus.request_in", "request in", base.NONE, frametype.REQUEST),
+  response_in = ProtoField.framenum("zapmodbus.response_in", "response in", base.NONE, frametype.RESPONSE),
+  latency_ms = ProtoField.double("zapmodbus.latency_ms", "latency_ms"),
+  bad = ProtoField.bytes("zapmodbus.bad", "bad frame", base.SPACE),
+}
+local mb_fields = {}
+for _, f in pairs(MB_F) do mb_fields[#mb_fields + 1] = f end
+mb_proto.fields = mb_fields
+local ex_mb_crc = ProtoExpert.new("zapmodbus.crc_bad", "Modbus RTU CRC-16 mismatch", expert.group.CHECKSUM,
+                                  expert.severity.WARN)
+local ex_mb_nopair = ProtoExpert.new("zapmodbus.unpaired", "reply without a request to this ID",
+                                     expert.group.SEQUENCE, expert.severity.NOTE)
+local ex_mb_exception = ProtoExpert.new("zapmodbus.exception_reply", "exception reply", expert.group.RESPONSE_CODE,
+                                        expert.severity.WARN)
+mb_proto.experts = {ex_mb_crc, ex_mb_nopair, ex_mb_exception}
+
+-- CRC-16/MODBUS (reflected polynomial 0xA001, init 0xFFFF), sent low byte first
+local CRC16 = {}
+for i = 0, 255 do
+  local c = i
+  for _ = 1, 8 do
+    if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), 0xA001) else c = bit32.rshift(c, 1) end
+  end
+  CRC16[i] = c
+end
+local function crc16(buf, first, last)
+  local c = 0xFFFF
+  for i = first, last do c = bit32.bxor(bit32.rshift(c, 8), CRC16[bit32.band(bit32.bxor(c, buf[i]), 0xFF)]) end
+  return c
+end
+
+-- the lengths a frame from buf[i] may have (nil: more bytes needed), as zkzap's RtuFramer
+local function mb_lengths(buf, i, n)
+  local fn = buf[i + 1]
+  if fn >= 0x80 then return {5} end
+  if fn == 0x03 then
+    if i + 2 > n then return nil end
+    local c = buf[i + 2]
+    if c > 0 and c % 2 == 0 and 5 + c ~= 8 then
+      if 5 + c < 8 then return {5 + c, 8} end
+      return {8, 5 + c}
+    end
+    return {8}
+  end
+  if fn == 0x06 then return {8} end
+  if fn == 0x10 then
+    if i + 6 > n then
+      if i + 7 <= n then return {8} end
+      return nil
+    end
+    local c = buf[i + 6]
+    if c > 0 and c % 2 == 0 then return {8, 9 + c} end
+    return {8}
+  end
+  return {}
+end
+
+local function mb_scan(buf, aligned)
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
+  while i + 1 <= n do
+    if buf[i] > MB_MAX_ID then
+      aligned = false
+      i = i + 1
+    else
+      local lengths = mb_lengths(buf, i, n)
+      if lengths == nil then break end
+      local hit, waiting = nil, false
+      for _, len in ipairs(lengths) do
+        if i + len - 1 > n then
+          waiting = true
+        elseif crc16(buf, i, i + len - 3) == buf[i + len - 2] + 256 * buf[i + len - 1] then
+          hit = len
+          break
+        end
+      end
+      if hit ~= nil then
+        found[#found + 1] = {pos = i, len = hit, ok = true}
+        i = i + hit
+        aligned = true
+      elseif waiting then
+        break
+      else
+        if aligned and #lengths > 0 then
+          local len = lengths[1]
+          found[#found + 1] = {pos = i, len = len, ok = false,
+                               expected = crc16(buf, i, i + len - 3), found = buf[i + len - 2] + 256 * buf[i + len - 1]}
+        end
+        aligned = false
+        i = i + 1
+      end
+    end
+  end
+  return found, i, aligned
+end
+
+local function mb_word(b, k) return b[k] * 256 + b[k + 1] end
+
+local function mb_name(address)
+  local r = MB_REGISTERS[address]
+  if r ~= nil then return r.name end
+  return tostring(address)
+end
+
+local function mb_names(address, count)
+  local name = mb_name(address)
+  if count ~= nil and count > 1 then name = name .. ".." .. mb_name(address + count - 1) end
+  return name
+end
+
+local function mb_values(out, address, values)
+  if #values == 1 then
+    out[#out + 1] = {"value", values[1]}
+    local r = MB_REGISTERS[address]
+    if r ~= nil and r.scale ~= 1 then
+      out[#out + 1] = {"physical", round(values[1] * r.scale, 3)}
+      out[#out + 1] = {"unit", r.unit}
+    end
+  else
+    local kv = {}
+    for k, v in ipairs(values) do kv[#kv + 1] = mb_name(address + k - 1) .. "=" .. v end
+    out[#out + 1] = {"values", table.concat(kv, ";")}
+  end
+end
+
+-- a request's meaning (as zkzap.codec.modbus.Request): address, count, values, or why malformed
+local function mb_request(b, n)
+  local fn, body = b[1], n - 4
+  if (fn == 0x03 or fn == 0x06) and body == 4 then
+    local address, word = mb_word(b, 2), mb_word(b, 4)
+    if fn == 0x03 then return {address = address, count = word} end
+    return {address = address, count = 1, values = {word}}
+  end
+  if fn == 0x10 and body >= 5 and b[6] == body - 5 and b[6] % 2 == 0 then
+    local r = {address = mb_word(b, 2), count = mb_word(b, 4), values = {}}
+    for k = 7, n - 3, 2 do r.values[#r.values + 1] = mb_word(b, k) end
+    if #r.values ~= r.count then
+      r.malformed = string.format("quantity %d but %d registers of data", r.count, #r.values)
+    end
+    return r
+  end
+  if MB_FUNCTION_TITLES[fn] ~= nil then
+    return {malformed = string.format("%d data bytes do not make a %s request", body, MB_FUNCTION_TITLES[fn])}
+  end
+  return {malformed = string.format("function 0x%02X is not one the actuator knows", fn)}
+end
+
+-- request, reply or exception: by the direction when known, else by the frame's shape
+local function mb_kind(b, n, dir)
+  local fn = b[1]
+  if fn >= 0x80 then return "exception" end
+  if dir == 2 then return "request" end
+  if dir == 1 then return "reply" end
+  if fn == 0x03 then
+    if n == 8 and n - 5 ~= b[2] then return "request" end
+    return "reply"
+  end
+  if fn == 0x10 then
+    if n == 8 then return "reply" end
+    return "request"
+  end
+  return "request"
+end
+
+local function same_bytes(a, b, n)
+  if a == nil or a.n ~= n then return false end
+  for k = 0, n - 1 do if a[k] ~= b[k] then return false end end
+  return true
+end
+
+-- the record zkzap's decoder makes of a checked frame; pending: the last request to its ID
+local function mb_decode(b, n, dir, st)
+  local ident, fn = b[0], bit32.band(b[1], 0x7F)
+  local req = st.request[ident]
+  if dir == 1 and same_bytes(req, b, n) then dir = 0 end     -- the adapter's echo of the request
+  local kind = mb_kind(b, n, dir)
+  if kind == "request" and dir == 0 and b[1] == 0x06 and same_bytes(req, b, n) then kind = "reply" end
+  local out = {}
+  if kind == "request" then
+    st.request[ident] = b
+    req = nil
+  else
+    st.request[ident] = nil
+    if kind ~= "exception" and req ~= nil then kind = "reply" end
+  end
+  out[#out + 1] = {"kind", kind}
+  out[#out + 1] = {"id", ident}
+  out[#out + 1] = {"function", MB_FUNCTIONS[fn] or string.format("0x%02x", fn)}
+  out[#out + 1] = {"code", b[1]}
+  if kind == "exception" then
+    local e = MB_EXCEPTIONS[b[2]]
+    out[#out + 1] = {"exception", b[2]}
+    out[#out + 1] = {"name", e and e.name or string.format("undocumented-0x%02x", b[2])}
+    out[#out + 1] = {"meaning", e and e.meaning or string.format("exception code 0x%02X (not documented)", b[2])}
+    return out, kind
+  end
+  if kind == "request" then
+    local r = mb_request(b, n)
+    if r.malformed ~= nil then
+      out[#out + 1] = {"malformed", r.malformed}
+      out[#out + 1] = {"params", hex(b, 2, n - 3)}
+      return out, kind
+    end
+    out[#out + 1] = {"address", r.address}
+    out[#out + 1] = {"register", mb_names(r.address, r.count)}
+    out[#out + 1] = {"count", r.count}
+    if r.values ~= nil then mb_values(out, r.address, r.values) end
+    return out, kind
+  end
+  if fn == 0x03 then
+    local values = {}
+    for k = 3, n - 3, 2 do values[#values + 1] = mb_word(b, k) end
+    local r = req ~= nil and req[1] == 0x03 and mb_request(req, req.n) or nil
+    if r ~= nil and r.malformed == nil and r.count == #values then
+      out[#out + 1] = {"address", r.address}
+      out[#out + 1] = {"register", mb_names(r.address, r.count)}
+      mb_values(out, r.address, values)
+    else
+      out[#out + 1] = {"count", #values}
+      if #values == 1 then
+        out[#out + 1] = {"value", values[1]}
+      else
+        local t = {}
+        for _, v in ipairs(values) do t[#t + 1] = tostring(v) end
+        out[#out + 1] = {"values", table.concat(t, ",")}
+      end
+    end
+    return out, kind
+  end
+  local address = mb_word(b, 2)
+  out[#out + 1] = {"address", address}
+  if fn == 0x06 then
+    out[#out + 1] = {"register", mb_names(address, 1)}
+    mb_values(out, address, {mb_word(b, 4)})
+  else
+    local count = mb_word(b, 4)
+    out[#out + 1] = {"count", count}
+    out[#out + 1] = {"register", mb_names(address, count)}
+  end
+  return out, kind
+end
+
+function mb_proto.dissector(tvb, pinfo, tree)
+  pinfo.cols.protocol = "mightyZAP Modbus"
+  local res = results[pinfo.number]
+  local st = MB_STATE
+  if res == nil then
+    res = {}
+    local dir = direction(pinfo)
+    local s = stream_of("zapmodbus", pinfo)
+    local buf, start = feed(s, tvb)
+    local found, rest, aligned = mb_scan(buf, s.aligned)
+    s.aligned = aligned
+    for _, fr in ipairs(found) do
+      local b = frame_bytes(buf, fr.pos, fr.len)
+      b.n = fr.len
+      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected, found = fr.found,
+                    offset = fr.pos >= start and fr.pos - start or nil}
+      if fr.ok then
+        local values, kind = mb_decode(b, fr.len, dir, st)
+        item.values, item.kind = values, kind
+        local ident = b[0]
+        if kind == "request" then
+          -- (an echo read back is inbound: no request of its own)
+          if dir ~= 1 and ident ~= 0 then st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts} end
+        else
+          local p = st.pending[ident]
+          st.pending[ident] = nil
+          if p ~= nil then
+            item.request_in = p.num
+            item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+            st.response_of[p.num] = pinfo.number
+          end
+        end
+        if dir == 1 then item.dir = "d2h" elseif dir == 2 then item.dir = "h2d" end
+      end
+      res[#res + 1] = item
+    end
+    keep_from(s, rest)
+    results[pinfo.number] = res
+  end
+  local info = {}
+  for _, item in ipairs(res) do
+    local range = item_range(tvb, item, "reassembled Modbus RTU frame")
+    if item.ok then
+      local v = {}
+      for _, kv in ipairs(item.values) do v[kv[1]] = kv[2] end
+      local summary
+      if item.kind == "request" then
+        summary = string.format("%s to ID %d", v["function"], v.id)
+      elseif item.kind == "exception" then
+        summary = string.format("exception %s from ID %d", v.name, v.id)
+      else
+        summary = string.format("%s reply from ID %d", v["function"], v.id)
+      end
+      if v.register ~= nil then summary = summary .. " " .. v.register end
+      if v.value ~= nil then summary = summary .. "=" .. v.value end
+      local t = tree:add(mb_proto, range, "mightyZAP Modbus RTU " .. summary)
+      t:add(MB_F.frame, range)
+      if item.dir ~= nil then t:add(MB_F.dir, item.dir) end
+      for _, kv in ipairs(item.values) do
+        local f = MB_F[kv[1]]
+        if f ~= nil and kv[2] ~= nil then t:add(f, kv[2]) end
+      end
+      t:add(MB_F.crc, item.bytes[item.len - 2] + 256 * item.bytes[item.len - 1])
+      t:add(MB_F.crc_ok, true)
+      if item.kind == "exception" then t:add_proto_expert_info(ex_mb_exception, v.meaning) end
+      if item.request_in ~= nil then
+        t:add(MB_F.request_in, item.request_in)
+        t:add(MB_F.latency_ms, item.latency_ms)
+      elseif item.kind ~= "request" then
+        t:add_proto_expert_info(ex_mb_nopair)
+      end
+      local resp = st.response_of[pinfo.number]
+      if item.kind == "request" and resp ~= nil then t:add(MB_F.response_in, resp) end
+      info[#info + 1] = summary
+    else
+      local t = tree:add(mb_proto, range, "bad Modbus RTU frame")
+      t:add(MB_F.bad, range)
+      t:add(MB_F.crc_ok, false)
+      t:add_proto_expert_info(ex_mb_crc, string.format("CRC-16 mismatch: expected %04X, found %04X",
+                                                        item.expected, item.found))
+      info[#info + 1] = "bad CRC"
+    end
+  end
+  pinfo.cols.info = (#info > 0) and table.concat(info, "; ") or "(part of a frame)"
+  return tvb:len()
+end
+
 local encap = DissectorTable.get("wtap_encap")
 local encaps = wtap_encaps or wtap
 encap:add(encaps.USER0, zk_proto)       -- link type 147
 encap:add(encaps.USER1, zap_proto)      -- link type 148
+encap:add(encaps.USER2, mb_proto)       -- link type 149

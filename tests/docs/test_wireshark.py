@@ -53,7 +53,7 @@ def _run_tshark(path):
     for packet in ET.fromstring(p.stdout).iter("packet"):
         for proto in packet.iter("proto"):
             name = proto.get("name")
-            if name not in ("zk", "zap"):
+            if name not in ("zk", "zap", "zapmodbus"):
                 continue
             fields = {}
             for f in proto.iter("field"):
@@ -70,7 +70,7 @@ def same(expected, shown: str) -> bool:
             return int(shown, 16) == expected
         return abs(float(shown) - expected) <= 1e-6 * max(1.0, abs(expected))
     if isinstance(expected, list):
-        return shown == ",".join(expected)
+        return shown == ",".join(str(x) for x in expected)
     if isinstance(expected, dict):
         return shown == ";".join(f"{k}={v}" for k, v in expected.items())
     return shown == expected
@@ -93,7 +93,7 @@ def compare(records, frames, proto):
                 continue
             assert shown is not None, (n, key, rec)
             assert same(value, shown[0]), (n, key, value, shown, rec)
-        assert fields[f"{proto}.{'crc_ok' if proto == 'zk' else 'checksum_ok'}"][0] in ("True", "1")
+        assert fields[f"{proto}.{'checksum_ok' if proto == 'zap' else 'crc_ok'}"][0] in ("True", "1")
     return len(good)
 
 
@@ -222,3 +222,66 @@ def test_one_corrupted_frame_is_one_bad_frame_even_when_its_bytes_look_like_a_he
     assert len([f for p, f in frames if p == "zk" and "zk.bad" not in f]) == 4
     r = cli("zk", "decode", str(path), "-f", "jsonl")
     assert r.exit_code == 0 and len(r.stdout.splitlines()) == 4 and "1 bad (CRC)" in r.stderr, r
+
+
+@pytest.fixture(scope="module")
+def modbus_captures(tmp_path_factory):
+    """Captures of Modbus RTU buses (link type 149): the commands' own, and a synthetic one with
+    frames split across chunks, an adapter's echo, an exception reply, a mixture of unknown
+    direction and a bad CRC."""
+    from click.testing import CliRunner
+
+    from zkzap.codec import modbus
+    from zkzap.commands import root, run
+
+    d = tmp_path_factory.mktemp("modbus")
+    out = []
+    for n, args in enumerate([
+        ["load", "present-position", "--id", "1", "--sim"],
+        ["store", "goal-speed", "500", "--id", "1", "--sim", "--verify"],
+        ["sync-move", "1:1000", "2:3000", "--sim", "--verify"],
+        ["dump", "--id", "1", "--sim"],
+        ["scan", "--sim", "--sim-ids", "1,3", "--ids", "1-6"],
+        ["raw", "read", "00 D4 00 01", "--id", "1", "--sim"],              # 212: exception 2
+        ["load", "present-position", "--id", "9", "--sim", "--sim-ids", "1", "--retries", "0"],   # unanswered
+    ]):
+        path = d / f"m{n}.pcapng"
+        with CliRunner().isolation():
+            code = run(root, "zkzap", ["zap", args[0], "--protocol", "modbus", *args[1:], "--capture", str(path)])
+        assert code in (0, 3, 5) and path.exists(), args
+        out.append(path)
+    req = modbus.read_registers(1, 205, 6)
+    reply = modbus.read_reply(1, [1, 2, 3, 4, 5, 6])
+    w = Writer(str(d / "synthetic.pcapng"))
+    i = w.interface("modbus", "synthetic")
+    ts = 1767225600.0
+    for chunk, direction in [(req[:3], OUTBOUND), (req[3:], OUTBOUND), (req, INBOUND),      # the echo
+                             (reply[:4], INBOUND), (reply[4:], INBOUND),
+                             (modbus.write_register(2, 205, 77), OUTBOUND), (modbus.write_register(2, 205, 77), INBOUND),
+                             (modbus.read_registers(3, 212, 1), OUTBOUND), (modbus.exception_reply(3, 3, 2), INBOUND),
+                             (modbus.read_registers(4, 0, 2) + modbus.read_reply(4, [17, 0x0102]), UNKNOWN),
+                             (b"\x01\x03\x00\xd2\x00\x01\x24\x34", OUTBOUND)]:
+        w.packet(i, ts, chunk, direction)
+        ts += 0.002
+    w.close()
+    out.append(d / "synthetic.pcapng")
+    return out
+
+
+@needs_tshark
+def test_tshark_decodes_modbus_captures_as_zkzap_does_and_links_replies(cli, modbus_captures):
+    total = linked = exceptions = 0
+    for path in modbus_captures:
+        recs = decoded(cli, "zap", path)                # the capture says Modbus RTU: no --protocol
+        frames = tshark(path)
+        total += compare(recs, frames, "zapmodbus")
+        good = [f for p, f in frames if p == "zapmodbus" and "zapmodbus.bad" not in f]
+        for rec, f in zip(recs, good):
+            exceptions += rec["kind"] == "exception"
+            if rec["kind"] != "request" and rec.get("latency_ms") is not None:
+                assert abs(float(f["zapmodbus.latency_ms"][0]) - rec["latency_ms"]) <= 0.002
+                assert "zapmodbus.request_in" in f
+                linked += 1
+    assert total > 60 and linked >= 20 and exceptions >= 2
+    bad = [f for p, f in tshark(modbus_captures[-1]) if "zapmodbus.bad" in f]
+    assert len(bad) == 1 and bad[0]["zapmodbus.crc_ok"][0] in ("False", "0")

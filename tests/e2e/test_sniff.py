@@ -226,3 +226,38 @@ def test_live_summary_on_a_terminal_and_records_in_the_pipe(tmp_path):
 
     assert re.search(r"sniffing \d+ s  d2h: \d+/s", text), text        # the live summary
     assert "CRC errors: 0" in text and "by ID: d2h ID 1:" in text         # --stats at the end
+
+
+def test_sniff_modbus_pairs_every_reply_and_captures_as_modbus(start_sim, tmp_path, cli):
+    """The same on a 17Lf bus: --protocol modbus frames, names and pairs Modbus RTU, a read of an
+    absent ID is missing, and the capture's link type says Modbus RTU, which zap decode follows."""
+    from zkzap.link.pcapng import LINKTYPE_MODBUS, capture_protocol
+    from zkzap.link.zap_bus import open_bus
+
+    url, _ = start_sim(["zap", "--protocol", "modbus", "--ids", "1,2", "--pty"])
+    relay = Relay(url, 57600, taps=1)
+    relay.start()
+    try:
+        cap = tmp_path / "bus.pcapng"
+        p = start_sniffer("zap", "--protocol", "modbus", "-p", relay.tap_paths[0], "-f", "jsonl",
+                          "--capture", str(cap), "--reply-timeout", "0.05")
+        with open_bus(relay.host_path, 57600, retries=0, timeout=0.05, protocol="modbus") as bus:
+            value = bus.read(2, "present-position")
+            bus.write(1, {"goal-speed": 500})
+            assert bus.ping(3) is None
+        recs = read_records(p, 5)
+        code, out, err = stop(p)
+    finally:
+        relay.stop()
+    assert code == 143, err
+    assert [(r["kind"], r["id"]) for r in recs] == [("request", 2), ("reply", 2), ("request", 1), ("reply", 1),
+                                                    ("request", 3)], recs
+    assert recs[1]["pairing"] == "ok" and recs[1]["request"] == "read" and recs[1]["value"] == value
+    assert recs[1]["register"] == "present-position" and 0 < recs[1]["latency_ms"] < 1000
+    assert recs[3]["request"] == "write-multiple" and recs[2]["register"] == "goal-speed"
+    assert relay.sniffer_wrote == b""
+    assert capture_protocol(str(cap)) == "modbus" and LINKTYPE_MODBUS == 149
+    r = cli("zap", "decode", str(cap), "-f", "jsonl")          # the capture says which protocol
+    got = [json.loads(x) for x in r.stdout.splitlines()]
+    assert r.exit_code == 0 and [g["kind"] for g in got][:4] == ["request", "reply", "request", "reply"], r
+    assert got[1]["value"] == value

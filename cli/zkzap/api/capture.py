@@ -76,6 +76,35 @@ def zap_records(frames: CaptureFrames, decoder: zap.ZapDecoder | None = None, de
         yield rec
 
 
+def modbus_records(frames: CaptureFrames, decoder=None, decode=None):
+    """Records of a mightyZAP Modbus RTU capture (link type 149): ``time``, ``t``, ``dir``, the
+    decoded frame (:class:`zkzap.codec.modbus.ModbusDecoder`: a reply named by the request to
+    its ID before it), its ``frame`` hex and, for a reply or an exception reply,
+    ``latency_ms`` since the request it answers (null when none was seen). A frame read back
+    that is the request just sent (a half-duplex adapter's echo) is decoded as what it is, a
+    request."""
+    from ..codec import modbus
+
+    decoder = decoder or modbus.ModbusDecoder()
+    decode = decode or decoder.decode
+    pairing = ZapPairing()
+    for ts, direction, frame in frames:
+        label = direction_label(direction)
+        if label == "d2h" and decoder.pending.get(frame[0]) == frame:
+            label_for_decoder = None          # the adapter's echo of the request
+        else:
+            label_for_decoder = label
+        rec = {"time": iso_utc(ts), "t": round(ts - frames.t0, 6), "dir": label}
+        rec.update(decode(frame, label_for_decoder))
+        rec["frame"] = frame.hex(" ").upper()
+        if rec["kind"] == "request":
+            if frame[0] != modbus.BROADCAST:          # (an echo read back is inbound: no request)
+                pairing.command(frame[0], ts, direction)
+        else:
+            rec["latency_ms"] = pairing.feedback(frame[0], ts)
+        yield rec
+
+
 CAPTURE_SUFFIXES = (".pcapng", ".pcap", ".ntar")
 
 

@@ -335,7 +335,7 @@ class Sniffer:
             return None
         i = noisy[0]
         lock, url = self.locks[i], self.ports_spec[i][0]
-        what = "ZK frames" if self.protocol == "zk" else "mightyZAP packets"
+        what = {"zk": "ZK frames", "modbus": "Modbus RTU frames"}.get(self.protocol, "mightyZAP packets")
         chance = lock.rejected + len(lock.held)
         return NoReply(f"{url}: {lock.bytes:,} bytes in {self.elapsed():.1f} s, but not as {what} at "
                        f"{self.baud} baud ({chance} valid by chance among them): line noise, another "
@@ -344,7 +344,7 @@ class Sniffer:
 
     def silent(self):
         """The :class:`~zkzap.errors.NoReply` for a sniff that ended without one frame."""
-        what = "ZK frame" if self.protocol == "zk" else "mightyZAP packet"
+        what = {"zk": "ZK frame", "modbus": "Modbus RTU frame"}.get(self.protocol, "mightyZAP packet")
         ports = ", ".join(url for url, _ in self.ports_spec)
         got = sum(lock.bytes for lock in self.locks)
         chance = sum(lock.rejected + len(lock.held) for lock in self.locks)
@@ -434,35 +434,53 @@ class ZapSniffer(Sniffer):
             return True
         return ident in self.acks
 
+    # what a protocol's frame is (the Modbus sniffer answers these for its frames)
+    def _request(self, rec) -> bool:
+        return rec["kind"] == "command"
+
+    @staticmethod
+    def _ident(pkt) -> int:
+        return pkt[3]
+
+    BROADCAST = zap.BROADCAST
+
+    @staticmethod
+    def _what(rec) -> str:
+        return rec["instruction"]
+
+    #: Requests whose acknowledgement tells that an ID answers writes (return mode 2).
+    READS = ("echo", "load")
+
     def frame(self, ts, index, pkt):
         out = []
         rec = self.decoder.decode(pkt)
-        if rec["kind"] == "command":
+        ident = self._ident(pkt)
+        if self._request(rec):
             out += self._missing(self.pairing.expired(ts), ts)
             base = self._base(ts, OUTBOUND)
             base.update(rec)
             base["frame"] = pkt.hex(" ").upper()
             self.stats.frame(base["t"], "h2d", rec["id"])
-            if pkt[3] != zap.BROADCAST:
-                out += self._missing(self.pairing.command(pkt[3], ts, (rec["instruction"], self._expects(pkt))), ts)
+            if ident != self.BROADCAST:
+                out += self._missing(self.pairing.command(ident, ts, (self._what(rec), self._expects(pkt))), ts)
             out.append(base)
             return out
         base = self._base(ts, INBOUND)
         base.update(rec)
         base["frame"] = pkt.hex(" ").upper()
         self.stats.frame(base["t"], "d2h", rec["id"])
-        got = self.pairing.feedback(pkt[3], ts)
+        got = self.pairing.feedback(ident, ts)
         if got is not None:
             _, (instruction, _), latency = got
             latency = round(latency * 1000.0, 3)
             base["pairing"] = "ok"
             base["request"] = instruction
             base["latency_ms"] = latency
-            self.stats.reply(base["t"], pkt[3], instruction, latency)
-            if instruction not in ("echo", "load"):
-                self.acks.add(pkt[3])
+            self.stats.reply(base["t"], ident, instruction, latency)
+            if instruction not in self.READS:
+                self.acks.add(ident)
         else:
-            others = self.pairing.others(pkt[3])
+            others = self.pairing.others(ident)
             if others:
                 latest = max(others, key=lambda i: self.pairing.pending[i][0])
                 base["pairing"] = "unexpected-id"
@@ -499,13 +517,50 @@ class ZapSniffer(Sniffer):
         return self._missing(self.pairing.expired(now), now)
 
 
+class ModbusSniffer(ZapSniffer):
+    """A mightyZAP bus speaking Modbus RTU (the 17Lf): frames cut by the RTU framer, named by
+    the register map (``regmap``, default the 17Lf's), each reply (an exception reply too) paired
+    with the request to its ID; every unicast request expects an answer (Modbus RTU answers
+    every one), so one unanswered within the window is a ``missing`` record."""
+
+    protocol = "modbus"
+    BROADCAST = 0
+    READS = ()
+
+    def __init__(self, ports, baud, *, capture=None, reply_timeout=DEFAULT_REPLY_TIMEOUT_S, stop_bits=1,
+                 regmap=None):
+        from ..codec import modbus
+
+        super().__init__(ports, baud, capture=capture, reply_timeout=reply_timeout, stop_bits=stop_bits)
+        self.decoder = modbus.ModbusDecoder(regmap)
+
+    def _framer(self, role):
+        from ..codec.framing import RtuFramer
+
+        return RtuFramer()
+
+    def _request(self, rec) -> bool:
+        return rec["kind"] == "request"
+
+    @staticmethod
+    def _ident(pkt) -> int:
+        return pkt[0]
+
+    @staticmethod
+    def _what(rec) -> str:
+        return rec["function"]
+
+    def _expects(self, pkt):
+        return pkt[0] != self.BROADCAST
+
+
 def check_ports(protocol: str, ports) -> list:
     """``-p`` values -> [(url, role)]: one port for mightyZAP; one or two for ZK (the host's TX
     line first, then the ECU's). Anything else is a usage error."""
     ports = list(ports)
     if not ports:
         raise UsageError(f"no port: give -p PORT{' (twice for a tapped link: HOST_TX, ECU_TX)' if protocol == 'zk' else ''}")
-    if protocol == "zap":
+    if protocol in ("zap", "modbus"):
         if len(ports) != 1:
             raise UsageError(f"port: {len(ports)} ports given; a mightyZAP bus is half-duplex: one adapter "
                              "sees both directions, give one -p")

@@ -69,28 +69,39 @@ def zk_decode_captures(paths, *, fmt, output, append, protocol_version, accept, 
     _notes(done, "frames", "CRC")
 
 
-def zap_decode_captures(paths, *, fmt, output, append, table_cells):
-    from ..api.capture import TIME_KEYS, CaptureFrames, check_captures, zap_records
-    from ..codec import zap
+def zap_decode_captures(paths, *, fmt, output, append, table_cells, protocol="zap", regmap=None):
+    """``zap decode`` of captures: the IR protocol's (``protocol`` zap) or Modbus RTU's
+    (``modbus``, named by ``regmap``)."""
+    from ..api.capture import TIME_KEYS, CaptureFrames, check_captures, modbus_records, zap_records
     from ..io.writers import make_writer
-    from .zap.decode import COLUMNS, TABLE_COLUMNS
+    from .zap import decode as zap_decode
 
-    check_captures(paths, "zap")
+    check_captures(paths, protocol)
     fmt = output_format(fmt, output, RECORD_FORMATS)
     stream, had = open_output(output, append)
-    decoder = zap.ZapDecoder()
-    decode = (lambda p: table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
-    table = [("t", "t"), ("dir", "dir")] + TABLE_COLUMNS + [("latency_ms", "latency ms")]
-    writer = make_writer(fmt, stream, TIME_KEYS + COLUMNS + ["latency_ms"], table_columns=table, header=not had)
+    if protocol == "modbus":
+        from ..codec import modbus
+
+        decoder, records = modbus.ModbusDecoder(regmap), modbus_records
+        columns, table_columns = zap_decode.MODBUS_COLUMNS, zap_decode.MODBUS_TABLE
+        decode = (lambda f, d: table_cells(decoder.decode(f, d))) if fmt == "table" else decoder.decode
+    else:
+        from ..codec import zap
+
+        decoder, records = zap.ZapDecoder(), zap_records
+        columns, table_columns = zap_decode.COLUMNS, zap_decode.TABLE_COLUMNS
+        decode = (lambda p: table_cells(decoder.decode(p))) if fmt == "table" else decoder.decode
+    table = [("t", "t"), ("dir", "dir")] + table_columns + [("latency_ms", "latency ms")]
+    writer = make_writer(fmt, stream, TIME_KEYS + columns + ["latency_ms"], table_columns=table, header=not had)
     done = []
     try:
         for path in paths:
-            frames = CaptureFrames(path, "zap")
-            _run(zap_records(frames, decoder, decode), writer, done)
+            frames = CaptureFrames(path, protocol)
+            _run(records(frames, decoder, decode), writer, done)
             done.append(frames)
     finally:
         close_output(writer, stream)
-    _notes(done, "packets", "checksum")
+    _notes(done, "frames" if protocol == "modbus" else "packets", "CRC" if protocol == "modbus" else "checksum")
 
 
 def _notes(done, what, check):

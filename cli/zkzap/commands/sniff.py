@@ -10,7 +10,7 @@ import click
 from ..errors import BAD_REPLY, DEVICE_ERROR, NO_REPLY, OK, OUTPUT_ERROR, PORT_ERROR
 from . import CONTEXT, Command, Group
 from .options import (DEFAULT_BAUD, ENV, STOP_BITS_HELP, BaudType, Choice, FiniteRange, IntRange,
-                      OutputPath, capture_option, close_output, exits, open_output)
+                      OutputPath, capture_option, close_output, exits, open_output, protocol_options)
 
 
 #: A sniffer only listens: it never waits for a reply, and decodes what it hears (no 5, 6); it
@@ -117,7 +117,9 @@ def zk(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats,
 @click.option("--reply-timeout", type=FiniteRange(0.001, 10), default=0.15, show_default=True,
               metavar="SECONDS", help="The late window: a request that expects an answer and gets none for "
                                       "this long is a missing reply (the window a host waits).")
-def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout):
+@protocol_options
+def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats, stats_json, reply_timeout,
+        protocol, regmap):
     """Sniff a mightyZAP bus (one adapter sees both directions; nothing is sent).
 
     Every feedback is paired with the request it answers (the latest one to its ID whose late
@@ -127,19 +129,50 @@ def zap(ports, baud, stop_bits, fmt, output, append, count, duration, show_stats
     an answer (Echo, Load Data, and anything to an ID seen acknowledging writes) and gets none
     within --reply-timeout gives a record of kind 'missing' with 'waited_ms'.
 
+    With --protocol modbus the bus speaks Modbus RTU (the 17Lf): requests, replies and
+    exception replies named by the register map (--map, else the 17Lf's), every unicast request
+    expecting an answer; 'request' is the function answered, and --capture records the port as
+    Modbus RTU (link type 149), which 'zap decode' and Wireshark follow.
+
     \b
     Examples:
       zkzap sniff zap -p /dev/ttyUSB0 --stats
       zkzap sniff zap -p /dev/ttyUSB0 -f csv -o bus.csv --capture bus.pcapng
+      zkzap sniff zap --protocol modbus -p /dev/ttyUSB0 --capture bus.pcapng
     """
-    from ..api.sniff import ZapSniffer
-    from ..codec import zap as zapc
+    from ..api.sniff import ModbusSniffer, ZapSniffer
 
     spec = _checked("zap", ports)
-    sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout, stop_bits=stop_bits)
-    cols = ["time", "t", "dir"] + list(zapc.ZAP_KEYS) + ["frame", "pairing", "request", "expected_id",
-                                                          "latency_ms", "waited_ms"]
-    _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table=_zap_cell)
+    tail = ["frame", "pairing", "request", "expected_id", "latency_ms", "waited_ms"]
+    if protocol == "modbus":
+        from ..codec import modbus
+        from .options import zap_map
+
+        sniffer = ModbusSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout, stop_bits=stop_bits,
+                                regmap=zap_map())
+        cols, cell = ["time", "t", "dir"] + list(modbus.MODBUS_KEYS) + tail, _modbus_cell
+    else:
+        from ..codec import zap as zapc
+
+        sniffer = ZapSniffer(spec, baud, capture=_capture(), reply_timeout=reply_timeout, stop_bits=stop_bits)
+        cols, cell = ["time", "t", "dir"] + list(zapc.ZAP_KEYS) + tail, _zap_cell
+    _run(sniffer, cols, fmt, output, append, count, duration, show_stats, stats_json, table=cell)
+
+
+def _modbus_cell(rec):
+    kind = rec["kind"]
+    if kind == "missing":
+        return f"no reply to {rec['request']} after {rec['waited_ms']:g} ms"
+    parts = [rec.get("function") or rec.get("name") or kind]
+    if kind == "exception":
+        parts = [f"exception {rec.get('name')}"]
+    if "register" in rec:
+        parts.append(rec["register"] + (f"={rec['value']}" if "value" in rec else ""))
+    if rec.get("latency_ms") is not None:
+        parts.append(f"{rec['latency_ms']:g} ms")
+    if rec.get("pairing") not in (None, "ok"):
+        parts.append(rec["pairing"] + (f" (asked ID {rec['expected_id']})" if "expected_id" in rec else ""))
+    return "  ".join(parts)
 
 
 def _zap_cell(rec):

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import os
 
-from ..codec import zap, zk
+from ..codec import modbus, zap, zk
 from ..codec.fields import ContextScale, VersionScale
-from ..link.pcapng import LINKTYPE_ZAP, LINKTYPE_ZK
+from ..codec.regmap import default_map
+from ..link.pcapng import LINKTYPE_MODBUS, LINKTYPE_ZAP, LINKTYPE_ZK
 
 PATH = os.path.join("share", "wireshark", "zkzap.lua")
 
@@ -92,6 +93,10 @@ def _zk_field_types():
     return types
 
 
+#: The map Modbus RTU frames are named by in Wireshark: the 17Lf's (as ``zap decode --protocol modbus``).
+_MB = default_map("modbus")
+
+
 def tables() -> str:
     control = {c.id: {"name": c.name, "fields": [_field(f) for f in c.fields]} for c in zk.CONTROL}
     status = {s.id: {"name": s.name, "fields": [_field(f) for f in s.fields]} for s in zk.STATUS}
@@ -99,6 +104,7 @@ def tables() -> str:
     instructions = {i.code: {"name": i.cli, "title": i.name} for i in zap.INSTRUCTIONS}
     registers = {r.address: {"name": r.name, "size": r.size, "scale": r.scale, "unit": r.unit}
                  for r in zap.REGISTERS + zap.UNDOCUMENTED_REGISTERS}
+    mb_registers = {r.address: {"name": r.name, "scale": r.scale, "unit": r.unit} for r in _MB.registers}
     lines = [
         f"local LINKTYPE_ZK, LINKTYPE_ZAP = {LINKTYPE_ZK}, {LINKTYPE_ZAP}",
         f"local ZK_DEFAULT_VERSION = {zk.DEFAULT_PROTOCOL_VERSION}",
@@ -111,6 +117,13 @@ def tables() -> str:
         f"local ZAP_REGISTERS = {_lua(registers)}",
         f"local ZAP_ERROR_BITS = {_lua(dict(zap.ERROR_BITS))}",
         f"local ZAP_BROADCAST = {zap.BROADCAST}",
+        f"local LINKTYPE_MODBUS = {LINKTYPE_MODBUS}",
+        f"local MB_MAP = {_lua(_MB.model)}",
+        f"local MB_REGISTERS = {_lua(mb_registers)}",
+        f"local MB_FUNCTIONS = {_lua({c: n for c, (n, _) in modbus.FUNCTIONS.items()})}",
+        f"local MB_FUNCTION_TITLES = {_lua({c: t for c, (_, t) in modbus.FUNCTIONS.items()})}",
+        f"local MB_EXCEPTIONS = {_lua({c: {'name': n, 'meaning': m} for c, (n, m) in modbus.EXCEPTIONS.items()})}",
+        f"local MB_MAX_ID = {modbus.MAX_ID}",
     ]
     return "\n".join(lines) + "\n"
 
@@ -119,10 +132,12 @@ HEADER = """\
 -- zkzap.lua: Wireshark dissector for zkzap's pcapng captures (zkzap ... --capture FILE).
 -- GENERATED from zkzap's protocol tables by `python -m zkzap.docs all`; do not edit.
 --
--- Link types: 147 (DLT_USER0) the ZK turbine ECU protocol, 148 (DLT_USER1) mightyZAP IR.
+-- Link types: 147 (DLT_USER0) the ZK turbine ECU protocol, 148 (DLT_USER1) mightyZAP IR,
+-- 149 (DLT_USER2) mightyZAP over Modbus RTU (the 17Lf's control table names the registers).
 -- Direction: the pcapng epb_flags (inbound = device -> host, outbound = host -> device);
 -- a capture of unknown direction (a sniffer on one line) is framed as a mixture.
--- Fields carry zkzap's own keys: zk.rpm, zk.egt_c, zk.engine_state_name, zap.register, ...
+-- Fields carry zkzap's own keys: zk.rpm, zk.egt_c, zk.engine_state_name, zap.register,
+-- zapmodbus.register, zapmodbus.exception, ...
 --
 -- Use: wireshark -X lua_script:zkzap.lua capture.pcapng, or copy this file to
 -- ~/.local/lib/wireshark/plugins/ (tshark -X lua_script:zkzap.lua -r capture.pcapng -V).
@@ -134,6 +149,7 @@ RUNTIME = r"""
 
 local zk_proto = Proto("zk", "ZK turbine ECU protocol (zkzap)")
 local zap_proto = Proto("zap", "mightyZAP IR protocol (zkzap)")
+local mb_proto = Proto("zapmodbus", "mightyZAP Modbus RTU (zkzap)")
 
 local f_dir = Field.new("frame.packet_flags_direction")
 local f_if = Field.new("frame.interface_id")
@@ -249,10 +265,12 @@ local function reset_state()
   streams = {}
   ZK_STATE = {version = nil, known = nil, source = "default", rpm_factor = nil}
   ZAP_STATE = {load = {}, pending = {}, response_of = {}}
+  MB_STATE = {request = {}, pending = {}, response_of = {}}
 end
 reset_state()
 function zk_proto.init() reset_state() end
 function zap_proto.init() reset_state() end
+function mb_proto.init() reset_state() end
 
 local function direction(pinfo)
   local d = f_dir()
@@ -735,10 +753,363 @@ function zap_proto.dissector(tvb, pinfo, tree)
   return tvb:len()
 end
 
+-- mightyZAP over Modbus RTU ------------------------------------------------------------------
+
+local MB_F = {
+  frame = ProtoField.bytes("zapmodbus.frame", "Modbus RTU frame", base.SPACE),
+  kind = ProtoField.string("zapmodbus.kind", "kind"),
+  id = ProtoField.uint8("zapmodbus.id", "id"),
+  ["function"] = ProtoField.string("zapmodbus.function", "function"),
+  code = ProtoField.uint8("zapmodbus.code", "code", base.HEX),
+  exception = ProtoField.uint8("zapmodbus.exception", "exception"),
+  name = ProtoField.string("zapmodbus.name", "name"),
+  meaning = ProtoField.string("zapmodbus.meaning", "meaning"),
+  register = ProtoField.string("zapmodbus.register", "register"),
+  address = ProtoField.uint16("zapmodbus.address", "address"),
+  count = ProtoField.uint16("zapmodbus.count", "count"),
+  value = ProtoField.uint32("zapmodbus.value", "value"),
+  physical = ProtoField.double("zapmodbus.physical", "physical"),
+  unit = ProtoField.string("zapmodbus.unit", "unit"),
+  values = ProtoField.string("zapmodbus.values", "values"),
+  malformed = ProtoField.string("zapmodbus.malformed", "malformed"),
+  params = ProtoField.string("zapmodbus.params", "params"),
+  dir = ProtoField.string("zapmodbus.dir", "dir"),
+  crc = ProtoField.uint16("zapmodbus.crc", "crc", base.HEX),
+  crc_ok = ProtoField.bool("zapmodbus.crc_ok", "crc_ok"),
+  request_in = ProtoField.framenum("zapmodbus.request_in", "request in", base.NONE, frametype.REQUEST),
+  response_in = ProtoField.framenum("zapmodbus.response_in", "response in", base.NONE, frametype.RESPONSE),
+  latency_ms = ProtoField.double("zapmodbus.latency_ms", "latency_ms"),
+  bad = ProtoField.bytes("zapmodbus.bad", "bad frame", base.SPACE),
+}
+local mb_fields = {}
+for _, f in pairs(MB_F) do mb_fields[#mb_fields + 1] = f end
+mb_proto.fields = mb_fields
+local ex_mb_crc = ProtoExpert.new("zapmodbus.crc_bad", "Modbus RTU CRC-16 mismatch", expert.group.CHECKSUM,
+                                  expert.severity.WARN)
+local ex_mb_nopair = ProtoExpert.new("zapmodbus.unpaired", "reply without a request to this ID",
+                                     expert.group.SEQUENCE, expert.severity.NOTE)
+local ex_mb_exception = ProtoExpert.new("zapmodbus.exception_reply", "exception reply", expert.group.RESPONSE_CODE,
+                                        expert.severity.WARN)
+mb_proto.experts = {ex_mb_crc, ex_mb_nopair, ex_mb_exception}
+
+-- CRC-16/MODBUS (reflected polynomial 0xA001, init 0xFFFF), sent low byte first
+local CRC16 = {}
+for i = 0, 255 do
+  local c = i
+  for _ = 1, 8 do
+    if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), 0xA001) else c = bit32.rshift(c, 1) end
+  end
+  CRC16[i] = c
+end
+local function crc16(buf, first, last)
+  local c = 0xFFFF
+  for i = first, last do c = bit32.bxor(bit32.rshift(c, 8), CRC16[bit32.band(bit32.bxor(c, buf[i]), 0xFF)]) end
+  return c
+end
+
+-- the lengths a frame from buf[i] may have (nil: more bytes needed), as zkzap's RtuFramer
+local function mb_lengths(buf, i, n)
+  local fn = buf[i + 1]
+  if fn >= 0x80 then return {5} end
+  if fn == 0x03 then
+    if i + 2 > n then return nil end
+    local c = buf[i + 2]
+    if c > 0 and c % 2 == 0 and 5 + c ~= 8 then
+      if 5 + c < 8 then return {5 + c, 8} end
+      return {8, 5 + c}
+    end
+    return {8}
+  end
+  if fn == 0x06 then return {8} end
+  if fn == 0x10 then
+    if i + 6 > n then
+      if i + 7 <= n then return {8} end
+      return nil
+    end
+    local c = buf[i + 6]
+    if c > 0 and c % 2 == 0 then return {8, 9 + c} end
+    return {8}
+  end
+  return {}
+end
+
+local function mb_scan(buf, aligned)
+  local found, i, n = {}, 1, #buf
+  if aligned == nil then aligned = true end
+  while i + 1 <= n do
+    if buf[i] > MB_MAX_ID then
+      aligned = false
+      i = i + 1
+    else
+      local lengths = mb_lengths(buf, i, n)
+      if lengths == nil then break end
+      local hit, waiting = nil, false
+      for _, len in ipairs(lengths) do
+        if i + len - 1 > n then
+          waiting = true
+        elseif crc16(buf, i, i + len - 3) == buf[i + len - 2] + 256 * buf[i + len - 1] then
+          hit = len
+          break
+        end
+      end
+      if hit ~= nil then
+        found[#found + 1] = {pos = i, len = hit, ok = true}
+        i = i + hit
+        aligned = true
+      elseif waiting then
+        break
+      else
+        if aligned and #lengths > 0 then
+          local len = lengths[1]
+          found[#found + 1] = {pos = i, len = len, ok = false,
+                               expected = crc16(buf, i, i + len - 3), found = buf[i + len - 2] + 256 * buf[i + len - 1]}
+        end
+        aligned = false
+        i = i + 1
+      end
+    end
+  end
+  return found, i, aligned
+end
+
+local function mb_word(b, k) return b[k] * 256 + b[k + 1] end
+
+local function mb_name(address)
+  local r = MB_REGISTERS[address]
+  if r ~= nil then return r.name end
+  return tostring(address)
+end
+
+local function mb_names(address, count)
+  local name = mb_name(address)
+  if count ~= nil and count > 1 then name = name .. ".." .. mb_name(address + count - 1) end
+  return name
+end
+
+local function mb_values(out, address, values)
+  if #values == 1 then
+    out[#out + 1] = {"value", values[1]}
+    local r = MB_REGISTERS[address]
+    if r ~= nil and r.scale ~= 1 then
+      out[#out + 1] = {"physical", round(values[1] * r.scale, 3)}
+      out[#out + 1] = {"unit", r.unit}
+    end
+  else
+    local kv = {}
+    for k, v in ipairs(values) do kv[#kv + 1] = mb_name(address + k - 1) .. "=" .. v end
+    out[#out + 1] = {"values", table.concat(kv, ";")}
+  end
+end
+
+-- a request's meaning (as zkzap.codec.modbus.Request): address, count, values, or why malformed
+local function mb_request(b, n)
+  local fn, body = b[1], n - 4
+  if (fn == 0x03 or fn == 0x06) and body == 4 then
+    local address, word = mb_word(b, 2), mb_word(b, 4)
+    if fn == 0x03 then return {address = address, count = word} end
+    return {address = address, count = 1, values = {word}}
+  end
+  if fn == 0x10 and body >= 5 and b[6] == body - 5 and b[6] % 2 == 0 then
+    local r = {address = mb_word(b, 2), count = mb_word(b, 4), values = {}}
+    for k = 7, n - 3, 2 do r.values[#r.values + 1] = mb_word(b, k) end
+    if #r.values ~= r.count then
+      r.malformed = string.format("quantity %d but %d registers of data", r.count, #r.values)
+    end
+    return r
+  end
+  if MB_FUNCTION_TITLES[fn] ~= nil then
+    return {malformed = string.format("%d data bytes do not make a %s request", body, MB_FUNCTION_TITLES[fn])}
+  end
+  return {malformed = string.format("function 0x%02X is not one the actuator knows", fn)}
+end
+
+-- request, reply or exception: by the direction when known, else by the frame's shape
+local function mb_kind(b, n, dir)
+  local fn = b[1]
+  if fn >= 0x80 then return "exception" end
+  if dir == 2 then return "request" end
+  if dir == 1 then return "reply" end
+  if fn == 0x03 then
+    if n == 8 and n - 5 ~= b[2] then return "request" end
+    return "reply"
+  end
+  if fn == 0x10 then
+    if n == 8 then return "reply" end
+    return "request"
+  end
+  return "request"
+end
+
+local function same_bytes(a, b, n)
+  if a == nil or a.n ~= n then return false end
+  for k = 0, n - 1 do if a[k] ~= b[k] then return false end end
+  return true
+end
+
+-- the record zkzap's decoder makes of a checked frame; pending: the last request to its ID
+local function mb_decode(b, n, dir, st)
+  local ident, fn = b[0], bit32.band(b[1], 0x7F)
+  local req = st.request[ident]
+  if dir == 1 and same_bytes(req, b, n) then dir = 0 end     -- the adapter's echo of the request
+  local kind = mb_kind(b, n, dir)
+  if kind == "request" and dir == 0 and b[1] == 0x06 and same_bytes(req, b, n) then kind = "reply" end
+  local out = {}
+  if kind == "request" then
+    st.request[ident] = b
+    req = nil
+  else
+    st.request[ident] = nil
+    if kind ~= "exception" and req ~= nil then kind = "reply" end
+  end
+  out[#out + 1] = {"kind", kind}
+  out[#out + 1] = {"id", ident}
+  out[#out + 1] = {"function", MB_FUNCTIONS[fn] or string.format("0x%02x", fn)}
+  out[#out + 1] = {"code", b[1]}
+  if kind == "exception" then
+    local e = MB_EXCEPTIONS[b[2]]
+    out[#out + 1] = {"exception", b[2]}
+    out[#out + 1] = {"name", e and e.name or string.format("undocumented-0x%02x", b[2])}
+    out[#out + 1] = {"meaning", e and e.meaning or string.format("exception code 0x%02X (not documented)", b[2])}
+    return out, kind
+  end
+  if kind == "request" then
+    local r = mb_request(b, n)
+    if r.malformed ~= nil then
+      out[#out + 1] = {"malformed", r.malformed}
+      out[#out + 1] = {"params", hex(b, 2, n - 3)}
+      return out, kind
+    end
+    out[#out + 1] = {"address", r.address}
+    out[#out + 1] = {"register", mb_names(r.address, r.count)}
+    out[#out + 1] = {"count", r.count}
+    if r.values ~= nil then mb_values(out, r.address, r.values) end
+    return out, kind
+  end
+  if fn == 0x03 then
+    local values = {}
+    for k = 3, n - 3, 2 do values[#values + 1] = mb_word(b, k) end
+    local r = req ~= nil and req[1] == 0x03 and mb_request(req, req.n) or nil
+    if r ~= nil and r.malformed == nil and r.count == #values then
+      out[#out + 1] = {"address", r.address}
+      out[#out + 1] = {"register", mb_names(r.address, r.count)}
+      mb_values(out, r.address, values)
+    else
+      out[#out + 1] = {"count", #values}
+      if #values == 1 then
+        out[#out + 1] = {"value", values[1]}
+      else
+        local t = {}
+        for _, v in ipairs(values) do t[#t + 1] = tostring(v) end
+        out[#out + 1] = {"values", table.concat(t, ",")}
+      end
+    end
+    return out, kind
+  end
+  local address = mb_word(b, 2)
+  out[#out + 1] = {"address", address}
+  if fn == 0x06 then
+    out[#out + 1] = {"register", mb_names(address, 1)}
+    mb_values(out, address, {mb_word(b, 4)})
+  else
+    local count = mb_word(b, 4)
+    out[#out + 1] = {"count", count}
+    out[#out + 1] = {"register", mb_names(address, count)}
+  end
+  return out, kind
+end
+
+function mb_proto.dissector(tvb, pinfo, tree)
+  pinfo.cols.protocol = "mightyZAP Modbus"
+  local res = results[pinfo.number]
+  local st = MB_STATE
+  if res == nil then
+    res = {}
+    local dir = direction(pinfo)
+    local s = stream_of("zapmodbus", pinfo)
+    local buf, start = feed(s, tvb)
+    local found, rest, aligned = mb_scan(buf, s.aligned)
+    s.aligned = aligned
+    for _, fr in ipairs(found) do
+      local b = frame_bytes(buf, fr.pos, fr.len)
+      b.n = fr.len
+      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected, found = fr.found,
+                    offset = fr.pos >= start and fr.pos - start or nil}
+      if fr.ok then
+        local values, kind = mb_decode(b, fr.len, dir, st)
+        item.values, item.kind = values, kind
+        local ident = b[0]
+        if kind == "request" then
+          -- (an echo read back is inbound: no request of its own)
+          if dir ~= 1 and ident ~= 0 then st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts} end
+        else
+          local p = st.pending[ident]
+          st.pending[ident] = nil
+          if p ~= nil then
+            item.request_in = p.num
+            item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+            st.response_of[p.num] = pinfo.number
+          end
+        end
+        if dir == 1 then item.dir = "d2h" elseif dir == 2 then item.dir = "h2d" end
+      end
+      res[#res + 1] = item
+    end
+    keep_from(s, rest)
+    results[pinfo.number] = res
+  end
+  local info = {}
+  for _, item in ipairs(res) do
+    local range = item_range(tvb, item, "reassembled Modbus RTU frame")
+    if item.ok then
+      local v = {}
+      for _, kv in ipairs(item.values) do v[kv[1]] = kv[2] end
+      local summary
+      if item.kind == "request" then
+        summary = string.format("%s to ID %d", v["function"], v.id)
+      elseif item.kind == "exception" then
+        summary = string.format("exception %s from ID %d", v.name, v.id)
+      else
+        summary = string.format("%s reply from ID %d", v["function"], v.id)
+      end
+      if v.register ~= nil then summary = summary .. " " .. v.register end
+      if v.value ~= nil then summary = summary .. "=" .. v.value end
+      local t = tree:add(mb_proto, range, "mightyZAP Modbus RTU " .. summary)
+      t:add(MB_F.frame, range)
+      if item.dir ~= nil then t:add(MB_F.dir, item.dir) end
+      for _, kv in ipairs(item.values) do
+        local f = MB_F[kv[1]]
+        if f ~= nil and kv[2] ~= nil then t:add(f, kv[2]) end
+      end
+      t:add(MB_F.crc, item.bytes[item.len - 2] + 256 * item.bytes[item.len - 1])
+      t:add(MB_F.crc_ok, true)
+      if item.kind == "exception" then t:add_proto_expert_info(ex_mb_exception, v.meaning) end
+      if item.request_in ~= nil then
+        t:add(MB_F.request_in, item.request_in)
+        t:add(MB_F.latency_ms, item.latency_ms)
+      elseif item.kind ~= "request" then
+        t:add_proto_expert_info(ex_mb_nopair)
+      end
+      local resp = st.response_of[pinfo.number]
+      if item.kind == "request" and resp ~= nil then t:add(MB_F.response_in, resp) end
+      info[#info + 1] = summary
+    else
+      local t = tree:add(mb_proto, range, "bad Modbus RTU frame")
+      t:add(MB_F.bad, range)
+      t:add(MB_F.crc_ok, false)
+      t:add_proto_expert_info(ex_mb_crc, string.format("CRC-16 mismatch: expected %04X, found %04X",
+                                                        item.expected, item.found))
+      info[#info + 1] = "bad CRC"
+    end
+  end
+  pinfo.cols.info = (#info > 0) and table.concat(info, "; ") or "(part of a frame)"
+  return tvb:len()
+end
+
 local encap = DissectorTable.get("wtap_encap")
 local encaps = wtap_encaps or wtap
 encap:add(encaps.USER0, zk_proto)       -- link type 147
 encap:add(encaps.USER1, zap_proto)      -- link type 148
+encap:add(encaps.USER2, mb_proto)       -- link type 149
 """
 
 

@@ -14,7 +14,7 @@ its last whole block.
 
 from __future__ import annotations
 
-from ..codec.framing import ZapFramer, ZkFramer
+from ..codec.framing import RtuFramer, ZapFramer, ZkFramer
 from .clock import wall_now
 from .pcapng import INBOUND, OUTBOUND, UNKNOWN, Reader, Writer
 
@@ -96,13 +96,17 @@ def finish() -> None:
             lane_.check()
 
 
-def tap(port, url: str, baud=None, capture=None, direction=None):
+def tap(port, url: str, baud=None, capture=None, direction=None, speaks=None):
     """Wrap ``port`` when a capture is asked for (``capture``: (path, protocol), else the one
     :func:`request` named). ``direction`` fixes the direction of everything read (a sniffer's
-    receive-only port on one side of a link); by default reads are inbound, writes outbound."""
+    receive-only port on one side of a link); by default reads are inbound, writes outbound.
+    ``speaks``: the protocol the port speaks when it is not the one the command asked the
+    capture for (``modbus`` on a mightyZAP bus: the interface's link type says so)."""
     capture = capture if capture is not None else _requested
     if not capture:
         return port
+    if speaks is not None:
+        capture = (capture[0], speaks)
     global _lane
     from ..offload import Lane, Proxy
 
@@ -179,6 +183,8 @@ class CaptureFrames:
         if f is None:
             if self.protocol == "zap":
                 f = ZapFramer()
+            elif self.protocol == "modbus":
+                f = RtuFramer()
             elif direction == OUTBOUND:
                 f = ZkFramer("control") if self.accept != "status" else None
             elif direction == INBOUND:

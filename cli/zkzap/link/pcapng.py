@@ -5,7 +5,8 @@ Layout (pcapng, little-endian, as written here):
 - one Section Header Block (``shb_userappl`` = ``zkzap VERSION``);
 - one Interface Description Block per port opened, with a user link type that names the
   protocol: :data:`LINKTYPE_ZK` = 147 (``DLT_USER0``) for the ZK ECU protocol,
-  :data:`LINKTYPE_ZAP` = 148 (``DLT_USER1``) for mightyZAP; ``if_name`` is the port, and
+  :data:`LINKTYPE_ZAP` = 148 (``DLT_USER1``) for mightyZAP's IR protocol, :data:`LINKTYPE_MODBUS`
+  = 149 (``DLT_USER2``) for mightyZAP over Modbus RTU (the 17Lf); ``if_name`` is the port, and
   ``if_description`` says ``zkzap ZK 115200 baud``; timestamps in microseconds (the default
   ``if_tsresol``);
 - one Enhanced Packet Block per chunk, its direction in ``epb_flags`` bits 0-1: 1 inbound
@@ -38,9 +39,10 @@ SHB, IDB, EPB, SPB = 0x0A0D0D0A, 1, 6, 3
 
 LINKTYPE_ZK = 147     # DLT_USER0
 LINKTYPE_ZAP = 148    # DLT_USER1
-LINKTYPES = {"zk": LINKTYPE_ZK, "zap": LINKTYPE_ZAP}
+LINKTYPE_MODBUS = 149  # DLT_USER2
+LINKTYPES = {"zk": LINKTYPE_ZK, "zap": LINKTYPE_ZAP, "modbus": LINKTYPE_MODBUS}
 PROTOCOL_BY_LINKTYPE = {v: k for k, v in LINKTYPES.items()}
-PROTOCOL_NAMES = {"zk": "ZK", "zap": "mightyZAP"}
+PROTOCOL_NAMES = {"zk": "ZK", "zap": "mightyZAP", "modbus": "mightyZAP Modbus RTU"}
 
 #: Directions: epb_flags values and the short names records carry in ``dir``.
 UNKNOWN, INBOUND, OUTBOUND = 0, 1, 2
@@ -53,7 +55,7 @@ _EPB_FLAGS = 2
 
 #: A few link types by name, for the message refusing a capture of something else.
 _KNOWN_LINKTYPES = {0: "NULL", 1: "ETHERNET", 101: "RAW", 113: "LINUX_SLL", 127: "IEEE802_11_RADIOTAP",
-                    147: "USER0", 148: "USER1", 189: "USB_LINUX_MMAPPED", 220: "USB_LINUX_MMAPPED",
+                    147: "USER0", 148: "USER1", 149: "USER2", 189: "USB_LINUX_MMAPPED", 220: "USB_LINUX_MMAPPED",
                     249: "USBPCAP", 276: "LINUX_SLL2"}
 
 
@@ -411,7 +413,8 @@ class Reader:
             shown = _KNOWN_LINKTYPES.get(linktype)
             wrong = (f"{self.path}: interface {n} has link type {linktype}"
                      f"{f' ({shown})' if shown else ''}; zkzap captures use {LINKTYPE_ZK} "
-                     f"(USER0, ZK) and {LINKTYPE_ZAP} (USER1, mightyZAP)")
+                     f"(USER0, ZK), {LINKTYPE_ZAP} (USER1, mightyZAP) and {LINKTYPE_MODBUS} "
+                     "(USER2, mightyZAP Modbus RTU)")
         elif self.protocol is not None and proto != self.protocol:
             wrong = (f"{self.path}: a {PROTOCOL_NAMES[proto]} capture (link type {linktype}); "
                      f"expected {PROTOCOL_NAMES[self.protocol]} (link type {LINKTYPES[self.protocol]})")
@@ -499,6 +502,15 @@ def _iter_options(buf, endian):
             return
         yield code, bytes(buf[i + 4:i + 4 + n])
         i += 4 + n + _pad(n)
+
+
+def capture_protocol(path: str) -> str | None:
+    """The protocol of a zkzap capture's first interface (``zk``, ``zap``, ``modbus``), None
+    when it describes none; a file that is no zkzap capture is a CaptureError."""
+    with Reader(path) as r:
+        for _ in r:
+            break
+        return next((i[0] for i in r.interfaces if i is not None), None)
 
 
 def check_capture(path: str, protocol: str | None = None) -> None:

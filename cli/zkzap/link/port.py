@@ -46,10 +46,12 @@ def fit_note(what: str, rate_hz: float, frame_bytes: int, baud: int, stop_bits: 
             f"{baud} baud carries at most {most:.1f} a second")
 
 
-def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1, capture=None):
+def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bits: int = 1, capture=None,
+              speaks=None):
     """A pyserial port for ``url`` at ``baud`` (8 data bits, no parity, ``stop_bits`` 1 or 2),
     opened exclusively where the OS allows; recorded to a pcapng capture when one was asked for
-    (``capture`` = (path, protocol), else the one named by :func:`zkzap.link.capture.request`).
+    (``capture`` = (path, protocol), else the one named by :func:`zkzap.link.capture.request`;
+    ``speaks``: the link's protocol where it is not the capture's, ``modbus`` on a mightyZAP bus).
     A ``url`` that is no string or a ``baud`` that is no positive integer is an InvalidValue."""
     if not isinstance(url, str):
         raise InvalidValue(f"port: {url!r} is not a device path or URL", port=url)
@@ -69,7 +71,7 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
         port = serial.serial_for_url(url, baudrate=baud, timeout=timeout, write_timeout=write_timeout,
                                      exclusive=True, stopbits=stop_bits)
         _no_delay(port)
-        return _tap(port, url, baud, capture)
+        return _tap(port, url, baud, capture, speaks)
     except InvalidValue:
         raise                        # a sim:// URL's option, named by the simulator
     except ValueError as e:
@@ -201,7 +203,7 @@ def _check_url(url: str) -> None:
     if parts is None or not parts.hostname or port is None:
         raise UsageError(f"port: {url}: expected {scheme}://HOST:PORT (a host name or address and a port "
                          f"number 0..65535)")
-def _tap(port, url, baud, capture):
+def _tap(port, url, baud, capture, speaks=None):
     import sys
 
     if not capture and "zkzap.link.capture" not in sys.modules:
@@ -209,7 +211,7 @@ def _tap(port, url, baud, capture):
     from .capture import tap
 
     try:
-        return tap(port, url, baud, capture)
+        return tap(port, url, baud, capture, speaks=speaks)
     except BaseException:
         close_port(port)
         raise

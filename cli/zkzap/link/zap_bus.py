@@ -1457,17 +1457,18 @@ def open_bus(port=None, baud=57600, *, sim=False, sim_ids=None, timeout=None, re
         from .modbus_bus import ModbusBus
 
         return open_on(url, baud, stop_bits, allow, low_latency, ModbusBus, regmap=regmap, timeout=timeout,
-                       retries=retries, latency=latency)
+                       retries=retries, latency=latency, speaks="modbus")
     return open_on(url, baud, stop_bits, allow, low_latency, ZapBus, return_mode=return_mode, timeout=timeout,
                    retries=retries, latency=latency)
 
 
-def open_on(url, baud, stop_bits, allow, low_latency, cls, **kw):
+def open_on(url, baud, stop_bits, allow, low_latency, cls, speaks=None, **kw):
     """A bus of class ``cls`` (``**kw``: its options) on the port ``url`` opened at ``baud``,
-    given ``allow``, in the driver's low-latency mode when asked."""
+    given ``allow``, in the driver's low-latency mode when asked; ``speaks``: its protocol in a
+    capture, where not the IR protocol's."""
     from .port import open_port
 
-    p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits)
+    p = open_port(url, baud, timeout=0.1, stop_bits=stop_bits, speaks=speaks)
     bus = cls(p, url=url, **kw)
     bus.allow = as_permission(allow)
     if low_latency:

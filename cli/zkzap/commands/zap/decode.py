@@ -56,7 +56,9 @@ def decode(inputs, binary, fmt, output, append, protocol, regmap):
 
     pcapng captures (--capture FILE; recognised by their content) add 'time', 't' (seconds since
     the capture began), 'dir' (h2d host to actuator, d2h actuator to host) and, on feedback,
-    'latency_ms' since the request it answers.
+    'latency_ms' since the request it answers. A capture records the protocol its port spoke
+    (a Modbus RTU bus's has link type 149): it is decoded by that protocol unless --protocol
+    says another, which is then refused.
 
     --protocol modbus decodes Modbus RTU frames (the 17Lf): requests, replies (a read's values
     named by the request to the same ID just before) and exception replies, named by code and
@@ -76,12 +78,16 @@ def decode(inputs, binary, fmt, output, append, protocol, regmap):
     from ...io.writers import make_writer
 
     captures = capture_inputs(inputs, binary)
-    if protocol == "modbus":
-        return _decode_modbus(inputs, binary, fmt, output, append, captures)
     if captures is not None:
         from ..capture_decode import zap_decode_captures
 
-        return zap_decode_captures(captures, fmt=fmt, output=output, append=append, table_cells=_table_cells)
+        protocol = _capture_protocol(captures, protocol)
+        return zap_decode_captures(captures, fmt=fmt, output=output, append=append,
+                                   table_cells=_modbus_cells if protocol == "modbus" else _table_cells,
+                                   protocol="modbus" if protocol == "modbus" else "zap",
+                                   regmap=zap_map() if protocol == "modbus" else None)
+    if protocol == "modbus":
+        return _decode_modbus(inputs, binary, fmt, output, append)
     chunks, explicit = _chunks(inputs, binary)
     fmt = output_format(fmt, output, RECORD_FORMATS)
     framer = ZapFramer()
@@ -136,14 +142,30 @@ def _modbus_cells(rec):
     return rec
 
 
-def _decode_modbus(inputs, binary, fmt, output, append, captures):
+def _capture_protocol(paths, protocol):
+    """The protocol captures are decoded by: a capture records which one its port spoke (its
+    link type), and that is the one taken unless --protocol (or its environment) says another
+    (the capture is then refused, exit 2, naming both)."""
+    ctx = click.get_current_context()
+    if ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT:
+        return protocol
+    from ...link.pcapng import capture_protocol
+
+    found = capture_protocol(paths[0])
+    if found == "modbus":
+        if ctx.params.get("regmap") is not None and ctx.params["regmap"].protocol != "modbus":
+            raise UsageError(f"map: {ctx.params['regmap'].path} describes the ir protocol; {paths[0]} is a "
+                             "Modbus RTU capture")
+        ctx.params["protocol"] = "modbus"
+        return "modbus"
+    return protocol
+
+
+def _decode_modbus(inputs, binary, fmt, output, append):
     from ...codec.framing import RtuFramer
     from ...io.sources import run_decode, start
     from ...io.writers import make_writer
 
-    if captures is not None:
-        raise UsageError("--protocol modbus: pcapng captures are decoded on the IR protocol only; "
-                         "give the raw bytes (--binary) or hex")
     regmap = zap_map()
     chunks, explicit = _chunks(inputs, binary)
     fmt = output_format(fmt, output, RECORD_FORMATS)
