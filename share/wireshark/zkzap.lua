@@ -29,6 +29,7 @@ local MB_FUNCTIONS = {[3] = "read", [6] = "write", [16] = "write-multiple"}
 local MB_FUNCTION_TITLES = {[3] = "Read Holding Registers", [6] = "Write Single Register", [16] = "Write Multiple Registers"}
 local MB_EXCEPTIONS = {[1] = {name = "illegal-function", meaning = "illegal function: the actuator does not know this function code"}, [2] = {name = "illegal-data-address", meaning = "illegal data address: no such register, or a block past the table"}, [3] = {name = "illegal-data-value", meaning = "illegal data value: a value or register count it does not take"}, [4] = {name = "slave-device-failure", meaning = "slave device failure (the manual: a parameter out of range)"}, [5] = {name = "acknowledge", meaning = "acknowledge (the manual: data not ready)"}, [6] = {name = "slave-device-busy", meaning = "slave device busy (the manual: parameters locked)"}}
 local MB_MAX_ID = 247
+local MB_FIELD_KINDS = {{"kind", "string"}, {"id", "uint8"}, {"function", "string"}, {"code", "hex8"}, {"exception", "uint8"}, {"name", "string"}, {"meaning", "string"}, {"register", "string"}, {"address", "uint16"}, {"count", "uint16"}, {"value", "uint32"}, {"physical", "double"}, {"unit", "string"}, {"values", "string"}, {"malformed", "string"}, {"params", "string"}, {"dir", "string"}, {"latency_ms", "double"}}
 
 -- ---------------------------------------------------------------------------------------------
 -- runtime
@@ -105,15 +106,19 @@ local ex_zap_nopair = ProtoExpert.new("zap.unpaired", "feedback without a reques
 zk_proto.experts = {ex_zk_crc}
 zap_proto.experts = {ex_zap_chk, ex_zap_nopair}
 
--- CRC-8/MAXIM-DOW (reflected polynomial 0x8C)
-local CRC = {}
-for i = 0, 255 do
-  local c = i
-  for _ = 1, 8 do
-    if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), 0x8C) else c = bit32.rshift(c, 1) end
+-- the byte table of a reflected CRC of polynomial poly (0x8C: CRC-8/MAXIM-DOW, 0xA001: CRC-16/MODBUS)
+local function crc_table(poly)
+  local t = {}
+  for i = 0, 255 do
+    local c = i
+    for _ = 1, 8 do
+      if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), poly) else c = bit32.rshift(c, 1) end
+    end
+    t[i] = c
   end
-  CRC[i] = c
+  return t
 end
+local CRC = crc_table(0x8C)
 local function crc8(b, first, last)
   local c = 0
   for i = first, last do c = CRC[bit32.bxor(c, b[i])] end
@@ -205,6 +210,42 @@ local function item_range(tvb, item, label)   -- the frame in this packet, or re
   local hexs = {}
   for i = 0, item.len - 1 do hexs[#hexs + 1] = string.format("%02X", item.bytes[i]) end
   return ByteArray.new(table.concat(hexs, " ")):tvb(label)()
+end
+
+-- the first pass over a packet: feed its bytes to its stream and cut the frames they complete
+-- (scan(buf, aligned, dir) -> found, rest, aligned), one item each; handle(item, b, dir)
+-- decodes a whole one (b: its 0-based bytes, b.n its length). Kept by packet number.
+local function first_pass(prefix, scan, tvb, pinfo, handle)
+  local res = {}
+  local dir = direction(pinfo)
+  local s = stream_of(prefix, pinfo)
+  local buf, start = feed(s, tvb)
+  local found, rest, aligned = scan(buf, s.aligned, dir)
+  s.aligned = aligned
+  for _, fr in ipairs(found) do
+    local b = frame_bytes(buf, fr.pos, fr.len)
+    b.n = fr.len
+    local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected, found = fr.found,
+                  offset = fr.pos >= start and fr.pos - start or nil}
+    handle(item, b, dir)
+    res[#res + 1] = item
+  end
+  keep_from(s, rest)
+  results[pinfo.number] = res
+  return res
+end
+
+-- a reply's link to its request and its latency (or a note that it has none); a request's link
+-- to its reply (F: the protocol's fields; response_of: request packet -> reply packet)
+local function add_links(t, F, item, is_request, response_of, pinfo, ex_nopair)
+  if item.request_in ~= nil then
+    t:add(F.request_in, item.request_in)
+    t:add(F.latency_ms, item.latency_ms)
+  elseif not is_request then
+    t:add_proto_expert_info(ex_nopair)
+  end
+  local resp = response_of[pinfo.number]
+  if is_request and resp ~= nil then t:add(F.response_in, resp) end
 end
 
 -- ZK ------------------------------------------------------------------------------------------
@@ -354,22 +395,11 @@ function zk_proto.dissector(tvb, pinfo, tree)
   pinfo.cols.protocol = "ZK"
   local res = results[pinfo.number]
   if res == nil then
-    res = {}
-    local dir = direction(pinfo)
-    local s = stream_of("zk", pinfo)
-    local buf, start = feed(s, tvb)
-    local found, rest, aligned = zk_scan(buf, dir, s.aligned)
-    s.aligned = aligned
-    for _, fr in ipairs(found) do
-      local b = frame_bytes(buf, fr.pos, fr.len)
-      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
-                    offset = fr.pos >= start and fr.pos - start or nil}
-      if fr.ok then item.values = zk_decode(b, fr.len) end
-      item.dir = (fr.len == 4) and "h2d" or "d2h"
-      res[#res + 1] = item
-    end
-    keep_from(s, rest)
-    results[pinfo.number] = res
+    res = first_pass("zk", function(buf, aligned, dir) return zk_scan(buf, dir, aligned) end, tvb, pinfo,
+                     function(item, b)
+      if item.ok then item.values = zk_decode(b, item.len) end
+      item.dir = (item.len == 4) and "h2d" or "d2h"
+    end)
   end
   local info = {}
   for _, item in ipairs(res) do
@@ -556,44 +586,30 @@ function zap_proto.dissector(tvb, pinfo, tree)
   local res = results[pinfo.number]
   local st = ZAP_STATE
   if res == nil then
-    res = {}
-    local dir = direction(pinfo)
-    local s = stream_of("zap", pinfo)
-    local buf, start = feed(s, tvb)
-    local found, rest, aligned = zap_scan(buf, s.aligned)
-    s.aligned = aligned
-    for _, fr in ipairs(found) do
-      local b = frame_bytes(buf, fr.pos, fr.len)
-      b.n = fr.len
-      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected,
-                    offset = fr.pos >= start and fr.pos - start or nil}
-      if fr.ok then
-        local ident, code = b[3], b[5]
-        if ZAP_INSTRUCTIONS[code] ~= nil then
-          item.values = zap_decode(b, fr.len, nil)
-          if code == 0xF2 then st.load[ident] = b else st.load[ident] = nil end
-          if dir ~= 1 and ident ~= ZAP_BROADCAST then
-            st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
-          end
-          item.dir = "h2d"
-        else
-          local req = st.load[ident]
-          st.load[ident] = nil
-          item.values = zap_decode(b, fr.len, req)
-          local p = st.pending[ident]
-          st.pending[ident] = nil
-          if p ~= nil then
-            item.request_in = p.num
-            item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
-            st.response_of[p.num] = pinfo.number
-          end
-          item.dir = "d2h"
+    res = first_pass("zap", zap_scan, tvb, pinfo, function(item, b, dir)
+      if not item.ok then return end
+      local ident, code = b[3], b[5]
+      if ZAP_INSTRUCTIONS[code] ~= nil then
+        item.values = zap_decode(b, item.len, nil)
+        if code == 0xF2 then st.load[ident] = b else st.load[ident] = nil end
+        if dir ~= 1 and ident ~= ZAP_BROADCAST then
+          st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
         end
+        item.dir = "h2d"
+      else
+        local req = st.load[ident]
+        st.load[ident] = nil
+        item.values = zap_decode(b, item.len, req)
+        local p = st.pending[ident]
+        st.pending[ident] = nil
+        if p ~= nil then
+          item.request_in = p.num
+          item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+          st.response_of[p.num] = pinfo.number
+        end
+        item.dir = "d2h"
       end
-      res[#res + 1] = item
-    end
-    keep_from(s, rest)
-    results[pinfo.number] = res
+    end)
   end
   local info = {}
   for _, item in ipairs(res) do
@@ -617,14 +633,7 @@ function zap_proto.dissector(tvb, pinfo, tree)
       end
       t:add(ZAP_F.checksum, item.bytes[item.len - 1])
       t:add(ZAP_F.checksum_ok, true)
-      if item.request_in ~= nil then
-        t:add(ZAP_F.request_in, item.request_in)
-        t:add(ZAP_F.latency_ms, item.latency_ms)
-      elseif v.kind == "feedback" then
-        t:add_proto_expert_info(ex_zap_nopair)
-      end
-      local resp = ZAP_STATE.response_of[pinfo.number]
-      if v.kind == "command" and resp ~= nil then t:add(ZAP_F.response_in, resp) end
+      add_links(t, ZAP_F, item, v.kind == "command", ZAP_STATE.response_of, pinfo, ex_zap_nopair)
       info[#info + 1] = summary
     else
       local t = tree:add(zap_proto, range, "bad mightyZAP packet")
@@ -641,32 +650,24 @@ end
 
 -- mightyZAP over Modbus RTU ------------------------------------------------------------------
 
+-- a field per key of zkzap's Modbus records (MB_FIELD_KINDS, from zkzap.codec.modbus.MODBUS_KEYS)
 local MB_F = {
   frame = ProtoField.bytes("zapmodbus.frame", "Modbus RTU frame", base.SPACE),
-  kind = ProtoField.string("zapmodbus.kind", "kind"),
-  id = ProtoField.uint8("zapmodbus.id", "id"),
-  ["function"] = ProtoField.string("zapmodbus.function", "function"),
-  code = ProtoField.uint8("zapmodbus.code", "code", base.HEX),
-  exception = ProtoField.uint8("zapmodbus.exception", "exception"),
-  name = ProtoField.string("zapmodbus.name", "name"),
-  meaning = ProtoField.string("zapmodbus.meaning", "meaning"),
-  register = ProtoField.string("zapmodbus.register", "register"),
-  address = ProtoField.uint16("zapmodbus.address", "address"),
-  count = ProtoField.uint16("zapmodbus.count", "count"),
-  value = ProtoField.uint32("zapmodbus.value", "value"),
-  physical = ProtoField.double("zapmodbus.physical", "physical"),
-  unit = ProtoField.string("zapmodbus.unit", "unit"),
-  values = ProtoField.string("zapmodbus.values", "values"),
-  malformed = ProtoField.string("zapmodbus.malformed", "malformed"),
-  params = ProtoField.string("zapmodbus.params", "params"),
-  dir = ProtoField.string("zapmodbus.dir", "dir"),
   crc = ProtoField.uint16("zapmodbus.crc", "crc", base.HEX),
   crc_ok = ProtoField.bool("zapmodbus.crc_ok", "crc_ok"),
   request_in = ProtoField.framenum("zapmodbus.request_in", "request in", base.NONE, frametype.REQUEST),
   response_in = ProtoField.framenum("zapmodbus.response_in", "response in", base.NONE, frametype.RESPONSE),
-  latency_ms = ProtoField.double("zapmodbus.latency_ms", "latency_ms"),
   bad = ProtoField.bytes("zapmodbus.bad", "bad frame", base.SPACE),
 }
+for _, kv in ipairs(MB_FIELD_KINDS) do
+  local key, kind, abbr = kv[1], kv[2], "zapmodbus." .. kv[1]
+  if kind == "hex8" then MB_F[key] = ProtoField.uint8(abbr, key, base.HEX)
+  elseif kind == "uint8" then MB_F[key] = ProtoField.uint8(abbr, key)
+  elseif kind == "uint16" then MB_F[key] = ProtoField.uint16(abbr, key)
+  elseif kind == "uint32" then MB_F[key] = ProtoField.uint32(abbr, key)
+  elseif kind == "double" then MB_F[key] = ProtoField.double(abbr, key)
+  else MB_F[key] = ProtoField.string(abbr, key) end
+end
 local mb_fields = {}
 for _, f in pairs(MB_F) do mb_fields[#mb_fields + 1] = f end
 mb_proto.fields = mb_fields
@@ -678,15 +679,8 @@ local ex_mb_exception = ProtoExpert.new("zapmodbus.exception_reply", "exception 
                                         expert.severity.WARN)
 mb_proto.experts = {ex_mb_crc, ex_mb_nopair, ex_mb_exception}
 
--- CRC-16/MODBUS (reflected polynomial 0xA001, init 0xFFFF), sent low byte first
-local CRC16 = {}
-for i = 0, 255 do
-  local c = i
-  for _ = 1, 8 do
-    if c % 2 == 1 then c = bit32.bxor(bit32.rshift(c, 1), 0xA001) else c = bit32.rshift(c, 1) end
-  end
-  CRC16[i] = c
-end
+-- CRC-16/MODBUS (init 0xFFFF), sent low byte first
+local CRC16 = crc_table(0xA001)
 local function crc16(buf, first, last)
   local c = 0xFFFF
   for i = first, last do c = bit32.bxor(bit32.rshift(c, 8), CRC16[bit32.band(bit32.bxor(c, buf[i]), 0xFF)]) end
@@ -909,39 +903,25 @@ function mb_proto.dissector(tvb, pinfo, tree)
   local res = results[pinfo.number]
   local st = MB_STATE
   if res == nil then
-    res = {}
-    local dir = direction(pinfo)
-    local s = stream_of("zapmodbus", pinfo)
-    local buf, start = feed(s, tvb)
-    local found, rest, aligned = mb_scan(buf, s.aligned)
-    s.aligned = aligned
-    for _, fr in ipairs(found) do
-      local b = frame_bytes(buf, fr.pos, fr.len)
-      b.n = fr.len
-      local item = {bytes = b, len = fr.len, ok = fr.ok, expected = fr.expected, found = fr.found,
-                    offset = fr.pos >= start and fr.pos - start or nil}
-      if fr.ok then
-        local values, kind = mb_decode(b, fr.len, dir, st)
-        item.values, item.kind = values, kind
-        local ident = b[0]
-        if kind == "request" then
-          -- (an echo read back is inbound: no request of its own)
-          if dir ~= 1 and ident ~= 0 then st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts} end
-        else
-          local p = st.pending[ident]
-          st.pending[ident] = nil
-          if p ~= nil then
-            item.request_in = p.num
-            item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
-            st.response_of[p.num] = pinfo.number
-          end
+    res = first_pass("zapmodbus", mb_scan, tvb, pinfo, function(item, b, dir)
+      if not item.ok then return end
+      local values, kind = mb_decode(b, item.len, dir, st)
+      item.values, item.kind = values, kind
+      local ident = b[0]
+      if kind == "request" then
+        -- (an echo read back is inbound: no request of its own)
+        if dir ~= 1 and ident ~= 0 then st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts} end
+      else
+        local p = st.pending[ident]
+        st.pending[ident] = nil
+        if p ~= nil then
+          item.request_in = p.num
+          item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+          st.response_of[p.num] = pinfo.number
         end
-        if dir == 1 then item.dir = "d2h" elseif dir == 2 then item.dir = "h2d" end
       end
-      res[#res + 1] = item
-    end
-    keep_from(s, rest)
-    results[pinfo.number] = res
+      if dir == 1 then item.dir = "d2h" elseif dir == 2 then item.dir = "h2d" end
+    end)
   end
   local info = {}
   for _, item in ipairs(res) do
@@ -969,14 +949,7 @@ function mb_proto.dissector(tvb, pinfo, tree)
       t:add(MB_F.crc, item.bytes[item.len - 2] + 256 * item.bytes[item.len - 1])
       t:add(MB_F.crc_ok, true)
       if item.kind == "exception" then t:add_proto_expert_info(ex_mb_exception, v.meaning) end
-      if item.request_in ~= nil then
-        t:add(MB_F.request_in, item.request_in)
-        t:add(MB_F.latency_ms, item.latency_ms)
-      elseif item.kind ~= "request" then
-        t:add_proto_expert_info(ex_mb_nopair)
-      end
-      local resp = st.response_of[pinfo.number]
-      if item.kind == "request" and resp ~= nil then t:add(MB_F.response_in, resp) end
+      add_links(t, MB_F, item, item.kind == "request", st.response_of, pinfo, ex_mb_nopair)
       info[#info + 1] = summary
     else
       local t = tree:add(mb_proto, range, "bad Modbus RTU frame")
