@@ -141,3 +141,33 @@ def test_a_lines_large_output_is_streamed_into_its_record_not_kept(cli, monkeypa
     csv = recs[2]["result"]                                 # streamed text: a line each, as a string
     assert csv[0].startswith("kind,id,frame,") and all(isinstance(x, str) for x in csv) and len(csv) > 20
     assert len(recs[3]["result"]) == 2
+
+
+def test_a_lines_messages_are_said_as_they_come_and_only_its_last_error_is_kept():
+    import io
+
+    from zkzap.commands import batch
+
+    class Records:
+        flushed = 0
+        failed = None
+
+        def flush(self):
+            self.flushed += 1
+
+        class lane:
+            @staticmethod
+            def drain():
+                return True
+
+    records, stderr = Records(), io.StringIO()
+    err = batch._LineMessages(records, stderr)
+    err.start(batch.Line("run.txt:3", 3, "monitor", ["monitor"]))
+    for i in range(1000):
+        err.write(f"zk: note: {i}\n")
+    assert stderr.getvalue().count("run.txt:3: zk: note:") == 1000 and records.flushed == 1
+    assert err.getvalue() == ""                                  # nothing kept
+    err.write("zk: error: first\nzk: error: sec")
+    err.write("ond\n")
+    err.write("zk: note: cut")
+    assert err.finish() == "error: second" and stderr.getvalue().endswith("run.txt:3: zk: note: cut\n")

@@ -485,6 +485,57 @@ class _LineOutput(io.StringIO):
             return True, None
 
 
+class _LineMessages(io.StringIO):
+    """What a batch line says (its stderr): each message goes to the batch's stderr as soon as it
+    is whole, after the records before it and prefixed with the line's ``FILE:LINE``, so that a
+    long line's notes are neither held back nor kept; only the last error message is kept (its
+    record's ``error``)."""
+
+    def __init__(self, records, stderr):
+        super().__init__()
+        self._records = records
+        self._stderr = stderr
+        self._lock = threading.Lock()
+        self.line = None
+        self._tail = ""
+        self.error = None
+        self.said = False
+
+    def start(self, line) -> None:
+        self.line, self._tail, self.error, self.said = line, "", None, False
+
+    def write(self, text):
+        with self._lock:
+            parts = (self._tail + text).split("\n")
+            self._tail = parts.pop()
+            if parts:
+                self._say(parts)
+            return len(text)
+
+    def _say(self, messages):
+        if not self.said:
+            self.said = True
+            try:
+                self._records.flush()      # the records before, then this line's messages
+                self._records.lane.drain()
+            except Exception as e:  # noqa: BLE001 - the records' output failed: raised by the batch's next flush
+                self._records.failed = self._records.failed or e
+        for m in messages:
+            if "error: " in m:
+                self.error = m.split("error: ", 1)[1]
+        self._stderr.write("".join(f"{self.line.where}: {m}\n" for m in messages))
+        self._stderr.flush()
+
+    def finish(self) -> str:
+        """The line ended: its last words said; returns its last error message as a message
+        (``error: ...``) for its record, or ''."""
+        with self._lock:
+            if self._tail:
+                tail, self._tail = self._tail, ""
+                self._say([tail])
+        return f"error: {self.error}" if self.error is not None else ""
+
+
 class _Records:
     """The batch's records on ``out``, in order. A line's record is written in the bus's next
     spare moment (:meth:`zkzap.link.zap_bus.ZapBus.spare`: the next line's request is on the
@@ -577,7 +628,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
     last = None
     records = _Records(out, shared(protocol))
     # what a line prints, emptied for the next line (its output streamed when it grows large)
-    buf, err = _LineOutput(records), io.StringIO()
+    buf, err = _LineOutput(records), _LineMessages(records, sys.stderr)
     contexts = {}
     with stop.deferring():
         try:
@@ -588,6 +639,7 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 Borrowed.keep_baud = line.path[0] in keep_baud_after
                 saved = sys.stdout, sys.stderr
                 buf.start(line)
+                err.start(line)
                 sys.stdout, sys.stderr = buf, err
                 try:
                     if line.builtin is not None:
@@ -599,17 +651,10 @@ def _run_lines(group, protocol, lines, defaults, out, *, keep_going=False, keep_
                 finally:
                     sys.stdout, sys.stderr = saved
                     Borrowed.keep_baud = False
-                messages = err.getvalue()
-                err.seek(0)
-                err.truncate()
+                messages = err.finish()            # said as they came; the last error kept
                 signum = stop.requested()
                 if signum is not None and stop.pending() is None and not code:
                     code = signals.status(signum)   # stopped, though the command returned
-                if messages:
-                    records.flush()                # the records before, then this line's messages
-                    records.lane.drain()
-                    sys.stderr.write("".join(f"{line.where}: {m}\n" for m in messages.splitlines()))
-                    sys.stderr.flush()
                 streamed, printed = buf.finish(code, messages)
                 if not streamed:
                     records.put(line, code, printed, messages)
