@@ -525,3 +525,22 @@ def test_watch_names_the_collision_of_two_actuators_with_one_id(cli):
     assert r.exit_code == 6 and "every reply was garbled" in r.stderr and "collision" in r.stderr
     rows = jsonl(r.stdout)
     assert [(x["id"], x["status"]) for x in rows] == [(1, "ok"), (4, "bad-reply")]
+
+
+def test_setup_brings_every_actuator_to_one_baud_rate(cli, rig, tmp_path):
+    state = str(tmp_path / "setup.json")
+    code = {b: c for c, b in rig.map.baud_codes.items()}[115200]
+    new = rig.bus(tmp_path / "new.json", ids=str(rig.factory))              # factory fresh, at 57600
+    args = ("zap", "setup", "--ids", "4", "--state", state, "--find-ids", "0-7", "--set-baud", "115200", "--no-wait")
+    r = cli(*args, *rig.option, "-p", new)
+    assert r.exit_code == 0, r
+    assert f"ID 4 done: found at ID {rig.factory}, 57600 baud; now at 115200 baud" in r.stderr
+    assert state_of(tmp_path / "new.json")[4]["baud-rate"] == code
+    r = cli("zap", "load", "id", "--id", "4", "-b", "115200", *rig.option, "-p", new)    # answers there
+    assert (r.exit_code, r.stdout.strip()) == (0, "4"), r
+    if rig.protocol == "ir":
+        # ID 4 answers at 115200 already: the new actuator keeps its ID (at the new rate), never a second ID 4
+        clash = rig.bus(tmp_path / "clash.json", ids=f"{rig.factory},4@115200")
+        r = cli(*args, "--find-baud", "57600", "--state", str(tmp_path / "s2.json"), "-p", clash)
+        assert r.exit_code == 1 and "ID 4 answers as well" in r.stderr, r
+        assert sorted(state_of(tmp_path / "clash.json")) == [rig.factory, 4]

@@ -1082,16 +1082,31 @@ def find_alone(bus, ids, bauds, *, prefer=(), procedures=PROCEDURES, on_progress
 _ranges = zap.id_ranges
 
 
-def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROCEDURES) -> dict:
+def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROCEDURES, baud=None) -> dict:
     """Give the actuator found at ``found`` = (ID, baud) the ID ``target``, apply ``config``
     (an :class:`Entry`: its stored settings except id, baud-rate and protocol-type) and
     verify. Returns the record kept in the state file (with ``warning`` when the actuator's
     model or firmware differs from ``config``'s). The writes need the STORED permission on a
-    real port (the bus's)."""
-    ident, baud = found
-    record = {"from_id": ident, "from_baud": baud, "baud": baud, "writes": 0, "time": now_iso()}
-    if bus.baud != baud:
-        bus.set_baud(baud)
+    real port (the bus's).
+
+    ``baud``: the rate every actuator of the setup is brought to, first (before its new ID), by
+    ``zap set-baud``'s procedure (:meth:`zkzap.api.zap.Bus.set_baud`: the found ID checked free
+    at the new rate, the actuator restarted where the protocol needs it and read back at the new
+    rate); the ID is then given at that rate, so it is checked free where the actuator will
+    answer. Stopped half-way, the actuator answers at the new rate with its old ID: never two
+    actuators with one ID."""
+    ident, found_baud = found
+    record = {"from_id": ident, "from_baud": found_baud, "baud": found_baud, "writes": 0, "time": now_iso()}
+    if bus.baud != found_baud:
+        bus.set_baud(found_baud)
+    if baud is not None and baud != found_baud:
+        from .zap import Bus
+
+        Bus.over(bus).set_baud(ident, baud)     # verified at the new rate; the port is left there
+        if bus.baud != baud:
+            bus.set_baud(baud)
+        record["baud"] = baud
+        record["writes"] += 1
     if ident != target:
         from ..errors import IdTaken
         from .zap import Bus

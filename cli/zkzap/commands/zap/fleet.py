@@ -484,13 +484,17 @@ def _report_interrupted(writes, done, fmt, file, exc):
               help="The IDs to search for each new actuator.")
 @click.option("--find-baud", type=actuator_bauds(), default="all", show_default=True, metavar="BAUDS",
               help="The baud rates to search: a list or 'all' (57600 first).")
+@click.option("--set-baud", "set_baud", type=Choice([str(b) for b in sorted(zap.BAUD_TO_CODE, reverse=True)]),
+              default=None, metavar="RATE",
+              help="Bring every actuator to this baud rate (found at any rate of --find-baud; checked free "
+                   "and read back at the new rate, as set-baud does).")
 @click.option("--no-wait", is_flag=True,
               help="Do not wait for Enter: set up the actuator connected now (the next pending ID) and stop; "
                    "exit status 8 when IDs remain pending.")
 @yes_option
 @link_options
 @protocol_options
-def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, no_wait, yes, **common):
+def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, set_baud, no_wait, yes, **common):
     """Guided ID setup: one actuator at a time, each gets the next ID of --ids.
 
     For each pending ID it asks you to connect the next actuator alone and press Enter (s and
@@ -510,6 +514,11 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
       zap setup --ids 1-8 -p /dev/ttyUSB0 --yes
       zap setup --ids 1-8 --config fleet.json --config-id 1 -p /dev/ttyUSB0 --yes
       zap setup --ids 1-8 --redo 3 -p /dev/ttyUSB0 --yes      # set up ID 3 again
+      zap setup --ids 1-8 --set-baud 115200 -p /dev/ttyUSB0 --yes  # every actuator at 115200 baud
+
+    --set-baud RATE brings every actuator to one baud rate: its rate is changed first (the ID it
+    was found at checked free at RATE, the actuator restarted on IR and read back at RATE), then
+    its ID is given at RATE (checked free there), then --config's settings.
     """
     entry = None
     if config:
@@ -548,9 +557,10 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
         return
     from .scan import stored_consent
 
-    allow = stored_consent(common, yes, "setup gives actuators new IDs" + (f" and {config}'s stored settings"
-                                                                              if config else ""),
-                           "id" + (f" and {config}'s stored settings" if config else ""))
+    rate = None if set_baud is None else int(set_baud)
+    allow = stored_consent(common, yes, "setup gives actuators new IDs" + (f", the baud rate {rate}" if rate else "")
+                           + (f" and {config}'s stored settings" if config else ""),
+                           "id" + (", baud-rate" if rate else "") + (f" and {config}'s stored settings" if config else ""))
     if redo or skip:
         state.save()
     args = _link_args(common)
@@ -580,7 +590,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                     raise fleet.TwoAnswer(f"the actuator found answers as ID {found[0]} at {found[1]} baud, "
                                           f"which this setup gave already; connect the next one "
                                           f"(or --redo {found[0]})")
-                record = fleet.setup_one(bus, target, found=found, config=entry)
+                record = fleet.setup_one(bus, target, found=found, config=entry, baud=rate)
                 if record.get("warning"):
                     warn(f"ID {target}: {record['warning']}")
             except (fleet.TwoAnswer, fleet.NotFound, NoReply, CheckFailed) as e:
@@ -591,6 +601,7 @@ def setup(ids, config, config_id, state_path, skip, redo, find_ids, find_baud, n
                 continue
             state.mark_done(target, record)
             note(f"ID {target} done: found at ID {found[0]}, {found[1]} baud"
+                 + (f"; now at {rate} baud" if rate and rate != found[1] else "")
                  + (f"; {record.get('config', 0)} settings from {config}" if entry is not None else "")
                  + " (verified)")
             if no_wait:
