@@ -166,3 +166,36 @@ def test_a_killed_runs_raw_log_and_capture_kept_every_byte_received(killed, fmt)
     raw = (killed / f"{fmt}.bin").read_bytes()
     # the capture is written inside the read, the raw log right after it: at most the last chunk apart
     assert received.startswith(raw) and len(received) - len(raw) <= len(pkts[-1].data)
+
+
+def test_a_killed_workbook_run_leaves_no_openpyxl_file_and_the_next_run_clears_its_directory(tmp_path):
+    """openpyxl keeps each sheet in a temporary file it removes only at a normal exit: zkzap puts
+    them in a directory of the run's own, which the next workbook run removes once its process is
+    gone; nothing of openpyxl's lies in the temporary directory itself."""
+    pytest.importorskip("openpyxl")
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    env = clean_env(TMPDIR=str(temp))
+    out = tmp_path / "run.xlsx"
+    partial = tmp_path / "run.xlsx.partial.csv"
+    p = subprocess.Popen([executable("zk"), "monitor", "-p", "sim://zk?speed=1", "-o", str(out), "--timeout", "30"],
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while not (partial.exists() and partial.read_text().count("\n") >= 5):
+            assert p.poll() is None, p.stderr.read().decode()
+            assert time.monotonic() < deadline, "no rows written"
+            time.sleep(0.05)
+        (private,) = [x for x in temp.iterdir()]
+        assert private.name.startswith(f"zkzap-xlsx-{p.pid}-") and any(private.glob("openpyxl.*"))
+    finally:
+        p.send_signal(signal.SIGKILL)
+        p.wait(10)
+        p.stderr.close()
+    assert not list(temp.glob("openpyxl.*")) and [x.name for x in temp.iterdir()] == [private.name]
+    partial.unlink()                                      # the killed run's rows, taken care of
+    done = subprocess.run([executable("zk"), "monitor", "-p", "sim://zk?speed=5", "-o", str(out), "--duration", "1"],
+                          stdin=subprocess.DEVNULL, capture_output=True, env=env, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert out.exists() and not partial.exists()
+    assert list(temp.iterdir()) == []                     # the killed run's directory, and its own, removed

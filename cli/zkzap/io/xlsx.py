@@ -14,12 +14,24 @@ is written. A process killed with SIGKILL (or a power cut) writes no workbook, s
 also kept as they are written in ``FILE.xlsx.partial.csv`` (the CSV's columns, flushed per
 row), removed once the workbook is saved: after a kill it holds every row up to the kill, and a
 session refuses to start while it exists (it would be the only copy of a killed run).
+
+openpyxl's streaming writer keeps each sheet in a temporary file it names itself in the system's
+temporary directory (``openpyxl.XXXX``) and removes at the exit — not after a SIGKILL, and it
+offers no way to choose the directory. So the workbook's temporary files go to a directory of
+its own, ``zkzap-xlsx-PID-XXXX`` in the temporary directory (:func:`_private_temp`): openpyxl's
+files are created only when a sheet gets its first row and when the workbook is saved, and for
+those calls alone :data:`tempfile.tempdir` points there (under a lock, restored after). The
+directory is removed when the workbook is saved or the writer dropped; a killed run's is removed
+by the next workbook run (:func:`_sweep`: the directories whose process no longer exists), so
+nothing of openpyxl's is left behind in the temporary directory itself.
 """
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import os
+import threading
 
 from ..errors import OutputError, UsageError
 
@@ -41,6 +53,54 @@ UNITS = {
     "thrust_kg": "kgf", "thrust_from_kg": "kgf", "thrust_corrected_kg": "kgf", "rpm_corrected": "rpm",
     "drift_rpm": "rpm", "drift_egt_c": "°C", "drift_thrust_kg": "kgf",
 }
+
+
+#: The name of a workbook's private temporary directory: its process, then mkdtemp's part.
+TEMP_PREFIX = "zkzap-xlsx-"
+_TEMP_LOCK = threading.Lock()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:                            # another user's process: alive
+        return True
+    return True
+
+
+def _sweep() -> None:
+    """Remove the private temporary directories that killed workbook runs left (their process gone)."""
+    import shutil
+    import tempfile
+
+    base = tempfile.gettempdir()
+    try:
+        names = os.listdir(base)
+    except OSError:
+        return
+    for name in names:
+        if not name.startswith(TEMP_PREFIX):
+            continue
+        pid = name[len(TEMP_PREFIX):].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            shutil.rmtree(os.path.join(base, name), ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _private_temp(directory):
+    """openpyxl's temporary files in ``directory`` for the calls inside (tempfile's default
+    directory, process-wide, so held under a lock and restored after)."""
+    import tempfile
+
+    with _TEMP_LOCK:
+        before = tempfile.tempdir
+        tempfile.tempdir = directory
+        try:
+            yield
+        finally:
+            tempfile.tempdir = before
 
 
 def require():
@@ -145,6 +205,15 @@ class XlsxWriter:
         except OSError as e:
             raise OutputError(f"output: cannot write {self.partial}: {e.strerror or e}") from None
         self._journal = CsvWriter(stream, self.columns)
+        import tempfile
+
+        _sweep()
+        try:
+            self._temp = tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{os.getpid()}-")
+        except OSError as e:
+            stream.close()
+            os.unlink(self.partial)
+            raise OutputError(f"output: cannot make a temporary directory for {path}: {e.strerror or e}") from None
         self.book = Workbook(write_only=True)
         self._sheet = None
         self._n = 0
@@ -157,7 +226,8 @@ class XlsxWriter:
         self._n += 1
         self._sheet = self.book.create_sheet("records" if self._n == 1 else f"records {self._n}")
         self._sheet.freeze_panes = "A3"        # the header and units stay in view
-        self._sheet.append(self.columns)
+        with _private_temp(self._temp):        # the sheet's first row makes its temporary file
+            self._sheet.append(self.columns)
         self._sheet.append([self.units.get(c) or unit_of(c) for c in self.columns])
         self._rows = 2
 
@@ -188,17 +258,20 @@ class XlsxWriter:
             return
         book, self.book = self.book, None
         steps = book.create_sheet("steps")
+        with _private_temp(self._temp):         # each sheet's first row makes its temporary file
+            if self._steps:
+                cols, rows = self._steps
+                steps.freeze_panes = "B3"
+                steps.append(list(cols))
+            else:
+                steps.append(["no steps (zk profile --settle/--average/--steps-csv averages each step)"])
+            summary = book.create_sheet("summary")
+            summary.append(["figure", "value", "unit"])
         if self._steps:
-            cols, rows = self._steps
-            steps.freeze_panes = "B3"
-            steps.append(list(cols))
             steps.append([self.units.get(c[:-5] if c.endswith(("_mean", "_min", "_max")) else c[:-4]
                                          if c.endswith("_std") else c) or unit_of(c) for c in cols])
             for r in rows:
                 steps.append([cell(r.get(c), c) for c in cols])
-        else:
-            steps.append(["no steps (zk profile --settle/--average/--steps-csv averages each step)"])
-        summary = book.create_sheet("summary")
         _summary_rows(summary, self._summary)
         tmp = f"{self.path}.tmp{os.getpid()}"
         try:
@@ -212,15 +285,27 @@ class XlsxWriter:
             self._journal.stream.close()
             raise OutputError(f"output: cannot write {self.path}: {e.strerror or e} "
                               f"(the rows are in {self.partial})") from None
+        finally:
+            self._drop_temp()
         self._journal.stream.close()
         try:
             os.unlink(self.partial)
         except OSError:
             pass
 
+    def _drop_temp(self):
+        import shutil
+
+        if getattr(self, "_temp", None):
+            shutil.rmtree(self._temp, ignore_errors=True)
+            self._temp = None
+
+    def __del__(self):
+        self._drop_temp()
+
 
 def _summary_rows(sheet, summary):
-    sheet.append(["figure", "value", "unit"])
+    """The summary's rows, under the header row ``figure, value, unit`` (given by the caller)."""
     if not summary:
         sheet.append(["no summary"])
         return
