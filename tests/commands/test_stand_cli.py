@@ -306,10 +306,13 @@ def test_a_limit_on_a_sensors_field_and_on_a_rate(cli, tmp_path):
     assert r.exit_code == 5 and "limit violated: egt_c/s=" in r.stderr and "(egt_c/s<=60)" in r.stderr, r
 
 
-def test_a_hung_start_ends_the_session_with_the_abort(cli):
+def test_a_hung_start_ends_the_session_with_the_abort(cli, tmp_path):
+    summary = tmp_path / "summary.json"
     r = cli("zk", "send", "control", "--state", "run", "--throttle", "30", "--for", "30", "-p", SIM, "-f", "jsonl",
-            "--hung-start", "2")
+            "--hung-start", "2", "--summary-json", str(summary))
     assert r.exit_code == 5, r
+    (alarm,) = json.loads(summary.read_text())["alarms"]          # the run's alarm list, in its summary
+    assert alarm["kind"] == "hung-start" and alarm["latched"] and alarm["time"].endswith("Z")
     assert "ALARM: hung start: the ECU has been starting for 2 s" in r.stderr and "sent standby" in r.stderr
     recs = jsonl(r.stdout)
     assert [x["kind"] for x in recs].count("trip") == 1 and recs[-1]["kind"] == "rundown"

@@ -352,6 +352,7 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             silence=timeout if timeout is not None else DEFAULT_SILENCE_S, stop_on_error=stop_on_error,
             abort_at_end=abort_at_end, end=end, end_label=end_label, on_update=on_update, notify=notify, plan=plan)
         stand_session.session = session
+        session.stand_session = stand_session    # what the summary and the logbook entry ask
         session.bridges = bridges.stats() if bridges else None
         lanes = [lane for lane in (out.lane, raw_lane, capture_lane()) if lane is not None]
         from ..options import notes_above

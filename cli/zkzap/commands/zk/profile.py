@@ -11,7 +11,7 @@ from .. import CONTEXT, Command
 from ..options import (Choice, InputPath, OutputPath, abort_option, authorize, close_output,
                        dry_run_option, note, port_options, protocol_version_option, rate_option, yes_option)
 from .stand import (Finite, alarm_options, alarm_settings, build_stand, check_output_dir, limit_options,
-                    logbook_option, raise_for_status, report, sensor_options, session_sensors)
+                    logbook_option, raise_for_status, report, sensor_options, session_sensors, stand_entries)
 from .telemetry import log_options, reconnect_option, resolve_port, session_exits, zk_timeout_help
 
 EPILOG = ("On a real port a schedule that can start the engine (any row in state run) needs --yes or "
@@ -168,7 +168,7 @@ def profile(schedule, example, interpolate, rate, abort, summary_json, settle, a
 
     def summarize(outcome, tel, session):
         summary = _summary(name, url, sched, outcome, tel, session)
-        summary.update(stand.summary())
+        summary.update(stand_entries(session, stand))
         summary["exit_status"] = stand.exit_status(outcome)
         if averager is not None:
             summary["steps"] = averager.rows()

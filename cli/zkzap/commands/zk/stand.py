@@ -204,9 +204,17 @@ def session_summary(*, command, port, outcome, tel, session, stand) -> dict:
            "aborted": outcome.aborted, "duration_s": round(session.ended_t or 0.0, 3),
            "crc_errors": session.source.framer.bad}
     out.update(tel.summary())
-    if stand is not None:
-        out.update(stand.summary())
+    out.update(stand_entries(session, stand))
     return out
+
+
+def stand_entries(session, stand) -> dict:
+    """The stand session's entries of a run summary (its hooks' and the alarm list), or the
+    hooks' alone for a session that ran without one."""
+    ss = getattr(session, "stand_session", None)
+    if ss is not None:
+        return ss.summary()
+    return stand.summary() if stand is not None else {}
 
 
 def summarizer(stand, *, command, port):
@@ -315,7 +323,11 @@ def report(stand, *, command, port, schedule=None, files=(), outcome, tel, sessi
         from ...api.limits import summary_lines
 
         click.echo("limits:\n" + "\n".join(summary_lines(stand.limits.summary())), err=True)
-    run_id = stand.log_run(command=command, port=port, schedule=schedule, files=files, outcome=outcome, tel=tel,
-                           session=session)
+    ss = getattr(session, "stand_session", None)
+    if ss is not None:
+        run_id = ss.log_run(command=command, port=port, schedule=schedule, files=files, outcome=outcome)
+    else:
+        run_id = stand.log_run(command=command, port=port, schedule=schedule, files=files, outcome=outcome, tel=tel,
+                               session=session)
     if run_id is not None:
         note(f"logbook {stand.logbook}: run {run_id} recorded")
