@@ -5,8 +5,10 @@ The public API (imported lazily: ``from zkzap import Bus`` loads neither click n
 
 - :class:`Ecu` (:mod:`zkzap.api.zk`): a ZK ECU session: status records, send, hold, profiles,
   abort, health;
-- :class:`Bus`, :class:`Actuator`, :class:`Reading` (:mod:`zkzap.api.zap`): a mightyZAP bus,
-  every instruction and procedure, registers as attributes;
+- :class:`Bus`, :class:`Actuator`, :class:`Reading`, :class:`Moved` (:mod:`zkzap.api.zap`): a
+  mightyZAP bus, every instruction and procedure, registers as attributes; the records it
+  returns are typed (:mod:`zkzap.api.records`: :class:`ScanRecord`, :class:`Identity`,
+  :class:`RegisterRow`, :class:`Latency`, ...);
 - :mod:`zkzap.codec` (``zk``, ``zap``, framers): the pure protocol tables and codecs, with typed
   frames (:class:`zkzap.codec.zk.ControlFrame`, :class:`zkzap.codec.zap.Command`);
 - :mod:`zkzap.sim`: the simulators, started from Python (:func:`zkzap.sim.start_zk`,
@@ -29,6 +31,14 @@ _LAZY = {
     "Bus": "zkzap.api.zap",
     "Actuator": "zkzap.api.zap",
     "Reading": "zkzap.api.zap",
+    "Moved": "zkzap.api.zap",
+    "ScanRecord": "zkzap.api.records",
+    "Identity": "zkzap.api.records",
+    "RegisterRow": "zkzap.api.records",
+    "RegisterValue": "zkzap.api.records",
+    "Latency": "zkzap.api.records",
+    "MoveRecord": "zkzap.api.records",
+    "GoalClamped": "zkzap.errors",
     "ZkzapError": "zkzap.errors",
     "UsageError": "zkzap.errors",
     "InvalidValue": "zkzap.errors",
@@ -83,7 +93,9 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .api.limits import LimitViolation as LimitViolation
     from .api.prestart import EcuLimitError as EcuLimitError
     from .api.schedule import ScheduleError as ScheduleError, ScheduleTargetError as ScheduleTargetError
-    from .api.zap import Actuator as Actuator, Bus as Bus, Reading as Reading
+    from .api.records import (Identity as Identity, Latency as Latency, MoveRecord as MoveRecord,
+                              RegisterRow as RegisterRow, RegisterValue as RegisterValue, ScanRecord as ScanRecord)
+    from .api.zap import Actuator as Actuator, Bus as Bus, Moved as Moved, Reading as Reading
     from .api.zk import Ecu as Ecu, ProfileResult as ProfileResult, Status as Status
     from .codec.fields import FieldValueError as FieldValueError
     from .codec.hexfmt import HexError as HexError
@@ -93,7 +105,7 @@ if TYPE_CHECKING:  # what type checkers see (re-exported: "X as X"); at run time
     from .codec.permissions import Permission as Permission
     from .codec.zap import ChecksumError as ChecksumError, PacketError as PacketError
     from .codec.zk import CrcError as CrcError, FrameError as FrameError
-    from .errors import IdTaken as IdTaken
+    from .errors import GoalClamped as GoalClamped, IdTaken as IdTaken
     from .errors import (BadReply as BadReply, CheckFailed as CheckFailed, DeviceError as DeviceError,
                          Interrupted as Interrupted, InvalidValue as InvalidValue, MissingExtra as MissingExtra,
                          MoreToDo as MoreToDo, NoReply as NoReply, OutputError as OutputError,

@@ -135,6 +135,18 @@ class CheckFailed(ZkzapError):
     code = CHECK_FAILED
 
 
+class GoalClamped(UserWarning):
+    """A warning (:mod:`warnings`), not an error: an actuator clamped the goal position it was
+    sent to its stroke limits, so the move ends elsewhere than asked. ``ident``, ``requested``
+    (the goal sent) and ``goal`` (the one the actuator holds) are attributes; the move's result
+    (:class:`zkzap.api.zap.Moved`) says the same. ``warnings.simplefilter("error", GoalClamped)``
+    makes it an exception."""
+
+    def __init__(self, message: str, *, ident: int, requested: int, goal: int) -> None:
+        super().__init__(message)
+        self.ident, self.requested, self.goal = ident, requested, goal
+
+
 class IdTaken(CheckFailed):
     """The ID asked for answers already (another actuator has it): refused before anything was
     written, so a refusal (exit 2) rather than a failed check; still a :class:`CheckFailed`."""

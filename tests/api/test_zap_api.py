@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
+
 import pytest
 
 import zkzap
-from zkzap import Bus, Permission, Reading
+from zkzap import Bus, GoalClamped, Moved, Permission, Reading
 from zkzap.codec import zap
 from zkzap.errors import CheckFailed, DeviceError, IdTaken, NoReply, UsageError
 
@@ -53,12 +55,22 @@ def test_move_waits_and_sync_move(zap_sim):
         assert bus.move(1, 500, wait=False) is None
 
 
-def test_move_clamped_goal_is_noted(zap_sim):
+def test_move_clamped_goal_is_said_in_the_result_and_a_warning(zap_sim):
     notes = []
     with Bus(zap_sim) as bus:
-        final = bus.move(1, 4000, notify=notes.append, timeout=30)
-    assert notes == ["ID 1: goal 4000 clamped to 3686 by the stroke limits"]
-    assert abs(final - 3686) <= 5
+        with pytest.warns(GoalClamped, match="ID 1: goal 4000 clamped to 3686 by the stroke limits") as w:
+            final = bus.move(1, 4000, notify=notes.append, timeout=30)
+        assert (w[0].message.ident, w[0].message.requested, w[0].message.goal) == (1, 4000, 3686)
+        assert w[0].filename == __file__                     # said at the caller's line
+        assert isinstance(final, Moved) and abs(final - 3686) <= 5 and str(final) == str(int(final))
+        assert (final.requested, final.goal, final.clamped, final.ident) == (4000, 3686, True, 1)
+        assert final.as_dict() == {"id": 1, "requested": 4000, "goal": 3686, "clamped": True,
+                                   "position": final.position}
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")                  # a goal inside the limits warns nothing
+            again = bus.move(1, 1000, timeout=30)
+        assert not again.clamped and again.goal == again.requested == 1000
+    assert notes == []                                      # notify is for interruptions
 
 
 @pytest.mark.parametrize("stop", [True, False])

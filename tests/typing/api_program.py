@@ -5,13 +5,15 @@ the tests also run it against the simulators."""
 from __future__ import annotations
 
 import sys
+import warnings
 from typing import TYPE_CHECKING, Any, Iterator, Optional, Union
 
 import zkzap
 from zkzap import (Actuator, BadReply, Bus, CaptureError, CheckFailed, ChecksumError, CrcError, DeviceError, Ecu,
-                   EcuLimitError, ExpressionError, FieldValueError, FrameError, HexError, InvalidValue, LimitViolation,
-                   NoReply, OutputError, PacketError, PortError, ProfileResult, Reading, ScheduleError, Status,
-                   UsageError, ZkzapError)
+                   EcuLimitError, ExpressionError, FieldValueError, FrameError, GoalClamped, HexError, Identity,
+                   InvalidValue, Latency, LimitViolation, Moved, MoveRecord, NoReply, OutputError, PacketError,
+                   PortError, ProfileResult, Reading, RegisterRow, ScanRecord, ScheduleError, Status, UsageError,
+                   ZkzapError)
 from zkzap.api.prestart import EcuLimits, Plan
 from zkzap.codec import ZapFramer, ZkFramer, crc8_maxim, format_hex, parse_hex, zap, zap_checksum, zk
 from zkzap.errors import close_names, did_you_mean, exit_code
@@ -59,16 +61,34 @@ def actuators() -> list[int]:
         bus.execute()
 
         final = bus.move(1, 3000)                     # waits until it stops; the position
-        assert_type(final, int)
-        assert abs(final - 3000) <= 5
+        assert_type(final, Moved)
+        assert abs(final - 3000) <= 5 and not final.clamped and final.goal == final.requested == 3000
+        position: int = final                         # a Moved is the int it always was
+        assert position == final.position
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always", GoalClamped)
+            clamped = bus.move(1, 4000)               # the actuator holds 3686: said, and warned
+        assert clamped.clamped and clamped.goal == 3686 and isinstance(said[0].message, GoalClamped)
+        record: MoveRecord = clamped.as_dict()
+        assert record["requested"] == 4000 and record["clamped"]
         assert_type(bus.move(2, 1000, wait=False), None)
-        assert_type(act.move(2000, speed=900), int)
+        assert_type(act.move(2000, speed=900), Moved)
         bus.sync_move({1: 1000, 2: 1000})
-        found = [rec["id"] for rec in bus.scan(range(0, 4))]
-        info: dict[str, Any] = bus.identify(1)
-        assert info["status"] == "ok"
-        registers = {rec["register"]: rec["value"] for rec in bus[2].dump()}
-        assert registers["id"] == 2
+        scanned = list(bus.scan(range(0, 4)))
+        assert_type(scanned, list[ScanRecord])
+        found = [rec["id"] for rec in scanned]
+        model: Optional[int] = scanned[0]["model"]
+        assert model == 0xA112 and scanned[0]["status"] == "ok" and scanned[0]["baud"] == 57600
+        info = bus.identify(1)
+        assert_type(info, Identity)
+        assert info["status"] == "ok" and info["return_mode"] == 1
+        rows = bus[2].dump()
+        assert_type(rows, list[RegisterRow])
+        registers = {rec["register"]: rec["value"] for rec in rows}
+        assert registers["id"] == 2 and all(rec["memory"] in ("NV", "V", "") for rec in rows)
+        learned = bus.latencies
+        assert_type(learned, dict[int, Latency])
+        assert all(v["samples"] >= 1 and v["latency_ms"] >= 0 for v in learned.values())
         assert bus.set_id(2, 7) == 7
         assert bus.detect_return_mode(7) == 1
         try:

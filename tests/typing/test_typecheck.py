@@ -88,6 +88,51 @@ def test_pyright_strict_accepts_the_api_and_refuses_wrong_types(workdir):
     assert found["wrong_types.py"] == refused_lines(), messages
 
 
+#: A user's ten lines: every record the mightyZAP API returns is typed (pyright strict: 0 errors).
+USER_SCRIPT = """\
+from zkzap import Bus
+
+with Bus("sim://zap?ids=1,2") as bus:
+    for rec in bus.scan(range(4)):
+        print(rec["id"], rec["model"], rec["status"], rec["errors"])
+    rows = bus[1].dump()
+    print(rows[0]["register"], rows[0]["value"], rows[0]["memory"])
+    print(bus.identify(1)["firmware"], bus.move(1, 4000).clamped)
+    for ident, lat in bus.latencies.items():
+        print(ident, lat["latency_ms"], lat["late"])
+"""
+
+
+def _pyright_errors(exe, workdir, name, text) -> list:
+    (workdir / name).write_text(text)
+    (workdir / "pyrightconfig.json").write_text(json.dumps({"typeCheckingMode": "strict", "pythonVersion": "3.10"}))
+    p = subprocess.run([exe, "--outputjson", "--pythonpath", sys.executable, name],
+                       capture_output=True, text=True, cwd=workdir, timeout=600)
+    report = json.loads(p.stdout)
+    return [(d["range"]["start"]["line"] + 1, d["message"]) for d in report["generalDiagnostics"]
+            if d["severity"] == "error"]
+
+
+def test_pyright_strict_types_a_users_ten_lines_and_refuses_a_key_typo(workdir):
+    exe = _pyright()
+    if exe is None:
+        pytest.skip(f"pyright cannot run here (it needs node); {EXTRA}")
+    assert len(USER_SCRIPT.splitlines()) == 10
+    assert _pyright_errors(exe, workdir, "user_script.py", USER_SCRIPT) == []
+    typo = USER_SCRIPT.replace('rec["id"]', 'rec["idd"]')
+    errors = _pyright_errors(exe, workdir, "user_typo.py", typo)
+    assert {line for line, _ in errors} == {5}, errors
+    assert any('"idd" is not a defined key in "ScanRecord"' in text for _, text in errors), errors
+
+
+def test_the_user_script_runs(capsys):
+    from zkzap import GoalClamped
+
+    with pytest.warns(GoalClamped, match="goal 4000 clamped to 3686"):
+        exec(compile(USER_SCRIPT, "user_script.py", "exec"), {})
+    assert capsys.readouterr().out.startswith("1 41234 ok []")
+
+
 def test_the_api_program_runs():
     spec = importlib.util.spec_from_file_location("api_program", os.path.join(HERE, "api_program.py"))
     module = importlib.util.module_from_spec(spec)

@@ -37,3 +37,10 @@ def wrong(url: str) -> None:
     zk.ControlFrame.build("control").frame.upper(1)    # refused: bytes.upper takes no argument
     zap.Command(zap.echo(1)).expects_reply("1")        # refused: a return mode is an int
     reading: Reading = bus.load(1, "present-voltage")  # refused: Load Data gives raw ints
+    for rec in bus.scan(range(4)):
+        print(rec["idd"])                              # refused: a scan record has no key idd
+        firmware: str = rec["firmware"]                # refused: an Optional[int]
+    print(bus.identify(1)["modle"])                    # refused: no key modle
+    print(bus[1].dump()[0]["registr"])                 # refused: no key registr
+    print(bus.latencies[1]["latency"])                 # refused: latency_ms
+    print(bus.move(1, 100).requsted)                   # refused: a Moved has requested

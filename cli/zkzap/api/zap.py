@@ -42,6 +42,7 @@ if TYPE_CHECKING:  # for the annotations only: typing costs start-up
     from ..link.zap_bus import Reply, ZapBus
     from ..sim.launch import Simulator
     from ._registers import RegisterAttributes as _Registers
+    from .records import Identity, Latency, MoveRecord, RegisterRow, RegisterValue, ScanRecord
 else:
     _Registers = object
 
@@ -49,7 +50,7 @@ from ..codec import zap
 from ..codec.permissions import FORCE, Permission, as_permission
 from ..errors import BadReply, CheckFailed, IdTaken, NoReply, UsageError, did_you_mean
 
-__all__ = ["Bus", "Actuator", "Reading", "Permission", "ALL_BAUDS", "register_records", "map_blocks"]
+__all__ = ["Bus", "Actuator", "Reading", "Moved", "Permission", "ALL_BAUDS", "register_records", "map_blocks"]
 
 #: Baud rates an actuator can talk at, in the order a scan over all of them tries: the factory
 #: default first, then the others fastest first.
@@ -98,17 +99,56 @@ class Reading(float):
     __str__ = __repr__
 
 
+class Moved(int):
+    """What a move that waited returns: an int, the final position (as ever), that also says
+    what became of the goal. ``requested``: the goal-position sent (the library sends it as
+    given); ``goal``: the goal the actuator holds, read back after the write (it clamps a goal to
+    its stroke limits); ``clamped``: whether they differ (then :class:`~zkzap.errors.GoalClamped`
+    was warned too); ``ident``: the actuator. :meth:`as_dict` is the record the command line
+    renders."""
+
+    ident: int
+    requested: int
+    goal: int
+
+    def __new__(cls, position: int, *, ident: int, requested: int, goal: int) -> Self:
+        self = super().__new__(cls, position)
+        self.ident, self.requested, self.goal = ident, requested, goal
+        return self
+
+    @property
+    def position(self) -> int:
+        """The final position (the int itself)."""
+        return int(self)
+
+    @property
+    def clamped(self) -> bool:
+        """Whether the actuator holds another goal than the one sent (its stroke limits)."""
+        return self.goal != self.requested
+
+    def as_dict(self) -> MoveRecord:
+        """``{"id", "requested", "goal", "clamped", "position"}``."""
+        return {"id": self.ident, "requested": self.requested, "goal": self.goal, "clamped": self.clamped,
+                "position": int(self)}
+
+    __str__ = int.__repr__                 # printed as the position it is
+
+    def __repr__(self) -> str:
+        return (f"Moved({int(self)}, ident={self.ident}, requested={self.requested}, goal={self.goal}"
+                + (", clamped" if self.clamped else "") + ")")
+
+
 def _value(reg: zap.Register, raw: int) -> Union[Reading, int]:
     return Reading(reg, raw) if reg.unit else raw
 
 
 def register_records(ident: int, values: Iterable[tuple[zap.Register, int]],
-                     errors: Iterable[str] = ()) -> list[Record]:
+                     errors: Iterable[str] = ()) -> list[RegisterValue]:
     """Records (id, register, address, value, physical/unit where scaled, meaning where the
     register has named values, errors) for ``[(Register, raw), ...]``."""
-    out = []
+    out: list[Any] = []
     for reg, raw in values:
-        rec = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
+        rec: dict[str, Any] = {"id": ident, "register": reg.name, "address": reg.address, "value": raw}
         if reg.scale != 1:
             rec["physical"] = reg.physical(raw)
             rec["unit"] = reg.unit
@@ -243,7 +283,7 @@ class Bus:
         self.link.allow = as_permission(value)
 
     @property
-    def latencies(self) -> dict:
+    def latencies(self) -> dict[int, Latency]:
         """What was learned of each actuator's latency on this port: ``{ID: {"latency_ms",
         "variation_ms", "samples", "late"}}`` (the time from a request's last byte to the first
         reply byte, smoothed; its variation; answers measured; answers after the learned
@@ -374,22 +414,22 @@ class Bus:
 
     # -- procedures ----------------------------------------------------------------------------
 
-    def identify(self, ident: int, *, retries: int = 2) -> Record:
+    def identify(self, ident: int, *, retries: int = 2) -> Identity:
         """``{"model", "firmware", "return_mode", "status", "errors"}`` of an actuator that answers
         Echo, from one Load Data. An actuator that answers Echo but not Load Data (after a full
         wait) is in return mode 0; a read that fails leaves the fields None with status
         ``unidentified`` (``duplicate`` when the reply is garbled), never a guess."""
         from ..link.zap_scan import identify
 
-        rec = {"id": ident, "model": None, "firmware": None, "return_mode": None, "status": "ok", "errors": []}
+        rec: Any = {"id": ident, "model": None, "firmware": None, "return_mode": None, "status": "ok", "errors": []}
         identify(self.link, rec, retries)
         rec.pop("id")
-        return rec
+        return rec  # type: ignore[no-any-return]
 
     def scan(self, ids: Iterable[int] = range(254), bauds: Iterable[int] = (57600,), *, retries: int = 2,
              on_probe: Optional[Callable[[int, int, int], None]] = None,
              on_warning: Optional[Callable[[str], None]] = None,
-             include_garbled: bool = True) -> Iterator[Record]:
+             include_garbled: bool = True) -> Iterator[ScanRecord]:
         """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, quick rounds
         and then full waits for the IDs near a late or garbled reply, then the model, firmware and return mode of
         each actuator found (see :mod:`zkzap.link.zap_scan` for the policy). Yields records in ID
@@ -416,11 +456,11 @@ class Bus:
             elif on_warning is not None:
                 on_warning(event[1])
 
-    def dump_records(self, ident: int) -> tuple[list[Record], Optional[Reply]]:
+    def dump_records(self, ident: int) -> tuple[list[RegisterRow], Optional[Reply]]:
         """``(records, reply with error bits or None)``: the whole register map of one actuator,
         read in as few Load Data reads as it has contiguous blocks (see :meth:`dump`)."""
         ident = zap.check_id(ident, allow_broadcast=False)
-        records = []
+        records: list[Any] = []
         worst = None
         for address, length in map_blocks():
             reply, values = self.load_reply(ident, address, length, check=False)
@@ -429,13 +469,13 @@ class Bus:
             mapped = [(reg, raw) for reg, raw in values if zap.REGISTER_BY_ADDRESS.get(reg.address) is reg]
             for rec in register_records(ident, mapped, reply.errors):
                 reg = zap.REGISTER_BY_ADDRESS[rec["address"]]
-                rec.pop("errors", None)
+                rec.pop("errors", None)  # type: ignore[misc]
                 rec["access"] = reg.access
                 rec["memory"] = reg.memory
                 records.append(rec)
         return records, worst
 
-    def dump(self, ident: int) -> list[Record]:
+    def dump(self, ident: int) -> list[RegisterRow]:
         """The whole register map of one actuator as records: id, register, address, value,
         physical and unit (scaled registers), meaning (coded ones), access (R/RW) and memory
         (NV stored, V volatile). Error bits in a reply raise DeviceError."""
@@ -451,7 +491,7 @@ class Bus:
         def move(self, ident: int, position: int, *, wait: Literal[True] = True, speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
                  on_progress: Optional[Callable[[int, int, int], None]] = None,
-                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> int: ...
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Moved: ...
         @overload
         def move(self, ident: int, position: int, *, wait: Literal[False], speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
@@ -461,17 +501,19 @@ class Bus:
         def move(self, ident: int, position: int, *, wait: bool, speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
                  on_progress: Optional[Callable[[int, int, int], None]] = None,
-                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]: ...
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[Moved]: ...
 
     def move(self, ident: int, position: int, *, wait: bool = True, speed: Optional[int] = None,
              timeout: float = 10.0, poll: float = 0.01,
              on_progress: Optional[Callable[[int, int, int], None]] = None,
-             notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]:
+             notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[Moved]:
         """Move to ``position`` (0..4095), writing goal-speed first when ``speed`` is given.
 
         With ``wait`` (the default) it reads the goal back (the actuator clamps it to its stroke
-        limits; ``notify`` is told), then polls present-position and moving every ``poll`` s
-        until the actuator stops, and returns the final position. Raises NoReply when it is
+        limits: then :class:`~zkzap.errors.GoalClamped` is warned through :mod:`warnings`), then
+        polls present-position and moving every ``poll`` s until the actuator stops, and returns
+        the final position as a :class:`Moved` (an int that also says ``requested``, ``goal`` and
+        ``clamped``). Raises NoReply when it is
         still moving after ``timeout`` s, CheckFailed when it stopped away from the goal (beyond
         end-compliance-margin), DeviceError on error bits (overload cuts the force).
         ``on_progress(position, goal, first_position)`` is called on every read. A
@@ -528,13 +570,24 @@ class Bus:
 
     def wait_stopped(self, ident: int, position: int, *, timeout: float = 10.0, poll: float = 0.01,
                      on_progress: Optional[Callable[[int, int, int], None]] = None,
-                     notify: Optional[Callable[[str], None]] = None) -> int:
-        """Wait until actuator ``ident``, sent to ``position``, stops; its final position (see
-        :meth:`move`)."""
+                     notify: Optional[Callable[[str], None]] = None) -> Moved:
+        """Wait until actuator ``ident``, sent to ``position``, stops; its final position, a
+        :class:`Moved` (see :meth:`move`; a clamped goal is warned, :class:`~zkzap.errors.GoalClamped`)."""
         goal = self.load(ident, POSITION)
         margin = self.load(ident, "end-compliance-margin")
-        if goal != position and notify is not None:
-            notify(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits")
+        if goal != position:
+            import warnings
+
+            from ..errors import GoalClamped
+
+            import os
+            import sys
+
+            # said at the caller's line (outside zkzap, where Python can tell)
+            where: Any = {"skip_file_prefixes": (os.path.dirname(os.path.dirname(__file__)),)} \
+                if sys.version_info >= (3, 12) else {"stacklevel": 3}
+            warnings.warn(GoalClamped(f"ID {ident}: goal {position} clamped to {goal} by the stroke limits",
+                                      ident=ident, requested=position, goal=goal), **where)
         start = self.link.now()
         first = None
         while True:
@@ -545,7 +598,7 @@ class Bus:
                 on_progress(pos, goal, first)
             if not moving:
                 if abs(pos - goal) <= max(margin, 1):
-                    return pos
+                    return Moved(pos, ident=ident, requested=position, goal=goal)
                 force = self.load(ident, "force-on-off")
                 why = "; the force is off" if not force else ""
                 raise CheckFailed(f"ID {ident} stopped at {pos}, {abs(pos - goal)} away from the goal {goal}{why}",
@@ -775,7 +828,7 @@ class Actuator(_Registers):
         def move(self, position: int, *, wait: Literal[True] = True, speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
                  on_progress: Optional[Callable[[int, int, int], None]] = None,
-                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> int: ...
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Moved: ...
         @overload
         def move(self, position: int, *, wait: Literal[False], speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
@@ -785,17 +838,17 @@ class Actuator(_Registers):
         def move(self, position: int, *, wait: bool, speed: Optional[int] = None,
                  timeout: float = 10.0, poll: float = 0.01,
                  on_progress: Optional[Callable[[int, int, int], None]] = None,
-                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[int]: ...
+                 notify: Optional[Callable[[str], None]] = None, stop: bool = True) -> Optional[Moved]: ...
 
-    def move(self, position: int, **kw: Any) -> Optional[int]:
+    def move(self, position: int, **kw: Any) -> Optional[Moved]:
         """Move, waiting by default (see :meth:`Bus.move`)."""
         return self.bus.move(self.ident, position, **kw)
 
-    def identify(self) -> Record:
+    def identify(self) -> Identity:
         """Model, firmware and return mode (see :meth:`Bus.identify`)."""
         return self.bus.identify(self.ident)
 
-    def dump(self) -> list[Record]:
+    def dump(self) -> list[RegisterRow]:
         """The whole register map (see :meth:`Bus.dump`)."""
         return self.bus.dump(self.ident)
 

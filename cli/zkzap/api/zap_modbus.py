@@ -28,7 +28,8 @@ if TYPE_CHECKING:
     from typing import Any, Iterable, Iterator, Mapping, Optional, Union
 
     from ..codec.regmap import RegisterMap
-    from .zap import Reading, Record
+    from .records import RegisterRow, ScanRecord
+    from .zap import Reading
 
 __all__ = ["ModbusBus", "ModbusActuator"]
 
@@ -136,19 +137,19 @@ class ModbusBus(Bus):
     # -- procedures -----------------------------------------------------------------------------
 
     def scan(self, ids: Iterable[int] = range(1, modbus.MAX_ID + 1), bauds: Iterable[int] = (57600,),
-             **kw: Any) -> Iterator[Record]:
+             **kw: Any) -> Iterator[ScanRecord]:
         """Find the actuators (IDs 1..247) at each baud rate: the IR scan's procedure (quick first
         pass, rounds over the IDs in doubt, collisions named), probing with a one-register read.
         Records as :meth:`Bus.scan`'s (``return_mode`` null)."""
         ids = [modbus.check_id(i, allow_broadcast=False) for i in ids]
         return super().scan(ids, bauds, **kw)
 
-    def dump_records(self, ident: int) -> tuple[list[Record], Any]:
+    def dump_records(self, ident: int) -> tuple[list[RegisterRow], Any]:
         """Every register of the map, read in as few reads as it has runs of adjacent registers."""
         from .zap import register_records
 
         ident = modbus.check_id(ident, allow_broadcast=False)
-        records = []
+        records: list[Any] = []
         for address, count in runs(self.map):
             reply, values = self.link.read_registers(ident, address, count)
             for rec in register_records(ident, values, []):

@@ -337,10 +337,15 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_
 
         from ...link.zap_safety import interrupted_move
 
+        import warnings
+
+        from ...errors import GoalClamped
+
         start = time.monotonic()
         guard = interrupted_move(link, ident, stop=not no_stop, notify=note, why_not=" (--no-stop)")
         try:
-            with guard:
+            with guard, warnings.catch_warnings():
+                warnings.simplefilter("ignore", GoalClamped)      # said below, from the result
                 final = bus.wait_stopped(ident, position, timeout=wait_timeout, poll=poll,
                                          on_progress=on_progress, notify=note)
         except KeyboardInterrupt:
@@ -353,9 +358,10 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_
         finally:
             if progress is not None:
                 progress.stop()
+        if final.clamped:
+            note(f"ID {ident}: goal {final.requested} clamped to {final.goal} by the stroke limits")
         if common["verbose"]:
-            note(f"ID {ident} stopped at {final} (goal {bus.load(ident, POSITION)}) after "
-                 f"{time.monotonic() - start:.2f} s")
+            note(f"ID {ident} stopped at {final} (goal {final.goal}) after {time.monotonic() - start:.2f} s")
     click.echo(str(final) if scale is None else f"{scale.mm(final):g}")
 
 
