@@ -415,9 +415,10 @@ def teach(ids, output, rate, interval, count, duration, force_off, unit, fleet_f
     """Record the actuators' present positions as waypoints: each time Enter is pressed (a
     line on stdin; 'q' or end of input finishes), or at --rate.
 
-    Move the rods with the console, with zap move, or by hand with --force-off; each waypoint
-    is one row per actuator (t, id, position), t = --interval x its number (with --rate: the
-    time since the first). The file plays back with zap play (with --unit mm: positions in
+    Move the rods by hand with --force-off (zap teach holds the port: zap move cannot reach the
+    bus meanwhile; to move them with sliders, teach from the browser console, zkzap web zap);
+    each waypoint is one row per actuator (t, id, position), t = --interval x its number (with
+    --rate: the time since the first). The file plays back with zap play (with --unit mm: positions in
     mm, played with --unit mm). Ctrl-C finishes too: the waypoints taken are written.
 
     \b
