@@ -271,13 +271,3 @@ def test_a_cancelled_play_stops_every_actuator_with_the_words_it_was_given():
         for i in (1, 2):
             assert sim.device.actuator(i).get("goal-position") == player.stopped.positions[i]
 
-
-def test_a_silent_actuator_is_read_only_where_its_whole_window_fits_so_the_steps_keep_time():
-    # ID 3 is named by the path but not on the bus: a read of it holds the line for its late window
-    with start_zap(ids=[1, 2]) as sim, Bus(sim) as bus:
-        rows = motion.read_path(io.StringIO('t,id,position\n0,"1,2,3",500\n0.2,"1,2,3",1500\n0.4,"1,2,3",2500\n'
-                                            '0.6,"1,2,3",800\n0.8,"1,2,3",900\n'))
-        player = motion.Player(bus, motion.plan(rows, baud=bus.baud), settle=2.0)
-        logged = list(player.rows())
-        assert any(r["id"] == 3 and r["status"] == "no-reply" for r in logged)   # once the steps are out
-        assert player.summary()["lateness_max_ms"] < 50      # a read of ID 3 before a step would make it ~150 ms late

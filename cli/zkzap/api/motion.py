@@ -20,8 +20,7 @@ late.
 (:class:`zkzap.link.clock.SessionClock`: model time on a simulator that runs faster). Between
 steps, the spare time reads the actuators one at a time, round robin (present-position ..
 present-voltage in one Load Data), but only a read whose round trip (the wire, and the
-actuator's learned latency; for an actuator whose last read went unanswered, the horizon
-through which the bus then keeps the line for its late reply) ends before the next step is due: the log rows give goal vs
+actuator's learned latency) ends before the next step is due: the log rows give goal vs
 present position (the tracking error), current and voltage. The lateness of every step (when
 its first byte left, after its due time) is kept (:attr:`Player.lateness`). A hardware error
 bit in a reply, a current over ``limit`` (mA), or Ctrl-C/SIGTERM stops every actuator
@@ -64,7 +63,6 @@ SPIN = 0.0015
 READ_GUARD = 0.002
 #: The actuator's own turnaround before any is learned (a 12Lf's: the link's floor).
 from ..link.zap_timing import FLOOR as TURNAROUND  # noqa: E402
-from ..link.zap_timing import horizon_for  # noqa: E402
 
 #: Columns of the log rows.
 LOG_COLUMNS = ["time", "t", "loop", "id", "goal", "present", "tracking_error", "current_ma", "voltage_v",
@@ -551,7 +549,6 @@ class Player:
         the last step."""
         self._margins = {}
         self._next = 0
-        self._silent = set()              # IDs whose last log read went unanswered
 
     @property
     def total(self) -> int:
@@ -560,8 +557,6 @@ class Player:
     def _read_cost(self, ident) -> float:
         """Session seconds a log read of ``ident`` is expected to take."""
         n = LOAD_BYTES + REPLY_BYTES + LOG_LENGTH
-        if ident in self._silent:             # unanswered last time: the bus may hold the line for its horizon
-            return (self.link.wire(n) + horizon_for(getattr(self.link, "window", 0.15)) + READ_GUARD) * self.clock.speed
         learned = self.link.latencies().get(ident) if hasattr(self.link, "latencies") else None
         lat = TURNAROUND
         if learned and learned.get("latency_ms") is not None:
@@ -614,9 +609,7 @@ class Player:
         self.reads += 1
         if reply is None:
             self.read_failures += 1
-            self._silent.add(ident)
         else:
-            self._silent.discard(ident)
             v = {reg.name: raw for reg, raw in zap._register_values(LOG_FIRST.address, reply.data)}
             row["present"] = v.get("present-position")
             row["current_ma"] = v.get("present-current")
@@ -668,7 +661,7 @@ class Player:
                 try:
                     self._margins[i] = max(1, self.link.read(i, MARGIN))
                 except ZkzapError:
-                    self._silent.add(i)  # read only where a silent one's time fits; its rows say so
+                    pass            # its reads fail in the log too, and say so there
         start = self.clock.now()
         if self._start is not None:         # a time shared with other buses' players
             start += (self._start - time.time()) * self.clock.speed
