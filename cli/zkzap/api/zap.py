@@ -642,6 +642,13 @@ class Bus:
         if taken:
             raise IdTaken(f"ID {taken[0]} is already taken by another actuator at {self.baud} baud",
                           ident=taken[0], taken=True, baud=self.baud)
+        for i in free:
+            # not on this line, but heard at another rate on this port: the same ID once the
+            # rates are made one
+            elsewhere = [b for b in self.link.bauds_of(i) if b != self.baud]
+            if elsewhere:
+                raise IdTaken(f"ID {i} is already taken by an actuator at {elsewhere[0]} baud (heard on this port)",
+                              ident=i, taken=True, baud=elsewhere[0])
 
     def set_id(self, ident: int, new: int, *, force: bool = False, ready_timeout: float = 2.0) -> int:
         """Give the actuator at ``ident`` the ID ``new``, verified by reading it back from
@@ -667,6 +674,7 @@ class Bus:
                               f"two actuators may have had ID {ident}", ident=ident, duplicate=True)
         if value != new:
             raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}", ident=new, value=value)
+        self.link.devices.moved(ident, new)     # what is known of it goes along
         return new
 
     def set_baud(self, ident: int, baud: int, *, restart: bool = True, ready_timeout: float = 2.0) -> int:
@@ -707,6 +715,7 @@ class Bus:
                                   ident=ident, value=value)
             return baud
         self.link.restart(ident)
+        self.link.moved_to(ident, baud)       # what is known of it goes along
         self.link.set_baud(baud)
         try:
             value = self._read_back(ident, BAUD_REG, ready_timeout,
@@ -730,6 +739,7 @@ class Bus:
         it answers still (its restart did not take), its stored baud-rate is written back, so it
         does not vanish at its next power-up. ``failed`` is told what was done
         (``rolled_back``: True, False where it does not answer at the old rate either)."""
+        self.link.moved_to(ident, was)
         self.link.set_baud(was)
         failed.facts["rolled_back"] = failed.rolled_back = False
         try:

@@ -14,6 +14,8 @@ def hint(e) -> str:
     """The hint for ``e`` (with its leading separator), or ``""``."""
     facts = getattr(e, "facts", {})
     if isinstance(e, NoReply) and facts.get("protocol") == "zap" and facts.get("tries") is not None:
+        if facts.get("late") or facts.get("late_before"):
+            return "; replies arrive late (after the window): try a longer --timeout"
         text = "; check the ID, the baud rate ('zap scan --baud all'), power and wiring"
         if facts.get("mode_dependent"):
             text += "; or the actuator's feedback-return-mode does not answer this (try 'zap echo')"

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import Optional
 
-__all__ = ["Device", "Devices"]
+__all__ = ["Device", "Devices", "ByBaud"]
 
 
 class Device:
@@ -97,3 +97,50 @@ class Devices:
 
     def forget(self, ident: int) -> None:
         self._by_id.pop(ident, None)
+
+    def take(self, ident: int) -> Optional[Device]:
+        """The record of ``ident``, removed (a device that moved to another line speed)."""
+        return self._by_id.pop(ident, None)
+
+    def put(self, dev: Device) -> None:
+        """Keep ``dev`` (a record taken from another line speed's) under its address."""
+        self._by_id[dev.ident] = dev
+
+
+class ByBaud:
+    """The devices of one port at each line speed: devices at different baud rates never hear
+    each other's line, so one address can be two devices (one at each rate), each with its own
+    facts. :attr:`current` is the :class:`Devices` of the rate the port is at."""
+
+    __slots__ = ("current", "baud", "_other")
+
+    def __init__(self, current: Devices, baud: Optional[int]) -> None:
+        self.current, self.baud = current, baud
+        self._other: dict = {}
+
+    def switch(self, baud: int) -> Devices:
+        """The port is at ``baud`` now: its devices (a fresh record where nothing was learned at
+        that rate, assuming what the others assume)."""
+        if baud != self.baud:
+            self._other[self.baud] = self.current
+            self.current = self._other.pop(baud, None) or Devices(self.current.default)
+            self.baud = baud
+        return self.current
+
+    def at(self, baud: int) -> Devices:
+        """The devices at ``baud`` (created when none were)."""
+        if baud == self.baud:
+            return self.current
+        found = self._other.get(baud)
+        if found is None:
+            found = self._other[baud] = Devices(self.current.default)
+        return found
+
+    def bauds_of(self, ident: int) -> list:
+        """The baud rates at which a device with ``ident`` answered (learned on this port)."""
+        out = []
+        for baud, devs in [(self.baud, self.current), *self._other.items()]:
+            dev = devs.get(ident)
+            if dev is not None and dev.baud == baud:
+                out.append(baud)
+        return sorted(out)

@@ -66,7 +66,7 @@ from ..codec.framing import ZapFramer
 from ..codec.permissions import Permission, as_permission, require
 from ..errors import BadReply, DeviceError, NoReply, OutputError, PortError, UsageError
 from . import stop
-from .devices import Devices
+from .devices import ByBaud, Devices
 from .port import close_port, wire_time
 from .zap_timing import (FLOOR, HORIZON, K, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE,
                          QUICK_MARGIN, RESTART_PAUSE, RETRIES, horizon_for, host_margin, policy_for, usb_latency,
@@ -318,6 +318,7 @@ class ZapBus:
         self.allow = Permission.NONE       # the permissions given to every command (see command())
         self.simulated = is_simulated(self.url)
         self.devices = Devices(return_mode)   # what is known of each actuator (see mode_of)
+        self.by_baud = ByBaud(self.devices, getattr(port, "baudrate", None))   # ... at each line speed
         self.timeout = timeout
         self.retries = retries
         self.latency = latency
@@ -419,6 +420,7 @@ class ZapBus:
         # them is heard at the new one
         self._owed_at[was] = self._owed
         self._owed = self._owed_at.pop(baud, deque())
+        self.devices = self.by_baud.switch(baud)   # the actuators at that rate (another ID 1 there)
         self._expire(self.now())
         self._framer = self.family.framer()
         self._held = None
@@ -875,6 +877,8 @@ class ZapBus:
         token = object()
         problems = []
         limit = span
+        dev = self.devices[ident]
+        late0 = dev.late
         outer = self._current, self._caught      # (a sync Echo runs inside a request)
         self._current, self._caught = token, None
         try:
@@ -914,9 +918,22 @@ class ZapBus:
                     return None            # silence is a legitimate answer: do not repeat the command
                 problems.append(got)
                 limit = got[3]
+            if not optional and all(p[0] == "none" for p in problems):
+                # before saying "no reply": listen through the grace of the last attempt; a reply
+                # of this request that comes meanwhile is its answer (late), else the error says
+                # whether replies of that ID come late (a fact: a longer window would do)
+                keep = [o.keep for o in self._owed if o.token is token]
+                end = max(keep) if keep else self.now()
+                while self._caught is None and self.now() < end:
+                    self._listen(end)
+                if self._caught is not None:
+                    owed, p, lo, hi = self._caught
+                    got = self._reply(p, hi - owed.t0, self._only(token, owed, lo))
+                    return self._answered(got, pkt, restart, stored, check, win)
         finally:
             self._current, self._caught = outer
-        return self._fail(pkt, [p[:3] for p in problems], limit, tries, optional)
+        return self._fail(pkt, [p[:3] for p in problems], limit, tries, optional,
+                          late=dev.late - late0, late_before=late0)
 
     def _linger_for(self, token, seconds) -> None:
         """Listen up to ``seconds`` past the window of the latest attempt of ``token``, or until
@@ -985,6 +1002,9 @@ class ZapBus:
 
     def _answered(self, got, pkt, restart, stored, check, win):
         self.replies += 1
+        dev = self.devices[got.ident]
+        if dev.baud is None:
+            dev.baud = self.port.baudrate      # it answers at this rate
         if got.latency is not None and self.policy.learn(got.ident, got.latency, win):
             self.late += 1                 # after its actuator's learned timeout: still the answer
         if restart:
@@ -1180,7 +1200,10 @@ class ZapBus:
             r.doubt = doubt
         return r
 
-    def _fail(self, pkt, problems, limit, tries, optional):
+    def _fail(self, pkt, problems, limit, tries, optional, late=0, late_before=0):
+        """Raise what went wrong. A NoReply's facts say how many replies of that ID came after
+        their window while this request was in hand (``late``) and before it (``late_before``):
+        an actuator slower than the window."""
         ident = self.family.ident(pkt)
         kinds = [p[0] for p in problems]
         if all(k == "none" for k in kinds):
@@ -1193,7 +1216,7 @@ class ZapBus:
                           f"({tries} {'try' if tries == 1 else 'tries'}){note}",
                           ident=ident, baud=self.baud, timeout=limit, window=self.window, tries=tries,
                           echo_only=echo, mode_dependent=self.mode_dependent(pkt),
-                          protocol="zap")
+                          protocol="zap", late=late, late_before=late_before)
         bad = [p for p in problems if p[0] != "none"][-1]
         seen = bad[2].hex(" ").upper() if bad[2] else "nothing"
         if len(seen) > 120:
@@ -1409,6 +1432,19 @@ class ZapBus:
             if self.now() >= end:
                 raise NoReply(f"no reply from ID {ident} at {self.baud} baud within {within:g} s",
                               ident=ident, baud=self.baud, timeout=within, protocol="zap")
+
+    def bauds_of(self, ident: int) -> list:
+        """The baud rates at which an actuator with ``ident`` answered on this port (what this
+        bus learned: a scan at several rates, a baud change)."""
+        return self.by_baud.bauds_of(ident)
+
+    def moved_to(self, ident: int, baud: int) -> None:
+        """Actuator ``ident`` at this rate now answers at ``baud`` (a baud change): its record
+        goes along."""
+        dev = self.devices.take(ident)
+        if dev is not None:
+            dev.baud = baud
+            self.by_baud.at(baud).put(dev)
 
     def latencies(self) -> dict:
         """What the bus learned: {ID: {"latency_ms", "variation_ms", "samples", "late"}}."""
