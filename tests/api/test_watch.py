@@ -83,3 +83,16 @@ def test_rate_paces_the_polls(bus):
     rows = list(w.rows())
     assert w.stopped_by == "duration"
     assert 5 <= len(rows) <= 17                # 15 at 50 Hz; generous on a loaded machine
+
+
+def test_an_actuator_silent_for_most_of_the_watch_is_named(bus):
+    bus.port.device.inject(2, "silent", count=8)          # dead for its first 8 replies (retries included)
+    w = Watcher(bus, [1, 2], [R["present-position"]], count=10)
+    list(w.rows())
+    h = w.health[2]
+    assert h.answered >= 1 and h.failed >= 3 and h.silent_s > 0.5 * w.elapsed     # a failed read waits
+    assert list(w.mostly_silent()) == [2] and w.health[1].silent_s == 0.0
+    bus.port.device.inject(1, "silent", count=1)          # one lost read of ten: not most of it
+    w = Watcher(bus, [1], [R["present-position"]], count=10)
+    list(w.rows())
+    assert w.health[1].failed == 1 and w.mostly_silent() == {}

@@ -123,3 +123,32 @@ def test_vendor_instructions_from_the_command_line(cli):
     assert r.exit_code == 0 and "unknown 0x40" in r.stdout
     r = cli("zap", "load", "present-temperature", "--id", "1", "--sim")
     assert (r.exit_code, r.stdout) == (0, "245\n")                         # a real 12Lf's
+
+
+def test_watch_fails_when_the_bus_died_for_most_of_the_run():
+    """The actuator answers, then the bus goes dead (every reply lost) for the rest of the watch:
+    every row is written, and the exit is 3 naming how long it was silent (never exit 0)."""
+    import json
+    import threading
+
+    from click.testing import CliRunner
+
+    from zkzap.commands import root, run
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[1], transport="tcp") as sim:
+        def die():
+            with sim.lock:
+                sim.device.inject(1, "silent")
+        timer = threading.Timer(0.3, die)
+        runner = CliRunner()
+        with runner.isolation(input="") as (out, err, _):
+            timer.start()
+            code = run(root, "zkzap", ["zap", "watch", "present-position", "--ids", "1", "--duration", "2",
+                                       "--retries", "0", "--timeout", "0.05", "-f", "jsonl", "-p", sim.url])
+            timer.join()
+            rows = [json.loads(line) for line in out.getvalue().decode().splitlines()]
+            text = err.getvalue().decode()
+    assert code == 3, text
+    assert rows[0]["status"] == "ok" and rows[-1]["status"] == "no-reply" and rows[-1]["t"] >= 1.5
+    assert "ID 1 unanswered for" in text and "the bus was silent for most of the watch" in text, text

@@ -106,10 +106,12 @@ def wire_limit(reads, baud: int, n_ids: int, turnaround: float = TURNAROUND) -> 
 
 class Health:
     """Link health of one actuator, counted in polls (one row each): asked, answered, failed
-    (of which garbled), the last round trip, the time of the last good read, and the error bits
-    seen."""
+    (of which garbled), the last round trip, the time of the last good read, the error bits
+    seen, and ``silent_s``: the seconds of the watch it did not answer (from each unanswered
+    read back to this actuator's read before it, or the start)."""
 
-    __slots__ = ("asked", "answered", "failed", "garbled", "last_rtt", "last_ok", "errors", "last_status")
+    __slots__ = ("asked", "answered", "failed", "garbled", "last_rtt", "last_ok", "errors", "last_status",
+                 "silent_s", "last_read")
 
     def __init__(self):
         self.asked = self.answered = self.failed = self.garbled = 0
@@ -117,10 +119,17 @@ class Health:
         self.last_ok = None
         self.errors = set()
         self.last_status = None
+        self.silent_s = 0.0
+        self.last_read = None
 
     @property
     def loss(self) -> float:
         return self.failed / self.asked if self.asked else 0.0
+
+
+#: The share of a watch an actuator may go unanswered before the watch fails (``zap watch``:
+#: exit 3): more than half of the run, a bus that was dead for most of it.
+MOSTLY_SILENT = 0.5
 
 
 class Watcher:
@@ -198,6 +207,9 @@ class Watcher:
         if status == "bad-reply":
             h.garbled += 1
         now = self._clock()
+        if status != "ok":
+            h.silent_s += now - (self.started if h.last_read is None else h.last_read)
+        h.last_read = now
         row["time"] = _iso(time.time())
         row["t"] = round(now - self.started, 4)
         scale = self.scales.get(ident)
@@ -216,6 +228,14 @@ class Watcher:
             for r in self.shown:
                 self.history[ident][r.name].append(row[r.name])
         return row
+
+    def mostly_silent(self, share: float = MOSTLY_SILENT) -> dict:
+        """``{ID: silent seconds}`` of the actuators that answered at some time but were silent
+        for more than ``share`` of the watch (a bus that died: its rows are there, but most are
+        empty). Those that never answered are not here (:attr:`health` says so: answered 0)."""
+        t = self.elapsed
+        return {i: h.silent_s for i, h in self.health.items()
+                if h.answered and t > 0 and h.silent_s > share * t}
 
     def done(self) -> bool:
         if self.count is not None and self.polls >= self.count:

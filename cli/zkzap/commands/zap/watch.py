@@ -18,7 +18,8 @@ from .scan import IdList
 FORMATS = ("table", "jsonl", "json", "csv")
 
 
-@exits({NO_REPLY: "an actuator never answered"})
+@exits({NO_REPLY: "an actuator never answered, or went unanswered for more than half of the watch (a bus that "
+                  "died: every row is written first)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("registers", nargs=-1, required=True, type=REGISTER, metavar="REGISTER...")
 @click.option("--ids", "ids", type=IdList(), default="0", show_default=True, metavar="LIST",
@@ -51,7 +52,9 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
     bits in colour and link health, and the achieved poll rate beside the asked one and the
     wire limit. With --unit mm each position register gets a NAME_mm column (and its mm beside
     the counts in the table), by the strokes of --fleet. JSON Lines in a pipe; CSV by -f csv or an -o *.csv name. A summary goes to
-    stderr at the end. Exit status 3 when an actuator never answered.
+    stderr at the end. Exit status 3 when an actuator never answered, or went unanswered for
+    more than half of the watch's time (a bus that died mid-run: every row is written, the
+    summary says how long each ID was silent, and the error names them).
 
     \b
     Examples:
@@ -141,6 +144,18 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
     if silent:
         raise NoReply(f"no reply from ID{'s' if len(silent) > 1 else ''} {', '.join(map(str, silent))} "
                       f"at {watcher.bus.baud} baud during the watch")
+    _mostly_silent(watcher)
+
+
+def _mostly_silent(w, bus_name=None):
+    """NoReply (exit 3) naming every ID that went unanswered for most of the watch."""
+    dead = w.mostly_silent()
+    if dead:
+        where = f"bus {bus_name}: " if bus_name else ""
+        said = "; ".join(f"ID {i} unanswered for {s:.1f} of {w.elapsed:.1f} s ({w.health[i].answered} of "
+                         f"{w.health[i].asked} reads answered)" for i, s in dead.items())
+        raise NoReply(f"{where}{said}: the bus was silent for most of the watch", ids=sorted(dead),
+                      silent_s={i: round(s, 3) for i, s in dead.items()})
 
 
 def _summary(w, rate):
@@ -152,7 +167,7 @@ def _summary(w, rate):
         limit = "?"
     asked = f"asked {rate:g}" if rate else "asked: as fast as possible"
     health = "; ".join(f"ID {i} {h.answered}/{h.asked}" + (f" ({', '.join(sorted(h.errors))})" if h.errors else "")
-                       for i, h in w.health.items())
+                       + (f", silent {h.silent_s:.1f} s" if h.silent_s >= 0.05 else "") for i, h in w.health.items())
     why = {"until": ", condition met", "count": "", "duration": ""}.get(w.stopped_by, "")
     note(f"{w.polls} polls in {w.elapsed:.2f} s: {w.achieved:.1f} polls/s ({asked}; wire limit {limit}/s){why}; "
          f"reads answered: {health}")
@@ -202,3 +217,6 @@ def _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt,
                                                               else ()) if h.answered == 0]
     if silent:
         raise NoReply(f"no reply during the watch from {', '.join(silent)}")
+    for spec in specs:
+        if spec.name in watchers:
+            _mostly_silent(watchers[spec.name], spec.name)
