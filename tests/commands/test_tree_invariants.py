@@ -703,3 +703,18 @@ def test_broadcast_is_given_explicitly_under_its_rules(argv, code):
         assert got == code, err
         heard = [h for h in truth if _acting(h.packet)]
         assert (len(heard) == 2) == (code == 0), heard           # both actuators heard it, or neither
+
+
+def test_a_port_that_may_be_given_again_takes_one_port_from_a_default_or_the_environment(monkeypatch):
+    """A batch's or shell's port reaches every line's command as one value, whether that command
+    takes one bus or several (-p again); the environment's port is one port, spaces and all."""
+    several = [(path, p) for path, cmd in commands() for p in cmd.params
+               if isinstance(p, click.Option) and p.name == "port" and p.multiple]
+    assert len(several) >= 4, several                     # scan, watch, play, cycle at least
+    for path, p in several:
+        ctx = click.Context(click.Command(path[-1]))
+        assert p.type_cast_value(ctx, "sim://zap?ids=1") == ("sim://zap?ids=1",), path
+        assert p.type_cast_value(ctx, ("a", "b")) == ("a", "b"), path
+        for env in p.envvar if isinstance(p.envvar, (list, tuple)) else [p.envvar]:
+            monkeypatch.setenv(env, "/dev/serial/by-id/usb-FTDI adapter-if00")
+            assert p.type_cast_value(ctx, p.value_from_envvar(ctx)) == ("/dev/serial/by-id/usb-FTDI adapter-if00",)

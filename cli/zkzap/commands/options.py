@@ -845,6 +845,20 @@ def _several_ports(ctx, param, value):
     return ports[0] if ports else None
 
 
+class _PortsOption(click.Option):
+    """A ``-p`` that may be given again: one port from a default (a batch's or shell's port,
+    which every line shares whether its command takes one bus or several) is that one port."""
+
+    def value_from_envvar(self, ctx):
+        # the environment names one port, spaces and all (click would split it at whitespace)
+        return self.resolve_envvar_value(ctx)
+
+    def type_cast_value(self, ctx, value):
+        if isinstance(value, str):
+            value = (value,)
+        return super().type_cast_value(ctx, value)
+
+
 def ports_given():
     """The ports of a ``-p`` given more than once (several buses), or None (one port or none)."""
     ctx = click.get_current_context(silent=True)
@@ -858,7 +872,7 @@ def port_options(group: str, *, baud_auto: bool = False, several: bool = False):
     env = ENV[group]
     options = [
         click.option("-p", "--port", envvar=env["port"], metavar="PORT", default=None, multiple=several,
-                     callback=_several_ports if several else None,
+                     cls=_PortsOption if several else click.Option, callback=_several_ports if several else None,
                      shell_complete=lambda ctx, param, incomplete: _complete_ports(ctx, param, incomplete, group),
                      help=f"Serial device or pyserial URL (socket://host:port, rfc2217://, "
                           f"loop://, spy://, hwgrep://) [env {env['port']}]."
