@@ -368,3 +368,15 @@ def test_play_scan_and_watch_on_two_buses_by_their_ports(cli, path):
     r = cli("zap", "watch", "present-position", "--ids", "1", "-c", "2", "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
     assert r.exit_code == 0, r.stderr
     assert sorted(x["bus"] for x in jsonl(r.stdout)) == sorted([LEFT, LEFT, RIGHT, RIGHT])
+
+
+def test_cycle_a_path_on_the_fleet_file_s_buses(cli, tmp_path, path):
+    fleet = _fleet_with_buses(tmp_path)
+    p = path('t,id,position\n0,1,1000\n0.3,1,2000\n')
+    r = cli("zap", "cycle", "--path", p, "--cycles", "2", "--buses", "all", "--fleet", fleet, "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    recs = jsonl(r.stdout)
+    assert sorted((x["bus"], x["cycle"]) for x in recs) == [("left", 1), ("left", 2), ("right", 1), ("right", 2)]
+    assert all(x["status"] == "ok" and x["reads"] > 0 for x in recs)
+    r = cli("zap", "cycle", "--path", p, "--buses", "all", "--fleet", fleet, "--report", str(tmp_path / "r.png"))
+    assert r.exit_code == 2 and "--report: for one bus" in r.stderr
