@@ -12,7 +12,8 @@ itself, as it comes — so a live pipe is still decoded as its bytes arrive, in 
 A view that would need bytes another view already took beyond :data:`HEAD` is an ``OSError``
 naming it (no reader of zkzap does that).
 
-:func:`is_input` says whether a path names something to read (a file, a FIFO, a device: not a
+:func:`reading` tells how far each regular file opened here has been read (for a progress
+display). :func:`is_input` says whether a path names something to read (a file, a FIFO, a device: not a
 directory, not missing) — never ``os.path.isfile``, which says no to a pipe.
 """
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 import io
 import os
 import stat
+import weakref
 
 #: The bytes of a stream kept for its later readers (a peek and a capture's first blocks).
 HEAD = 1 << 16
@@ -48,13 +50,45 @@ def open_input(path):
     """``path`` opened for reading bytes (a buffered binary stream); see the module's text. An
     ``OSError`` as from :func:`open`."""
     if regular(path) or not is_input(path):
-        return open(path, "rb")           # a regular file, or open's own error (missing, a directory)
+        f = open(path, "rb")              # a regular file, or open's own error (missing, a directory)
+        _track(f, path)
+        return f
     st = os.stat(path)
     key = (st.st_dev, st.st_ino, st.st_rdev)
     shared = _shared.get(key)
     if shared is None or shared.closed:
         shared = _shared[key] = _Shared(open(path, "rb", buffering=0), str(path))
     return io.BufferedReader(_View(shared), buffer_size=1 << 16)
+
+
+#: The regular files :func:`open_input` opened: (a weak reference to the stream, path, size).
+_open: list = []
+
+
+def _track(f, path) -> None:
+    try:
+        size = os.fstat(f.fileno()).st_size
+    except OSError:
+        return
+    _open[:] = [x for x in _open if (s := x[0]()) is not None and not s.closed]
+    _open.append((weakref.ref(f), str(path), size))
+
+
+def reading() -> list:
+    """``[(path, bytes read, size)]`` of the regular files open for reading now (bytes read: the
+    file's offset, a buffer ahead of its reader at most), for a progress display; safe to call
+    from another thread."""
+    out = []
+    for ref, path, size in list(_open):
+        f = ref()
+        if f is None or f.closed:
+            continue
+        try:
+            pos = os.lseek(f.fileno(), 0, os.SEEK_CUR)
+        except (OSError, ValueError):
+            continue
+        out.append((path, min(pos, size), size))
+    return out
 
 
 class _Shared:

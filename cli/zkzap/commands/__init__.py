@@ -83,6 +83,10 @@ class Command(QuickHelp, click.Command):
             from .options import check_files
 
             check_files(ctx)      # -o run.xlsx where .xlsx means nothing, an output that is an input: exit 2
+            from ..io.term import input_progress
+
+            with input_progress():    # a bar on a terminal's stderr while a large input file is read
+                return super().invoke(ctx)
         return super().invoke(ctx)
 
     def format_epilog(self, ctx, formatter):

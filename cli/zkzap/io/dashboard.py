@@ -123,13 +123,19 @@ class LiveView:
         self._live = Live(get_renderable=self.render, console=self.console,
                           refresh_per_second=self.refresh_per_second, transient=False,
                           redirect_stdout=self.console.file is sys.stdout, redirect_stderr=True)
+        from .term import live_view
+
+        live_view(True)                   # a progress bar of an input stands aside
         self._live.__enter__()
         return self
 
     def __exit__(self, *exc):
         live, self._live = self._live, None
         if live is not None:
+            from .term import live_view
+
             live.__exit__(*exc)
+            live_view(False)
         return False
 
     def note(self, text: str) -> None:

@@ -5,8 +5,10 @@ rich is imported only by the functions that need it, never at module import.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+import threading
 
 
 def is_tty(stream) -> bool:
@@ -159,3 +161,70 @@ def fitted_table(headings, rows, width, *, title=None, caption=None, priority=No
             table.add_section()
         table.add_row(*(str(r[i]) for i in keep))
     return table
+
+
+# --- progress of a large input --------------------------------------------------------------------
+
+#: An input file at least this large gets a progress bar while it is read (on a terminal).
+PROGRESS_MIN = 32 << 20
+#: Live views drawing on the terminal now (a progress bar stands aside for them).
+_live = [0]
+
+
+def live_view(on: bool) -> None:
+    """A live view (the dashboard, a watch table) starts (``on``) or ends drawing on the terminal."""
+    _live[0] += 1 if on else -1
+
+
+@contextlib.contextmanager
+def input_progress(stream=None, minimum=None):
+    """While inside: a progress bar on ``stream`` (stderr) for every regular input file of at
+    least ``minimum`` bytes (:data:`PROGRESS_MIN`) being read (:func:`zkzap.infile.reading`):
+    bytes read, speed and the time left; shown only while such a file is open and no live view
+    draws, erased after. Nothing at all when ``stream`` is no terminal (no thread, no rich)."""
+    stream = stream if stream is not None else sys.stderr
+    if not is_tty(stream):
+        yield
+        return
+    stop = threading.Event()
+    worker = threading.Thread(target=_progress, args=(stream, stop, minimum or PROGRESS_MIN), daemon=True,
+                              name="zkzap-input-progress")
+    worker.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        worker.join(5)
+
+
+def _progress(stream, stop, minimum, interval=0.25):
+    from ..infile import reading
+
+    bar, tasks = None, {}
+    try:
+        while not stop.wait(interval):
+            big = [r for r in reading() if r[2] >= minimum] if not _live[0] else []
+            if not big:
+                if bar is not None:
+                    bar.stop()
+                    bar, tasks = None, {}
+                continue
+            if bar is None:
+                from rich.progress import (BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn,
+                                           TransferSpeedColumn)
+
+                # stderr's messages go above the bar; so do stdout's on a terminal (data in a pipe
+                # is never touched)
+                bar = Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(),
+                               TransferSpeedColumn(), TimeRemainingColumn(), console=console_for(stream),
+                               transient=True, auto_refresh=False, redirect_stderr=True,
+                               redirect_stdout=is_tty(sys.stdout))
+                bar.start()
+            for path, done, size in big:
+                if path not in tasks:
+                    tasks[path] = bar.add_task(f"reading {os.path.basename(path)}", total=size)
+                bar.update(tasks[path], completed=done)
+            bar.refresh()
+    finally:
+        if bar is not None:
+            bar.stop()
