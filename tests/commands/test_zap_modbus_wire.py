@@ -208,3 +208,26 @@ def test_shell_on_modbus(cli):
             input="load goal-speed --id 1\nmove 300 --id 1 --wait\nload present-position --id 1\nexecute\n")
     assert r.stdout.splitlines()[:3] == ["1000", "300", "300"], r
     assert "IR protocol only" in r.stderr
+
+
+def test_unit_mm_on_the_17lf_spans_its_positions(cli, tmp_path):
+    """The 17Lf's positions are 0..10000 over its stroke (no long-stroke-limit default in its
+    map): 15 mm of a 30 mm stroke is 5000; a 12Lf part number gives no 17Lf stroke."""
+    from zkzap.api import units
+    from zkzap.codec.regmap import default_map
+
+    assert units.position_range(default_map("modbus")) == (10000, 10000)
+    assert units.position_range(default_map("ir")) == (units.RATED_COUNTS, units.MAX_COUNTS) == (3686, 4095)
+    fleet = tmp_path / "fleet.json"
+    fleet.write_text(json.dumps({"format": "zkzap-fleet/2", "actuators": {
+        "1": {"motion": {"stroke_mm": 30}}, "2": {"motion": {"part": "12Lf-20PT-27"}}}}))
+    r = cli("zap", "move", "--protocol", "modbus", "15", "--unit", "mm", "--fleet", str(fleet), "--id", "1", "--sim",
+            "--wait", "-v")
+    assert r.exit_code == 0 and r.stdout == "15\n" and "position 5000" in r.stderr, r
+    r = cli("zap", "move", "--protocol", "modbus", "31", "--unit", "mm", "--fleet", str(fleet), "--id", "1", "--sim")
+    assert r.exit_code == 2 and "0..30 mm" in r.stderr, r
+    r = cli("zap", "move", "--protocol", "modbus", "15", "--unit", "mm", "--fleet", str(fleet), "--id", "2", "--sim")
+    assert r.exit_code == 2 and "stroke_mm" in r.stderr, r
+    r = cli("zap", "watch", "--protocol", "modbus", "goal-position", "--ids", "1", "--sim", "--unit", "mm",
+            "--fleet", str(fleet), "--count", "1", "-f", "jsonl")
+    assert r.exit_code == 0 and "goal-position_mm" in r.stdout, r

@@ -18,6 +18,13 @@ the L12-xxF-3 datasheet gives "27 mm (extendable to 30 mm)", and 27/30 of 4096 c
 calibrate``: the operator shows the two ends) replaces that with the two taught ends and the
 travel measured between them.
 
+A model's position range comes from its register map (:func:`position_range`): the 12Lf's
+potentiometer counts 0..4095 with its rated stroke at the factory long-stroke-limit (3686, the
+map's default); the 17Lf's control table takes positions 0..10000 over its whole stroke (its
+long-stroke-limit default is per model, so the range's top is the rated stroke's end). No 17Lf
+part number with its stroke from a datasheet is in hand: a 17Lf's motion entry gives
+``stroke_mm`` or a calibration (a part is refused, never guessed).
+
 Speeds: goal-speed is a raw 0..1023 of the motor's rate, not a velocity; its mm/s needs the
 rod's speed at goal-speed 1023, ``max_speed_mm_s`` in the motion entry (``zap calibrate
 --measure-speed`` times a full stroke). Without it a speed in mm/s is refused, never guessed.
@@ -53,6 +60,21 @@ PARTS = (
 )
 
 
+def position_range(regmap=None) -> tuple:
+    """``(rated, top)`` counts of a model's map (None: the 12Lf's IR map): the count at the end
+    of the rated stroke (the map's long-stroke-limit default, else the top of goal-position's
+    range) and the highest position the map takes."""
+    if regmap is None:
+        return RATED_COUNTS, MAX_COUNTS
+    goal = regmap.by_name.get("goal-position")
+    if goal is None:
+        raise UsageError(f"--unit mm: the {regmap.model} map has no goal-position", model=regmap.model)
+    top = goal.hi
+    limit = regmap.by_name.get("long-stroke-limit")
+    rated = limit.default if limit is not None and limit.default is not None else top
+    return rated, top
+
+
 def stroke_of_part(part: str) -> float:
     """The rated stroke (mm) of a part number of :data:`PARTS`; UsageError for another."""
     text = str(part).strip()
@@ -73,12 +95,14 @@ class Scale:
     between the ends follows from the rated stroke); ``max_speed_mm_s``: the rod's
     speed at goal-speed 1023."""
 
-    __slots__ = ("ident", "stroke_mm", "zero", "mm_per_count", "max_speed_mm_s", "source")
+    __slots__ = ("ident", "stroke_mm", "zero", "mm_per_count", "max_speed_mm_s", "source", "top")
 
-    def __init__(self, stroke_mm=None, *, calibration=None, max_speed_mm_s=None, ident=None, source=""):
+    def __init__(self, stroke_mm=None, *, calibration=None, max_speed_mm_s=None, ident=None, source="",
+                 regmap=None):
         self.ident = ident
         self.stroke_mm = stroke_mm
         self.max_speed_mm_s = max_speed_mm_s
+        rated, self.top = position_range(regmap)
         if calibration:
             lo, hi = calibration["retracted"], calibration["extended"]
             travel = calibration.get("travel_mm")
@@ -86,7 +110,11 @@ class Scale:
                 if not stroke_mm:
                     raise UsageError(f"ID {ident}: a calibration without travel_mm needs the stroke (part or "
                                      "stroke_mm)", ident=ident)
-                travel = abs(hi - lo) * stroke_mm / RATED_COUNTS
+                travel = abs(hi - lo) * stroke_mm / rated
+            for end in (lo, hi):
+                if end > self.top:
+                    raise UsageError(f"ID {ident}: calibration end {end} is beyond the model's positions "
+                                     f"(0..{self.top})", ident=ident)
             self.zero = lo
             self.mm_per_count = travel / (hi - lo)
             self.source = source or "calibration"
@@ -94,7 +122,7 @@ class Scale:
             if not stroke_mm:
                 raise UsageError("a scale needs a stroke or a calibration")
             self.zero = 0
-            self.mm_per_count = stroke_mm / RATED_COUNTS
+            self.mm_per_count = stroke_mm / rated
             self.source = source or f"stroke {stroke_mm:g} mm"
 
     def __repr__(self) -> str:
@@ -105,12 +133,13 @@ class Scale:
         return round((counts - self.zero) * self.mm_per_count, 3)
 
     def counts(self, mm: float, *, what: str = "position") -> int:
-        """The count nearest ``mm``; UsageError when it falls outside 0..4095."""
+        """The count nearest ``mm``; UsageError when it falls outside the model's positions
+        (0..4095 on the 12Lf, 0..10000 on the 17Lf)."""
         if not math.isfinite(mm):
             raise UsageError(f"{what}: {mm!r} mm is not a finite number")
         c = round(self.zero + mm / self.mm_per_count)
-        if not 0 <= c <= MAX_COUNTS:
-            lo, hi = self.mm(0), self.mm(MAX_COUNTS)
+        if not 0 <= c <= self.top:
+            lo, hi = self.mm(0), self.mm(self.top)
             raise UsageError(f"{what}: {mm:g} mm is outside the rod's travel ({min(lo, hi):g}..{max(lo, hi):g} mm"
                              f"{self._who()})", mm=mm)
         return c
@@ -169,8 +198,10 @@ def check_motion(entry, where: str, fail) -> dict:
                 fail(f"{where}.calibration.{k}", f"unknown key; allowed {', '.join(CALIBRATION_KEYS)}")
         for k in ("retracted", "extended"):
             v = cal.get(k)
-            if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= MAX_COUNTS):
-                fail(f"{where}.calibration.{k}", f"{v!r} is not a position in counts (0..4095)")
+            if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 0xFFFF):
+                # (the model's own range is checked where its map is known: Scale)
+                fail(f"{where}.calibration.{k}", f"{v!r} is not a position in counts (0..4095 on a 12Lf, "
+                                                 "0..10000 on a 17Lf)")
         if cal["retracted"] == cal["extended"]:
             fail(f"{where}.calibration", "the two ends are the same position")
         t = cal.get("travel_mm")
@@ -179,24 +210,28 @@ def check_motion(entry, where: str, fail) -> dict:
     return entry
 
 
-def scale_of(motion, ident=None) -> Scale:
-    """The :class:`Scale` of a checked ``motion`` entry; UsageError when it gives no stroke."""
+def scale_of(motion, ident=None, regmap=None) -> Scale:
+    """The :class:`Scale` of a checked ``motion`` entry on a model of ``regmap`` (None: the
+    12Lf's); UsageError when it gives no stroke."""
     motion = motion or {}
     stroke = motion.get("stroke_mm")
     source = ""
     if stroke is None and motion.get("part"):
+        if regmap is not None and regmap.protocol == "modbus":
+            raise UsageError(f"ID {ident}: part {motion['part']!r}: no {regmap.model} part's stroke is in the model "
+                             "table; give stroke_mm (or calibrate) in the fleet file's motion entry", ident=ident)
         stroke = stroke_of_part(motion["part"])
         source = f"part {motion['part']} ({stroke:g} mm)"
     if stroke is None and not motion.get("calibration"):
         raise UsageError(f"ID {ident}: the fleet file gives no stroke (motion.part, motion.stroke_mm or a "
                          "calibration from zap calibrate)", ident=ident)
     return Scale(stroke, calibration=motion.get("calibration"), max_speed_mm_s=motion.get("max_speed_mm_s"),
-                 ident=ident, source=source)
+                 ident=ident, source=source, regmap=regmap)
 
 
-def scales(path, ids) -> dict:
-    """``{ID: Scale}`` for ``ids`` from the fleet file at ``path``; UsageError naming an ID the
-    file gives no stroke for."""
+def scales(path, ids, regmap=None) -> dict:
+    """``{ID: Scale}`` for ``ids`` from the fleet file at ``path``, on a model of ``regmap``
+    (None: the 12Lf's); UsageError naming an ID the file gives no stroke for."""
     from .fleet import read_document
 
     entries = read_document(path)
@@ -206,7 +241,7 @@ def scales(path, ids) -> dict:
         if entry is None or entry.motion is None:
             raise UsageError(f"{path}: ID {ident} has no motion entry (its stroke): add "
                              f"actuators.{ident}.motion.part or .stroke_mm, or run zap calibrate", ident=ident)
-        out[ident] = scale_of(entry.motion, ident)
+        out[ident] = scale_of(entry.motion, ident, regmap)
     return out
 
 

@@ -417,8 +417,8 @@ def unit_options(f):
     speeds in mm/s; tables show counts beside millimetres."""
     f = fleet_option(f)
     f = click.option("--unit", type=Choice(["counts", "mm"]), default="counts", show_default=True,
-                     help="Positions in counts (0..4095) or millimetres (and speeds in mm/s), by the strokes "
-                          "of --fleet.")(f)
+                     help="Positions in counts (0..4095; 0..10000 on the 17Lf) or millimetres (and speeds in "
+                          "mm/s), by the strokes of --fleet.")(f)
     return f
 
 
@@ -434,7 +434,9 @@ def unit_scales(unit, fleet_file, ids):
         raise UsageError("--unit mm: needs --fleet FILE (the fleet file giving each actuator's stroke)")
     from ..api.units import scales
 
-    return scales(fleet_file, ids)
+    ctx = click.get_current_context(silent=True)
+    modbus = ctx is not None and (ctx.params.get("protocol") == "modbus" or ctx.params.get("regmap") is not None)
+    return scales(fleet_file, ids, zap_map(ctx) if modbus else None)
 
 
 def resolve_format(fmt, stream=None, *, tty_default="table", pipe_default="jsonl"):

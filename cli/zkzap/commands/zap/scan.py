@@ -262,8 +262,8 @@ def dump(ident, fmt, **common):
 @link_options
 @protocol_options
 def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_file, **common):
-    """Move to POSITION (0..4095; millimetres with --unit mm), optionally waiting until the
-    actuator stops there.
+    """Move to POSITION (0..4095, 0..10000 on the 17Lf; millimetres with --unit mm), optionally
+    waiting until the actuator stops there.
 
     With --unit mm, POSITION and --speed (mm/s) are converted by the actuator's stroke in the
     --fleet file (and the final position printed in mm). Writes goal-speed (with --speed) and goal-position; a goal position turns the force back
@@ -280,13 +280,12 @@ def move(position, ident, speed, wait, wait_timeout, poll, no_stop, unit, fleet_
       zap move 0 --id 1 --speed 300 --wait -p /dev/ttyUSB0
       pos=$(zap move 3000 --id 2 --wait --sim)
       zap move 12.5 --unit mm --fleet fleet.json --id 1 --wait -p /dev/ttyUSB0
+      zap move --protocol modbus 12.5 --unit mm --fleet fleet.json --id 1 --wait --sim
     """
     regmap = zap_map()
     scale = None
-    if unit == "mm" and common["protocol"] != "ir":
-        raise UsageError("--unit mm: the strokes are known in the IR protocol's counts (12Lf) only")
     if unit == "mm":
-        if ident == zap.BROADCAST:
+        if ident == (zap.BROADCAST if common["protocol"] == "ir" else 0):
             raise UsageError("--unit mm: give one actuator's ID (each has its own stroke)")
         scale = unit_scales(unit, fleet_file, [ident])[ident]
         mm = position
