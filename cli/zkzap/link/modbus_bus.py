@@ -312,8 +312,15 @@ class ModbusBus(ZapBus):
     def factory_reset(self, *a, **kw):
         self._not_modbus("factory reset (no source gives the 17Lf's factory reset an address)")
 
-    def symmetric_store(self, *a, **kw):
-        self._not_modbus("symmetric store")
+    def symmetric_store(self, reg, targets, *, allow=None, **kw):
+        """One register of several actuators (``targets``: (ID, value) pairs): Modbus RTU has no
+        multi-actuator write, so one Write Multiple Registers per ID
+        (:func:`zkzap.codec.modbus.sync_frames`), every frame's permissions checked before the
+        first goes out. Returns the replies."""
+        frames = modbus.sync_frames(self.regmap.register(getattr(reg, "name", reg)).name, list(targets), self.regmap)
+        for f in frames:
+            self.authorize(f, allow)
+        return [self.command(f, allow=allow) for f in frames]
 
 
 def _anonymous(address):

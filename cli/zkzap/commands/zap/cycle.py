@@ -12,7 +12,8 @@ import click
 from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, CheckFailed, UsageError
 from .. import CONTEXT, Command
 from ..options import (FINITE, Choice, FiniteRange, InputPath, IntRange, OutputPath, buses_option, close_output,
-                       exits, note, open_output, output_format, output_options, unit_options, unit_scales, warn)
+                       exits, note, open_output, output_format, output_options, protocol_options, unit_options,
+                       unit_scales, warn)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -64,6 +65,7 @@ def _given(name) -> bool:
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
 @link_options(several=True)
+@protocol_options(ir_only="not yet on Modbus RTU: the endurance procedure runs on the 12Lf's registers and counts")
 def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit, leg_timeout, resume_path,
           report_path, fmt, output, append, unit, fleet_file, bus_names, **common):
     """Run an actuator between two ends for many cycles, measuring each one.

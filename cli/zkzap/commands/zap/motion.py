@@ -14,7 +14,7 @@ from ...errors import CHECK_FAILED, DEVICE_ERROR, NO_REPLY, CheckFailed, UsageEr
 from .. import CONTEXT, Command
 from ..options import (Choice, FiniteRange, InputPath, IntRange, OutputPath, buses_option, close_output,
                        dry_run_option, exits, note, open_output, output_format, output_options, ports_given,
-                       unit_options, unit_scales, warn)
+                       protocol_options, unit_options, unit_scales, warn)
 from .compose import _link_args, check_sim_args, link_options, open_link
 from .scan import IdList, _progress
 
@@ -88,6 +88,8 @@ def _raise_stopped(stopped):
 @unit_options
 @dry_run_option
 @link_options(several=True)
+@protocol_options(ir_only="the player sends IR Symmetric Store packets on the IR bus's timing (a Modbus step: "
+                          "zap sync-move --protocol modbus)")
 def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fmt, output, append, unit, fleet_file,
          dry_run, **common):
     """Play a timed path: FILE rows of t (seconds), id (one, or several like "1,2"),
@@ -411,6 +413,7 @@ def _path_ids(path, text=None):
                    "turns it back on).")
 @unit_options
 @link_options
+@protocol_options
 def teach(ids, output, rate, interval, count, duration, force_off, unit, fleet_file, **common):
     """Record the actuators' present positions as waypoints: each time Enter is pressed (a
     line on stdin; 'q' or end of input finishes), or at --rate.
@@ -510,6 +513,8 @@ def _write_path(output, rows, fmt):
 @click.option("--measure-speed", is_flag=True,
               help="Then move between the two ends at goal-speed 1023 and record the rod's speed (mm/s).")
 @link_options
+@protocol_options(ir_only="not yet on Modbus RTU: its teaching of the ends runs on the 12Lf's registers and "
+                          "counts (a 17Lf's stroke: stroke_mm in the fleet file)")
 def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manual, measure_speed, **common):
     """Teach the two ends of an actuator's stroke and record them in the fleet file.
 
