@@ -106,3 +106,96 @@ def test_a_vanished_port_is_exit_4(start_sim, tmp_path, extra, message):
             proc.kill()
             proc.communicate()
     assert proc.returncode == 4 and message in err, err
+
+
+class FlappingBridge:
+    """A TCP bridge to a device (``target``: host, port) that loses it when :meth:`die` is
+    called: from then on it accepts each connection and closes it at once, as a network
+    serial server whose device is unplugged does (the port opens, then fails)."""
+
+    def __init__(self, target):
+        import socket
+        import threading
+
+        self.target = target
+        self.dead = threading.Event()
+        self.opened = 0
+        self._srv = socket.socket()
+        self._srv.bind(("127.0.0.1", 0))
+        self._srv.listen(8)
+        self._srv.settimeout(0.05)
+        self.url = f"socket://127.0.0.1:{self._srv.getsockname()[1]}"
+        self._conns = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _pump(self, a, b):
+        try:
+            while not self.dead.is_set() and (chunk := a.recv(4096)):
+                b.sendall(chunk)
+        except OSError:
+            pass
+        for s in (a, b):
+            try:
+                s.close()
+            except OSError:
+                pass
+
+    def _serve(self):
+        import socket
+        import threading
+
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._srv.accept()
+            except (socket.timeout, OSError):
+                continue
+            self.opened += 1
+            if self.dead.is_set():
+                conn.close()
+                continue
+            dev = socket.create_connection(self.target)
+            self._conns += [conn, dev]
+            for a, b in ((conn, dev), (dev, conn)):
+                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
+
+    def die(self):
+        self.dead.set()
+        for s in self._conns:
+            try:
+                s.shutdown(2)
+            except OSError:
+                pass
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(1)
+        self._srv.close()
+
+
+def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(start_sim):
+    """--reconnect 2 on a port that keeps opening and failing (nothing ever comes from it):
+    that is one outage, counted from its first failure, never a port back; the run ends at
+    2 s (exit 4), not a window later for every reopen."""
+    url, _ = start_sim(["zk", "--listen", "127.0.0.1:0", *FAST])
+    host, port = url[len("socket://"):].rsplit(":", 1)
+    bridge = FlappingBridge((host, int(port)))
+    proc = subprocess.Popen([executable("zk"), "monitor", "-p", bridge.url, "--duration", "30", "-f", "jsonl",
+                             "--reconnect", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
+    try:
+        _lines(proc, lambda line: '"kind":"status"' in line)
+        t0 = time.monotonic()
+        bridge.die()
+        _, err = proc.communicate(timeout=20)
+        took = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        bridge.close()
+    assert proc.returncode == 4 and "not back within --reconnect 2 s" in err, err
+    assert bridge.opened >= 3                           # it was reopened, and failed each time
+    assert "port back" not in err, err
+    assert 2.0 <= took < 3.5, f"gave up after {took:.2f} s"

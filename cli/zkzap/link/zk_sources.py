@@ -35,9 +35,13 @@ class LiveSource:
 
     With ``reconnect`` (session seconds), a port that fails or vanishes is reopened (the same
     device path or URL) every :data:`REOPEN_INTERVAL` for up to that long: meanwhile
-    :meth:`poll` returns no frames and :attr:`down` is the time it failed; once it is back,
-    :attr:`gap` is ``(t_down, t_up, reason)`` until :meth:`take_gap`. After ``reconnect``
-    seconds the port failure is raised as it would have been without it.
+    :meth:`poll` returns no frames and :attr:`down` is the time it failed. The port is back when
+    bytes come from it again, not when it opens: a port that opens and fails again before
+    anything came (a TCP bridge whose device is gone, a USB adapter flapping) is the same
+    outage, still counted from its first failure. Once it is back, :attr:`gap` is ``(t_down,
+    t_up, reason)`` until :meth:`take_gap`. ``reconnect`` seconds after the first failure the
+    port failure is raised as it would have been without it (at most one reopen attempt, or
+    one read slice, later).
     """
 
     live = True
@@ -52,6 +56,7 @@ class LiveSource:
         self.clock = SessionClock.of_port(link.ser)
         self.speed = self.clock.speed
         self.down = None                  # session time the port failed, while it is away
+        self._reopened = False            # away, but open again: back once bytes come
         self.gap = None
         self.reconnects = 0
         self._error = None
@@ -80,7 +85,7 @@ class LiveSource:
 
     def poll(self):
         """Frames read within one slice, as ``[(t, frame), ...]``."""
-        if self.down is not None:
+        if self.down is not None and not self._reopened:
             return self._retry()
         try:
             data = self.link.read()
@@ -89,6 +94,11 @@ class LiveSource:
                 raise
             self._fail(e)
             return []
+        if self.down is not None:          # open again: back only once bytes come
+            if not data:
+                self._give_up()
+                return []
+            self._back()
         if not data:
             return []
         t = self.now()
@@ -130,15 +140,26 @@ class LiveSource:
         return {"bytes": sig.bytes, "chance_frames": sig.rejected + len(sig.held)}
 
     def _fail(self, e):
-        self.down = self.now()
-        self._error = e
-        self._next_try = 0.0
+        if self.down is None:              # a failure while reopened is the same outage
+            self.down = self.now()
+            self._error = e
+        self._reopened = False
+        self._next_try = 0.0 if self._error is e else self.now() + REOPEN_INTERVAL
         self.framer.flush()                # a frame cut by the drop-out is not glued to new bytes
 
-    def _retry(self):
-        now = self.now()
-        if now - self.down > self.reconnect:
+    def _give_up(self):
+        if self.now() - self.down > self.reconnect:
             raise PortError(f"{self._error}; not back within --reconnect {self.reconnect:g} s")
+
+    def _back(self):
+        self.gap = (self.down, self.now(), str(self._error))
+        self.down = None
+        self._reopened = False
+        self.reconnects += 1
+
+    def _retry(self):
+        self._give_up()
+        now = self.now()
         if now < self._next_try:
             self.clock.sleep(min(0.05, self._next_try - now))
             return []
@@ -146,10 +167,9 @@ class LiveSource:
         try:
             self.link.reopen()
         except (PortError, UsageError):
+            self._give_up()                # an attempt that took long may end the window
             return []
-        self.gap = (self.down, self.now(), str(self._error))
-        self.down = None
-        self.reconnects += 1
+        self._reopened = True
         return []
 
     def take_gap(self):
@@ -159,7 +179,7 @@ class LiveSource:
 
     def write(self, frame):
         """Send a control frame (nothing while the port is away)."""
-        if self.down is not None:
+        if self.down is not None and not self._reopened:
             return                         # nothing to write to while the port is away
         try:
             self.link.write(frame)

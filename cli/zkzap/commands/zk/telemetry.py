@@ -73,7 +73,9 @@ reconnect_option = click.option(
     flag_value=RECONNECT_DEFAULT, metavar="[S]",
     help="When the port fails or vanishes (a USB adapter dropping out), keep reopening the same "
          f"device for up to S seconds (default {RECONNECT_DEFAULT:g} without a value; off without the "
-         "option), write a gap record and go on writing the same files. A session that controls the "
+         "option), write a gap record and go on writing the same files. S counts from the first "
+         "failure until bytes come again (a port that opens and fails again is the same outage); "
+         "after S the run ends with exit status 4, at most one reopen attempt later. A session that controls the "
          "engine sends the abort the moment the port is back, before anything else, and only logs "
          "from then on: it ends with exit status 4 however it ends (its time, Ctrl-C, SIGTERM).")
 
