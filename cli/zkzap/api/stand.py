@@ -212,6 +212,16 @@ class Stand:
         return _logbook.record(self.logbook, run)
 
 
+def shared_stand(notify: Optional[Notify] = None) -> Any:
+    """``with shared_stand(notify):`` the stand sessions this process runs one after the other (a
+    shell's or a batch's lines) share one alarm list: a trip in one latches for the next, until
+    an ``ack`` acknowledges it (:func:`zkzap.api.alarms.installed`); the limits' own messages
+    say their violations, the list says the rest through ``notify``."""
+    from .alarms import Alarms, installed
+
+    return installed(Alarms(tell_limits=False, notify=notify))
+
+
 class StandSession:
     """One engine stand's session: the same object under every front end.
 

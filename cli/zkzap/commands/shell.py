@@ -315,11 +315,11 @@ Examples:
         if timeout is not None:
             defaults["timeout"] = timeout
         link = ZkLink.open(url, baud, stop_bits=stop_bits)
-        from ..api.alarms import Alarms, installed
+        from ..api.stand import shared_stand
         from .options import note
 
         try:
-            with sharing("zk", link), _batch_capture(), installed(Alarms(tell_limits=False, notify=note)):
+            with sharing("zk", link), _batch_capture(), shared_stand(notify=note):
                 code = loop(group, "zk", defaults, interactive=_interactive())
         finally:
             link.close()

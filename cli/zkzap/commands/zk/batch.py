@@ -76,11 +76,11 @@ def batch(file, keep_going, abort, yes, port, baud, stop_bits, timeout, sim):
             consent(f"this batch on {url} can start the engine or run ECU hardware: " + "; ".join(items), yes)
     link = ZkLink.open(url, baud, stop_bits=stop_bits)
     try:
-        from ...api.alarms import Alarms, installed
+        from ...api.stand import shared_stand
 
         # one alarm list for the batch: a line's trip latches, and with --keep-going a later line's
-        # start is refused (exit 5) while the engine is not back at rest and cool
-        with sharing("zk", link), installed(Alarms(tell_limits=False, notify=note)):
+        # start is refused (exit 5) until an 'ack' line and the engine back at rest and cool
+        with sharing("zk", link), shared_stand(notify=note):
             code = run_lines(group, "zk", lines, defaults, sys.stdout, keep_going=keep_going)
         if code and link.controlled and abort != "none":
             for f in abort_frames(abort):
