@@ -29,7 +29,7 @@ class Device:
     answer) and ``extra`` (replies with its address that no request was owed: two where one
     was due, from two devices sharing the address or a line fault)."""
 
-    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra")
+    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra", "extra_at")
 
     def __init__(self, ident: int) -> None:
         self.ident = ident
@@ -38,6 +38,7 @@ class Device:
         self.late = 0
         self.doubts = 0
         self.extra = 0
+        self.extra_at: Optional[float] = None    # when the last of those came
 
     def __repr__(self) -> str:
         return (f"Device(id={self.ident}, return_mode={self.return_mode}, baud={self.baud}, "

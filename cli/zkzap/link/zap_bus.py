@@ -111,6 +111,10 @@ def is_simulated(url) -> bool:
 DOUBT = "it may answer an earlier request that went unanswered in its window"
 
 
+#: Why a reply of an ID that lately sent replies where none was due is marked :attr:`Reply.doubt`.
+TWICE = "its ID lately sent a reply where none was due: it may be another actuator's"
+
+
 class Reply:
     """A checked feedback packet: ``ident``, ``error`` (bits), ``data`` (parameter bytes),
     ``packet`` (the whole packet), ``rtt`` (seconds from just before the write of the attempt it
@@ -644,7 +648,7 @@ class ZapBus:
         owed = self._take_owed(p, hi)
         if owed is None:
             self.stale += 1
-            self.devices[family.ident(p)].extra += 1     # a reply where none was due
+            self._extra(family.ident(p), hi)         # a reply where none was due
             self._event("stray", family.ident(p), lo, hi, None, p)
             return None
         if owed.kind == "ack":
@@ -656,6 +660,11 @@ class ZapBus:
             return owed, p
         self._late(p, lo, hi, owed)
         return None
+
+    def _extra(self, ident: int, when: float) -> None:
+        dev = self.devices[ident]
+        dev.extra += 1
+        dev.extra_at = when
 
     def _late(self, p, lo, hi, owed) -> None:
         """``p`` is (or may be) the late reply of the earlier attempt ``owed``: counted (for the
@@ -1005,6 +1014,16 @@ class ZapBus:
         dev = self.devices[got.ident]
         if dev.baud is None:
             dev.baud = self.port.baudrate      # it answers at this rate
+        if dev.extra_at is not None and self.now() - dev.extra_at < HORIZON and got.doubt is None:
+            # that ID lately sent a reply where none was due (two actuators answering to it, or a
+            # reply sent twice): an answer of it may be the other's, never a value
+            if got.data:
+                raise BadReply(f"ID {got.ident}: a reply came where none was due within the last {HORIZON:g} s "
+                               "(two actuators answering to this ID, or a reply sent twice): this answer may be "
+                               "the other's", kind="twice", ident=got.ident, baud=self.baud,
+                               received=bytes(got.packet), collision=True, duplicate=True,
+                               protocol="zap" if self.family.name == "ir" else self.family.name)
+            got.doubt = TWICE
         if got.latency is not None and self.policy.learn(got.ident, got.latency, win):
             self.late += 1                 # after its actuator's learned timeout: still the answer
         if restart:
@@ -1115,7 +1134,7 @@ class ZapBus:
                     continue
                 if ident_of(p) not in accept:
                     wrong.append(p)
-                    self.devices[ident_of(p)].extra += 1     # a reply where none was due
+                    self._extra(ident_of(p), hi)             # a reply where none was due
                     self._event("stray", ident_of(p), lo, hi, None, p)
                     state["want"] = len(received) + rx_len
                     continue
@@ -1127,6 +1146,14 @@ class ZapBus:
                 if framer.bad or framer.skipped:
                     # bytes that made no packet came first: a collision, for scans
                     self._event("garbled", None, state["lo"], hi, None, bytes(received))
+                    if data_len and not any_answer:
+                        # they may be another reply that met this request on the line (then the
+                        # actuator never heard it), and this one a reply to an earlier request:
+                        # never a value; this attempt's own reply, if it comes, follows it
+                        self.devices[ident_of(p)].doubts += 1
+                        state["doubted"] += 1
+                        state["want"] = len(received) + rx_len
+                        continue
                 first = state["first"] if state["first"] is not None else hi
                 self._resolve(ident_of(p), t0)    # this attempt's answer: earlier ones are lost
                 if any(o.token is token for o in self._owed):
