@@ -404,6 +404,8 @@ def _error_of(messages):
 #: many characters; beyond, the record is streamed: written as the output comes, its result the
 #: list of the output's lines, each its JSON value or, where it is none, its text.
 STREAM_AFTER = 1 << 16
+#: A streamed record's values are handed to its output this many characters at a time.
+STREAM_CHUNK = 1 << 14
 
 
 def _json_item(text):
@@ -440,6 +442,7 @@ class _LineOutput(io.StringIO):
         self._size = 0
         self._tail = ""
         self._first = True
+        self._pending, self._held = [], 0
 
     def start(self, line) -> None:
         """A new line runs: its output starts empty."""
@@ -467,10 +470,21 @@ class _LineOutput(io.StringIO):
     def _stream(self, text):
         parts = (self._tail + text).split("\n")
         self._tail = parts.pop()
-        values = [_json_item(p) for p in parts if p.strip()]
-        if values:
-            self._records.items(values, self._first)
+        for p in parts:
+            if p.strip():
+                value = _json_item(p)
+                self._pending.append(value)
+                self._held += len(value)
+        if self._held >= STREAM_CHUNK:
+            self._hand_over()
+
+    def _hand_over(self):
+        """The values gathered go to the records' output (in chunks: one hand-over per record
+        would cost a thread switch each)."""
+        if self._pending:
+            self._records.items(self._pending, self._first)
             self._first = False
+            self._pending, self._held = [], 0
 
     def finish(self, code, messages):
         """The line ended: ``(True, None)`` when its record was streamed (now ended), else
@@ -479,8 +493,9 @@ class _LineOutput(io.StringIO):
             if not self.streamed:
                 return False, self.getvalue()
             if self._tail.strip():
-                self._records.items([_json_item(self._tail)], self._first)
+                self._pending.append(_json_item(self._tail))
             self._tail = ""
+            self._hand_over()
             self._records.end(code, messages)
             return True, None
 
