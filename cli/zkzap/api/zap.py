@@ -754,6 +754,31 @@ class Bus:
             pass
 
 
+    def baud_state(self, ident: int, rates: Iterable[int], *, ready_timeout: float = 1.0) -> dict[str, Any]:
+        """Where actuator ``ident`` answers among ``rates`` (tried in order; after a baud change
+        that failed: the old rate, then the new) and the rate it stores, read back, never
+        assumed: ``{"answers_at": baud or None (at none of them), "stored_baud": the rate its
+        baud-rate register names, "code": that raw code (both None when unread: return mode 0
+        answers no read)}``. The port is left at the rate it answers at (else the first)."""
+        ident = zap.check_id(ident, allow_broadcast=False)
+        rates = list(dict.fromkeys(rates))
+        for rate in rates:
+            self.baud = rate
+            try:
+                self.link.wait_ready(ident, within=ready_timeout)
+            except (NoReply, BadReply):
+                continue
+            try:
+                code: Optional[int] = self.link.read(ident, BAUD_REG)
+            except (NoReply, BadReply, UsageError):
+                code = None
+            return {"answers_at": rate, "stored_baud": zap.BAUD_CODES.get(code) if code is not None else None,
+                    "code": code}
+        if rates:
+            self.baud = rates[0]
+        return {"answers_at": None, "stored_baud": None, "code": None}
+
+
 def _given(allow: AllowSpec, force: bool) -> Permission:
     """A call's permissions: ``allow``, and every FORCE permission with ``force``."""
     return as_permission(allow) | (FORCE if force else Permission.NONE)

@@ -20,7 +20,7 @@ from ..api import fleet
 from ..api.watch import Watcher
 from ..codec import zap
 from ..codec.fields import FieldValueError
-from ..errors import NoReply, UsageError
+from ..errors import BadReply, CheckFailed, NoReply, UsageError
 from .consent import force_values, needs_force
 from .console import Console, number
 from .zap_motion import MotionTools
@@ -352,7 +352,10 @@ class ZapConsole(PacketTools, MotionTools, Console):
         if reg.name == "baud-rate":
             baud = zap.BAUD_CODES[value]
             was = self.bus.baud
-            self.bus.set_baud(ident, baud)
+            try:
+                self.bus.set_baud(ident, baud)
+            except (NoReply, BadReply, CheckFailed) as e:
+                self._baud_failed(ctx, ident, was, baud, e)      # logged, settled, then the page's error
             self.actuators[ident]["baud"] = baud
             if any(a["baud"] == was for i, a in self.actuators.items() if i != ident):
                 self.bus.baud = was          # the others are still at the old rate
@@ -372,6 +375,37 @@ class ZapConsole(PacketTools, MotionTools, Console):
         if back is not None and back != value:
             raise UsageError(f"ID {ident}: {reg.name} reads back {back}, not the {value} written")
         self.reply(ctx, id=ident, register=reg.name, value=value, read_back=back)
+
+    def _baud_failed(self, ctx, ident, was, baud, e):
+        """A baud change that failed (the library rolls back what it can: ``e.rolled_back``): said
+        in the log, then the actuator's true state read back (:meth:`~zkzap.api.zap.Bus.baud_state`)
+        and said in the log and the page's error; the table shows the rate it answers at."""
+        self.log(f"{ctx.label}: ID {ident} baud change {was} -> {baud} failed: {e}", "error")
+        try:
+            st = self.bus.baud_state(ident, (was, baud))
+        except (NoReply, BadReply, CheckFailed, UsageError) as again:
+            st = {"answers_at": None, "code": None, "stored_baud": None, "why": str(again)}
+        rate, code, stored = st["answers_at"], st["code"], st["stored_baud"]
+        holds = "its stored baud-rate is unread" if code is None else f"it stores baud-rate code {code} ({stored})"
+        if rate is None:
+            text = (f"ID {ident} answers at neither {was} nor {baud} baud: its state is unknown; scan at every baud "
+                    "rate")
+        elif rate == was and stored not in (None, was):
+            text = (f"ID {ident} answers at {was} baud, but {holds}: it will answer at {stored} only after its "
+                    "next power-up")
+        elif rate == was:
+            text = f"ID {ident} answers at {was} baud and {holds}: unchanged" + \
+                (" (rolled back)" if getattr(e, "rolled_back", False) else "")
+        else:
+            text = f"ID {ident} answers at {baud} baud now and {holds}: the change took effect, its read-back failed"
+        if rate is not None:
+            self.actuators[ident]["baud"] = rate
+        self.actuators[ident]["polled"] = rate is not None and self.actuators[ident].get("return_mode") != 0
+        if any(a["baud"] == was for i, a in self.actuators.items() if i != ident) and self.bus.baud != was:
+            self.bus.baud = was              # the others are still at the old rate
+        self.log(text, "warn" if rate is not None and stored in (None, rate) else "error")
+        self._table()
+        raise CheckFailed(f"baud change of ID {ident} to {baud} failed ({e}); {text}", ident=ident) from None
 
     # check ------------------------------------------------------------------------------------
 
