@@ -20,7 +20,10 @@ late.
 (:class:`zkzap.link.clock.SessionClock`: model time on a simulator that runs faster). Between
 steps, the spare time reads the actuators one at a time, round robin (present-position ..
 present-voltage in one Load Data), but only a read whose round trip (the wire, and the
-actuator's learned latency) ends before the next step is due: the log rows give goal vs
+actuator's learned latency, and for one whose last read went unanswered the time until the
+bus would send it at once, :meth:`~zkzap.link.zap_bus.ZapBus.clear_at`) ends before the next
+step is due, and it waits for its reply only until then (no reply by then: a ``no-reply``
+row, never a late step): the log rows give goal vs
 present position (the tracking error), current and voltage. The lateness of every step (when
 its first byte left, after its due time) is kept (:attr:`Player.lateness`). A hardware error
 bit in a reply, a current over ``limit`` (mA), or Ctrl-C/SIGTERM stops every actuator
@@ -561,7 +564,9 @@ class Player:
         lat = TURNAROUND
         if learned and learned.get("latency_ms") is not None:
             lat = max(lat, learned["latency_ms"] / 1000.0)      # smoothed: one late reply does not starve it
-        return (self.link.wire(n) + lat + READ_GUARD) * self.clock.speed
+        # after an unanswered read of it (a silent actuator's) the bus waits, or asks an Echo, first
+        held = self.link.clear_at(ident, LOG_LENGTH) - self.link.now() if hasattr(self.link, "clear_at") else 0.0
+        return (max(0.0, held) + self.link.wire(n) + lat + READ_GUARD) * self.clock.speed
 
     def _fits(self, due) -> bool:
         """Whether a log read can end before ``due``: the next actuator in turn whose read fits
@@ -590,15 +595,26 @@ class Player:
             self.link.command(frame)
         self.goal.update(step.goals)
 
-    def _read_one(self, loop):
+    def _read_one(self, loop, due=None):
+        """Read the next actuator in turn; ``due``: the next step's time, which its reply's wait
+        must end before (an actuator that does not answer by then is no-reply, never a late step)."""
         ids = self.plan.ids
         ident = ids[self._next % len(ids)]
         self._next += 1
+        kw = {}
+        if due is not None and hasattr(self.link, "clear_at"):
+            n = LOAD_BYTES + REPLY_BYTES + LOG_LENGTH
+            start = max(self.link.now(), self.link.clear_at(ident, LOG_LENGTH))
+            kw["window"] = max(TURNAROUND, (due - self.clock.now()) / self.clock.speed
+                               - (start - self.link.now()) - self.link.wire(n) - READ_GUARD / 2)
+            kw["optional"] = True          # silence by then is its answer: no listening on past the step
         row = {"time": None, "t": None, "loop": loop, "id": ident, "goal": self.goal.get(ident), "present": None,
                "tracking_error": None, "current_ma": None, "voltage_v": None, "errors": [], "status": "ok"}
         reply = None
         try:
-            reply = self.link.load(ident, LOG_FIRST.address, LOG_LENGTH, check=False, retries=0)
+            reply = self.link.load(ident, LOG_FIRST.address, LOG_LENGTH, check=False, retries=0, **kw)
+            if reply is None:
+                row["status"] = "no-reply"
         except NoReply:
             row["status"] = "no-reply"
         except BadReply:
@@ -692,7 +708,7 @@ class Player:
                         if self.cancel is not None and self.cancel.is_set():
                             self._stop("cancelled", self.cancel_why)       # now, not at the next step
                             return
-                        row, reply = self._read_one(loop)
+                        row, reply = self._read_one(loop, None if last else nxt)
                         yield row
                         bad = self._check(row, reply)
                         if bad is not None:

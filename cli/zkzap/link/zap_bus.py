@@ -606,6 +606,17 @@ class ZapBus:
                 return
             self._listen(min(due))
 
+    def clear_at(self, ident: int, data_len=None) -> float:
+        """When a request to ``ident`` whose reply carries ``data_len`` bytes goes out at once,
+        with nothing to wait for: the horizon of every unanswered attempt its reply could be
+        taken for (before it the bus listens through that attempt's grace, or asks an Echo
+        first; :meth:`now` when none is owed). A caller with a deadline (a player's next step)
+        asks before it sends."""
+        now = self.now()
+        self._expire(now)
+        return max((o.horizon for o in self._owed if o.horizon > now and o.conflicts({ident}, data_len)),
+                   default=now)
+
     def settle(self, ident: int) -> None:
         """Listen until no reply to an unanswered attempt to ``ident`` can come any more (every
         one's horizon has passed, or its reply came): after that, silence from ``ident`` is
