@@ -544,3 +544,38 @@ def test_setup_brings_every_actuator_to_one_baud_rate(cli, rig, tmp_path):
         r = cli(*args, "--find-baud", "57600", "--state", str(tmp_path / "s2.json"), "-p", clash)
         assert r.exit_code == 1 and "ID 4 answers as well" in r.stderr, r
         assert sorted(state_of(tmp_path / "clash.json")) == [rig.factory, 4]
+
+
+def test_several_buses_backed_up_diffed_and_applied_at_once(cli, tmp_path):
+    """Two buses, each with its own ID 1, read on a thread each; the backup names each bus, and
+    a diff and an apply take it bus by bus onto two other buses named in a machine file."""
+    left = make_bus(tmp_path / "l.json", ids="1,2", settings={1: {"speed-limit": 500}})
+    right = make_bus(tmp_path / "r.json", ids="1,3", settings={1: {"speed-limit": 600}, 3: {"acceleration": 33}})
+    two = tmp_path / "two.json"
+    r = cli("zap", "backup", "-p", left, "-p", right, "-o", str(two))
+    assert r.exit_code == 0 and "4 actuators on 2 buses" in r.stderr, r
+    doc = json.loads(two.read_text())
+    assert {b["port"]: b["ids"] for b in doc["buses"].values()} == {left: [1, 2], right: [1, 3]}
+    assert "actuators" not in doc and doc["buses"][right]["actuators"]["1"]["stored"]["speed-limit"] == 600
+    # the same machine's settings onto two fresh buses, named in the file
+    fresh = {n: make_bus(tmp_path / f"{n}2.json", ids=ids) for n, ids in (("left", "1,2"), ("right", "1,3"))}
+    doc["buses"] = {"left": dict(doc["buses"][left], port=fresh["left"]),
+                    "right": dict(doc["buses"][right], port=fresh["right"])}
+    machine = tmp_path / "machine.json"
+    machine.write_text(json.dumps(doc))
+    r = cli("zap", "diff", str(machine), "bus", "--buses", "all")
+    assert r.exit_code == 1, r
+    assert sorted((x["bus"], x["id"], x["register"], x["a"]) for x in jsonl(r.stdout)) == [
+        ("left", 1, "speed-limit", 500), ("right", 1, "speed-limit", 600), ("right", 3, "acceleration", 33)]
+    r = cli("zap", "apply", str(machine), "-p", fresh["left"])          # one bus given: the file has two
+    assert (r.exit_code, r.stdout) == (2, "") and "keeps its actuators per bus" in r.stderr, r
+    r = cli("zap", "apply", str(machine), "--buses", "all")
+    assert r.exit_code == 0, r
+    assert sorted((x["bus"], x["id"], x["status"]) for x in jsonl(r.stdout)) == [
+        ("left", 1, "verified"), ("right", 1, "verified"), ("right", 3, "verified")]
+    assert state_of(tmp_path / "right2.json")[1]["speed-limit"] == 600
+    assert state_of(tmp_path / "left2.json")[1]["speed-limit"] == 500
+    r = cli("zap", "diff", str(machine), "bus", "--buses", "left,right")
+    assert (r.exit_code, r.stdout) == (0, ""), r
+    r = cli("zap", "diff", str(machine), "bus", "-p", fresh["left"])     # a single port: refused, not half a diff
+    assert (r.exit_code, r.stdout) == (2, ""), r

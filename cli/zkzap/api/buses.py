@@ -22,7 +22,7 @@ import threading
 from ..codec import zap
 from ..errors import UsageError
 
-BUS_KEYS = ("port", "baud", "ids")
+BUS_KEYS = ("port", "baud", "ids", "actuators")
 
 
 class BusSpec:
@@ -45,7 +45,7 @@ def check_buses(buses, fail) -> dict:
     for name, spec in buses.items():
         where = f"buses.{name}"
         if not isinstance(spec, dict):
-            fail(where, "expected an object with port, baud, ids")
+            fail(where, "expected an object with port, baud, ids (and a backup's actuators)")
         for k in spec:
             if k not in BUS_KEYS:
                 fail(f"{where}.{k}", f"unknown key; allowed {', '.join(BUS_KEYS)}")

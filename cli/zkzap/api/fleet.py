@@ -352,7 +352,7 @@ def document_map(doc, name="document", regmap=None):
     return found
 
 
-def check_document(doc, name="document", regmap=None) -> dict:
+def check_document(doc, name="document", regmap=None, *, _buses_out=None) -> dict:
     """{ID: :class:`Entry`} from a parsed document; DocumentError naming ``name`` and the key.
     Its register names, IDs and baud rates are checked against the map of its protocol and
     model (:func:`document_map`; ``regmap``: a user's map the document may name)."""
@@ -369,18 +369,45 @@ def check_document(doc, name="document", regmap=None) -> dict:
         if key not in TOP_KEYS:
             fail(key, f"unknown key; allowed {', '.join(TOP_KEYS)}")
     regmap = document_map(doc, name, regmap)
-    by_name = regmap.by_name
-    bauds = sorted(regmap.baud_codes.values())
+    per_bus = {}
     if doc.get("buses") is not None:
         from .buses import check_buses
 
         check_buses(doc["buses"], fail)
+        for bus, spec in doc["buses"].items():
+            if spec.get("actuators") is not None:
+                per_bus[bus] = check_entries(spec["actuators"], f"buses.{bus}.actuators", regmap, fail)
+                listed = sorted(per_bus[bus])
+                if sorted(spec["ids"]) != listed:
+                    fail(f"buses.{bus}.ids", f"{sorted(spec['ids'])} are not the IDs of its actuators ({listed})")
     actuators = doc.get("actuators")
+    if actuators is None and per_bus:
+        out = {}                              # every actuator is its bus's (buses.NAME.actuators)
+    else:
+        out = check_entries(actuators, "actuators", regmap, fail)
+    if _buses_out is not None:
+        _buses_out.update(per_bus)
+    return out
+
+
+def bus_documents(doc, name="document", regmap=None) -> dict:
+    """``{bus name: {ID: Entry}}`` of a parsed document whose buses carry their actuators
+    (``buses.NAME.actuators``, as ``zap backup`` of several buses writes them: an ID is that
+    bus's), checked as :func:`check_document` checks a document; ``{}`` when none does."""
+    per_bus: dict = {}
+    check_document(doc, name, regmap, _buses_out=per_bus)
+    return per_bus
+
+
+def check_entries(actuators, prefix, regmap, fail) -> dict:
+    """{ID: Entry} of one bus's ``actuators`` object (``prefix``: its key in the document)."""
+    by_name = regmap.by_name
+    bauds = sorted(regmap.baud_codes.values())
     if not isinstance(actuators, dict) or not actuators:
-        fail("actuators", "missing or empty; expected an object of actuators by ID")
+        fail(prefix, "missing or empty; expected an object of actuators by ID")
     out = {}
     for key, entry in actuators.items():
-        where = f"actuators.{key}"
+        where = f"{prefix}.{key}"
         ids = all_ids(regmap)
         try:
             ident = check_ident(regmap, str(key)) if re.fullmatch(r"\s*\d+\s*", str(key)) else None
@@ -1136,3 +1163,123 @@ def setup_one(bus, target, *, found, config=None, on_write=None, procedures=PROC
     r = bus.echo(target, check=False)
     record["errors"] = r.errors
     return record
+
+
+# -- several buses ---------------------------------------------------------------------------
+#
+# A machine's buses, each worked on its own thread (:func:`zkzap.api.buses.run`): a backup of
+# several buses names each (``buses.NAME``: port, baud, ids and its ``actuators``, an ID being that
+# bus's), and a diff or an apply matches the file's buses to the live ones by name.
+
+def backup_buses(specs, *, ids=None, bauds=None, scan=None, retries=2, open_bus=None, on_actuator=None) -> dict:
+    """A backup document of the buses of ``specs`` (:class:`~zkzap.api.buses.BusSpec`), each read
+    on its own thread: on each, the spec's IDs (each must answer), else ``ids``, found as
+    :func:`survey` finds them at ``bauds`` (default the spec's rate). ``on_actuator(bus, ID,
+    entry)`` is told of each actuator read (from the caller's thread)."""
+    from .. import __version__
+    from ..errors import NoReply
+    from . import buses
+
+    def work(bus, spec, emit, cancel):
+        wanted = list(spec.ids) or ids
+        found = survey(bus, wanted, bauds or [spec.baud], scan=scan if spec.ids else True, retries=retries)
+        missing = sorted(set(wanted or ()) - {r["id"] for r in found}) if spec.ids or ids else []
+        if not found or missing:
+            raise NoReply(f"bus {spec.name}: no reply from ID{'s' if len(missing) != 1 else ''} "
+                          f"{_ranges(missing) if missing else 'any'}", bus=spec.name, ids=missing)
+        emit({"doc": read_fleet(bus, found)})
+
+    parts = {}
+    for rec in buses.run(specs, work, open_bus=open_bus):
+        parts[rec["bus"]] = rec["doc"]
+        if on_actuator is not None:
+            for key, entry in rec["doc"]["actuators"].items():
+                on_actuator(rec["bus"], int(key), entry)
+    first = next(iter(parts.values()))
+    doc = {"format": FORMAT, "zkzap": __version__, "time": now_iso(), "protocol": first["protocol"],
+           "map": first["map"], "buses": {}}
+    for spec in specs:
+        acts = parts[spec.name]["actuators"]
+        doc["buses"][spec.name] = {"port": spec.port, "baud": spec.baud, "ids": sorted(int(k) for k in acts),
+                                   "actuators": acts}
+    return doc
+
+
+def match_buses(per_bus: dict, ports: dict, specs, name="the file") -> dict:
+    """``{live bus name: {ID: Entry}}``: for each live bus of ``specs`` the file's bus of its name,
+    or of its port (``ports``: the file's {bus name: port}); UsageError for a live bus the file
+    does not have."""
+    out = {}
+    for spec in specs:
+        key = spec.name if spec.name in per_bus else next((n for n, p in ports.items() if p == spec.port
+                                                            and n in per_bus), None)
+        if key is None:
+            raise UsageError(f"{name} has no bus {spec.name!r} with its actuators (it has "
+                             f"{', '.join(map(repr, per_bus)) or 'none'})", bus=spec.name)
+        out[spec.name] = per_bus[key]
+    return out
+
+
+def read_bus_document(path: str) -> tuple:
+    """``({bus name: {ID: Entry}}, {bus name: port}, name)`` of a backup of several buses."""
+    fmt = "json" if path == "-" else format_of(path)
+    doc, name = documents.read(path, "fleet", fmt)
+    return bus_documents(doc, name), bus_ports(doc), name
+
+
+def bus_ports(doc) -> dict:
+    """{bus name: port} of a parsed document's buses."""
+    return {n: b.get("port") for n, b in (doc.get("buses") or {}).items()}
+
+
+def diff_buses(a: dict, b: dict, **kw) -> list:
+    """Rows of :func:`diff` with ``bus`` first, comparing ``{bus: {ID: Entry}}`` bus by bus (a
+    bus on one side only: each of its actuators a row ``(actuator)``)."""
+    rows = []
+    for bus in list(a) + [n for n in b if n not in a]:
+        for row in diff(a.get(bus, {}), b.get(bus, {}), **kw):
+            rows.append(dict({"bus": bus}, **row))
+    return rows
+
+
+def live_buses(specs, *, ids=None, bauds=None, retries=2, open_bus=None) -> dict:
+    """``{bus name: {ID: Entry}}`` of the live buses of ``specs``, each read on its own thread as
+    :func:`bus_entries` reads one bus (``ids``: per bus name, the IDs to ask; default every one
+    that answers)."""
+    from . import buses
+
+    def work(bus, spec, emit, cancel):
+        emit({"entries": bus_entries(bus, (ids or {}).get(spec.name), bauds or [spec.baud], retries=retries)})
+
+    return {rec["bus"]: rec["entries"] for rec in buses.run(specs, work, open_bus=open_bus)}
+
+
+def apply_buses(specs, per_bus: dict, *, name="the file", only=None, skip=(), force=False, plan_only=False,
+                allow=None, open_bus=None, on_mismatch=None):
+    """Apply each bus's entries of ``per_bus`` ({bus name: {ID: Entry}}) to the live bus of that
+    name, each on its own thread: plan (:func:`plan_bus`), then unless ``plan_only`` execute
+    (:func:`execute`, each write read back). Yields ``("write", bus, Write)`` for each write
+    planned or made and ``("summary", bus, (unchanged, left out))`` per bus; an error on one
+    bus stops the others (and is raised when every thread has ended)."""
+    from . import buses
+
+    def work(bus, spec, emit, cancel):
+        entries = per_bus[spec.name]
+        pairs = assignments(entries)
+        writes, unchanged, current = plan_bus(bus, entries, pairs, name=f"{name} (bus {spec.name})", only=only,
+                                              skip=skip, force=force, on_mismatch=on_mismatch)
+        emit({"summary": (unchanged, left_out(entries, pairs, current, only=only, skip=skip), len(writes))})
+        if plan_only:
+            for w in writes:
+                emit({"write": w})
+            return
+        done: list = []
+        try:
+            execute(bus, writes, done, allow=allow, on_write=lambda w: emit({"write": w}))
+        finally:
+            emit({"done": (done, writes)})
+
+    for rec in buses.run(specs, work, open_bus=open_bus):
+        for kind in ("write", "summary", "done"):
+            if kind in rec:
+                yield kind, rec["bus"], rec[kind]

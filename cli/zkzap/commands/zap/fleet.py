@@ -14,8 +14,8 @@ from ...api import fleet
 from ...codec import zap
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, MORE_TO_DO, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
-from ..options import (Choice, InputPath, OutputPath, consent, exits, note, plural, protocol_options, resolve_format,
-                       protocol_option, warn, zap_map, zap_yes_option as yes_option)
+from ..options import (Choice, InputPath, OutputPath, buses_option, consent, exits, fleet_option, note, plural,
+                       protocol_options, resolve_format, protocol_option, warn, zap_map, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -124,7 +124,7 @@ class RegisterList(click.ParamType):
 
 #: -b of the fleet commands that search the bus: one baud rate, a list, or all (as zap scan).
 SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search: one, a list like 57600,115200, "
-                                                         "or 'all' (as zap scan) [env ZKZAP_ZAP_BAUD].")
+                                                         "or 'all' (as zap scan) [env ZKZAP_ZAP_BAUD].", several=True)
 
 
 @exits({NO_REPLY: "a listed ID does not answer (nothing written)",
@@ -142,7 +142,9 @@ SEARCH_BAUDS = dict(baud_type=actuator_bauds(), baud_help="Baud rates to search:
               help="Document format (default: from --output's suffix; JSON on stdout).")
 @link_options(**SEARCH_BAUDS)
 @protocol_options
-def backup(ids, scan_, output, fmt, **common):
+@buses_option("Back up")
+@fleet_option
+def backup(ids, scan_, output, fmt, bus_names=None, fleet_file=None, **common):
     """Back up every readable register of every actuator: a fleet document.
 
     The document groups the actuators by ID, each with its model number, firmware version and
@@ -165,6 +167,10 @@ def backup(ids, scan_, output, fmt, **common):
 
     The document names its protocol and register map (protocol, map): a Modbus RTU fleet's file
     is read back as one, and never applied to an IR bus (nor the other way round).
+
+    Several buses (-p again, or --buses NAMES of a --fleet file) are read at once, each on its
+    own thread: the document names each bus (buses.NAME: port, baud, ids and its actuators; an
+    ID is that bus's), and zap diff and zap apply take it bus by bus.
     """
     if output and output != "-":
         doc_fmt = fmt or fleet.format_of(output)
@@ -175,6 +181,12 @@ def backup(ids, scan_, output, fmt, **common):
         doc_fmt = fmt or "json"
     _ir_return_mode(common, "Load Data is never answered in feedback-return-mode 0")
     bauds = common["baud"]
+    if fleet_file and bus_names is None:
+        raise UsageError("--fleet: it names the buses of --buses; give --buses all (or NAMES) with it")
+    from .motion import several_buses
+
+    if several_buses(bus_names):
+        return _backup_buses(ids, output, doc_fmt, bus_names, fleet_file, common)
     search = scan_ or ids is None or len(bauds) > 1
     targets = ids if ids is not None else fleet.all_ids(zap_map())
     sim_ids = ids if ids is not None else [0]
@@ -241,7 +253,8 @@ DIFF_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("a"
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @link_options(**SEARCH_BAUDS)
 @protocol_options
-def diff(a, b, ids, everything, compare, fmt, **common):
+@buses_option("Compare")
+def diff(a, b, ids, everything, compare, fmt, bus_names=None, **common):
     """Compare two fleets: A and B are backup files or 'bus' (the live bus on -p).
 
     One row per actuator and register that differs: id, register, address, memory, a, b,
@@ -256,9 +269,17 @@ def diff(a, b, ids, everything, compare, fmt, **common):
       zap diff fleet.json bus -p /dev/ttyUSB0
       zap diff monday.json friday.yaml --compare settings
       zap diff fleet.json bus -p /dev/ttyUSB0 -f csv > drift.csv
+      zap diff machine.json bus --buses all                    # every bus the file names, at once
+
+    A backup of several buses is compared bus by bus (rows start with bus): with the bus, on
+    the buses it names (--buses all or NAMES; or -p once per bus, matched by name or port).
     """
     if a == "bus" and b == "bus":
         raise UsageError("diff: A and B are both the bus; compare a file with the bus")
+    from .motion import several_buses
+
+    if several_buses(bus_names) or _per_bus(a) or _per_bus(b):
+        return _diff_buses(a, b, ids, everything, compare, fmt, bus_names, common)
     sides = {}
     for label, src in (("A", a), ("B", b)):
         if src != "bus":
@@ -321,9 +342,10 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.option("-f", "--format", "fmt", type=Choice(ROW_FORMATS), default=None,
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
-@link_options
+@link_options(several=True)
 @protocol_option
-def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **common):
+@buses_option("Apply")
+def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_names=None, **common):
     """Make the bus match FILE: write the stored settings that differ, read each back.
 
     Reads every target actuator, computes the writes (a write that would change nothing is
@@ -349,7 +371,15 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, **comm
       zap apply fleet.json --ids 1 --to 2-8 -p /dev/ttyUSB0 --yes     # clone ID 1 onto 2..8
       zap apply old.json --map 1:5,2:6 --skip current-limit -p /dev/ttyUSB0 --yes
       zap apply fleet.json --only goal-speed,led -p /dev/ttyUSB0       # volatile settings
+      zap apply machine.json --buses all --yes                         # every bus the file names
+
+    A backup of several buses is applied bus by bus, each on its own thread (--buses all or
+    NAMES: the file's ports; or -p once per bus, matched by name or port); rows start with bus.
     """
+    from .motion import several_buses
+
+    if several_buses(bus_names) or _per_bus(file):
+        return _apply_buses(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_names, common)
     entries = fleet.read_document(file, common.get("regmap"))
     file = "stdin" if file == "-" else file
     _from_file(common, entries)
@@ -655,3 +685,163 @@ def _setup_summary(state):
     if skipped:
         parts.append(f"skipped {fleet._ranges(skipped)}")
     note("setup: " + "; ".join(parts))
+
+
+# -- several buses -------------------------------------------------------------------------------
+
+def _per_bus(path) -> bool:
+    """Whether a fleet file (not 'bus', not stdin) keeps its actuators per bus (a backup of several buses)."""
+    if path in ("bus", "-"):
+        return False
+    return bool(fleet.read_bus_document(path)[0])
+
+
+def _bus_specs(bus_names, fleet_file, common, ids=()):
+    from .motion import bus_specs
+
+    if common.get("protocol", "ir") != "ir":
+        raise UsageError("several buses: the IR protocol's buses (--protocol ir)")
+    _ir_return_mode(common, "Load Data is never answered in feedback-return-mode 0")
+    if bus_names is None and ports_given_() is None:
+        raise UsageError("this file keeps its actuators per bus: give --buses all (or NAMES), or -p once per bus")
+    return bus_specs(bus_names, fleet_file, common, "counts", ids)
+
+
+def ports_given_():
+    from ..options import ports_given
+
+    return ports_given()
+
+
+def _backup_buses(ids, output, doc_fmt, bus_names, fleet_file, common):
+    """zap backup of several buses: one thread a bus, one document naming each."""
+    from .motion import open_spec
+
+    specs = _bus_specs(bus_names, fleet_file, common, ids or ())
+    shown = sys.stderr.isatty() or common["verbose"]
+
+    def said(bus, ident, entry):
+        if shown:
+            note(f"bus {bus} ID {ident}: model 0x{entry['model']:04X}, firmware {entry['firmware']}, "
+                 f"{len(entry['stored'])} stored settings")
+
+    bauds = list(common["baud"]) if ports_given_() is not None else None
+    doc = fleet.backup_buses(specs, bauds=bauds, retries=common["retries"], open_bus=open_spec(common),
+                             on_actuator=said)
+    n = sum(len(b["actuators"]) for b in doc["buses"].values())
+    if output and output != "-":
+        fleet.dump_document(doc, output, doc_fmt)
+        note(f"{plural(n, 'actuator')} on {len(specs)} buses backed up to {output}")
+    else:
+        click.echo(fleet.dumps(doc, doc_fmt), nl=False)
+    bad = [(bus, i, e["errors"]) for bus, b in doc["buses"].items() for i, e in b["actuators"].items()
+           if e.get("errors")]
+    if bad:
+        from ...errors import DeviceError
+
+        raise DeviceError("; ".join(f"bus {bus} ID {i} reports {', '.join(errs)}" for bus, i, errs in bad))
+
+
+def _diff_buses(a, b, ids, everything, compare, fmt, bus_names, common):
+    """zap diff of backups of several buses, or of one with its live buses (one thread a bus)."""
+    from .motion import open_spec
+
+    if ids is not None:
+        raise UsageError("--ids: with several buses every actuator of each bus is compared")
+    sides, ports = {}, {}
+    for label, src in (("A", a), ("B", b)):
+        if src != "bus":
+            per_bus, ports[label], _ = fleet.read_bus_document(src)
+            if not per_bus:
+                raise UsageError(f"{src}: not a backup of several buses (no buses.NAME.actuators)")
+            sides[label] = per_bus
+    if "bus" in (a, b):
+        label = "A" if a != "bus" else "B"
+        specs = _bus_specs(bus_names, a if a != "bus" else b, common)
+        wanted = fleet.match_buses(sides[label], ports[label], specs, a if a != "bus" else b)
+        live = fleet.live_buses(specs, retries=common["retries"], open_bus=open_spec(common),
+                                bauds=list(common["baud"]) if ports_given_() is not None else None)
+        sides[label] = wanted
+        sides["B" if label == "A" else "A"] = live
+    rows = fleet.diff_buses(sides["A"], sides["B"], compare=compare, everything=everything)
+    table = [("bus", "bus")] + DIFF_TABLE + ([("equal", "equal")] if everything else [])
+    _write_rows(rows, ["bus"] + fleet.DIFF_COLUMNS, fmt, table_columns=table, title=f"A = {a}, B = {b}")
+    different = sum(1 for r in rows if not r["equal"])
+    if different:
+        note(f"{different} difference{'s' if different != 1 else ''} between {a} and {b} ({compare} registers, "
+             f"{len(set(sides['A']) | set(sides['B']))} buses)")
+        raise click.exceptions.Exit(1)
+    if sys.stderr.isatty() or common["verbose"]:
+        note(f"{a} and {b} are equal ({compare} registers)")
+
+
+def _apply_buses(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_names, common):
+    """zap apply of a backup of several buses: each bus planned and written on its own thread."""
+    from ...codec.permissions import FORCE, Permission
+    from .motion import open_spec
+
+    if ids is not None or mapping or to is not None:
+        raise UsageError("--ids, --map, --to: with several buses each bus's actuators are applied as the file has them")
+    if file == "-":
+        raise UsageError("several buses: give the backup as a file, not stdin")
+    per_bus, ports, _ = fleet.read_bus_document(file)
+    if not per_bus:
+        raise UsageError(f"{file}: not a backup of several buses (no buses.NAME.actuators)")
+    regmap = fleet.map_of(next(iter(per_bus.values())))
+    only_regs = fleet.registers_option(only, "--only", regmap) if only is not None else None
+    skip_regs = fleet.registers_option(skip, "--skip", regmap)
+    for reg in only_regs or ():
+        if reg.name in fleet.PROTECTED and not force:
+            raise UsageError(f"--only {reg.name}: this changes how the actuator is reached; add --force")
+    specs = _bus_specs(bus_names, file, common)
+    wanted = fleet.match_buses(per_bus, ports, specs, file)
+    real = any(not _simulated(s.port) for s in specs)
+    if real and not plan_only:
+        consent(f"apply {file} to {len(specs)} buses: it writes stored settings that survive power-off", yes)
+    allow = (FORCE if force else Permission.NONE) | (Permission.STORED if (yes or not real) else Permission.NONE)
+    records, summaries, made = [], {}, {}
+    from ...io.writers import make_writer
+
+    out_fmt = resolve_format(fmt, sys.stdout)
+    writer = make_writer(out_fmt, sys.stdout, ["bus"] + fleet.PLAN_COLUMNS, table_columns=[("bus", "bus")] + PLAN_TABLE,
+                         title=f"{'plan' if plan_only else 'applied'}: {file}")
+    try:
+        for kind, bus, item in fleet.apply_buses(specs, wanted, name=file, only=only_regs, skip=skip_regs, force=force,
+                                                  plan_only=plan_only, allow=allow, open_bus=open_spec(common),
+                                                  on_mismatch=warn):
+            if kind == "write":
+                row = dict({"bus": bus}, **item.record())
+                if out_fmt == "table":
+                    row = {k: ("-" if v is None or v == [] else v) for k, v in row.items()}
+                writer.write(row)
+                records.append((bus, item))
+            elif kind == "summary":
+                summaries[bus] = item
+            else:
+                made[bus] = item
+    except BaseException as e:
+        writer.close()
+        text = "; ".join(f"bus {b}: {len(d)} of {len(w)} writes made" for b, (d, w) in made.items())
+        click.echo(f"apply stopped ({e}): {text or 'no write made'}. Run the same apply again to finish "
+                   "(writes already made are skipped).", err=True)
+        raise
+    writer.close()
+    for bus, (unchanged, left, n) in summaries.items():
+        text = (f"bus {bus}: {plural(n, 'write')}{'' if plan_only or not n else ' made and verified'}; "
+                f"{plural(unchanged, 'setting')} already equal")
+        if left:
+            text += "; " + fleet.describe_left_out(left)
+        note(("plan: " if plan_only else "") + text + ("; nothing written" if plan_only else ""))
+    for bus, w in records:
+        if w.note:
+            note(f"bus {bus}: {w.note}")
+    bad = [(bus, w) for bus, w in records if not plan_only and w.status not in ("verified", "unverifiable")]
+    if bad:
+        raise CheckFailed("; ".join(f"bus {bus} ID {w.target}: {w.register.name} reads back {w.read_back}, wrote "
+                                    f"{w.new}" for bus, w in bad[:3]))
+
+
+def _simulated(port) -> bool:
+    from ...link.zap_bus import is_simulated
+
+    return is_simulated(port)
