@@ -243,3 +243,22 @@ def test_cycle_from_the_page_with_its_records_and_a_cancel_that_holds_the_rod(pa
     held = reg(tools_bus, 3, "goal-position")
     assert abs(reg(tools_bus, 3, "present-position") - held) <= 10
     assert console_errors(page) == []
+
+
+def test_a_play_cancelled_from_the_page_stops_every_actuator_where_it_is(page, tools_bus, tmp_path):
+    path = tmp_path / "long.csv"
+    path.write_text('t,id,position\n0,"1,2",3500\n30,"1,2",200\n')
+    css(page, "#play-file")[0].send_keys(str(path))
+    if css(page, "#play-interp")[0].is_selected():
+        click(page, "#play-interp")
+    click(page, "#play-go")
+    until(lambda: css(page, "#busy.show") and "play" in text_of(page, "#busy"), "the play under way")
+    until(lambda: reg(tools_bus, 1, "present-position") > 1000, "ID 1 on its way")
+    click(page, "#cancel")
+    until(lambda: "stopped: cancelled" in text_of(page, "#play-note"), "the cancel", timeout=30)
+    assert "cancelled from the page" in text_of(page, "#play-out")
+    until(lambda: not css(page, "#busy.show"), "the bus free again")
+    for i in (1, 2):
+        held = reg(tools_bus, i, "goal-position")
+        assert held != 200 and abs(reg(tools_bus, i, "present-position") - held) <= 10
+    assert console_errors(page) == []
