@@ -35,11 +35,19 @@ def page_file(tmp_path_factory):
 
 
 def test_the_page_renders_zooms_and_reads_out(browser, page_file):
-    from selenium.webdriver.common.action_chains import ActionChains
-
     text = open(page_file, encoding="utf-8").read()
     assert "<script src=" not in text                    # self-contained: plotly.js inlined, nothing fetched
+    size = browser.get_window_size()                     # the session's browser: given back as it was
     browser.set_window_size(1400, 1600)
+    try:
+        _check_page(browser, page_file)
+    finally:
+        browser.set_window_size(size["width"], size["height"])
+
+
+def _check_page(browser, page_file):
+    from selenium.webdriver.common.action_chains import ActionChains
+
     browser.get("file://" + page_file)
     console_errors(browser)
     until(lambda: js(browser, "const g = document.getElementById('histories-plot');"

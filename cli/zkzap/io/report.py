@@ -992,6 +992,8 @@ def _line_label(ax, y, text, colour, above=True):
 
 #: An averaging window's shade (settled, not settled): neither a state's colour.
 WINDOW_COLOURS = ("#c7c1dd", "#f2b8b5")
+#: The settle time's hatching.
+SETTLING_COLOUR = "#9aa7b8"
 
 
 def _shade_windows(ax, run, label=True, numbers=True):
@@ -1003,7 +1005,7 @@ def _shade_windows(ax, run, label=True, numbers=True):
     shown = set()
     for step, a, w0, w1, ok in step_windows(run):
         if w0 > a:
-            ax.axvspan(a, w0, facecolor="none", edgecolor="#9aa7b8", hatch="///", linewidth=0, zorder=0.5,
+            ax.axvspan(a, w0, facecolor="none", edgecolor=SETTLING_COLOUR, hatch="///", linewidth=0, zorder=0.5,
                        label="settling" if label and first else None)
         if w1 > w0:
             what = "averaging window" if ok else "averaging window (not settled)"

@@ -147,6 +147,9 @@ def _histories(go, runs, panels, limits):
             keys.setdefault(f"state: {group}", colour)
             shade(t0, t1, colour, 1.0)
     for step, a, w0, w1, ok in R.step_windows(ref) if ref.steps else ():
+        if w0 > a:                                   # the settle time: hatched on paper, grey here
+            keys.setdefault("settling", R.SETTLING_COLOUR)
+            shade(a, w0, R.SETTLING_COLOUR, 0.35)
         if w1 > w0:
             colour = R.WINDOW_COLOURS[0 if ok else 1]
             keys.setdefault("averaging window" if ok else "averaging window (not settled)", colour)
