@@ -94,6 +94,11 @@ def test_logbook_at_80_columns_in_a_terminal(tmp_path):
         screen
     totals = " ".join(x.strip() for x in lines[lines.index(next(x for x in lines if x.startswith("totals:"))):])
     assert "12.646 L fuel" in totals.replace("\u00a0", " ") and "max rpm 151234" in totals.replace("\u00a0", " ")
+    # the totals alone: a row per figure, whole at 80 columns
+    status, lines = run_in_terminal(zk("logbook", db, "--totals"), width=80)
+    screen = "\n".join(lines)
+    assert status == 0 and "left out" not in screen and all(len(x) <= 80 for x in lines), screen
+    assert re.search(r"│ fuel_used_l +│ 12.646 +│", screen) and re.search(r"│ max_rpm +│ 151234 +│", screen), screen
     # at 160 columns every column is there, boxed as before
     status, wide = run_in_terminal(zk("logbook", db), width=160)
     wide = "\n".join(wide)

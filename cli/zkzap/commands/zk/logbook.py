@@ -90,7 +90,10 @@ def logbook(logbook_file, fmt, only_totals, last, engine, above, service, note):
         click.echo(json.dumps(doc, ensure_ascii=False, indent=2))
         return
     if only_totals:
-        write_rows([totals], list(totals), fmt)
+        if fmt == "table":
+            _figures([totals], ["value"], f"logbook {logbook_file}: totals")
+        else:
+            write_rows([totals], list(totals), fmt)
         return
     _runs(recs, fmt, f"logbook {logbook_file}: {len(recs)} runs")
     if fmt == "table":
@@ -114,6 +117,16 @@ def _runs(recs, fmt, title):
     write_rows([dict(r, throttle_s=";".join(f"{k}={v:g}" for k, v in sorted(r["throttle_s"].items(),
                                                                               key=lambda kv: int(kv[0]))))
                 if fmt == "csv" else r for r in recs], list(lb.COLUMNS), fmt)
+
+
+def _figures(rows, headings, title):
+    """Totals on a terminal: a row per figure, a column per set of totals (``headings``), so that
+    they fit a narrow terminal whole."""
+    from ..options import write_rows
+
+    table = [{"figure": k, **{str(j): r.get(k) for j, r in enumerate(rows)}} for k in rows[0]]
+    write_rows(table, ["figure", *map(str, range(len(rows)))], "table", title=title,
+               table_columns=[("figure", "figure")] + [(str(j), h) for j, h in enumerate(headings)])
 
 
 def _totals_text(t) -> str:
@@ -156,6 +169,10 @@ def _engine(path, engine, above, fmt, only_totals, last):
     for r in rows:
         for pct, h in (r.pop("hours_above", None) or {}).items():
             r[f"hours_above_{pct}"] = h
+    if only_totals and fmt == "table":
+        _figures([{k: v for k, v in r.items() if k not in ("engine", "period")} for r in rows],
+                 [r["period"] for r in rows], f"engine {engine}: totals")
+        return
     if only_totals or fmt != "table":
         write_rows(rows, list(rows[0]), fmt)
         return
