@@ -132,15 +132,18 @@ def web():
 
 
 def _make_zap():
+    from .options import protocol_options
     from .zap.compose import link_options
 
     @click.command("zap", cls=Command, context_settings=CONTEXT)
     @click.option("--rate", type=FiniteRange(0.5, 1000), default=30.0, show_default=True, metavar="HZ",
                   help="Polls of the actuators per second at most (the line may allow fewer).")
-    @click.option("--scan-ids", "scan_ids", default="0-253", show_default=True, metavar="LIST",
-                  help="The IDs the first scan searches, like 1-8 ('none': no scan at the start).")
+    @click.option("--scan-ids", "scan_ids", default=None, metavar="LIST",
+                  help="The IDs the first scan searches, like 1-8 ('none': no scan at the start) [default: "
+                       "0-253; 1-247 on Modbus RTU].")
     @web_options
     @link_options
+    @protocol_options
     def zap_web(rate, scan_ids, listen, token, token_file, open_browser, **common):
         """Serve a browser console for the actuators on one port.
 
@@ -160,14 +163,24 @@ def _make_zap():
           zkzap web zap -p /dev/ttyUSB0
           zkzap web zap --sim --sim-ids 1-6
           zkzap web zap -p /dev/ttyUSB0 --listen 0.0.0.0:8470 --token auto
+          zkzap web zap --protocol modbus -p /dev/ttyUSB0      # 17Lf actuators
+
+        With --protocol modbus the page says so and its register table is the map's (--map, else
+        the 17Lf's control table), edited with the same consent rules.
         """
         from .. import web as webpkg
-        from ..api.zap import Bus
         from .zap.compose import _link_args, open_link
 
+        modbus = common["protocol"] == "modbus"
+        if modbus:
+            from ..api.zap_modbus import ModbusBus as Bus
+        else:
+            from ..api.zap import Bus
         webpkg.require()
         token = read_token(token, token_file)
         check_access(listen, token)
+        if scan_ids is None:
+            scan_ids = "1-247" if modbus else "0-253"
         ids = None if scan_ids.strip().lower() == "none" else _ids(scan_ids)
         args = _link_args(common)
         if args["sim"] and not args["sim_ids"]:

@@ -70,7 +70,17 @@ def _direct_write(reg, value) -> bytes:
     return zap.packet(1, zap.STORE_DATA, bytes((reg.address,)) + reg.to_bytes(value))
 
 
-def force_values(reg) -> list:
+def _write_permissions(reg, value, regmap=None):
+    """What the console's direct write of ``value`` to ``reg`` needs, decided on the frame it
+    sends: an IR Store Data, or on a Modbus map (``regmap``) a Write Multiple Registers."""
+    if regmap is not None and regmap.protocol == "modbus":
+        from ..codec import modbus
+
+        return modbus.Request(modbus.write_registers(1, reg.address, [value])).permissions(regmap)
+    return zap.Command(_direct_write(reg, value)).permissions
+
+
+def force_values(reg, regmap=None) -> list:
     """The values of register ``reg`` whose direct write from the console needs force, as the
     library decides it on the packet (:meth:`zkzap.codec.zap.Command.needs`): every value of a
     register whose write changes where or how the actuator answers (protocol-type), the values
@@ -80,16 +90,17 @@ def force_values(reg) -> list:
     if reg.name in CHECKED or not reg.writable:
         return []
     values = sorted(reg.choices) if reg.choices else sorted({reg.lo, reg.hi})
-    return [v for v in values if zap.Command(_direct_write(reg, v)).permissions & P.FORCE]
+    return [v for v in values if _write_permissions(reg, v, regmap) & P.FORCE]
 
 
-def needs_force(reg, value=None) -> bool:
+def needs_force(reg, value=None, regmap=None) -> bool:
     """Whether the console's direct write of register ``reg`` needs force: of ``value``, or
-    (None) whatever value is written (protocol-type: the page marks its button)."""
+    (None) whatever value is written (protocol-type: the page marks its button); ``regmap``:
+    a Modbus map (its frames decide)."""
     if value is not None:
-        return reg.name not in CHECKED and bool(zap.Command(_direct_write(reg, value)).permissions & P.FORCE)
+        return reg.name not in CHECKED and bool(_write_permissions(reg, value, regmap) & P.FORCE)
     values = sorted(reg.choices) if reg.choices else sorted({reg.lo, reg.hi})
-    return bool(values) and force_values(reg) == values
+    return bool(values) and force_values(reg, regmap) == values
 
 
 class Policy:

@@ -18,7 +18,7 @@ import time
 
 from ..api import fleet
 from ..api.watch import Watcher
-from ..codec import zap
+from ..codec import modbus, zap
 from ..codec.fields import FieldValueError
 from ..errors import BadReply, CheckFailed, NoReply, UsageError
 from .consent import force_values, needs_force
@@ -53,6 +53,9 @@ class ZapConsole(PacketTools, MotionTools, Console):
     def __init__(self, bus, *, rate=30.0, scan_ids=range(254), retries=2):
         super().__init__(bus.url, simulated=bus.link.simulated)
         self.bus = bus
+        #: The bus's protocol family, and its register map on Modbus RTU (None: the 12Lf's IR table).
+        self.protocol = getattr(bus, "protocol", "ir")
+        self.map = bus.map if self.protocol == "modbus" else None
         self.rate = rate
         self.retries = retries
         self.actuators = {}           # ID -> record (identity, baud, status, errors)
@@ -90,7 +93,8 @@ class ZapConsole(PacketTools, MotionTools, Console):
     def _watch(self, ids):
         """Poll ``ids`` until a request comes (between two polls) or the console closes."""
         plotted = self.plotted
-        w = Watcher(self.bus.link, ids, LIVE + ([plotted] if plotted is not None else []), rate=self.rate, retries=0)
+        w = Watcher(self.bus.link, ids, self.live() + ([plotted] if plotted is not None else []), rate=self.rate,
+                    retries=0)
         self._polling = True
         try:
             for row in w.rows():
@@ -107,7 +111,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
     def _sample(self, row, plotted=None):
         item = {"w": round(time.time() * 1000, 1), "id": row["id"], "status": row["status"],
                 "errors": row["errors"], "rtt": row["rtt_ms"]}
-        for reg in LIVE:
+        for reg in self.live():
             v = row.get(reg.name)
             item[SHORT[reg.name]] = reg.physical(v) if v is not None else None
         if plotted is not None:
@@ -190,10 +194,36 @@ class ZapConsole(PacketTools, MotionTools, Console):
         self._progress_t = now
         self.broadcast({"type": "progress", "job": job, "done": done, "total": total, "text": text})
 
+    # the protocol's table: the 12Lf's IR registers, or the Modbus map's ------------------------
+
+    def reg(self, name):
+        """A register by name or address, of the bus's map."""
+        try:
+            return self.map.register(name) if self.map is not None else zap.register(name)
+        except FieldValueError as e:
+            raise UsageError(str(e)) from None
+
+    def live(self) -> list:
+        """What the live view polls: LIVE's registers that the map has."""
+        if self.map is None:
+            return LIVE
+        return [self.map.by_name[r.name] for r in LIVE if r.name in self.map.by_name]
+
+    @property
+    def max_id(self) -> int:
+        return modbus.MAX_ID if self.map is not None else zap.MAX_ID
+
+    @property
+    def bauds(self) -> list:
+        return sorted(self.map.baud_codes.values(), reverse=True) if self.map is not None else list(zap.BAUD_TO_CODE)
+
     def hello(self):
         out = super().hello()
-        out.update({"baud": self.bus.baud, "bauds": list(zap.BAUD_TO_CODE), "rate": self.rate,
-                    "return_mode": self.bus.return_mode, "registers": [_register_info(r) for r in zap.REGISTERS],
+        registers = self.map.registers if self.map is not None else zap.REGISTERS
+        out.update({"baud": self.bus.baud, "bauds": self.bauds, "rate": self.rate,
+                    "protocol": self.protocol, "model": self.map.model if self.map is not None else "12Lf",
+                    "return_mode": self.bus.return_mode,
+                    "registers": [_register_info(r, self.map) for r in registers],
                     "protected": list(fleet.PROTECTED), "formats": list(fleet.SUFFIXES.values())})
         out.update(self.tools_hello())
         return out
@@ -208,7 +238,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
         self.broadcast(self._table_message())
 
     def _known(self, msg, key="id"):
-        ident = number(msg, key, int, 0, zap.MAX_ID, "id")
+        ident = number(msg, key, int, 0, self.max_id, "id")
         if ident not in self.actuators:
             raise UsageError(f"id: no actuator {ident} was found; scan first")
         return ident
@@ -217,12 +247,15 @@ class ZapConsole(PacketTools, MotionTools, Console):
 
     def op_scan(self, ctx, msg):
         try:
-            ids = zap.parse_id_list(str(msg.get("ids") or "0-253"), "ids")
+            ids = zap.parse_id_list(str(msg.get("ids") or ("1-247" if self.map is not None else "0-253")), "ids")
         except FieldValueError as e:
             raise UsageError(str(e)) from None
+        if self.map is not None:
+            for i in ids:
+                modbus.check_id(i, allow_broadcast=False)
         bauds = msg.get("bauds") or [self.bus.baud]
-        if not isinstance(bauds, list) or not all(isinstance(b, int) and b in zap.BAUD_TO_CODE for b in bauds):
-            raise UsageError(f"bauds: {bauds!r}; allowed {', '.join(map(str, zap.BAUD_TO_CODE))}")
+        if not isinstance(bauds, list) or not all(isinstance(b, int) and b in self.bauds for b in bauds):
+            raise UsageError(f"bauds: {bauds!r}; allowed {', '.join(map(str, self.bauds))}")
         self._scan(ctx, ids, bauds)
 
     def _scan(self, ctx, ids, bauds):
@@ -279,7 +312,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
 
     def op_move(self, ctx, msg):
         ident = self._known(msg)
-        pos = number(msg, "position", int, 0, R["goal-position"].hi, "goal-position")
+        pos = number(msg, "position", int, 0, self.reg("goal-position").hi, "goal-position")
         self.bus.move(ident, pos, wait=False)
         self.reply(ctx, id=ident, position=pos)
 
@@ -289,7 +322,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
         wrote = {}
         for key, name in (("speed", "goal-speed"), ("current", "goal-current")):
             if msg.get(key) is not None:
-                wrote[name] = number(msg, key, int, R[name].lo, R[name].hi, name)
+                wrote[name] = number(msg, key, int, self.reg(name).lo, self.reg(name).hi, name)
         if not wrote:
             raise UsageError("goals: give speed or current")
         for name, value in wrote.items():
@@ -304,7 +337,8 @@ class ZapConsole(PacketTools, MotionTools, Console):
         out = {}
         for key, value in targets.items():
             ident = self._known({"id": key})
-            out[ident] = number({"p": value}, "p", int, 0, R["goal-position"].hi, f"goal-position of ID {ident}")
+            out[ident] = number({"p": value}, "p", int, 0, self.reg("goal-position").hi,
+                                f"goal-position of ID {ident}")
         self.bus.sync_move(out)
         self.log(f"{ctx.label}: sync-move " + ", ".join(f"ID {i} to {p}" for i, p in out.items()))
         self.reply(ctx, targets=out)
@@ -331,10 +365,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
 
     def op_write(self, ctx, msg):
         ident = self._known(msg)
-        try:
-            reg = zap.register(str(msg.get("register")))
-        except FieldValueError as e:
-            raise UsageError(str(e)) from None
+        reg = self.reg(str(msg.get("register")))
         if not reg.writable:
             raise UsageError(f"{reg.name} is read-only")
         value = number(msg, "value", int, what=reg.name)
@@ -350,7 +381,7 @@ class ZapConsole(PacketTools, MotionTools, Console):
             self.reply(ctx, id=new, register=reg.name, value=new)
             return
         if reg.name == "baud-rate":
-            baud = zap.BAUD_CODES[value]
+            baud = self.map.baud_codes[value] if self.map is not None else zap.BAUD_CODES[value]
             was = self.bus.baud
             try:
                 self.bus.set_baud(ident, baud)
@@ -501,12 +532,12 @@ JOBS = ("scan", "backup", "diff", "apply", "check")
 MOTION_JOBS = ("play", "cycle")
 
 
-def _register_info(reg) -> dict:
+def _register_info(reg, regmap=None) -> dict:
     return {"name": reg.name, "address": reg.address, "size": reg.size, "access": reg.access,
             "memory": reg.memory, "lo": reg.lo, "hi": reg.hi, "unit": reg.unit, "scale": reg.scale,
             "choices": {str(k): v for k, v in reg.choices.items()} if reg.choices else None,
             "range": reg.describe_range(), "help": reg.help, "default": reg.default,
-            "protected": needs_force(reg), "force_values": force_values(reg)}
+            "protected": needs_force(reg, regmap=regmap), "force_values": force_values(reg, regmap)}
 
 
 def _ranges(ids) -> str:

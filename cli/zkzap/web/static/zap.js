@@ -4,6 +4,7 @@
   const { $, el, fmt, setText } = Z;
   let actuators = [];             // the scan's records
   let busBaud = null;
+  let protocol = "ir";            // the bus's protocol family (hello): a Modbus map's addresses are decimal
   const live = {};                // id -> latest sample
   const rows = {};                // id -> row elements
   let plots = null, plotIds = "";
@@ -145,7 +146,7 @@
         edit = el("div", { class: "row" }, input, btn);
       }
       const phys = rec.physical !== undefined ? `${rec.physical} ${rec.unit}` : rec.meaning ? rec.meaning : rec.unit ? `${rec.value} ${rec.unit}` : "";
-      tb.append(el("tr", {}, el("td", { class: "mono dim", text: "0x" + rec.address.toString(16).toUpperCase().padStart(2, "0") }),
+      tb.append(el("tr", {}, el("td", { class: "mono dim", text: protocol === "modbus" ? String(rec.address) : "0x" + rec.address.toString(16).toUpperCase().padStart(2, "0") }),
         el("td", { class: "name", text: rec.register, title: info.help || "" }), el("td", {}, mem),
         el("td", { class: "num", text: rec.value }), el("td", { class: "dim", text: phys }),
         el("td", { class: "dim small", text: info.choices ? `${Object.keys(info.choices).length} choices` : info.range || "" }),
@@ -207,6 +208,10 @@
   const handlers = {
     hello(m) {
       busBaud = m.baud;
+      $("#protocol").textContent = (m.protocol === "modbus" ? "Modbus RTU" : "IR protocol") + ` · ${m.model}`;
+      $("#protocol").dataset.protocol = m.protocol;
+      protocol = m.protocol;
+      if (m.protocol === "modbus" && $("#scan-ids").value === "0-253") $("#scan-ids").value = "1-247";
       regInfo = Object.fromEntries(m.registers.map(r => [r.name, r]));
       const box = $("#scan-bauds");
       box.replaceChildren(...m.bauds.map(b => el("label", { class: "inline" },
