@@ -9,6 +9,11 @@ position, ``moving`` and current: a rod that stops advancing while ``moving`` st
 stall, named with the current it drew against the goal current. Whatever happens after the
 move started, the original goal position is written back (and the force left on).
 
+On Modbus RTU (the 17Lf, ``bus`` a :class:`~zkzap.link.modbus_bus.ModbusBus`) the same checks
+run over its map: the error bits are its hardware-error register's, the echo is a read of its
+model number, and the voltage check is skipped (its map gives no voltage limits, and the
+present voltage's unit is not documented: the raw value is shown).
+
 Nothing here imports click or rich.
 """
 
@@ -48,18 +53,63 @@ class Motion:
         self.errors = set()
 
 
+def _modbus(bus) -> bool:
+    m = getattr(bus, "regmap", None)
+    return m is not None and m.protocol == "modbus"
+
+
+def _reg(bus, name):
+    return bus.regmap.by_name[name] if _modbus(bus) else R[name]
+
+
+def _read(bus, ident, name) -> tuple:
+    """``(raw, error names)`` of one register: a Load Data on IR (the reply's error bits), a read on
+    Modbus RTU (an exception reply raises; the error bits are the hardware-error register's)."""
+    reg = _reg(bus, name)
+    if _modbus(bus):
+        _, values = bus.read_registers(ident, reg.address, 1)
+        return values[0][1], []
+    rep = bus.load(ident, reg.address, reg.size, check=False)
+    return rep.value, rep.errors
+
+
+def _store(bus, ident, name, value):
+    return bus.store(ident, _reg(bus, name), value, check=_modbus(bus))
+
+
+def _motion(bus, ident) -> tuple:
+    """``({present-position, moving, present-current}, error names)``: one Load Data on IR; on the
+    17Lf, whose table has a gap between them, moving first and then position and current (a rod
+    read "stopped" has stopped where the position read after it says)."""
+    if _modbus(bus):
+        m = bus.regmap.by_name
+        moving = bus.read_registers(ident, m["moving"].address, 1)[1][0][1]
+        _, values = bus.read_registers(ident, m["present-position"].address, 2)
+        v = {reg.name: raw for reg, raw in values}
+        v["moving"] = moving
+        hw = bus.read_registers(ident, m["hardware-error"].address, 1)[1][0][1]
+        return v, error_bits(bus, hw)
+    length = MOTION_LAST.address + MOTION_LAST.size - MOTION_FIRST.address
+    reply, values = bus.read_registers(ident, MOTION_FIRST.address, length, check=False)
+    return {reg.name: raw for reg, raw in values}, reply.errors
+
+
+def error_bits(bus, raw) -> list:
+    """The names of the hardware-error register's bits (Modbus RTU)."""
+    bits = bus.regmap.by_name["hardware-error"].bits or {}
+    return [bits.get(b, f"bit {b}").replace(" ", "-") for b in range(16) if raw >> b & 1]
+
+
 def move_and_wait(bus, ident, goal, *, margin, timeout, poll=0.005, clock=time.monotonic):
     """Write goal-position ``goal`` and follow the rod until it stops, stalls or ``timeout``."""
     m = Motion()
-    length = MOTION_LAST.address + MOTION_LAST.size - MOTION_FIRST.address
-    bus.store(ident, R["goal-position"], goal, check=False)
+    _store(bus, ident, "goal-position", goal)
     t0 = clock()
     mark_t, mark_pos = t0, None
     while True:
-        reply, values = bus.read_registers(ident, MOTION_FIRST.address, length, check=False)
+        v, errs = _motion(bus, ident)
         now = clock()
-        m.errors.update(reply.errors)
-        v = {reg.name: raw for reg, raw in values}
+        m.errors.update(errs)
         pos, moving, current = v["present-position"], v["moving"], v["present-current"]
         m.position = pos
         m.peak_current = max(m.peak_current, current)
@@ -98,22 +148,29 @@ def check_actuator(bus, ident, *, move=True, move_timeout=10.0, clock=time.monot
             add(name, "skipped", detail="no echo")
         add("verdict", "fail", detail="does not answer")
         return rows
-    errors.update(r.errors)
+    modbus = _modbus(bus)
+    if not modbus:
+        errors.update(r.errors)
     add("echo", "pass", round(r.rtt * 1000, 2), detail="rtt ms")
 
     # identity and voltage: one read of model-number .. highest-limit-voltage and the present voltage
     def read(reg):
-        rep = bus.load(ident, reg.address, reg.size, check=False)
-        errors.update(rep.errors)
-        return rep.value
+        value, errs = _read(bus, ident, reg.name)
+        errors.update(errs)
+        return value
 
-    model, fw = read(R["model-number"]), read(R["firmware-version"])
+    model, fw = read(_reg(bus, "model-number")), read(_reg(bus, "firmware-version"))
     add("identity", "pass", f"0x{model:04X}/{fw}", detail="model/firmware")
-    lo, hi, volts = read(R["lowest-limit-voltage"]), read(R["highest-limit-voltage"]), read(R["present-voltage"])
-    vr = R["present-voltage"]
-    ok = lo <= volts <= hi
-    add("voltage", "pass" if ok else "fail", vr.physical(volts), f"{vr.physical(lo):g}..{vr.physical(hi):g} V",
-        detail="" if ok else "supply outside the actuator's voltage limits")
+    if modbus:
+        volts = read(_reg(bus, "present-voltage"))
+        add("voltage", "skipped", volts, detail="raw: the 17Lf's map gives no voltage limits (nor the unit)")
+        errors.update(error_bits(bus, read(_reg(bus, "hardware-error"))))
+    else:
+        lo, hi, volts = read(R["lowest-limit-voltage"]), read(R["highest-limit-voltage"]), read(R["present-voltage"])
+        vr = R["present-voltage"]
+        ok = lo <= volts <= hi
+        add("voltage", "pass" if ok else "fail", vr.physical(volts), f"{vr.physical(lo):g}..{vr.physical(hi):g} V",
+            detail="" if ok else "supply outside the actuator's voltage limits")
     bits = sorted(errors)
     add("errors", "error" if bits else "pass", ", ".join(bits) or "none",
         detail="; ".join(zap.ERROR_TEXT.get(b, b) for b in bits))
@@ -124,11 +181,11 @@ def check_actuator(bus, ident, *, move=True, move_timeout=10.0, clock=time.monot
         add("force", "skipped", detail="--no-move")
         add("restore", "skipped", detail="--no-move")
     else:
-        original = read(R["goal-position"])
-        short, long_ = read(R["short-stroke-limit"]), read(R["long-stroke-limit"])
+        original = read(_reg(bus, "goal-position"))
+        short, long_ = read(_reg(bus, "short-stroke-limit")), read(_reg(bus, "long-stroke-limit"))
         short, long_ = min(short, long_), max(short, long_)
-        margin = read(R["end-compliance-margin"])
-        goal_current = read(R["goal-current"])
+        margin = read(_reg(bus, "end-compliance-margin"))
+        goal_current = read(_reg(bus, "goal-current"))
         try:
             first = move_and_wait(bus, ident, short, margin=margin, timeout=move_timeout, clock=clock)
             errors.update(first.errors)
@@ -145,10 +202,10 @@ def check_actuator(bus, ident, *, move=True, move_timeout=10.0, clock=time.monot
                     add("stroke", "fail", full.position, f"{short}..{long_}",
                         detail=_why(full, long_, goal_current, "to the long stroke limit"))
             # force off, then on
-            force = R["force-on-off"]
-            bus.store(ident, force, 0, check=False)
+            force = _reg(bus, "force-on-off")
+            _store(bus, ident, force.name, 0)
             off = read(force)
-            bus.store(ident, force, 1, check=False)
+            _store(bus, ident, force.name, 1)
             on = read(force)
             ok = off == 0 and on == 1
             add("force", "pass" if ok else "fail", f"{off}/{on}", "0/1",

@@ -8,7 +8,8 @@ import click
 
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, DeviceError, OK, UsageError
 from .. import CONTEXT, Command
-from ..options import Choice, FiniteRange, consent, exits, resolve_format, zap_move_yes_option as yes_option
+from ..options import (Choice, FiniteRange, consent, exits, protocol_options, resolve_format,
+                       zap_move_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList
 
@@ -28,6 +29,7 @@ TABLE = [("id", "id"), ("check", "check"), ("verdict", "verdict"), ("value", "va
               help="Output format (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options
+@protocol_options
 def check(ids, no_move, move_timeout, fmt, yes, **common):
     """Self-check actuators: echo, model and firmware, supply voltage within the actuator's
     limits, error bits, a full-stroke move, force off and on, and the original goal restored.
@@ -44,12 +46,16 @@ def check(ids, no_move, move_timeout, fmt, yes, **common):
     Examples:
       zap check --ids 1-4 -p /dev/ttyUSB0 --yes
       zap check --ids 1 --no-move -p /dev/ttyUSB0 -f json
+      zap check --protocol modbus --ids 1-2 -p /dev/ttyUSB0 --yes
+
+    With --protocol modbus (the 17Lf) the error bits are its hardware-error register's, and the
+    voltage check is skipped: its map gives no voltage limits (the raw value is shown).
     """
     from ...api.selfcheck import COLUMNS, check_actuator
     from ...io.writers import make_writer
     from ...link.zap_bus import is_simulated
 
-    if common["return_mode"] == "0":
+    if common["return_mode"] == "0" and common.get("protocol", "ir") == "ir":
         raise UsageError("--return-mode 0: Load Data is never answered, so nothing can be checked")
     if not no_move and not (common["sim"] or is_simulated(common["port"])):
         consent(f"check moves actuator{'s' if len(ids) > 1 else ''} {', '.join(map(str, ids))} on {common['port']} "
