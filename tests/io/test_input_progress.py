@@ -50,13 +50,17 @@ def test_a_large_input_gets_a_progress_bar_on_a_terminal(tmp_path):
     reader.start()
     with os.fdopen(slave, "w", encoding="utf-8") as stream:
         with input_progress(stream, minimum=1 << 20):
-            _slowly(big)
+            threads = threading.active_count()
+            with input_progress(stream, minimum=1 << 20):       # a command inside (a batch's line)
+                assert threading.active_count() == threads      # no second watcher: one bar
+                _slowly(big)
     stop.set()
     reader.join(5)
     got.append(_drain(master))
     os.close(master)
     screen = b"".join(got).decode("utf-8", "replace")
     assert "reading capture.bin" in screen and "/4.2 MB" in screen, screen
+    assert screen.count("reading capture.bin") == screen.count("/4.2 MB")
     assert reading() == []                      # closed: no longer an input being read
 
 

@@ -169,6 +169,8 @@ def fitted_table(headings, rows, width, *, title=None, caption=None, priority=No
 PROGRESS_MIN = 32 << 20
 #: Live views drawing on the terminal now (a progress bar stands aside for them).
 _live = [0]
+#: Progress watchers running (one at a time: the outermost command's).
+_watching = [0]
 
 
 def live_view(on: bool) -> None:
@@ -183,9 +185,10 @@ def input_progress(stream=None, minimum=None):
     bytes read, speed and the time left; shown only while such a file is open and no live view
     draws, erased after. Nothing at all when ``stream`` is no terminal (no thread, no rich)."""
     stream = stream if stream is not None else sys.stderr
-    if not is_tty(stream):
+    if not is_tty(stream) or _watching[0]:          # a command inside another's (a batch line): one bar
         yield
         return
+    _watching[0] += 1
     stop = threading.Event()
     worker = threading.Thread(target=_progress, args=(stream, stop, minimum or PROGRESS_MIN), daemon=True,
                               name="zkzap-input-progress")
@@ -195,6 +198,7 @@ def input_progress(stream=None, minimum=None):
     finally:
         stop.set()
         worker.join(5)
+        _watching[0] -= 1
 
 
 def _progress(stream, stop, minimum, interval=0.25):
