@@ -31,8 +31,27 @@ def bus_of():
 
 
 def stores(bus, since=0):
-    """Store Data packets the simulated actuators heard since index ``since``."""
+    """Writes the simulated actuators heard since index ``since``: Store Data packets (IR), Write
+    Multiple Registers frames (Modbus RTU)."""
+    if fleet.regmap_of(bus).protocol == "modbus":
+        return [p for p in list(bus.port.device.received)[since:] if p[1] == 0x10]
     return [p for p in list(bus.port.device.received)[since:] if p[5] == 0xF3]
+
+
+@pytest.fixture(params=["ir", "modbus"])
+def proto_bus(request):
+    """bus_of over each protocol family (the 12Lf's IR, the 17Lf's Modbus RTU)."""
+    opened = []
+
+    def make(ids="1,2,3"):
+        q = "&protocol=modbus" if request.param == "modbus" else ""
+        bus = open_bus(f"sim://zap?ids={ids}{q}", 57600, protocol=request.param)
+        opened.append(bus)
+        return bus
+
+    yield make
+    for b in opened:
+        b.close()
 
 
 def configured(bus):
@@ -149,8 +168,8 @@ def test_diff_lists_only_differences(bus_of):
     assert volts["unit"] == "0.1 V" and volts["memory"] == "R"
 
 
-def test_backup_of_bus_a_applied_to_fresh_bus_b_takes_exactly_the_minimal_writes(bus_of):
-    a, b = bus_of(), bus_of()
+def test_backup_of_bus_a_applied_to_fresh_bus_b_takes_exactly_the_minimal_writes(proto_bus):
+    a, b = proto_bus(), proto_bus()
     changed = configured(a)
     entries = fleet.check_document(json.loads(json.dumps(fleet.read_bus(a, [1, 2, 3]))))
     mark = len(b.port.device.received)
@@ -195,10 +214,11 @@ def test_plan_rules(bus_of):
     assert [x.register.name for x in w] == ["speed-limit", "id"]               # id last
 
 
-def test_an_id_write_through_apply_is_checked_free_like_set_id(bus_of):
+def test_an_id_write_through_apply_is_checked_free_like_set_id(proto_bus):
     from zkzap.errors import IdTaken
 
-    bus = bus_of()
+    bus = proto_bus()
+    R = fleet.regmap_of(bus).by_name
     mark = len(bus.port.device.received)
     taken = fleet.Write(1, 1, R["id"], 1, 2)
     done = []
