@@ -67,3 +67,32 @@ def test_every_zap_command_runs_on_modbus_or_refuses_naming_why(cli, values, tmp
         assert r.stdout == "", r
     else:
         assert r.exit_code == 0, r
+
+
+def _readme_row(start, name="README.md"):
+    import os
+    import re
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), name)
+    with open(path, encoding="utf-8") as f:
+        row = next(line for line in f if line.startswith(start))
+    return set(re.findall(r"`((?:zap|zkzap shell|zkzap sniff|zkzap web) [a-z-]+)`", row.split("|")[1]))
+
+
+def test_the_readme_says_what_works_on_each_protocol():
+    """The README's feature table (and the Modbus page's) names every zap command once, in the row of what it does on
+    Modbus RTU: it speaks it (a --protocol that takes modbus) or it is IR only (its --protocol
+    refuses modbus with a reason, or it has none and open_link refuses the environment)."""
+    both, ir_only = set(), set()
+    for path, cmd in commands():
+        if not (path[0] == "zap" or path in (("shell", "zap"), ("sniff", "zap"), ("web", "zap"))):
+            continue
+        name = " ".join(path) if path[0] == "zap" else "zkzap " + " ".join(path)
+        opt = next((p for p in cmd.params if p.name == "protocol"), None)
+        speaks = opt is not None and "modbus" in opt.type.choices and not getattr(opt, "ir_only", None)
+        if name == "zap detect":          # no --protocol: it probes both (test_zap_modbus_wire's detect tests)
+            speaks = True
+        (both if speaks else ir_only).add(name)
+    for page in ("README.md", "docs/how-to/modbus.md"):
+        assert _readme_row("| commands:", page) == both, page
+        assert _readme_row("| IR only", page) == ir_only, page

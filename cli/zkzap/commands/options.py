@@ -369,11 +369,15 @@ def protocol_option(f=None, *, protocols=ZAP_PROTOCOLS, ir_only=None):
     :func:`protocol_options` for ``ir_only``."""
     if f is None:
         return lambda g: protocol_option(g, protocols=protocols, ir_only=ir_only)
-    return click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True,
-                        is_eager=True, envvar=PROTOCOL_ENV, callback=_protocol_callback(ir_only),
-                        help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
-                             f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}]."
-                             + (f" IR only: {ir_only}." if ir_only else ""))(f)
+    f = click.option("--protocol", type=Choice(list(protocols)), default="ir", show_default=True,
+                     is_eager=True, envvar=PROTOCOL_ENV, callback=_protocol_callback(ir_only),
+                     help="The actuators' protocol family: ir (the 12Lf's IR protocol) or modbus (Modbus RTU: "
+                          f"the 17Lf, or a 12Lf with protocol-type 0) [env {PROTOCOL_ENV}]."
+                          + (f" IR only: {ir_only}." if ir_only else ""))(f)
+    for param in getattr(f, "__click_params__", ()):
+        if param.name == "protocol":
+            param.ir_only = ir_only        # why the command has no Modbus form (None: it has one)
+    return f
 
 
 def zap_map(ctx=None):
