@@ -45,7 +45,8 @@ def values(tmp_path_factory):
             "_backup_ok": code == 0}
 
 
-BOUNDS = {"timeout": "0.05", "retries": "0", "duration": lambda cmd: None if cmd.name == "teach" else "0.3",
+BOUNDS = {"timeout": "0.3", "retries": "1",   # a loaded machine: a command that runs must not time out
+          "duration": lambda cmd: None if cmd.name == "teach" else "0.3",
           "count": lambda cmd: "1" if cmd.name in ("echo", "teach") else None, "ident": "1",
           "ids": "1", "find_ids": "1", "find_baud": "57600"}
 
