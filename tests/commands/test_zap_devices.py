@@ -130,6 +130,7 @@ def test_watch_fails_when_the_bus_died_for_most_of_the_run():
     every row is written, and the exit is 3 naming how long it was silent (never exit 0)."""
     import json
     import threading
+    import time
 
     from click.testing import CliRunner
 
@@ -137,12 +138,14 @@ def test_watch_fails_when_the_bus_died_for_most_of_the_run():
     from zkzap.sim import start_zap
 
     with start_zap(ids=[1], transport="tcp") as sim:
-        def die():
-            with sim.lock:
-                sim.device.inject(1, "silent")
-        timer = threading.Timer(0.3, die)
         runner = CliRunner()
         with runner.isolation(input="") as (out, err, _):
+            def die():                         # once the first rows are out, every reply is lost
+                while out.getvalue().count(b"\n") < 3:
+                    time.sleep(0.005)
+                with sim.lock:
+                    sim.device.inject(1, "silent")
+            timer = threading.Thread(target=die, daemon=True)
             timer.start()
             code = run(root, "zkzap", ["zap", "watch", "present-position", "--ids", "1", "--duration", "2",
                                        "--retries", "0", "--timeout", "0.05", "-f", "jsonl", "-p", sim.url])

@@ -231,11 +231,13 @@ class Watcher:
 
     def mostly_silent(self, share: float = MOSTLY_SILENT) -> dict:
         """``{ID: silent seconds}`` of the actuators that answered at some time but were silent
-        for more than ``share`` of the watch (a bus that died: its rows are there, but most are
-        empty). Those that never answered are not here (:attr:`health` says so: answered 0)."""
+        for more than ``share`` of the watch, in time and in reads (a bus that died: its rows
+        are there, but most are empty; a failed read waits its whole window, so one lost read of
+        a short watch is not "most of it"). Those that never answered are not here
+        (:attr:`health` says so: answered 0)."""
         t = self.elapsed
         return {i: h.silent_s for i, h in self.health.items()
-                if h.answered and t > 0 and h.silent_s > share * t}
+                if h.answered and t > 0 and h.silent_s > share * t and h.failed > share * h.asked}
 
     def done(self) -> bool:
         if self.count is not None and self.polls >= self.count:
