@@ -47,7 +47,7 @@ PROBE = r"""
 import json, sys, time
 from zkzap import Bus
 what, port, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
-with Bus(port) as bus:
+with Bus(port, allow=True) as bus:
     bus.echo(1)
     t = time.perf_counter()
     if what == "scan":
