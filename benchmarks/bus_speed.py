@@ -88,6 +88,7 @@ def measure(tree, what, ids, extra, loads):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default="4b1cb72", help="the earlier revision (default 4b1cb72)")
+    ap.add_argument("--current", help="measure this revision as the current one (default: the working tree)")
     ap.add_argument("--rounds", type=int, default=3, help="measurements of each figure per revision")
     ap.add_argument("--loads", type=int, default=400, help="Load round trips per measurement")
     ap.add_argument("--limit", type=float, default=1.10, help="the largest ratio allowed (default 1.10)")
@@ -98,6 +99,10 @@ def main() -> int:
     tmp = tempfile.mkdtemp(prefix="zkzap-base-")
     base = os.path.join(tmp, "tree")
     subprocess.run(["git", "-C", ROOT, "worktree", "add", "-q", "--detach", base, args.base], check=True)
+    current = ROOT
+    if args.current:
+        current = os.path.join(tmp, "current")
+        subprocess.run(["git", "-C", ROOT, "worktree", "add", "-q", "--detach", current, args.current], check=True)
     worse = []
     try:
         print(f"{'':30} {args.base:>10} {'current':>10} {'ratio':>7}")
@@ -106,7 +111,7 @@ def main() -> int:
                 continue
             runs = {"base": [], "current": []}
             for i in range(args.rounds):
-                order = [("base", base), ("current", ROOT)]
+                order = [("base", base), ("current", current)]
                 for name, tree in (order if i % 2 == 0 else order[::-1]):
                     got = measure(tree, what, ids, extra, args.loads)
                     if not got["ok"]:
@@ -119,7 +124,8 @@ def main() -> int:
             if checked and ratio > args.limit:
                 worse.append(label)
     finally:
-        subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", base], check=False)
+        for tree in {base, current} - {ROOT}:
+            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree], check=False)
         shutil.rmtree(tmp, ignore_errors=True)
     if worse and not args.quick:
         print(f"slower than {args.limit:.2f}x: {', '.join(worse)}")

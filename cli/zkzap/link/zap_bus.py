@@ -69,7 +69,7 @@ from . import stop
 from .devices import ByBaud, Devices
 from .port import close_port, wire_time
 from .zap_timing import (FLOOR, HORIZON, K, INTER_BYTE, LATE_WINDOW, MARGIN, NETWORK_MARGIN, NV_PAUSE,
-                         QUICK_MARGIN, RESTART_PAUSE, RETRIES, horizon_for, host_margin, policy_for, usb_latency,
+                         QUICK_MARGIN, RESTART_PAUSE, RETRIES, RETRY_GRACE, horizon_for, host_margin, policy_for, usb_latency,
                          window_for)
 
 __all__ = ["ZapBus", "Reply", "open_bus", "device_error", "error_message", "stored_writes", "leaves_protocol",
@@ -83,10 +83,6 @@ READ_CHUNK = 4096
 #: How long after its window closed a reply is still recognised as the answer of an old attempt
 #: (and never taken for another's), as a multiple of the window.
 MEMORY = 2.0
-#: How long past an unanswered attempt's window the bus listens on before a retry, as a share of
-#: the attempt's whole wait (a reply a little late is then the request's own, its latency known,
-#: and no retry meets it on the line).
-RETRY_GRACE = 0.5
 #: Spare time: work handed to :meth:`ZapBus.spare` starts after a write only within this share of
 #: the request's own time on the wire. No reply byte can come before the request has crossed the
 #: line, so work done by then delays nothing; work that runs past it (a blocked output) makes the
@@ -938,12 +934,13 @@ class ZapBus:
                     return None            # silence is a legitimate answer: do not repeat the command
                 problems.append(got)
                 limit = got[3]
-            if not optional and all(p[0] == "none" for p in problems):
-                # before saying "no reply": listen through the grace of the last attempt; a reply
-                # of this request that comes meanwhile is its answer (late), else the error says
-                # whether replies of that ID come late (a fact: a longer window would do)
-                keep = [o.keep for o in self._owed if o.token is token]
-                end = max(keep) if keep else self.now()
+            if not optional and dev.late and all(p[0] == "none" for p in problems):
+                # an actuator known to answer late: before saying "no reply", listen on half a
+                # window more, as before a retry; a
+                # reply of this request that comes meanwhile is its answer (late), else the error
+                # says whether replies of that ID come late (a fact: a longer window would do)
+                until = [o.until for o in self._owed if o.token is token]
+                end = max(until) + span * RETRY_GRACE if until else self.now()
                 while self._caught is None and self.now() < end:
                     self._listen(end)
                 if self._caught is not None:

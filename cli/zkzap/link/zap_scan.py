@@ -60,7 +60,7 @@ from __future__ import annotations
 
 from ..codec import zap
 from ..errors import BadReply, NoReply
-from .zap_timing import QUICK_FACTOR, horizon_for
+from .zap_timing import QUICK_FACTOR, RETRY_GRACE, horizon_for
 
 #: The order ``--baud all`` tries: the factory default first, then the others fastest first.
 ALL_BAUDS = (57600, 115200, 38400, 19200, 9600)
@@ -125,6 +125,7 @@ class _Scan:
         self.prompt = set()            # IDs that answered their first-pass probe in its wait
         self.tried = {}                # ID -> every _Probe of it (first pass and rounds)
         self.twice = set()             # IDs found whose replies came where none was due
+        self.bursts_heard = 0          # bursts of garbled bytes heard (for the warning)
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -153,6 +154,12 @@ class _Scan:
             self.bursts = list(self.all_bursts)
             yield from self._replay(far, spaced=True, reach=self._reach())
             self._identify_found()
+        if self.bursts_heard or self.late_seen:
+            # something late was on the line: a reply a little later than the last probes'
+            # windows is still heard (half a window more, as before any retry), not taken for
+            # an absent ID's silence
+            bus.linger(bus.window * RETRY_GRACE)
+            self._judge()
         while True:                    # every ID is asked again at most once: this ends
             todo = sorted(self.doubt - set(self.records) - self.asked)
             redo = sorted(i for i in self.records if i not in self.identified or i in self.provisional)
@@ -175,6 +182,22 @@ class _Scan:
             rec["errors"] = [_late_text(bus, ident)]
             self._final(ident, [("record", rec)])
         yield from self._release(final=True)
+        yield from self._collision_warnings()
+
+    def _collision_warnings(self):
+        """What the scan talked over, said once per baud rate: an actuator found by a reply that
+        came after its probe's quick wait (the probes sent meanwhile met or may have met it; the
+        same on every scan of that bus), else bursts of garbled bytes heard."""
+        late = sorted(self.late_seen & set(self.records))
+        if late:
+            ids = ", ".join(str(i) for i in late)
+            yield ("warning", f"{'ID' if len(late) == 1 else 'IDs'} {ids} at {self.baud} baud answered after the "
+                              "scan's quick wait: its probes talk over such replies, so the IDs near "
+                              f"{'it' if len(late) == 1 else 'them'} were probed again")
+        elif self.bursts_heard:
+            yield ("warning", f"{self.bursts_heard} burst{'s' if self.bursts_heard > 1 else ''} of garbled bytes at "
+                              f"{self.baud} baud during the scan (replies that met a probe or each other, or a line "
+                              "fault): the IDs they may have come from were probed again")
 
     def _probe(self, ident):
         """A first-pass Echo: the reply, or None (garbled bytes are an event like the others)."""
@@ -373,6 +396,7 @@ class _Scan:
             lo, hi = ev.lo - slack - bus.wire(bus.family.PROBE_LEN), ev.hi
             self.bursts.append((ev.lo, ev.hi))
             self.all_bursts.append((ev.lo, ev.hi))
+            self.bursts_heard += 1
             self._collided(lo, hi)
             # whoever sent them may be any ID whose window they fell in
             self.doubt |= {p.ident for p in self.probes.values()

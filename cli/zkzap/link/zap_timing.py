@@ -61,6 +61,11 @@ RESTART_PAUSE = 0.1
 #: the slowest reply the bus is built to attribute. A reply later still is a device the bus
 #: cannot vouch for at that window: give a longer ``--timeout``.
 HORIZON = 1.5
+#: How long past an unanswered attempt's window the bus listens on before a retry, as a share of
+#: the attempt's whole wait (a reply a little late is then the request's own, its latency known,
+#: and no retry meets it on the line); a scan that heard something late listens as long past
+#: its last window.
+RETRY_GRACE = 0.5
 #: Default number of retries after a failed attempt.
 RETRIES = 2
 #: The smoothing of the estimators (RFC 6298: alpha 1/8, beta 1/4, K 4).
