@@ -500,6 +500,14 @@ class Actuator:
         """The ID a reply carries."""
         return reply[3]
 
+    #: Where a reply carries its ID.
+    ID_AT = 3
+
+    @staticmethod
+    def _whole(reply) -> bool:
+        """Whether ``reply`` is a whole packet (no fault cut it short)."""
+        return len(reply) >= 7 and reply[4] + 5 == len(reply)
+
     @staticmethod
     def _repack(reply, ident):
         """``reply`` as if ``ident`` had sent it (the wrong-id fault)."""
@@ -520,12 +528,12 @@ class Actuator:
             if kind == "delay":
                 t += (20.0 if f.value is None else f.value) / 1000.0
             elif kind == "wrong-id":
-                if len(reply) < 4:
+                if len(reply) <= self.ID_AT:
                     continue               # cut short before its ID (truncate came first)
                 other = (self._sender(reply) + 1) % 254 if f.value is None else int(f.value)
                 # a reply cut short keeps its length: the ID byte changed, its checksum no more
-                reply = self._repack(reply, other) if len(reply) >= 7 and reply[4] + 5 == len(reply) \
-                    else reply[:3] + bytes((other,)) + reply[4:]
+                reply = self._repack(reply, other) if self._whole(reply) \
+                    else reply[:self.ID_AT] + bytes((other,)) + reply[self.ID_AT + 1:]
             elif kind == "corrupt":
                 reply = reply[:-1] + bytes(((reply[-1] ^ 0x5A),))
             elif kind == "truncate":

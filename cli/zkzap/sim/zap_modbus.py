@@ -221,6 +221,12 @@ class ModbusActuator(ir.Actuator):
     def _sender(reply) -> int:
         return reply[0]
 
+    ID_AT = 0
+
+    @staticmethod
+    def _whole(reply) -> bool:
+        return len(reply) >= 4 and modbus.crc_ok(reply)
+
     @staticmethod
     def _repack(reply, ident):
         return modbus.frame(ident, reply[1:-2])
