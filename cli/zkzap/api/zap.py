@@ -694,7 +694,7 @@ class Bus:
             # an actuator that already has this ID at the new rate is heard only there
             self.link.set_baud(baud)
             try:
-                taken = self.link.census([ident], asks=1)[ident] != "none"
+                taken = self.link.census([ident])[ident] != "none"
             finally:
                 self.link.set_baud(was)
             if taken:

@@ -1391,10 +1391,12 @@ class ZapBus:
         self.settle(ident)
         return dev.late > late
 
-    def census(self, ids, *, asks: int = 2, tries: int = 3) -> dict:
+    def census(self, ids, *, asks: int = 3, tries: int = 1) -> dict:
         """How many actuators answer to each of ``ids`` at this baud rate, as far as the line can
         tell: ``{ID: "none" | "one" | "shared"}``. Each ID is asked ``asks`` Echoes (each with
-        the whole window and ``tries`` attempts) once no reply to an earlier attempt to it can
+        the whole window and ``tries`` attempts: an ID is judged by the replies counted over the
+        horizon, so a request lost on the line is made up by the next ask, not by waiting out
+        a retry) once no reply to an earlier attempt to it can
         come, and the bus listens on until the horizon of the last has passed
         (:func:`~zkzap.link.zap_timing.horizon_for`): an ID is ``shared`` when its replies came
         garbled every time, or when more replies came than were due (two actuators answering
