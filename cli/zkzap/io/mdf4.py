@@ -21,6 +21,8 @@ import struct
 import sys
 from array import array
 
+from ..errors import InvalidValue
+
 #: Identification flags of an unfinalized file: update the CG cycle counters (bit 0) and the
 #: length of the last DT block (bit 2).
 UNFINALIZED = 1 | 4
@@ -110,7 +112,7 @@ class Mdf4Stream:
         for row in rows:
             values.extend(row)
         if len(values) != len(rows) * (1 + self.n):
-            raise ValueError("a record of the wrong width")
+            raise InvalidValue(f"MDF record of {len(values)} values for {len(rows)} rows of {1 + self.n}")
         if sys.byteorder != "little":
             values.byteswap()
         self.stream.write(values.tobytes())
