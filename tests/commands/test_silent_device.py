@@ -71,7 +71,9 @@ BOUNDS = {
     "zk": {"timeout": "0.3", "budget": "0.3", "window": "0.1", "duration": "0.3"},
     # (zap teach's --duration bounds its --rate mode only; its Enter mode ends with its input)
     "zap": {"timeout": "0.01", "retries": "0", "duration": lambda cmd: None if cmd.name == "teach" else "0.3",
-            "ids": "1", "find_ids": "1", "find_baud": "57600"},
+            "ids": "1", "find_ids": "1", "find_baud": "57600",
+            # zap cycle checks its --id in code (--path or --resume may give it instead)
+            "ident": lambda cmd: "1" if cmd.name == "cycle" else None},
 }
 #: What a shell reads, and a command that asks reads (zap setup's Enter): a line that talks.
 STDIN = {"zk": "monitor --duration 0.3\n", "zap": "echo --id 1\n"}
