@@ -112,17 +112,20 @@ class PacketTools:
         if name in (None, ""):
             self.plotted = None
         else:
-            try:
-                self.plotted = zap.register(str(name))
-            except FieldValueError as e:
-                raise UsageError(str(e)) from None
+            self.plotted = self.reg(str(name))          # of the bus's map (IR table or Modbus map)
         self.broadcast({"type": "plot", "register": self.plotted.name if self.plotted else None})
         self.log(f"{ctx.label} plots {self.plotted.name}" if self.plotted else f"{ctx.label} ends the register plot")
         self.reply(ctx, register=self.plotted.name if self.plotted else None)
 
     # -- packets ------------------------------------------------------------------------------
 
+    def _ir_only(self):
+        if getattr(self, "protocol", "ir") != "ir":
+            raise UsageError("the packet panel composes mightyZAP IR packets, and this bus speaks Modbus RTU; "
+                             "send a Modbus frame with 'zap raw --protocol modbus'")
+
     def op_compose(self, ctx, msg):
+        self._ir_only()
         pkt = compose(msg)
         cmd = zap.Command(pkt)
         mode = self.bus.link.mode_of(pkt[3]) if pkt[3] != zap.BROADCAST else None
@@ -143,6 +146,7 @@ class PacketTools:
         return None
 
     def op_packet(self, ctx, msg):
+        self._ir_only()
         pkt = compose(msg)
         cmd = zap.Command(pkt)
         reply = self.bus.link.command(pkt, check=False)         # the bus asks for what the table says
@@ -171,6 +175,9 @@ class PacketTools:
 
     def _monitor(self, direction, data):
         """Every write and read on the bus (the worker's thread)."""
+        if getattr(self, "protocol", "ir") != "ir":
+            self._monitor_modbus(direction, data)
+            return
         if self._polling and not self.traffic_polls:
             if direction == "rx":
                 self._framer.feed(data)          # kept in step, not shown
@@ -188,6 +195,44 @@ class PacketTools:
                 item["text"] = _words(rec, pkt)
             except (zap.PacketError, ValueError, IndexError) as e:
                 item["text"] = f"not a packet: {e}"
+                item["bad"] = True
+            if self.hub is not None:
+                self.hub.traffic(item)
+
+
+    def _monitor_modbus(self, direction, data):
+        """The same log for a Modbus RTU bus: a request as written, a reply once its bytes make a
+        CRC-valid frame (what is left when the next request goes out is shown as not a frame)."""
+        from ..codec import modbus
+
+        if not hasattr(self, "_rtu"):
+            self._rtu, self._rtu_decoder = bytearray(), modbus.ModbusDecoder(self.map)
+        frames = []
+        if direction == "tx":
+            if self._rtu:
+                frames.append(("rx", bytes(self._rtu)))
+                self._rtu.clear()
+            frames.append(("tx", bytes(data)))
+        else:
+            self._rtu += data
+            if modbus.crc_ok(self._rtu) and len(self._rtu) >= 4:
+                frames.append(("rx", bytes(self._rtu)))
+                self._rtu.clear()
+            elif len(self._rtu) > 256:
+                frames.append(("rx", bytes(self._rtu)))
+                self._rtu.clear()
+        if self._polling and not self.traffic_polls:
+            return
+        now = round(time.time() * 1000, 1)
+        for way, frame in frames:
+            item = {"w": now, "dir": way, "hex": frame[:TRAFFIC_MAX_BYTES].hex(" ").upper(), "n": len(frame),
+                    "poll": self._polling}
+            try:
+                modbus.check_frame(frame)
+                rec = self._rtu_decoder.decode(frame, "h2d" if way == "tx" else "d2h")
+                item["text"] = " ".join(f"{k}={rec[k]}" for k in modbus.MODBUS_KEYS if rec.get(k) not in (None, ""))
+            except (modbus.ModbusFrameError, ValueError, IndexError) as e:
+                item["text"] = f"not a frame: {e}"
                 item["bad"] = True
             if self.hub is not None:
                 self.hub.traffic(item)
