@@ -4,6 +4,7 @@ replies are there whenever the host reads: a loaded machine cannot make them lat
 test needs a reply to come after a window, it comes hundreds of milliseconds after it: a host
 held up that long would read it as if in time."""
 
+import re
 import time
 
 import pytest
@@ -227,14 +228,23 @@ def test_scan_finds_and_identifies_every_slow_actuator(opts):
     found, warnings = records(bus, list(range(0, 24)))
     assert [(r["id"], r["status"], r["model"], r["firmware"], r["return_mode"]) for r in found] == \
         [(i, "ok", MODEL_NUMBER, 21, 1) for i in (1, 2, 5, 9, 20)]
-    assert warnings == []
+    only_late(warnings, {1, 2, 5, 9, 20})
+
+
+def only_late(warnings, ids):
+    """What a scan of slow actuators may say: that some of ``ids`` answered after its quick wait
+    (so it talked over them and asked again); never a duplicate, a garbled ID or a burst."""
+    assert len(warnings) <= 1, warnings
+    for w in warnings:
+        m = re.fullmatch(r"IDs? ([\d, ]+) at 57600 baud answered after the scan's quick wait: .*", w)
+        assert m and {int(i) for i in m.group(1).split(", ")} <= ids, w
 
 
 def test_scan_of_consecutive_slow_ids_behind_an_echoing_adapter():
     bus = make(ids="1-6", turnaround="20", gap="1", echo="1")
     found, warnings = records(bus, list(range(0, 40)))
     assert [(r["id"], r["status"], r["model"]) for r in found] == [(i, "ok", MODEL_NUMBER) for i in range(1, 7)]
-    assert warnings == []
+    only_late(warnings, set(range(1, 7)))
 
 
 def test_scan_return_mode_0_is_found_out_not_guessed():
@@ -253,7 +263,8 @@ def test_scan_warns_of_two_actuators_with_one_id():
     # colliding replies: garbled at the Echo (the simulator models the wired-AND of two senders a
     # byte apart), or readable Echoes whose live registers then disagree
     assert by_id[4]["status"] in ("duplicate", "garbled")
-    assert len(warnings) == 1 and "ID 4" in warnings[0] and "two actuators" in warnings[0]
+    named = [w for w in warnings if "ID 4" in w and "two actuators" in w]
+    assert len(named) == 1 and all(w in named or "burst" in w for w in warnings), warnings
 
 
 def test_answers_counts_error_bits_and_garbled_replies():
