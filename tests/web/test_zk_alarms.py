@@ -26,7 +26,9 @@ def recorded(tmp_path_factory):
 @pytest.fixture(scope="module")
 def console(recorded):
     out, book = recorded
-    c = WebConsole("zk", "-p", "sim://zk?speed=2", "--limit", LIMIT, "-o", str(out), "--logbook", str(book),
+    # speed 1: from the trip the engine takes about 13 s to be at rest and cool, long enough for
+    # the page's steps in between (refused, acknowledged, still refused) on a loaded machine
+    c = WebConsole("zk", "-p", "sim://zk?speed=1", "--limit", LIMIT, "-o", str(out), "--logbook", str(book),
                    "--engine", "K100-1")
     yield c
     c.close()
