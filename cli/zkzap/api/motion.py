@@ -463,10 +463,15 @@ def stop_all(bus, ids, mode: str = "hold") -> dict:
         return {i: None for i in ids}
     held, lost = {}, []
     for i in ids:
-        try:
-            held[i] = link.read(i, PRESENT)
-        except ZkzapError:
-            lost.append(i)
+        # asked twice: a stop often follows a read it interrupted, whose reply the bus still
+        # owes (the first ask then gives no value, never a wrong one)
+        for attempt in (1, 2):
+            try:
+                held[i] = link.read(i, PRESENT)
+                break
+            except ZkzapError:
+                if attempt == 2:
+                    lost.append(i)
     if held:
         link.symmetric_store(POSITION, sorted(held.items()))
     if lost:
