@@ -116,7 +116,9 @@ def set_value(driver, selector, value, event="change"):
 
 
 def click(driver, selector):
-    until(lambda: css(driver, selector) and css(driver, selector)[0].is_enabled(), f"{selector} to be enabled")
+    # shown too: a button a page reveals (the busy bar's Cancel) is clicked once a person could
+    until(lambda: css(driver, selector) and css(driver, selector)[0].is_enabled()
+          and css(driver, selector)[0].is_displayed(), f"{selector} to be enabled and shown")
     element = css(driver, selector)[0]
     js(driver, "arguments[0].scrollIntoView({block: 'center'})", element)    # not under the sticky bar
     element.click()
