@@ -73,7 +73,9 @@ BOUNDS = {
     "zap": {"timeout": "0.01", "retries": "0", "duration": lambda cmd: None if cmd.name == "teach" else "0.3",
             "ids": "1", "find_ids": "1", "find_baud": "57600",
             # zap cycle checks its --id in code (--path or --resume may give it instead)
-            "ident": lambda cmd: "1" if cmd.name == "cycle" else None},
+            "ident": lambda cmd: "1" if cmd.name == "cycle" else None,
+            # zap detect tries one rate, not five (each a whole scan of both protocols' IDs)
+            "baud": lambda cmd: "57600" if cmd.name == "detect" else None},
 }
 #: What a shell reads, and a command that asks reads (zap setup's Enter): a line that talks.
 STDIN = {"zk": "monitor --duration 0.3\n", "zap": "echo --id 1\n"}
