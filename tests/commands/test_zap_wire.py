@@ -277,7 +277,7 @@ def test_move_wait_timeout_and_stops(cli):
 
 def test_set_id_verified(cli, tmp_path):
     state = str(tmp_path / "bus.json")
-    port = url(ids="0,5", state=state)
+    port = url(ids="0,5", state=state, clock="virtual")   # the census horizon in no time
     r = cli("zap", "set-id", "3", "--id", "0", "-p", port)
     assert r.exit_code == 0 and "ID 0 is now ID 3 (verified)" in r.stderr
     assert cli("zap", "echo", "--id", "3", "-p", port).exit_code == 0
@@ -304,7 +304,7 @@ def test_read_back_mismatch_exit_1(cli, monkeypatch):
 
 def test_set_baud_verified(cli, tmp_path):
     state = str(tmp_path / "bus.json")
-    port = url(ids="1", state=state)
+    port = url(ids="1", state=state, clock="virtual")   # the census horizon in no time
     r = cli("zap", "set-baud", "115200", "--id", "1", "-p", port)
     assert r.exit_code == 0 and "now talks at 115200 baud (verified)" in r.stderr
     assert cli("zap", "echo", "--id", "1", "-b", "115200", "-p", port).exit_code == 0
