@@ -247,7 +247,9 @@ def test_cycle_from_the_page_with_its_records_and_a_cancel_that_holds_the_rod(pa
 
 def test_a_play_cancelled_from_the_page_stops_every_actuator_where_it_is(page, tools_bus, tmp_path):
     path = tmp_path / "long.csv"
-    path.write_text('t,id,position\n0,"1,2",3500\n30,"1,2",200\n')
+    # a second step long after the first: on a loaded machine the play must not end by itself
+    # before the page cancels it (it was 30 s, and ended as the test reached for Cancel)
+    path.write_text('t,id,position\n0,"1,2",3500\n600,"1,2",200\n')
     css(page, "#play-file")[0].send_keys(str(path))
     if css(page, "#play-interp")[0].is_selected():
         click(page, "#play-interp")
