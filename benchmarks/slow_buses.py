@@ -140,9 +140,16 @@ def slow_commands(args, env, failures):
           "scans that find the fleet for backup and diff)")
     ok = (code == 0 and answered == args.echoes and code_b == 0 and found == 2 and code_d == 0
           and out["echo_collisions"] == 0 and out["api_collisions"] == 0
-          and learned is not None and abs(learned["latency_ms"] - turnaround * 1000) < 10)
+          and learned is not None and abs(learned["latency_ms"] - turnaround * 1000) < tolerance_ms(args))
     if not ok:
         failures.append(label)
+
+
+def tolerance_ms(args) -> float:
+    """How far the learned latency may be from the simulated turnaround: 10 ms over the default
+    run's echoes; over the quick run's two, one reply held up by a shared machine's scheduler
+    moves the mean by half its delay, so 25 ms (the quick run's figures mean nothing)."""
+    return 25.0 if args.echoes <= 5 else 10.0
 
 
 def shared_id(args, env, failures):
