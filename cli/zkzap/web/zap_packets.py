@@ -97,6 +97,10 @@ class PacketTools:
         self._polling = False            # the watcher has the bus now
         self._framer = ZapFramer()
         self._decoder = zap.ZapDecoder()
+        if self.protocol == "modbus":            # a reply's bytes until they make a frame
+            from ..codec import modbus
+
+            self._rtu, self._rtu_decoder = bytearray(), modbus.ModbusDecoder(self.map)
         self.bus.link.monitor = self._monitor
 
     def tools_hello(self) -> dict:
@@ -120,7 +124,7 @@ class PacketTools:
     # -- packets ------------------------------------------------------------------------------
 
     def _ir_only(self):
-        if getattr(self, "protocol", "ir") != "ir":
+        if self.protocol != "ir":
             raise UsageError("the packet panel composes mightyZAP IR packets, and this bus speaks Modbus RTU; "
                              "send a Modbus frame with 'zap raw --protocol modbus'")
 
@@ -175,7 +179,7 @@ class PacketTools:
 
     def _monitor(self, direction, data):
         """Every write and read on the bus (the worker's thread)."""
-        if getattr(self, "protocol", "ir") != "ir":
+        if self.protocol != "ir":
             self._monitor_modbus(direction, data)
             return
         if self._polling and not self.traffic_polls:
@@ -205,8 +209,6 @@ class PacketTools:
         CRC-valid frame (what is left when the next request goes out is shown as not a frame)."""
         from ..codec import modbus
 
-        if not hasattr(self, "_rtu"):
-            self._rtu, self._rtu_decoder = bytearray(), modbus.ModbusDecoder(self.map)
         frames = []
         if direction == "tx":
             if self._rtu:
@@ -215,10 +217,7 @@ class PacketTools:
             frames.append(("tx", bytes(data)))
         else:
             self._rtu += data
-            if modbus.crc_ok(self._rtu) and len(self._rtu) >= 4:
-                frames.append(("rx", bytes(self._rtu)))
-                self._rtu.clear()
-            elif len(self._rtu) > 256:
+            if (len(self._rtu) >= 4 and modbus.crc_ok(self._rtu)) or len(self._rtu) > 256:
                 frames.append(("rx", bytes(self._rtu)))
                 self._rtu.clear()
         if self._polling and not self.traffic_polls:
