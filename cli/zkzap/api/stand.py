@@ -239,9 +239,11 @@ class StandSession:
 
         ss = StandSession(stand, notify=print)        # before any port opens (options checked)
         ss.start(timeout)                             # the sensors' first lines: a silent one is exit 3
-        on_update = ss.attach(source, telemetry, sink, on_update)
+        ss.record(output, "--output run.csv")         # the one sink of the records (or attach's sink)
+        on_update = ss.attach(source, telemetry, on_update=on_update)
         outcome = ss.run(control=..., duration=...)   # again for each session of a console
         ss.close()                                    # the sensors stop: one count for every summary
+        ss.close_output()                             # the records queued are written, the file closed
         ss.summary(), ss.log_run(...)                 # the run's entries, its logbook row
 
     ``notify(message)``: how the session's, the limits' and the alarms' messages are said (a
@@ -264,6 +266,10 @@ class StandSession:
         self.source = None
         self.telemetry = None
         self.sink = None
+        #: where the records are written (:meth:`record`: a writer of :mod:`zkzap.io`; None: the
+        #: front end's sink given to :meth:`attach`, or nowhere)
+        self.output = None
+        self._write = None             # the output's write, made in its lane
         self.session = None            # the last Session run
         self._closed = False
 
@@ -287,12 +293,51 @@ class StandSession:
                 self.close()
                 raise
 
-    def attach(self, source: Any, telemetry: Telemetry, sink: Optional[Sink],
-               on_update: Optional[OnUpdate] = None) -> Optional[OnUpdate]:
+    def record(self, output: Any, what: str, *, wait: Optional[bool] = None) -> Sink:
+        """The session's records go to ``output`` (a writer of :mod:`zkzap.io`, made by the front
+        end: ``output.offload(lane)`` returns its write made in that lane, ``output.close()``
+        writes what is queued and closes), each record once, written off the session's thread
+        in one :class:`~zkzap.offload.Lane` (``what``: the output's name in messages; ``wait``:
+        what a full queue does, see :mod:`zkzap.offload`). Every session this object runs, and
+        every trip it marks, writes through this one sink; :meth:`close_output` closes it.
+        Returns the sink (``sink(record)``)."""
+        if self.output is not None:
+            raise RuntimeError(f"the records go to {self.output!r} already")
+        from ..offload import Lane
+
+        self.output = output
+        self._write = output.offload(Lane(what, wait=wait))
+        return self._write
+
+    @property
+    def lane(self) -> Any:
+        """The :class:`~zkzap.offload.Lane` the records are written in (None: no :meth:`record`)."""
+        return getattr(self.output, "lane", None) if self.output is not None else None
+
+    def close_output(self) -> None:
+        """Write the records still queued and close the output of :meth:`record` (a stalled one
+        is abandoned, see :mod:`zkzap.offload`). Twice is once."""
+        if self.output is not None:
+            self.output.close()
+
+    def attach(self, source: Any, telemetry: Telemetry, sink: Optional[Sink] = None,
+               on_update: Optional[OnUpdate] = None, *, watch: Optional[Sink] = None) -> Optional[OnUpdate]:
         """Run on ``source`` (a live or replayed ZK source) through ``telemetry`` into ``sink``
-        (``sink(record)``: the front end's writer; None: records are not kept); returns the live
-        view's callback with the stand's limit lines and the alarm list added (None stays None)."""
-        self.source, self.telemetry, self.sink = source, telemetry, sink or (lambda rec: None)
+        (``sink(record)``: the front end's own writer; None: the output of :meth:`record`, else
+        records are not kept); ``watch(record)`` is also handed every record once it is queued
+        for writing (a console's pages). Returns the live view's callback with the stand's limit
+        lines and the alarm list added (None stays None)."""
+        if sink is not None and self._write is not None:
+            raise RuntimeError("the records have their output already (record): no second sink")
+        sink = sink or self._write or (lambda rec: None)
+        if watch is not None:
+            write = sink
+
+            def sink(rec):
+                write(rec)
+                watch(rec)
+
+        self.source, self.telemetry, self.sink = source, telemetry, sink
         if self.stand is not None:
             on_update = self.stand.attach(telemetry, source, on_update)
         if on_update is not None and getattr(source, "live", True):

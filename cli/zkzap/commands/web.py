@@ -294,29 +294,26 @@ def _make_zk():
         url = resolve_port(port, sim)
         silence = timeout if timeout is not None else 2.0
         stand.start(silence)             # the external sensors' first lines: a silent one is exit 3
-        record = None
+        from ..api.stand import StandSession
+
+        session = StandSession(stand)
         try:
             if output:
                 record = session_output(None, output, append, None, None, f"zkzap web zk on {url}", stand,
                                         controls=True, view=False)
                 record.path = output
-                # written off the worker's path (zkzap.offload): a stalled file never holds up the
-                # engine; a full queue ends the session that runs (with its abort), never waits
-                from ..offload import Lane, Proxy
-
-                record.offload(Lane(f"--output {output}", wait=False))
-                record = Proxy(record, record.lane, ("write",))
+                # the session's one sink of the records, written off the worker's path
+                # (zkzap.offload): a stalled file never holds up the engine; a full queue ends the
+                # session that runs (with its abort), never waits
+                session.record(record, f"--output {output}", wait=False)
             ecu = Ecu(url, baud=baud, protocol_version=protocol_version, stop_bits=stop_bits, silence=silence)
         except BaseException:
             stand.close()
-            if record is not None:
-                record.close()
+            session.close_output()
             raise
         from ..web.zk_console import ZkConsole
 
-        from ..api.stand import StandSession
-
-        console = ZkConsole(ecu, session=StandSession(stand), rate=rate, silence=silence, record=record)
+        console = ZkConsole(ecu, session=session, rate=rate, silence=silence)
         _serve(console, listen, token, "zk", "sim" if sim else url)
 
     for p in zk_web.params:

@@ -94,9 +94,12 @@ class _Cuttable:
 class ZkConsole(Console):
     """The console over ``ecu`` (an open :class:`~zkzap.api.zk.Ecu`). ``session``: the
     :class:`~zkzap.api.stand.StandSession` it runs (the stand's hooks and alarm list, made by the
-    front end from its options); without one, ``conditions`` and ``on_limit`` (``abort`` or
-    ``warn``) are the limits and ``alarms`` the alarm list's settings. ``record``: where the
-    records go (``record.write(rec)``, closed with the console); ``rate`` the control rate (Hz);
+    front end from its options, with its records' output when it has one:
+    :meth:`~zkzap.api.stand.StandSession.record`); without one, ``conditions`` and ``on_limit``
+    (``abort`` or ``warn``) are the limits and ``alarms`` the alarm list's settings.
+    ``record``: where the records go when the session has no output yet (a writer of
+    :mod:`zkzap.io`, given to the session's :meth:`~zkzap.api.stand.StandSession.record`,
+    closed with the console); ``rate`` the control rate (Hz);
     ``silence`` the longest an ECU may be silent while controlled."""
 
     kind = "zk"
@@ -128,19 +131,18 @@ class ZkConsole(Console):
         #: console): as on the command line.
         self.stand_session = session
         self.stand = session.stand
-        self.record = record
-        self._write = None            # the records' writes, made off the worker (zkzap.offload)
         if record is not None:
-            from ..offload import Lane
-
-            # a full queue ends the console safely (its run with the abort), never the worker blocked
-            self._write = record.offload(Lane(f"--output {getattr(record, 'path', '')}", wait=False))
+            # the one sink of the records: the stand session's (written off the worker, and a full
+            # queue ends the console safely — its run with the abort — never the worker blocked)
+            session.record(record, f"--output {getattr(record, 'path', '')}", wait=False)
+        self.record = session.output
         self.command_name = command
         self.limits = session.limits
         if self.limits is not None:
             self.limits.notify = lambda m: self.log(m, "warn")
-        # every frame: limits, sensors, ESR answers; the records into the console's sink
-        session.attach(ecu.source, self.tel, self._sink, None)
+        # every frame: limits, sensors, ESR answers; the records into the stand session's one
+        # sink (its output), each then handed to the pages
+        session.attach(ecu.source, self.tel, watch=self._seen)
         #: The stand's alarm list and start interlock, shared by every session of the console;
         #: the console says and shows what it raises.
         self.alarms = session.alarms
@@ -275,8 +277,7 @@ class ZkConsole(Console):
         try:
             self.ecu.close()
         finally:
-            if self.record is not None:
-                self.record.close()
+            self.stand_session.close_output()
             self.stand_session.close()
             if self.stand is not None:
                 self._log_run(ended)
@@ -296,9 +297,8 @@ class ZkConsole(Console):
 
     # -- session hooks (on the worker) ----------------------------------------------------------
 
-    def _sink(self, rec):
-        if self._write is not None:
-            self._write(rec)                  # whole records, as the command line writes them
+    def _seen(self, rec):
+        """A record the stand session wrote (or queued): to the pages' plots."""
         if rec.get("kind") in ("trip", "rundown", "gap"):
             return                            # a session's event: the file's only
         now = time.time()

@@ -338,13 +338,15 @@ def run_telemetry(*, url=None, baud=None, replay=None, fast=False, fmt=None, out
             source = LiveSource(ZkLink.open(url, baud, raw_log=raw_proxy, stop_bits=stop_bits, allow=allow),
                                 reconnect=reconnect)
         tel = Telemetry(protocol_version, id_set, out.snapshot, stale_after, clock=source.clock)
-        sink = out.offload(Lane("stdout" if output in (None, "-") else f"--output {output}"))
+        # the session's one sink of the records (written in a lane of their own, zkzap.offload)
+        stand_session.record(out, "stdout" if output in (None, "-") else f"--output {output}")
         on_update = out.update if out.dashboard is not None else None
-        on_update = stand_session.attach(source, tel, sink, on_update)
+        on_update = stand_session.attach(source, tel, on_update=on_update)
+        sink = stand_session.sink
         if bridges or out.fmt == "mcap":
             from .taps import tap_session
 
-            source, sink, on_update = tap_session(source, tel, out, bridges, on_update)
+            source, sink, on_update = tap_session(source, tel, out, bridges, on_update, sink)
             stand_session.rebind(source)         # ESR answers are recorded like every control frame
             stand_session.sink = sink
         session = stand_session.make_session(

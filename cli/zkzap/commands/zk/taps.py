@@ -20,21 +20,18 @@ class _TappedSource:
         self._on_frame(frame)
 
 
-def tap_session(source, tel, out, bridges, on_update):
-    """(source, sink, on_update) for :class:`~zkzap.api.session.Session`."""
+def tap_session(source, tel, out, bridges, on_update, write):
+    """(source, sink, on_update) for :class:`~zkzap.api.session.Session`; ``write``: the
+    session's sink of the records (each record still goes through it once, then to the
+    bridges)."""
     from ...codec import zk
 
     decoder = zk.ZkDecoder()
     mcap = out.writer if out.fmt == "mcap" else None
     submit = bridges.submit if bridges else None
-    write = out.write
     lane = getattr(out, "lane", None)
-    if lane is not None:              # the records' writes are made off the control path
-        write = lane.wrap(write)
-        if mcap is not None:
-            mcap = lane.wrap(mcap.write)
-    elif mcap is not None:
-        mcap = mcap.write
+    if mcap is not None:              # the control records, in the records' lane (off the control path)
+        mcap = lane.wrap(mcap.write) if lane is not None else mcap.write
 
     def on_frame(frame):
         t = source.now()
