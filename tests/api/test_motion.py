@@ -17,6 +17,18 @@ def rows_of(text, **kw):
     return motion.read_path(io.StringIO(text), name="path.csv", **kw)
 
 
+#: The motion procedures run over both mightyZAP protocols: the same tests, the protocol a parameter.
+PROTOCOLS = pytest.mark.parametrize("protocol", ["ir", "modbus"])
+#: The end-compliance-margin of each protocol's simulated actuator (the 12Lf's 7, the 17Lf's map default 8).
+MARGIN = {"ir": 7, "modbus": 8}
+
+
+def on(protocol, ids, **kw):
+    """A simulator of ``protocol`` and a Bus on it."""
+    sim = start_zap(ids=ids, protocol=protocol, **kw)
+    return sim, Bus(sim, protocol=protocol)
+
+
 # -- reading and planning ----------------------------------------------------------------------
 
 def test_rows_of_one_time_are_one_sync_move():
@@ -77,10 +89,61 @@ def test_steps_closer_than_their_frames_take_are_refused():
         motion.plan(rows)
 
 
+def test_a_modbus_step_is_one_answered_write_per_actuator_and_the_line_counts_the_replies():
+    from zkzap.api.motion_wire import ModbusWire
+
+    wire = ModbusWire()
+    rows = rows_of('t,id,position,speed,current\n0,"1,2",9000,500,600\n', protocol=wire)
+    step = motion.plan(rows, protocol="modbus").steps[0]
+    # goal-speed and goal-current (adjacent, 208-209) in one frame per actuator, then each goal-position
+    assert [f.hex(" ").upper() for f in step.frames] == [
+        "01 10 00 D0 00 02 04 01 F4 02 58 BE 67", "02 10 00 D0 00 02 04 01 F4 02 58 B1 23",
+        "01 10 00 CD 00 01 02 23 28 AF 63", "02 10 00 CD 00 01 02 23 28 BB 93"]
+    # each frame: the 1.75 ms silence, its 11 bytes and the 8-byte reply at 10 bits a byte, two turnarounds
+    per = 0.00175 + 19 * 10 / 57600 + 2 * 0.002
+    assert motion.max_rate(range(1, 7), 57600, protocol=wire) == pytest.approx(0.8 / (6 * per))
+    with pytest.raises(UsageError, match=r"6 answered frames of 11 bytes.*carries 14 Hz"):
+        motion.plan(rows_of('t,id,position\n0,"1,2,3,4,5,6",0\n1,"1,2,3,4,5,6",4000\n', protocol=wire),
+                    interpolate="linear", rate=20, protocol=wire)
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("t,id,position\n0,1,10001\n", "position: 10001 is out of range; allowed 0..10000"),
+    ("t,id,position\n0,248,5\n", "id: '248' is not an actuator ID 1..247"),
+    ("t,id,position\n0,0,5\n", "id: '0' is not an actuator ID 1..247"),
+])
+def test_a_modbus_path_is_checked_against_the_17lf_map(text, needle):
+    from zkzap.api.motion_wire import ModbusWire
+
+    with pytest.raises(UsageError, match=needle):
+        rows_of(text, protocol=ModbusWire())
+    assert rows_of("t,id,position\n0,1,10000\n", protocol=ModbusWire())[0].position == 10000
+
+
+def test_a_plan_for_one_protocol_is_refused_on_the_other():
+    with start_zap(ids=[1], protocol="modbus") as sim, Bus(sim, protocol="modbus") as bus:
+        with pytest.raises(UsageError, match="frames are of the ir protocol"):
+            motion.Player(bus, motion.plan(rows_of("t,id,position\n0,1,5\n")))
+
+
+def test_a_modbus_stop_holds_every_actuator_it_can_and_says_which_it_could_not():
+    # ID 3 is not on the bus: its position cannot be read, the others are still held (one write each)
+    with start_zap(ids=[1, 2], protocol="modbus", speed=4) as sim, Bus(sim, protocol="modbus") as bus:
+        bus.write(1, {"goal-position": 9000})
+        bus.write(2, {"goal-position": 9000})
+        held = motion.stop_all(bus, [1, 3, 2])
+        assert held[3] is None and held[1] is not None and held[2] is not None
+        for i in (1, 2):
+            assert sim.device.actuator(i).get("goal-position") == held[i]
+        assert "ID 3 force off" in motion.describe_stop(held, "hold")
+
+
 # -- playing on the simulator ------------------------------------------------------------------
 
-def test_play_logs_goal_against_present_and_ends_at_the_goals():
-    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
+@PROTOCOLS
+def test_play_logs_goal_against_present_and_ends_at_the_goals(protocol):
+    sim, bus = on(protocol, [1, 2], speed=2)
+    with sim, bus:
         rows = []
         player = bus.play(io.StringIO("t,id,position\n0,\"1,2\",1000\n0.3,1,3000\n"), on_row=rows.append)
         assert player.stopped is None and player.sent == 2 and not player.unsettled
@@ -88,14 +151,20 @@ def test_play_logs_goal_against_present_and_ends_at_the_goals():
         moving = [r for r in rows if r["tracking_error"]]
         assert moving and all(r["current_ma"] > 100 for r in moving)          # the model draws current moving
         last = {r["id"]: r for r in rows}
-        # the log ends once every rod is within its end-compliance-margin (7) of its goal
-        assert abs(last[1]["present"] - 3000) <= 7 and abs(last[2]["present"] - 1000) <= 7
+        # the log ends once every rod is within its end-compliance-margin of its goal
+        m = MARGIN[protocol]
+        assert abs(last[1]["present"] - 3000) <= m and abs(last[2]["present"] - 1000) <= m
         s = player.summary()
         assert s["lateness_p99_ms"] is not None and s["steps"] == 2
+        if protocol == "modbus":          # present-voltage has no unit in the 17Lf's map: raw, never a guess
+            assert all(r["voltage_v"] is None and r["voltage_raw"] == 120 for r in rows if r["status"] == "ok")
+            assert s["frames"] == 3       # one answered write per actuator and goal: 2 at t=0, 1 at t=0.3
 
 
-def test_a_current_over_the_limit_stops_every_actuator_where_it_is():
-    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
+@PROTOCOLS
+def test_a_current_over_the_limit_stops_every_actuator_where_it_is(protocol):
+    sim, bus = on(protocol, [1, 2], speed=2)
+    with sim, bus:
         player = bus.play(io.StringIO('t,id,position\n0,"1,2",4000\n'), limit=100)
         assert player.stopped.reason == "current-limit" and "over the limit of 100 mA" in player.stopped.message
         held = player.stopped.positions
@@ -104,8 +173,11 @@ def test_a_current_over_the_limit_stops_every_actuator_where_it_is():
             assert held[ident] is not None and a.get("goal-position") == held[ident] < 4000
 
 
-def test_a_hardware_error_stops_every_actuator_force_off_when_asked():
-    with start_zap(ids=[1, 2], faults=["2:overload"]) as sim, Bus(sim) as bus:
+@PROTOCOLS
+def test_a_hardware_error_stops_every_actuator_force_off_when_asked(protocol):
+    # (on Modbus RTU the error bits are the hardware-error register's, read with the log)
+    sim, bus = on(protocol, [1, 2], faults=["2:overload"])
+    with sim, bus:
         player = bus.play(io.StringIO('t,id,position\n0,"1,2",3000\n'), stop_mode="off")
         assert player.stopped.reason == "device-error" and "overload" in player.stopped.message
         assert sim.device.actuator(1).get("force-on-off") == 0
@@ -117,8 +189,10 @@ def test_loops_repeat_the_path():
         assert player.sent == 6 and len(player.lateness) == 6
 
 
-def test_taught_waypoints_play_back():
-    with start_zap(ids=[1, 2]) as sim, Bus(sim) as bus:
+@PROTOCOLS
+def test_taught_waypoints_play_back(protocol):
+    sim, bus = on(protocol, [1, 2])
+    with sim, bus:
         teacher = motion.Teacher(bus, [1, 2], interval=0.5)
         for pos in (100, 900):
             for i in (1, 2):
@@ -129,7 +203,7 @@ def test_taught_waypoints_play_back():
                         {"t": 0.5, "id": 2, "position": 902, "counts": 902}]
         buf = io.StringIO()
         motion.write_path(buf, [{"t": 0.0, "id": 1, "position": 101}] + rows)
-        back = motion.read_path(io.StringIO(buf.getvalue()))
+        back = motion.read_path(io.StringIO(buf.getvalue()), protocol=motion.wire_of(bus))
         assert [(r.t, r.ids, r.position) for r in back] == [(0, (1,), 101), (0.5, (1,), 901), (0.5, (2,), 902)]
 
 
@@ -182,22 +256,28 @@ def test_a_path_in_millimetres_plays_in_counts(tmp_path):
 
 # -- endurance cycles --------------------------------------------------------------------------
 
-def test_cycles_measure_reach_time_and_current_on_the_moving_model():
+@PROTOCOLS
+def test_cycles_measure_reach_time_and_current_on_the_moving_model(protocol):
     from zkzap.api.cycle import Cycler
     from zkzap.sim.zap_actuators import FULL_SPEED
 
-    with start_zap(ids=[1]) as sim, Bus(sim) as bus:
+    sim, bus = on(protocol, [1])
+    with sim, bus:
         sim.device.actuator(1).set("goal-position", 500)
         sim.device.actuator(1).set("present-position", 500)
         c = Cycler(bus, 1, 500, 3500, dwell=0.05, cycles=2)
         recs = list(c.run())
         assert c.reason == "done" and [r["cycle"] for r in recs] == [1, 2]
-        travel = (3000 - 7) / FULL_SPEED                # to within the end-compliance-margin
+        travel = (3000 - MARGIN[protocol]) / FULL_SPEED     # to within the end-compliance-margin
         for r in recs:
             for key in ("reach_b_s", "reach_a_s"):      # resolution: one poll (~7 ms, more on a loaded machine)
                 assert travel <= r[key] <= travel + 0.1, r
             assert r["peak_current_ma"] == 420 and 15 < r["mean_current_ma"] <= 420
-            assert r["min_voltage_v"] == 12.0 and r["errors"] == [] and r["status"] == "ok"
+            assert r["errors"] == [] and r["status"] == "ok"
+            if protocol == "ir":
+                assert r["min_voltage_v"] == 12.0
+            else:                                       # no unit in the 17Lf's map: the raw value only
+                assert r["min_voltage_v"] is None and r["min_voltage_raw"] == 120
 
 
 @pytest.mark.parametrize("fault,kw,reason", [
@@ -205,10 +285,12 @@ def test_cycles_measure_reach_time_and_current_on_the_moving_model():
     (None, {"limit": 300}, "current-limit"),
     ("overload", {}, "device-error"),
 ])
-def test_a_cycle_run_stops_the_rod_where_it_is(fault, kw, reason):
+@PROTOCOLS
+def test_a_cycle_run_stops_the_rod_where_it_is(fault, kw, reason, protocol):
     from zkzap.api.cycle import Cycler
 
-    with start_zap(ids=[1], speed=1 if kw.get("limit") else 4) as sim, Bus(sim) as bus:
+    sim, bus = on(protocol, [1], speed=1 if kw.get("limit") else 4)
+    with sim, bus:
         sim.device.actuator(1).set("present-position", 1000)
         sim.device.actuator(1).set("goal-position", 1000)
         if fault:
@@ -234,12 +316,14 @@ def test_the_cycle_state_round_trips(tmp_path):
         CycleState.load(str(tmp_path / "bad.json"))
 
 
-def test_a_cancelled_cycle_run_holds_the_rod_and_says_why():
+@PROTOCOLS
+def test_a_cancelled_cycle_run_holds_the_rod_and_says_why(protocol):
     import threading
 
     from zkzap.api.cycle import Cycler
 
-    with start_zap(ids=[1], speed=4) as sim, Bus(sim) as bus:
+    sim, bus = on(protocol, [1], speed=4)
+    with sim, bus:
         cancel = threading.Event()
         c = Cycler(bus, 1, 500, 3500, cycles=1000, dwell=0.05, cancel=cancel, cancel_why="cancelled from the page")
         recs = []
@@ -252,14 +336,16 @@ def test_a_cancelled_cycle_run_holds_the_rod_and_says_why():
         assert c.held is not None and sim.device.actuator(1).get("goal-position") == c.held
 
 
-def test_a_cancelled_play_stops_every_actuator_with_the_words_it_was_given():
+@PROTOCOLS
+def test_a_cancelled_play_stops_every_actuator_with_the_words_it_was_given(protocol):
     import threading
     import time
 
-    with start_zap(ids=[1, 2], speed=2) as sim, Bus(sim) as bus:
+    sim, bus = on(protocol, [1, 2], speed=2)
+    with sim, bus:
         cancel = threading.Event()
         rows = motion.read_path(io.StringIO('t,id,position\n0,"1,2",500\n0.5,"1,2",3500\n60,"1,2",500\n'))
-        p = motion.plan(rows, baud=bus.baud)
+        p = motion.plan(rows, baud=bus.baud, protocol=protocol)
         player = motion.Player(bus, p, cancel=cancel, cancel_why="cancelled from the page")
         started = time.monotonic()
         for row in player.rows():

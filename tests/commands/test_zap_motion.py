@@ -18,6 +18,25 @@ def jsonl(text):
     return [json.loads(line) for line in text.splitlines() if line.strip()]
 
 
+class Proto:
+    """One mightyZAP protocol's command line: ``args`` (its --protocol), ``sim(query)`` (a
+    simulator URL speaking it), ``margin`` (its simulated actuator's end-compliance-margin)."""
+
+    def __init__(self, name):
+        self.name = name
+        self.args = ["--protocol", "modbus"] if name == "modbus" else []
+        self.margin = 8 if name == "modbus" else 7
+
+    def sim(self, query):
+        return "sim://zap?" + ("protocol=modbus&" if self.name == "modbus" else "") + query
+
+
+@pytest.fixture(params=["ir", "modbus"])
+def proto(request):
+    """The motion commands' tests run over both protocols (parametrised, not copied)."""
+    return Proto(request.param)
+
+
 @pytest.fixture
 def path(tmp_path):
     def make(text, name="path.csv"):
@@ -50,19 +69,22 @@ def test_a_rate_the_line_cannot_carry_is_refused_before_anything_is_sent(cli, pa
     assert r.exit_code == 2 and "path.csv:3" in r.stderr and written() == b""
 
 
-def test_play_logs_tracking_to_csv_and_reaches_the_goals(cli, path, tmp_path):
+def test_play_logs_tracking_to_csv_and_reaches_the_goals(cli, path, tmp_path, proto):
     out = tmp_path / "run.csv"
-    r = cli("zap", "play", path('t,id,position\n0,"1,2",1500\n0.4,2,3000\n'), "-p", "sim://zap?ids=1,2&speed=2",
-            "-o", str(out), "--interpolate", "linear", "--rate", "10")
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",1500\n0.4,2,3000\n'), "-p", proto.sim("ids=1,2&speed=2"),
+            "-o", str(out), "--interpolate", "linear", "--rate", "10", *proto.args)
     assert r.exit_code == 0, r.stderr
     import csv
 
     rows = list(csv.DictReader(open(out)))
     assert rows[0].keys() >= {"t", "id", "goal", "present", "tracking_error", "current_ma", "voltage_v"}
     last = {row["id"]: row for row in rows}
-    assert abs(int(last["1"]["present"]) - 1500) <= 7 and abs(int(last["2"]["present"]) - 3000) <= 7
+    m = proto.margin
+    assert abs(int(last["1"]["present"]) - 1500) <= m and abs(int(last["2"]["present"]) - 3000) <= m
     assert any(int(row["current_ma"]) > 100 for row in rows)
     assert "lateness p50" in r.stderr and "5 of 5 steps" in r.stderr
+    if proto.name == "modbus":                 # the raw voltage beside an empty voltage_v (no unit in the map)
+        assert rows[0]["voltage_v"] == "" and rows[0]["voltage_raw"] == "120"
 
 
 def test_play_in_millimetres_shows_counts_beside_mm(cli, path, tmp_path):
@@ -78,26 +100,26 @@ def test_play_in_millimetres_shows_counts_beside_mm(cli, path, tmp_path):
     assert r.exit_code == 2 and "needs --fleet" in r.stderr
 
 
-def test_a_current_over_the_limit_stops_every_actuator_and_says_so(cli, path):
-    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "--limit", "200", "-p", "sim://zap?ids=1,2",
-            "-f", "jsonl")
+def test_a_current_over_the_limit_stops_every_actuator_and_says_so(cli, path, proto):
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "--limit", "200", "-p", proto.sim("ids=1,2"),
+            "-f", "jsonl", *proto.args)
     assert r.exit_code == 1, r.stderr
     assert "stopped every actuator" in r.stderr and "over the limit of 200 mA" in r.stderr
     assert "ID 1 held at" in r.stderr and "ID 2 held at" in r.stderr
 
 
-def test_a_hardware_error_stops_every_actuator(cli, path):
-    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "-p", "sim://zap?ids=1,2&faults=1:overload",
-            "--stop", "off", "-f", "jsonl")
+def test_a_hardware_error_stops_every_actuator(cli, path, proto):
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",4000\n'), "-p", proto.sim("ids=1,2&faults=1:overload"),
+            "--stop", "off", "-f", "jsonl", *proto.args)
     assert r.exit_code == 5, r.stderr
     assert "overload" in r.stderr and "force off: ID 1, ID 2" in r.stderr
 
 
-def test_ctrl_c_stops_every_actuator_where_it_is(path, tmp_path):
+def test_ctrl_c_stops_every_actuator_where_it_is(path, tmp_path, proto):
     from e2e.conftest import clean_env, executable
 
     p = path('t,id,position\n0,"1,2",0\n0.1,"1,2",4000\n60,"1,2",0\n')
-    proc = subprocess.Popen([executable("zap"), "play", p, "-p", "sim://zap?ids=1,2", "-f", "jsonl"],
+    proc = subprocess.Popen([executable("zap"), "play", p, "-p", proto.sim("ids=1,2"), "-f", "jsonl", *proto.args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=clean_env())
     first = proc.stdout.readline()            # it is playing
     assert first
@@ -109,14 +131,18 @@ def test_ctrl_c_stops_every_actuator_where_it_is(path, tmp_path):
     assert "stopped every actuator (interrupted)" in err and "ID 1 held at" in err and "ID 2 held at" in err
 
 
-def test_teach_records_waypoints_that_play_back(cli, tmp_path):
+def test_teach_records_waypoints_that_play_back(cli, tmp_path, proto):
     out = tmp_path / "taught.csv"
-    r = cli("zap", "teach", "--ids", "1,2", "-o", str(out), "-p", "sim://zap?ids=1,2", input="\n\nq\n")
+    r = cli("zap", "teach", "--ids", "1,2", "-o", str(out), "-p", proto.sim("ids=1,2"), input="\n\nq\n",
+            *proto.args)
     assert r.exit_code == 0, r.stderr
     assert out.read_text() == "t,id,position\n0,1,0\n0,2,0\n1,1,0\n1,2,0\n"
     assert "2 waypoints of 2 actuators written" in r.stderr
-    r = cli("zap", "play", str(out), "-n")
-    assert r.exit_code == 0 and len(r.stdout.splitlines()) == 2
+    r = cli("zap", "play", str(out), "-n", *proto.args)
+    # a sync move of both: one Symmetric Store a step on IR, one write per actuator on Modbus RTU
+    assert r.exit_code == 0 and len(r.stdout.splitlines()) == (2 if proto.name == "ir" else 4)
+    r = cli("zap", "play", str(out), "-p", proto.sim("ids=1,2&speed=4"), *proto.args, "-f", "jsonl")
+    assert r.exit_code == 0 and all(x["present"] == 0 for x in jsonl(r.stdout)), r.stderr
     out2 = tmp_path / "timed.json"
     r = cli("zap", "teach", "--ids", "1", "-o", str(out2), "--rate", "20", "--count", "3", "-p", "sim://zap?ids=1")
     assert r.exit_code == 0, r.stderr
@@ -149,17 +175,46 @@ def test_calibrate_records_the_two_ends_and_mm_follow_them(cli, tmp_path, path):
     assert "max_speed_mm_s" in doc["1"]["motion"]                   # the other entry is kept
 
 
+def test_calibrate_a_17lf_drives_it_to_its_stroke_limits_and_mm_follow(cli, tmp_path, path):
+    fleet = tmp_path / "fleet.json"
+    sim = "sim://zap?protocol=modbus&ids=1&speed=8"
+    r = cli("zap", "calibrate", "--protocol", "modbus", "--id", "1", "--fleet", str(fleet), "--stroke", "30",
+            "-p", sim)
+    assert r.exit_code == 0, r.stderr
+    motion = json.load(open(fleet))["actuators"]["1"]["motion"]
+    # the simulated 17Lf's stroke limits are 0 and 10000 (its map's range: no 4095 ceiling)
+    assert motion["calibration"] == {"retracted": 0, "extended": 10000, "travel_mm": 30.0}
+    r = cli("zap", "play", path("t,id,position\n0,1,15\n"), "--protocol", "modbus", "--unit", "mm", "--fleet",
+            str(fleet), "-n", "-f", "jsonl")
+    assert r.exit_code == 0 and jsonl(r.stdout)[0]["goals"] == {"1": 5000}, r.stderr
+    for args, needle in ((["--id", "1", "--part", "12Lf-20PT-27"], "no 17Lf part's stroke"),
+                         (["--id", "248"], "1..247")):
+        r = cli("zap", "calibrate", "--protocol", "modbus", "--fleet", str(fleet), "-p", sim, *args)
+        assert r.exit_code == 2 and needle in r.stderr, r.stderr
+    r = cli("zap", "calibrate", "--id", "1", "--fleet", str(fleet), "--retracted", "5000", "-p", "sim://zap?ids=1")
+    assert r.exit_code == 2 and "--retracted" in r.stderr and "4095" in r.stderr     # the 12Lf's range
+
+
+def test_play_dry_run_on_modbus_names_each_actuator_s_write(cli, path):
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",9000\n'), "-n", "--protocol", "modbus")
+    assert r.exit_code == 0, r.stderr
+    assert r.stdout.splitlines() == ["    0.000  write goal-position=9000 to actuator 1  01 10 00 CD 00 01 02 23 28 AF 63",
+                                     "    0.000  write goal-position=9000 to actuator 2  02 10 00 CD 00 01 02 23 28 BB 93"]
+    r = cli("zap", "play", path('t,id,position\n0,"1,2",9000\n'), "-n")
+    assert r.exit_code == 2 and "out of range; allowed 0..4095" in r.stderr
+
+
 # -- zap cycle ---------------------------------------------------------------------------------
 
-def test_cycle_resumes_where_it_stopped_and_reports_the_whole_run(cli, tmp_path):
+def test_cycle_resumes_where_it_stopped_and_reports_the_whole_run(cli, tmp_path, proto):
     out, state, report = tmp_path / "wear.csv", tmp_path / "wear.json", tmp_path / "wear.png"
-    sim = "sim://zap?ids=3&speed=2"    # a poll every ~7 ms (more when loaded): several during each move
+    sim = proto.sim("ids=3&speed=2")    # a poll every ~7 ms (more when loaded): several during each move
     r = cli("zap", "cycle", "--id", "3", "--between", "500", "3500", "--dwell", "0.05", "--cycles", "3",
-            "-p", sim, "-o", str(out), "--resume", str(state))
+            "-p", sim, "-o", str(out), "--resume", str(state), *proto.args)
     assert r.exit_code == 0, r.stderr
     assert "3 cycles (1..3)" in r.stderr and "x the wire limit" in r.stderr
     assert json.load(open(state))["done"] == 3
-    r = cli("zap", "cycle", "--resume", str(state), "--cycles", "5", "-p", sim, "--report", str(report))
+    r = cli("zap", "cycle", "--resume", str(state), "--cycles", "5", "-p", sim, "--report", str(report), *proto.args)
     assert r.exit_code == 0, r.stderr
     assert "resuming the run" in r.stderr and "at cycle 4 of 5" in r.stderr
     assert "resuming the run" in r.stderr and "at cycle 4 of 5" in r.stderr
@@ -169,15 +224,15 @@ def test_cycle_resumes_where_it_stopped_and_reports_the_whole_run(cli, tmp_path)
     assert [int(x["cycle"]) for x in rows] == [1, 2, 3, 4, 5]
     assert all(float(x["reach_b_s"]) > 0 and int(x["peak_current_ma"]) > 100 for x in rows)
     assert report.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "report written" in r.stderr
-    r = cli("zap", "cycle", "--resume", str(state), "-p", sim)
+    r = cli("zap", "cycle", "--resume", str(state), "-p", sim, *proto.args)
     assert r.exit_code == 2 and "has done its 5 cycles" in r.stderr
-    r = cli("zap", "cycle", "--resume", str(state), "--id", "4", "--cycles", "9", "-p", sim)
+    r = cli("zap", "cycle", "--resume", str(state), "--id", "4", "--cycles", "9", "-p", sim, *proto.args)
     assert r.exit_code == 2 and "differs from the run" in r.stderr
 
 
-def test_cycle_stops_on_a_stall_and_says_where(cli, tmp_path):
+def test_cycle_stops_on_a_stall_and_says_where(cli, tmp_path, proto):
     r = cli("zap", "cycle", "--id", "1", "--between", "500", "3500", "--stall", "0.2", "-p",
-            "sim://zap?ids=1&speed=4&faults=1:stuck", "-f", "jsonl")
+            proto.sim("ids=1&speed=4&faults=1:stuck"), "-f", "jsonl", *proto.args)
     assert r.exit_code == 1, r.stderr
     rec = jsonl(r.stdout)[-1]
     assert rec["status"] == "stall" and "stalled at 0" in r.stderr and "held at 0" in r.stderr
@@ -198,9 +253,9 @@ def test_cycle_in_millimetres_and_the_html_report(cli, tmp_path):
     assert r.exit_code == 2 and "millimetres need --unit mm" in r.stderr
 
 
-def test_cycle_of_a_path(cli, path):
+def test_cycle_of_a_path(cli, path, proto):
     r = cli("zap", "cycle", "--path", path('t,id,position\n0,"1,2",500\n0.2,"1,2",2500\n'), "--cycles", "2",
-            "-p", "sim://zap?ids=1,2&speed=4", "-f", "jsonl")
+            "-p", proto.sim("ids=1,2&speed=4"), "-f", "jsonl", *proto.args)
     assert r.exit_code == 0, r.stderr
     recs = jsonl(r.stdout)
     assert [x["cycle"] for x in recs] == [1, 2] and all(x["max_tracking_error"] > 0 for x in recs)
@@ -324,9 +379,10 @@ def test_scan_every_bus_at_its_baud_rate(cli, tmp_path):
 LEFT, RIGHT = "sim://zap?ids=1,2&speed=4", "sim://zap?ids=1&speed=4"
 
 
-def test_cycle_on_two_buses_by_their_ports(cli):
+def test_cycle_on_two_buses_by_their_ports(cli, proto):
+    LEFT, RIGHT = proto.sim("ids=1,2&speed=4"), proto.sim("ids=1&speed=4")
     r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "--dwell", "0.05", "--cycles", "2",
-            "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+            "-p", LEFT, "-p", RIGHT, "-f", "jsonl", *proto.args)
     assert r.exit_code == 0, r.stderr
     recs = jsonl(r.stdout)
     assert sorted((x["bus"], x["cycle"]) for x in recs) == sorted([(LEFT, 1), (LEFT, 2), (RIGHT, 1), (RIGHT, 2)])

@@ -1,16 +1,18 @@
 """Endurance cycles of one actuator: ``zap cycle`` (:class:`Cycler`).
 
 A cycle moves the rod from end A to end B and back (or plays a path once, see
-:mod:`zkzap.api.motion`). Each leg writes the goal and then polls present-position .. moving in
-one Load Data, back to back (the poll rate the line allows, as ``zap watch`` does), and
-measures:
+:mod:`zkzap.api.motion`). Each leg writes the goal and then polls the log read of
+:mod:`zkzap.api.motion_wire` (present-position .. present-voltage in one Load Data on IR; the
+map's runs of hardware-error, present-position, present-current and present-voltage on Modbus
+RTU) back to back (the poll rate the line allows, as ``zap watch`` does), and measures:
 
 - ``reach_s``: the time from the goal's write to the first reading within the actuator's
   end-compliance-margin of the goal;
 - ``overshoot``: how far the rod went past the goal, in the direction it travelled (counts),
   from the write to the end of the dwell;
-- the current (peak and mean over the move), the lowest supply voltage and the error bits of
-  every reply (the IR protocol's hardware-error byte).
+- the current (peak and mean over the move), the lowest supply voltage (on Modbus RTU the raw
+  value, ``min_voltage_raw``: the 17Lf's map gives no unit) and the error bits of every read
+  (the IR reply's error byte; the hardware-error register on Modbus RTU).
 
 After the goal is reached the rod dwells ``dwell`` seconds (still polled). A cycle is one
 record (:data:`COLUMNS`). The run stops, stopping the rod where it is (goal := present
@@ -28,14 +30,10 @@ import json
 import os
 import time
 
-from ..codec import zap
 from ..errors import BadReply, NoReply, UsageError, ZkzapError
-from .motion import POSITION, SPEED, stop_all
+from .motion import stop_all
+from .motion_wire import wire_of
 
-FIRST = zap.REGISTER_BY_NAME["present-position"]
-LAST = zap.REGISTER_BY_NAME["moving"]
-LENGTH = LAST.address + LAST.size - FIRST.address
-MARGIN = zap.REGISTER_BY_NAME["end-compliance-margin"]
 #: Progress toward the goal that counts as moving (counts), within ``stall`` seconds.
 STALL_COUNTS = 3
 STATE_FORMAT = "zkzap-cycle/1"
@@ -43,6 +41,8 @@ STATE_FORMAT = "zkzap-cycle/1"
 COLUMNS = ["cycle", "time", "t", "reach_b_s", "reach_a_s", "overshoot_b", "overshoot_a", "peak_current_ma",
            "mean_current_ma", "min_voltage_v", "errors", "polls", "status"]
 MM_COLUMNS = ["overshoot_b_mm", "overshoot_a_mm"]
+#: The column a record gains on Modbus RTU, whose present-voltage has no documented unit: the raw value.
+RAW_VOLTAGE_COLUMNS = ["min_voltage_raw"]
 REASONS = ("done", "duration", "device-error", "stall", "current-limit", "timeout", "no-reply", "interrupted",
            "cancelled")
 
@@ -78,15 +78,18 @@ class Cycler:
     def __init__(self, bus, ident, a, b, *, dwell=0.5, cycles=10, first=1, speed=None, stall=1.0, limit=None,
                  timeout=10.0, scale=None, clock=None, duration=None, cancel=None, cancel_why="cancelled"):
         self.link = getattr(bus, "link", bus)
+        self.wire = wire_of(self.link)
         self.cancel = cancel
         self.cancel_why = cancel_why
-        self.ident = zap.check_id(ident, allow_broadcast=False)
+        from .fleet import check_ident
+
+        self.ident = check_ident(self.wire.map, ident)
         for v in (a, b):
-            POSITION.check(v)
+            self.wire.position.check(v)
         if a == b:
             raise UsageError("between: the two ends are the same position")
         if speed is not None:
-            SPEED.check(speed)
+            self.wire.speed.check(speed)
         self.a, self.b = a, b
         self.dwell, self.cycles, self.first = dwell, cycles, first
         self.speed, self.stall, self.limit, self.timeout = speed, stall, limit, timeout
@@ -107,10 +110,11 @@ class Cycler:
         self.done = first - 1
 
     def wire_limit(self) -> float:
-        """Polls per second the line allows for this read (the wire and a 12Lf's turnaround)."""
-        from .watch import wire_limit
+        """Polls per second the line allows for this read (the wire and the actuator's turnaround;
+        on Modbus RTU the silence before each request too)."""
+        from .watch import TURNAROUND
 
-        return wire_limit([(FIRST.address, LENGTH, [])], self.link.baud, 1)
+        return 1.0 / self.wire.read_cost(self.link, self.ident, TURNAROUND)
 
     @property
     def achieved(self) -> float:
@@ -118,15 +122,13 @@ class Cycler:
         return self.polls / self.poll_time if self.poll_time > 0 else 0.0
 
     def _poll(self):
-        reply = self.link.load(self.ident, FIRST.address, LENGTH, check=False)
-        v = {reg.name: raw for reg, raw in zap._register_values(FIRST.address, reply.data)}
-        return reply, v
+        return self.wire.read_sample(self.link, self.ident)
 
     def leg(self, goal) -> Leg:
         """Move to ``goal``, measure until it is reached and the dwell is over."""
         leg = Leg()
         link, clock = self.link, self.clock
-        link.store(self.ident, POSITION, goal)
+        link.store(self.ident, self.wire.position, goal)
         t0 = clock.now()
         start = None
         direction = 0
@@ -138,19 +140,20 @@ class Cycler:
         try:
             while True:
                 try:
-                    reply, v = self._poll()
+                    reply = self._poll()
                 except NoReply as e:
                     leg.stop, leg.why = "no-reply", str(e)
                     return leg
                 now = clock.now()
                 leg.polls += 1
-                pos, cur = v["present-position"], v["present-current"]
-                volts = round(v["present-voltage"] * 0.1, 1)
+                pos, cur = reply.position, reply.current
+                volts = reply.voltage_v if reply.voltage_v is not None else reply.voltage_raw
                 if start is None:
                     start = pos
                     direction = 1 if goal > start else -1
                 leg.errors.update(reply.errors)
-                leg.min_voltage = volts if leg.min_voltage is None else min(leg.min_voltage, volts)
+                if volts is not None:
+                    leg.min_voltage = volts if leg.min_voltage is None else min(leg.min_voltage, volts)
                 leg.overshoot = max(leg.overshoot, (pos - goal) * direction)
                 if reached_at is None:
                     currents.append(cur)
@@ -198,9 +201,9 @@ class Cycler:
         link = self.link
         try:
             # error bits are the first poll's to report (as a stop), not this read's
-            self.margin = max(1, link.load(self.ident, MARGIN.address, MARGIN.size, check=False).value)
+            self.margin = max(1, self.wire.read_margin(link, self.ident))
             if self.speed is not None:
-                link.store(self.ident, SPEED, self.speed)
+                link.store(self.ident, self.wire.speed, self.speed)
             start = self.clock.now()
             if self.duration is not None:
                 self._end = start + self.duration
@@ -241,6 +244,8 @@ class Cycler:
                "min_voltage_v": min(volts) if volts else None,
                "errors": sorted(set().union(*(x.errors for x in both))), "polls": sum(x.polls for x in both),
                "status": legs[-1].stop or "ok"}
+        if self.wire.log_columns:             # Modbus RTU: the voltage raw, its unit undocumented
+            rec["min_voltage_raw"], rec["min_voltage_v"] = rec["min_voltage_v"], None
         if self.scale is not None:
             k = abs(self.scale.mm_per_count)
             rec["overshoot_b_mm"] = round(b.overshoot * k, 3)
@@ -341,7 +346,7 @@ class PathCycler:
                 self.reason, self.why = "duration", f"stopped after {self.duration:g} s (--duration)"
                 return
             t = round(player.clock.now() - start, 3)
-            worst, currents, volts, errors = 0, [], [], set()
+            worst, currents, volts, raws, errors = 0, [], [], [], set()
             t0 = time.monotonic()
             for row in player.rows():
                 if row["tracking_error"] is not None:
@@ -350,6 +355,8 @@ class PathCycler:
                     currents.append(row["current_ma"])
                 if row["voltage_v"] is not None:
                     volts.append(row["voltage_v"])
+                if row.get("voltage_raw") is not None:
+                    raws.append(row["voltage_raw"])
                 errors.update(row["errors"])
             self.polls += player.reads
             self.poll_time += time.monotonic() - t0
@@ -360,6 +367,8 @@ class PathCycler:
                    "min_voltage_v": min(volts) if volts else None, "errors": sorted(errors), "reads": player.reads,
                    "lateness_p99_ms": player.summary()["lateness_p99_ms"],
                    "status": stopped.reason if stopped else "ok"}
+            if player.wire.log_columns:
+                rec["min_voltage_raw"] = min(raws) if raws else None
             if stopped is not None:
                 self.reason, self.why = stopped.reason, stopped.message
                 self.held = stopped.positions

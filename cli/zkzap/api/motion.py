@@ -43,7 +43,7 @@ from array import array
 
 from ..codec import zap
 from ..errors import BadReply, DeviceError, NoReply, UsageError, ZkzapError
-from ..link.port import wire_time
+from .motion_wire import IrWire, wire_for, wire_of
 
 POSITION = zap.REGISTER_BY_NAME["goal-position"]
 SPEED = zap.REGISTER_BY_NAME["goal-speed"]
@@ -54,8 +54,7 @@ MARGIN = zap.REGISTER_BY_NAME["end-compliance-margin"]
 #: The block a log read covers: present-position .. present-voltage.
 LOG_FIRST = PRESENT
 LOG_LENGTH = zap.REGISTER_BY_NAME["present-voltage"].address + 1 - PRESENT.address
-#: Bytes of a Load Data command and of a reply without data.
-LOAD_BYTES, REPLY_BYTES = 9, 7
+from .motion_wire import LOAD_BYTES, REPLY_BYTES  # noqa: E402,F401  (bytes of a Load Data, of a bare reply)
 #: The share of the line a plan may use for its goals (the rest: the log reads, the host).
 LINE_SHARE = 0.8
 #: Interpolation rate when none is asked: this, or what the line carries when less.
@@ -94,24 +93,23 @@ class Row:
 
 class Step:
     """What leaves at one due time: ``t``, ``goals``/``speeds``/``currents`` ({ID: raw}) and
-    their ``frames`` (Symmetric Store packets, in sending order)."""
+    their ``frames`` (in sending order: on IR Symmetric Store packets, on Modbus RTU one Write
+    Multiple Registers per actuator; ``protocol``: the :mod:`~zkzap.api.motion_wire` wire)."""
 
-    __slots__ = ("t", "goals", "speeds", "currents", "frames", "keyframe")
+    __slots__ = ("t", "goals", "speeds", "currents", "frames", "keyframe", "protocol")
 
-    def __init__(self, t, goals, speeds=None, currents=None, keyframe=True):
+    def __init__(self, t, goals, speeds=None, currents=None, keyframe=True, protocol=None):
         self.t = t
         self.goals = dict(goals)
         self.speeds = dict(speeds or {})
         self.currents = dict(currents or {})
         self.keyframe = keyframe
-        self.frames = []
-        for reg, values in ((CURRENT, self.currents), (SPEED, self.speeds), (POSITION, self.goals)):
-            if values:
-                self.frames += zap.symmetric_store(reg, sorted(values.items()))
+        self.protocol = protocol if protocol is not None else IrWire()
+        self.frames = self.protocol.step_frames(self.goals, self.speeds, self.currents)
 
     def wire(self, baud: int, stop_bits: int = 1) -> float:
-        """Seconds the step's frames take on the line."""
-        return sum(wire_time(len(f), baud, stop_bits) for f in self.frames)
+        """Seconds the step's frames hold the line (on Modbus RTU with their replies)."""
+        return sum(self.protocol.frame_time(f, baud, stop_bits) for f in self.frames)
 
     def record(self) -> dict:
         return {"t": round(self.t, 6), "goals": {str(k): v for k, v in sorted(self.goals.items())},
@@ -181,7 +179,13 @@ def _number(name, line, key, v, *, integer=False):
     return v
 
 
-def _ids(name, line, v):
+def _ids(name, line, v, protocol="ir"):
+    if protocol == "modbus":
+        from ..codec import modbus as checker
+
+        what = "1..247"
+    else:
+        checker, what = zap, "0..253"
     items = v if isinstance(v, list) else [v] if isinstance(v, int) else str(v).replace(";", ",").split(",")
     out = []
     for item in items:
@@ -189,9 +193,9 @@ def _ids(name, line, v):
             ident = int(item) if not isinstance(item, str) else int(item.strip(), 0)
             if isinstance(item, (bool, float)):
                 raise ValueError
-            zap.check_id(ident, allow_broadcast=False)
+            checker.check_id(ident, allow_broadcast=False)
         except (ValueError, TypeError, ZkzapError):
-            _fail(name, line, f"id: {item!r} is not an actuator ID 0..253")
+            _fail(name, line, f"id: {item!r} is not an actuator ID {what}")
         if ident in out:
             _fail(name, line, f"id: {ident} is given twice")
         out.append(ident)
@@ -200,11 +204,14 @@ def _ids(name, line, v):
     return out
 
 
-def read_path(source, *, unit: str = "counts", scales=None, name=None) -> list:
+def read_path(source, *, unit: str = "counts", scales=None, name=None, protocol=None) -> list:
     """The checked :class:`Row` list of a path file (``source``: a path, ``-`` for stdin, or a
     text stream), in time order (rows of one time keep their order). ``unit`` ``"mm"``:
-    positions in mm and speeds in mm/s, converted with ``scales`` ({ID: Scale}). A bad row is a
-    UsageError naming ``FILE:LINE``; nothing is returned from a file with one."""
+    positions in mm and speeds in mm/s, converted with ``scales`` ({ID: Scale}). IDs and
+    ranges are those of ``protocol`` (a :mod:`~zkzap.api.motion_wire` wire; None: the 12Lf's
+    IR map). A bad row is a UsageError naming ``FILE:LINE``; nothing is returned from a file
+    with one."""
+    protocol = protocol if protocol is not None else IrWire()
     if hasattr(source, "read"):
         text, name = source.read(), name or getattr(source, "name", "path")
     elif source == "-":
@@ -234,9 +241,9 @@ def read_path(source, *, unit: str = "counts", scales=None, name=None) -> list:
         t = _number(name, line, "t", rec["t"])
         if t < 0:
             _fail(name, line, f"t: {t:g} is before the start (t >= 0)")
-        ids = _ids(name, line, rec["id"])
+        ids = _ids(name, line, rec["id"], protocol.protocol)
         values = {}
-        for key, reg in (("position", POSITION), ("speed", SPEED), ("current", CURRENT)):
+        for key, reg in (("position", protocol.position), ("speed", protocol.speed), ("current", protocol.current)):
             v = rec.get(key)
             if v in (None, ""):
                 values[key] = None
@@ -345,37 +352,45 @@ def _keyframes(rows):
     return out
 
 
-def max_rate(ids, baud: int, stop_bits: int = 1) -> float:
-    """The fastest interpolation rate (Hz) the line carries for a sync move of ``ids``: one
-    Symmetric Store of goal-position per step within :data:`LINE_SHARE` of each period."""
-    step = Step(0.0, {i: 0 for i in ids})
+def max_rate(ids, baud: int, stop_bits: int = 1, protocol=None) -> float:
+    """The fastest interpolation rate (Hz) the line carries for a sync move of ``ids``: a
+    step's goal-position frames (one Symmetric Store on IR; one answered write per actuator on
+    Modbus RTU) within :data:`LINE_SHARE` of each period."""
+    step = Step(0.0, {i: 0 for i in ids}, protocol=protocol)
     return LINE_SHARE / step.wire(baud, stop_bits)
 
 
 class Plan:
     """The steps of a path, checked against the line: ``steps``, ``ids``, ``duration``, ``rate``
-    (the interpolation rate, None without), ``baud``, ``note`` (what the check says)."""
+    (the interpolation rate, None without), ``baud``, ``note`` (what the check says),
+    ``protocol`` (the :mod:`~zkzap.api.motion_wire` wire its frames are for)."""
 
-    def __init__(self, steps, ids, duration, rate, baud, note):
+    def __init__(self, steps, ids, duration, rate, baud, note, protocol=None):
         self.steps, self.ids, self.duration, self.rate, self.baud, self.note = steps, ids, duration, rate, baud, note
+        self.protocol = protocol if protocol is not None else IrWire()
 
     @property
     def frames(self) -> int:
         return sum(len(s.frames) for s in self.steps)
 
 
-def plan(rows, *, baud: int = 57600, stop_bits: int = 1, interpolate=None, rate=None) -> Plan:
-    """The :class:`Plan` of checked path rows at ``baud``: refused (UsageError) when the line
-    cannot carry it (see the module's description)."""
+def plan(rows, *, baud: int = 57600, stop_bits: int = 1, interpolate=None, rate=None, protocol=None) -> Plan:
+    """The :class:`Plan` of checked path rows at ``baud`` on ``protocol`` (a
+    :mod:`~zkzap.api.motion_wire` wire, or ``"ir"``/``"modbus"``; None: IR): refused
+    (UsageError) when the line cannot carry it (see the module's description)."""
+    if protocol is None or isinstance(protocol, str):
+        protocol = wire_for(protocol or "ir")
     keys = _keyframes(rows)
     ids = sorted({i for _, g, s, c in keys for i in (*g, *s, *c)})
     duration = keys[-1][0]
     if interpolate not in (None, "none", "linear"):
         raise UsageError(f"interpolate: {interpolate!r}; allowed linear")
     if interpolate == "linear":
-        limit = max_rate(ids, baud, stop_bits)
-        frame = Step(0.0, {i: 0 for i in ids})
-        why = (f"a sync move of {len(ids)} actuator{'s' if len(ids) != 1 else ''} is {len(frame.frames[0])} bytes, "
+        limit = max_rate(ids, baud, stop_bits, protocol)
+        frame = Step(0.0, {i: 0 for i in ids}, protocol=protocol)
+        size = (f"{len(frame.frames[0])} bytes" if len(frame.frames) == 1 else
+                f"{len(frame.frames)} answered frames of {len(frame.frames[0])} bytes")
+        why = (f"a sync move of {len(ids)} actuator{'s' if len(ids) != 1 else ''} is {size}, "
                f"{frame.wire(baud, stop_bits) * 1000:.2f} ms at {baud} baud; {LINE_SHARE:.0%} of the line carries "
                f"{math.floor(limit)} Hz")
         if rate is None:
@@ -383,14 +398,14 @@ def plan(rows, *, baud: int = 57600, stop_bits: int = 1, interpolate=None, rate=
         elif rate > limit:
             raise UsageError(f"--rate {rate:g} Hz: more than the line carries ({why})", rate=rate,
                              max_rate=math.floor(limit))
-        steps = _interpolated(keys, ids, rate)
+        steps = _interpolated(keys, ids, rate, protocol)
         note = f"interpolating at {rate:g} Hz ({why})"
     else:
-        steps = [Step(t, g, s, c) for t, g, s, c in keys]
+        steps = [Step(t, g, s, c, protocol=protocol) for t, g, s, c in keys]
         note = f"{len(steps)} steps at their own times"
         rate = None
     check_line(steps, baud, stop_bits)
-    return Plan(steps, ids, duration, rate, baud, note)
+    return Plan(steps, ids, duration, rate, baud, note, protocol)
 
 
 def check_line(steps, baud: int, stop_bits: int = 1, speed: float = 1.0) -> None:
@@ -406,7 +421,7 @@ def check_line(steps, baud: int, stop_bits: int = 1, speed: float = 1.0) -> None
                              t=a.t)
 
 
-def _interpolated(keys, ids, rate):
+def _interpolated(keys, ids, rate, protocol):
     """Steps every 1/rate s: each actuator's goal linear between its keyframes (held before its
     first and after its last); speeds and currents leave with the first step at or after their
     keyframe. Only goals that change are sent."""
@@ -430,7 +445,8 @@ def _interpolated(keys, ids, rate):
             currents.update(extras[ei][2])
             ei += 1
         if goals or speeds or currents:
-            steps.append(Step(t, goals, speeds, currents, keyframe=any(abs(t - kt) < 1e-9 for kt, *_ in keys)))
+            steps.append(Step(t, goals, speeds, currents, keyframe=any(abs(t - kt) < 1e-9 for kt, *_ in keys),
+                              protocol=protocol))
     return steps
 
 
@@ -453,13 +469,14 @@ def _at(track, t):
 
 def stop_all(bus, ids, mode: str = "hold") -> dict:
     """Stop every actuator of ``ids`` now: ``hold`` reads each present position and makes it
-    the goal in one sync move; ``off`` turns the force off (one Symmetric Store). Returns
-    ``{ID: position held, or None}``; an actuator whose position cannot be read is turned off
-    instead (None)."""
+    the goal in one sync move (on Modbus RTU one write each, every one tried); ``off`` turns
+    the force off. Returns ``{ID: position held, or None}``; an actuator whose position cannot
+    be read, or whose hold was not confirmed, is turned off instead (None)."""
     link = getattr(bus, "link", bus)
+    wire = wire_of(link)
     ids = list(ids)
     if mode == "off":
-        link.symmetric_store(FORCE, [(i, 0) for i in ids])
+        wire.write_all(link, "force-on-off", {i: 0 for i in ids})
         return {i: None for i in ids}
     held, lost = {}, []
     for i in ids:
@@ -467,15 +484,16 @@ def stop_all(bus, ids, mode: str = "hold") -> dict:
         # owes (the first ask then gives no value, never a wrong one)
         for attempt in (1, 2):
             try:
-                held[i] = link.read(i, PRESENT)
+                held[i] = wire.read_present(link, i)
                 break
             except ZkzapError:
                 if attempt == 2:
                     lost.append(i)
-    if held:
-        link.symmetric_store(POSITION, sorted(held.items()))
+    for i in wire.write_all(link, "goal-position", held):
+        held.pop(i)
+        lost.append(i)
     if lost:
-        link.symmetric_store(FORCE, [(i, 0) for i in lost])
+        wire.write_all(link, "force-on-off", {i: 0 for i in lost})
     return {i: held.get(i) for i in ids}
 
 
@@ -490,7 +508,7 @@ def describe_stop(positions: dict, mode: str) -> str:
 
 class Stopped:
     """Why a play stopped early: ``reason`` (``interrupted``, ``device-error``, ``current-limit``,
-    ``port``), ``message``, ``positions`` (what :func:`stop_all` held) and ``mode``."""
+    ``no-reply`` (a goal's write unanswered, on Modbus RTU), ``cancelled``), ``message``, ``positions`` (what :func:`stop_all` held) and ``mode``."""
 
     __slots__ = ("reason", "message", "positions", "mode", "error")
 
@@ -526,6 +544,10 @@ class Player:
                  scales=None, on_progress=None, clock=None, settle: float = 5.0, cancel=None, start=None,
                  cancel_why: str = "another bus stopped"):
         self.link = getattr(bus, "link", bus)
+        self.wire = wire_of(self.link)
+        if self.wire.protocol != plan.protocol.protocol:
+            raise UsageError(f"play: the plan's frames are of the {plan.protocol.protocol} protocol, the bus speaks "
+                             f"{self.wire.protocol}")
         self.cancel = cancel
         self.cancel_why = cancel_why
         self._start = start
@@ -564,14 +586,16 @@ class Player:
 
     def _read_cost(self, ident) -> float:
         """Session seconds a log read of ``ident`` is expected to take."""
-        n = LOAD_BYTES + REPLY_BYTES + LOG_LENGTH
         learned = self.link.latencies().get(ident) if hasattr(self.link, "latencies") else None
         lat = TURNAROUND
         if learned and learned.get("latency_ms") is not None:
             lat = max(lat, learned["latency_ms"] / 1000.0)      # smoothed: one late reply does not starve it
         # after an unanswered read of it (a silent actuator's) the bus waits, or asks an Echo, first
-        held = self.link.clear_at(ident, LOG_LENGTH) - self.link.now() if hasattr(self.link, "clear_at") else 0.0
-        return (max(0.0, held) + self.link.wire(n) + lat + READ_GUARD) * self.clock.speed
+        held = self._clear_at(ident) - self.link.now() if hasattr(self.link, "clear_at") else 0.0
+        return (max(0.0, held) + self.wire.read_cost(self.link, ident, lat) + READ_GUARD) * self.clock.speed
+
+    def _clear_at(self, ident) -> float:
+        return self.link.clear_at(ident, self.wire.reads()[0][0])
 
     def _fits(self, due) -> bool:
         """Whether a log read can end before ``due``: the next actuator in turn whose read fits
@@ -597,7 +621,7 @@ class Player:
 
     def _send(self, step) -> None:
         for frame in step.frames:
-            self.link.command(frame)
+            self.wire.send(self.link, frame)
         self.goal.update(step.goals)
 
     def _read_one(self, loop, due=None):
@@ -608,16 +632,18 @@ class Player:
         self._next += 1
         kw = {}
         if due is not None and hasattr(self.link, "clear_at"):
-            n = LOAD_BYTES + REPLY_BYTES + LOG_LENGTH
-            start = max(self.link.now(), self.link.clear_at(ident, LOG_LENGTH))
+            start = max(self.link.now(), self._clear_at(ident))
             kw["window"] = max(TURNAROUND, (due - self.clock.now()) / self.clock.speed
-                               - (start - self.link.now()) - self.link.wire(n) - READ_GUARD / 2)
+                               - (start - self.link.now()) - self.wire.read_cost(self.link, ident, 0.0)
+                               - READ_GUARD / 2)
             kw["optional"] = True          # silence by then is its answer: no listening on past the step
         row = {"time": None, "t": None, "loop": loop, "id": ident, "goal": self.goal.get(ident), "present": None,
                "tracking_error": None, "current_ma": None, "voltage_v": None, "errors": [], "status": "ok"}
+        for col in self.wire.log_columns:
+            row[col] = None
         reply = None
         try:
-            reply = self.link.load(ident, LOG_FIRST.address, LOG_LENGTH, check=False, retries=0, **kw)
+            reply = self.wire.read_sample(self.link, ident, retries=0, **kw)
             if reply is None:
                 row["status"] = "no-reply"
         except NoReply:
@@ -631,11 +657,11 @@ class Player:
         if reply is None:
             self.read_failures += 1
         else:
-            v = {reg.name: raw for reg, raw in zap._register_values(LOG_FIRST.address, reply.data)}
-            row["present"] = v.get("present-position")
-            row["current_ma"] = v.get("present-current")
-            volts = v.get("present-voltage")
-            row["voltage_v"] = None if volts is None else round(volts * 0.1, 1)
+            row["present"] = reply.position
+            row["current_ma"] = reply.current
+            row["voltage_v"] = reply.voltage_v
+            if self.wire.log_columns:
+                row["voltage_raw"] = reply.voltage_raw
             row["errors"] = reply.errors
             if row["goal"] is not None and row["present"] is not None:
                 row["tracking_error"] = row["present"] - row["goal"]
@@ -680,7 +706,7 @@ class Player:
         if self.log:
             for i in self.plan.ids:
                 try:
-                    self._margins[i] = max(1, self.link.read(i, MARGIN))
+                    self._margins[i] = max(1, self.wire.read_margin(self.link, i))
                 except ZkzapError:
                     pass            # its reads fail in the log too, and say so there
         start = self.clock.now()
@@ -733,6 +759,8 @@ class Player:
             raise
         except DeviceError as e:
             self._stop("device-error", str(e), e)
+        except NoReply as e:                 # a goal's write unanswered (Modbus RTU answers each)
+            self._stop("no-reply", str(e), e)
 
     def run(self, on_row=None):
         """Play to the end; ``on_row(row)`` for every log row. Returns self."""
@@ -757,9 +785,10 @@ def play(bus, path, *, unit="counts", scales=None, interpolate=None, rate=None, 
          stop_mode="hold", on_row=None, on_progress=None) -> Player:
     """Read, plan and play the path file ``path`` on ``bus`` (see :class:`Player`); returns the
     Player (its :meth:`Player.summary` and :attr:`Player.stopped`)."""
-    rows = read_path(path, unit=unit, scales=scales)
     link = getattr(bus, "link", bus)
-    p = plan(rows, baud=link.baud, stop_bits=link.stop_bits, interpolate=interpolate, rate=rate)
+    wire = wire_of(link)
+    rows = read_path(path, unit=unit, scales=scales, protocol=wire)
+    p = plan(rows, baud=link.baud, stop_bits=link.stop_bits, interpolate=interpolate, rate=rate, protocol=wire)
     return Player(bus, p, loops=loops, log=log, limit=limit, stop_mode=stop_mode, scales=scales,
                   on_progress=on_progress).run(on_row)
 

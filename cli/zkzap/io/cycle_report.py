@@ -18,7 +18,7 @@ from ..errors import UsageError
 from .report import FORMATS, _file_meta, _mpl, _svg, output_format  # noqa: F401 - one report family
 
 SERIES = ("cycle", "reach_b_s", "reach_a_s", "peak_current_ma", "mean_current_ma", "min_voltage_v", "overshoot_b",
-          "overshoot_a")
+          "overshoot_a", "min_voltage_raw")
 
 
 class CycleRun:
@@ -47,6 +47,13 @@ class CycleRun:
     def __len__(self):
         return len(self.series["cycle"])
 
+    def voltage(self):
+        """``(series key, unit, axis label)`` of the lowest voltage: in volts, or raw where the
+        records hold only raw values (Modbus RTU: the 17Lf's map gives present-voltage no unit)."""
+        if not any(v == v for v in self.series["min_voltage_v"]) and any(v == v for v in self.series["min_voltage_raw"]):
+            return "min_voltage_raw", "(raw)", "voltage (raw: unit not documented)"
+        return "min_voltage_v", "V", "voltage (V)"
+
     def summary_rows(self):
         def stats(key, unit, dec=3):
             vals = sorted(v for v in self.series[key] if v == v)
@@ -62,7 +69,7 @@ class CycleRun:
                 ("reach time to B", stats("reach_b_s", "s")), ("reach time to A", stats("reach_a_s", "s")),
                 ("peak current", stats("peak_current_ma", "mA", 0)),
                 ("mean current", stats("mean_current_ma", "mA", 1)),
-                ("lowest voltage", stats("min_voltage_v", "V", 1)),
+                ("lowest voltage", stats(*self.voltage()[:2], 1)),
                 ("cycles with error bits", str(self.flagged))]
 
 
@@ -127,10 +134,11 @@ def _axes(fig, run):
     ax.set_xlabel("peak current (mA)")
     ax.set_ylabel("cycles")
     ax = fig.add_subplot(grid[2, 0])
-    ax.plot(x, s["min_voltage_v"], ".", ms=3)
+    key, _, label = run.voltage()
+    ax.plot(x, s[key], ".", ms=3)
     ax.set_title("Lowest supply voltage per cycle")
     ax.set_xlabel("cycle")
-    ax.set_ylabel("voltage (V)")
+    ax.set_ylabel(label)
     ax = fig.add_subplot(grid[2, 1])
     ax.plot(x, s["overshoot_b"], ".", ms=3, label="at B")
     ax.plot(x, s["overshoot_a"], ".", ms=3, label="at A")

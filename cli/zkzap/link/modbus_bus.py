@@ -205,10 +205,11 @@ class ModbusBus(ZapBus):
             require(needs, self.allow | as_permission(allow), simulated=self.simulated,
                     what=req.describe(self.regmap), frame=pkt)
 
-    def command(self, pkt: bytes, *, check=True, optional=None, allow=None, retries=None):
+    def command(self, pkt: bytes, *, check=True, optional=None, allow=None, retries=None, window=None):
         """Send any request frame (after its permissions) and wait for its reply (None for a
         broadcast). An exception reply raises :class:`~zkzap.codec.modbus.ExceptionReply`
-        unless ``check=False``; a reply with another function raises ReplyMismatch."""
+        unless ``check=False``; a reply with another function raises ReplyMismatch. ``window``:
+        this transaction's late window (a player's read that must end before its next step)."""
         pkt = bytes(pkt)
         self.authorize(pkt, allow)
         req = modbus.Request(pkt)
@@ -220,6 +221,8 @@ class ModbusBus(ZapBus):
                 kw["accept_ids"] = {pkt[0], req.values[ids.address - req.address]}
         if optional is not None:
             kw["optional"] = optional
+        if window is not None:
+            kw["window"] = window
         reply = self.transact(pkt, check=False, retries=retries, **kw)
         if reply is None:
             return None

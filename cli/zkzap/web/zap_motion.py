@@ -71,13 +71,15 @@ class MotionTools:
                 raise UsageError("play: no path (choose a file of rows t, id, position)")
             if len(text) > PATH_MAX:
                 raise UsageError(f"play: {name} is over {PATH_MAX} characters")
-        rows = motion.read_path(io.StringIO(text), name=name)
+        link = self.bus.link
+        wire = motion.wire_of(link)          # the bus's protocol: its IDs, ranges and frames
+        rows = motion.read_path(io.StringIO(text), name=name, protocol=wire)
         interpolate = msg.get("interpolate") or None
         if interpolate not in (None, "linear"):
             raise UsageError(f"interpolate: {interpolate!r}; allowed linear")
         rate = None if msg.get("rate") in (None, "") else number(msg, "rate", float, 0.1, 1000, "rate")
-        link = self.bus.link
-        plan = motion.plan(rows, baud=link.baud, stop_bits=link.stop_bits, interpolate=interpolate, rate=rate)
+        plan = motion.plan(rows, baud=link.baud, stop_bits=link.stop_bits, interpolate=interpolate, rate=rate,
+                           protocol=wire)
         for ident in plan.ids:
             self._known({"id": ident})
         return plan, name

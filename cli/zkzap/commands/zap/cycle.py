@@ -65,7 +65,7 @@ def _given(name) -> bool:
 @output_options(formats=("jsonl", "json", "csv"))
 @unit_options
 @link_options(several=True)
-@protocol_options(ir_only="not yet on Modbus RTU: the endurance procedure runs on the 12Lf's registers and counts")
+@protocol_options
 def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit, leg_timeout, resume_path,
           report_path, fmt, output, append, unit, fleet_file, bus_names, **common):
     """Run an actuator between two ends for many cycles, measuring each one.
@@ -75,7 +75,10 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     time (to within the end-compliance-margin), the overshoot past the goal (to the end of the
     --dwell), peak and mean current, the lowest voltage, the error bits of every reply. One
     record per cycle: cycle, time, t, reach_b_s, reach_a_s, overshoot_b, overshoot_a,
-    peak_current_ma, mean_current_ma, min_voltage_v, errors, polls, status.
+    peak_current_ma, mean_current_ma, min_voltage_v, errors, polls, status. With --protocol
+    modbus the poll reads hardware-error, present-position, present-current and present-voltage
+    (Read Holding Registers, one per run of the map), the error bits are hardware-error's, and
+    min_voltage_raw holds the lowest voltage raw (the 17Lf's map gives it no unit).
 
     The run stops the rod where it is (goal = present position) on an error bit (exit 5), a
     stall, a current over --limit or a move over --leg-timeout (exit 1), a silent actuator (exit
@@ -162,33 +165,42 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
         raise UsageError("--return-mode 0: the actuator's position is never answered in feedback-return-mode 0")
     scales = None
     plan = None
+    from .motion import _wire
+
+    wire = _wire(common)
     if path_file is not None:
         from ...api import motion
         from .motion import _path_ids
 
-        scales = unit_scales(params["unit"], fleet_file, _path_ids(path_file) if params["unit"] == "mm" else [])
-        rows = motion.read_path(path_file, unit=params["unit"], scales=scales)
-        plan = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"])
+        scales = unit_scales(params["unit"], fleet_file,
+                             _path_ids(path_file, wire=wire) if params["unit"] == "mm" else [])
+        rows = motion.read_path(path_file, unit=params["unit"], scales=scales, protocol=wire)
+        plan = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"], protocol=wire)
         ids = plan.ids
     else:
+        from ...api.fleet import check_ident
+
+        check_ident(wire.map, ident)
         ids = [ident]
         scales = unit_scales(params["unit"], fleet_file, ids)
         scale = (scales or {}).get(ident)
         if between is None:
             a = b = None                    # the stroke limits, read once the port is open
-            raw_speed = _speed(scale, params["speed"])
+            raw_speed = _speed(scale, params["speed"], wire)
         elif scale is not None:
             a, b = (scale.counts(v, what="--between") for v in between)
-            raw_speed = _speed(scale, params["speed"])
+            raw_speed = _speed(scale, params["speed"], wire)
         else:
-            a, b = _counts(between[0]), _counts(between[1])
-            raw_speed = _speed(scale, params["speed"])
+            a, b = _counts(between[0], wire=wire), _counts(between[1], wire=wire)
+            raw_speed = _speed(scale, params["speed"], wire)
         if between is not None and a == b:
             raise UsageError("--between: the two ends are the same position")
     record_fmt = output_format(fmt, output, ("jsonl", "json", "csv"))
     if record_fmt == "table":
         record_fmt = "jsonl"
     columns = list(api.PATH_COLUMNS if plan is not None else api.COLUMNS)
+    if wire.log_columns:
+        columns += api.RAW_VOLTAGE_COLUMNS
     if plan is None and scales:
         columns += api.MM_COLUMNS
     if several:
@@ -318,15 +330,23 @@ def _cycle_buses(bus_names, fleet_file, plan, ident, ends, raw_speed, params, du
         _raise_for(first.reason, first.why)
 
 
-def _speed(scale, speed):
+def _speed(scale, speed, wire):
     if speed is None:
         return None
-    return scale.speed_raw(speed) if scale is not None else _counts(speed, "--speed", 1, 1023)
+    if scale is not None:
+        return scale.speed_raw(speed)
+    reg = wire.speed
+    return _counts(speed, "--speed", max(1, reg.lo or 0), reg.hi, wire)
 
 
-def _counts(v, what="--between", lo=0, hi=4095):
+def _counts(v, what="--between", lo=None, hi=None, wire=None):
+    """A raw value of ``wire``'s goal-position range (or ``lo``..``hi``)."""
+    reg = wire.position if wire is not None else None
+    lo = lo if lo is not None else (reg.lo if reg is not None else 0)
+    hi = hi if hi is not None else (reg.hi if reg is not None else 4095)
     if v != int(v) or not lo <= v <= hi:
-        raise UsageError(f"{what}: {v:g} is not a position in counts ({lo}..{hi}); millimetres need --unit mm")
+        unit = "a position in counts" if what == "--between" else "a raw value"
+        raise UsageError(f"{what}: {v:g} is not {unit} ({lo}..{hi}); millimetres need --unit mm")
     return int(v)
 
 

@@ -22,6 +22,14 @@ ROW_FORMATS = ("table", "jsonl", "json", "csv")
 PATH_FORMATS = ("csv", "jsonl", "json")
 
 
+def _wire(common):
+    """The motion wire (:mod:`zkzap.api.motion_wire`) of the command's --protocol and --map."""
+    from ...api.motion_wire import wire_for
+    from ..options import zap_map
+
+    return wire_for(common.get("protocol") or "ir", zap_map())
+
+
 def _plan_lines(plan, fmt):
     """-n: the plan's steps and their frames on stdout."""
     from ...io.writers import make_writer
@@ -35,10 +43,7 @@ def _plan_lines(plan, fmt):
     out = sys.stdout
     for step in plan.steps:
         for frame in step.frames:
-            from ...codec import zap
-
-            cmd = zap.Command(frame)
-            out.write(f"{step.t:9.3f}  {cmd.describe()}  {frame.hex(' ').upper()}\n")
+            out.write(f"{step.t:9.3f}  {plan.protocol.describe(frame)}  {frame.hex(' ').upper()}\n")
     out.flush()
 
 
@@ -58,14 +63,25 @@ def _raise_stopped(stopped):
     warn(f"stopped every actuator ({stopped.message}): {where}")
     if stopped.reason == "interrupted":
         return
+    raise_stop(stopped)
+
+
+def raise_stop(stopped):
+    """The exit of a play (or a bus of it) that stopped for ``stopped.reason``."""
+    from ...errors import DeviceError, NoReply
+
     if stopped.reason == "device-error":
         raise DeviceError(f"stopped: {stopped.message}")
+    if stopped.reason == "no-reply":
+        raise NoReply(f"stopped: {stopped.message}")
     raise CheckFailed(f"stopped: {stopped.message}")
 
 
-@exits({DEVICE_ERROR: "an actuator reported error bits: every actuator was stopped",
+@exits({DEVICE_ERROR: "an actuator reported error bits (or, on Modbus RTU, an exception reply): every actuator was "
+                      "stopped",
         CHECK_FAILED: "a current over --limit: every actuator was stopped",
-        NO_REPLY: "no log read was answered: the goals went out unconfirmed"})
+        NO_REPLY: "no log read was answered: the goals went out unconfirmed (on Modbus RTU: a goal's write was "
+                  "unanswered, every actuator was stopped)"})
 @click.command(cls=Command, context_settings=CONTEXT)
 @click.argument("path", metavar="FILE", type=InputPath("zap path", label="FILE"))
 @click.option("--interpolate", type=Choice(["linear"]), default=None,
@@ -88,8 +104,7 @@ def _raise_stopped(stopped):
 @unit_options
 @dry_run_option
 @link_options(several=True)
-@protocol_options(ir_only="the player sends IR Symmetric Store packets on the IR bus's timing (a Modbus step: "
-                          "zap sync-move --protocol modbus)")
+@protocol_options
 def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fmt, output, append, unit, fleet_file,
          dry_run, **common):
     """Play a timed path: FILE rows of t (seconds), id (one, or several like "1,2"),
@@ -97,7 +112,9 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
 
     FILE is CSV with a header, a JSON array of objects or JSON Lines ('-': stdin). Rows at one
     time are one step: its goals go out as one sync move (Symmetric Store, broadcast), after
-    the step's goal-current and goal-speed. Every row is checked before anything moves, and
+    the step's goal-current and goal-speed; with --protocol modbus one Write Multiple Registers
+    per actuator (goal-speed and goal-current together, then goal-position), each answered and
+    counted with its reply on the line. Every row is checked before anything moves, and
     the line must carry the plan: steps closer than their frames take on the wire, or an
     --interpolate --rate above 80% of what the line carries, are refused (exit 2) and the
     command says the rate it can carry. -n prints the plan and its frames and sends nothing.
@@ -105,7 +122,8 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
     Between the steps the actuators are read one at a time (only where the read ends before
     the next step is due): log rows with t, loop, id, goal, present, tracking_error (present -
     goal), current_ma, voltage_v, errors, status (with --unit mm: goal_mm, present_mm,
-    tracking_error_mm beside the counts). Ctrl-C, an error bit in a reply (exit 5) or a
+    tracking_error_mm beside the counts; on Modbus RTU voltage_raw, the 17Lf's map giving
+    present-voltage no unit, and errors from hardware-error). Ctrl-C, an error bit in a reply (exit 5) or a
     current over --limit (exit 1) stops every actuator (--stop hold: goal = present position;
     off: force off) and says where. A summary on stderr gives the steps' lateness.
 
@@ -123,13 +141,15 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
     import io
 
     text = sys.stdin.read() if path == "-" else None
-    scales = unit_scales(unit, fleet_file, _path_ids(path, text) if unit == "mm" else [])
+    wire = _wire(common)
+    scales = unit_scales(unit, fleet_file, _path_ids(path, text, wire) if unit == "mm" else [])
     rows = motion.read_path(io.StringIO(text) if text is not None else path, unit=unit, scales=scales,
-                            name="stdin" if path == "-" else path)
+                            name="stdin" if path == "-" else path, protocol=wire)
     if several_buses(bus_names):
         return _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loops, limit, stop_mode, no_log,
-                           fmt, output, append, dry_run, common)
-    p = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"], interpolate=interpolate, rate=rate)
+                           fmt, output, append, dry_run, common, wire)
+    p = motion.plan(rows, baud=common["baud"], stop_bits=common["stop_bits"], interpolate=interpolate, rate=rate,
+                    protocol=wire)
     if dry_run:
         check_sim_args(common["port"], common["sim"], common["sim_ids"])
         note(f"{p.note}; {len(p.steps)} steps, {p.frames} frames, {p.duration:g} s"
@@ -148,7 +168,7 @@ def play(path, interpolate, rate, loops, limit, stop_mode, no_log, bus_names, fm
             record_fmt = "jsonl"
         if fmt == "table":
             raise UsageError("--format table: the log is written as jsonl, json or csv")
-    columns = list(motion.LOG_COLUMNS) + (motion.MM_COLUMNS if scales else [])
+    columns = list(motion.LOG_COLUMNS) + list(wire.log_columns) + (motion.MM_COLUMNS if scales else [])
     stream, had = (None, False)
     if record_fmt is not None:
         stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
@@ -230,20 +250,23 @@ def bus_specs(bus_names, fleet_file, common, unit, ids=()):
 
 
 def open_spec(common):
-    """Opens a :class:`~zkzap.api.buses.BusSpec` with the command's link options."""
+    """Opens a :class:`~zkzap.api.buses.BusSpec` with the command's link options (its
+    --protocol and --map too)."""
     from ...link.zap_bus import open_bus
 
-    mode = 1 if common["return_mode"] == "auto" else int(common["return_mode"])
+    protocol = common.get("protocol") or "ir"
+    mode = 1 if common["return_mode"] == "auto" or protocol == "modbus" else int(common["return_mode"])
     latency = None if common.get("latency") is None else common["latency"] / 1000.0
 
     def opener(spec):
         return open_bus(spec.port, spec.baud, timeout=common["timeout"], return_mode=mode, retries=common["retries"],
-                        stop_bits=common["stop_bits"], latency=latency)
+                        stop_bits=common["stop_bits"], latency=latency, protocol=protocol,
+                        regmap=common.get("regmap"))
     return opener
 
 
 def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loops, limit, stop_mode, no_log, fmt,
-                output, append, dry_run, common):
+                output, append, dry_run, common, wire):
     """zap play --buses: one player a bus, each on its own thread, their step 0 at one moment."""
     import time
 
@@ -256,7 +279,7 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
                                    shared=ports_given() is not None)
         if mine:
             plans[spec.name] = motion.plan(mine, baud=spec.baud, stop_bits=common["stop_bits"],
-                                           interpolate=interpolate, rate=rate)
+                                           interpolate=interpolate, rate=rate, protocol=wire)
     specs = [s for s in specs if s.name in plans]
     if dry_run:
         for spec in specs:
@@ -278,7 +301,7 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
         return
     if common["return_mode"] == "0" and not no_log:
         raise UsageError("--return-mode 0: the log reads are never answered; give --no-log")
-    columns = ["bus"] + list(motion.LOG_COLUMNS)
+    columns = ["bus"] + list(motion.LOG_COLUMNS) + list(wire.log_columns)
     record_fmt = None if no_log else output_format(fmt if fmt != "table" else None, output, ("jsonl", "json", "csv"))
     if record_fmt == "table":
         record_fmt = "jsonl"
@@ -325,11 +348,7 @@ def _play_buses(path, rows, bus_names, fleet_file, unit, interpolate, rate, loop
     if first is not None:
         if first.reason == "interrupted":
             raise KeyboardInterrupt
-        if first.reason == "device-error":
-            from ...errors import DeviceError
-
-            raise DeviceError(f"stopped: {first.message}")
-        raise CheckFailed(f"stopped: {first.message}")
+        raise_stop(first)
     for player in players.values():
         _raise_unanswered(player)
 
@@ -376,7 +395,7 @@ def scan_buses(ids, fmt, bus_names, fleet_file, common):
                       f"{', '.join(s.name for s in specs)}")
 
 
-def _path_ids(path, text=None):
+def _path_ids(path, text=None, wire=None):
     """The IDs a path file names (read without conversion: the fleet file's scales are for them)."""
     from ...api import motion
 
@@ -390,7 +409,7 @@ def _path_ids(path, text=None):
     for line, rec in motion._records(text, str(path)):
         for k, v in rec.items():
             if motion._ALIASES.get(str(k).lower(), str(k).lower()) == "id":
-                ids.update(motion._ids(str(path), line, v))
+                ids.update(motion._ids(str(path), line, v, wire.protocol if wire is not None else "ir"))
     return sorted(ids)
 
 
@@ -503,18 +522,17 @@ def _write_path(output, rows, fmt):
 @click.option("--part", default=None, metavar="PART", help="Record the part number too (like 12Lf-20PT-27).")
 @click.option("--stroke", type=FiniteRange(0.01, 1000), default=None, metavar="MM",
               help="Record the rated stroke too (mm).")
-@click.option("--retracted", type=IntRange(0, 4095), default=None, metavar="COUNTS",
-              help="The retracted end's position, known already (not read).")
-@click.option("--extended", type=IntRange(0, 4095), default=None, metavar="COUNTS",
-              help="The extended end's position, known already (not read).")
+@click.option("--retracted", type=IntRange(0, 10000), default=None, metavar="COUNTS",
+              help="The retracted end's position, known already (not read; 0..4095 on a 12Lf, 0..10000 on a 17Lf).")
+@click.option("--extended", type=IntRange(0, 10000), default=None, metavar="COUNTS",
+              help="The extended end's position, known already (not read; 0..4095 on a 12Lf, 0..10000 on a 17Lf).")
 @click.option("--manual", is_flag=True,
               help="Show each end by hand (move the rod there, then Enter) instead of driving the rod to its "
                    "stroke limits.")
 @click.option("--measure-speed", is_flag=True,
               help="Then move between the two ends at goal-speed 1023 and record the rod's speed (mm/s).")
 @link_options
-@protocol_options(ir_only="not yet on Modbus RTU: its teaching of the ends runs on the 12Lf's registers and "
-                          "counts (a 17Lf's stroke: stroke_mm in the fleet file)")
+@protocol_options
 def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manual, measure_speed, **common):
     """Teach the two ends of an actuator's stroke and record them in the fleet file.
 
@@ -525,6 +543,8 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
     The fleet file's motion entry of the actuator gets the calibration: both ends in counts and
     the travel between them in mm (--travel, measured; else from the rated stroke of --stroke,
     --part or the file). From then on --unit mm counts millimetres from the retracted end.
+    With --protocol modbus (a 17Lf: positions 0..10000, no part table) give --travel or
+    --stroke for millimetres.
 
     \b
     Examples:
@@ -534,11 +554,24 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
     """
     import os
 
-    from ...api import motion, units
+    from ...api import units
 
     if len(ident) != 1:
         raise UsageError("--id: one actuator")
     ident = ident[0]
+    from ...api.fleet import check_ident
+
+    wire = _wire(common)
+    modbus = wire.protocol == "modbus"
+    check_ident(wire.map, ident)
+    for name, given in (("--retracted", retracted), ("--extended", extended)):
+        if given is not None:
+            try:
+                wire.position.check(given)
+            except ValueError as e:
+                raise UsageError(f"{name}: {e}") from None
+    if part is not None and modbus and stroke is None:
+        raise UsageError(f"--part {part}: no {wire.map.model} part's stroke is in the model table; give --stroke")
     if part is not None and stroke is None:
         units.stroke_of_part(part)               # a part the table does not know needs --stroke
     from ...outfile import check_state
@@ -556,14 +589,16 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
     if stroke is not None:
         motion_entry["stroke_mm"] = stroke
     rated = stroke or existing.get("stroke_mm")
-    if rated is None and (part or existing.get("part")):
+    if rated is None and (part or existing.get("part")) and not modbus:
         rated = units.stroke_of_part(part or existing.get("part"))
+    regmap = wire.map if modbus else None
+    rated_counts = units.position_range(regmap)[0]
     from ...api.zap import Bus
 
     with open_link(ids=[ident], **_link_args(common)) as link:
         bus = Bus.over(link)
         ends = {}
-        for name, given, goal in (("retracted", retracted, 0), ("extended", extended, 4095)):
+        for name, given, goal in (("retracted", retracted, wire.position.lo), ("extended", extended, wire.position.hi)):
             if given is not None:
                 ends[name] = given
                 continue
@@ -571,7 +606,7 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
                 click.echo(f"move ID {ident} to its {name} end, then press Enter", err=True)
                 if not sys.stdin.readline():
                     raise UsageError(f"calibrate: the input ended before the {name} end was shown")
-                ends[name] = bus.read(ident, motion.PRESENT)
+                ends[name] = int(bus.read(ident, "present-position"))
             else:                          # driven there: the goal is clamped to the stroke limit
                 import warnings
 
@@ -584,7 +619,7 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
         if ends["retracted"] == ends["extended"]:
             raise CheckFailed(f"calibrate: both ends read {ends['retracted']}: the rod did not move between them")
         if travel is None and rated is not None:
-            travel = round(abs(ends["extended"] - ends["retracted"]) * rated / units.RATED_COUNTS, 3)
+            travel = round(abs(ends["extended"] - ends["retracted"]) * rated / rated_counts, 3)
         cal = {"retracted": ends["retracted"], "extended": ends["extended"]}
         if travel is not None:
             cal["travel_mm"] = travel
@@ -596,7 +631,7 @@ def calibrate(ident, fleet_file, travel, part, stroke, retracted, extended, manu
     units.record_motion(fleet_file, ident, motion_entry)
     said = f"ID {ident}: retracted {cal['retracted']}, extended {cal['extended']}"
     if travel is not None:
-        scale = units.Scale(calibration=cal)
+        scale = units.Scale(calibration=cal, regmap=regmap)
         said += f", {travel:g} mm between them ({abs(scale.mm_per_count) * 1000:.2f} um a count)"
     else:
         said += " (no travel in mm: give --travel, --stroke or --part for millimetres)"
