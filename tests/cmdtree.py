@@ -121,8 +121,9 @@ def spelling(p):
     return next((o for o in p.opts if o.startswith("--")), p.opts[0])
 
 
-class RecordingPort:
-    """A TCP port (``socket://127.0.0.1:N``) that records every connection and byte sent to it."""
+class LocalServer:
+    """A TCP server on 127.0.0.1 (``url``: ``socket://127.0.0.1:N``) that hands every accepted
+    connection to :meth:`handle`, on its one accept thread, until :meth:`close`."""
 
     def __init__(self):
         import socket
@@ -133,7 +134,6 @@ class RecordingPort:
         self._srv.listen(8)
         self._srv.settimeout(0.05)
         self.url = f"socket://127.0.0.1:{self._srv.getsockname()[1]}"
-        self.connections, self.data = 0, b""
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
@@ -146,19 +146,33 @@ class RecordingPort:
                 conn, _ = self._srv.accept()
             except (socket.timeout, OSError):
                 continue
-            self.connections += 1
-            conn.settimeout(0.2)
-            try:
-                while chunk := conn.recv(4096):
-                    self.data += chunk
-            except OSError:
-                pass
-            conn.close()
+            self.handle(conn)
 
-    def seen(self):
-        return self.connections, self.data
+    def handle(self, conn):
+        raise NotImplementedError
 
     def close(self):
         self._stop.set()
         self._thread.join(1)
         self._srv.close()
+
+
+class RecordingPort(LocalServer):
+    """A TCP port (``socket://127.0.0.1:N``) that records every connection and byte sent to it."""
+
+    def __init__(self):
+        self.connections, self.data = 0, b""
+        super().__init__()
+
+    def handle(self, conn):
+        self.connections += 1
+        conn.settimeout(0.2)
+        try:
+            while chunk := conn.recv(4096):
+                self.data += chunk
+        except OSError:
+            pass
+        conn.close()
+
+    def seen(self):
+        return self.connections, self.data

@@ -14,6 +14,8 @@ import time
 
 import pytest
 
+from cmdtree import LocalServer
+
 from .conftest import clean_env, executable, stop_sim
 
 FAST = ["--speed", "10"]
@@ -108,27 +110,19 @@ def test_a_vanished_port_is_exit_4(start_sim, tmp_path, extra, message):
     assert proc.returncode == 4 and message in err, err
 
 
-class FlappingBridge:
+class FlappingBridge(LocalServer):
     """A TCP bridge to a device (``target``: host, port) that loses it when :meth:`die` is
     called: from then on it accepts each connection and closes it at once, as a network
     serial server whose device is unplugged does (the port opens, then fails)."""
 
     def __init__(self, target):
-        import socket
         import threading
 
         self.target = target
         self.dead = threading.Event()
         self.opened = 0
-        self._srv = socket.socket()
-        self._srv.bind(("127.0.0.1", 0))
-        self._srv.listen(8)
-        self._srv.settimeout(0.05)
-        self.url = f"socket://127.0.0.1:{self._srv.getsockname()[1]}"
         self._conns = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-        self._thread.start()
+        super().__init__()
 
     def _pump(self, a, b):
         try:
@@ -142,23 +136,18 @@ class FlappingBridge:
             except OSError:
                 pass
 
-    def _serve(self):
+    def handle(self, conn):
         import socket
         import threading
 
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._srv.accept()
-            except (socket.timeout, OSError):
-                continue
-            self.opened += 1
-            if self.dead.is_set():
-                conn.close()
-                continue
-            dev = socket.create_connection(self.target)
-            self._conns += [conn, dev]
-            for a, b in ((conn, dev), (dev, conn)):
-                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
+        self.opened += 1
+        if self.dead.is_set():
+            conn.close()
+            return
+        dev = socket.create_connection(self.target)
+        self._conns += [conn, dev]
+        for a, b in ((conn, dev), (dev, conn)):
+            threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
 
     def die(self):
         self.dead.set()
@@ -167,11 +156,6 @@ class FlappingBridge:
                 s.shutdown(2)
             except OSError:
                 pass
-
-    def close(self):
-        self._stop.set()
-        self._thread.join(1)
-        self._srv.close()
 
 
 def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(start_sim):
