@@ -1004,7 +1004,20 @@ class ZapBus:
         """One attempt: write, wait; a Reply or a problem ``(kind, detail, bytes, limit)``."""
         t0 = self._write(pkt)
         limit = (self.quick_timeout(len(pkt), self.family.ident(pkt)) + extra) if quick else span
-        got = self._await(pkt, accept, data_len, rx_len, t0, limit, self.family.copy_reply(pkt), token, any_answer)
+        try:
+            got = self._await(pkt, accept, data_len, rx_len, t0, limit, self.family.copy_reply(pkt), token,
+                              any_answer)
+        except BaseException:
+            # interrupted (Ctrl-C) while its reply was on its way: that reply is still owed. The
+            # line stays quiet for the time the actuator is known to take (the request that
+            # follows, a stop's, must not meet it on the line), not for the whole window; and
+            # when it comes it is this attempt's (late), never a reply where none was due, which
+            # would make its ID suspect for the stop
+            ident = self.family.ident(pkt)
+            quiet = min(t0 + span, t0 + tx + self.courtesy(ident, span) + self.wire(rx_len) + self.margin + extra)
+            self._owed.append(_Owed(token, accept, data_len, t0, t0 + tx, quiet, quiet,
+                                    horizon=t0 + horizon_for(span)))
+            raise
         if isinstance(got, Reply):
             if got.doubt is not None:
                 # the reply may be an earlier attempt's: this one's own may still come, and is
