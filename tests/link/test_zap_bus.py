@@ -24,6 +24,15 @@ def bus():
     b.close()
 
 
+@pytest.fixture
+def vbus():
+    """A bus on the simulator's virtual clock: the moment after a write lasts as long as the
+    model says, however long the host is held up (spare work's timing is then the model's)."""
+    b = make(clock="virtual")
+    yield b
+    b.close()
+
+
 def test_the_wait_is_the_late_window_plus_the_wire():
     b = make()
     assert wire_time(10, 57600) == pytest.approx(10 * 10 / 57600)
@@ -326,7 +335,8 @@ def test_a_request_the_driver_cannot_take_at_once_waits_for_room_and_goes_out_wh
         os.close(master)
 
 
-def test_spare_work_runs_while_the_request_is_on_the_wire_and_never_before_it(bus):
+def test_spare_work_runs_while_the_request_is_on_the_wire_and_never_before_it(vbus):
+    bus = vbus
     seen = []
     bus.spare(lambda: seen.append((bus.sent, bus.replies)))
     assert seen == []                                   # nothing runs when it is handed over
@@ -339,18 +349,20 @@ def test_spare_work_runs_while_the_request_is_on_the_wire_and_never_before_it(bu
     assert seen[-1] == "at close"                       # what is left runs when the bus closes
 
 
-def test_spare_work_that_outlasts_the_request_leaves_the_latency_unknown_not_longer(bus):
+def test_spare_work_that_outlasts_the_request_leaves_the_latency_unknown_not_longer(vbus):
+    bus = vbus
     bus.read(1, "present-position")
     est = bus.policy.estimator(1)
     samples, srtt = est.samples, est.srtt
-    bus.spare(lambda: time.sleep(bus.wire(9) * 3))      # a blocked output, say
+    bus.spare(lambda: bus.sleep(bus.wire(9) * 3))       # a blocked output, say
     r = bus.load(1, 0x8C, 2)
     assert r.latency is None and r.rtt > bus.wire(9) * 3      # the round trip is what it was
     assert (est.samples, est.srtt) == (samples, srtt)        # and nothing was learned from it
     assert bus.load(1, 0x8C, 2).latency is not None
 
 
-def test_spare_work_waits_for_a_request_whose_reply_it_can_wait_for(bus):
+def test_spare_work_waits_for_a_request_whose_reply_it_can_wait_for(vbus):
+    bus = vbus
     seen = []
     bus.spare(lambda: seen.append(bus.sent))
     bus.store(1, "goal-position", 100)                   # return mode 1: no reply, no wait
@@ -359,3 +371,22 @@ def test_spare_work_waits_for_a_request_whose_reply_it_can_wait_for(bus):
     assert seen == [2]
     bus.run_spare()
     assert seen == [2]
+
+
+def test_a_request_interrupted_while_its_reply_is_on_its_way_leaves_every_id_readable():
+    # a Ctrl-C in a play's log read: the stop that follows must read every actuator's position
+    # (the interrupted read's reply is that read's, late; it never makes its ID suspect)
+    b = make(clock="virtual")
+    read = b.port.read
+
+    def interrupted(n):
+        b.port.read = read
+        raise KeyboardInterrupt
+
+    for ident in (1, 2):
+        b.port.read = interrupted
+        with pytest.raises(KeyboardInterrupt):
+            b.load(ident, 0x8C, 6)
+        assert b.read(1, "present-position") == 0 and b.read(2, "present-position") == 0
+        assert b.devices[ident].late == 1
+    b.close()
