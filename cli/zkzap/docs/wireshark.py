@@ -355,6 +355,23 @@ local function first_pass(prefix, scan, tvb, pinfo, handle)
   return res
 end
 
+-- a bus's pairing of replies to requests (st: its pending requests and response_of): a request
+-- to ID ident waits for its reply; a reply from ident takes the request waiting for it, with the
+-- latency between them
+local function pair_request(st, ident, pinfo)
+  st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
+end
+
+local function pair_reply(st, item, ident, pinfo)
+  local p = st.pending[ident]
+  st.pending[ident] = nil
+  if p ~= nil then
+    item.request_in = p.num
+    item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+    st.response_of[p.num] = pinfo.number
+  end
+end
+
 -- a reply's link to its request and its latency (or a note that it has none); a request's link
 -- to its reply (F: the protocol's fields; response_of: request packet -> reply packet)
 local function add_links(t, F, item, is_request, response_of, pinfo, ex_nopair)
@@ -712,21 +729,13 @@ function zap_proto.dissector(tvb, pinfo, tree)
       if ZAP_INSTRUCTIONS[code] ~= nil then
         item.values = zap_decode(b, item.len, nil)
         if code == 0xF2 then st.load[ident] = b else st.load[ident] = nil end
-        if dir ~= 1 and ident ~= ZAP_BROADCAST then
-          st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
-        end
+        if dir ~= 1 and ident ~= ZAP_BROADCAST then pair_request(st, ident, pinfo) end
         item.dir = "h2d"
       else
         local req = st.load[ident]
         st.load[ident] = nil
         item.values = zap_decode(b, item.len, req)
-        local p = st.pending[ident]
-        st.pending[ident] = nil
-        if p ~= nil then
-          item.request_in = p.num
-          item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
-          st.response_of[p.num] = pinfo.number
-        end
+        pair_reply(st, item, ident, pinfo)
         item.dir = "d2h"
       end
     end)
@@ -1030,15 +1039,9 @@ function mb_proto.dissector(tvb, pinfo, tree)
       local ident = b[0]
       if kind == "request" then
         -- (an echo read back is inbound: no request of its own)
-        if dir ~= 1 and ident ~= 0 then st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts} end
+        if dir ~= 1 and ident ~= 0 then pair_request(st, ident, pinfo) end
       else
-        local p = st.pending[ident]
-        st.pending[ident] = nil
-        if p ~= nil then
-          item.request_in = p.num
-          item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
-          st.response_of[p.num] = pinfo.number
-        end
+        pair_reply(st, item, ident, pinfo)
       end
       if dir == 1 then item.dir = "d2h" elseif dir == 2 then item.dir = "h2d" end
     end)
