@@ -548,19 +548,20 @@ def test_setup_brings_every_actuator_to_one_baud_rate(cli, rig, tmp_path):
         assert sorted(state_of(tmp_path / "clash.json")) == [rig.factory, 4]
 
 
-def test_several_buses_backed_up_diffed_and_applied_at_once(cli, tmp_path):
+def test_several_buses_backed_up_diffed_and_applied_at_once(cli, tmp_path, rig):
     """Two buses, each with its own ID 1, read on a thread each; the backup names each bus, and
-    a diff and an apply take it bus by bus onto two other buses named in a machine file."""
-    left = make_bus(tmp_path / "l.json", ids="1,2", settings={1: {"speed-limit": 500}})
-    right = make_bus(tmp_path / "r.json", ids="1,3", settings={1: {"speed-limit": 600}, 3: {"acceleration": 33}})
+    a diff and an apply take it bus by bus onto two other buses named in a machine file (the
+    file's protocol is theirs: diff and apply are given none)."""
+    left = rig.bus(tmp_path / "l.json", ids="1,2", settings={1: {"speed-limit": 500}})
+    right = rig.bus(tmp_path / "r.json", ids="1,3", settings={1: {"speed-limit": 600}, 3: {"acceleration": 33}})
     two = tmp_path / "two.json"
-    r = cli("zap", "backup", "-p", left, "-p", right, "-o", str(two))
+    r = cli("zap", "backup", *rig.option, "-p", left, "-p", right, "-o", str(two))
     assert r.exit_code == 0 and "4 actuators on 2 buses" in r.stderr, r
     doc = json.loads(two.read_text())
     assert {b["port"]: b["ids"] for b in doc["buses"].values()} == {left: [1, 2], right: [1, 3]}
     assert "actuators" not in doc and doc["buses"][right]["actuators"]["1"]["stored"]["speed-limit"] == 600
     # the same machine's settings onto two fresh buses, named in the file
-    fresh = {n: make_bus(tmp_path / f"{n}2.json", ids=ids) for n, ids in (("left", "1,2"), ("right", "1,3"))}
+    fresh = {n: rig.bus(tmp_path / f"{n}2.json", ids=ids) for n, ids in (("left", "1,2"), ("right", "1,3"))}
     doc["buses"] = {"left": dict(doc["buses"][left], port=fresh["left"]),
                     "right": dict(doc["buses"][right], port=fresh["right"])}
     machine = tmp_path / "machine.json"
@@ -581,3 +582,7 @@ def test_several_buses_backed_up_diffed_and_applied_at_once(cli, tmp_path):
     assert (r.exit_code, r.stdout) == (0, ""), r
     r = cli("zap", "diff", str(machine), "bus", "-p", fresh["left"])     # a single port: refused, not half a diff
     assert (r.exit_code, r.stdout) == (2, ""), r
+    other = "ir" if rig.protocol == "modbus" else "modbus"     # the file's buses speak its protocol only
+    r = cli("zap", "watch", "present-position", "--buses", "all", "--fleet", str(machine), "-c", "1",
+            "--protocol", other)
+    assert (r.exit_code, r.stdout) == (2, "") and f"speak the {rig.protocol} protocol" in r.stderr, r

@@ -401,6 +401,11 @@ def test_a_stall_on_one_bus_stops_the_cycle_on_every_bus(cli):
     assert f"bus {stuck}: stopped: ID 1 stalled" in r.stderr and f"bus {LEFT}: stopped: another bus stopped" in r.stderr
 
 
+def test_scan_of_several_buses_takes_one_protocol(cli):
+    r = cli("zap", "scan", "--protocol", "auto", "-p", LEFT, "-p", RIGHT)
+    assert (r.exit_code, r.stdout) == (2, "") and "--protocol auto: one bus at a time" in r.stderr
+
+
 def test_several_ports_refuse_what_is_one_bus_s(cli, tmp_path):
     r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "-p", LEFT, "-p", RIGHT,
             "--resume", str(tmp_path / "s.json"))
@@ -411,17 +416,19 @@ def test_several_ports_refuse_what_is_one_bus_s(cli, tmp_path):
     assert r.exit_code == 2 and "--unit mm is for one bus" in r.stderr
 
 
-def test_play_scan_and_watch_on_two_buses_by_their_ports(cli, path):
+def test_play_scan_and_watch_on_two_buses_by_their_ports(cli, path, proto):
+    LEFT, RIGHT = proto.sim("ids=1,2&speed=4"), proto.sim("ids=1&speed=4")
     p = path('t,id,position\n0,1,1000\n0.3,1,2000\n')
-    r = cli("zap", "play", p, "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    r = cli("zap", "play", p, "-p", LEFT, "-p", RIGHT, "-f", "jsonl", *proto.args)
     assert r.exit_code == 0, r.stderr
     last = {x["bus"]: x for x in jsonl(r.stdout)}
-    assert set(last) == {LEFT, RIGHT} and all(abs(x["present"] - 2000) <= 7 for x in last.values())
-    r = cli("zap", "scan", "--ids", "0-3", "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    assert set(last) == {LEFT, RIGHT} and all(abs(x["present"] - 2000) <= proto.margin for x in last.values())
+    r = cli("zap", "scan", "--ids", "1-3", "-p", LEFT, "-p", RIGHT, "-f", "jsonl", *proto.args)
     assert r.exit_code == 0, r.stderr
     assert sorted((x["bus"], x["id"]) for x in jsonl(r.stdout)) == sorted([(LEFT, 1), (LEFT, 2), (RIGHT, 1)])
     assert "did not answer" not in r.stderr
-    r = cli("zap", "watch", "present-position", "--ids", "1", "-c", "2", "-p", LEFT, "-p", RIGHT, "-f", "jsonl")
+    r = cli("zap", "watch", "present-position", "--ids", "1", "-c", "2", "-p", LEFT, "-p", RIGHT, "-f", "jsonl",
+            *proto.args)
     assert r.exit_code == 0, r.stderr
     assert sorted(x["bus"] for x in jsonl(r.stdout)) == sorted([LEFT, LEFT, RIGHT, RIGHT])
 

@@ -699,8 +699,6 @@ def _per_bus(path) -> bool:
 def _bus_specs(bus_names, fleet_file, common, ids=()):
     from .motion import bus_specs
 
-    if common.get("protocol", "ir") != "ir":
-        raise UsageError("several buses: the IR protocol's buses (--protocol ir)")
     _ir_return_mode(common, "Load Data is never answered in feedback-return-mode 0")
     if bus_names is None and ports_given_() is None:
         raise UsageError("this file keeps its actuators per bus: give --buses all (or NAMES), or -p once per bus")
@@ -757,6 +755,7 @@ def _diff_buses(a, b, ids, everything, compare, fmt, bus_names, common):
             sides[label] = per_bus
     if "bus" in (a, b):
         label = "A" if a != "bus" else "B"
+        _from_file(common, next(iter(sides[label].values())))    # its protocol, where --protocol says none
         specs = _bus_specs(bus_names, a if a != "bus" else b, common)
         wanted = fleet.match_buses(sides[label], ports[label], specs, a if a != "bus" else b)
         live = fleet.live_buses(specs, retries=common["retries"], open_bus=open_spec(common),
@@ -787,6 +786,7 @@ def _apply_buses(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes,
     per_bus, ports, _ = fleet.read_bus_document(file)
     if not per_bus:
         raise UsageError(f"{file}: not a backup of several buses (no buses.NAME.actuators)")
+    _from_file(common, next(iter(per_bus.values())))      # its protocol, where --protocol says none
     regmap = fleet.map_of(next(iter(per_bus.values())))
     only_regs = fleet.registers_option(only, "--only", regmap) if only is not None else None
     skip_regs = fleet.registers_option(skip, "--skip", regmap)

@@ -246,7 +246,20 @@ def bus_specs(bus_names, fleet_file, common, unit, ids=()):
     if unit == "mm":
         raise UsageError("--buses: --unit mm is for one bus (an ID's stroke is per bus)")
     names = None if bus_names.strip().lower() == "all" else [n.strip() for n in bus_names.split(",") if n.strip()]
-    return buses_of(fleet_file, names)
+    specs = buses_of(fleet_file, names)
+    _same_protocol(fleet_file, common)
+    return specs
+
+
+def _same_protocol(fleet_file, common):
+    """A fleet file's buses speak its protocol: --buses with another --protocol is refused (exit 2)."""
+    from ...api import documents
+    from ...api.fleet import format_of
+
+    doc, name = documents.read(fleet_file, "fleet", format_of(fleet_file))
+    theirs, ours = doc.get("protocol") or "ir", common.get("protocol") or "ir"
+    if theirs != ours:
+        raise UsageError(f"--buses: {name}'s buses speak the {theirs} protocol; give --protocol {theirs}")
 
 
 def open_spec(common):
@@ -362,8 +375,6 @@ def scan_buses(ids, fmt, bus_names, fleet_file, common):
     from ..options import resolve_format
     from .scan import SCAN_COLUMNS, SCAN_TABLE, _emit
 
-    if common["protocol"] != "ir":
-        raise UsageError("--buses: the IR protocol's buses (--protocol ir)")
     specs = bus_specs(bus_names, fleet_file, common, "counts")    # -p again: no ID is expected anywhere
     bauds = list(common["baud"]) if ports_given() is not None else None
     fmt = resolve_format(fmt)

@@ -120,10 +120,6 @@ def scan(ids, fmt, bus_names=None, fleet_file=None, **common):
 
     from .motion import several_buses
 
-    if several_buses(bus_names):
-        from .motion import scan_buses
-
-        return scan_buses(ids, fmt, bus_names, fleet_file, common)
     unit_scales("counts", fleet_file, [])         # a --fleet given is read all the same: a bad one refused
     bauds = common["baud"]
     fmt = resolve_format(fmt)
@@ -139,6 +135,12 @@ def scan(ids, fmt, bus_names=None, fleet_file=None, **common):
             ids_for = {"ir": ids, "modbus": [i for i in ids if 1 <= i <= modbus.MAX_ID]}
     else:
         ids_for = {"ir": ids}
+    if several_buses(bus_names):
+        from .motion import scan_buses
+
+        if len(protocols) > 1:
+            raise UsageError("--protocol auto: one bus at a time (several buses speak the protocol --protocol names)")
+        return scan_buses(ids_for[protocols[0]], fmt, bus_names, fleet_file, common)
     columns = SCAN_COLUMNS + (["protocol"] if len(protocols) > 1 else [])
     table = SCAN_TABLE + ([("protocol", "protocol")] if len(protocols) > 1 else [])
     writer = make_writer(fmt, sys.stdout, columns, table_columns=table, title="mightyZAP actuators")

@@ -84,9 +84,6 @@ def watch(registers, ids, rate, count, duration, until, fmt, output, append, bus
     from .motion import several_buses
 
     if several_buses(bus_names):
-        if modbus:
-            raise UsageError("--buses, -p again: not with --protocol modbus yet (several buses speak the IR "
-                             "protocol)")
         return _watch_buses(registers, bus_names, shown, conds, rate, count, duration, fmt, output, append, unit,
                             fleet_file, common, ids)
     from ...api.watch import MM_REGISTERS
