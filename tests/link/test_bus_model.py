@@ -150,6 +150,14 @@ FOUND = {
     13: "a scan reported return mode 0 for an actuator slower than the window",
     130: "a baud change made two actuators of one ID",
     163: "backup read an ID two actuators have, whose replies do not meet, as one's",
+    81: "a scan reported return mode 0 for an actuator in mode 2, 616 ms late",
+    99: "a scan found the old ID of an actuator whose ID was changed, by the late acknowledgement of the change",
+    251: "a scan found an ID no actuator has",
+    321: "an attempt whose window held another ID's garbled reply was not remembered: its reply was the next "
+         "request's value",
+    339: "a reply sent twice was taken for the retry's reply, and the retry's reply for the next request's",
+    416: "a reply sent twice, in one burst, answered the Echo that decides return mode 0",
+    424: "the acknowledgement of a slow actuator in another return mode was taken for a later Echo's reply",
 }
 
 

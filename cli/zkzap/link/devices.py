@@ -26,10 +26,11 @@ class Device:
     learned: None until the bus learned it, then the device's own), ``baud`` (the line speed it
     last answered at, None before), ``late`` (replies that came after their attempt's window),
     ``doubts`` (replies the bus could not attribute with certainty: never taken for an
-    answer) and ``extra`` (replies with its address that no request was owed: two where one
-    was due, from two devices sharing the address or a line fault)."""
+    answer), ``extra`` (replies with its address that no request was owed: two where one
+    was due, from two devices sharing the address or a line fault) and ``replies`` (every
+    reply with its address heard, however it was attributed)."""
 
-    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra", "extra_at")
+    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra", "extra_at", "replies")
 
     def __init__(self, ident: int) -> None:
         self.ident = ident
@@ -38,6 +39,7 @@ class Device:
         self.late = 0
         self.doubts = 0
         self.extra = 0
+        self.replies = 0
         self.extra_at: Optional[float] = None    # when the last of those came
 
     def __repr__(self) -> str:

@@ -331,6 +331,7 @@ class ZapBus:
         self._owed_at = {}                 # baud -> those of the other line speeds
         self._current = None               # the request in hand (the token of its attempts)
         self._caught = None                # its earlier attempt's reply, heard between attempts
+        self._answer = None                # (packet, when read, writes by then): the last reply heard (_twin)
         self._spare = deque()              # work for the time a reply is on its way (spare())
         self._framer = self.family.framer()     # bytes read between transactions
         self._held = None                  # [lo, hi]: when the bytes the framer holds were read
@@ -613,14 +614,20 @@ class ZapBus:
         return max((o.horizon for o in self._owed if o.horizon > now and o.conflicts({ident}, data_len)),
                    default=now)
 
-    def settle(self, ident: int) -> None:
-        """Listen until no reply to an unanswered attempt to ``ident`` can come any more (every
-        one's horizon has passed, or its reply came): after that, silence from ``ident`` is
-        certain (see :meth:`answers`)."""
+    def owes(self, ident=None) -> bool:
+        """Whether a reply to an unanswered attempt to ``ident`` (None: to any ID) may still come."""
+        now = self.now()
+        self._expire(now)
+        return any(ident is None or ident in o.ids for o in self._owed)
+
+    def settle(self, ident=None) -> None:
+        """Listen until no reply to an unanswered attempt to ``ident`` (None: to any ID) can
+        come any more (every one's horizon has passed, or its reply came): after that, silence
+        from ``ident`` is certain (see :meth:`answers`), and nothing owed can meet a request."""
         while True:
             now = self.now()
             self._expire(now)
-            due = [o.horizon for o in self._owed if ident in o.ids]
+            due = [o.horizon for o in self._owed if ident is None or ident in o.ids]
             if not due:
                 break
             self._listen(min(due))
@@ -652,6 +659,8 @@ class ZapBus:
         family = self.family
         if family.is_request(p):
             return None                    # another master's command
+        if self._twin(p, lo, hi):
+            return None
         owed = self._take_owed(p, hi)
         if owed is None:
             self.stale += 1
@@ -667,6 +676,34 @@ class ZapBus:
             return owed, p
         self._late(p, lo, hi, owed)
         return None
+
+    def _twin(self, p: bytes, lo: float, hi: float) -> bool:
+        """Whether the reply ``p`` (its bytes read from ``lo`` to ``hi``) followed a reply of the
+        same ID and length with no pause between (nothing sent since that one's last byte was read,
+        and ``p`` read within its own time on the wire, two byte times and the host margin after
+        it): a reply sent twice, or a second actuator with that ID, as well as the reply of an
+        unanswered attempt (replies held up and delivered together), which the line cannot tell
+        apart. Such a reply answers nothing: an attempt it might answer stays owed (the reply is
+        counted late), so that its own reply, if it comes, is never another request's value;
+        where none is owed it is a reply where none was due. Remembers ``p`` as the last reply heard."""
+        family = self.family
+        self.devices[family.ident(p)].replies += 1
+        last, self._answer = self._answer, (p, hi, self.sent)
+        if last is None:
+            return False
+        before, end, sent = last
+        if not (len(p) == len(before) and family.ident(p) == family.ident(before) and self.sent == sent
+                and hi - self.wire(len(p)) <= end + self.wire(2) + self.margin):
+            return False
+        if any(o.horizon >= hi and o.matches(p, family) for o in self._owed):
+            self.late += 1
+            self._event("late", family.ident(p), lo, hi, None, p)
+        else:
+            # none owed: a reply where none was due
+            self.stale += 1
+            self._extra(family.ident(p), hi)
+            self._event("stray", family.ident(p), lo, hi, None, p)
+        return True
 
     def _extra(self, ident: int, when: float) -> None:
         dev = self.devices[ident]
@@ -885,8 +922,11 @@ class ZapBus:
                 # its learned latency (the bus-typical one before it was measured), and that
                 # acknowledgement is skipped when it comes
                 until = t0 + tx + self.courtesy(ident, win) + self.wire(family.OVERHEAD) + self.margin
+                # (an actuator known to answer after the window may acknowledge that late too: its
+                # acknowledgement is recognised as one until the horizon, never taken for an answer)
+                horizon = t0 + horizon_for(until - t0 + win) if self.devices[ident].late else until + win
                 self._owed.append(_Owed(None, accept, family.ack_len(pkt), t0, t0 + tx, until + pause, until + win,
-                                         "ack"))
+                                         "ack", horizon=horizon))
             return None
         rx_len = family.OVERHEAD + (data_len or 0)
         span = tx + win + self.wire(rx_len) + self.margin + extra      # the whole window of an attempt
@@ -1024,10 +1064,11 @@ class ZapBus:
                 # this attempt's, never another request's
                 self._owe(token, accept, data_len, t0, tx, span)
             return got
-        if got[0] == "none":
-            # its window (still open after a quick probe) and then some: a reply that comes is
-            # this attempt's, never the answer to another request
-            self._owe(token, accept, data_len, t0, tx, span)
+        # its window (still open after a quick probe) and then some: a reply that comes is this
+        # attempt's, never the answer to another request. So after bytes that were not its answer
+        # too (garbled, another ID's, a wrong length): they may have been another reply, and the
+        # actuator heard the request all the same
+        self._owe(token, accept, data_len, t0, tx, span)
         return got + (limit,)
 
     def _answered(self, got, pkt, restart, stored, check, win):
@@ -1109,6 +1150,9 @@ class ZapBus:
                 if p in self._recent or family.is_request(p):
                     self._echoed(p)
                     continue                      # a late echo of an earlier packet, another master
+                if self._twin(p, lo, hi):
+                    state["want"] = len(received) + rx_len
+                    continue
                 now = self.now()
                 # A reply that fits an unanswered earlier attempt is that attempt's first: an
                 # actuator answers in the order it was asked, so the oldest such attempt it may
@@ -1420,6 +1464,8 @@ class ZapBus:
         for ident in ids:
             self.settle(ident)
         extra = {i: self.devices[i].extra for i in ids}
+        replies = {i: self.devices[i].replies for i in ids}
+        sent = {i: 0 for i in ids}
         late = {i: self.devices[i].late for i in ids}
         got = {i: 0 for i in ids}
         garbled = {i: 0 for i in ids}
@@ -1430,12 +1476,14 @@ class ZapBus:
             before = self.garbled
             for ident in ids:
                 probe, n = self.family.probe(ident)
+                retried = self.retried
                 try:
                     r = self.transact(probe, reply=True, data_len=n, retries=tries - 1, optional=True,
                                       persist=True, check=False, any_answer=True)
                 except BadReply:
                     garbled[ident] += 1
                     r = None
+                sent[ident] += 1 + self.retried - retried
                 if r is not None:
                     got[ident] += 1
                 last = self.last_sent
@@ -1448,7 +1496,10 @@ class ZapBus:
         out = {}
         for ident in ids:
             dev = self.devices[ident]
-            if dev.extra > extra[ident] or garbled[ident] >= asks or (garbled[ident] and got[ident]):
+            # (more replies than attempts, however they were attributed: a second actuator's
+            # reply can come where the next ask's is due, and be taken for it)
+            if dev.extra > extra[ident] or dev.replies - replies[ident] > sent[ident] \
+                    or garbled[ident] >= asks or (garbled[ident] and got[ident]):
                 out[ident] = "shared"
             elif got[ident] or dev.late > late[ident]:
                 out[ident] = "one"

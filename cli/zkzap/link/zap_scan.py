@@ -126,6 +126,7 @@ class _Scan:
         self.tried = {}                # ID -> every _Probe of it (first pass and rounds)
         self.twice = set()             # IDs found whose replies came where none was due
         self.bursts_heard = 0          # bursts of garbled bytes heard (for the warning)
+        self.start = bus.now()         # a late reply to an attempt before it finds nobody
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -290,7 +291,7 @@ class _Scan:
             self._judge()
             yield from self._release()
 
-    def _ask(self, ident):
+    def _ask(self, ident, again=False):
         """Ask again, with the whole window and the retries: a record, found, or absent."""
         self.asked.add(ident)
         self.doubt.discard(ident)
@@ -299,6 +300,12 @@ class _Scan:
         except BadReply as e:
             if e.kind == "wrong-id":
                 return                 # only another ID's reply came (named: an event): none here
+            if not again and self.bus.owes():
+                # a late reply of another ID may have met the probes: ask once more when no
+                # reply owed to any can come, so that garbled bytes are this ID's own
+                self.bus.settle()
+                self._judge()
+                return self._ask(ident, again=True)
             rec = _record(ident, self.baud)
             rec["status"] = "garbled"
             rec["errors"] = [str(e)]
@@ -382,7 +389,10 @@ class _Scan:
                 ident = ev.ident
                 if ev.kind == "stray" and ident in self.records:
                     self.twice.add(ident)     # two replies where one was due
-                if ident not in self.records and (ev.kind == "late" or ident in self.probes):
+                # (the late answer of a request made before the scan, a Store that changed the
+                # ID, says nothing of who answers to that ID now)
+                ours = ev.kind == "late" and (ev.t0 is None or ev.t0 >= self.start)
+                if ident not in self.records and (ours or (ev.kind == "stray" and ident in self.probes)):
                     if ev.packet[4] == 2:             # an Echo reply (no data): the actuator is there
                         self._found(ident, bus.family.reply(ev.packet, 0.0, None))
                     self.late_seen.add(ident)
