@@ -32,6 +32,7 @@ class Receiver:
         self.conn = mavutil.mavlink_connection(url, dialect="common", source_system=255, source_component=190)
         self.messages = []
         self.heartbeat = heartbeat
+        self.empty = 0                     # how many reads found nothing waiting
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -47,8 +48,19 @@ class Receiver:
                 self.conn.mav.heartbeat_send(6, 8, 0, 0, 0)        # a GCS says hello
                 last_hb = time.monotonic()
             m = self.conn.recv_match(blocking=True, timeout=0.05)
-            if m is not None and m.get_type() != "BAD_DATA":
+            if m is None:
+                self.empty += 1
+            elif m.get_type() != "BAD_DATA":
                 self.messages.append(m)
+
+    def drained(self, timeout=30):
+        """Wait until every datagram sent so far has been read (for a sender that has ended: two
+        reads that began after this call found nothing waiting), however slow the thread is."""
+        seen = self.empty
+        deadline = time.monotonic() + timeout
+        while self.empty < seen + 2:
+            assert time.monotonic() < deadline, "the receiver never found its socket empty"
+            time.sleep(0.01)
 
     def close(self):
         self._stop.set()
@@ -112,7 +124,7 @@ def test_efi_status_carries_the_simulators_values_in_mavlink_units(cli, gcs, tmp
             "--mavlink", f"udpout:127.0.0.1:{rx.port}", "--mavlink-rate", "20", "--sysid", "7", "--compid", "200",
             "--ecu-index", "2", "-o", str(out))
     assert r.exit_code == 0, r
-    time.sleep(0.2)                        # the last datagrams on loopback
+    rx.drained()                           # the last datagrams on loopback
     records = [json.loads(x) for x in out.read_text().splitlines()]
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in rx.messages} == {(7, 200)}
     efi = rx.of("EFI_STATUS")
@@ -152,10 +164,12 @@ def test_efi_status_carries_the_simulators_values_in_mavlink_units(cli, gcs, tmp
 
 def test_an_ecu_error_is_a_critical_statustext_and_unhealthy(cli, gcs):
     rx = gcs()
-    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&error=egt-high&error_after=3", "--duration", "15",
+    # the error 6 model seconds in (0.6 s): a first EFI_STATUS before it even when the host is slow
+    # to start; then 1.4 s of error, past a heartbeat
+    r = cli("zk", "monitor", "-p", "sim://zk?speed=10&error=egt-high&error_after=6", "--duration", "20",
             "--mavlink", f"udpout:127.0.0.1:{rx.port}", "-f", "jsonl")
     assert r.exit_code == 0, r
-    time.sleep(0.2)
+    rx.drained()
     code = next(c for c, n in zk.ERRORS.items() if n == "egt-high")
     texts = [(t.severity, t.text) for t in rx.of("STATUSTEXT")]
     assert (mavutil.mavlink.MAV_SEVERITY_CRITICAL, f"ZK ECU error {code}: egt-high") in texts
