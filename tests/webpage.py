@@ -30,12 +30,37 @@ CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--disable-backgrounding-occluded-windows")
 
 
-def until(condition, what, timeout=PATIENCE, interval=0.05):
-    """Poll ``condition()`` until it returns something true (returned); fail naming ``what`` (a text,
-    or a function giving it at the time)."""
+def _stale(e) -> bool:
+    """Whether ``e`` says an element found a moment ago is gone (the page redrew it meanwhile)."""
+    return type(e).__name__ == "StaleElementReferenceException"
+
+
+def fresh(action, timeout=PATIENCE):
+    """``action()`` (which finds the elements it uses), done again while an element it found was
+    redrawn before it was used: a page that redraws a table on every update never fails a test
+    that reaches for it at the wrong moment."""
     deadline = time.monotonic() + timeout
     while True:
-        got = condition()
+        try:
+            return action()
+        except Exception as e:
+            if not _stale(e) or time.monotonic() > deadline:
+                raise
+        time.sleep(0.02)
+
+
+def until(condition, what, timeout=PATIENCE, interval=0.05):
+    """Poll ``condition()`` until it returns something true (returned); fail naming ``what`` (a text,
+    or a function giving it at the time). An element the condition found and the page redrew
+    before it was read counts as not yet."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            got = condition()
+        except Exception as e:
+            if not _stale(e):
+                raise
+            got = None
         if got:
             return got
         if time.monotonic() > deadline:
@@ -101,8 +126,11 @@ def css(driver, selector):
 
 
 def text_of(driver, selector) -> str:
-    found = css(driver, selector)
-    return found[0].text if found else ""
+    def read():
+        found = css(driver, selector)
+        return found[0].text if found else ""
+
+    return fresh(read)
 
 
 def js(driver, script, *args):
@@ -116,12 +144,18 @@ def set_value(driver, selector, value, event="change"):
 
 
 def click(driver, selector):
-    # shown too: a button a page reveals (the busy bar's Cancel) is clicked once a person could
-    until(lambda: css(driver, selector) and css(driver, selector)[0].is_enabled()
-          and css(driver, selector)[0].is_displayed(), f"{selector} to be enabled and shown")
-    element = css(driver, selector)[0]
-    js(driver, "arguments[0].scrollIntoView({block: 'center'})", element)    # not under the sticky bar
-    element.click()
+    def shown():
+        found = css(driver, selector)
+        return found and found[0].is_enabled() and found[0].is_displayed()
+
+    def press():
+        element = css(driver, selector)[0]
+        js(driver, "arguments[0].scrollIntoView({block: 'center'})", element)    # not under the sticky bar
+        element.click()
+
+    # shown too: a button a page reveals (the busy bar's Cancel) is clicked once a person could;
+    # found again when the page redrew it between finding and clicking
+    fresh(lambda: (until(shown, f"{selector} to be enabled and shown"), press()))
 
 
 def take_control(driver):
