@@ -307,3 +307,45 @@ def test_an_aborted_run_draws_its_targets_and_windows_until_the_trip_only():
     untripped = R.Run("whole")
     untripped.add({"t": 3.0, "kind": "status", "id": 1, "rpm": 1})
     assert R._sent_until(untripped) == 3.0
+
+
+def test_the_png_header_wraps_long_values_and_cuts_none(run, other, tmp_path):
+    """A comparison's header with long file names, a long --meta value and long summary values:
+    every value is in its cell whole (wrapped to its column, not cut), and every cell's text is
+    drawn inside its cell and its figure."""
+    import shutil
+
+    long_a = tmp_path / ("stand-2026-12-03-K100-1234-morning-session-after-the-rebuild-" + "x" * 40 + "-run-01.csv")
+    long_b = tmp_path / "stand-2026-12-03-K100-1234-afternoon-session-after-nozzle-change-run-02.csv"
+    shutil.copy(run["tel"], long_a)
+    shutil.copy(other["tel"], long_b)
+    runs = [R.load_run(str(p)) for p in (long_a, long_b)]
+    for x, s in zip(runs, (run["summary"], other["summary"])):
+        x.summary = R.load_summary(s)
+        x.summary["states"] = x.summary["states"] * 3          # a long value of the summary's own
+    meta = [("operator", "J. Example, test cell 3, witnessed by the customer representative of the overhaul "
+                         "shop on the second day of the acceptance tests")]
+    rows = R.header_rows(runs, meta)
+    fig = R.figure_all(runs, [], [], [], "Runs compared", meta)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    fig.set_dpi(110)
+    canvas.draw()                                              # lays the figure out, as savefig does
+    renderer = canvas.get_renderer()
+    fig_box = fig.bbox
+    table = fig.axes[0].tables[0]
+    cells = table.get_celld()
+    labels = [""] + [f"#{k + 1} {r.label}" for k, r in enumerate(runs)]
+    for (i, j), cell in cells.items():
+        want = labels[j] if i == 0 else rows[i - 1][j]
+        got = cell.get_text().get_text()
+        # every character there (the wrap breaks lines at spaces, which it drops, or after separators)
+        assert "".join(got.split()) == "".join(str(want).split()), (got, want)
+        text_box = cell.get_text().get_window_extent(renderer)
+        cell_box = cell.get_window_extent(renderer)
+        assert text_box.x0 >= cell_box.x0 - 1 and text_box.x1 <= cell_box.x1 + 1, (got, text_box, cell_box)
+        assert text_box.y0 >= cell_box.y0 - 1 and text_box.y1 <= cell_box.y1 + 1, (got, text_box, cell_box)
+        assert fig_box.x0 <= text_box.x0 and text_box.x1 <= fig_box.x1
+    assert cells[(1, 1)].get_text().get_text().count("\n") >= 1              # the meta value wrapped
+    assert cells[(0, 1)].get_text().get_text().count("\n") >= 1              # the long file name too

@@ -1144,32 +1144,91 @@ def header_rows(runs, meta):
     return rows
 
 
+#: The header table's font size (points), and what one of its lines takes (inches): a row of
+#: one line, and each further line of a wrapped cell.
+HEADER_FONT = 8
+HEADER_ROW_IN = 0.19
+HEADER_LINE_IN = 0.135
+#: The widest character of the header's font, in ems, for how many fit a column (DejaVu Sans:
+#: digits 0.64, lower case about 0.55; a little wider is a line broken early, never a cut).
+_EM_PER_CHAR = 0.62
+
+
+def _chars(width_in, fontsize=HEADER_FONT):
+    """How many characters of ``fontsize`` points fit in ``width_in`` inches of a table cell (its
+    padding taken off)."""
+    return max(8, int(width_in * 72 / (fontsize * _EM_PER_CHAR)) - 2)
+
+
+def _fold(text, width):
+    """``text`` in lines of at most ``width`` characters: broken at spaces, after hyphens and
+    after the separators of a file name or a list (``, / _ = & ; >``), a word longer than a line
+    cut where it must — every character kept (a header's values are never cut off)."""
+    import re
+    import textwrap
+
+    text = str(text)
+    if len(text) <= width:
+        return [text]
+    # a break chance after a separator: a space textwrap may break at (marked by a zero-width
+    # space), taken out again where the line went on
+    spaced = re.sub(r"([,/_=&;>])(?=\S)", "\\1\u200b ", text)
+    lines = textwrap.wrap(spaced, width + 1, break_long_words=True, break_on_hyphens=True)
+    return [line.replace("\u200b ", "").replace("\u200b", "") for line in lines] or [text]
+
+
+def _folded(rows, widths_in):
+    """Each cell of ``rows`` as its lines (:func:`_fold` to its column's width in inches), and
+    each row's height in inches."""
+    width_chars = [_chars(w) for w in widths_in]
+    cells = [[_fold(v, width_chars[i]) for i, v in enumerate(r)] for r in rows]
+    return cells, [HEADER_ROW_IN + HEADER_LINE_IN * (max(len(c) for c in r) - 1) for r in cells]
+
+
+def _header_table(ax, rows, col_labels, widths_in, top):
+    """The header's table in ``ax`` (rows of cells, column labels or None; ``widths_in`` each
+    column's width in inches), every cell wrapped to its column (no value cut), each row as high
+    as its most lines; it fills the axes from ``top`` (a fraction of the axes' height) down."""
+    cells, heights = _folded(([col_labels] if col_labels else []) + rows, widths_in)
+    total_in, total_w = sum(heights), sum(widths_in)
+    text = [["\n".join(c) for c in r] for r in cells]
+    table = ax.table(cellText=text[1:] if col_labels else text, colLabels=text[0] if col_labels else None,
+                     colWidths=[w / total_w for w in widths_in], cellLoc="left", colLoc="left", edges="horizontal",
+                     bbox=[0, 0, 1, top])
+    table.auto_set_font_size(False)
+    table.set_fontsize(HEADER_FONT)
+    for (row, _col), cell in table.get_celld().items():
+        cell.set_height(heights[row] / total_in)
+
+
 def figure_all(runs, panels, step_plots, limits, title, meta):
     """One figure: header (title, metadata, summary table), time histories, steady-state plots
-    and, comparing runs, their steps side by side."""
+    and, comparing runs, their steps side by side. The header's cells are wrapped to their
+    columns, never cut."""
     Figure = _mpl()
     rows = header_rows(runs, meta)
     comparison = step_comparison(runs, short=True) if len(runs) > 1 and any(r.steps for r in runs) else None
+    fig_w = 11 if not comparison else 14
     title = _wrap(title, 90)
-    header_h = 0.35 + 0.2 * title.count("\n") + (0.19 * (len(rows) + (len(runs) > 1)) + 0.25 if rows else 0)
+    many = len(runs) > 1
+    col_labels = [""] + [f"#{k + 1} {r.label}" for k, r in enumerate(runs)] if many else None
+    # the table spans the axes' width (less the layout's margins): the label column and one per run
+    table_w = fig_w - 0.5
+    widths_in = [table_w * 0.26] + [table_w * 0.74 / len(runs)] * len(runs)
+    title_h = 0.35 + 0.2 * title.count("\n")
+    table_h = sum(_folded(([col_labels] if col_labels else []) + rows, widths_in)[1]) if rows else 0.0
+    header_h = title_h + (table_h + 0.1 if rows else 0)
     n = len(panels)
     heights = [header_h] + [1.7] * n + ([3.0] if step_plots else [])
     if comparison:
         heights.append(0.5 + 0.2 * (len(comparison[1]) + 1))
-    fig = Figure(figsize=(11 if not comparison else 14, sum(heights) + 0.6), layout="constrained")
+    fig = Figure(figsize=(fig_w, sum(heights) + 0.6), layout="constrained")
     grid = fig.add_gridspec(len(heights), 1, height_ratios=heights)
     head = fig.add_subplot(grid[0])
     head.axis("off")
     head.set_title(title, fontsize=12, loc="left", fontweight="bold")
     if rows:
-        many = len(runs) > 1
-        width = 0.74 / len(runs)
-        table = head.table(cellText=[[r[0]] + [_clip(v, 110 // len(runs)) for v in r[1:]] for r in rows],
-                           colLabels=[""] + [f"#{k + 1} {r.label}" for k, r in enumerate(runs)] if many else None,
-                           colWidths=[0.26] + [width] * len(runs), loc="upper left", cellLoc="left",
-                           edges="horizontal")
-        table.auto_set_font_size(False)
-        table.set_fontsize(8)
+        _header_table(head, rows, col_labels, widths_in, top=1.0)   # the title is above the axes
     if n:
         sub = grid[1:1 + n].subgridspec(n, 1, hspace=0.08)
         _history_axes(fig, sub, runs, panels, limits)
@@ -1186,11 +1245,6 @@ def figure_all(runs, panels, step_plots, limits, title, meta):
         table.auto_set_font_size(False)
         table.set_fontsize(6.5)
     return fig
-
-
-def _clip(text, width=110):
-    text = str(text)
-    return text if len(text) <= width else text[:width - 1] + "…"
 
 
 def render(path, fmt, runs, limits=(), title="zkzap run report", meta=(), interactive=False):
