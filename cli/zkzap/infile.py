@@ -74,11 +74,38 @@ def _track(f, path) -> None:
     _open.append((weakref.ref(f), str(path), size))
 
 
+#: The streams of unknown size being read (pipes, FIFOs, devices, stdin): weak references to
+#: objects with ``name``, ``taken`` (bytes read so far) and ``closed``.
+_streams: list = []
+
+
+def _track_stream(obj) -> None:
+    _streams[:] = [x for x in _streams if (s := x()) is not None and not s.closed]
+    _streams.append(weakref.ref(obj))
+
+
+#: Paths shown under another name by :func:`reading` (a temporary copy of stdin: ``stdin``).
+_names: dict = {}
+
+
+def shown_as(path, name: str) -> None:
+    """:func:`reading` names ``path`` ``name`` (None: its own name again)."""
+    if name is None:
+        _names.pop(str(path), None)
+    else:
+        _names[str(path)] = name
+
+
 def reading() -> list:
-    """``[(path, bytes read, size)]`` of the regular files open for reading now (bytes read: the
-    file's offset, a buffer ahead of its reader at most), for a progress display; safe to call
-    from another thread."""
+    """``[(path, bytes read, size)]`` of the inputs open for reading now, for a progress
+    display: the regular files (bytes read: the file's offset, a buffer ahead of its reader at
+    most) and the streams of unknown size (pipes, FIFOs, stdin: size None); safe to call from
+    another thread."""
     out = []
+    for ref in list(_streams):
+        s = ref()
+        if s is not None and not s.closed:
+            out.append((s.name, s.taken, None))
     for ref, path, size in list(_open):
         f = ref()
         if f is None or f.closed:
@@ -87,7 +114,7 @@ def reading() -> list:
             pos = os.lseek(f.fileno(), 0, os.SEEK_CUR)
         except (OSError, ValueError):
             continue
-        out.append((path, min(pos, size), size))
+        out.append((_names.get(path, path), min(pos, size), size))
     return out
 
 
@@ -100,6 +127,7 @@ class _Shared:
         self.taken = 0                    # bytes of the stream read so far (beyond head: not kept)
         self.views = 0
         self.closed = False
+        _track_stream(self)
 
     def read_at(self, pos: int, n: int) -> bytes:
         if pos < len(self.head):
@@ -163,3 +191,28 @@ class _View(io.RawIOBase):
         if not self.closed:
             self._s.release()
         super().close()
+
+
+class _Counting(io.RawIOBase):
+    """A stream read through, its bytes counted (``taken``) for :func:`reading`."""
+
+    def __init__(self, raw, name):
+        super().__init__()
+        self._raw, self.name, self.taken = raw, name, 0
+        _track_stream(self)
+
+    def readable(self):
+        return True
+
+    def readinto(self, b):
+        data = self._raw.read(len(b))
+        n = len(data)
+        b[:n] = data
+        self.taken += n
+        return n
+
+
+def counted(stream, name: str = "stdin"):
+    """``stream`` (binary, read once: stdin) read through a counter of its bytes, so that a
+    progress display can say how much of it was read (:func:`reading`, size unknown)."""
+    return io.BufferedReader(_Counting(stream, name), buffer_size=1 << 16)

@@ -77,3 +77,63 @@ def test_off_a_terminal_nothing_is_shown(tmp_path):
         f.read(1000)
         ((path, done, size),) = reading()
         assert path == str(big) and size == 2 << 20 and 1000 <= done <= size
+
+
+def _screen_until(master, want, work, timeout=20.0):
+    """What the terminal's side got while ``work(done)`` runs, until every text of ``want`` was
+    shown (``done()`` then tells the work to end)."""
+    got = []
+    finished = threading.Event()
+    worker = threading.Thread(target=work, args=(finished.is_set,), daemon=True)
+    worker.start()
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got.append(_drain(master))
+        screen = b"".join(got).decode("utf-8", "replace")
+        if all(w in screen for w in want):
+            break
+    finished.set()
+    worker.join(10)
+    got.append(_drain(master))
+    return b"".join(got).decode("utf-8", "replace")
+
+
+def test_a_pipe_of_unknown_size_gets_a_running_count_and_a_long_work_its_steps():
+    pty = pytest.importorskip("pty")
+    from zkzap.infile import counted
+    from zkzap.io.term import STREAM_MIN, working
+
+    master, slave = pty.openpty()
+    r, w = os.pipe()
+    stopped = threading.Event()
+
+    def feed():                         # a producer that goes on until the count was seen
+        try:
+            with os.fdopen(w, "wb") as out:
+                while not stopped.is_set():
+                    out.write(b"\0" * (1 << 20))
+        except BrokenPipeError:
+            pass                        # the reader had enough
+
+    def read(done):                     # the reader: through the counter, until the screen showed it
+        with os.fdopen(r, "rb") as raw, counted(raw, "stdin") as f:
+            while not done() and f.read(1 << 16):
+                pass
+            stopped.set()
+
+    with os.fdopen(slave, "w", encoding="utf-8") as stream, input_progress(stream, minimum=1 << 20):
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        screen = _screen_until(master, ["reading stdin", "MB read", "/s"], read)
+        assert "reading stdin" in screen and "MB read" in screen and "/s" in screen, screen  # bytes and rate
+
+        def draw(done):
+            with working("report: drawing", total=3) as work:
+                work.step("report: drawing engine speed", 1)
+                while not done():
+                    time.sleep(0.01)
+        screen = _screen_until(master, ["report: drawing engine speed", "1/3"], draw)
+        assert "report: drawing engine speed" in screen and "1/3" in screen, screen
+    os.close(master)
+    assert reading() == [] and STREAM_MIN > 0
+

@@ -349,3 +349,26 @@ def test_the_png_header_wraps_long_values_and_cuts_none(run, other, tmp_path):
         assert fig_box.x0 <= text_box.x0 and text_box.x1 <= fig_box.x1
     assert cells[(1, 1)].get_text().get_text().count("\n") >= 1              # the meta value wrapped
     assert cells[(0, 1)].get_text().get_text().count("\n") >= 1              # the long file name too
+
+
+def test_a_long_series_is_drawn_decimated_keeping_its_peaks_and_gaps():
+    """Drawing a million-record history: each pixel column's minimum and maximum, in time order
+    (every peak and dip stays, a gap stays a gap); the numbers never come from it."""
+    import numpy as np
+
+    n = 1_000_000
+    t = np.arange(n) * 0.01
+    v = np.sin(t / 50.0) * 100.0
+    v[123_457] = 1e4                       # a one-record spike
+    v[765_431] = -1e4                      # and a dip
+    v[400_000:420_000] = np.nan            # a gap of 200 s (longer than a bin)
+    xs, ys = R.decimate(t, v)
+    assert len(xs) <= 2 * R.DRAW_BINS + R.DRAW_BINS and np.all(np.diff(xs) > 0)
+    assert np.nanmax(ys) == 1e4 and xs[np.nanargmax(ys)] == t[123_457]
+    assert np.nanmin(ys) == -1e4 and xs[np.nanargmin(ys)] == t[765_431]
+    gap = np.isnan(ys)
+    assert gap.any() and np.all((xs[gap] >= t[400_000]) & (xs[gap] < t[420_000]))
+    # every point drawn is one of the series' own
+    assert np.array_equal(ys[~gap], v[np.searchsorted(t, xs[~gap])])
+    short_t, short_v = R.decimate(t[:1000], v[:1000])
+    assert len(short_t) == 1000                              # a short series is drawn whole

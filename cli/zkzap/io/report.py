@@ -203,7 +203,19 @@ def check_run(run, path, min_records=1) -> None:
 def _float(v):
     """A record's number, or None (empty, not a number, not finite); InvalidValue for a number
     written in full that no float holds (an integer of 400 digits, ``1e400``)."""
-    if v is None or v == "" or isinstance(v, bool):
+    if v.__class__ is str:                    # the common case of a text input, first
+        if not v:
+            return None
+        try:
+            f = float(v)
+        except ValueError:
+            return None
+        if f - f == 0.0:                      # finite
+            return f
+        if beyond_float(v, f):
+            raise InvalidValue(f"{clip(repr(v))} is beyond a float's range (1.8e308)")
+        return None
+    if v is None or isinstance(v, bool):
         return None
     try:
         f = float(v)
@@ -396,13 +408,19 @@ def _load_stdin(extra):
 
     if sys.stdin is None:
         raise UsageError("run: '-': no standard input")
+    from ..infile import counted, shown_as
+
     with tempfile.NamedTemporaryFile(prefix="zkzap-report-", suffix=".run") as tmp:
-        shutil.copyfileobj(sys.stdin.buffer, tmp, 1 << 16)
+        with counted(sys.stdin.buffer, "stdin") as stdin:       # how much came: a progress display's
+            shutil.copyfileobj(stdin, tmp, 1 << 16)
         tmp.flush()
+        shown_as(tmp.name, "stdin")
         try:
             run = load_run(tmp.name, extra)
         except UsageError as e:
             raise UsageError(str(e).replace(tmp.name, "stdin")) from None
+        finally:
+            shown_as(tmp.name, None)
     run.name = run.label = "stdin"
     return run
 
@@ -868,7 +886,51 @@ RUN_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b",
 LIMIT_COLOUR, WARN_COLOUR = "#c00000", "#e69500"
 
 
-def _history_axes(fig, grid, runs, panels, limits):
+#: A time history draws at most this many bins' minimum and maximum per line (the axes are
+#: about 1,000 pixel columns wide at the report's size: two bins to a column keeps every peak and
+#: every dip the series has; the numbers — steps, summary, limits — always use every record).
+DRAW_BINS = 2000
+
+
+def decimate(t, v, bins=None):
+    """``(t, v)`` for drawing a line of the float arrays ``t`` and ``v``: the series itself when
+    it has at most ``2 * bins`` points, else, of each of ``bins`` equal time bins, the points of
+    its minimum and its maximum in their order (a line through them reaches every extreme the
+    series does, bin by bin), and a NaN where a bin has no value (a gap stays a gap). numpy."""
+    import numpy as np
+
+    bins = bins or DRAW_BINS
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v, dtype=float)
+    n = len(t)
+    if n <= 2 * bins:
+        return t, v
+    t0, t1 = np.nanmin(t), np.nanmax(t)
+    span = (t1 - t0) or 1.0
+    b = np.clip(((t - t0) / span * bins).astype(np.int64), 0, bins - 1)
+    idx = np.arange(n)
+    finite = ~np.isnan(v)
+    fb, fi, fv = b[finite], idx[finite], v[finite]
+    picked = []
+    if len(fi):
+        # per bin (sorted by bin, then by value): the first is the bin's minimum, the last its maximum
+        order = np.lexsort((fv, fb))
+        sb = fb[order]
+        starts = np.flatnonzero(np.r_[True, sb[1:] != sb[:-1]])
+        ends = np.r_[starts[1:], len(sb)] - 1
+        picked += [fi[order[starts]], fi[order[ends]]]
+    # a bin without any value: a gap (one NaN point, at the bin's first record)
+    has = np.zeros(bins, dtype=bool)
+    has[fb] = True
+    first = np.full(bins, -1, dtype=np.int64)
+    first[b[::-1]] = idx[::-1]
+    gaps = first[(~has) & (first >= 0)]
+    keep = np.unique(np.concatenate(picked + [gaps]))
+    return t[keep], v[keep]
+
+
+def _history_axes(fig, grid, runs, panels, limits, work=None):
+    """The time histories, a panel each (``work``: a :class:`~zkzap.io.term.Work` told of each)."""
     import numpy as np
 
     many = len(runs) > 1
@@ -876,6 +938,8 @@ def _history_axes(fig, grid, runs, panels, limits):
     shared = None
     ref = runs[0]
     for i, (title, unit, lines) in enumerate(panels):
+        if work is not None:
+            work.step(f"report: drawing {title.lower()}", 0)
         ax = fig.add_subplot(grid[i], sharex=shared)
         shared = shared or ax
         axes.append(ax)
@@ -897,7 +961,8 @@ def _history_axes(fig, grid, runs, panels, limits):
                     style = {"color": RUN_COLOURS[k % len(RUN_COLOURS)]} if many else {}
                     if many and j:
                         style["linestyle"] = (":", "-.", "--")[(j - 1) % 3]
-                    ax.plot(t, np.frombuffer(run.series[c], dtype=float), linewidth=1.2, label=name, **style)
+                    ax.plot(*decimate(t, np.frombuffer(run.series[c], dtype=float)), linewidth=1.2, label=name,
+                            **style)
         fields = {c for c, _ in lines}
         levels = [v for _, field, _, threshold, warn in limits if field in fields for v in (threshold, warn)
                   if v is not None]
@@ -932,6 +997,8 @@ def _history_axes(fig, grid, runs, panels, limits):
         handles, labels = ax.get_legend_handles_labels()
         if handles:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0, frameon=False)
+        if work is not None:
+            work.step()
     if axes:
         ends = [run.t[-1] - run.offset for run in runs if len(run.t)]
         starts = [min(run.t) - run.offset for run in runs if len(run.t)]
@@ -1019,10 +1086,14 @@ def _shade_windows(ax, run, label=True, numbers=True):
 
 
 def _shade_states(ax, run, t_end, legend=True):
-    used = set()
+    """The engine states shaded: one collection of spans per group (a long run's thousands of
+    state changes are a few artists, not one each)."""
+    spans = {}
     for t0, t1, group, colour in state_spans(run, t_end):
-        ax.axvspan(t0, t1, color=colour, zorder=0, label=f"state: {group}" if legend and group not in used else None)
-        used.add(group)
+        spans.setdefault((group, colour), []).append((t0, t1 - t0))
+    for (group, colour), xranges in spans.items():
+        ax.broken_barh(xranges, (0, 1), transform=ax.get_xaxis_transform(), facecolors=colour, zorder=0,
+                       label=f"state: {group}" if legend else None)
 
 
 def _step_axes(fig, grid, step_plots):
@@ -1201,7 +1272,7 @@ def _header_table(ax, rows, col_labels, widths_in, top):
         cell.set_height(heights[row] / total_in)
 
 
-def figure_all(runs, panels, step_plots, limits, title, meta):
+def figure_all(runs, panels, step_plots, limits, title, meta, work=None):
     """One figure: header (title, metadata, summary table), time histories, steady-state plots
     and, comparing runs, their steps side by side. The header's cells are wrapped to their
     columns, never cut."""
@@ -1231,7 +1302,7 @@ def figure_all(runs, panels, step_plots, limits, title, meta):
         _header_table(head, rows, col_labels, widths_in, top=1.0)   # the title is above the axes
     if n:
         sub = grid[1:1 + n].subgridspec(n, 1, hspace=0.08)
-        _history_axes(fig, sub, runs, panels, limits)
+        _history_axes(fig, sub, runs, panels, limits, work)
     if step_plots:
         sub = grid[1 + n].subgridspec(1, len(step_plots), wspace=0.25)
         _step_axes(fig, sub, step_plots)
@@ -1274,8 +1345,14 @@ def render(path, fmt, runs, limits=(), title="zkzap run report", meta=(), intera
             with open(path, "w", encoding="utf-8") as f:
                 f.write(text)
             return skipped
-        fig = figure_all(runs, panels, step_plots, limits, title, meta)
-        fig.savefig(path, format=fmt, dpi=110, metadata=_file_meta(fmt, title))
+        from .term import working
+
+        # on a terminal, what is being drawn (a run of a million records takes seconds)
+        with working("report: drawing", total=len(panels) + 1) as work:
+            fig = figure_all(runs, panels, step_plots, limits, title, meta, work)
+            work.step(f"report: writing the {fmt.upper()}", 0)
+            fig.savefig(path, format=fmt, dpi=110, metadata=_file_meta(fmt, title))
+            work.step()
     return skipped
 
 

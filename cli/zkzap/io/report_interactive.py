@@ -34,40 +34,13 @@ def require():
 
 
 def thin(t, v, limit=MAX_POINTS):
-    """``(t, v, thinned)``: the series as lists, or — longer than ``limit`` — the first and last
-    point of each of ``limit / 2`` equal time bins' minimum and maximum, in time order (a line
-    through them draws every peak the full series has)."""
-    n = len(t)
-    if n <= limit:
+    """``(t, v, thinned)``: the series as lists (None for NaN), or — longer than ``limit`` — the
+    minimum and maximum of each of ``limit / 2`` equal time bins, in time order (a line through
+    them draws every peak the full series has; :func:`zkzap.io.report.decimate`)."""
+    if len(t) <= limit:
         return list(t), [None if x != x else x for x in v], False
-    bins = max(limit // 2, 1)
-    t0, t1 = t[0], t[-1]
-    span = (t1 - t0) or 1.0
-    out_t, out_v = [], []
-    lo = hi = None
-    current = 0
-    for i in range(n):
-        b = min(bins - 1, int((t[i] - t0) / span * bins))
-        if b != current and (lo is not None):
-            for j in sorted({lo, hi}):
-                out_t.append(t[j])
-                out_v.append(v[j])
-            lo = hi = None
-        current = b
-        x = v[i]
-        if x != x:
-            continue
-        if lo is None:
-            lo = hi = i
-        elif x < v[lo]:
-            lo = i
-        elif x > v[hi]:
-            hi = i
-    if lo is not None:
-        for j in sorted({lo, hi}):
-            out_t.append(t[j])
-            out_v.append(v[j])
-    return out_t, out_v, True
+    xs, ys = R.decimate(t, v, max(limit // 2, 1))
+    return xs.tolist(), [None if y != y else y for y in ys.tolist()], True
 
 
 def _unit_of(label):

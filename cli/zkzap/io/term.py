@@ -171,11 +171,47 @@ PROGRESS_MIN = 32 << 20
 _live = [0]
 #: Progress watchers running (one at a time: the outermost command's).
 _watching = [0]
+#: A stream of unknown size (a pipe, stdin) gets its running count once this much was read.
+STREAM_MIN = 4 << 20
+#: A piece of work (:func:`working`) is shown once it has lasted this long (seconds).
+WORK_AFTER_S = 0.5
+#: The pieces of work under way (:class:`Work`), for the progress display.
+_works: list = []
 
 
 def live_view(on: bool) -> None:
     """A live view (the dashboard, a watch table) starts (``on``) or ends drawing on the terminal."""
     _live[0] += 1 if on else -1
+
+
+class Work:
+    """A long piece of work a progress display shows (:func:`working`): ``what`` it does now,
+    ``done`` of ``total`` steps (None: not known)."""
+
+    def __init__(self, what: str, total=None):
+        import time
+
+        self.what, self.total, self.done = what, total, 0
+        self.started = time.monotonic()
+
+    def step(self, what=None, n: int = 1) -> None:
+        """``n`` steps more done; ``what``: what it does now."""
+        self.done += n
+        if what is not None:
+            self.what = what
+
+
+@contextlib.contextmanager
+def working(what: str, total=None):
+    """``with working("drawing run.png", total=8) as w: ... w.step("writing run.png")``: a piece
+    of work the progress display of :func:`input_progress` shows on a terminal once it has lasted
+    :data:`WORK_AFTER_S` (bar and steps); off a terminal it costs a list append."""
+    w = Work(what, total)
+    _works.append(w)
+    try:
+        yield w
+    finally:
+        _works.remove(w)
 
 
 @contextlib.contextmanager
@@ -201,33 +237,73 @@ def input_progress(stream=None, minimum=None):
         _watching[0] -= 1
 
 
-def _progress(stream, stop, minimum, interval=0.25):
+def _shown(minimum):
+    """What the progress display shows now: ``[(key, description, done, total, bytes)]``."""
+    import time
+
     from ..infile import reading
 
+    out = []
+    for path, done, size in reading():
+        if size is None:                       # a pipe, stdin: its running count, once it is large
+            if done >= STREAM_MIN:
+                out.append((("stream", path), f"reading {path}", done, None, True))
+        elif size >= minimum:
+            out.append((("file", path), f"reading {os.path.basename(path)}", done, size, True))
+    now = time.monotonic()
+    for w in list(_works):
+        if now - w.started >= WORK_AFTER_S:
+            out.append((("work", id(w)), w.what, w.done, w.total, False))
+    return out
+
+
+def _progress(stream, stop, minimum, interval=0.25):
     bar, tasks = None, {}
     try:
         while not stop.wait(interval):
-            big = [r for r in reading() if r[2] >= minimum] if not _live[0] else []
-            if not big:
+            shown = _shown(minimum) if not _live[0] else []
+            if not shown:
                 if bar is not None:
                     bar.stop()
                     bar, tasks = None, {}
                 continue
             if bar is None:
-                from rich.progress import (BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn,
-                                           TransferSpeedColumn)
+                from rich.progress import (BarColumn, DownloadColumn, Progress, ProgressColumn, TextColumn,
+                                           TimeRemainingColumn, TransferSpeedColumn)
+
+                class Count(ProgressColumn):
+                    """Bytes (read of the size, or read so far) and their speed; or steps done."""
+
+                    _bytes, _speed = DownloadColumn(), TransferSpeedColumn()
+
+                    def render(self, task):
+                        from rich.text import Text
+
+                        if task.fields.get("bytes"):
+                            if task.total is None:          # a pipe: how much so far, no size
+                                from rich.filesize import decimal
+
+                                read = Text(f"{decimal(int(task.completed))} read", style="progress.download")
+                            else:
+                                read = self._bytes.render(task)
+                            return Text.assemble(read, " ", self._speed.render(task))
+                        total = f"/{task.total:g}" if task.total is not None else ""
+                        return Text(f"{task.completed:g}{total}", style="progress.download")
 
                 # stderr's messages go above the bar; so do stdout's on a terminal (data in a pipe
                 # is never touched)
-                bar = Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(),
-                               TransferSpeedColumn(), TimeRemainingColumn(), console=console_for(stream),
-                               transient=True, auto_refresh=False, redirect_stderr=True,
-                               redirect_stdout=is_tty(sys.stdout))
+                bar = Progress(TextColumn("{task.description}"), BarColumn(), Count(), TimeRemainingColumn(),
+                               console=console_for(stream), transient=True, auto_refresh=False,
+                               redirect_stderr=True, redirect_stdout=is_tty(sys.stdout))
                 bar.start()
-            for path, done, size in big:
-                if path not in tasks:
-                    tasks[path] = bar.add_task(f"reading {os.path.basename(path)}", total=size)
-                bar.update(tasks[path], completed=done)
+            keys = set()
+            for key, what, done, total, is_bytes in shown:
+                keys.add(key)
+                if key not in tasks:
+                    tasks[key] = bar.add_task(what, total=total, bytes=is_bytes)
+                bar.update(tasks[key], completed=done, total=total, description=what)
+            for key in [k for k in tasks if k not in keys]:
+                bar.remove_task(tasks.pop(key))
             bar.refresh()
     finally:
         if bar is not None:
