@@ -314,6 +314,14 @@ def test_the_cycle_state_round_trips(tmp_path):
     (tmp_path / "bad.json").write_text('{"format": "zkzap-cycle/1", "params": {}, "done": 1}')
     with pytest.raises(UsageError, match="params: missing"):
         CycleState.load(str(tmp_path / "bad.json"))
+    several = CycleState(path, {k: None for k in CycleState.KEYS}, done=2, buses={"left": 3, "right": 2})
+    several.save()
+    assert CycleState.load(path).buses == {"left": 3, "right": 2} and back.buses is None
+    doc = json.load(open(path))
+    doc["buses"]["right"] = -1
+    (tmp_path / "bad2.json").write_text(json.dumps(doc))
+    with pytest.raises(UsageError, match=r"buses\.right: -1 is not a cycle count"):
+        CycleState.load(str(tmp_path / "bad2.json"))
 
 
 @PROTOCOLS

@@ -406,10 +406,34 @@ def test_scan_of_several_buses_takes_one_protocol(cli):
     assert (r.exit_code, r.stdout) == (2, "") and "--protocol auto: one bus at a time" in r.stderr
 
 
+def test_a_cycle_run_on_several_buses_resumes_each_bus_and_reports_them_all(cli, tmp_path):
+    state, out, report = tmp_path / "s.json", tmp_path / "c.jsonl", tmp_path / "r.html"
+    args = ["zap", "cycle", "--id", "1", "--between", "500", "3000", "--dwell", "0", "-p", LEFT, "-p", RIGHT]
+    r = cli(*args, "--cycles", "2", "--resume", str(state), "-o", str(out))
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(state.read_text())
+    assert doc["buses"] == {LEFT: 2, RIGHT: 2} and doc["done"] == 2
+    doc["buses"][RIGHT] = 1                  # as if the right bus had been interrupted a cycle earlier
+    state.write_text(json.dumps(doc))
+    r = cli(*args, "--cycles", "3", "--resume", str(state), "--report", str(report))
+    assert r.exit_code == 0, r.stderr
+    assert f"bus {LEFT} at cycle 3, bus {RIGHT} at cycle 2 of 3" in r.stderr
+    got = sorted((x["bus"], x["cycle"]) for x in jsonl(out.read_text()))
+    assert got == sorted([(LEFT, 1), (LEFT, 2), (LEFT, 3), (RIGHT, 1), (RIGHT, 2), (RIGHT, 2), (RIGHT, 3)])
+    assert json.loads(state.read_text())["buses"] == {LEFT: 3, RIGHT: 3}
+    from html import unescape
+
+    text = unescape(report.read_text())
+    assert "on 2 buses" in text and f"{LEFT}: 3 cycles" in text and f"{RIGHT}: 4 cycles" in text
+    r = cli("zap", "cycle", "--resume", str(state), "--cycles", "4", "-p", LEFT)       # the run was on two buses
+    assert r.exit_code == 2 and "was on 2 buses" in r.stderr
+    r = cli("zap", "cycle", "--resume", str(state), "--cycles", "4", "-p", LEFT, "-p", "sim://zap?ids=1&speed=8")
+    assert r.exit_code == 2 and "was on buses" in r.stderr
+    r = cli("zap", "cycle", "--resume", str(state), "-p", LEFT, "-p", RIGHT)
+    assert r.exit_code == 2 and "has done its 3 cycles" in r.stderr
+
+
 def test_several_ports_refuse_what_is_one_bus_s(cli, tmp_path):
-    r = cli("zap", "cycle", "--id", "1", "--between", "500", "3000", "-p", LEFT, "-p", RIGHT,
-            "--resume", str(tmp_path / "s.json"))
-    assert r.exit_code == 2 and "--resume: for one bus" in r.stderr and not (tmp_path / "s.json").exists()
     r = cli("zap", "cycle", "--id", "1", "-p", LEFT, "-p", LEFT)
     assert r.exit_code == 2 and "is given twice" in r.stderr
     r = cli("zap", "watch", "present-position", "--ids", "1", "-p", LEFT, "-p", RIGHT, "--unit", "mm")
@@ -441,5 +465,6 @@ def test_cycle_a_path_on_the_fleet_file_s_buses(cli, tmp_path, path):
     recs = jsonl(r.stdout)
     assert sorted((x["bus"], x["cycle"]) for x in recs) == [("left", 1), ("left", 2), ("right", 1), ("right", 2)]
     assert all(x["status"] == "ok" and x["reads"] > 0 for x in recs)
-    r = cli("zap", "cycle", "--path", p, "--buses", "all", "--fleet", fleet, "--report", str(tmp_path / "r.png"))
-    assert r.exit_code == 2 and "--report: for one bus" in r.stderr
+    r = cli("zap", "cycle", "--path", p, "--cycles", "1", "--buses", "all", "--fleet", fleet, "--report",
+            str(tmp_path / "r.png"))
+    assert r.exit_code == 0 and (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG", r.stderr

@@ -267,12 +267,15 @@ class Cycler:
 
 class CycleState:
     """How far a cycle run got, in a JSON file rewritten whole after every cycle: its
-    parameters (``params``), ``done`` (the last cycle finished), the output file it writes."""
+    parameters (``params``), ``done`` (the last cycle finished; of a run on several buses the
+    least any bus finished), the output file it writes and, for a run on several buses,
+    ``buses`` ({bus name: the last cycle it finished}; None for one bus)."""
 
     KEYS = ("id", "between", "dwell", "cycles", "speed", "stall", "limit", "timeout")
 
-    def __init__(self, path, params, done=0, output=None, started=None):
+    def __init__(self, path, params, done=0, output=None, started=None, buses=None):
         self.path, self.params, self.done, self.output = path, dict(params), done, output
+        self.buses = dict(buses) if buses is not None else None
         self.started = started or time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
     @classmethod
@@ -288,7 +291,14 @@ class CycleState:
         done = doc.get("done")
         if not isinstance(done, int) or isinstance(done, bool) or done < 0:
             raise UsageError(f"{name}: done: {done!r} is not a cycle count")
-        return cls(path, params, done, doc.get("output"), doc.get("started"))
+        buses = doc.get("buses")
+        if buses is not None:
+            if not isinstance(buses, dict) or not buses:
+                raise UsageError(f"{name}: buses: expected an object of bus name -> the last cycle it finished")
+            for bus, n in buses.items():
+                if not isinstance(n, int) or isinstance(n, bool) or n < 0:
+                    raise UsageError(f"{name}: buses.{bus}: {n!r} is not a cycle count")
+        return cls(path, params, done, doc.get("output"), doc.get("started"), buses)
 
     def save(self) -> None:
         from ..outfile import write_whole
@@ -296,6 +306,8 @@ class CycleState:
         doc = {"format": STATE_FORMAT, "started": self.started,
                "updated": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "params": self.params,
                "done": self.done, "output": self.output}
+        if self.buses is not None:
+            doc["buses"] = self.buses
         write_whole(self.path, json.dumps(doc, indent=1) + "\n", what="state")
 
     def exists(self) -> bool:

@@ -30,8 +30,16 @@ class CycleRun:
         self.series = {k: array("d") for k in SERIES}
         self.statuses = {}
         self.flagged = 0
+        self.groups = {}
+        """{bus name: CycleRun} of a run on several buses (records with ``bus``): each bus its own
+        series in the per-cycle plots."""
 
     def add(self, rec) -> None:
+        bus = rec.get("bus")
+        if bus not in (None, ""):
+            if bus not in self.groups:
+                self.groups[bus] = CycleRun(str(bus))
+            self.groups[bus].add({k: v for k, v in rec.items() if k != "bus"})
         for k in SERIES:
             v = rec.get(k)
             try:
@@ -64,7 +72,9 @@ class CycleRun:
                     f"max {vals[-1]:.{dec}f}")
 
         cycles = [v for v in self.series["cycle"] if v == v]
-        return [("cycles", f"{len(self)}" + (f" ({int(min(cycles))}..{int(max(cycles))})" if cycles else "")),
+        buses = [("buses", "; ".join(f"{name}: {len(g)} cycles" for name, g in self.groups.items()))] \
+            if len(self.groups) > 1 else []
+        return buses + [("cycles", f"{len(self)}" + (f" ({int(min(cycles))}..{int(max(cycles))})" if cycles else "")),
                 ("statuses", ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.items()))),
                 ("reach time to B", stats("reach_b_s", "s")), ("reach time to A", stats("reach_a_s", "s")),
                 ("peak current", stats("peak_current_ma", "mA", 0)),
@@ -103,15 +113,22 @@ def load_records(path) -> CycleRun:
 
 def _axes(fig, run):
     s = run.series
-    x = s["cycle"]
+    parts = list(run.groups.items()) if len(run.groups) > 1 else [("", run)]    # a series per bus
+
+    def per_cycle(ax, keys):
+        for name, part in parts:
+            for key, label in keys:
+                ax.plot(part.series["cycle"], part.series[key], ".", ms=3,
+                        label=(f"{label}, {name}" if label else name) if name else label)
+        if any(label for _, label in keys) or len(parts) > 1:
+            ax.legend(loc="best", fontsize="small")
+
     grid = fig.add_gridspec(3, 2)
     ax = fig.add_subplot(grid[0, 0])
-    ax.plot(x, s["reach_b_s"], ".", ms=3, label="to B")
-    ax.plot(x, s["reach_a_s"], ".", ms=3, label="to A")
+    per_cycle(ax, (("reach_b_s", "to B"), ("reach_a_s", "to A")))
     ax.set_title("Reach time per cycle")
     ax.set_xlabel("cycle")
     ax.set_ylabel("reach time (s)")
-    ax.legend(loc="best", fontsize="small")
     ax = fig.add_subplot(grid[0, 1])
     vals = [v for k in ("reach_b_s", "reach_a_s") for v in s[k] if v == v]
     if vals:
@@ -120,12 +137,10 @@ def _axes(fig, run):
     ax.set_xlabel("reach time (s)")
     ax.set_ylabel("legs")
     ax = fig.add_subplot(grid[1, 0])
-    ax.plot(x, s["peak_current_ma"], ".", ms=3, label="peak")
-    ax.plot(x, s["mean_current_ma"], ".", ms=3, label="mean")
+    per_cycle(ax, (("peak_current_ma", "peak"), ("mean_current_ma", "mean")))
     ax.set_title("Current per cycle")
     ax.set_xlabel("cycle")
     ax.set_ylabel("current (mA)")
-    ax.legend(loc="best", fontsize="small")
     ax = fig.add_subplot(grid[1, 1])
     vals = [v for v in s["peak_current_ma"] if v == v]
     if vals:
@@ -135,17 +150,15 @@ def _axes(fig, run):
     ax.set_ylabel("cycles")
     ax = fig.add_subplot(grid[2, 0])
     key, _, label = run.voltage()
-    ax.plot(x, s[key], ".", ms=3)
+    per_cycle(ax, ((key, ""),))
     ax.set_title("Lowest supply voltage per cycle")
     ax.set_xlabel("cycle")
     ax.set_ylabel(label)
     ax = fig.add_subplot(grid[2, 1])
-    ax.plot(x, s["overshoot_b"], ".", ms=3, label="at B")
-    ax.plot(x, s["overshoot_a"], ".", ms=3, label="at A")
+    per_cycle(ax, (("overshoot_b", "at B"), ("overshoot_a", "at A")))
     ax.set_title("Overshoot per cycle")
     ax.set_xlabel("cycle")
     ax.set_ylabel("overshoot (counts)")
-    ax.legend(loc="best", fontsize="small")
 
 
 def figure(run, title, meta=()):

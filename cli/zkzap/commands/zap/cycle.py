@@ -88,7 +88,9 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
 
     Several buses at once: -p again (or --buses NAMES with --fleet): the same run on each bus,
     each on its own thread, every record naming its bus; a bus that stops (a stall, a limit, an
-    error bit) stops every bus, each rod held. --resume and --report are for one bus.
+    error bit) stops every bus, each rod held. --resume keeps each bus's last cycle done (the
+    same buses again go on, each at its next cycle); --report plots every bus, each its own
+    series.
 
     \b
     Examples:
@@ -115,9 +117,6 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     from .motion import several_buses
 
     several = several_buses(bus_names)
-    if several and (resume_path is not None or report_path is not None):
-        raise UsageError(f"{'--resume' if resume_path is not None else '--report'}: for one bus (a run's state and "
-                         "report are one actuator's); with several buses write -o FILE, whose records name their bus")
 
     if resume_path is not None:
         from ...outfile import check_state
@@ -125,6 +124,10 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
         check_state(resume_path, "--resume")
     if resume_path is not None and os.path.exists(resume_path):
         state = api.CycleState.load(resume_path)
+        if (state.buses is not None) != several:
+            raise UsageError(f"--resume: the run in {resume_path} was on "
+                             + (f"{len(state.buses)} buses ({', '.join(state.buses)}); give them again (-p once a "
+                                "bus, or --buses)" if state.buses is not None else "one bus; give one -p"))
         for key, opt in (("id", "ident"), ("between", "between"), ("path", "path_file"), ("dwell", "dwell"),
                          ("speed", "speed"), ("stall", "stall"), ("limit", "limit"), ("timeout", "leg_timeout"),
                          ("unit", "unit")):
@@ -141,7 +144,8 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
         if output is None and state.output:
             output, append = state.output, True
         state.params.update(params)
-        note(f"resuming the run in {resume_path} at cycle {first} of {params['cycles']}")
+        if state.buses is None:
+            note(f"resuming the run in {resume_path} at cycle {first} of {params['cycles']}")
     elif resume_path is not None:
         state = api.CycleState(resume_path, params)
     if report_path is not None:
@@ -206,7 +210,7 @@ def cycle(ident, between, path_file, dwell, count, duration, speed, stall, limit
     if several:
         return _cycle_buses(bus_names, fleet_file, plan, ident, (a, b) if plan is None else None,
                             raw_speed if plan is None else None, params, duration, record_fmt, columns, output,
-                            append, common)
+                            append, common, state, report_path)
     stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
     if state is not None:
         state.output = output if output and output != "-" else None
@@ -284,22 +288,45 @@ def _raise_for(reason, why):
 
 
 def _cycle_buses(bus_names, fleet_file, plan, ident, ends, raw_speed, params, duration, record_fmt, columns, output,
-                 append, common):
+                 append, common, state=None, report_path=None):
     """zap cycle on several buses (--buses, -p again): the same cycle run on each bus, each on its
     own thread (:mod:`zkzap.api.buses`); one record stream whose records name their bus. A bus
-    that stops (a stall, a limit, an error bit, Ctrl-C) stops every bus, each rod held."""
+    that stops (a stall, a limit, an error bit, Ctrl-C) stops every bus, each rod held.
+    ``state``: the run's :class:`~zkzap.api.cycle.CycleState`, keeping each bus's last cycle
+    done (a resumed bus goes on at its next one; one that has done them all is not cycled);
+    ``report_path``: one report of every bus's cycles (each bus its own series)."""
     from ...api import buses
     from ...io.writers import make_writer
     from .motion import bus_specs, open_spec
 
     specs = bus_specs(bus_names, fleet_file, common, params["unit"], plan.ids if plan is not None else [ident])
+    firsts = {s.name: 1 for s in specs}
+    if state is not None:
+        if state.buses is None:               # a new run's state
+            state.buses = {s.name: 0 for s in specs}
+        elif set(state.buses) != set(firsts):
+            raise UsageError(f"--resume: the run in {state.path} was on buses {', '.join(state.buses)}; given "
+                             f"{', '.join(firsts)}")
+        else:
+            firsts = {name: state.buses[name] + 1 for name in firsts}
+            note(f"resuming the run in {state.path}: " + ", ".join(
+                f"bus {n} at cycle {f}" if f <= params["cycles"] else f"bus {n} done" for n, f in firsts.items())
+                 + f" of {params['cycles']}")
+        state.output = output if output and output != "-" else None
+    collected = None
+    if report_path is not None:
+        from ...io.cycle_report import CycleRun
+
+        collected = CycleRun()
     columns = ["bus"] + columns
     stream, had = open_output(output, append, fmt=record_fmt, columns=columns)
     runners = {}
 
     def work(link, spec, emit, cancel):
-        runner = runners[spec.name] = _runner(link, plan, ident, ends, raw_speed, dict(params), 1, None, duration,
-                                              cancel=cancel, what=f"bus {spec.name}: ")
+        if firsts[spec.name] > params["cycles"]:
+            return                              # a resumed run's bus that has done every cycle
+        runner = runners[spec.name] = _runner(link, plan, ident, ends, raw_speed, dict(params), firsts[spec.name],
+                                              None, duration, cancel=cancel, what=f"bus {spec.name}: ")
         try:
             for rec in runner.run():
                 emit(rec)
@@ -312,9 +339,17 @@ def _cycle_buses(bus_names, fleet_file, plan, ident, ends, raw_speed, params, du
     try:
         for rec in buses.run(specs, work, open_bus=open_spec(common)):
             writer.write(rec)
+            if collected is not None:
+                collected.add(rec)
+            if state is not None and rec["status"] == "ok":
+                state.buses[rec["bus"]] = rec["cycle"]
+                state.done = min(state.buses.values())
+                state.save()
     except KeyboardInterrupt:
         for runner in runners.values():
             runner.halt()
+        if state is not None:
+            warn(f"interrupted; resume with --resume {state.path}")
         raise
     finally:
         close_output(writer, stream)
@@ -322,9 +357,11 @@ def _cycle_buses(bus_names, fleet_file, plan, ident, ends, raw_speed, params, du
             runner = runners.get(spec.name)
             if runner is None:
                 continue
-            _summary(runner, 1, time.monotonic() - started, plan is None, f"bus {spec.name}: ")
+            _summary(runner, firsts[spec.name], time.monotonic() - started, plan is None, f"bus {spec.name}: ")
             if runner.reason not in (None, "done", "duration"):
                 warn(f"bus {spec.name}: stopped: {runner.why}" + _held(runner))
+        if report_path is not None:
+            _report(report_path, output, collected, params, max(firsts.values()), buses=len(specs))
     first = next((r for r in runners.values() if r.reason not in (None, "done", "duration", "cancelled")), None)
     if first is not None:
         _raise_for(first.reason, first.why)
@@ -373,7 +410,9 @@ def _summary(runner, first, seconds, polled, what=""):
     note(what + text)
 
 
-def _report(path, output, collected, params, first):
+def _report(path, output, collected, params, first, buses=1):
+    """The report of the run; ``first`` above 1 (a resumed run): of the whole run, read back from
+    its output file."""
     from ...io import cycle_report
 
     fmt = REPORT_PATH.format_of(path)
@@ -383,8 +422,14 @@ def _report(path, output, collected, params, first):
     if run is None or not len(run):
         note(f"no cycle to report; {path} not written")
         return
-    what = (f"ID {params['id']} between {params['between'][0]:g} and {params['between'][1]:g} {params['unit']}"
-            if params["between"] else f"path {params['path']}")
+    if params["between"]:
+        what = f"ID {params['id']} between {params['between'][0]:g} and {params['between'][1]:g} {params['unit']}"
+    elif params["path"]:
+        what = f"path {params['path']}"
+    else:
+        what = f"ID {params['id']} between its stroke limits"
+    if buses > 1:
+        what += f" on {buses} buses"
     import os
 
     from ...outfile import replacing
