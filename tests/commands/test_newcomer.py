@@ -20,12 +20,12 @@ def _bus_file(path, ids):
 def test_apply_map_on_a_bigger_file_names_its_ids_and_the_fix(cli, tmp_path):
     url = _bus_file(tmp_path / "six.json", "1,2,3,4,5,6")
     assert cli("zap", "backup", "-p", url, "-o", str(tmp_path / "old.json")).exit_code == 0
-    r = cli("zap", "apply", str(tmp_path / "old.json"), "--map", "1:5,2:6", "-p", url, "--plan")
+    r = cli("zap", "apply", str(tmp_path / "old.json"), "--id-map", "1:5,2:6", "-p", url, "--plan")
     assert r.exit_code == 2 and r.stdout == ""
-    assert ("--map: bus ID 5 would get the settings of two actuators of the file: ID 1 (--map 1:5) and ID 5 "
+    assert ("--id-map: bus ID 5 would get the settings of two actuators of the file: ID 1 (--id-map 1:5) and ID 5 "
             "(kept as it is)") in r.stderr
     assert "every ID of the file (1-6) is applied: add --ids 1,2 to apply only the mapped ones" in r.stderr
-    ok = cli("zap", "apply", str(tmp_path / "old.json"), "--ids", "1,2", "--map", "1:5,2:6", "-p", url, "--plan")
+    ok = cli("zap", "apply", str(tmp_path / "old.json"), "--ids", "1,2", "--id-map", "1:5,2:6", "-p", url, "--plan")
     assert ok.exit_code == 0, ok
 
 

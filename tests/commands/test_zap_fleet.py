@@ -153,13 +153,63 @@ def test_apply_clone_with_to_and_map(cli, rig, fleets):
         [(i, reg) for i in (1, 2, 3) for reg in ("speed-limit", "acceleration")])
     st = state_of(tmp / "b.json")
     assert all(st[i]["speed-limit"] == 500 for i in (1, 2, 3))
-    r = cli("zap", "apply", f, "--map", "2:3", "-p", b)
+    r = cli("zap", "apply", f, "--id-map", "2:3", "-p", b)
     assert r.exit_code == 2 and "bus ID 3 would get the settings of two actuators" in r.stderr
-    r = cli("zap", "apply", f, "--ids", "2", "--map", "2:3", "-p", b)
+    r = cli("zap", "apply", f, "--ids", "2", "--id-map", "2:3", "-p", b)
     assert r.exit_code == 0 and [(x["id"], x["source"], x["register"], x["new"]) for x in jsonl(r.stdout)] == [
         (3, 2, name, v) for _, name, v in rig.order([(3, "speed-limit", fresh[2]["speed-limit"]),
                                                      (3, "acceleration", fresh[2]["acceleration"]),
                                                      (3, "current-limit", 600)])]
+
+
+USER_MAP = """model: Q17
+protocol: modbus
+  0 | model-number | 16 | NV | R |  |  |  |  | model
+  1 | firmware-version | 16 | NV | R |  |  |  |  | firmware
+  4 | id | 16 | NV | RW | 1..247 |  | 1 | identity | actuator ID
+  5 | baud-rate | 16 | NV | RW | 8=115200 bps; 16=57600 bps |  | 16 | identity | baud rate code
+ 20 | speed-limit | 16 | NV | RW |  |  | 1000 |  | speed limit
+"""
+
+
+def test_apply_takes_a_register_map_file_and_the_ids_by_id_map(cli, tmp_path):
+    """zap apply's --map is the register map file, as on every zap command (a model zkzap does not
+    ship); the ID mapping is --id-map. The old --map OLD:NEW still works where it names no file."""
+    m = tmp_path / "q17.map"
+    m.write_text(USER_MAP)
+    bus = make_bus(tmp_path / "b.json", ids="1,2", protocol="modbus")
+    f = tmp_path / "q.json"
+    r = cli("zap", "backup", "--protocol", "modbus", "--map", str(m), "--ids", "1", "-p", bus, "-o", str(f))
+    assert r.exit_code == 0, r
+    doc = json.loads(f.read_text())
+    assert doc["map"] == "Q17" and doc["actuators"]["1"]["stored"] == {"id": 1, "baud-rate": 16, "speed-limit": 1000}
+    doc["actuators"]["1"]["stored"]["speed-limit"] = 555
+    f.write_text(json.dumps(doc))
+    r = cli("zap", "apply", str(f), "--protocol", "modbus", "-p", bus)          # no map of the Q17 shipped
+    assert (r.exit_code, r.stdout) == (2, "") and "give its map file with --map FILE" in r.stderr, r
+    r = cli("zap", "apply", str(f), "--protocol", "modbus", "--map", str(m), "--id-map", "1:2", "-p", bus)
+    assert r.exit_code == 0 and [(x["id"], x["register"], x["status"]) for x in jsonl(r.stdout)] == [
+        (2, "speed-limit", "verified")], r
+    assert state_of(tmp_path / "b.json")[2]["speed-limit"] == 555
+    # the old spelling: OLD:NEW pairs that name no file are the ID mapping, with a note
+    r = cli("zap", "apply", str(f), "--protocol", "modbus", "--map", "1:2", "-p", bus, "--plan")
+    assert r.exit_code == 2 and "--map 1:2: the ID mapping is --id-map now" in r.stderr, r   # (no Q17 map)
+    legacy = tmp_path / "legacy.json"
+    assert cli("zap", "backup", "--protocol", "modbus", "--ids", "1", "-p", bus, "-o", str(legacy)).exit_code == 0
+    r = cli("zap", "apply", str(legacy), "--map", "1:2", "-p", bus, "--plan")
+    assert r.exit_code == 0 and "taken as --id-map 1:2" in r.stderr, r
+    r = cli("zap", "apply", str(legacy), "--map", "1:2", "--id-map", "1:2", "-p", bus, "--plan")
+    assert (r.exit_code, r.stdout) == (2, "") and "give the ID mapping once" in r.stderr
+    import os
+
+    here = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        (tmp_path / "1:2").write_text(USER_MAP)        # a file of that name too: ambiguous, refused
+        r = cli("zap", "apply", str(legacy), "--map", "1:2", "-p", bus, "--plan")
+    finally:
+        os.chdir(here)
+    assert (r.exit_code, r.stdout) == (2, "") and "both a file and OLD:NEW ID pairs" in r.stderr, r
 
 
 def test_apply_only_skip_and_protected(cli, buses):
@@ -170,11 +220,11 @@ def test_apply_only_skip_and_protected(cli, buses):
     assert [x["register"] for x in jsonl(r.stdout)] == ["speed-limit", "current-limit", "long-stroke-limit"]
     r = cli("zap", "apply", f, "--only", "id", "-p", b)
     assert (r.exit_code, r.stdout) == (2, "") and "--force" in r.stderr
-    r = cli("zap", "apply", f, "--map", "1:2", "--ids", "1", "--only", "id", "--force", "--plan", "-p", b)
+    r = cli("zap", "apply", f, "--id-map", "1:2", "--ids", "1", "--only", "id", "--force", "--plan", "-p", b)
     assert (r.exit_code, r.stdout) == (2, "") and "would give bus ID 2 the ID 1" in r.stderr
 
 
-@pytest.mark.parametrize("how", [["--to", "2-3"], ["--map", "1:3"]])
+@pytest.mark.parametrize("how", [["--to", "2-3"], ["--id-map", "1:3"]])
 def test_a_clone_never_makes_two_actuators_with_one_id(cli, fleets, how):
     """Regression: a clone's plan listed "ID 2 id (2 on the bus, 1 in the file)" and hinted
     --only NAME --force, which gave ID 2 the ID 1."""

@@ -672,12 +672,12 @@ def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
     mapping = dict(mapping or {})
     for old in mapping:
         if old not in entries:
-            raise UsageError(f"--map: ID {old} is not in the file; it has {', '.join(map(str, sorted(entries)))}")
+            raise UsageError(f"--id-map: ID {old} is not in the file; it has {', '.join(map(str, sorted(entries)))}")
         if old not in chosen:
             chosen.append(old)
     if to is not None:
         if mapping:
-            raise UsageError("--to and --map do not go together: --to clones one actuator onto many")
+            raise UsageError("--to and --id-map do not go together: --to clones one actuator onto many")
         if len(chosen) != 1:
             raise UsageError(f"--to clones one actuator, but {len(chosen)} are selected "
                              f"({', '.join(map(str, chosen))}); choose one with --ids")
@@ -687,13 +687,13 @@ def assignments(entries: dict, *, ids=None, mapping=None, to=None) -> list:
     dup = sorted({t for t in targets if targets.count(t) > 1})
     if dup:
         t = dup[0]
-        sources = [f"ID {i} ({'--map ' + str(i) + ':' + str(t) if i in mapping else 'kept as it is'})"
+        sources = [f"ID {i} ({'--id-map ' + str(i) + ':' + str(t) if i in mapping else 'kept as it is'})"
                    for i, target in pairs if target == t]
         unmapped = [i for i in chosen if i not in mapping]
-        hint = (f"; an ID of the file that --map does not name keeps its own, and without --ids every ID "
+        hint = (f"; an ID of the file that --id-map does not name keeps its own, and without --ids every ID "
                 f"of the file ({_ranges(sorted(entries))}) is applied: add --ids {','.join(map(str, mapping))} "
                 f"to apply only the mapped ones" if unmapped and ids is None else "")
-        raise UsageError(f"--map: bus ID {t} would get the settings of two actuators of the file: "
+        raise UsageError(f"--id-map: bus ID {t} would get the settings of two actuators of the file: "
                          f"{' and '.join(sources)}{hint}", bus_id=t)
     return pairs
 
@@ -1220,11 +1220,12 @@ def match_buses(per_bus: dict, ports: dict, specs, name="the file") -> dict:
     return out
 
 
-def read_bus_document(path: str) -> tuple:
-    """``({bus name: {ID: Entry}}, {bus name: port}, name)`` of a backup of several buses."""
+def read_bus_document(path: str, regmap=None) -> tuple:
+    """``({bus name: {ID: Entry}}, {bus name: port}, name)`` of a backup of several buses
+    (``regmap``: the map of a model zkzap does not ship, as :func:`read_document`)."""
     fmt = "json" if path == "-" else format_of(path)
     doc, name = documents.read(path, "fleet", fmt)
-    return bus_documents(doc, name), bus_ports(doc), name
+    return bus_documents(doc, name, regmap), bus_ports(doc), name
 
 
 def bus_ports(doc) -> dict:

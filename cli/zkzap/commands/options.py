@@ -339,14 +339,17 @@ def _map_callback(ctx, param, value):
     return load_map(value)                 # MapError: exit 2, FILE:LINE
 
 
-def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS, ir_only=None):
+def protocol_options(f=None, *, protocols=ZAP_PROTOCOLS, ir_only=None, map_callback=None):
     """``--protocol ir|modbus`` and ``--map FILE``, the one definition for every zap command.
     Both are eager: a REGISTER argument is read against the map they choose
     (:func:`zap_map`). ``ir_only``: why the command has no Modbus RTU form (``--protocol
-    modbus``, or the environment saying it, is then refused with that reason, exit 2)."""
+    modbus``, or the environment saying it, is then refused with that reason, exit 2).
+    ``map_callback``: reads --map's value where a command reads more than a map file (zap
+    apply: an old ID mapping); it returns the map, or None."""
     if f is None:
-        return lambda g: protocol_options(g, protocols=protocols, ir_only=ir_only)
-    f = click.option("--map", "regmap", metavar="FILE", default=None, is_eager=True, callback=_map_callback,
+        return lambda g: protocol_options(g, protocols=protocols, ir_only=ir_only, map_callback=map_callback)
+    f = click.option("--map", "regmap", metavar="FILE", default=None, is_eager=True,
+                     callback=map_callback or _map_callback,
                      help="A register map file for a model zkzap does not ship (format: the manual's "
                           "Modbus page); its 'protocol:' line must agree with --protocol.")(f)
     return protocol_option(f, protocols=protocols, ir_only=ir_only)

@@ -15,7 +15,7 @@ from ...codec import zap
 from ...errors import CHECK_FAILED, CheckFailed, DEVICE_ERROR, MORE_TO_DO, NO_REPLY, NoReply, OK, USAGE, UsageError
 from .. import CONTEXT, Command
 from ..options import (Choice, InputPath, OutputPath, buses_option, consent, exits, fleet_option, note, plural,
-                       protocol_options, resolve_format, protocol_option, warn, zap_map, zap_yes_option as yes_option)
+                       protocol_options, resolve_format, warn, zap_map, zap_yes_option as yes_option)
 from .compose import _link_args, link_options, open_link
 from .scan import IdList, actuator_bauds
 
@@ -92,13 +92,37 @@ class MapType(click.ParamType):
                 a = zap.check_id(old, allow_broadcast=False)
                 b = zap.check_id(new, allow_broadcast=False)
             except Exception:  # FieldValueError, ValueError
-                raise UsageError(f"--map: {part!r} is not OLD:NEW with IDs 0..253 (like 1:5,2:6)") from None
+                raise UsageError(f"--id-map: {part!r} is not OLD:NEW with IDs 0..253 (like 1:5,2:6)") from None
             if a in out:
-                raise UsageError(f"--map: ID {a} is mapped twice")
+                raise UsageError(f"--id-map: ID {a} is mapped twice")
             out[a] = b
         if not out:
-            raise UsageError("--map: none given; expected OLD:NEW pairs like 1:5,2:6")
+            raise UsageError("--id-map: none given; expected OLD:NEW pairs like 1:5,2:6")
         return out
+
+
+#: What ``zap apply --map`` took before it named a register map file: ``OLD:NEW,...`` ID pairs.
+OLD_ID_MAP = r"\s*\d+\s*:\s*\d+\s*(?:[, ]\s*\d+\s*:\s*\d+\s*)*"
+
+
+def _apply_map_callback(ctx, param, value):
+    """zap apply's --map: a register map file, as on every zap command; a value of the old form
+    ``OLD:NEW,...`` (the ID mapping, now --id-map) that names no file is still taken as the ID
+    mapping, with a note; one that also names a file is ambiguous: refused (exit 2)."""
+    import os
+    import re
+
+    if value is not None and re.fullmatch(OLD_ID_MAP, value):
+        if os.path.exists(value):
+            raise UsageError(f"--map {value}: both a file and OLD:NEW ID pairs; give --map ./{value} for the "
+                             f"register map file, or --id-map {value} for the IDs")
+        warn(f"--map {value}: the ID mapping is --id-map now (--map names a register map file, as on every zap "
+             f"command); taken as --id-map {value}")
+        ctx.meta["zkzap.apply.id_map"] = MapType().convert(value, param, ctx)
+        return None
+    from ..options import _map_callback
+
+    return _map_callback(ctx, param, value)
 
 
 class RegisterList(click.ParamType):
@@ -278,7 +302,7 @@ def diff(a, b, ids, everything, compare, fmt, bus_names=None, **common):
         raise UsageError("diff: A and B are both the bus; compare a file with the bus")
     from .motion import several_buses
 
-    if several_buses(bus_names) or _per_bus(a) or _per_bus(b):
+    if several_buses(bus_names) or _per_bus(a, common.get("regmap")) or _per_bus(b, common.get("regmap")):
         return _diff_buses(a, b, ids, everything, compare, fmt, bus_names, common)
     sides = {}
     for label, src in (("A", a), ("B", b)):
@@ -326,8 +350,9 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
 @click.argument("file", metavar="FILE", type=InputPath("fleet"))
 @click.option("--ids", "ids", type=IdList(), default=None, metavar="LIST",
               help="Apply only these actuators of FILE (default: all of them).")
-@click.option("--map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
-              help="Apply FILE's actuator OLD to the bus's actuator NEW.")
+@click.option("--id-map", "mapping", type=MapType(), default=None, metavar="OLD:NEW,...",
+              help="Apply FILE's actuator OLD to the bus's actuator NEW (--map OLD:NEW, its old spelling, is still "
+                   "taken where it names no file).")
 @click.option("--to", "to", type=IdList(), default=None, metavar="LIST",
               help="Clone the one selected actuator of FILE onto every bus ID listed, like 1-8.")
 @click.option("--only", "only", type=RegisterList(), default=None, metavar="REG,...",
@@ -343,7 +368,7 @@ PLAN_TABLE = [("id", "id"), ("register", "register"), ("memory", "memory"), ("ol
               help="Output format of the plan and the result (default: table on a terminal, jsonl otherwise).")
 @yes_option
 @link_options(several=True)
-@protocol_option
+@protocol_options(map_callback=_apply_map_callback)
 @buses_option("Apply")
 def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_names=None, **common):
     """Make the bus match FILE: write the stored settings that differ, read each back.
@@ -355,7 +380,7 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_na
     read_back. Volatile settings are written only when named in --only; id, baud-rate,
     protocol-type and feedback-return-mode only with --only and --force: the plan and the
     summary name every difference left out and why, so "0 writes" never hides one. A clone
-    (--to, --map) never copies the file's id (it would give two actuators one ID); an id write
+    (--to, --id-map) never copies the file's id (it would give two actuators one ID); an id write
     is checked free first, as set-id does. A baud-rate write says when the rate takes effect. A
     file from another model or firmware is refused unless --force.
 
@@ -369,7 +394,8 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_na
       zap apply fleet.json -p /dev/ttyUSB0 --plan
       zap apply fleet.json -p /dev/ttyUSB0 --yes
       zap apply fleet.json --ids 1 --to 2-8 -p /dev/ttyUSB0 --yes     # clone ID 1 onto 2..8
-      zap apply old.json --map 1:5,2:6 --skip current-limit -p /dev/ttyUSB0 --yes
+      zap apply old.json --id-map 1:5,2:6 --skip current-limit -p /dev/ttyUSB0 --yes
+      zap apply fleet.json --protocol modbus --map my-model.map -p /dev/ttyUSB0 --yes   # a map of your own
       zap apply fleet.json --only goal-speed,led -p /dev/ttyUSB0       # volatile settings
       zap apply machine.json --buses all --yes                         # every bus the file names
 
@@ -378,7 +404,12 @@ def apply(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_na
     """
     from .motion import several_buses
 
-    if several_buses(bus_names) or _per_bus(file):
+    legacy = click.get_current_context().meta.get("zkzap.apply.id_map")
+    if legacy is not None:
+        if mapping is not None:
+            raise UsageError("--map OLD:NEW and --id-map: give the ID mapping once, as --id-map")
+        mapping = legacy
+    if several_buses(bus_names) or _per_bus(file, common.get("regmap")):
         return _apply_buses(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes, bus_names, common)
     entries = fleet.read_document(file, common.get("regmap"))
     file = "stdin" if file == "-" else file
@@ -689,11 +720,12 @@ def _setup_summary(state):
 
 # -- several buses -------------------------------------------------------------------------------
 
-def _per_bus(path) -> bool:
-    """Whether a fleet file (not 'bus', not stdin) keeps its actuators per bus (a backup of several buses)."""
+def _per_bus(path, regmap=None) -> bool:
+    """Whether a fleet file (not 'bus', not stdin) keeps its actuators per bus (a backup of several buses);
+    ``regmap``: a --map FILE (the file's model may be one zkzap does not ship)."""
     if path in ("bus", "-"):
         return False
-    return bool(fleet.read_bus_document(path)[0])
+    return bool(fleet.read_bus_document(path, regmap)[0])
 
 
 def _bus_specs(bus_names, fleet_file, common, ids=()):
@@ -749,7 +781,7 @@ def _diff_buses(a, b, ids, everything, compare, fmt, bus_names, common):
     sides, ports = {}, {}
     for label, src in (("A", a), ("B", b)):
         if src != "bus":
-            per_bus, ports[label], _ = fleet.read_bus_document(src)
+            per_bus, ports[label], _ = fleet.read_bus_document(src, common.get("regmap"))
             if not per_bus:
                 raise UsageError(f"{src}: not a backup of several buses (no buses.NAME.actuators)")
             sides[label] = per_bus
@@ -780,10 +812,11 @@ def _apply_buses(file, ids, mapping, to, only, skip, plan_only, force, fmt, yes,
     from .motion import open_spec
 
     if ids is not None or mapping or to is not None:
-        raise UsageError("--ids, --map, --to: with several buses each bus's actuators are applied as the file has them")
+        raise UsageError("--ids, --id-map, --to: with several buses each bus's actuators are applied as the file has "
+                         "them")
     if file == "-":
         raise UsageError("several buses: give the backup as a file, not stdin")
-    per_bus, ports, _ = fleet.read_bus_document(file)
+    per_bus, ports, _ = fleet.read_bus_document(file, common.get("regmap"))
     if not per_bus:
         raise UsageError(f"{file}: not a backup of several buses (no buses.NAME.actuators)")
     _from_file(common, next(iter(per_bus.values())))      # its protocol, where --protocol says none
