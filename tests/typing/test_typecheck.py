@@ -71,19 +71,30 @@ def _pyright():
     return exe if p.returncode == 0 else None
 
 
-def test_pyright_strict_accepts_the_api_and_refuses_wrong_types(workdir):
+@pytest.fixture(scope="module")
+def pyright_report(workdir):
+    """pyright (strict) over every program of this module at once (one node process analysing the
+    library once): ``{file name: [diagnostic, ...]}``."""
     exe = _pyright()
     if exe is None:
         pytest.skip(f"pyright cannot run here (it needs node); {EXTRA}")
+    (workdir / "user_script.py").write_text(USER_SCRIPT)
+    (workdir / "user_typo.py").write_text(USER_SCRIPT.replace('rec["id"]', 'rec["idd"]'))
     (workdir / "pyrightconfig.json").write_text(json.dumps({"typeCheckingMode": "strict", "pythonVersion": "3.10"}))
-    p = subprocess.run([exe, "--outputjson", "--pythonpath", sys.executable, *PROGRAMS],
-                       capture_output=True, text=True, cwd=workdir, timeout=600)
+    p = subprocess.run([exe, "--outputjson", "--pythonpath", sys.executable, *PROGRAMS, "user_script.py",
+                        "user_typo.py"], capture_output=True, text=True, cwd=workdir, timeout=600)
     report = json.loads(p.stdout)
-    errors = [(d["file"], d["range"]["start"]["line"] + 1) for d in report["generalDiagnostics"]
-              if d["severity"] == "error"]
+    out = {}
+    for d in report["generalDiagnostics"]:
+        out.setdefault(os.path.basename(d["file"]), []).append(d)
+    return out
+
+
+def test_pyright_strict_accepts_the_api_and_refuses_wrong_types(pyright_report):
+    diagnostics = [d for name in PROGRAMS for d in pyright_report.get(name, [])]
+    errors = [(d["file"], d["range"]["start"]["line"] + 1) for d in diagnostics if d["severity"] == "error"]
     found = _errors_by_file(errors)
-    messages = "\n".join(f"{d['file']}:{d['range']['start']['line'] + 1}: {d['message']}"
-                         for d in report["generalDiagnostics"])
+    messages = "\n".join(f"{d['file']}:{d['range']['start']['line'] + 1}: {d['message']}" for d in diagnostics)
     assert found["api_program.py"] == set(), messages
     assert found["wrong_types.py"] == refused_lines(), messages
 
@@ -103,24 +114,14 @@ with Bus("sim://zap?ids=1,2") as bus:
 """
 
 
-def _pyright_errors(exe, workdir, name, text) -> list:
-    (workdir / name).write_text(text)
-    (workdir / "pyrightconfig.json").write_text(json.dumps({"typeCheckingMode": "strict", "pythonVersion": "3.10"}))
-    p = subprocess.run([exe, "--outputjson", "--pythonpath", sys.executable, name],
-                       capture_output=True, text=True, cwd=workdir, timeout=600)
-    report = json.loads(p.stdout)
-    return [(d["range"]["start"]["line"] + 1, d["message"]) for d in report["generalDiagnostics"]
-            if d["severity"] == "error"]
+def _pyright_errors(report, name) -> list:
+    return [(d["range"]["start"]["line"] + 1, d["message"]) for d in report.get(name, []) if d["severity"] == "error"]
 
 
-def test_pyright_strict_types_a_users_ten_lines_and_refuses_a_key_typo(workdir):
-    exe = _pyright()
-    if exe is None:
-        pytest.skip(f"pyright cannot run here (it needs node); {EXTRA}")
+def test_pyright_strict_types_a_users_ten_lines_and_refuses_a_key_typo(pyright_report):
     assert len(USER_SCRIPT.splitlines()) == 10
-    assert _pyright_errors(exe, workdir, "user_script.py", USER_SCRIPT) == []
-    typo = USER_SCRIPT.replace('rec["id"]', 'rec["idd"]')
-    errors = _pyright_errors(exe, workdir, "user_typo.py", typo)
+    assert _pyright_errors(pyright_report, "user_script.py") == []
+    errors = _pyright_errors(pyright_report, "user_typo.py")
     assert {line for line, _ in errors} == {5}, errors
     assert any('"idd" is not a defined key in "ScanRecord"' in text for _, text in errors), errors
 
