@@ -1,4 +1,6 @@
-"""Find a ZK ECU's line settings by listening: baud rate, stop bits, protocol version, status rate.
+"""Find a ZK ECU's line settings by listening: baud rate, stop bits, protocol version, status rate
+(:func:`detect`); and which protocol and baud rate a mightyZAP bus speaks (:func:`detect_bus`,
+at the end).
 
 The ZK document lets the ECU's UART run at 2400 .. 115200 baud, 8 data bits, no parity, 1 or 2
 stop bits, and an ECU streams status frames on its own. :func:`detect` listens at each setting
@@ -196,3 +198,53 @@ def no_answer(result: Detection) -> NoReply:
     why = "out of time budget; " if result.out_of_budget else ""
     return NoReply(f"no ZK status frames on {result.port} at any setting tried ({why}"
                    f"{result.elapsed:.1f} s of {result.budget:g} s): {result.describe_tried()}")
+
+
+# -- the actuator bus ----------------------------------------------------------------------------
+
+#: The protocols a mightyZAP bus may speak, in the order :func:`detect_bus` tries them at a rate.
+BUS_PROTOCOLS = ("ir", "modbus")
+
+
+def detect_bus(port=None, bauds=None, *, protocols=BUS_PROTOCOLS, every=False, retries=2, on_warning=None,
+               opener=None, **options):
+    """Say which protocol (IR or Modbus RTU) and baud rate the actuators on a bus speak: yields
+    one record per combination where an actuator answers — ``protocol``, ``baud``, ``ids`` (the
+    IDs that answered) and ``found`` (how many) — and stops after the first unless ``every``.
+
+    At each baud rate of ``bauds`` in turn (default :data:`zkzap.api.zap.ALL_BAUDS`, the
+    factory default first), each protocol of ``protocols`` is scanned over all its IDs (IR
+    0-253, Modbus RTU 1-247) as :meth:`zkzap.api.zap.Bus.scan` scans (its timing policy: a
+    silent ID costs its probe's time on the wire and the first-byte wait, and late replies are
+    still recognised by their ID). ``opener(baud, protocol)``: how the port is opened for one
+    combination (a context manager giving a bus link; the command line's, which knows
+    batches and ``--sim``); by default :func:`zkzap.link.zap_bus.open_bus` on ``port`` with
+    ``options`` (timeout, stop_bits, latency, ...). ``on_warning(text)``: what the scans say.
+    Raises :class:`~zkzap.errors.NoReply` when nothing answers (the rates tried, the time
+    taken)."""
+    from ..codec import modbus, zap
+    from .zap import ALL_BAUDS, Bus
+
+    bauds = list(ALL_BAUDS if bauds is None else bauds)
+    ids_for = {"ir": list(range(zap.MAX_ID + 1)), "modbus": list(range(1, modbus.MAX_ID + 1))}
+    if opener is None:
+        from ..link.zap_bus import open_bus
+
+        def opener(baud, protocol):
+            return open_bus(port, baud, protocol=protocol, return_mode=1, retries=retries, **options)
+
+    t0 = time.monotonic()
+    found = 0
+    for baud in bauds:
+        for protocol in protocols:
+            with opener(baud, protocol) as link:
+                recs = list(Bus.over(link).scan(ids_for[protocol], [baud], retries=retries, on_warning=on_warning))
+            if recs:
+                found += 1
+                yield {"protocol": protocol, "baud": baud, "ids": [r["id"] for r in recs], "found": len(recs)}
+                if not every:
+                    return
+    if not found:
+        names = {"ir": "the IR protocol", "modbus": "Modbus RTU"}
+        raise NoReply(f"nothing answered on {' or '.join(names[p] for p in protocols)} at "
+                      f"{', '.join(map(str, bauds))} baud ({time.monotonic() - t0:.2f} s)")

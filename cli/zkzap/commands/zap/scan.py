@@ -468,33 +468,22 @@ def detect(every, fmt, **common):
       zap detect -p /dev/ttyUSB0
       zap detect -p /dev/ttyUSB0 --all -f json
     """
-    from ...codec import modbus
+    from ...api.detect import detect_bus
     from ...io.writers import make_writer
 
     ctx = click.get_current_context()
     bauds = list(ALL_BAUDS) if ctx.get_parameter_source("baud") == click.core.ParameterSource.DEFAULT \
         else common["baud"]
     fmt = resolve_format(fmt)
+
+    def opener(baud, protocol):          # as every command opens its port (batches, --sim)
+        args = _link_args(common)
+        args.update(return_mode="1", baud=baud, protocol=protocol, regmap=None)
+        return open_link(ids=[0 if protocol == "ir" else 1], **args)
+
     writer = make_writer(fmt, sys.stdout, DETECT_COLUMNS, title="mightyZAP bus")
-    found = []
-    t0 = time.monotonic()
-    ids_for = {"ir": list(range(zap.MAX_ID + 1)), "modbus": list(range(1, modbus.MAX_ID + 1))}
     try:
-        for baud in bauds:
-            for protocol in ("ir", "modbus"):
-                args = _link_args(common)
-                args.update(return_mode="1", baud=baud, protocol=protocol, regmap=None)
-                with open_link(ids=[0 if protocol == "ir" else 1], **args) as link:
-                    recs = list(Bus.over(link).scan(ids_for[protocol], [baud], retries=common["retries"],
-                                                    on_warning=warn))
-                if recs:
-                    rec = {"protocol": protocol, "baud": baud, "ids": [r["id"] for r in recs], "found": len(recs)}
-                    found.append(rec)
-                    writer.write(dict(rec, ids=_ranges(rec["ids"])) if fmt == "table" else rec)
-                    if not every:
-                        return
+        for rec in detect_bus(bauds=bauds, every=every, retries=common["retries"], on_warning=warn, opener=opener):
+            writer.write(dict(rec, ids=_ranges(rec["ids"])) if fmt == "table" else rec)
     finally:
         writer.close()
-    if not found:
-        raise NoReply(f"nothing answered on the IR protocol or Modbus RTU at {', '.join(map(str, bauds))} baud "
-                      f"({time.monotonic() - t0:.2f} s)")
