@@ -42,9 +42,9 @@ def tool(name):
     return [exe] if os.path.exists(exe) else [sys.executable, "-m", "zkzap"]
 
 
-def start_sim(ids, baud):
+def start_sim(ids, baud, protocol="ir"):
     env = dict(os.environ, NO_COLOR="1")
-    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids, "--baud", str(baud)],
+    p = subprocess.Popen(tool("zkzap") + ["sim", "zap", "--ids", ids, "--baud", str(baud), "--protocol", protocol],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     port = p.stdout.readline().strip()
     if not port:
