@@ -74,3 +74,15 @@ def test_the_bytes_on_the_bus_are_modbus_frames_decoded(rig):
     assert [i["dir"] for i in items] == ["tx", "rx"], items
     assert all(not i.get("bad") for i in items), items
     assert "register=goal-speed" in items[0]["text"] and "kind=reply" in items[1]["text"], items
+
+
+def test_the_page_plans_a_path_with_the_bus_s_own_frames(rig):
+    """A path planned from the page on a Modbus bus is the library's Modbus plan: one answered Write
+    Multiple Registers per actuator, the 17Lf's range (never IR Symmetric Store packets)."""
+    _, _, console = rig
+    sent = _ask(console, "plan", text='t,id,position\n0,1,9000\n0.5,1,100\n', name="wave.csv")
+    reply = next(m for m in sent if m.get("req") == 3)
+    assert [s["frames"] for s in reply["steps"]] == [["01 10 00 CD 00 01 02 23 28 AF 63"],
+                                                     ["01 10 00 CD 00 01 02 00 64 B7 A6"]], reply
+    sent = _ask(console, "plan", text='t,id,position\n0,248,5\n', name="bad.csv")
+    assert any(m.get("type") == "error" and "1..247" in m.get("text", "") for m in sent), sent
