@@ -110,7 +110,7 @@ def test_dump(zap_sim):
     assert by_name["present-voltage"]["physical"] == 12.0 and by_name["id"]["memory"] == "NV"
 
 
-@pytest.mark.zap_sim(ids=[1, 2])
+@pytest.mark.zap_sim(ids=[1, 2], virtual=True)        # the census's horizon in no time
 def test_set_id_verified_and_refused_when_taken(zap_sim):
     with Bus(zap_sim) as bus:
         assert bus.set_id(1, 7) == 7
@@ -121,6 +121,7 @@ def test_set_id_verified_and_refused_when_taken(zap_sim):
     assert isinstance(e.value, IdTaken) and e.value.taken and e.value.code == 2
 
 
+@pytest.mark.zap_sim(virtual=True)                   # the census's horizon in no time
 def test_set_baud_switches_the_port(zap_sim):
     with Bus(zap_sim) as bus:
         assert bus.set_baud(1, 115200) == 115200
