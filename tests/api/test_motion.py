@@ -128,7 +128,7 @@ def test_a_plan_for_one_protocol_is_refused_on_the_other():
 
 def test_a_modbus_stop_holds_every_actuator_it_can_and_says_which_it_could_not():
     # ID 3 is not on the bus: its position cannot be read, the others are still held (one write each)
-    with start_zap(ids=[1, 2], protocol="modbus", speed=4) as sim, Bus(sim, protocol="modbus") as bus:
+    with start_zap(ids=[1, 2], protocol="modbus", virtual=True) as sim, Bus(sim, protocol="modbus") as bus:
         bus.write(1, {"goal-position": 9000})
         bus.write(2, {"goal-position": 9000})
         held = motion.stop_all(bus, [1, 3, 2])
@@ -183,8 +183,10 @@ def test_a_hardware_error_stops_every_actuator_force_off_when_asked(protocol):
         assert sim.device.actuator(1).get("force-on-off") == 0
 
 
-def test_loops_repeat_the_path():
-    with start_zap(ids=[1], speed=4) as sim, Bus(sim) as bus:
+@PROTOCOLS
+def test_loops_repeat_the_path(protocol):
+    sim, bus = on(protocol, [1], speed=4)
+    with sim, bus:
         player = bus.play(io.StringIO("t,id,position\n0,1,500\n0.2,1,1500\n"), loops=3, log=False)
         assert player.sent == 6 and len(player.lateness) == 6
 

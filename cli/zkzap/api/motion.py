@@ -9,7 +9,9 @@ speeds mm/s; see :mod:`zkzap.api.units`). Every row is checked before anything m
 
 **The plan** (:func:`plan`): rows of one time are one *step*, and a step's goals of one register
 go out as one Symmetric Store (one sync move, broadcast, never answered) — goal-current first,
-then goal-speed, then goal-position. With ``interpolate="linear"`` each actuator's goal moves
+then goal-speed, then goal-position; on Modbus RTU (``protocol``, a
+:mod:`~zkzap.api.motion_wire` wire) one Write Multiple Registers per actuator of its
+goal-speed and goal-current, then one per actuator of goal-position, each answered. With ``interpolate="linear"`` each actuator's goal moves
 linearly between its rows and steps leave at ``rate`` Hz. The line must carry the plan: a step's
 frames take their time on the wire (10 bits a byte at the baud rate); a plan whose steps come
 closer than their frames take, or an interpolation rate above :data:`LINE_SHARE` of what the
@@ -19,7 +21,8 @@ late.
 **Playing** (:class:`Player`): each step leaves at its due time on the session's clock
 (:class:`zkzap.link.clock.SessionClock`: model time on a simulator that runs faster). Between
 steps, the spare time reads the actuators one at a time, round robin (present-position ..
-present-voltage in one Load Data), but only a read whose round trip (the wire, and the
+present-voltage in one Load Data; on Modbus RTU the map's runs of hardware-error ..
+present-voltage), but only a read whose round trip (the wire, and the
 actuator's learned latency, and for one whose last read went unanswered the time until the
 bus would send it at once, :meth:`~zkzap.link.zap_bus.ZapBus.clear_at`) ends before the next
 step is due, and it waits for its reply only until then (no reply by then: a ``no-reply``

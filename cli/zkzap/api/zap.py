@@ -548,7 +548,8 @@ class Bus:
              on_row: Optional[Callable[[Record], None]] = None,
              on_progress: Optional[Callable[[int, int], None]] = None) -> Any:
         """Play a timed path file (CSV, JSON or JSON Lines rows of t, id, position, speed,
-        current) on this bus, as ``zap play`` does: rows of one time are one sync move; with
+        current) on this bus, as ``zap play`` does: rows of one time are one sync move (on
+        Modbus RTU one answered write per actuator); with
         ``interpolate="linear"`` goals every 1/``rate`` s; a plan the line cannot carry raises
         UsageError before anything moves. ``on_row(row)`` gets each log row (goal vs present,
         current, voltage), ``on_progress(done, total)`` each step sent. A hardware error bit, a
