@@ -1,8 +1,9 @@
 """The bus against its model, at size: random buses and operations through the library and the
 command line (tests/busmodel.py), every answer checked against the simulator's ground truth.
-Prints the operations run, the wrong values found (the target is 0), the doubts and errors the
-bus raised or flagged instead, and the real time per operation (on a virtual clock: windows that
-close in silence cost none). A violation prints the seed that reproduces it.
+Prints the operations run, the wrong values found (the target is 0; how many of them on a bus
+where two actuators share an ID at one rate, see docs/reference/timing.md), the doubts and
+errors the bus raised or flagged instead, and the real time per operation (on a virtual clock:
+windows that close in silence cost none). A violation prints the seed that reproduces it.
 
     python benchmarks/bus_truth.py                  # 100,000 operations
     python benchmarks/bus_truth.py --ops 2000 --seed 7
@@ -32,7 +33,7 @@ def main() -> int:
     args = ap.parse_args()
     import busmodel
 
-    ops = wrong = errors = doubts = buses = 0
+    ops = wrong = errors = doubts = buses = shared = 0
     seen = []
     seed = args.seed
     t = time.perf_counter()
@@ -44,7 +45,10 @@ def main() -> int:
                 world.step()
         except busmodel.Violation as e:
             wrong += 1
-            seen.append(str(e).splitlines()[0] + f" (seed {seed})")
+            dupes = world.dupes()
+            if dupes:
+                shared += 1
+            seen.append(str(e).splitlines()[0] + f" (seed {seed}{', shared ID' if dupes else ''})")
         finally:
             ops += world.ops
             errors += world.errors
@@ -54,7 +58,7 @@ def main() -> int:
     took = time.perf_counter() - t
     print(f"operations      {ops}")
     print(f"random buses    {buses} (seeds {args.seed}..{seed - 1})")
-    print(f"wrong values    {wrong}   (target 0)")
+    print(f"wrong values    {wrong}   (target 0; {shared} on a bus where two actuators share an ID)")
     print(f"doubts flagged  {doubts}")
     print(f"errors raised   {errors}")
     print(f"time per op     {took / max(ops, 1) * 1e6:.0f} us ({took:.1f} s)")

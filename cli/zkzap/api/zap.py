@@ -429,15 +429,18 @@ class Bus:
     def scan(self, ids: Iterable[int] = range(254), bauds: Iterable[int] = (57600,), *, retries: int = 2,
              on_probe: Optional[Callable[[int, int, int], None]] = None,
              on_warning: Optional[Callable[[str], None]] = None,
-             include_garbled: bool = True) -> Iterator[ScanRecord]:
+             include_garbled: bool = True,
+             on_note: Optional[Callable[[str], None]] = None) -> Iterator[ScanRecord]:
         """Find actuators at each baud rate in ``bauds``: a quick Echo to every ID, quick rounds
         and then full waits for the IDs near a late or garbled reply, then the model, firmware and return mode of
         each actuator found (see :mod:`zkzap.link.zap_scan` for the policy). Yields records in ID
         order: ``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status`` (``ok``,
         ``error``, ``garbled``, ``duplicate``, ``unidentified``) and ``errors``.
         ``on_probe(baud, id, found)`` is called before each first probe (for progress) and
-        ``on_warning(text)`` for what a scan should say (duplicate IDs, garbled replies). The port
-        is left at the last baud rate scanned."""
+        ``on_warning(text)`` for what a scan should say (duplicate IDs, garbled replies), and
+        ``on_note(text)`` for what is worth knowing where nothing went wrong (actuators that
+        answer after the scan's quick wait, all identified: once per bus and rate, with their
+        latency). The port is left at the last baud rate scanned."""
         from ..link.zap_scan import scan as scan_bus
 
         ids, bauds = list(ids), list(bauds)
@@ -453,6 +456,9 @@ class Bus:
             elif event[0] == "record":
                 if include_garbled or event[1]["status"] != "garbled":
                     yield event[1]
+            elif event[0] == "note":
+                if on_note is not None:
+                    on_note(event[1])
             elif on_warning is not None:
                 on_warning(event[1])
 
@@ -670,12 +676,17 @@ class Bus:
         self.link.store(ident, ID_REG, new, allow=Permission.IDENTITY)   # the checked way: set_id itself
         value = self._read_back(new, ID_REG, ready_timeout,
                                 f"set-id: ID {new} does not answer after the change", "id")
-        if value == new and (self.link.answers(ident, tries=2) or collides(self.link, new)):
+        # (the census found one actuator at the old ID: an Echo with the whole window, not a
+        # second horizon, says that it is gone from there)
+        if value == new and (self.link.answers(ident, tries=2, listen_out=False) or collides(self.link, new)):
             raise CheckFailed(f"set-id: ID {ident} still answers after the change (ID {new} reads back {value}): "
                               f"two actuators may have had ID {ident}", ident=ident, duplicate=True)
         if value != new:
             raise CheckFailed(f"set-id: ID {new} reads back its ID as {value}", ident=new, value=value)
-        self.link.devices.moved(ident, new)     # what is known of it goes along
+        self.link.moved_id(ident, new)          # what is known of it goes along
+        if not force:
+            # the one actuator the census found at ``ident`` is the one at ``new`` (found free)
+            self.link.heard_out({(self.baud, new): "one", (self.baud, ident): "none"})
         return new
 
     def set_baud(self, ident: int, baud: int, *, restart: bool = True, ready_timeout: float = 2.0) -> int:
@@ -732,6 +743,10 @@ class Bus:
         if value != code:
             raise CheckFailed(f"set-baud: ID {ident} reads back baud-rate code {value}, expected {code} ({baud})",
                               ident=ident, value=value)
+        if baud != was:
+            # the one actuator the census found with ``ident`` at ``was`` is the one at ``baud``
+            # (found free there)
+            self.link.heard_out({(baud, ident): "one", (was, ident): "none"})
         return baud
 
 

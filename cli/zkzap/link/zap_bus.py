@@ -90,6 +90,9 @@ MEMORY = 2.0
 SPARE_SHARE = 0.5
 #: Garbled bytes and collisions kept for scans (events), at most.
 MAX_EVENTS = 4096
+#: How long what an identity change left known (:meth:`ZapBus.heard_out`) answers a census, if
+#: nothing is sent meanwhile (seconds): the change that undoes it asks nothing again.
+HEARD_OUT = 2.0
 #: Instructions that write nothing.
 _READS = (zap.ECHO, zap.LOAD_DATA)
 
@@ -323,6 +326,8 @@ class ZapBus:
         self.retries = retries
         self.latency = latency
         self.policy = policy if policy is not None else policy_for(self.url, margin)
+        if getattr(port, "baudrate", None) is not None:
+            self.policy.switch(port.baudrate)      # the latencies learned at the port's rate
         self.adapter_echo = False          # learned: the adapter echoes what we send
         self.low_latency = None            # True/False: what --low-latency achieved (None: not asked)
         self._recent = deque(maxlen=8)     # packets we sent lately (their echoes are skipped)
@@ -346,6 +351,8 @@ class ZapBus:
         posix = sys.modules.get("serial.serialposix")
         self._raw = self._fd is not None and posix is not None and type(port) is posix.Serial
         self.events = []                   # Event: late, stray and garbled, for scans
+        self.noted = set()                 # what a scan says once per bus (its notes)
+        self._heard_out = None             # (writes by then, when, {(baud, ID): census verdict})
         self.monitor = None                # monitor(direction "tx"/"rx", bytes): every write and read
         self.last_sent = 0.0               # when the last write began
         self.sent = 0
@@ -422,6 +429,7 @@ class ZapBus:
         self._owed_at[was] = self._owed
         self._owed = self._owed_at.pop(baud, deque())
         self.devices = self.by_baud.switch(baud)   # the actuators at that rate (another ID 1 there)
+        self.policy.switch(baud)                   # ... and their latencies
         self._expire(self.now())
         self._framer = self.family.framer()
         self._held = None
@@ -1430,12 +1438,14 @@ class ZapBus:
                              optional=True, check=False, quick=quick, early=early, window=window,
                              any_answer=True)
 
-    def answers(self, ident: int, *, tries: int = 3) -> bool:
+    def answers(self, ident: int, *, tries: int = 3, listen_out: bool = True) -> bool:
         """Whether any actuator answers to ``ident``: Echo with the whole window up to ``tries``
         times; a reply with error bits, a garbled reply or a late reply from ``ident`` all count
         as an answer. Only ``tries`` silences in a row, and then no reply to any of them until
         no reply can come any more (:meth:`settle`: the horizon of every attempt to ``ident``),
-        say it is free: an actuator slower than the window is not taken for a free ID."""
+        say it is free: an actuator slower than the window is not taken for a free ID
+        (``listen_out=False``: the silence of the tries' windows, where a census has just
+        listened out the horizon of that ID)."""
         dev = self.devices[ident]
         late = dev.late
         try:
@@ -1445,27 +1455,64 @@ class ZapBus:
                 return True
         except BadReply:
             return True
-        self.settle(ident)
+        if listen_out:
+            self.settle(ident)
         return dev.late > late
+
+    def moved_id(self, old: int, new: int) -> None:
+        """The actuator at ``old`` now answers at ``new`` (an ID change, verified): its record
+        goes along, and nothing is known any more of ``old``."""
+        self.devices.moved(old, new)
+
+    def heard_out(self, verdicts) -> None:
+        """What a verified identity change leaves known, ``{(baud, ID): "none" | "one"}`` (the
+        actuator a census found alone at its ID is now the one at the new ID or rate, and none is
+        left where it was): a census of those IDs right after it, with nothing sent meanwhile
+        (within :data:`HEARD_OUT`), asks nothing again (set-id 1 -> 9 and back)."""
+        self._heard_out = (self.sent, self.now(), dict(verdicts))
+
+    def _known(self, ids):
+        """The census verdicts of ``ids`` at this rate that :meth:`heard_out` left, if it left all
+        of them, nothing was sent since and it was lately; else None."""
+        known, self._heard_out = self._heard_out, None
+        if known is None:
+            return None
+        sent, when, verdicts = known
+        if sent != self.sent or self.now() - when > HEARD_OUT:
+            return None
+        out = {i: verdicts.get((self.baud, i)) for i in ids}
+        if None in out.values():
+            return None
+        self._heard_out = known
+        return out
 
     def census(self, ids, *, asks: int = 3, tries: int = 1) -> dict:
         """How many actuators answer to each of ``ids`` at this baud rate, as far as the line can
         tell: ``{ID: "none" | "one" | "shared"}``. Each ID is asked ``asks`` Echoes (each with
         the whole window and ``tries`` attempts: an ID is judged by the replies counted over the
         horizon, so a request lost on the line is made up by the next ask, not by waiting out
-        a retry) once no reply to an earlier attempt to it can
-        come, and the bus listens on until the horizon of the last has passed
+        a retry; an earlier attempt to it still owed counts as one of them), and the bus listens
+        on until the horizon of the last, and of those, has passed
         (:func:`~zkzap.link.zap_timing.horizon_for`): an ID is ``shared`` when its replies came
         garbled every time, or when more replies came than were due (two actuators answering
         one request, however far apart: a second unit slower than the window; or a reply
         sent twice); ``none`` when nothing answered until the horizon. Costs about the horizon
-        (1.5 s) in all, whatever the number of IDs."""
+        (1.5 s) in all, whatever the number of IDs; nothing right after an identity change
+        that left them known (:meth:`heard_out`)."""
         ids = list(dict.fromkeys(ids))
-        for ident in ids:
-            self.settle(ident)
+        known = self._known(ids)
+        if known is not None:
+            return known
+        # an attempt to one of them still owed counts as an ask (its reply, when it comes, is
+        # counted against it), and its horizon is listened out with the census's own: the
+        # horizon of an ID asked just before (set-id's check that the old ID is gone) is not
+        # waited out twice
+        now = self.now()
+        self._expire(now)
+        sent = {i: sum(1 for o in self._owed if i in o.ids) for i in ids}
+        owed_until = max((o.horizon for o in self._owed if not o.ids.isdisjoint(ids)), default=now)
         extra = {i: self.devices[i].extra for i in ids}
         replies = {i: self.devices[i].replies for i in ids}
-        sent = {i: 0 for i in ids}
         late = {i: self.devices[i].late for i in ids}
         got = {i: 0 for i in ids}
         garbled = {i: 0 for i in ids}
@@ -1492,7 +1539,7 @@ class ZapBus:
                 noisy += 1
                 rounds += 1
         span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
-        self.linger(max(0.0, last + horizon_for(span) - self.now()))
+        self.linger(max(0.0, max(last + horizon_for(span), owed_until) - self.now()))
         out = {}
         for ident in ids:
             dev = self.devices[ident]

@@ -90,7 +90,8 @@ def scan(bus, ids, bauds, *, retries: int = 2):
     Yields ``("probe", baud, ident, found_so_far, phase)`` before each probe (for progress;
     ``phase`` is ``"first"``, ``"round"`` for the quick rounds of step 2, ``"ask"`` for asking
     again with the whole window),
-    ``("record", rec)`` for every actuator found (as found) and ``("warning", text)``.
+    ``("record", rec)`` for every actuator found (as found), ``("warning", text)`` and
+    ``("note", text)`` (what is worth knowing, where nothing went wrong).
     """
     found = [0]
     for baud in bauds:
@@ -127,6 +128,7 @@ class _Scan:
         self.twice = set()             # IDs found whose replies came where none was due
         self.bursts_heard = 0          # bursts of garbled bytes heard (for the warning)
         self.start = bus.now()         # a late reply to an attempt before it finds nobody
+        self.late_rtt = {}             # ID -> the round trip of its latest late reply (for the note)
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -188,13 +190,26 @@ class _Scan:
     def _collision_warnings(self):
         """What the scan talked over, said once per baud rate: an actuator found by a reply that
         came after its probe's quick wait (the probes sent meanwhile met or may have met it; the
-        same on every scan of that bus), else bursts of garbled bytes heard."""
+        same on every scan of that bus), else bursts of garbled bytes heard. Where every such
+        actuator was identified all the same, that is a note with the latency learned of them
+        (a bus of slow actuators or a USB adapter's timer: nothing went wrong), said once per
+        bus and rate; else a warning."""
         late = sorted(self.late_seen & set(self.records))
         if late:
             ids = ", ".join(str(i) for i in late)
-            yield ("warning", f"{'ID' if len(late) == 1 else 'IDs'} {ids} at {self.baud} baud answered after the "
-                              "scan's quick wait: its probes talk over such replies, so the IDs near "
-                              f"{'it' if len(late) == 1 else 'them'} were probed again")
+            them = "it" if len(late) == 1 else "them"
+            found = f"{'ID' if len(late) == 1 else 'IDs'} {ids} at {self.baud} baud"
+            if all(self.records[i]["status"] in ("ok", "error") and self.records[i]["model"] is not None
+                   for i in late):
+                key = (self.baud, tuple(late))
+                if key not in self.bus.noted:
+                    self.bus.noted.add(key)
+                    yield ("note", f"{found} answered after the scan's quick wait "
+                                   f"({_latencies(self.bus, late, self.late_rtt)}): "
+                                   f"found and identified; the IDs near {them} were probed again")
+            else:
+                yield ("warning", f"{found} answered after the scan's quick wait: its probes talk over such "
+                                  f"replies, so the IDs near {them} were probed again")
         elif self.bursts_heard:
             yield ("warning", f"{self.bursts_heard} burst{'s' if self.bursts_heard > 1 else ''} of garbled bytes at "
                               f"{self.baud} baud during the scan (replies that met a probe or each other, or a line "
@@ -392,6 +407,8 @@ class _Scan:
                 # (the late answer of a request made before the scan, a Store that changed the
                 # ID, says nothing of who answers to that ID now)
                 ours = ev.kind == "late" and (ev.t0 is None or ev.t0 >= self.start)
+                if ours and ev.t0 is not None:
+                    self.late_rtt[ident] = ev.hi - ev.t0
                 if ident not in self.records and (ours or (ev.kind == "stray" and ident in self.probes)):
                     if ev.packet[4] == 2:             # an Echo reply (no data): the actuator is there
                         self._found(ident, bus.family.reply(ev.packet, 0.0, None))
@@ -431,6 +448,23 @@ class _Scan:
             return True
         p = self.probes.get(i)
         return p is None or p.t0 + p.span > now
+
+
+def _latencies(bus, ids, late_rtt) -> str:
+    """The latency learned of ``ids``, as a note says it (``latency 20.4 ms``, or a range); for
+    IDs whose every reply came late (never learned), the round trip of their last late reply."""
+    got, rtt = [], []
+    for i in ids:
+        est = bus.policy.estimators.get(i)
+        if est is not None and est.srtt is not None:
+            got.append(est.srtt * 1000.0)
+        elif i in late_rtt:
+            rtt.append(late_rtt[i] * 1000.0)
+    parts = []
+    for what, xs in (("latency", sorted(got)), ("round trip", sorted(rtt))):
+        if xs:
+            parts.append(f"{what} {xs[0]:.1f} ms" if xs[-1] - xs[0] < 0.05 else f"{what} {xs[0]:.1f}-{xs[-1]:.1f} ms")
+    return "; ".join(parts) or "latency not measured"
 
 
 def _late_text(bus, ident) -> str:

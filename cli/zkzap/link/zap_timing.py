@@ -131,8 +131,20 @@ class Policy:
         self.device = device
         self.margin = (MARGIN + (adapter or 0.0) + (NETWORK_MARGIN if network else 0.0)) if margin is None \
             else margin
-        self.estimators = {}
+        self.estimators = {}               # ID -> Estimator, at the line speed the port is at
+        self.baud = None                   # that line speed (None: not told yet)
+        self._at = {}                      # baud -> the estimators of the other line speeds
         self.hinted = False                # the adapter hint was given (once per process)
+
+    def switch(self, baud) -> None:
+        """The port is at ``baud`` now: the latencies learned at that rate are the ones in use
+        (an ID 7 at 115200 and another at 57600 are two actuators, each with its own)."""
+        if baud == self.baud:
+            return
+        if self.baud is not None:
+            self._at[self.baud] = self.estimators
+        self.estimators = self._at.pop(baud, {})
+        self.baud = baud
 
     def estimator(self, ident: int) -> Estimator:
         est = self.estimators.get(ident)

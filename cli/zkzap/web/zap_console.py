@@ -271,7 +271,8 @@ class ZapConsole(PacketTools, MotionTools, Console):
         self.log(f"scan: IDs {_ranges(ids)} at {', '.join(map(str, bauds))} baud")
         try:
             for rec in self.bus.scan(ids, bauds, retries=self.retries, on_probe=probe,
-                                     on_warning=lambda text: self.log(f"scan: {text}", "warn")):
+                                     on_warning=lambda text: self.log(f"scan: {text}", "warn"),
+                                     on_note=lambda text: self.log(f"scan: {text}")):
                 rec = dict(rec)
                 rec["polled"] = rec["status"] not in ("garbled", "duplicate") and rec.get("return_mode") != 0
                 rec["link"] = None

@@ -162,7 +162,8 @@ def scan(ids, fmt, bus_names=None, fleet_file=None, **common):
             args["protocol"] = protocol
             with open_link(ids=[0 if protocol == "ir" else 1], **args) as link:
                 for rec in Bus.over(link).scan(ids_for[protocol], bauds, retries=common["retries"],
-                                               on_probe=probed if progress is not None else None, on_warning=warn):
+                                               on_probe=probed if progress is not None else None, on_warning=warn,
+                                               on_note=note):
                     if len(protocols) > 1:
                         rec["protocol"] = protocol
                     _emit(writer, rec, found, fmt)
