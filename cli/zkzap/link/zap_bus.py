@@ -1518,6 +1518,7 @@ class ZapBus:
         garbled = {i: 0 for i in ids}
         last = self.now()
         rounds, noisy = asks, 0
+        span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
         while rounds > 0:
             rounds -= 1
             before = self.garbled
@@ -1533,12 +1534,15 @@ class ZapBus:
                 sent[ident] += 1 + self.retried - retried
                 if r is not None:
                     got[ident] += 1
+                    # the whole window, answered or not: a second actuator's reply comes as one
+                    # where none was due, never where the next ask's is (nor over the next ask,
+                    # which neither actuator would then hear)
+                    self.linger(max(0.0, self.last_sent + span - self.now()))
                 last = self.last_sent
             if self.garbled != before and noisy < asks:
                 # bytes that made no packet may hide a second reply (one cut short): once more
                 noisy += 1
                 rounds += 1
-        span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
         self.linger(max(0.0, max(last + horizon_for(span), owed_until) - self.now()))
         out = {}
         for ident in ids:
