@@ -379,3 +379,19 @@ def test_a_silent_actuator_never_makes_a_step_late():
         assert any(r["id"] == 3 and r["status"] == "no-reply" for r in logged)
         assert sum(r["status"] == "ok" for r in logged if r["id"] in (1, 2)) >= 10     # the others read all along
         assert player.summary()["lateness_max_ms"] < 50      # unbounded, a read of ID 3 made steps 150-500 ms late
+
+
+def test_a_play_on_the_simulators_virtual_clock_keeps_its_times_in_no_time():
+    # the player's waits are the clock's: on a virtual clock a wait is a jump (it spun forever)
+    import time as _time
+
+    from zkzap.link.port import open_port
+    from zkzap.link.zap_bus import ZapBus
+
+    bus = ZapBus(open_port("sim://zap?ids=1&clock=virtual", 57600, timeout=0.1))
+    plan = motion.plan(motion.read_path(io.StringIO("t,id,position\n0,1,100\n30,1,200\n"), name="path.csv"))
+    began = _time.monotonic()
+    player = motion.Player(bus, plan, log=False).run()
+    assert player.sent == 2 and player.stopped is None
+    assert bus.now() >= 30.0 and _time.monotonic() - began < 10
+    bus.close()

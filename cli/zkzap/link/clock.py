@@ -46,6 +46,9 @@ class SessionClock:
         now = getattr(model, "now", None)
         self._now = now if callable(now) else time.monotonic
         self.speed = float(getattr(model, "speed", 1.0)) if callable(now) else 1.0
+        # a virtual clock (its time passes only while the host waits): a sleep is a jump
+        self._advance = model.advance if callable(now) and getattr(model, "virtual", False) else None
+        self.virtual = self._advance is not None
         self.start()
 
     @classmethod
@@ -70,7 +73,10 @@ class SessionClock:
     def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` of session time."""
         if seconds > 0:
-            time.sleep(seconds / self.speed)
+            if self._advance is not None:
+                self._advance(seconds)
+            else:
+                time.sleep(seconds / self.speed)
 
     def wall(self, t: float):
         """The POSIX time at session time ``t``: the real moment it happened."""
