@@ -26,7 +26,7 @@ from cmdtree import commands
 #: A ZK ECU that never sends a status frame, in model time ten times faster than real time.
 SILENT_ZK = "sim://zk?silent_after=0&speed=10"
 #: A mightyZAP bus whose only actuator (ID 1) never answers.
-SILENT_ZAP = "sim://zap?ids=1&faults=1:silent"
+SILENT_ZAP = "sim://zap?ids=1&faults=1:silent&clock=virtual"   # (on the virtual clock: silence in no time)
 
 #: Commands that serve until they are stopped (they declare a --listen address) have no end to
 #: judge; the console's own answer to a silent device is tested in tests/web/test_access.py.
