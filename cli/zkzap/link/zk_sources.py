@@ -109,7 +109,11 @@ class LiveSource:
         """Each frame of one read with its own time: the last one ends at the read, each one
         before it a frame's time on the wire earlier (they came back to back, or they would not
         share a read); never before the session's start, nor within :data:`MIN_SPACING_S` of the
-        frame before it (the records' times resolve milliseconds: each gets its own)."""
+        frame before it (the records' times resolve milliseconds: each gets its own) — and never
+        after the read: a stamp is never ahead of the clock. Frames that come faster than one a
+        millisecond (no ECU does: an overspeed simulator over TCP) share what is left of the time
+        up to the read evenly, so their records may repeat a millisecond; ``--for`` and every
+        duration stay the clock's."""
         n = len(frames)
         if not n:
             return []
@@ -126,6 +130,8 @@ class LiveSource:
             tk = max(0.0, t - (n - 1 - k) * wire)
             if last is not None and tk < last + MIN_SPACING_S:
                 tk = last + MIN_SPACING_S
+                if tk > t:                # faster than one a millisecond: up to the read, no further
+                    tk = max(last, min(t, last + (t - last) / (n - k)))
             out.append((tk, f))
             last = tk
         self._last_t = last
