@@ -263,7 +263,7 @@ def test_cycles_measure_reach_time_and_current_on_the_moving_model(protocol):
     from zkzap.api.cycle import Cycler
     from zkzap.sim.zap_actuators import FULL_SPEED
 
-    sim, bus = on(protocol, [1])
+    sim, bus = on(protocol, [1], virtual=True)      # model time: the polls' timing is the model's, not the load's
     with sim, bus:
         sim.device.actuator(1).set("goal-position", 500)
         sim.device.actuator(1).set("present-position", 500)

@@ -266,7 +266,7 @@ def error_names(regmap, error: int) -> list:
     reg = regmap.by_name.get("hardware-error") if regmap.protocol == "modbus" else None
     if reg is None or not reg.bits:
         return zap.error_names(error)
-    return [reg.bits.get(b, f"bit {b}") for b in range(16) if error >> b & 1]
+    return reg.bit_names(error)
 
 
 def entry_from_values(values: dict, *, baud, error=0, when=None, regmap=None) -> dict:

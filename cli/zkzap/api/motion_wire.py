@@ -234,12 +234,11 @@ class ModbusWire(IrWire):
                 return None
             for reg, raw in regs:
                 values[reg.name] = raw
-        from .fleet import error_names
-
         raw = values.get("present-voltage")
+        errors = self.map.by_name.get("hardware-error")
         return Sample(values.get("present-position"), values.get("present-current"),
                       _volts(self.map.by_name.get("present-voltage"), raw), raw,
-                      error_names(self.map, values.get("hardware-error", 0)), reply)
+                      errors.bit_names(values.get("hardware-error", 0)) if errors is not None else [], reply)
 
     def _read(self, link, ident, address, count, kw):
         from ..codec import modbus

@@ -126,6 +126,11 @@ class Register:
         """The bits a bit-set register may hold (None for other registers)."""
         return sum(1 << b for b in self.bits) if self.bits else None
 
+    def bit_names(self, raw: int) -> list:
+        """The names of the bits set in ``raw`` (a bit mask register's; ``bit N`` for one it does not name)."""
+        bits = self.bits or {}
+        return [bits.get(b, f"bit {b}") for b in range(8 * self.size) if raw >> b & 1]
+
     def describe_range(self) -> str:
         """The allowed raw values, as messages say them (``0..4095``, ``0 (off), 1 (on)``)."""
         if self.choices:
