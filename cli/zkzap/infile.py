@@ -104,7 +104,8 @@ def reading() -> list:
     out = []
     for ref in list(_streams):
         s = ref()
-        if s is not None and not s.closed:
+        # (a shared stream at its end, or that no reader has open, is not being read)
+        if s is not None and not s.closed and not getattr(s, "ended", False) and getattr(s, "views", 1) > 0:
             out.append((s.name, s.taken, None))
     for ref, path, size in list(_open):
         f = ref()
@@ -127,6 +128,7 @@ class _Shared:
         self.taken = 0                    # bytes of the stream read so far (beyond head: not kept)
         self.views = 0
         self.closed = False
+        self.ended = False                # the stream gave its end: nothing more is read from it
         _track_stream(self)
 
     def read_at(self, pos: int, n: int) -> bytes:
@@ -134,7 +136,11 @@ class _Shared:
             return bytes(self.head[pos:pos + n])
         if pos != self.taken:
             raise OSError(f"{self.name}: a stream read once, and its bytes at {pos} were read by another reader")
+        if self.ended:
+            return b""
         block = self.raw.read(n)
+        if not block and n:
+            self.ended = True             # its end: no longer an input being read
         if block:
             if self.taken < HEAD and len(self.head) == self.taken:
                 self.head += block[:HEAD - len(self.head)]
