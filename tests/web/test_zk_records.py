@@ -14,6 +14,7 @@ import pytest
 
 from zkzap.api.stand import StandSession
 from zkzap.api.zk import Ecu
+from zkzap.errors import UsageError
 
 pytest.importorskip("aiohttp")
 
@@ -35,7 +36,7 @@ def test_every_record_is_written_once_through_the_sessions_one_sink(tmp_path):
     record.path = str(out)
     session = StandSession(None)
     session.record(record, f"--output {out}", wait=False)
-    with pytest.raises(RuntimeError):        # one sink: a second output or sink is refused
+    with pytest.raises(UsageError, match="one output"):     # one sink: a second output is refused
         session.record(record, "again")
     console = ZkConsole(Ecu("sim://zk?speed=20", silence=2.0), session=session)
     console.start(None)

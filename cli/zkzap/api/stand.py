@@ -302,7 +302,9 @@ class StandSession:
         every trip it marks, writes through this one sink; :meth:`close_output` closes it.
         Returns the sink (``sink(record)``)."""
         if self.output is not None:
-            raise RuntimeError(f"the records go to {self.output!r} already")
+            from ..errors import UsageError
+
+            raise UsageError(f"the records go to {self.output!r} already: one output per stand session")
         from ..offload import Lane
 
         self.output = output
@@ -328,7 +330,9 @@ class StandSession:
         for writing (a console's pages). Returns the live view's callback with the stand's limit
         lines and the alarm list added (None stays None)."""
         if sink is not None and self._write is not None:
-            raise RuntimeError("the records have their output already (record): no second sink")
+            from ..errors import UsageError
+
+            raise UsageError("the records have their output already (record): no second sink")
         sink = sink or self._write or (lambda rec: None)
         if watch is not None:
             write = sink
