@@ -468,3 +468,11 @@ def test_cycle_a_path_on_the_fleet_file_s_buses(cli, tmp_path, path):
     r = cli("zap", "cycle", "--path", p, "--cycles", "1", "--buses", "all", "--fleet", fleet, "--report",
             str(tmp_path / "r.png"))
     assert r.exit_code == 0 and (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG", r.stderr
+
+
+def test_a_scan_of_several_buses_says_each_buses_late_actuators_as_a_note(cli):
+    slow = "sim://zap?ids=1&faults=1:delay=40&clock=virtual"
+    r = cli("zap", "scan", "--ids", "0-2", "-p", slow, "-p", "sim://zap?ids=2&clock=virtual", "-f", "jsonl")
+    assert r.exit_code == 0, r.stderr
+    assert f"note: bus {slow}: ID 1 at 57600 baud answered after the scan's quick wait" in r.stderr, r.stderr
+    assert "warning" not in r.stderr and r.stderr.count("quick wait") == 1

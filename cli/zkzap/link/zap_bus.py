@@ -73,7 +73,7 @@ from .zap_timing import (FLOOR, HORIZON, K, INTER_BYTE, LATE_WINDOW, MARGIN, NET
                          window_for)
 
 __all__ = ["ZapBus", "Reply", "open_bus", "device_error", "error_message", "stored_writes", "leaves_protocol",
-           "writes_id", "is_simulated", "host_margin", "usb_latency", "wire_time", "FLOOR", "INTER_BYTE",
+           "is_simulated", "host_margin", "usb_latency", "wire_time", "FLOOR", "INTER_BYTE",
            "LATE_WINDOW", "MARGIN", "NETWORK_MARGIN", "NV_PAUSE", "QUICK_MARGIN", "RESTART_PAUSE", "RETRIES"]
 
 #: Read granularity on ports without a file descriptor (URL ports).

@@ -384,7 +384,8 @@ def scan_buses(ids, fmt, bus_names, fleet_file, common):
 
     def work(link, spec, emit, cancel):
         for rec in Bus.over(link).scan(ids, bauds or [spec.baud], retries=common["retries"],
-                                       on_warning=lambda text: warn(f"bus {spec.name}: {text}")):
+                                       on_warning=lambda text: warn(f"bus {spec.name}: {text}"),
+                                       on_note=lambda text: note(f"bus {spec.name}: {text}")):
             if cancel.is_set():
                 return
             emit(rec)
