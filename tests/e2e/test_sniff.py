@@ -89,7 +89,9 @@ def test_sniff_zap_pairs_every_reply_and_writes_nothing(zap_link, tmp_path):
     assert kinds == [("command", 1), ("feedback", 1), ("command", 2), ("feedback", 2), ("command", 3),
                      ("missing", 3), ("command", 2), ("feedback", 2)], recs
     fb = [r for r in recs if r["kind"] == "feedback"]
-    assert all(r["pairing"] == "ok" and 0 < r["latency_ms"] < 1000 for r in fb), [(r["pairing"], r.get("latency_ms")) for r in fb]
+    # a latency is measured, or (request and reply in one read of a held-up reader) not known
+    assert all(r["pairing"] == "ok" and (0 < r["latency_ms"] < 1000 if r["latency_ms"] is not None
+                                         else r["latency_unknown"]) for r in fb), fb
     assert fb[1]["request"] == "load" and fb[1]["register"] == "present-position" and fb[1]["value"] == value
     assert [r["dir"] for r in recs if r["kind"] == "command"] == ["h2d"] * 4
     assert recs[5]["request"] == "echo" and recs[5]["waited_ms"] > 30   # until the next request or the timeout

@@ -106,6 +106,24 @@ def test_passive_pairing_follows_the_same_window():
     assert pair.feedback(3, 1.21)[2] == pytest.approx(0.21)                    # ... that began in time
     pair.command(4, 2.0, "load")
     assert pair.expired(2.2) == [(4, 2.0, "load")] and pair.feedback(4, 2.25) is None
+    pair.command(5, 3.0, "echo")                  # request and reply in one read: one time stamp
+    assert pair.feedback(5, 3.0) == (3.0, "echo", None)                        # not known, never 0
+
+
+def test_a_reply_read_with_its_request_has_no_latency_in_records_and_stats():
+    from zkzap.api.sniff import ZapSniffer
+    from zkzap.codec import zap
+
+    s = ZapSniffer([], 57600)
+    s.wall0 = 10.0                                # (set when its ports open)
+    s.frame(10.0, 0, zap.echo(1))
+    rec = [r for r in s.frame(10.0, 0, zap.packet(1, 0, b"")) if r.get("kind") == "feedback"][0]
+    assert rec["pairing"] == "ok" and rec["latency_ms"] is None and rec["latency_unknown"]
+    s.frame(11.0, 0, zap.echo(1))
+    rec = [r for r in s.frame(11.004, 0, zap.packet(1, 0, b"")) if r.get("kind") == "feedback"][0]
+    assert rec["latency_ms"] == pytest.approx(4.0)
+    summary = s.stats.summary(2.0)
+    assert summary["replies"] == 2 and summary["mean_latency_ms"] == pytest.approx(4.0)
 
 
 # -- transactions ---------------------------------------------------------------------------------

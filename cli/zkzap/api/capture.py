@@ -56,12 +56,13 @@ class ZapPairing:
 
     def feedback(self, ident, ts):
         got = self.pairing.feedback(ident, ts)
-        return None if got is None else round(got[2] * 1000.0, 3)
+        return None if got is None or got[2] is None else round(got[2] * 1000.0, 3)
 
 
 def zap_records(frames: CaptureFrames, decoder: zap.ZapDecoder | None = None, decode=None):
     """Records of a mightyZAP capture: ``time``, ``t``, ``dir``, the decoded packet, its
-    ``frame`` hex and, for feedback, ``latency_ms`` (null when no request was seen)."""
+    ``frame`` hex and, for feedback, ``latency_ms`` (null when no request was seen, or when the
+    request and its reply carry one time stamp: not known)."""
     decoder = decoder or zap.ZapDecoder()
     decode = decode or decoder.decode
     pairing = ZapPairing()

@@ -72,6 +72,7 @@ class Stats:
         self.unsolicited = 0
         self.slowest = []                  # heap of (latency, t, id, instruction)
         self.replies = 0
+        self.timed = 0                    # replies whose latency is known
         self.latency_sum = 0.0
 
     def frame(self, t, d, ident):
@@ -82,7 +83,11 @@ class Stats:
             self.recent.popleft()
 
     def reply(self, t, ident, instruction, latency):
+        """A reply paired with its request; ``latency`` ms, or None where it is not known."""
         self.replies += 1
+        if latency is None:
+            return
+        self.timed += 1
         self.latency_sum += latency
         item = (latency, t, ident, instruction)
         if len(self.slowest) < SLOWEST:
@@ -110,7 +115,7 @@ class Stats:
         if self.replies or self.missing or self.unexpected or self.unsolicited:
             out.update({
                 "replies": self.replies,
-                "mean_latency_ms": round(self.latency_sum / self.replies, 3) if self.replies else None,
+                "mean_latency_ms": round(self.latency_sum / self.timed, 3) if self.timed else None,
                 "missing_replies": self.missing,
                 "unexpected_id": self.unexpected,
                 "unsolicited": self.unsolicited,
@@ -472,9 +477,12 @@ class ZapSniffer(Sniffer):
         got = self.pairing.feedback(ident, ts)
         if got is not None:
             _, (instruction, _), latency = got
-            latency = round(latency * 1000.0, 3)
             base["pairing"] = "ok"
             base["request"] = instruction
+            if latency is None:           # request and reply in one read: not known (never 0)
+                base["latency_unknown"] = "request and reply came in one read"
+            else:
+                latency = round(latency * 1000.0, 3)
             base["latency_ms"] = latency
             self.stats.reply(base["t"], ident, instruction, latency)
             if instruction not in self.READS:

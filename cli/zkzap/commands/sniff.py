@@ -338,7 +338,7 @@ def stats_lines(s) -> list:
     lines.append(f"CRC errors: {s['crc_errors']} ({s['skipped_bytes']} bytes skipped); gaps: {s['gaps']}"
                  + (f" (longest {s['longest_gap_s']:g} s)" if s["gaps"] else ""))
     if "replies" in s:
-        lines.append(f"replies: {s['replies']}" + (f", mean {s['mean_latency_ms']:g} ms" if s["replies"] else "")
+        lines.append(f"replies: {s['replies']}" + (f", mean {s['mean_latency_ms']:g} ms" if s["mean_latency_ms"] is not None else "")
                      + f"; missing {s['missing_replies']}, unexpected ID {s['unexpected_id']}, "
                        f"unsolicited {s['unsolicited']}")
         if s["slowest"]:

@@ -357,7 +357,7 @@ end
 
 -- a bus's pairing of replies to requests (st: its pending requests and response_of): a request
 -- to ID ident waits for its reply; a reply from ident takes the request waiting for it, with the
--- latency between them
+-- latency between them (none where both carry one time stamp)
 local function pair_request(st, ident, pinfo)
   st.pending[ident] = {num = pinfo.number, ts = pinfo.abs_ts}
 end
@@ -367,7 +367,8 @@ local function pair_reply(st, item, ident, pinfo)
   st.pending[ident] = nil
   if p ~= nil then
     item.request_in = p.num
-    item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3)
+    -- (one time stamp: request and reply came in one read, the latency is not known, never 0)
+    if p.ts < pinfo.abs_ts then item.latency_ms = round((pinfo.abs_ts - p.ts) * 1000, 3) end
     st.response_of[p.num] = pinfo.number
   end
 end

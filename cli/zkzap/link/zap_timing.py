@@ -360,11 +360,13 @@ class Pairing:
 
     def feedback(self, ident, ts):
         """``(request ts, info, latency seconds)`` of the request a feedback from ``ident`` at
-        ``ts`` answers, or None (no request to that ID is open)."""
+        ``ts`` answers, or None (no request to that ID is open). The latency is None when the
+        request and the feedback carry one time stamp (they came in one read, a reader held up):
+        the time between them is not known, and never taken for 0."""
         p = self.pending.pop(ident, None)
         if p is None:
             return None
-        return p[0], p[1], ts - p[0]
+        return p[0], p[1], (ts - p[0]) if ts > p[0] else None
 
     def expired(self, now, busy=False) -> list:
         """``[(ident, ts, info)]`` of the requests whose window closed by ``now``, unanswered
