@@ -507,7 +507,9 @@ def test_an_input_that_is_a_fifo_reads_as_its_file(path, name, files, port, tmp_
                 del line.opts[pname]          # a replay is the port
             else:
                 line.opts[pname] = (by[pname], _sim_for(path))
-    for pname, value in [("count", "3"), ("for_s", "0.5"), ("duration", "0.5"), ("fast", True), ("dry_run", True),
+    # (a run bounded by time gets 1.5 s: the file's run and the FIFO's must both see their
+    # frames, also on a loaded machine; --count ends most of them sooner)
+    for pname, value in [("count", "3"), ("for_s", "1.5"), ("duration", "1.5"), ("fast", True), ("dry_run", True),
                          ("terminal", True)]:
         if pname in by and pname not in line.opts:
             line.opts[pname] = (by[pname], value)
