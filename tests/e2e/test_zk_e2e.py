@@ -200,12 +200,14 @@ def test_raw_log_then_replay_gives_the_same_records(start_sim, tmp_path):
 
 
 def test_sim_options_and_version_4_loss_of_signal(start_sim):
-    url, _ = start_sim(["zk", "--speed", "10", "--protocol-version", "4", "--pty"])
-    r = zk("send", "control", "--state", "run", "--throttle", "20", "--for", "2", "-p", url, "--yes",
+    # speed 4: the ECU's 1 s without a control frame is 0.25 s here, more than a loaded machine
+    # holds up the 50 Hz control thread (at speed 10 it was 0.1 s, and the run tripped)
+    url, _ = start_sim(["zk", "--speed", "4", "--protocol-version", "4", "--pty"])
+    r = zk("send", "control", "--state", "run", "--throttle", "20", "--for", "5", "-p", url, "--yes",
            "--rate", "50", "-f", "csv", "--ids", "1,6")
     assert r.returncode == 0, r.stderr
     rows = list(csv.DictReader(io.StringIO(r.stdout)))
     assert rows[-1]["engine_state_name"] == "running" and rows[-1]["protocol_version"] == "4"
-    time.sleep(0.25)                                                  # > 1 s of model time in silence
+    time.sleep(0.5)                                                   # > 1 s of model time in silence
     r = zk("monitor", "-p", url, "--count", "5", "--ids", "1", "--fail-on-error")
     assert r.returncode == 5 and "ECU error 13 (loss-of-control-signal: " in r.stderr
