@@ -158,6 +158,9 @@ FOUND = {
     339: "a reply sent twice was taken for the retry's reply, and the retry's reply for the next request's",
     416: "a reply sent twice, in one burst, answered the Echo that decides return mode 0",
     424: "the acknowledgement of a slow actuator in another return mode was taken for a later Echo's reply",
+    36: "the latency learned of an ID stayed when its actuator moved away: a 290 ms actuator given that ID "
+        "later was judged by another's 22 ms, an earlier Echo's reply taken for a later one's, and its "
+        "return mode reported 0",
 }
 
 

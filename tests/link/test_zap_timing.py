@@ -499,3 +499,19 @@ def test_a_late_reply_that_met_a_probe_is_found_in_a_quick_round_not_by_asking_e
     # the round kept the line free where the reply came (a host held up for longer than the free
     # slot's margin, 12 ms, could still meet it once: the spaced second round finds it then)
     assert port.collisions <= 1
+
+
+def test_what_is_learned_of_an_actuator_goes_with_it_when_its_id_or_baud_changes():
+    from zkzap.link.zap_timing import Policy
+
+    pol = Policy(margin=0.0)
+    pol.switch(57600)
+    for _ in range(4):
+        pol.learn(1, 0.022, 0.1)
+        pol.learn(2, 0.300, 1.0)
+    pol.moved(1, 9)                                   # set-id 1 -> 9
+    assert 1 not in pol.estimators and pol.estimators[9].srtt == pytest.approx(0.022)
+    pol.moved_to(2, 115200)                           # set-baud of ID 2
+    assert 2 not in pol.estimators
+    pol.switch(115200)
+    assert pol.estimators[2].srtt == pytest.approx(0.300)

@@ -1461,8 +1461,9 @@ class ZapBus:
 
     def moved_id(self, old: int, new: int) -> None:
         """The actuator at ``old`` now answers at ``new`` (an ID change, verified): its record
-        goes along, and nothing is known any more of ``old``."""
+        goes along (its latency too), and nothing is known any more of ``old``."""
         self.devices.moved(old, new)
+        self.policy.moved(old, new)
 
     def heard_out(self, verdicts) -> None:
         """What a verified identity change leaves known, ``{(baud, ID): "none" | "one"}`` (the
@@ -1592,7 +1593,8 @@ class ZapBus:
 
     def moved_to(self, ident: int, baud: int) -> None:
         """Actuator ``ident`` at this rate now answers at ``baud`` (a baud change): its record
-        goes along."""
+        goes along (its latency too), and nothing is known any more of ``ident`` here."""
+        self.policy.moved_to(ident, baud)
         dev = self.devices.take(ident)
         if dev is not None:
             dev.baud = baud

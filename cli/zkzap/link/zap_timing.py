@@ -146,6 +146,27 @@ class Policy:
         self.estimators = self._at.pop(baud, {})
         self.baud = baud
 
+    def moved(self, old: int, new: int) -> None:
+        """An ID change (verified): what was learned of ``old`` is that actuator's at ``new`` now,
+        and nothing is known any more of ``old`` (another actuator given that ID later is not
+        judged by it)."""
+        est = self.estimators.pop(old, None)
+        self.estimators.pop(new, None)
+        if est is not None:
+            self.estimators[new] = est
+
+    def moved_to(self, ident: int, baud: int) -> None:
+        """A baud change (verified) of ``ident`` from the line speed in use: what was learned of it
+        goes along to ``baud`` (replacing what was learned there of that ID), and nothing is known
+        any more of ``ident`` at this speed."""
+        if baud == self.baud:
+            return
+        est = self.estimators.pop(ident, None)
+        there = self._at.setdefault(baud, {})
+        there.pop(ident, None)
+        if est is not None:
+            there[ident] = est
+
     def estimator(self, ident: int) -> Estimator:
         est = self.estimators.get(ident)
         if est is None:
