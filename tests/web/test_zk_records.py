@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import collections
 import json
-import time
 
 import pytest
 
@@ -16,15 +15,9 @@ from zkzap.api.stand import StandSession
 from zkzap.api.zk import Ecu
 from zkzap.errors import UsageError
 
+from webpage import until
+
 pytest.importorskip("aiohttp")
-
-
-def _wait(cond, what, timeout=30.0):
-    end = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 def test_every_record_is_written_once_through_the_sessions_one_sink(tmp_path):
@@ -41,13 +34,13 @@ def test_every_record_is_written_once_through_the_sessions_one_sink(tmp_path):
     console = ZkConsole(Ecu("sim://zk?speed=20", silence=2.0), session=session)
     console.start(None)
     try:
-        _wait(lambda: console.tel.frames >= 20, "status frames")
+        until(lambda: console.tel.frames >= 20, "status frames")
         console.request(None, "test", {"op": "start", "mode": "throttle", "throttle": 0, "req": 1})
-        _wait(lambda: console.command is not None, "the control session")
-        _wait(lambda: console.tel.frames >= 60, "frames under control")
+        until(lambda: console.command is not None, "the control session")
+        until(lambda: console.tel.frames >= 60, "frames under control")
         console.request(None, "test", {"op": "abort", "req": 2})
-        _wait(lambda: console.command is None and console.ended is not None, "the abort's end")
-        _wait(lambda: console.tel.frames >= 100, "frames after the abort")
+        until(lambda: console.command is None and console.ended is not None, "the abort's end")
+        until(lambda: console.tel.frames >= 100, "frames after the abort")
     finally:
         console.close()
     recs = [json.loads(line) for line in out.read_text().splitlines()]
