@@ -75,7 +75,7 @@ def _track(f, path) -> None:
 
 
 #: The streams of unknown size being read (pipes, FIFOs, devices, stdin): weak references to
-#: objects with ``name``, ``taken`` (bytes read so far) and ``closed``.
+#: objects with ``name``, ``taken`` (bytes read so far) and ``being_read``.
 _streams: list = []
 
 
@@ -104,8 +104,7 @@ def reading() -> list:
     out = []
     for ref in list(_streams):
         s = ref()
-        # (a shared stream at its end, or that no reader has open, is not being read)
-        if s is not None and not s.closed and not getattr(s, "ended", False) and getattr(s, "views", 1) > 0:
+        if s is not None and s.being_read:
             out.append((s.name, s.taken, None))
     for ref, path, size in list(_open):
         f = ref()
@@ -146,6 +145,11 @@ class _Shared:
                 self.head += block[:HEAD - len(self.head)]
             self.taken += len(block)
         return block or b""
+
+    @property
+    def being_read(self) -> bool:
+        """Open, not at its end, and a reader has it open (a peeked and closed one is not)."""
+        return not self.closed and not self.ended and self.views > 0
 
     def release(self):
         self.views -= 1
@@ -206,6 +210,10 @@ class _Counting(io.RawIOBase):
         super().__init__()
         self._raw, self.name, self.taken = raw, name, 0
         _track_stream(self)
+
+    @property
+    def being_read(self) -> bool:
+        return not self.closed
 
     def readable(self):
         return True
