@@ -199,7 +199,8 @@ def test_one_stand_session_runs_a_trip_its_rundown_and_the_interlock_over_sessio
         assert acked.acked_by == "bench" and ss.alarms.latched == []
         zero = zk.encode_control("control", sw="run", throttle_pct=0)[0]
         assert ss.refusal(setpoint=0) is None                # the rundown ended at rest, and cool
-        assert ss.run(control=lambda t: zero, duration=0.5, restart=False).ok
+        at_zero = ss.run(control=lambda t: zero, duration=0.5, restart=False)
+        assert at_zero.ok, (at_zero.reason, at_zero.error)
         summary = ss.summary()
         assert summary["engine"] == "K100-1" and summary["alarms"][0]["acked_by"] == "bench"
     finally:
