@@ -131,8 +131,8 @@ class Policy:
 
         if missing & P.FORCE:
             return Needed(FORCE, f"{why(P.FORCE)}. This changes how the actuator is reached or answers, or "
-                                 "goes beyond what the 12Lf documents (a wrong value can make it unreachable). "
-                                 "Tick 'force' to send it.")
+                                 "goes beyond what its register map documents (a wrong value can make it "
+                                 "unreachable). Tick 'force' to send it.")
         if missing & Permission.ENGINE:
             frame = getattr(e, "frame", b"") or b""
             return Needed(ENGINE, f"{frame.hex(' ').upper()} to {self.url}: {why(Permission.ENGINE)}.")

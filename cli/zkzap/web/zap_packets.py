@@ -8,9 +8,15 @@
   asks for it (:meth:`zkzap.codec.zap.Command.needs`) and whether a reply comes; ``packet``
   sends it through the bus, which refuses it until the page granted those permissions (the
   consent of every other request). Nothing about permissions is decided here or on the page.
+  On a Modbus RTU bus the same for any request frame (Read Holding Registers, Write Single
+  Register, Write Multiple Registers by a register of the bus's map or an address, or any
+  function with raw data bytes; the CRC appended by :mod:`zkzap.codec.modbus`), its permissions
+  those of :meth:`zkzap.codec.modbus.Request.needs` against the bus's map.
 - **Traffic**: every byte the console writes and reads on the bus (the bus's ``monitor``),
-  framed into packets and decoded (a feedback named by the Load Data it answers), to every page
-  in batches, as live data; the live view's polls only while a page asks for them.
+  cut into frames by the bus's own framer (its protocol family's) and decoded (a reply named by
+  the request it answers; a Modbus exception reply by its code and meaning); bytes that make no
+  frame (a bad checksum or CRC, a frame cut short) are shown as such, never as values. To every
+  page in batches, as live data; the live view's polls only while a page asks for them.
 """
 
 from __future__ import annotations
@@ -28,25 +34,38 @@ TRAFFIC_MAX_BYTES = 64
 """The longest packet shown whole in the traffic log (a longer one is cut, its length said)."""
 
 
-def instruction_code(value) -> int:
+def instruction_code(value, protocol: str = "ir") -> int:
     """An instruction by its command-line name (``load``, ``sync-move``, the vendor codes'
-    names) or its code (0..255, or text like ``0xF2``/``F2``)."""
+    names) or its code (0..255, or text like ``0xF2``/``F2``); on Modbus RTU (``protocol``
+    "modbus") a function by its name (``read``, ``write``, ``write-multiple``) or code 0x01..0x7F."""
+    modbus_ = protocol == "modbus"
+    names = ({name: code for code, (name, _) in _modbus().FUNCTIONS.items()} if modbus_ else
+             {ins.cli: ins.code for ins in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS})
+    what = "function" if modbus_ else "instruction"
     if isinstance(value, str):
         text = value.strip().lower()
-        for ins in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS:
-            if text == ins.cli:
-                return ins.code
+        if text in names:
+            return names[text]
         try:
             code = int(text, 16) if text.startswith("0x") or any(c in "abcdef" for c in text) else int(text)
         except ValueError:
-            raise UsageError(f"instruction: {value!r} is not an instruction's name or code") from None
+            raise UsageError(f"{what}: {value!r} is not {'a function' if modbus_ else 'an instruction'}'s name or "
+                             f"code; allowed {', '.join(names)} or a code") from None
     elif isinstance(value, int) and not isinstance(value, bool):
         code = value
     else:
-        raise UsageError(f"instruction: {value!r} is not an instruction's name or code")
-    if not 0 <= code <= 255:
-        raise UsageError(f"instruction: {code} is out of range; allowed 0..255")
+        raise UsageError(f"{what}: {value!r} is not {'a function' if modbus_ else 'an instruction'}'s name or code")
+    lo, hi = (1, 0x7F) if modbus_ else (0, 255)
+    if not lo <= code <= hi:
+        raise UsageError(f"{what}: {code} is out of range; allowed {lo}..{hi}"
+                         + (" (0x80 and up mark exception replies)" if modbus_ else ""))
     return code
+
+
+def _modbus():
+    from ..codec import modbus
+
+    return modbus
 
 
 def compose(msg) -> bytes:
@@ -70,22 +89,93 @@ def compose(msg) -> bytes:
         else:
             raise UsageError("register: only for load, store and send; give params for this instruction")
     else:
-        text = msg.get("params") or ""
-        if not isinstance(text, str) or len(text) > 2000:
-            raise UsageError("params: expected hex bytes (like 8C 02)")
-        try:
-            params = parse_hex(text, what="params") if text.strip() else b""
-        except HexError as e:
-            raise UsageError(str(e)) from None
+        params = _raw_params(msg, "8C 02")
     if len(params) > 250:
         raise UsageError(f"params: {len(params)} bytes; a packet carries at most 250")
     return zap.packet(ident, code, params)
 
 
-def describe_needs(cmd) -> list:
-    """``[{"permission": name, "reason": text}]``: what the library's table asks of ``cmd``."""
+def _raw_params(msg, example) -> bytes:
+    """A request's ``params``: hex bytes in any notation (empty: none)."""
+    text = msg.get("params") or ""
+    if not isinstance(text, str) or len(text) > 2000:
+        raise UsageError(f"params: expected hex bytes (like {example})")
+    try:
+        return parse_hex(text, what="params") if text.strip() else b""
+    except HexError as e:
+        raise UsageError(str(e)) from None
+
+
+def compose_modbus(msg, regmap) -> bytes:
+    """The Modbus RTU request frame a page's compose request describes (the CRC appended by the
+    codec): ``instruction`` (a function: read, write, write-multiple or a code), ``id`` (0..247,
+    0 the broadcast), and ``register`` (a name of ``regmap`` or an address) with ``count``
+    (read, default 1), ``value`` (write) or ``values`` (write-multiple: numbers, or text like
+    ``1000 800``); or ``params``, the data bytes between function and CRC (hex, any notation)."""
+    modbus = _modbus()
+    code = instruction_code(msg.get("instruction"), "modbus")
+    ident = number(msg, "id", int, 0, modbus.MAX_ID, "id")
+    name = msg.get("register")
+    try:
+        if name in (None, ""):
+            data = _raw_params(msg, "00 D2 00 01")
+            if len(data) + 4 > modbus.MAX_FRAME:
+                raise UsageError(f"params: {len(data)} bytes; a Modbus RTU frame carries at most "
+                                 f"{modbus.MAX_FRAME - 4} between function and CRC")
+            return modbus.frame(ident, bytes((code,)) + data)
+        address = _modbus_address(name, regmap)
+        label = regmap.by_address[address].name if address in regmap.by_address else f"register {address}"
+        if code == modbus.READ_HOLDING:
+            if ident == modbus.BROADCAST:
+                raise UsageError("id: a read to the broadcast (0) is never answered; give an actuator's ID, or "
+                                 "raw params")
+            count = 1 if msg.get("count") in (None, "") else number(msg, "count", int, 1, modbus.MAX_READ, "count")
+            return modbus.read_registers(ident, address, count)
+        if code == modbus.WRITE_SINGLE:
+            return modbus.write_register(ident, address, number(msg, "value", int, 0, 0xFFFF, label))
+        if code == modbus.WRITE_MULTIPLE:
+            return modbus.write_registers(ident, address, _values_given(msg, label))
+    except FieldValueError as e:
+        raise UsageError(str(e)) from None
+    raise UsageError("register: only for read, write and write-multiple; give params for this function")
+
+
+def _modbus_address(name, regmap) -> int:
+    """A register of ``regmap`` by name, or any address 0..65535 (one the map lacks too: what
+    writing it needs is the permission table's to say)."""
+    text = str(name).strip()
+    try:
+        return regmap.register(text).address
+    except FieldValueError:
+        try:
+            address = int(text, 0)
+        except ValueError:
+            raise UsageError(f"register: {text!r} is not a register of the {regmap.model} map or an address") \
+                from None
+        if not 0 <= address <= 0xFFFF:
+            raise UsageError(f"register: address {address} is outside 0..65535") from None
+        return address
+
+
+def _values_given(msg, label) -> list:
+    """``values`` of a write-multiple: a list of numbers or text (``1000 800``, ``1000,800``)."""
+    raw = msg.get("values")
+    if isinstance(raw, str):
+        raw = [v for v in raw.replace(",", " ").split() if v]
+    elif isinstance(raw, (int, float)) and not isinstance(raw, bool):
+        raw = [raw]
+    if not isinstance(raw, list) or not raw:
+        raise UsageError("values: give the registers' values (like 1000 800)")
+    if len(raw) > _modbus().MAX_WRITE:
+        raise UsageError(f"values: {len(raw)} registers; one write carries 1..{_modbus().MAX_WRITE}")
+    return [number({"v": v}, "v", int, 0, 0xFFFF, f"{label} + {i}" if i else label) for i, v in enumerate(raw)]
+
+
+def describe_needs(needs) -> list:
+    """``[{"permission": name, "reason": text}]``: what the library's table asks (``needs``, a
+    typed frame's ``{Permission: reason}``)."""
     return [{"permission": (p.name or str(p)).lower().replace("_", "-"), "reason": why}
-            for p, why in cmd.needs().items()]
+            for p, why in needs.items()]
 
 
 class PacketTools:
@@ -95,18 +185,29 @@ class PacketTools:
         self.plotted = None              # the register every page plots (a Register), or None
         self.traffic_polls = False       # whether the live view's polls go to the traffic log
         self._polling = False            # the watcher has the bus now
-        self._framer = ZapFramer()
-        self._decoder = zap.ZapDecoder()
-        if self.protocol == "modbus":            # a reply's bytes until they make a frame
-            from ..codec import modbus
-
-            self._rtu, self._rtu_decoder = bytearray(), modbus.ModbusDecoder(self.map)
+        self._rx = FrameCutter(self.bus.link.family.framer())     # the bytes read, cut as the bus cuts them
+        self._last_tx = b""              # the last request written (a reply's bytes are judged against it)
+        if self.protocol == "modbus":
+            self._decoder = _modbus().ModbusDecoder(self.map)
+        else:
+            self._decoder = zap.ZapDecoder()
         self.bus.link.monitor = self._monitor
 
     def tools_hello(self) -> dict:
-        ins = [{"name": i.cli, "code": i.code, "title": i.name, "help": i.help, "params": i.params_help,
-                "documented": i.documented} for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS]
-        return {"instructions": ins, "plotted": self.plotted.name if self.plotted else None,
+        if self.protocol == "modbus":
+            modbus = _modbus()
+            takes = {modbus.READ_HOLDING: "count", modbus.WRITE_SINGLE: "value", modbus.WRITE_MULTIPLE: "values"}
+            ins = [{"name": name, "code": code, "title": title, "help": f"{title} (0x{code:02X})",
+                    "params": "", "documented": True, "takes": takes[code]}
+                   for code, (name, title) in modbus.FUNCTIONS.items()]
+            ids = {"lo": 0, "hi": modbus.MAX_ID, "broadcast": modbus.BROADCAST}
+        else:
+            takes = {zap.LOAD_DATA: "length", **{c: "value" for c in zap.WRITE_CODES}}
+            ins = [{"name": i.cli, "code": i.code, "title": i.name, "help": i.help, "params": i.params_help,
+                    "documented": i.documented, "takes": takes.get(i.code)}
+                   for i in zap.INSTRUCTIONS + zap.VENDOR_INSTRUCTIONS]
+            ids = {"lo": 0, "hi": zap.BROADCAST, "broadcast": zap.BROADCAST}
+        return {"instructions": ins, "packet_ids": ids, "plotted": self.plotted.name if self.plotted else None,
                 "traffic_polls": self.traffic_polls}
 
     # -- the plot -----------------------------------------------------------------------------
@@ -123,49 +224,71 @@ class PacketTools:
 
     # -- packets ------------------------------------------------------------------------------
 
-    def _ir_only(self):
-        if self.protocol != "ir":
-            raise UsageError("the packet panel composes mightyZAP IR packets, and this bus speaks Modbus RTU; "
-                             "send a Modbus frame with 'zap raw --protocol modbus'")
-
-    def op_compose(self, ctx, msg):
-        self._ir_only()
+    def _composed(self, msg):
+        """``(frame, needs, describe, expects_reply, record)`` of the page's packet: what the
+        protocol's typed frame answers (:class:`zkzap.codec.zap.Command`,
+        :class:`zkzap.codec.modbus.Request` against the bus's map)."""
+        if self.protocol == "modbus":
+            modbus = _modbus()
+            frame = compose_modbus(msg, self.map)
+            req = modbus.Request(frame)
+            return (frame, req.needs(self.map), req.describe(self.map), req.expects_reply(),
+                    modbus.decode_frame(frame, regmap=self.map, direction="h2d"))
         pkt = compose(msg)
         cmd = zap.Command(pkt)
         mode = self.bus.link.mode_of(pkt[3]) if pkt[3] != zap.BROADCAST else None
-        self.reply(ctx, frame=pkt.hex(" ").upper(), describe=cmd.describe(), needs=describe_needs(cmd),
-                   asks=self._asks(cmd), reply=cmd.expects_reply(mode) if mode is not None else False, record=zap.decode_packet(pkt))
+        return (pkt, cmd.needs(), cmd.describe(), cmd.expects_reply(mode) if mode is not None else False,
+                zap.decode_packet(pkt))
 
-    def _asks(self, cmd):
+    def op_compose(self, ctx, msg):
+        frame, needs, what, reply, record = self._composed(msg)
+        self.reply(ctx, frame=frame.hex(" ").upper(), describe=what, needs=describe_needs(needs),
+                   asks=self._asks(needs, what, frame), reply=reply, record=record)
+
+    def _asks(self, needs, what, frame):
         """What the page will be asked before this packet goes out on this port (the consent
         adapter's question for the library's refusal), or None."""
         from ..codec import permissions as P
         from ..errors import PermissionNeeded
 
         try:
-            P.require(cmd.needs(), P.Permission.NONE, simulated=self.policy.simulated, what=cmd.describe(),
-                      frame=cmd.packet)
+            P.require(needs, P.Permission.NONE, simulated=self.policy.simulated, what=what, frame=frame)
         except PermissionNeeded as e:
             return self.policy.needed(e).permission
         return None
 
     def op_packet(self, ctx, msg):
-        self._ir_only()
-        pkt = compose(msg)
-        cmd = zap.Command(pkt)
-        reply = self.bus.link.command(pkt, check=False)         # the bus asks for what the table says
-        out = {"frame": pkt.hex(" ").upper(), "describe": cmd.describe()}
-        if reply is not None:
-            out.update(reply=reply.packet.hex(" ").upper(), rtt_ms=round(reply.rtt * 1000, 2),
-                       decoded=zap.decode_packet(reply.packet, pkt), errors=reply.errors)
+        frame, needs, what, _, _ = self._composed(msg)
+        out = {"frame": frame.hex(" ").upper(), "describe": what}
+        if self.protocol == "modbus":
+            modbus = _modbus()
+            req = modbus.Request(frame)
+            # the bus asks for what the table says; a frame whose reply cannot be foretold may go unanswered
+            reply = self.bus.link.command(frame, check=False, optional=True if req.reply_length() is None else None)
+            if reply is not None:
+                out.update(decoded=modbus.decode_frame(reply.packet, frame, self.map))
+                if reply.exception:
+                    out["exception"] = (f"exception {reply.error} ({modbus.exception_name(reply.error)}): "
+                                        f"{modbus.exception_meaning(reply.error)}")
+            else:
+                out["note"] = ("a broadcast is never answered" if req.broadcast else
+                               "no reply (a frame the actuator does not know may go unanswered)")
+            moved = {self.map.owner[a].name for addr, values in req.blocks()
+                     for a in range(addr, addr + len(values)) if a in self.map.owner}
         else:
-            out["note"] = ("a broadcast is never answered" if cmd.broadcast else
-                           f"no reply expected (feedback-return-mode {self.bus.link.mode_of(pkt[3])})")
-        self.log(f"{ctx.label}: sent {cmd.describe()}" + (f"; reply in {out['rtt_ms']} ms" if reply is not None else ""),
-                 "warn" if cmd.needs() else "info")
-        if cmd.blocks() and any(a in (zap.REGISTER_BY_NAME[n].address for n in ("id", "baud-rate", "protocol-type",
-                                                                                  "feedback-return-mode"))
-                                for _, a, _ in cmd.blocks()):
+            cmd = zap.Command(frame)
+            reply = self.bus.link.command(frame, check=False)         # the bus asks for what the table says
+            if reply is not None:
+                out.update(decoded=zap.decode_packet(reply.packet, frame))
+            else:
+                out["note"] = ("a broadcast is never answered" if cmd.broadcast else
+                               f"no reply expected (feedback-return-mode {self.bus.link.mode_of(frame[3])})")
+            moved = {zap.REGISTER_BY_ADDRESS[a].name for _, a, _ in cmd.blocks() if a in zap.REGISTER_BY_ADDRESS}
+        if reply is not None:
+            out.update(reply=reply.packet.hex(" ").upper(), rtt_ms=round(reply.rtt * 1000, 2), errors=reply.errors)
+        self.log(f"{ctx.label}: sent {what}" + (f"; reply in {out['rtt_ms']} ms" if reply is not None else "")
+                 + (f"; {out['exception']}" if "exception" in out else ""), "warn" if needs else "info")
+        if moved & REACHED_BY:
             self.log("the packet changes how an actuator is reached or answers: scan again to see the bus as it "
                      "is now", "warn")
         self.reply(ctx, **out)
@@ -178,78 +301,163 @@ class PacketTools:
     # -- traffic ------------------------------------------------------------------------------
 
     def _monitor(self, direction, data):
-        """Every write and read on the bus (the worker's thread)."""
-        if self.protocol != "ir":
-            self._monitor_modbus(direction, data)
-            return
-        if self._polling and not self.traffic_polls:
-            if direction == "rx":
-                self._framer.feed(data)          # kept in step, not shown
-            return
-        now = round(time.time() * 1000, 1)
-        packets = [data] if direction == "tx" else self._framer.feed(data)
-        if direction == "rx" and not packets:
-            return
-        for pkt in packets:
-            item = {"w": now, "dir": direction, "hex": pkt[:TRAFFIC_MAX_BYTES].hex(" ").upper(), "n": len(pkt),
-                    "poll": self._polling}
-            try:
-                zap.check_packet(pkt)
-                rec = self._decoder.decode(pkt)
-                item["text"] = _words(rec, pkt)
-            except (zap.PacketError, ValueError, IndexError) as e:
-                item["text"] = f"not a packet: {e}"
-                item["bad"] = True
-            if self.hub is not None:
-                self.hub.traffic(item)
-
-
-    def _monitor_modbus(self, direction, data):
-        """The same log for a Modbus RTU bus: a request as written, a reply once its bytes make a
-        CRC-valid frame (what is left when the next request goes out is shown as not a frame)."""
-        from ..codec import modbus
-
-        frames = []
+        """Every write and read on the bus (the worker's thread): a request as written, the
+        bytes read as the bus's framer cuts them (what it holds when the next request goes out,
+        or once a Modbus reply's length is in, is judged then: no frame is lost or made up)."""
+        show = self.hub is not None and (self.traffic_polls or not self._polling)
         if direction == "tx":
-            if self._rtu:
-                frames.append(("rx", bytes(self._rtu)))
-                self._rtu.clear()
-            frames.append(("tx", bytes(data)))
+            said = [self._said("rx", p, why, show) for p, why in self._rx.flush()]   # judged by the request they followed
+            self._last_tx = bytes(data)
+            said.append(self._said("tx", self._last_tx, None, show))
         else:
-            self._rtu += data
-            if (len(self._rtu) >= 4 and modbus.crc_ok(self._rtu)) or len(self._rtu) > 256:
-                frames.append(("rx", bytes(self._rtu)))
-                self._rtu.clear()
-        if self._polling and not self.traffic_polls:
+            said = [self._said("rx", p, why, show) for p, why in self._rx.feed(data)]
+            if self.protocol == "modbus" and self._reply_in():
+                said += [self._said("rx", p, why, show) for p, why in self._rx.flush()]  # a reply's length in, no frame
+        if not show:
             return
         now = round(time.time() * 1000, 1)
-        for way, frame in frames:
+        for way, frame, text, bad in said:
             item = {"w": now, "dir": way, "hex": frame[:TRAFFIC_MAX_BYTES].hex(" ").upper(), "n": len(frame),
-                    "poll": self._polling}
-            try:
-                modbus.check_frame(frame)
-                rec = self._rtu_decoder.decode(frame, "h2d" if way == "tx" else "d2h")
-                item["text"] = " ".join(f"{k}={rec[k]}" for k in modbus.MODBUS_KEYS if rec.get(k) not in (None, ""))
-            except (modbus.ModbusFrameError, ValueError, IndexError) as e:
-                item["text"] = f"not a frame: {e}"
+                    "poll": self._polling, "text": text}
+            if bad:
                 item["bad"] = True
-            if self.hub is not None:
-                self.hub.traffic(item)
+            self.hub.traffic(item)
+
+    def _said(self, way, frame, why, show=True):
+        """``(way, frame, text, bad)``: a whole frame decoded (the decoder is kept in step with
+        every frame, shown or not: a reply is named by its request), or bytes in no frame
+        (``why``: the framer's reason)."""
+        noun = "frame" if self.protocol == "modbus" else "packet"
+        if why is not None:
+            return (way, frame, f"not a {noun}: {self._bad(frame, why)}", True) if show else None
+        try:
+            return way, frame, self._decode(way, frame, show), False
+        except (zap.PacketError, ValueError, IndexError) as e:
+            return way, frame, f"not a {noun}: {e}", True
+
+    def _reply_in(self) -> bool:
+        """Whether the bytes held are as many as a whole Modbus reply to the last request has
+        and no frame came of them: judged now, not at the next request. Bytes that begin as the
+        request did are its echo coming (a half-duplex adapter's), still awaited."""
+        held, sent = bytes(self._rx.raw), self._last_tx
+        if not held or len(sent) < 4 or sent.startswith(held[:len(sent)]):
+            return False
+        want = self._reply_len(held)
+        return want is not None and len(held) >= want
+
+    def _reply_len(self, data):
+        """The length of a whole Modbus reply to the last request that begins as ``data`` does
+        (an exception reply 5), or None when it cannot be foretold."""
+        modbus = _modbus()
+        if len(data) >= 2 and data[1] & modbus.EXCEPTION_BIT:
+            return 5
+        return modbus.Request(self._last_tx).reply_length() if len(self._last_tx) >= 4 else None
+
+    def _decode(self, way, frame, words=True) -> str:
+        """One line for a whole frame, from the protocol's decoder (``words`` False: only the
+        decoder kept in step)."""
+        if self.protocol != "modbus":
+            if way == "tx":
+                zap.check_packet(frame)
+            rec = self._decoder.decode(frame)
+            return _words(rec, frame) if words else ""
+        modbus = _modbus()
+        if way == "rx" and frame == self._last_tx and frame[1] != modbus.WRITE_SINGLE:
+            return "the request's echo (the adapter's)"
+        rec = self._decoder.decode(frame, "h2d" if way == "tx" else "d2h")
+        if not words:
+            return ""
+        if rec["kind"] == "request":
+            return modbus.Request(frame).describe(self.map)
+        if rec["kind"] == "exception":
+            return (f"exception reply of ID {rec['id']} to {rec['function']}: {rec['exception']} {rec['name']} "
+                    f"({rec['meaning']})")
+        return _reply_words(rec)
+
+    def _bad(self, data, why) -> str:
+        """Why ``data`` is no frame: the protocol's own check where the bytes are as many as the
+        frame they begin (a bad CRC or checksum, with the expected and found bytes), else their
+        count and the framer's reason."""
+        try:
+            if self.protocol == "modbus":
+                if len(data) == self._reply_len(data):
+                    _modbus().check_frame(data)
+            else:
+                zap.check_packet(data)
+        except (zap.PacketError, ValueError) as e:
+            if "CRC" in str(e) or "checksum" in str(e):
+                return str(e)
+        return f"{len(data)} byte{'s' if len(data) != 1 else ''}, {why}"
 
 
-def _words(rec, pkt) -> str:
-    """One line for a decoded packet."""
-    if rec["kind"] == "command":
-        return zap.Command(pkt).describe()
-    if rec["kind"] == "unknown":
-        return f"ID {rec['id']}: code 0x{rec['code']:02X} {rec['params']}"
+#: Registers whose write changes how an actuator is reached or answers (scan again after it).
+REACHED_BY = {"id", "baud-rate", "protocol-type", "feedback-return-mode"}
+
+
+class FrameCutter:
+    """The bytes read on a bus cut by ``framer`` (the bus's family's: the same cut the bus makes)
+    into whole frames and the runs of bytes that make none, each said with why (a failed check,
+    a frame cut short, bytes in no frame); :meth:`flush` judges what the framer holds."""
+
+    def __init__(self, framer):
+        self.framer = framer
+        self.raw = bytearray()           # bytes read and not yet given out as a frame or a run
+
+    @property
+    def held(self) -> int:
+        return len(self.raw)
+
+    def feed(self, data) -> list:
+        """``[(bytes, None)]`` for a frame, ``[(bytes, why)]`` for bytes in none, as ``data`` completes them."""
+        return self._cut(lambda: self.framer.feed(data), data, final=False)
+
+    def flush(self) -> list:
+        return self._cut(self.framer.flush, b"", final=True) if self.raw else []
+
+    def _cut(self, run, data, final) -> list:
+        f = self.framer
+        bad, truncated = f.bad, f.truncated
+        self.raw += data
+        frames = run()
+        why = "a failed check" if f.bad != bad else "cut short" if f.truncated != truncated else "in no frame"
+        out = []
+        for frame in frames:
+            i = self.raw.find(frame)
+            if i < 0:                      # cannot be: a framer's frames are the bytes it was fed
+                i = 0
+            if i:
+                out.append((bytes(self.raw[:i]), why))
+            out.append((bytes(frame), None))
+            del self.raw[:i + len(frame)]
+        rest = len(self.raw) - (0 if final else f.pending)
+        if rest > 0:
+            out.append((bytes(self.raw[:rest]), why))
+            del self.raw[:rest]
+        return out
+
+
+def _reply_words(rec) -> str:
+    """The words for a decoded reply (either protocol's record)."""
     text = f"reply of ID {rec['id']}"
-    if "values" in rec:
+    if isinstance(rec.get("values"), dict):
         text += ": " + " ".join(f"{k}={v}" for k, v in rec["values"].items())
+    elif rec.get("values") is not None:
+        text += ": " + " ".join(map(str, rec["values"]))
     elif "value" in rec:
         text += f": {rec['register']}={rec['value']}" if "register" in rec else f": {rec['value']}"
+    elif rec.get("count") is not None and rec.get("register"):
+        text += f": wrote {rec['register']} ({rec['count']} register{'s' if rec['count'] != 1 else ''})"
     elif rec.get("params"):
         text += f": {rec['params']}"
     if rec.get("errors"):
         text += " · errors: " + ", ".join(rec["errors"])
     return text
+
+
+def _words(rec, pkt) -> str:
+    """One line for a decoded IR packet."""
+    if rec["kind"] == "command":
+        return zap.Command(pkt).describe()
+    if rec["kind"] == "unknown":
+        return f"ID {rec['id']}: code 0x{rec['code']:02X} {rec['params']}"
+    return _reply_words(rec)

@@ -54,22 +54,28 @@
   });
 
   // -- the packet panel ----------------------------------------------------------------------
-  const WITH_REGISTER = ["load", "store", "send"];
+  // what each instruction (an IR instruction, or a Modbus function) takes beside a register:
+  // "length" (Load Data), "count" (Read Holding Registers), "value", "values" (Write Multiple), or none
+  let takes = {};
+  const LABELS = { length: "Length ", count: "Count ", value: "Value ", values: "Values " };
   function packetFields() {
-    const ins = $("#pkt-ins").value, reg = $("#pkt-reg").value;
+    const ins = $("#pkt-ins").value, reg = $("#pkt-reg").value, kind = takes[ins];
     const f = { instruction: ins, id: Number($("#pkt-id").value) };
-    if (reg && WITH_REGISTER.includes(ins)) {
+    const v = $("#pkt-value").value.trim();
+    if (reg && kind) {
       f.register = reg;
-      if (ins === "load") { if ($("#pkt-value").value !== "") f.length = Number($("#pkt-value").value); }
-      else f.value = $("#pkt-value").value === "" ? null : Number($("#pkt-value").value);
+      if (kind === "values") f.values = v;
+      else if (kind === "value") f.value = v === "" ? null : Number(v);
+      else if (v !== "") f[kind] = Number(v);
     } else f.params = $("#pkt-params").value;
     return f;
   }
   function packetForm() {
-    const ins = $("#pkt-ins").value, reg = WITH_REGISTER.includes(ins) && $("#pkt-reg").value;
-    $("#pkt-reg").disabled = !WITH_REGISTER.includes(ins) || !Z.controlling();
+    const ins = $("#pkt-ins").value, kind = takes[ins], reg = kind && $("#pkt-reg").value;
+    $("#pkt-reg").disabled = !kind || !Z.controlling();
     $("#pkt-value-l").style.display = reg ? "" : "none";
-    $("#pkt-value-l").firstChild.textContent = ins === "load" ? "Length " : "Value ";
+    $("#pkt-value-l").firstChild.textContent = LABELS[kind] || "Value ";
+    $("#pkt-value").placeholder = kind === "values" ? "like 1000 800" : "";
     $("#pkt-params-l").style.display = reg ? "none" : "";
   }
   let composeN = 0;
@@ -95,7 +101,8 @@
     $("#pkt-reply").textContent = "sending…";
     const r = await Z.send("packet", packetFields());
     if (!r) { $("#pkt-reply").textContent = "not sent"; return; }
-    $("#pkt-reply").textContent = r.reply ? `reply ${r.reply} in ${fmt(r.rtt_ms, 1)} ms` + (r.errors && r.errors.length ? ` · errors: ${r.errors.join(", ")}` : "") : r.note;
+    $("#pkt-reply").textContent = r.reply ? `reply ${r.reply} in ${fmt(r.rtt_ms, 1)} ms` + (r.exception ? ` · ${r.exception}`
+      : r.errors && r.errors.length ? ` · errors: ${r.errors.join(", ")}` : "") : r.note;
   });
 
   // -- the bytes on the bus ------------------------------------------------------------------
@@ -231,9 +238,12 @@
     const pr = $("#pkt-reg");
     pr.replaceChildren(el("option", { value: "", text: "raw parameters" }), ...registers.map(r => el("option", { value: r.name, text: r.name })));
     pr.value = "goal-position";
+    takes = Object.fromEntries((m.instructions || []).map(i => [i.name, i.takes]));
     $("#pkt-ins").replaceChildren(...(m.instructions || []).map(i => el("option", { value: i.name, title: i.help,
-      text: `${i.name} (0x${i.code.toString(16).toUpperCase()})` + (i.documented ? "" : " · undocumented") })));
-    $("#pkt-ins").value = "load";
+      text: `${i.name} (0x${i.code.toString(16).toUpperCase().padStart(2, "0")})` + (i.documented ? "" : " · undocumented") })));
+    $("#pkt-ins").value = m.protocol === "modbus" ? "read" : "load";
+    if (m.packet_ids) { $("#pkt-id").max = m.packet_ids.hi; $("#pkt-id").title = `0..${m.packet_ids.hi}; ${m.packet_ids.broadcast}: every actuator (broadcast)`; }
+    $("#pkt-params").placeholder = m.protocol === "modbus" ? "data bytes, like 00 D2 00 01" : "hex, like 8C 02";
     $("#traffic-polls").checked = !!m.traffic_polls;
     buildRegPlot();
     setTimeout(composePacket, 0);
