@@ -183,3 +183,57 @@ def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(s
     assert bridge.opened >= 3                           # it was reopened, and failed each time
     assert "port back" not in err, err
     assert 2.0 <= took < 3.5, f"gave up after {took:.2f} s"
+
+
+class HangingBridge(FlappingBridge):
+    """A bridge that, once its device is gone, stops taking connections at all: its listening
+    socket's queue is full, so a connect hangs (no answer to the SYN), as to a network serial
+    server that lost power. pyserial waits 5 s for such a connect."""
+
+    def die(self):
+        import socket
+
+        self._stop.set()                    # nobody accepts any more ...
+        self._thread.join(1)
+        super().die()
+        addr = self._srv.getsockname()
+        self._fillers = []
+        for _ in range(16):                 # ... and the queue is full: the next SYN goes unanswered
+            s = socket.socket()
+            s.setblocking(False)
+            try:
+                s.connect(addr)
+            except (BlockingIOError, OSError):
+                pass
+            self._fillers.append(s)
+
+    def close(self):
+        for s in getattr(self, "_fillers", ()):
+            s.close()
+        super().close()
+
+
+def test_a_reopen_that_hangs_does_not_outlast_the_reconnect_window(start_sim):
+    """--reconnect 1.5 on a TCP port whose server stops answering connects: each reopen attempt
+    hangs, and the run still ends when the window does (exit 4), not pyserial's 5 s connect
+    timeout later."""
+    url, _ = start_sim(["zk", "--listen", "127.0.0.1:0", *FAST])
+    host, port = url[len("socket://"):].rsplit(":", 1)
+    bridge = HangingBridge((host, int(port)))
+    proc = subprocess.Popen([executable("zk"), "monitor", "-p", bridge.url, "--duration", "30", "-f", "jsonl",
+                             "--reconnect", "1.5"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
+    try:
+        _lines(proc, lambda line: '"kind":"status"' in line)
+        t0 = time.monotonic()
+        bridge.die()
+        _, err = proc.communicate(timeout=20)
+        took = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        bridge.close()
+    assert proc.returncode == 4 and "not back within --reconnect 1.5 s" in err, err
+    assert "port back" not in err, err
+    assert 1.5 <= took < 3.0, f"gave up after {took:.2f} s"

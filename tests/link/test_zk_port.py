@@ -2,6 +2,7 @@
 port as PortError naming the port, and sim:// recognised as the simulator."""
 
 import io
+import time
 
 import pytest
 import serial
@@ -100,3 +101,39 @@ def test_reasons_are_the_os_words(error, said):
     from zkzap.link.port import reason
 
     assert reason(error) == said
+
+
+def test_an_open_that_outlasts_its_time_is_given_up_and_its_late_port_closed(monkeypatch):
+    """open_within: an open still running after its time is a PortError then; the port it
+    opens afterwards is closed, never left open behind the caller's back."""
+    import threading
+
+    from zkzap.link import port as port_mod
+
+    release, closed = threading.Event(), threading.Event()
+
+    class Late:
+        def close(self):
+            closed.set()
+
+    def slow_open(url, baud, **kw):
+        release.wait(5)
+        return Late()
+
+    monkeypatch.setattr(port_mod, "open_port", slow_open)
+    t = time.monotonic()
+    with pytest.raises(PortError, match="no answer within 0.2 s"):
+        port_mod.open_within(0.2, "socket://192.0.2.1:7", 57600)
+    assert time.monotonic() - t < 1.0
+    release.set()
+    assert closed.wait(2)
+    # an open that ends in time gives its port, or its own error
+    monkeypatch.setattr(port_mod, "open_port", lambda url, baud, **kw: "port")
+    assert port_mod.open_within(1.0, "x", 57600) == "port"
+
+    def failing(url, baud, **kw):
+        raise PortError("port x: cannot open: gone")
+
+    monkeypatch.setattr(port_mod, "open_port", failing)
+    with pytest.raises(PortError, match="gone"):
+        port_mod.open_within(1.0, "x", 57600)

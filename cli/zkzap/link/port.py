@@ -85,6 +85,38 @@ def open_port(url: str, baud: int, *, timeout=None, write_timeout=None, stop_bit
         raise PortError(f"port {url}: {_short(e)}") from None
 
 
+def open_within(within: float, url: str, baud: int, **kw):
+    """:func:`open_port`, given up after ``within`` real seconds with a PortError ("no answer
+    within ...") when the open has not ended by then: a TCP connect to a host or server that does
+    not answer hangs for pyserial's 5 s, a USB device being re-enumerated can block in open().
+    The attempt goes on in its own thread; a port it opens after it was given up is closed."""
+    import threading
+
+    done = threading.Event()
+    lock = threading.Lock()
+    state = {"abandoned": False}
+
+    def attempt():
+        try:
+            state["port"] = open_port(url, baud, **kw)
+        except BaseException as e:  # noqa: BLE001 - handed to the caller as it is
+            state["error"] = e
+        with lock:
+            if state["abandoned"] and "port" in state:
+                close_port(state["port"])
+            done.set()
+
+    threading.Thread(target=attempt, name="zkzap-open", daemon=True).start()
+    done.wait(max(0.0, within))
+    with lock:
+        if not done.is_set():
+            state["abandoned"] = True
+            raise PortError(f"port {url}: cannot open: no answer within {within:.2g} s", url=url)
+    if "error" in state:
+        raise state["error"]
+    return state["port"]
+
+
 def _busy(e) -> bool:
     """Whether an open failed because another program holds the device (its exclusive lock,
     which pyserial reports as "Resource temporarily unavailable", or the tty's own TIOCEXCL)."""

@@ -63,13 +63,19 @@ class ZkLink:
         ser = open_port(url, baud, timeout=slice_s, write_timeout=1.0, stop_bits=stop_bits)
         return cls(ser, url, raw_log, baud, slice_s, stop_bits, allow)
 
-    def reopen(self) -> None:
-        """Close the failed port and open the same device again (PortError while it is absent)."""
-        from .port import close_port, open_port
+    def reopen(self, within: float | None = None) -> None:
+        """Close the failed port and open the same device again (PortError while it is absent).
+        ``within``: real seconds the attempt may take at most (an open that hangs, such as a TCP
+        connect to a server that does not answer, which pyserial gives 5 s, is given up then:
+        PortError; it is left to end in its thread, and a port it opens after all is closed)."""
+        from .port import close_port, open_port, open_within
 
         close_port(self.ser)
-        self.ser = open_port(self.url, self.baud, timeout=self.slice_s, write_timeout=1.0,
-                             stop_bits=self.stop_bits)
+        kw = dict(timeout=self.slice_s, write_timeout=1.0, stop_bits=self.stop_bits)
+        if within is None:
+            self.ser = open_port(self.url, self.baud, **kw)
+        else:
+            self.ser = open_within(within, self.url, self.baud, **kw)
 
     def borrow(self, raw_log=None, slice_s=READ_SLICE_S):
         """A link over this one's port for one command; its close() leaves the port open."""

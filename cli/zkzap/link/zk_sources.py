@@ -40,8 +40,9 @@ class LiveSource:
     anything came (a TCP bridge whose device is gone, a USB adapter flapping) is the same
     outage, still counted from its first failure. Once it is back, :attr:`gap` is ``(t_down,
     t_up, reason)`` until :meth:`take_gap`. ``reconnect`` seconds after the first failure the
-    port failure is raised as it would have been without it (at most one reopen attempt, or
-    one read slice, later).
+    port failure is raised as it would have been without it (at most one read slice later: a
+    reopen attempt is given no more than the time left, so one that hangs — a TCP connect that
+    pyserial would wait 5 s for — is given up when the window ends).
     """
 
     live = True
@@ -170,8 +171,8 @@ class LiveSource:
             self.clock.sleep(min(0.05, self._next_try - now))
             return []
         self._next_try = now + REOPEN_INTERVAL
-        try:
-            self.link.reopen()
+        try:                               # an attempt never outlasts the window
+            self.link.reopen(within=self.clock.real(self.reconnect - (now - self.down)))
         except (PortError, UsageError):
             self._give_up()                # an attempt that took long may end the window
             return []
