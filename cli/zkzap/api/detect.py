@@ -210,7 +210,7 @@ def detect_bus(port=None, bauds=None, *, protocols=BUS_PROTOCOLS, every=False, r
                opener=None, **options):
     """Say which protocol (IR or Modbus RTU) and baud rate the actuators on a bus speak: yields
     one record per combination where an actuator answers — ``protocol``, ``baud``, ``ids`` (the
-    IDs that answered) and ``found`` (how many) — and stops after the first unless ``every``.
+    IDs that answered, in order: a late reply found after an earlier ID's does not reorder them) and ``found`` (how many) — and stops after the first unless ``every``.
 
     At each baud rate of ``bauds`` in turn (default :data:`zkzap.api.zap.ALL_BAUDS`, the
     factory default first), each protocol of ``protocols`` is scanned over all its IDs (IR
@@ -241,7 +241,7 @@ def detect_bus(port=None, bauds=None, *, protocols=BUS_PROTOCOLS, every=False, r
                 recs = list(Bus.over(link).scan(ids_for[protocol], [baud], retries=retries, on_warning=on_warning))
             if recs:
                 found += 1
-                yield {"protocol": protocol, "baud": baud, "ids": [r["id"] for r in recs], "found": len(recs)}
+                yield {"protocol": protocol, "baud": baud, "ids": sorted(r["id"] for r in recs), "found": len(recs)}
                 if not every:
                     return
     if not found:
