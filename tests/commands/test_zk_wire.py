@@ -174,7 +174,9 @@ def test_send_for_harmless_command_keeps_going_through_errors(cli):
     # not stopped by the error (a keep-alive controls nothing), but the error is the exit status
     r = cli("zk", "send", "keepalive", "-p", SIM + "&error=3&error_after=0.3", "--for", "10", "-f", "jsonl")
     assert r.exit_code == 5 and "ECU error 3 (glowplug-failure: Glowplug failure) at t=" in r.stderr
-    assert jsonl(r.stdout)[-1]["t"] > 9.5
+    # it went on long past the error at 0.3 s (the last frame's time, not the run's end: on a
+    # loaded machine the sped-up simulator's last frames before 10 s may not be read in time)
+    assert jsonl(r.stdout)[-1]["t"] > 5
 
 
 @pytest.mark.parametrize("args,msg", [
