@@ -1,6 +1,6 @@
 """Make the screenshots of docs/web.md: the consoles on the simulators, in headless Chromium.
 
-    python docs/img/make.py            # writes docs/img/web-*.png (or: make.py zap-tools zk alarms)
+    python docs/img/make.py            # writes docs/img/web-*.png (or: make.py zap-tools zap-buses zk alarms)
 
 Needs the extra 'web', selenium, and Debian's chromium and chromium-driver (the test suite's
 setup). Each picture is a console after a few real actions (a scan and moves, a start).
@@ -122,6 +122,34 @@ def zap_tools_shots():
             p.wait()
 
 
+def zap_buses_shots():
+    """Two buses of a fleet file at once, both with an ID 1: each bus's actuators under its name."""
+    import json
+
+    with start_zap(ids=[1, 2, 3], transport="tcp") as left, start_zap(ids=[1, 2], transport="tcp") as right:
+        with tempfile.TemporaryDirectory() as tmp:
+            fleet = os.path.join(tmp, "machine.json")
+            with open(fleet, "w") as f:
+                json.dump({"format": "zkzap-fleet/1", "actuators": {"1": {}}, "buses": {
+                    "left": {"port": left.url, "ids": [1, 2, 3]}, "right": {"port": right.url, "ids": [1, 2]}}}, f)
+            p, url = console("zap", "--fleet", fleet, "--buses", "all")
+            d = browser(1440, 1350)
+            try:
+                d.get(url)
+                wait(d, "return document.querySelectorAll('#actuators tbody tr[data-id]').length === 5")
+                for row, pos in (("0-1", 3000), ("0-2", 1200), ("0-3", 2500), ("1-1", 600), ("1-2", 3400)):
+                    move(d, row, pos)
+                time.sleep(2.0)
+                d.execute_script("document.querySelector('#act-1-1 .btn').click();")
+                wait(d, "return document.querySelector('#registers') && !document.querySelector('#registers').hidden")
+                time.sleep(1.0)
+                shoot(d, "web-zap-buses.png")
+            finally:
+                d.quit()
+                p.terminate()
+                p.wait()
+
+
 def zk_shots():
     with start_zk(speed=1, transport="tcp") as sim:
         p, url = console("zk", "-p", sim.url, "--limit", "egt_c<=900,warn=700", "--limit", "power_voltage_v>=11")
@@ -177,7 +205,7 @@ def alarm_shots():
             p.wait()
 
 
-SHOTS = {"zap": zap_shots, "zap-tools": zap_tools_shots, "zk": zk_shots, "alarms": alarm_shots}
+SHOTS = {"zap": zap_shots, "zap-tools": zap_tools_shots, "zap-buses": zap_buses_shots, "zk": zk_shots, "alarms": alarm_shots}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or SHOTS:     # python docs/img/make.py [zap] [zk] [alarms]

@@ -132,7 +132,7 @@ def web():
 
 
 def _make_zap():
-    from .options import protocol_options
+    from .options import buses_option, fleet_option, protocol_options
     from .zap.compose import link_options
 
     @click.command("zap", cls=Command, context_settings=CONTEXT)
@@ -142,10 +142,13 @@ def _make_zap():
                   help="The IDs the first scan searches, like 1-8 ('none': no scan at the start) [default: "
                        "0-253; 1-247 on Modbus RTU].")
     @web_options
-    @link_options
+    @buses_option("Serve one console")
+    @lambda f: fleet_option(f, help="The fleet file naming the buses of --buses (name -> port, baud, ids) "
+                                    "[env ZKZAP_ZAP_FLEET].")
+    @link_options(several=True)
     @protocol_options
-    def zap_web(rate, scan_ids, listen, token, token_file, open_browser, **common):
-        """Serve a browser console for the actuators on one port.
+    def zap_web(rate, scan_ids, listen, token, token_file, open_browser, bus_names, fleet_file, **common):
+        """Serve a browser console for the actuators on one port, or on several buses at once.
 
         It scans the bus (IDs and baud rates, with progress), lists the actuators with their
         identity and error bits, plots position, current and voltage live, moves each one with
@@ -167,9 +170,23 @@ def _make_zap():
 
         With --protocol modbus the page says so and its register table is the map's (--map, else
         the 17Lf's control table), edited with the same consent rules.
+
+        With -p given more than once, or --buses and a --fleet file naming the buses, one console
+        shows every bus: each bus's actuators listed under its name (an actuator is its bus and
+        ID: two buses may both have an ID 1), each bus polled on its own thread, so a slow or
+        dead bus holds up no other (a bus whose port fails is shown failed; the others go on).
+        The bus chosen on the page is the one its register table, moves, packet panel, fleet
+        file, check, play, teach and cycle act on, each bus with its own consent; STOP ALL stops
+        every bus. The buses speak the one --protocol (a fleet file's buses, its protocol).
+
+        \b
+          zkzap web zap -p /dev/ttyUSB0 -p /dev/ttyUSB1
+          zkzap web zap --fleet machine.json --buses all
+          zkzap web zap --fleet machine.json --buses left,right --scan-ids 1-8
         """
         from .. import web as webpkg
         from .zap.compose import _link_args, open_link
+        from .zap.motion import several_buses
 
         modbus = common["protocol"] == "modbus"
         if modbus:
@@ -179,9 +196,19 @@ def _make_zap():
         webpkg.require()
         token = read_token(token, token_file)
         check_access(listen, token)
+        given = scan_ids is not None
         if scan_ids is None:
             scan_ids = "1-247" if modbus else "0-253"
         ids = None if scan_ids.strip().lower() == "none" else _ids(scan_ids)
+        if several_buses(bus_names):
+            console = _buses_console(Bus, bus_names, fleet_file, common, rate, ids, given)
+            _serve(console, listen, token, "zap", "the buses " + ", ".join(
+                p if n == p else f"{n} ({p})" for n, p in console.ports.items()))
+            return
+        if fleet_file:                    # read all the same: a bad file is refused, not ignored
+            from ..api.fleet import read_document
+
+            read_document(fleet_file)
         args = _link_args(common)
         if args["sim"] and not args["sim_ids"]:
             args["sim_ids"] = SIM_IDS
@@ -192,6 +219,30 @@ def _make_zap():
         _serve(console, listen, token, "zap", "sim" if common["sim"] else link.url)
 
     return zap_web
+
+
+def _buses_console(Bus, bus_names, fleet_file, common, rate, ids, given):
+    """The console of several buses: the buses of -p given more than once or of --buses (as
+    every zap command takes them), each opened as those commands open theirs, with a console
+    of its own; a fleet file's bus scans its IDs first unless --scan-ids says otherwise."""
+    from ..web.zap_buses import BusesConsole
+    from ..web.zap_console import ZapConsole
+    from .zap.motion import bus_specs, open_spec
+
+    specs = bus_specs(bus_names, fleet_file, common, "counts")
+    opener = open_spec(common)
+    consoles, ports = {}, {}
+    try:
+        for spec in specs:
+            link = opener(spec)
+            consoles[spec.name] = ZapConsole(Bus.over(link), rate=rate, retries=common["retries"],
+                                             scan_ids=spec.ids if spec.ids and not given else ids)
+            ports[spec.name] = spec.port
+    except BaseException:
+        for c in consoles.values():
+            c.shutdown()
+        raise
+    return BusesConsole(consoles, ports)
 
 
 def _ids(text):

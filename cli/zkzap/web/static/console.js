@@ -75,7 +75,10 @@ const Z = (() => {
         ws.send(JSON.stringify({ op: "pong", n: msg.n, t: msg.t }));
         return;
       case "hello": me = msg.you; hello = msg; $("#port").textContent = msg.port + (msg.simulated ? " (simulated)" : "");
-        $("#port").title = msg.port; break;
+        $("#port").title = msg.buses ? msg.buses.map(b => b.port).join(", ") : msg.port;
+        buses = msg.buses || null;
+        if (buses && !buses.some(b => b.name === chosen)) chosen = buses.length ? buses[0].name : null;
+        break;
       case "control": controller = msg.controller; renderControl(msg); break;
       case "log": addLog(msg); break;
       case "logs": $("#log").replaceChildren(); msg.items.forEach(addLog); break;
@@ -91,8 +94,21 @@ const Z = (() => {
         if (p) { pending.delete(msg.req); askConsent(msg, p); }
         break;
       }
-      case "failed": banner(`The console stopped: ${msg.text}`, "error"); break;
+      case "failed": banner(msg.bus !== undefined ? `Bus ${msg.bus} stopped: ${msg.text}` : `The console stopped: ${msg.text}`, "error"); break;
     }
+    for (const f of everyListeners[msg.type] || []) f(msg);
+    if (buses) {
+      // several buses: what a bus says is kept (shown when that bus is chosen); the page's panels
+      // hear the chosen bus, and what names no bus (the log, who controls, the live batches)
+      if (msg.bus !== undefined) {
+        if (KEPT.includes(msg.type)) (busState[msg.bus] = busState[msg.bus] || {})[msg.type] = msg;
+        if (msg.bus !== chosen) return;
+        if (msg.type === "bushello") { deliver({ ...msg, type: "hello" }); return; }
+      } else if (msg.type === "hello") return;     // each bus's own hello comes as bushello
+    }
+    deliver(msg);
+  }
+  function deliver(msg) {
     const fn = handlers[msg.type];
     if (fn) fn(msg);
     for (const f of listeners[msg.type] || []) f(msg);
@@ -100,13 +116,32 @@ const Z = (() => {
   // more handlers of a message type, beside the page's own (a page's further panels)
   const listeners = {};
   function on(type, f) { (listeners[type] = listeners[type] || []).push(f); }
+  // handlers of every message of a type, whichever bus it names (the actuators of every bus)
+  const everyListeners = {};
+  function every(type, f) { (everyListeners[type] = everyListeners[type] || []).push(f); }
+
+  // -- several buses: one is chosen, the one the panels show and the requests go to ---------
+  let buses = null, chosen = null;
+  const busState = {};
+  // what a bus's console says of its state, shown again when that bus is chosen (in this order)
+  const KEPT = ["bushello", "actuators", "busy", "plot", "traffic-polls", "teach"];
+  function choose(name) {
+    if (!buses || name === chosen || !buses.some(b => b.name === name)) return;
+    chosen = name;
+    for (const f of listeners.choose || []) f({ bus: name });
+    const kept = busState[name] || {};
+    for (const type of KEPT) if (kept[type]) deliver(type === "bushello" ? { ...kept[type], type: "hello" } : kept[type]);
+    renderControl();
+  }
+  // whether a live item (a sample, a byte on the bus) is the chosen bus's
+  const mine = (item) => !buses || item.bus === chosen;
 
   // a request: resolves with the reply; a consent reply asks the person and sends it again
   function request(op, fields = {}, grant = []) {
     return new Promise((resolve, reject) => {
       if (!ws || ws.readyState !== WebSocket.OPEN) { reject(new Error("not connected")); return; }
       const req = ++reqN;
-      const msg = { op, req, ...fields, grant };
+      const msg = { op, req, ...(buses && !("bus" in fields) ? { bus: chosen } : {}), ...fields, grant };
       pending.set(req, { resolve, reject, msg });
       ws.send(JSON.stringify(msg));
     });
@@ -180,7 +215,8 @@ const Z = (() => {
   function addLog(e) {
     const box = $("#log");
     if (!box) return;
-    box.prepend(el("div", { class: e.level }, el("span", { class: "t num", text: clock(e.t) }), e.text));
+    box.prepend(el("div", { class: e.level }, el("span", { class: "t num", text: clock(e.t) }),
+      e.bus !== undefined ? el("span", { class: "busname", text: e.bus }) : null, e.text));
     while (box.childElementCount > 300) box.lastChild.remove();
   }
   function toast(text, kind = "") {
@@ -377,5 +413,6 @@ const Z = (() => {
   if (nm) nm.addEventListener("click", name);
 
   return { $, el, fmt, clock, setText, setClass, connect, request, send, toast, banner, controlling, Plot, onFrame, sawSample,
-           throttle, stats, on, download, readFile, get hello() { return hello; }, renderControl };
+           throttle, stats, on, every, download, readFile, get hello() { return hello; }, renderControl,
+           choose, mine, get buses() { return buses; }, get bus() { return chosen; } };
 })();

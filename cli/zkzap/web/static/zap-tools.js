@@ -12,7 +12,7 @@
   let rplot = null, rplotKey = "", rplotReg = null, rplotSeries = [];
   function regInfo(name) { return registers.find(r => r.name === name); }
   function buildRegPlot() {
-    const key = `${rplotReg}|${polled.join(",")}`;
+    const key = `${Z.bus}|${rplotReg}|${polled.join(",")}`;
     if (key === rplotKey) return;
     rplotKey = key;
     const box = $("#rplot");
@@ -34,7 +34,7 @@
     if (!rplot) return;
     const n = rplot.ids.length;
     for (const s of m.items) {
-      if (s.reg === undefined || s.reg === null || s.status !== "ok") continue;
+      if (s.reg === undefined || s.reg === null || s.status !== "ok" || !Z.mine(s)) continue;
       const i = rplot.ids.indexOf(s.id);
       if (i < 0) continue;
       const a = new Array(n).fill(null); a[i] = s.reg;
@@ -113,6 +113,7 @@
     const box = $("#traffic");
     const frag = document.createDocumentFragment();
     for (const it of m.items) {
+      if (!Z.mine(it)) continue;        // several buses: the chosen bus's bytes
       frag.append(el("div", { class: (it.dir === "tx" ? "tx" : "rx") + (it.bad ? " bad" : "") + (it.poll ? " poll" : ""), title: it.hex },
         el("span", { class: "t num dim", text: new Date(it.w).toLocaleTimeString("en-GB", { hour12: false }) + "." + String(Math.floor(it.w % 1000)).padStart(3, "0") }),
         el("b", { text: it.dir === "tx" ? " → " : " ← " }), el("span", { text: it.text }), el("span", { class: "h", text: it.hex + (it.n > 64 ? ` … (${it.n} bytes)` : "") })));
@@ -208,7 +209,7 @@
     return t.tBodies[0];
   }
   Z.on("cycles", (m) => {
-    if (m.reset) { cyclePlot(); $("#cycle-out").replaceChildren(); $("#cycle-sum").textContent = m.id !== undefined ? `ID ${m.id}: ${m.between.join(" ↔ ")}` : ""; }
+    if (m.reset || !cplot) { cyclePlot(); $("#cycle-out").replaceChildren(); $("#cycle-sum").textContent = m.id !== undefined ? `ID ${m.id}: ${m.between.join(" ↔ ")}` : ""; }
     const tb = cycleTable();
     for (const c of m.items) {
       tb.prepend(cycleRow(c));
@@ -257,4 +258,10 @@
     if (polled.length && !polled.includes(Number($("#pkt-id").value))) { $("#pkt-id").value = polled[0]; composeSoon(); }
   });
   Z.on("controlchange", () => packetForm());
+  Z.on("choose", () => {            // another bus: its own bytes, plan, play and cycles from now on
+    $("#traffic").replaceChildren();
+    for (const id of ["#play-out", "#cycle-out", "#cycle-plot"]) $(id).replaceChildren();
+    for (const id of ["#play-note", "#cycle-note", "#cycle-sum", "#pkt-reply"]) $(id).textContent = "";
+    cplot = null;
+  });
 })();

@@ -2,19 +2,25 @@
 "use strict";
 (() => {
   const { $, el, fmt, setText } = Z;
-  let actuators = [];             // the scan's records
-  let busBaud = null;
-  let protocol = "ir";            // the bus's protocol family (hello): a Modbus map's addresses are decimal
-  const live = {};                // id -> latest sample
-  const rows = {};                // id -> row elements
+  // each bus's scan records and baud rate (one bus: the key ""); an actuator is its bus and ID
+  const state = {};
+  const S = (bus) => state[bus ?? ""] || (state[bus ?? ""] = { actuators: [], baud: null, failed: null, busy: null });
+  const names = () => Z.buses ? Z.buses.map(b => b.name) : [""];
+  const keyOf = (bus, id) => `${bus ?? ""}|${id}`;
+  // a request for an actuator of ``bus`` (one bus: as it always was)
+  const at = (bus, fields) => Z.buses ? { bus, ...fields } : fields;
+  let protocol = "ir";            // the chosen bus's protocol family (hello): a Modbus map's addresses are decimal
+  const live = {};                // bus|id -> latest sample
+  const rows = {};                // bus|id -> row elements
   let plots = null, plotIds = "";
   let regId = null, regInfo = {};
   let busy = null;
   const COLORS = ["#4aa3ff", "#3fcf7a", "#f2b134", "#ff7b54", "#c59bff", "#57c7e6", "#ff5d9e", "#b5e853"];
 
   // -- the actuator table --------------------------------------------------------------------
-  function statusTag(a, s) {
-    if (a.baud !== busBaud) return el("span", { class: "tag warn", text: `at ${a.baud} baud` });
+  function statusTag(a, s, st) {
+    if (st.failed) return el("span", { class: "tag bad", text: "bus failed", title: st.failed });
+    if (a.baud !== st.baud) return el("span", { class: "tag warn", text: `at ${a.baud} baud` });
     if (!a.polled) return el("span", { class: "tag warn", text: a.return_mode === 0 ? "mode 0: echo only" : a.status });
     const errs = (s && s.errors && s.errors.length) ? s.errors : a.errors;
     if (errs && errs.length) return el("span", { class: "tag bad", text: errs.join(", ") });
@@ -27,32 +33,55 @@
     const tb = $("#actuators tbody");
     tb.replaceChildren();
     for (const k in rows) delete rows[k];
-    for (const a of actuators) {
+    let total = 0;
+    names().forEach((bus, k) => {
+      const st = S(bus);
+      total += st.actuators.length;
+      if (Z.buses) tb.append(busHead(bus, k, st));
+      for (const a of st.actuators) tb.append(actuatorRow(bus, k, a, st));
+    });
+    const st = S(names()[0]);
+    $("#act-note").textContent = !Z.buses ? (total ? `${total} found · bus at ${st.baud} baud` : "none found yet: scan")
+      : `${total} found on ${names().length} buses`;
+    Z.renderControl();
+  }
+  function busInfo(bus) { return (Z.buses || []).find(b => b.name === bus) || {}; }
+  // a bus's name where space is short (the plots' keys): a long port given by -p is "bus N"
+  function short(bus) { const k = names().indexOf(bus); return bus.length > 14 ? `bus ${k + 1}` : bus; }
+  function busHead(bus, k, st) {
+    const b = busInfo(bus);
+    return el("tr", { class: "bushead", id: `bushead-${k}`, "data-bus": bus },
+      el("td", { colspan: 12 }, el("b", { text: short(bus) === bus ? `bus ${bus}` : `${short(bus)}: ${bus}` }), b.port && b.port !== bus ? el("span", { class: "dim", text: ` ${b.port}` }) : "",
+        el("span", { class: "tag", text: b.protocol === "modbus" ? "Modbus RTU" : "IR" }),
+        el("span", { class: "dim", text: st.failed ? "" : st.actuators.length ? ` ${st.actuators.length} found at ${st.baud} baud` : " none found yet" }),
+        st.failed ? el("span", { class: "tag bad", text: "failed", title: st.failed }) : ""));
+  }
+  function actuatorRow(bus, k, a, st) {
       const id = a.id;
-      const sync = el("input", { type: "checkbox", class: "ctl sync", "data-id": id, title: "move with Sync move" });
+      const sync = el("input", { type: "checkbox", class: "ctl sync", "data-id": id, "data-bus": Z.buses ? bus : null, title: "move with Sync move" });
       const range = el("input", { type: "range", class: "ctl grow", min: 0, max: 4095, value: 0, "aria-label": `goal of ID ${id}` });
       const num = el("input", { type: "number", class: "ctl", min: 0, max: 4095, value: 0, "aria-label": `goal number of ID ${id}` });
-      const mover = Z.throttle((p) => Z.send("move", { id, position: p }), 60);
+      const mover = Z.throttle((p) => Z.send("move", at(bus, { id, position: p })), 60);
       let touched = false;
       range.addEventListener("input", () => { num.value = range.value; touched = true; mover(Number(range.value)); });
       range.addEventListener("change", () => { touched = false; });
-      num.addEventListener("change", () => { range.value = num.value; Z.send("move", { id, position: Number(num.value) }); });
+      num.addEventListener("change", () => { range.value = num.value; Z.send("move", at(bus, { id, position: Number(num.value) })); });
       const gspeed = el("input", { type: "number", class: "ctl goal-speed", min: 0, max: 1023, placeholder: "speed",
         title: "goal-speed 0..1023", "aria-label": `goal speed of ID ${id}` });
       const gcur = el("input", { type: "number", class: "ctl goal-current", min: 0, max: 1600, placeholder: "mA",
         title: "goal-current 0..1600 mA", "aria-label": `goal current of ID ${id}` });
-      gspeed.addEventListener("change", () => Z.send("goals", { id, speed: Number(gspeed.value) }));
-      gcur.addEventListener("change", () => Z.send("goals", { id, current: Number(gcur.value) }));
+      gspeed.addEventListener("change", () => Z.send("goals", at(bus, { id, speed: Number(gspeed.value) })));
+      gcur.addEventListener("change", () => Z.send("goals", at(bus, { id, current: Number(gcur.value) })));
       const pos = el("span", { class: "num big", text: "–" });
       const bar = el("div", { class: "posbar" }, el("b"), el("i"));
       const moving = el("span", { class: "moving", title: "moving" });
       const cur = el("span", { class: "num", text: "–" }), volt = el("span", { class: "num", text: "–" });
       const status = el("td");
       const btns = el("td", {}, el("div", { class: "row" },
-        el("button", { class: "btn small ctl", onclick: () => readRegisters(id) }, "Registers"),
-        el("button", { class: "btn small ctl", onclick: () => check(id) }, "Check"),
-        el("button", { class: "btn small ctl", onclick: () => Z.send("stop", { id }) }, "Stop")));
-      const tr = el("tr", { id: `act-${id}` },
+        el("button", { class: "btn small ctl", onclick: () => { Z.choose(bus); readRegisters(id); } }, "Registers"),
+        el("button", { class: "btn small ctl", onclick: () => { Z.choose(bus); check(id); } }, "Check"),
+        el("button", { class: "btn small ctl", onclick: () => Z.send("stop", at(bus, { id })) }, "Stop")));
+      const tr = el("tr", { id: Z.buses ? `act-${k}-${id}` : `act-${id}`, class: st.failed ? "failed" : null, "data-bus": Z.buses ? bus : null, "data-id": id },
         el("td", {}, sync), el("td", { class: "big num", text: id }),
         el("td", { class: "mono", text: a.model === null ? "–" : "0x" + a.model.toString(16).toUpperCase().padStart(4, "0") }),
         el("td", { class: "num", text: a.firmware ?? "–" }), el("td", { class: "num", text: a.baud }),
@@ -61,16 +90,14 @@
           el("div", { class: "row goals" }, el("span", { class: "dim small", text: "speed" }), gspeed,
             el("span", { class: "dim small", text: "current" }), gcur)),
         el("td", {}, cur, el("span", { class: "dim", text: " mA" })), el("td", {}, volt, el("span", { class: "dim", text: " V" })), btns);
-      tb.append(tr);
-      rows[id] = { a, tr, range, num, gspeed, gcur, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
-      status.append(statusTag(a, null));
-    }
-    $("#act-note").textContent = actuators.length ? `${actuators.length} found · bus at ${busBaud} baud` : "none found yet: scan";
-    Z.renderControl();
+      rows[keyOf(bus, id)] = { a, st, tr, range, num, gspeed, gcur, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
+      status.append(statusTag(a, null, st));
+      return tr;
   }
   function paintRows() {
-    for (const id in rows) {
-      const r = rows[id], s = live[id];
+    for (const key in rows) {
+      const r = rows[key], s = live[key];
+      if (r.st.failed && r.sig !== "failed") { r.sig = "failed"; r.status.replaceChildren(statusTag(r.a, s, r.st)); }
       if (!s || !s.fresh) continue;
       s.fresh = false;
       setText(r.pos, fmt(s.pos));
@@ -82,27 +109,30 @@
       if (!r.seeded && s.goal !== null && !r.touched()) { r.range.value = s.goal; r.num.value = s.goal; r.seeded = true; }
       for (const [input, v] of [[r.gspeed, s.gspeed], [r.gcur, s.gcur]])   // what the actuator holds, unless being edited
         if (v !== null && v !== undefined && document.activeElement !== input && String(v) !== input.value) input.value = v;
-      const sig = `${r.a.baud}|${busBaud}|${r.a.polled}|${s.status}|${(s.errors || []).join()}`;
-      if (r.sig !== sig) { r.sig = sig; r.status.replaceChildren(statusTag(r.a, s)); }
+      const sig = r.st.failed ? "failed" : `${r.a.baud}|${r.st.baud}|${r.a.polled}|${s.status}|${(s.errors || []).join()}`;
+      if (r.sig !== sig) { r.sig = sig; r.status.replaceChildren(statusTag(r.a, s, r.st)); }
     }
   }
 
   // -- plots ---------------------------------------------------------------------------------
+  // the polled actuators of every bus, as [bus, id]
+  const polledAll = () => names().flatMap(bus => S(bus).failed ? []
+    : S(bus).actuators.filter(a => a.polled && a.baud === S(bus).baud).map(a => [bus, a.id]));
   function buildPlots() {
-    const ids = actuators.filter(a => a.polled && a.baud === busBaud).map(a => a.id);
+    const polled = polledAll(), ids = polled.map(([bus, id]) => keyOf(bus, id));
     const key = ids.join(",");
     if (key === plotIds && plots) return;
     plotIds = key;
     const box = $("#plots");
     box.replaceChildren();
-    const series = ids.map((id, i) => ({ label: `ID ${id}`, color: COLORS[i % COLORS.length] }));
+    const series = polled.map(([bus, id], i) => ({ label: Z.buses ? `${short(bus)} ID ${id}` : `ID ${id}`, color: COLORS[i % COLORS.length] }));
     plots = { ids, pos: new Z.Plot(box, "Position", series, { window: 30 }),
               cur: new Z.Plot(box, "Current (mA)", series, { window: 30 }),
               volt: new Z.Plot(box, "Voltage (V)", series.map(s => ({ ...s, digits: 1 })), { window: 30, digits: 1 }) };
   }
   function plotSample(s) {
     if (!plots) return;
-    const i = plots.ids.indexOf(s.id);
+    const i = plots.ids.indexOf(keyOf(s.bus, s.id));
     if (i < 0 || s.status !== "ok") return;
     const t = s.w / 1000, n = plots.ids.length;
     const at = (v) => { const a = new Array(n).fill(null); a[i] = v; return a; };
@@ -115,7 +145,7 @@
   // -- registers -----------------------------------------------------------------------------
   async function readRegisters(id) {
     regId = id;
-    $("#reg-id").textContent = `of ID ${id}`;
+    $("#reg-id").textContent = Z.buses ? `of ID ${id} on bus ${Z.bus}` : `of ID ${id}`;
     $("#reg-refresh").dataset.off = "0";
     Z.renderControl();
     const r = await Z.send("registers", { id });
@@ -167,7 +197,7 @@
       el("tbody", {}, r.rows.map(row => el("tr", {}, el("td", { text: row.check }),
         el("td", { class: "verdict-" + row.verdict, text: row.verdict }), el("td", { class: "num", text: row.value ?? "–" }),
         el("td", { class: "dim", text: row.limit ?? "" }), el("td", { class: "dim", text: row.detail }))))));
-    $("#check-note").firstChild.textContent = `ID ${id}: ${r.rows[r.rows.length - 1].verdict} · `;
+    $("#check-note").firstChild.textContent = (Z.buses ? `bus ${Z.bus} ` : "") + `ID ${id}: ${r.rows[r.rows.length - 1].verdict} · `;
   }
 
   // -- fleet ---------------------------------------------------------------------------------
@@ -207,7 +237,6 @@
   let polls = 0, pollT = Date.now();
   const handlers = {
     hello(m) {
-      busBaud = m.baud;
       $("#protocol").textContent = (m.protocol === "modbus" ? "Modbus RTU" : "IR protocol") + ` · ${m.model}`;
       $("#protocol").dataset.protocol = m.protocol;
       protocol = m.protocol;
@@ -218,29 +247,65 @@
         el("input", { type: "checkbox", class: "ctl", value: b, checked: b === m.baud }), b)));
       Z.renderControl();
     },
-    actuators(m) { actuators = m.items; busBaud = m.baud; buildTable(); buildPlots(); },
-    samples(m) {
-      for (const s of m.items) { s.fresh = true; live[s.id] = s; plotSample(s); Z.sawSample(s.w); polls++; }
-    },
     busy(m) {
       busy = m.job;
       $("#busy").classList.toggle("show", !!m.job);
-      $("#busy-text").textContent = m.job ? `${m.job}…` : "";
+      $("#busy-text").textContent = m.job ? (Z.buses ? `bus ${Z.bus}: ` : "") + `${m.job}…` : "";
       if (!m.job) $("#busy-bar").style.width = "0";
       $("#scan").disabled = !!m.job || !Z.controlling();
     },
     progress(m) {
       $("#busy-bar").style.width = `${(100 * m.done / Math.max(1, m.total)).toFixed(1)}%`;
-      $("#busy-text").textContent = `${m.job}: ${m.text}`;
+      $("#busy-text").textContent = (Z.buses ? `bus ${Z.bus}: ` : "") + `${m.job}: ${m.text}`;
       if (m.job === "scan") $("#scan-note").textContent = `${m.done} of ${m.total} probes`;
     },
     controlchange(c) { $("#who").textContent = c.controller ? `controlling: ${c.controller.label}` : "nobody controls"; },
   };
+  // every bus's table and live samples, whichever bus is chosen
+  Z.every("actuators", (m) => { const st = S(m.bus); st.actuators = m.items; st.baud = m.baud; buildTable(); buildPlots(); renderBuses(); });
+  Z.every("samples", (m) => {
+    for (const s of m.items) { s.fresh = true; live[keyOf(s.bus, s.id)] = s; plotSample(s); Z.sawSample(s.w); polls++; }
+  });
+  Z.every("busy", (m) => { if (m.bus !== undefined) { S(m.bus).busy = m.job; renderBuses(); } });
+  Z.every("failed", (m) => {
+    if (m.bus === undefined) return;
+    S(m.bus).failed = m.text;
+    buildTable(); buildPlots(); renderBuses();
+  });
+  Z.every("hello", (m) => { if (m.buses) { for (const b of m.buses) S(b.name); renderBuses(); } });
+  Z.on("choose", () => {            // the panels of one bus start empty on another
+    regId = null;
+    $("#registers").hidden = true; $("#reg-empty").hidden = false; $("#reg-id").textContent = "";
+    $("#reg-refresh").dataset.off = "1";
+    $("#fleet-out").replaceChildren();
+    $("#scan-note").textContent = "";
+    renderBuses();
+  });
+
+  // -- the buses (several at once): each with its state; the chosen one is what the panels show
+  function renderBuses() {
+    if (!Z.buses) return;
+    $("#buses-card").hidden = false;
+    $("#scan-bus").textContent = `bus ${Z.bus}`;
+    $("#buses").replaceChildren(...Z.buses.map((b, k) => {
+      const st = S(b.name);
+      const tag = st.failed ? el("span", { class: "tag bad state", text: "failed", title: st.failed })
+        : st.busy ? el("span", { class: "tag warn state", text: st.busy })
+        : el("span", { class: "tag ok state", text: `${st.actuators.length} actuator${st.actuators.length === 1 ? "" : "s"}` });
+      return el("button", { class: "busbtn" + (b.name === Z.bus ? " chosen" : "") + (st.failed ? " failed" : ""), id: `bus-${k}`,
+        "data-bus": b.name, title: `${b.port}: choose this bus for the panels below`, onclick: () => Z.choose(b.name) },
+        el("b", { text: short(b.name) }), short(b.name) !== b.name ? el("span", { class: "small", text: b.name }) : "",
+        b.port !== b.name ? el("span", { class: "dim small", text: b.port }) : "",
+        el("span", { class: "tag", text: b.protocol === "modbus" ? "Modbus RTU" : "IR" }), tag);
+    }));
+  }
+
   setInterval(() => {
-    const dt = (Date.now() - pollT) / 1000, n = actuators.filter(a => a.polled && a.baud === busBaud).length;
+    const dt = (Date.now() - pollT) / 1000, n = polledAll().length, baud = S(names()[0]).baud;
     const l = $("#link");
-    if (n) { l.textContent = `${busBaud} baud · ${n} polled · ${fmt(polls / dt / n, 1)} polls/s each`; l.className = "pill ok"; }
-    else { l.textContent = busBaud ? `${busBaud} baud · no actuator polled` : "no actuators yet"; l.className = "pill warn"; }
+    const where = Z.buses ? `${names().length} buses` : `${baud} baud`;
+    if (n) { l.textContent = `${where} · ${n} polled · ${fmt(polls / dt / n, 1)} polls/s each`; l.className = "pill ok"; }
+    else { l.textContent = Z.buses || baud ? `${where} · no actuator polled` : "no actuators yet"; l.className = "pill warn"; }
     polls = 0; pollT = Date.now();
     const p50 = pct(Z.stats.latencies, .5), p99 = pct(Z.stats.latencies, .99);
     $("#lat").textContent = p50 === null ? "" : `latency p50 ${fmt(p50)} ms · p99 ${fmt(p99)} ms` + (Z.stats.dropped ? ` · ${Z.stats.dropped} dropped` : "");
@@ -251,15 +316,19 @@
     Z.send("scan", { ids: $("#scan-ids").value, bauds });
   });
   $("#cancel").addEventListener("click", () => Z.send("cancel"));
-  $("#stopall").addEventListener("click", () => Z.send("stop"));
+  $("#stopall").addEventListener("click", () => Z.send("stop", Z.buses ? { bus: null } : {}));
   $("#sync-range").addEventListener("input", () => { $("#sync-pos").value = $("#sync-range").value; });
   $("#sync-pos").addEventListener("change", () => { $("#sync-range").value = $("#sync-pos").value; });
   $("#sync").addEventListener("click", () => {
-    const ids = [...document.querySelectorAll("input.sync:checked")].map(i => Number(i.dataset.id));
-    if (!ids.length) { Z.toast("tick the actuators to move together first"); return; }
+    const ticked = [...document.querySelectorAll("input.sync:checked")].map(i => [i.dataset.bus, Number(i.dataset.id)]);
+    if (!ticked.length) { Z.toast("tick the actuators to move together first"); return; }
     const p = Number($("#sync-pos").value);
-    Z.send("sync", { targets: Object.fromEntries(ids.map(i => [i, p])) });
-    for (const i of ids) if (rows[i]) { rows[i].range.value = p; rows[i].num.value = p; }
+    // one Symmetric Store a bus
+    for (const bus of [...new Set(ticked.map(([b]) => b))]) {
+      const ids = ticked.filter(([b]) => b === bus).map(([, i]) => i);
+      Z.send("sync", at(bus, { targets: Object.fromEntries(ids.map(i => [i, p])) }));
+    }
+    for (const [bus, i] of ticked) { const r = rows[keyOf(bus, i)]; if (r) { r.range.value = p; r.num.value = p; } }
   });
   $("#reg-refresh").addEventListener("click", () => { if (regId !== null) readRegisters(regId); });
   $("#backup").addEventListener("click", backup);
