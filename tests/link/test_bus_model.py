@@ -161,6 +161,18 @@ FOUND = {
     36: "the latency learned of an ID stayed when its actuator moved away: a 290 ms actuator given that ID "
         "later was judged by another's 22 ms, an earlier Echo's reply taken for a later one's, and its "
         "return mode reported 0",
+    109: "two actuators share an ID: the slower one's reply to an Echo of a scan was the next Echo's answer",
+    131: "two actuators share an ID: a reply to an earlier request was the value of the next Load of that shape",
+    140: "two actuators share an ID: the slower one's reply (sent twice) came over the next Echo, which neither "
+         "heard, and was its answer",
+    274: "two actuators share an ID: a late reply of the second answered the next Echo",
+    372: "two actuators share an ID: a late reply of the second was the next Load's value",
+    427: "two actuators share an ID: the second's reply to a Load of present-position was goal-speed's value",
+    492: "two actuators share an ID: the second's reply to a Load of model-number was a watch's present "
+         "position",
+    384: "a 336 ms actuator in return mode 2 acknowledged a write assumed unanswered after the write was "
+         "forgotten: the acknowledgement answered the census's first Echo, that Echo's reply the second's (5 ms "
+         "learned), and a scan reported return mode 0",
 }
 
 

@@ -27,10 +27,15 @@ class Device:
     last answered at, None before), ``late`` (replies that came after their attempt's window),
     ``doubts`` (replies the bus could not attribute with certainty: never taken for an
     answer), ``extra`` (replies with its address that no request was owed: two where one
-    was due, from two devices sharing the address or a line fault) and ``replies`` (every
-    reply with its address heard, however it was attributed)."""
+    was due, from two devices sharing the address or a line fault), ``replies`` (every
+    reply with its address heard, however it was attributed) and ``asked`` (every request sent
+    to its address that a device could answer). One device never gives more replies than it
+    was asked: once ``replies`` exceeds ``asked`` (:attr:`shared`), two devices answer to the
+    address (or one sent a reply twice), and no reply of it can be told to answer the request
+    it came after, whatever order they came in."""
 
-    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra", "extra_at", "replies")
+    __slots__ = ("ident", "return_mode", "baud", "late", "doubts", "extra", "extra_at", "replies", "asked",
+                 "shared")
 
     def __init__(self, ident: int) -> None:
         self.ident = ident
@@ -41,10 +46,25 @@ class Device:
         self.extra = 0
         self.replies = 0
         self.extra_at: Optional[float] = None    # when the last of those came
+        self.asked = 0
+        self.shared = False                      # more replies heard than requests sent (see above)
+
+    def heard(self) -> None:
+        """A reply with this address was heard (however it is attributed)."""
+        self.replies += 1
+        if self.replies > self.asked:
+            self.shared = True
+
+    def cleared(self) -> None:
+        """A census found exactly one device at this address: what was counted before it is
+        settled (every reply owed has come or can no longer come)."""
+        self.shared = False
+        self.asked = self.replies
 
     def __repr__(self) -> str:
         return (f"Device(id={self.ident}, return_mode={self.return_mode}, baud={self.baud}, "
-                f"late={self.late}, doubts={self.doubts}, extra={self.extra})")
+                f"late={self.late}, doubts={self.doubts}, extra={self.extra}, "
+                f"replies={self.replies}/{self.asked}{', shared' if self.shared else ''})")
 
 
 class Devices:
@@ -97,6 +117,8 @@ class Devices:
         if dev is not None:
             dev.ident = new
             self._by_id[new] = dev
+            # a late reply to what was asked of it at the old address is still one it owed
+            self[old].asked = max(0, dev.asked - dev.replies)
 
     def forget(self, ident: int) -> None:
         self._by_id.pop(ident, None)

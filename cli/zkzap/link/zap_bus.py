@@ -695,7 +695,7 @@ class ZapBus:
         counted late), so that its own reply, if it comes, is never another request's value;
         where none is owed it is a reply where none was due. Remembers ``p`` as the last reply heard."""
         family = self.family
-        self.devices[family.ident(p)].replies += 1
+        self.devices[family.ident(p)].heard()
         last, self._answer = self._answer, (p, hi, self.sent)
         if last is None:
             return False
@@ -869,6 +869,9 @@ class ZapBus:
             raise self._port_error(e) from None
         self.sent += 1
         self.last_sent = t0
+        ident = self.family.ident(pkt)
+        if ident != self.family.BROADCAST:
+            self.devices[ident].asked += 1      # a reply it may give (see Device.shared)
         if self.monitor is not None:
             self.monitor("tx", bytes(pkt))
         self._recent.append(bytes(pkt))
@@ -930,9 +933,12 @@ class ZapBus:
                 # its learned latency (the bus-typical one before it was measured), and that
                 # acknowledgement is skipped when it comes
                 until = t0 + tx + self.courtesy(ident, win) + self.wire(family.OVERHEAD) + self.margin
-                # (an actuator known to answer after the window may acknowledge that late too: its
-                # acknowledgement is recognised as one until the horizon, never taken for an answer)
-                horizon = t0 + horizon_for(until - t0 + win) if self.devices[ident].late else until + win
+                # (an actuator known to answer after the window may acknowledge that late too, and
+                # so may one whose return mode was only assumed: its acknowledgement is recognised
+                # as one until the horizon, never taken for an answer)
+                dev = self.devices[ident]
+                unsure = dev.late or dev.return_mode is None
+                horizon = t0 + horizon_for(until - t0 + win) if unsure else until + win
                 self._owed.append(_Owed(None, accept, family.ack_len(pkt), t0, t0 + tx, until + pause, until + win,
                                          "ack", horizon=horizon))
             return None
@@ -965,7 +971,7 @@ class ZapBus:
                         # answer, and no retry meets it on the line
                         owed, p, lo, hi = self._caught
                         got = self._reply(p, hi - owed.t0, self._only(token, owed, lo))
-                        return self._answered(got, pkt, restart, stored, check, win)
+                        return self._answered(got, pkt, restart, stored, check, win, any_answer)
                     self.retried += 1
                 elif not early:
                     self._close_windows()  # then the quiet time; the write drains what came
@@ -977,7 +983,7 @@ class ZapBus:
                 got = self._attempt(pkt, accept, data_len, rx_len, tx, span, quick, extra, restart, token,
                                     any_answer)
                 if isinstance(got, Reply):
-                    return self._answered(got, pkt, restart, stored, check, win)
+                    return self._answered(got, pkt, restart, stored, check, win, any_answer)
                 if got[0] == "none" and (quick or (optional and not persist)):
                     return None            # silence is a legitimate answer: do not repeat the command
                 problems.append(got)
@@ -994,7 +1000,7 @@ class ZapBus:
                 if self._caught is not None:
                     owed, p, lo, hi = self._caught
                     got = self._reply(p, hi - owed.t0, self._only(token, owed, lo))
-                    return self._answered(got, pkt, restart, stored, check, win)
+                    return self._answered(got, pkt, restart, stored, check, win, any_answer)
         finally:
             self._current, self._caught = outer
         return self._fail(pkt, [p[:3] for p in problems], limit, tries, optional,
@@ -1079,11 +1085,13 @@ class ZapBus:
         self._owe(token, accept, data_len, t0, tx, span)
         return got + (limit,)
 
-    def _answered(self, got, pkt, restart, stored, check, win):
+    def _answered(self, got, pkt, restart, stored, check, win, any_answer=False):
         self.replies += 1
         dev = self.devices[got.ident]
         if dev.baud is None:
             dev.baud = self.port.baudrate      # it answers at this rate
+        if not any_answer:
+            self.refuse_shared(got)
         if dev.extra_at is not None and self.now() - dev.extra_at < HORIZON and got.doubt is None:
             # that ID lately sent a reply where none was due (two actuators answering to it, or a
             # reply sent twice): an answer of it may be the other's, never a value
@@ -1103,6 +1111,22 @@ class ZapBus:
         if check and got.error:
             raise device_error(got)
         return got
+
+    def refuse_shared(self, got: Reply) -> None:
+        """Raise :class:`~zkzap.errors.BadReply` (kind ``shared``, a duplicate) when more replies
+        of ``got``'s ID were heard than requests went to it (:attr:`Device.shared
+        <zkzap.link.devices.Device>`): two actuators answer to it (or one sent a reply twice), and
+        a reply can be the other's answer to an earlier request, however they are ordered. Holds
+        until a census finds one actuator there (:meth:`census`; set-id, set-baud, the fleet
+        reads)."""
+        dev = self.devices.get(got.ident)
+        if dev is None or not dev.shared:
+            return
+        raise BadReply(f"ID {got.ident} at {self.baud} baud: more replies came from this ID than requests went "
+                       "to it (two actuators answering to this ID, or a reply sent twice): this answer may be "
+                       "the other's, to an earlier request", kind="shared", ident=got.ident, baud=self.baud,
+                       received=bytes(got.packet), collision=True, duplicate=True,
+                       protocol="zap" if self.family.name == "ir" else self.family.name)
 
     def _idle(self) -> None:
         """Before a retry after a garbled reply: listen until the line has been idle for one
@@ -1382,7 +1406,10 @@ class ZapBus:
         of it is marked :attr:`Reply.doubt`: an Echo carries no value, and its round trip is
         then not known)."""
         kw.setdefault("any_answer", True)
-        return self.transact(zap.echo(ident), reply=True, data_len=0, **kw)
+        r = self.transact(zap.echo(ident), reply=True, data_len=0, **kw)
+        if r is not None:
+            self.refuse_shared(r)          # whether that ID answers this Echo: the line cannot tell
+        return r
 
     def load(self, ident: int, address: int, length: int, **kw) -> Reply:
         """Load Data: ``length`` bytes from ``address``."""
@@ -1553,10 +1580,13 @@ class ZapBus:
             if dev.extra > extra[ident] or dev.replies - replies[ident] > sent[ident] \
                     or garbled[ident] >= asks or (garbled[ident] and got[ident]):
                 out[ident] = "shared"
+                dev.shared = True
             elif got[ident] or dev.late > late[ident]:
                 out[ident] = "one"
+                dev.cleared()          # one actuator there: what was counted before is settled
             else:
                 out[ident] = "none"
+                dev.cleared()
         return out
 
     def detect_return_mode(self, ident: int) -> int:
@@ -1598,7 +1628,11 @@ class ZapBus:
         dev = self.devices.take(ident)
         if dev is not None:
             dev.baud = baud
-            self.by_baud.at(baud).put(dev)
+            there = self.by_baud.at(baud)
+            if there is not self.devices:
+                # a late reply to what was asked of it here is still one it owed
+                self.devices[ident].asked = max(0, dev.asked - dev.replies)
+            there.put(dev)
 
     def latencies(self) -> dict:
         """What the bus learned: {ID: {"latency_ms", "variation_ms", "samples", "late"}}."""
