@@ -133,6 +133,46 @@ def test_scans_classify_the_same_on_every_run():
     assert results[0] == results[1] == results[2] == [(1, "ok", 0xA112), (6, "ok", 0xA112)]
 
 
+def test_an_id_that_gave_more_replies_than_it_was_asked_gives_no_value():
+    """Two actuators with ID 3, one answering in 2 ms and one in 200 ms: every value read is the
+    first one's own; once more replies came than requests went out (the second's, heard while
+    the program paused), every read and Echo of that ID says it is shared, until a census finds
+    one actuator there."""
+    from zkzap.errors import BadReply
+    from zkzap.sim import start_zap
+
+    names = ("long-stroke-limit", "short-stroke-limit", "speed-limit", "current-limit")
+    with start_zap(ids=[3, 3], virtual=True) as sim:
+        sim.device.actuators[1].own_turnaround = 0.2
+        with Bus(sim.url, retries=0) as bus:
+            for name in names:
+                assert bus.load(3, name) == zap.REGISTER_BY_NAME[name].default
+            bus.link.linger(0.3)                  # the program pauses: the second's replies come
+            for name in names:
+                with pytest.raises(BadReply) as e:
+                    bus.load(3, name)
+                assert e.value.facts["kind"] == "shared" and e.value.facts["duplicate"]
+            with pytest.raises(BadReply):
+                bus.echo(3)
+            assert bus.link.census([3]) == {3: "shared"}
+            sim.device.actuators.pop()            # the second unit taken off the bus
+            assert bus.link.census([3]) == {3: "one"}
+            assert bus.load(3, "speed-limit") == zap.REGISTER_BY_NAME["speed-limit"].default
+
+
+def test_the_late_acknowledgement_of_a_write_assumed_unanswered_is_that_writes():
+    """An actuator in return mode 2 taking 336 ms, on a bus that assumes mode 1: the
+    acknowledgement of a Store comes long after the line was free again; it is that Store's,
+    never an Echo's reply (once the census counted it as a second reply: shared)."""
+    from zkzap.sim import start_zap
+
+    with start_zap(ids=[4], virtual=True, return_mode=2) as sim:
+        sim.device.actuators[0].own_turnaround = 0.336
+        with Bus(sim.url, retries=0) as bus:
+            bus.store(4, "goal-speed", 512)
+            assert bus.link.census([4]) == {4: "one"}
+
+
 def test_the_simulator_logs_its_ground_truth():
     from zkzap.sim.zap_actuators import from_options
 
