@@ -155,6 +155,44 @@ def test_stop_all_stops_every_bus(page, bus_a, bus_b):
             sim.device.actuator(ident).set("goal-speed", 1023)
 
 
+def test_the_packet_panel_and_a_cycle_act_on_the_chosen_bus_while_the_other_bus_moves(page, bus_a, bus_b):
+    click(page, "#bus-1")                              # bus B for the panels
+    until(lambda: "chosen" in css(page, "#bus-1")[0].get_attribute("class"), "bus B chosen")
+    goal = 1500 if reg(bus_a, 1, "goal-position") != 1500 else 1600
+    a_goal = reg(bus_a, 1, "goal-position")
+    set_value(page, "#pkt-ins", "store")
+    set_value(page, "#pkt-id", 1)
+    set_value(page, "#pkt-reg", "goal-position")
+    set_value(page, "#pkt-value", goal)
+    until(lambda: f"store goal-position={goal} to ID 1" in text_of(page, "#pkt-describe"), "the packet composed")
+    click(page, "#pkt-send")
+    until(lambda: reg(bus_b, 1, "goal-position") == goal, "bus B's ID 1 to take the packet's goal")
+    assert reg(bus_a, 1, "goal-position") == a_goal
+    until(lambda: "goal-position" in text_of(page, "#traffic"), "the packet among bus B's bytes")
+    # a cycle of bus B's ID 1; meanwhile bus A is free and moves
+    set_value(page, "#cycle-id", 1)
+    set_value(page, "#cycle-a", 1000)
+    set_value(page, "#cycle-b", 2000)
+    set_value(page, "#cycle-n", 3)
+    set_value(page, "#cycle-dwell", 0.3)
+    click(page, "#cycle-go")
+    until(lambda: "cycle" in text_of(page, "#bus-1 .state"), "bus B shown running the cycle")
+    assert "cycle" not in text_of(page, "#bus-0 .state")
+    target = 3500 if reg(bus_a, 2, "present-position") < 2000 else 500
+    set_value(page, "#act-0-2 td.goal input[type=number]", target)
+    until(lambda: abs(reg(bus_a, 2, "present-position") - target) <= 5, "bus A's ID 2 to move during bus B's cycle")
+    until(lambda: "3 cycles in" in text_of(page, "#cycle-sum"), "the cycle's summary", timeout=60)
+    assert len(css(page, "#cycle-table tbody tr")) == 3
+    assert reg(bus_a, 1, "goal-position") == a_goal and reg(bus_b, 1, "goal-position") in (1000, 2000)
+    # bus A's panels start empty; bus B's run is shown again when it is chosen again
+    click(page, "#bus-0")
+    until(lambda: not css(page, "#cycle-table tbody tr") and text_of(page, "#cycle-sum") == "", "bus A's cycle panel")
+    click(page, "#bus-1")
+    until(lambda: len(css(page, "#cycle-table tbody tr")) == 3 and "3 cycles in" in text_of(page, "#cycle-sum"),
+          "bus B's cycle run shown again")
+    assert console_errors(page) == []
+
+
 # -- a bus that dies ---------------------------------------------------------------------------
 
 

@@ -101,7 +101,12 @@ const Z = (() => {
       // several buses: what a bus says is kept (shown when that bus is chosen); the page's panels
       // hear the chosen bus, and what names no bus (the log, who controls, the live batches)
       if (msg.bus !== undefined) {
-        if (KEPT.includes(msg.type)) (busState[msg.bus] = busState[msg.bus] || {})[msg.type] = msg;
+        const kept = busState[msg.bus] = busState[msg.bus] || {};
+        if (KEPT.includes(msg.type)) kept[msg.type] = msg;
+        else if (msg.type === "cycles") {      // a run's records: since its reset, the last few hundred
+          kept.cycles = msg.reset ? [msg] : [...(kept.cycles || []), msg].slice(-400);
+          if (msg.reset) delete kept.cycled;
+        }
         if (msg.bus !== chosen) return;
         if (msg.type === "bushello") { deliver({ ...msg, type: "hello" }); return; }
       } else if (msg.type === "hello") return;     // each bus's own hello comes as bushello
@@ -124,13 +129,16 @@ const Z = (() => {
   let buses = null, chosen = null;
   const busState = {};
   // what a bus's console says of its state, shown again when that bus is chosen (in this order)
-  const KEPT = ["bushello", "actuators", "busy", "plot", "traffic-polls", "teach"];
+  const KEPT = ["bushello", "actuators", "busy", "plot", "traffic-polls", "teach", "played", "cycled"];
   function choose(name) {
     if (!buses || name === chosen || !buses.some(b => b.name === name)) return;
     chosen = name;
     for (const f of listeners.choose || []) f({ bus: name });
     const kept = busState[name] || {};
-    for (const type of KEPT) if (kept[type]) deliver(type === "bushello" ? { ...kept[type], type: "hello" } : kept[type]);
+    for (const type of KEPT) {
+      if (type === "cycled") for (const m of kept.cycles || []) deliver(m);    // a cycle run's records, then its end
+      if (kept[type]) deliver(type === "bushello" ? { ...kept[type], type: "hello" } : kept[type]);
+    }
     renderControl();
   }
   // whether a live item (a sample, a byte on the bus) is the chosen bus's
