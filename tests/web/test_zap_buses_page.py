@@ -49,7 +49,8 @@ def ready(browser, console, rows, what):
         open_console(browser, console.url)
     until(lambda: len(css(browser, "#actuators tbody tr[data-id]")) == rows, what)
     until(lambda: "You control" in text_of(browser, "#control") and not css(browser, "#busy.show")
-          and not css(browser, "#modal.show"), "the page in control with the bus free")
+          and not css(browser, "#buses .state.warn") and not css(browser, "#modal.show"),
+          "the page in control with every bus free")
     return browser
 
 
@@ -128,6 +129,7 @@ def test_the_register_table_of_an_actuator_reads_its_own_bus(page, bus_a, bus_b)
 
 
 def test_a_stored_write_asks_consent_and_writes_the_chosen_bus_only(page, bus_a, bus_b):
+    js(page, "document.querySelector('#registers tbody').replaceChildren()")   # wait for the new table
     click(page, "#act-1-1 button")                     # bus B's ID 1: Registers
     until(lambda: f"on bus {bus_b.url}" in text_of(page, "#reg-id").lower()
           and css(page, "#registers input[data-register=long-stroke-limit]"), "bus B's register table")
@@ -256,6 +258,7 @@ def test_a_fleet_file_s_modbus_buses_are_shown_by_name_and_a_move_reaches_its_bu
     set_value(page, "#act-1-1 td.goal input[type=number]", target)
     until(lambda: abs(reg(b, 1, "present-position") - target) <= 10, "bus right's ID 1 to move")
     assert reg(a, 1, "present-position") == was
+    js(page, "document.querySelector('#registers tbody').replaceChildren()")
     click(page, "#act-0-1 button")                     # left's ID 1: its register table
     until(lambda: "on bus left" in text_of(page, "#reg-id").lower() and css(page, "#registers input[data-register=goal-speed]"),
           "the register table of left's ID 1")
