@@ -229,6 +229,30 @@ def test_a_bus_whose_port_dies_is_shown_failed_and_the_other_goes_on(browser, dy
     shot(page, "zap-buses-failed.png")
 
 
+@pytest.fixture(scope="session")
+def slow_and_fast():
+    # bus A's actuator answers after 120 ms (a slow adapter or line), bus B's at once
+    with start_zap(ids=[1], transport="tcp", turnaround=120) as a, start_zap(ids=[1], transport="tcp") as b:
+        c = WebConsole("zap", "-p", a.url, "-p", b.url, "--scan-ids", "1", "--timeout", "0.3", "--rate", "30")
+        yield c, a, b
+        c.close()
+
+
+def test_a_slow_bus_does_not_slow_the_other(browser, slow_and_fast):
+    console, a, b = slow_and_fast
+    page = ready(browser, console, 2, "both buses' actuators")
+    until(lambda: shown(page, "act-0-1") >= 0 and shown(page, "act-1-1") >= 0, "live positions on both buses")
+    js(page, "window.per = {}; Z.every('samples', (m) => { for (const s of m.items) if (s.status === 'ok')"
+             " window.per[s.bus] = (window.per[s.bus] || 0) + 1; });")
+    t0 = js(page, "return performance.now()")
+    until(lambda: js(page, "return performance.now()") - t0 > 4000, "4 s of samples", interval=0.2)
+    per = js(page, "return window.per")
+    seconds = (js(page, "return performance.now()") - t0) / 1000
+    slow, fast = per.get(a.url, 0) / seconds, per.get(b.url, 0) / seconds
+    # the slow bus is polled at most 1/0.12 s; the fast one at its --rate, whatever the slow one does
+    assert slow <= 9 and fast >= 15 and fast >= 2.5 * slow, (slow, fast)
+
+
 # -- a fleet file's buses, and Modbus RTU ------------------------------------------------------
 
 

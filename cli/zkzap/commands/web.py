@@ -167,6 +167,8 @@ def _make_zap():
           zkzap web zap --sim --sim-ids 1-6
           zkzap web zap -p /dev/ttyUSB0 --listen 0.0.0.0:8470 --token auto
           zkzap web zap --protocol modbus -p /dev/ttyUSB0      # 17Lf actuators
+          zkzap web zap -p /dev/ttyUSB0 -p /dev/ttyUSB1        # two buses, one page
+          zkzap web zap --fleet machine.json --buses left,right
 
         With --protocol modbus the page says so and its register table is the map's (--map, else
         the 17Lf's control table), edited with the same consent rules.
@@ -177,12 +179,8 @@ def _make_zap():
         dead bus holds up no other (a bus whose port fails is shown failed; the others go on).
         The bus chosen on the page is the one its register table, moves, packet panel, fleet
         file, check, play, teach and cycle act on, each bus with its own consent; STOP ALL stops
-        every bus. The buses speak the one --protocol (a fleet file's buses, its protocol).
-
-        \b
-          zkzap web zap -p /dev/ttyUSB0 -p /dev/ttyUSB1
-          zkzap web zap --fleet machine.json --buses all
-          zkzap web zap --fleet machine.json --buses left,right --scan-ids 1-8
+        every bus. The buses speak the one --protocol (a fleet file's buses, its protocol); a
+        fleet file's bus first scans its own IDs unless --scan-ids is given.
         """
         from .. import web as webpkg
         from .zap.compose import _link_args, open_link
