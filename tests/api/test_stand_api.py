@@ -199,7 +199,10 @@ def test_one_stand_session_runs_a_trip_its_rundown_and_the_interlock_over_sessio
         assert acked.acked_by == "bench" and ss.alarms.latched == []
         zero = zk.encode_control("control", sw="run", throttle_pct=0)[0]
         assert ss.refusal(setpoint=0) is None                # the rundown ended at rest, and cool
-        at_zero = ss.run(control=lambda t: zero, duration=0.5, restart=False)
+        # the sessions go on on the source's one clock (restart=False): a duration is a time on
+        # it, so this session runs 0.5 s from now (a bare 0.5 was long past: a session that ended
+        # at its first read, and failed as silent when that read held no whole frame)
+        at_zero = ss.run(control=lambda t: zero, duration=src.now() + 0.5, restart=False)
         assert at_zero.ok, (at_zero.reason, at_zero.error)
         summary = ss.summary()
         assert summary["engine"] == "K100-1" and summary["alarms"][0]["acked_by"] == "bench"

@@ -320,6 +320,8 @@ class Session:
         outcome = None
         told = False
         first_poll = None
+        if self.limits is not None:
+            self.limits.tripped = None      # a violation seen before this session is not this one's
         if self.control is not None:
             src.pace(self.period)           # reads never hold a control frame up
         hooked = tel.on_frame

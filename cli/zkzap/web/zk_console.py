@@ -209,8 +209,6 @@ class ZkConsole(Console):
             link.allow = saved
 
     def _control_session(self, command, label):
-        if self.limits is not None:
-            self.limits.tripped = None          # a violation seen before this start is not this run's
         self.tel.new_error = None               # an error before the start is not a new one
         self.command, self.controller, self.since = command, label, time.time()
         self.ended = None
