@@ -195,6 +195,41 @@ def test_the_packet_panel_and_a_cycle_act_on_the_chosen_bus_while_the_other_bus_
     assert console_errors(page) == []
 
 
+def test_every_request_goes_to_the_bus_it_names_and_one_naming_none_is_refused(browser, two, bus_a, bus_b):
+    """Over the WebSocket, as a page sends them: a backup of bus B is bus B's document; a request
+    naming no bus, or an unknown one, is refused saying which buses there are."""
+    import asyncio
+
+    aiohttp = pytest.importorskip("aiohttp")
+    from webpage import open_page, wait
+
+    browser.get("about:blank")                         # the browser's page no longer controls
+
+    async def main():
+        async with aiohttp.ClientSession() as s:
+            p = await open_page(s, two)
+            await wait(lambda: p.seen("hello") and len(p.seen("bushello")) == 2, "the buses' hellos")
+            assert [b["name"] for b in p.seen("hello")[0]["buses"]] == [bus_a.url, bus_b.url]
+            assert [m["bus"] for m in p.seen("bushello")] == [bus_a.url, bus_b.url]
+            for _ in range(100):
+                if (await p.request("take"))["type"] == "done":
+                    break
+                await asyncio.sleep(0.1)
+            got = await p.request("backup", bus=bus_b.url, format="json")
+            assert got["type"] == "done" and got["bus"] == bus_b.url, got
+            doc = json.loads(got["text"])
+            assert doc["port"] == bus_b.url and sorted(doc["actuators"]) == ["1", "3"]
+            none = await p.request("registers", id=1)
+            assert none["type"] == "error" and none["text"] == f"bus: none given; the buses: {bus_a.url}, {bus_b.url}"
+            unknown = await p.request("registers", id=1, bus="nope")
+            assert unknown["type"] == "error" and unknown["text"].startswith("bus: no bus 'nope'")
+            mine = await p.request("registers", id=3, bus=bus_a.url)      # ID 3 is bus B's only
+            assert mine["type"] == "error" and "no actuator 3 was found" in mine["text"] and mine["bus"] == bus_a.url
+            await p.ws.close()
+
+    asyncio.run(asyncio.wait_for(main(), 60))
+
+
 # -- a bus that dies ---------------------------------------------------------------------------
 
 
