@@ -230,6 +230,37 @@ def test_every_request_goes_to_the_bus_it_names_and_one_naming_none_is_refused(b
     asyncio.run(asyncio.wait_for(main(), 60))
 
 
+@pytest.fixture(scope="session")
+def mixed():
+    # bus 1 the in-process simulator (consent waived there), bus 2 a real port
+    with start_zap(ids=[1], transport="tcp") as real:
+        c = WebConsole("zap", "-p", "sim://zap?ids=1", "-p", real.url, "--scan-ids", "0-2", "--timeout", "0.3")
+        yield c, real
+        c.close()
+
+
+def test_consent_is_each_bus_s_own(browser, mixed):
+    console, real = mixed
+    page = ready(browser, console, 2, "both buses' actuators")
+    assert "simulated" in text_of(page, "#bus-0") and "simulated" not in text_of(page, "#bus-1")
+    assert "(simulated)" not in text_of(page, "#port")
+
+    def write(row, value):
+        js(page, "document.querySelector('#registers tbody').replaceChildren()")
+        click(page, f"#{row} button")                  # Registers
+        until(lambda: css(page, "#registers input[data-register=long-stroke-limit]"), f"the register table of {row}")
+        set_value(page, "#registers [data-register=long-stroke-limit]:not(button)", value)
+        click(page, "#registers button[data-register=long-stroke-limit]")
+
+    write("act-0-1", 3500)                            # the simulator: written at once, nothing asked
+    until(lambda: "long-stroke-limit = 3500 (stored, reads back 3500)" in text_of(page, "#log"), "the simulated write")
+    assert not css(page, "#modal.show")
+    write("act-1-1", 3400)                            # the real port: asked first
+    assert "stored settings" in consent_dialog(page)
+    click(page, "#modal-ok")
+    until(lambda: reg(real, 1, "long-stroke-limit") == 3400, "the real port's write once confirmed")
+
+
 # -- a bus that dies ---------------------------------------------------------------------------
 
 

@@ -296,7 +296,8 @@
         "data-bus": b.name, title: `${b.port}: choose this bus for the panels below`, onclick: () => Z.choose(b.name) },
         el("b", { text: short(b.name) }), short(b.name) !== b.name ? el("span", { class: "small", text: b.name }) : "",
         b.port !== b.name ? el("span", { class: "dim small", text: b.port }) : "",
-        el("span", { class: "tag", text: b.protocol === "modbus" ? "Modbus RTU" : "IR" }), tag);
+        el("span", { class: "tag", text: b.protocol === "modbus" ? "Modbus RTU" : "IR" }),
+        b.simulated ? el("span", { class: "tag", text: "simulated", title: "nothing real can be harmed: no confirmation asked" }) : "", tag);
     }));
   }
 
