@@ -213,6 +213,8 @@ FOUND = {
     384: "a 336 ms actuator in return mode 2 acknowledged a write assumed unanswered after the write was "
          "forgotten: the acknowledgement answered the census's first Echo, that Echo's reply the second's (5 ms "
          "learned), and a scan reported return mode 0",
+    632: "set-baud's census took two actuators with one ID for one: each ask's second reply met the first on "
+         "the line, and only bytes that made no packet came after a clean reply",
 }
 
 

@@ -1524,7 +1524,9 @@ class ZapBus:
         (:func:`~zkzap.link.zap_timing.horizon_for`): an ID is ``shared`` when its replies came
         garbled every time, or when more replies came than were due (two actuators answering
         one request, however far apart: a second unit slower than the window; or a reply
-        sent twice); ``none`` when nothing answered until the horizon. Costs about the horizon
+        sent twice), or when two of its answered asks also heard bytes that made no packet (a
+        second reply that met the first on the line; once is a line fault); ``none`` when
+        nothing answered until the horizon. Costs about the horizon
         (1.5 s) in all, whatever the number of IDs; nothing right after an identity change
         that left them known (:meth:`heard_out`)."""
         ids = list(dict.fromkeys(ids))
@@ -1544,6 +1546,7 @@ class ZapBus:
         late = {i: self.devices[i].late for i in ids}
         got = {i: 0 for i in ids}
         garbled = {i: 0 for i in ids}
+        tails = {i: 0 for i in ids}       # answered asks whose window also held bytes that made no packet
         last = self.now()
         rounds, noisy = asks, 0
         span = self.reply_timeout(self.family.PROBE_LEN, self.family.PROBE_LEN)
@@ -1553,6 +1556,7 @@ class ZapBus:
             for ident in ids:
                 probe, n = self.family.probe(ident)
                 retried = self.retried
+                noise = self.garbled
                 try:
                     r = self.transact(probe, reply=True, data_len=n, retries=tries - 1, optional=True,
                                       persist=True, check=False, any_answer=True)
@@ -1566,6 +1570,10 @@ class ZapBus:
                     # where none was due, never where the next ask's is (nor over the next ask,
                     # which neither actuator would then hear)
                     self.linger(max(0.0, self.last_sent + span - self.now()))
+                    if self.garbled != noise:
+                        # a clean reply and bytes that made no packet in one window: a second
+                        # reply that met it on the line (or a line fault, once)
+                        tails[ident] += 1
                 last = self.last_sent
             if self.garbled != before and noisy < asks:
                 # bytes that made no packet may hide a second reply (one cut short): once more
@@ -1578,7 +1586,7 @@ class ZapBus:
             # (more replies than attempts, however they were attributed: a second actuator's
             # reply can come where the next ask's is due, and be taken for it)
             if dev.extra > extra[ident] or dev.replies - replies[ident] > sent[ident] \
-                    or garbled[ident] >= asks or (garbled[ident] and got[ident]):
+                    or garbled[ident] >= asks or (garbled[ident] and got[ident]) or tails[ident] >= 2:
                 out[ident] = "shared"
                 dev.shared = True
             elif got[ident] or dev.late > late[ident]:
