@@ -6,9 +6,12 @@ as Modbus RTU both ways (exception replies named, a bad CRC never a value)."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from zkzap import Bus
+from zkzap.codec import modbus
 from zkzap.sim import start_zap
 from zkzap.web.console import Request
 from zkzap.web.zap_console import ZapConsole
@@ -221,6 +224,38 @@ def test_bytes_that_make_no_frame_are_said_as_such_when_the_next_request_goes(ri
     console.hub.bytes.clear()
     console._monitor("rx", bytes.fromhex("01 03 02 01 AA 39 AB"))   # the manual's reply: 426
     assert [i["text"] for i in console.hub.bytes] == ["reply of ID 1: present-current=426"]
+
+
+@pytest.mark.parametrize("count", [1, 4, 11])
+@pytest.mark.parametrize("crc", ["good", "bad"])
+def test_a_reply_split_across_reads_is_judged_as_one_frame(rig, count, crc):
+    """A reply that comes in two reads (a USB adapter's or a socket's chunks, a moment apart, less
+    than the 3.5-character silence) is one frame: a value when its CRC holds, else one line of
+    bytes in no frame saying the CRC failed, said as soon as the reply's length is in; never two
+    pieces, never a value. Every cut, for the live view's reads (1, 4 and 11 registers)."""
+    _, bus, console = rig
+    req = modbus.read_registers(1, 208, count)
+    values = [1000 + 37 * k for k in range(count)]
+    reply = modbus.frame(1, bytes((modbus.READ_HOLDING, 2 * count)) + b"".join(v.to_bytes(2, "big") for v in values))
+    if crc == "bad":
+        reply = reply[:-1] + bytes((reply[-1] ^ 0x5A,))         # the simulator's corrupt fault
+    gap = modbus.silence(bus.link.baud) / 4
+    for cut in range(1, len(reply)):
+        console._monitor("tx", req)
+        console.hub.bytes.clear()
+        console._monitor("rx", reply[:cut])
+        time.sleep(gap)
+        console._monitor("rx", reply[cut:])
+        said = list(console.hub.bytes)
+        console._monitor("tx", req)                                  # the next request: nothing more
+        assert said == console.hub.bytes[:len(said)] and len(console.hub.bytes) == len(said) + 1, (cut, console.hub.bytes)
+        assert len(said) == 1 and said[0]["dir"] == "rx" and said[0]["n"] == len(reply), (cut, said)
+        if crc == "good":
+            assert not said[0].get("bad") and said[0]["text"].startswith("reply of ID 1: goal-speed=1000"), (cut, said)
+        else:
+            assert said[0]["bad"] and said[0]["text"].startswith("not a frame: Modbus RTU frame: CRC mismatch"), \
+                (cut, said)
+            assert "goal" not in said[0]["text"], (cut, said)
 
 
 def test_an_adapter_s_echo_is_said_as_such(rig):

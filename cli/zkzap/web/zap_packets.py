@@ -187,6 +187,8 @@ class PacketTools:
         self._polling = False            # the watcher has the bus now
         self._rx = FrameCutter(self.bus.link.family.framer())     # the bytes read, cut as the bus cuts them
         self._last_tx = b""              # the last request written (a reply's bytes are judged against it)
+        self._junk = b""                 # Modbus: bytes read since the last frame that made none (one run)
+        self._junk_why = None
         if self.protocol == "modbus":
             self._decoder = _modbus().ModbusDecoder(self.map)
         else:
@@ -303,16 +305,21 @@ class PacketTools:
     def _monitor(self, direction, data):
         """Every write and read on the bus (the worker's thread): a request as written, the
         bytes read as the bus's framer cuts them (what it holds when the next request goes out,
-        or once a Modbus reply's length is in, is judged then: no frame is lost or made up)."""
+        or once a Modbus reply's length is in, is judged then: no frame is lost or made up).
+
+        On Modbus RTU the bytes between two frames that make none are one run, as the bus judges
+        one attempt's bytes: a reply whose CRC fails is one line however many reads brought it
+        (a USB adapter's or a socket's chunks; how long the host waited between two reads says
+        nothing of the silence on the line), said once the reply's length is in."""
         show = self.hub is not None and (self.traffic_polls or not self._polling)
         if direction == "tx":
-            said = [self._said("rx", p, why, show) for p, why in self._rx.flush()]   # judged by the request they followed
+            said = self._pieces(self._rx.flush(), show, final=True)   # judged by the request they followed
             self._last_tx = bytes(data)
             said.append(self._said("tx", self._last_tx, None, show))
         else:
-            said = [self._said("rx", p, why, show) for p, why in self._rx.feed(data)]
+            said = self._pieces(self._rx.feed(data), show)
             if self.protocol == "modbus" and self._reply_in():
-                said += [self._said("rx", p, why, show) for p, why in self._rx.flush()]  # a reply's length in, no frame
+                said += self._pieces(self._rx.flush(), show, final=True)  # a reply's length in, no frame
         if not show:
             return
         now = round(time.time() * 1000, 1)
@@ -322,6 +329,29 @@ class PacketTools:
             if bad:
                 item["bad"] = True
             self.hub.traffic(item)
+
+    def _pieces(self, pieces, show, final=False) -> list:
+        """What the cutter's ``pieces`` say (see :meth:`_said`). On Modbus RTU the runs that make
+        no frame are gathered into one, said before the next frame, or now when ``final``."""
+        if self.protocol != "modbus":
+            return [self._said("rx", p, why, show) for p, why in pieces]
+        out = []
+        for p, why in pieces:
+            if why is None:
+                out += self._junk_said(show)
+                out.append(self._said("rx", p, None, show))
+            else:
+                self._junk += p
+                if self._junk_why is None or why == "a failed check":
+                    self._junk_why = why
+        if final:
+            out += self._junk_said(show)
+        return out
+
+    def _junk_said(self, show) -> list:
+        junk, why = self._junk, self._junk_why
+        self._junk, self._junk_why = b"", None
+        return [self._said("rx", junk, why, show)] if junk else []
 
     def _said(self, way, frame, why, show=True):
         """``(way, frame, text, bad)``: a whole frame decoded (the decoder is kept in step with
@@ -336,14 +366,21 @@ class PacketTools:
             return way, frame, f"not a {noun}: {e}", True
 
     def _reply_in(self) -> bool:
-        """Whether the bytes held are as many as a whole Modbus reply to the last request has
-        and no frame came of them: judged now, not at the next request. Bytes that begin as the
-        request did are its echo coming (a half-duplex adapter's), still awaited."""
-        held, sent = bytes(self._rx.raw), self._last_tx
-        if not held or len(sent) < 4 or sent.startswith(held[:len(sent)]):
+        """Whether the bytes read since the last request and in no frame yet (those the framer
+        holds, after any that made none) are as many as a whole Modbus reply to it has: judged
+        now, not at the next request. Bytes that begin as the request did are its echo coming (a
+        half-duplex adapter's), still awaited; held bytes that begin as its reply does (its ID
+        and function) after a run that made no frame are that reply coming, judged by their own
+        length."""
+        held, junk, sent = bytes(self._rx.raw), self._junk, self._last_tx
+        if len(sent) < 4 or not (held or junk):
             return False
-        want = self._reply_len(held)
-        return want is not None and len(held) >= want
+        if not junk and sent.startswith(held[:len(sent)]):
+            return False
+        if junk and held and held[0] == sent[0] and (len(held) < 2 or held[1] & 0x7F == sent[1]):
+            junk = b""
+        want = self._reply_len(junk + held)
+        return want is not None and len(junk) + len(held) >= want
 
     def _reply_len(self, data):
         """The length of a whole Modbus reply to the last request that begins as ``data`` does
