@@ -260,12 +260,12 @@ def test_logbook_per_engine_with_hours_above_a_throttle_and_a_service(cli, tmp_p
     old.execute(SCHEMA.replace(",\n    engine TEXT,\n    throttle_s TEXT", ""))
     old.close()
     for throttle, engine in ((90, "K100-1"), (50, "K100-2")):
-        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "6", "-p",
+        r = cli("zk", "send", "control", "--state", "run", "--throttle", str(throttle), "--for", "2", "-p",
                 stand_port, "--yes", "-f", "jsonl", "--logbook", book, "--engine", engine)
         assert r.exit_code == 0, r
     r = cli("zk", "logbook", book, "--service", "K100-1", "--note", "25 h inspection")
     assert r.exit_code == 0 and "service 1 of K100-1 recorded" in r.stderr
-    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "6", "-p", stand_port,
+    r = cli("zk", "send", "control", "--state", "run", "--throttle", "60", "--for", "2", "-p", stand_port,
             "--yes", "-f", "jsonl", "--logbook", book, "--engine", "K100-1")
     assert r.exit_code == 0, r
     doc = json.loads(cli("zk", "logbook", book, "--engine", "K100-1", "--above", "80", "--above", "55",
