@@ -149,24 +149,18 @@ class Procedures:
     operation touches these procedures, so they can be pointed at another implementation."""
 
     @staticmethod
-    def discover(bus, ids, bauds=None, *, retries=2, on_warning=None):
+    def discover(bus, ids, bauds=None, *, retries=2):
         """Scan records (``id``, ``baud``, ``model``, ``firmware``, ``return_mode``, ``status``,
         ``errors``) of the actuators among ``ids`` at each of ``bauds`` (default: the bus's),
         found as ``zap scan`` finds them (:mod:`zkzap.link.zap_scan`): a fast first pass whose
         doubts (something late or garbled on the line) are probed again in quick rounds and
         what stays in doubt asked with the whole window. Two
-        actuators sharing an ID give status ``duplicate`` or ``garbled``. ``on_warning(text)`` is
-        told what the scan warns of (garbled bytes or replies after its quick wait: what was heard
-        where nothing may have been found). The bus is left at the last baud rate."""
+        actuators sharing an ID give status ``duplicate`` or ``garbled``. The bus is left at the
+        last baud rate."""
         from ..link.zap_scan import scan
 
-        records = []
-        for ev in scan(bus, list(ids), list(bauds or [bus.baud]), retries=retries):
-            if ev[0] == "record":
-                records.append(ev[1])
-            elif ev[0] == "warning" and on_warning is not None:
-                on_warning(ev[1])
-        return records
+        return [ev[1] for ev in scan(bus, list(ids), list(bauds or [bus.baud]), retries=retries)
+                if ev[0] == "record"]
 
     @staticmethod
     def find(bus, ids, *, retries=2):
@@ -840,14 +834,14 @@ def read_entries(bus, ids, *, required=True, procedures=PROCEDURES) -> dict:
     return entries
 
 
-def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES, on_warning=None) -> list:
+def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> list:
     """Scan records (``id``, ``baud``, ...) of the live bus's actuators, as a fleet operation
     compares or backs them up. Without ``ids`` (every ID of the protocol: 0..253 on IR, 1..247
     on Modbus RTU), at several ``bauds``, or with
     ``scan``, the actuators are found as ``zap scan`` finds them (:meth:`Procedures.discover`),
     and a bus where two actuators answer to one ID is refused (:class:`SharedId`, naming it),
-    never read without one of them (``on_warning(text)``: what the scan warns of); otherwise
-    ``ids`` are asked for one by one, an ordinary Echo each (one that does not answer is absent)."""
+    never read without one of them; otherwise ``ids`` are asked for one by one, an ordinary Echo
+    each (one that does not answer is absent)."""
     bauds = list(bauds or [bus.baud])
     if scan is None:
         scan = ids is None or len(bauds) > 1
@@ -856,17 +850,17 @@ def survey(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCED
             bus.set_baud(bauds[0])
         return [{"id": i, "baud": bus.baud} for i in ids if bus.ping(i, retries=retries) is not None]
     wanted = list(ids) if ids is not None else all_ids(regmap_of(bus))
-    records = procedures.discover(bus, wanted, bauds, retries=retries, on_warning=on_warning)
+    records = procedures.discover(bus, wanted, bauds, retries=retries)
     refuse_shared(records)
     return records
 
 
-def bus_entries(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES, on_warning=None) -> dict:
+def bus_entries(bus, ids=None, bauds=None, *, scan=None, retries=2, procedures=PROCEDURES) -> dict:
     """{ID: Entry} of the live bus, as ``zap diff`` and the browser console compare it with a
     file: the actuators :func:`survey` finds (every one that answers, without ``ids``: an actuator
     that is only on the bus is in it, so a diff names it), each read whole at the baud rate it
     answered at. A bus where two actuators answer to one ID is refused (:class:`SharedId`)."""
-    found = survey(bus, ids, bauds, scan=scan, retries=retries, procedures=procedures, on_warning=on_warning)
+    found = survey(bus, ids, bauds, scan=scan, retries=retries, procedures=procedures)
     return read_entries(bus, found, procedures=procedures)
 
 

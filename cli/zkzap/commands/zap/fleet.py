@@ -217,20 +217,10 @@ def backup(ids, scan_, output, fmt, bus_names=None, fleet_file=None, **common):
     args = dict(_link_args(common), baud=bauds[0])
     with open_link(ids=sim_ids, probe=None if search else sim_ids[0], **args) as bus:
         if search:
-            heard = []
-
-            def warned(text):
-                heard.append(text)
-                warn(text)
-
-            found = fleet.survey(bus, targets, bauds, scan=True, retries=common["retries"], on_warning=warned)
+            found = fleet.survey(bus, targets, bauds, scan=True, retries=common["retries"])
             if not found:
-                # bytes heard that made no actuator found (garbled, or later than the window) are
-                # not silence: the error says so, and a run again or a longer --timeout may do
-                raise NoReply(f"no actuator {'found' if heard else 'answered'} (IDs {fleet._ranges(targets)} at "
-                              f"{', '.join(map(str, bauds))} baud)" +
-                              (", though the line was not silent (warned above): run it again; a longer --timeout "
-                               "if replies came late" if heard else ""))
+                raise NoReply(f"no actuator answered (IDs {fleet._ranges(targets)} at "
+                              f"{', '.join(map(str, bauds))} baud)")
             missing = [i for i in ids or () if i not in {r["id"] for r in found}] if not scan_ else []
             if missing:
                 raise NoReply(f"no reply from ID{'s' if len(missing) > 1 else ''} {fleet._ranges(missing)} at "
@@ -328,7 +318,7 @@ def diff(a, b, ids, everything, compare, fmt, bus_names=None, **common):
         with open_link(ids=ids if ids is not None else sorted(other), **args) as bus:
             if common["return_mode"] == "auto" and common["protocol"] == "ir":
                 bus.detect_return_mode((ids or sorted(other))[0])
-            live = fleet.bus_entries(bus, ids, bauds, retries=common["retries"], on_warning=warn)
+            live = fleet.bus_entries(bus, ids, bauds, retries=common["retries"])
         sides["A" if a == "bus" else "B"] = live
     nowhere = [i for i in ids or () if i not in sides["A"] and i not in sides["B"]]
     if nowhere:
