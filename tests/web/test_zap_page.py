@@ -200,3 +200,18 @@ def test_speed_and_current_goals_beside_the_slider(page, bus):
     until(lambda: js(page, "return document.querySelector('#act-3 input.goal-speed').value") == "300"
           and js(page, "return document.querySelector('#act-3 input.goal-current').value") == "650",
           "the page to show what the actuator holds now")
+
+
+def test_the_ranges_and_the_voltage_are_the_ir_map_s(page, bus):
+    """On the IR protocol the ranges are the 12Lf table's (positions 0..4095, goal speed 0..1023,
+    goal current 0..1600 mA) and the voltage is in volts, as the table scales it (0.1 V)."""
+    for sel in ("#act-1 td.goal input[type=range]", "#act-1 td.goal input[type=number]", "#sync-range", "#cycle-b"):
+        e = css(page, sel)[0]
+        assert (e.get_attribute("min"), e.get_attribute("max")) == ("0", "4095"), sel
+    assert css(page, "#act-1 input.goal-speed")[0].get_attribute("max") == "1023"
+    assert css(page, "#act-1 input.goal-current")[0].get_attribute("max") == "1600"
+    raw = register(bus, 1, "present-voltage")
+    until(lambda: text_of(page, "#act-1 td.volt") == f"{raw / 10:.1f} V", "the voltage in volts")
+    titles = [t.get_attribute("textContent") for t in css(page, "#plots .plot .title b")]
+    assert titles == ["Position", "Current (mA)", "Voltage (V)"], titles
+    assert console_errors(page) == []

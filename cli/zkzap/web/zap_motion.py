@@ -96,7 +96,7 @@ class MotionTools:
 
         plan, name = self._plan(msg)
         loops = number(msg, "loops", int, 1, 100000, "loops") if msg.get("loops") not in (None, "") else 1
-        limit = None if msg.get("limit") in (None, "") else number(msg, "limit", float, 1, 1600, "limit")
+        limit = None if msg.get("limit") in (None, "") else number(msg, "limit", float, 1, self._current_hi(), "limit")
         stop_mode = msg.get("stop") or "hold"
         player = motion.Player(self.bus, plan, loops=loops, limit=limit, stop_mode=stop_mode,
                                on_progress=lambda done, total: self._progress_quiet("play", done, total,
@@ -135,7 +135,8 @@ class MotionTools:
             return
         self.hub.sample({"w": round(time.time() * 1000, 1), "id": row["id"], "status": "ok", "errors": row["errors"],
                          "rtt": None, "goal": row["goal"], "pos": row["present"], "cur": row["current_ma"],
-                         "volt": row["voltage_v"], "gspeed": None, "gcur": None, "moving": None, "play": True})
+                         "volt": row["voltage_v"] if row["voltage_v"] is not None else row.get("voltage_raw"),
+                         "gspeed": None, "gcur": None, "moving": None, "play": True})
 
     # -- teach --------------------------------------------------------------------------------
 
@@ -226,14 +227,16 @@ class MotionTools:
         from ..api.cycle import Cycler
 
         ident = self._known(msg)
-        a = number(msg, "a", int, 0, 4095, "A")
-        b = number(msg, "b", int, 0, 4095, "B")
+        goal = self.reg("goal-position")            # the bus's map: its range, not the IR table's
+        a = number(msg, "a", int, goal.lo, goal.hi, "A")
+        b = number(msg, "b", int, goal.lo, goal.hi, "B")
         opt = {"dwell": ("dwell", float, 0, 3600, 0.5), "cycles": ("cycles", int, 1, 100_000_000, 10),
                "stall": ("stall", float, 0.01, 600, 1.0), "timeout": ("leg timeout", float, 0.01, 3600, 10.0)}
         kw = {k: (default if msg.get(k) in (None, "") else number(msg, k, kind, lo, hi, what))
               for k, (what, kind, lo, hi, default) in opt.items()}
-        speed = None if msg.get("speed") in (None, "") else number(msg, "speed", int, 1, 1023, "speed")
-        limit = None if msg.get("limit") in (None, "") else number(msg, "limit", float, 1, 1600, "limit")
+        speed = None if msg.get("speed") in (None, "") else number(msg, "speed", int, 1, self.reg("goal-speed").hi,
+                                                                   "speed")
+        limit = None if msg.get("limit") in (None, "") else number(msg, "limit", float, 1, self._current_hi(), "limit")
         runner = Cycler(self.bus, ident, a, b, speed=speed, limit=limit, cancel=_CancelFlag(self), **kw)
         self.cycles = []
         self.broadcast({"type": "cycles", "items": [], "reset": True, "id": ident, "between": [a, b]})
@@ -258,6 +261,10 @@ class MotionTools:
         self.log(text, "info" if runner.reason == "done" else "warn")
         self.broadcast({"type": "cycled", **summary})
         self.reply(ctx, **summary)
+
+    def _current_hi(self) -> int:
+        """The highest current limit a play or cycle takes: goal-current's in the bus's map."""
+        return self.reg("goal-current").hi
 
     def _progress_quiet(self, job, done, total, text):
         """Progress that never raises for a Cancel (the Cycler stops itself, safely)."""

@@ -194,15 +194,21 @@
       { label: "reach B", color: COLORS[0] }, { label: "reach A", color: COLORS[1] }, { label: "peak mA", color: COLORS[3], scale: "r" }],
       { rolling: false, right: true, height: 200, res: 0 });
   }
+  // the chosen bus's voltage as its map gives it (volts, or the raw value where the map gives no unit)
+  const volts = () => Z.voltageOf(Z.buses ? Z.bus : "");
   function cycleRow(c) {
+    const vu = volts(), v = vu.unit ? c.min_voltage_v : c.min_voltage_raw ?? c.min_voltage_v;
     return el("tr", { class: c.status === "ok" ? "" : "badc" }, [c.cycle, fmt(c.reach_b_s * 1000), fmt(c.reach_a_s === null ? null : c.reach_a_s * 1000),
-      c.overshoot_b, c.overshoot_a ?? "–", c.peak_current_ma, fmt(c.mean_current_ma, 1), fmt(c.min_voltage_v, 1), c.polls, c.status]
+      c.overshoot_b, c.overshoot_a ?? "–", c.peak_current_ma, fmt(c.mean_current_ma, 1), v === null || v === undefined ? "–" : vu.unit ? fmt(v, vu.digits) : `${fmt(v)} (raw)`,
+      c.polls, c.status]
       .map(v => el("td", { class: "num", text: v ?? "–" })));
   }
   function cycleTable() {
     let t = $("#cycle-table");
     if (!t) {
-      t = el("table", { id: "cycle-table" }, el("thead", {}, el("tr", {}, ["cycle", "reach B ms", "reach A ms", "over B", "over A", "peak mA", "mean mA", "min V", "polls", "status"]
+      const vu = volts();
+      t = el("table", { id: "cycle-table" }, el("thead", {}, el("tr", {}, ["cycle", "reach B ms", "reach A ms", "over B", "over A", "peak mA", "mean mA",
+        vu.unit ? `min ${vu.unit}` : "min voltage (raw)", "polls", "status"]
         .map(h => el("th", { text: h })))), el("tbody"));
       $("#cycle-out").replaceChildren(t);
     }
@@ -233,7 +239,8 @@
     registers = m.registers || [];
     busBaud = m.baud;
     const sel = $("#rplot-reg");
-    sel.replaceChildren(el("option", { value: "", text: "none" }), ...registers.map(r => el("option", { value: r.name, text: `${r.name} (0x${r.address.toString(16).toUpperCase().padStart(2, "0")})` })));
+    const addr = (r) => m.protocol === "modbus" ? String(r.address) : `0x${r.address.toString(16).toUpperCase().padStart(2, "0")}`;   // as the register table
+    sel.replaceChildren(el("option", { value: "", text: "none" }), ...registers.map(r => el("option", { value: r.name, text: `${r.name} (${addr(r)})` })));
     sel.value = m.plotted || "";
     rplotReg = m.plotted || null;
     const pr = $("#pkt-reg");

@@ -17,6 +17,26 @@
   let busy = null;
   const COLORS = ["#4aa3ff", "#3fcf7a", "#f2b134", "#ff7b54", "#c59bff", "#57c7e6", "#ff5d9e", "#b5e853"];
 
+  // -- each bus's register map (the console's: every range and unit the page shows is its) ---
+  const maps = {};                // bus -> {register name: info}; one bus: the key ""
+  const regOf = (bus, name) => (maps[bus ?? ""] || {})[name] || {};
+  // a register's range as the map gives it: [lo, hi] (the present register's where the goal has none)
+  function rangeOf(bus, name, other) {
+    const r = regOf(bus, name), o = other ? regOf(bus, other) : {};
+    return [r.lo ?? o.lo ?? null, r.hi ?? o.hi ?? null];
+  }
+  const digitsOf = (r) => r.scale && r.scale < 1 ? Math.round(-Math.log10(r.scale)) : 0;
+  // the supply voltage as the map gives it: in its unit (the console scales it), or the raw value,
+  // said to be raw, where the map gives no unit
+  function voltageOf(bus) {
+    const r = regOf(bus, "present-voltage");
+    return r.unit ? { unit: r.unit, digits: digitsOf(r) } : { unit: null, digits: 0 };
+  }
+  Z.voltageOf = voltageOf;
+  Z.voltText = (v, vu) => v === null || v === undefined ? "–" : vu.unit ? `${fmt(v, vu.digits)} ${vu.unit}` : `${fmt(v)} (raw)`;
+  Z.rangeOf = rangeOf;
+  const keepMap = (bus, registers) => { maps[bus ?? ""] = Object.fromEntries((registers || []).map(r => [r.name, r])); };
+
   // -- the actuator table --------------------------------------------------------------------
   function statusTag(a, s, st) {
     if (st.failed) return el("span", { class: "tag bad", text: "bus failed", title: st.failed });
@@ -59,23 +79,26 @@
   function actuatorRow(bus, k, a, st) {
       const id = a.id;
       const sync = el("input", { type: "checkbox", class: "ctl sync", "data-id": id, "data-bus": Z.buses ? bus : null, title: "move with Sync move" });
-      const range = el("input", { type: "range", class: "ctl grow", min: 0, max: 4095, value: 0, "aria-label": `goal of ID ${id}` });
-      const num = el("input", { type: "number", class: "ctl", min: 0, max: 4095, value: 0, "aria-label": `goal number of ID ${id}` });
+      const [plo, phi] = rangeOf(bus, "goal-position", "present-position");
+      const range = el("input", { type: "range", class: "ctl grow", min: plo, max: phi, value: plo ?? 0, "aria-label": `goal of ID ${id}` });
+      const num = el("input", { type: "number", class: "ctl", min: plo, max: phi, value: plo ?? 0, "aria-label": `goal number of ID ${id}` });
       const mover = Z.throttle((p) => Z.send("move", at(bus, { id, position: p })), 60);
       let touched = false;
       range.addEventListener("input", () => { num.value = range.value; touched = true; mover(Number(range.value)); });
       range.addEventListener("change", () => { touched = false; });
       num.addEventListener("change", () => { range.value = num.value; Z.send("move", at(bus, { id, position: Number(num.value) })); });
-      const gspeed = el("input", { type: "number", class: "ctl goal-speed", min: 0, max: 1023, placeholder: "speed",
-        title: "goal-speed 0..1023", "aria-label": `goal speed of ID ${id}` });
-      const gcur = el("input", { type: "number", class: "ctl goal-current", min: 0, max: 1600, placeholder: "mA",
-        title: "goal-current 0..1600 mA", "aria-label": `goal current of ID ${id}` });
+      const sp = regOf(bus, "goal-speed"), gc = regOf(bus, "goal-current");
+      const gspeed = el("input", { type: "number", class: "ctl goal-speed", min: sp.lo, max: sp.hi, placeholder: "speed",
+        title: `goal-speed ${sp.range || ""}`.trim(), "aria-label": `goal speed of ID ${id}` });
+      const gcur = el("input", { type: "number", class: "ctl goal-current", min: gc.lo, max: gc.hi, placeholder: gc.unit || "raw",
+        title: `goal-current ${gc.range || ""}${gc.unit ? " " + gc.unit : ""}`.trim(), "aria-label": `goal current of ID ${id}` });
       gspeed.addEventListener("change", () => Z.send("goals", at(bus, { id, speed: Number(gspeed.value) })));
       gcur.addEventListener("change", () => Z.send("goals", at(bus, { id, current: Number(gcur.value) })));
       const pos = el("span", { class: "num big", text: "–" });
       const bar = el("div", { class: "posbar" }, el("b"), el("i"));
       const moving = el("span", { class: "moving", title: "moving" });
       const cur = el("span", { class: "num", text: "–" }), volt = el("span", { class: "num", text: "–" });
+      const vu = voltageOf(bus);
       const status = el("td");
       const btns = el("td", {}, el("div", { class: "row" },
         el("button", { class: "btn small ctl", onclick: () => { Z.choose(bus); readRegisters(id); } }, "Registers"),
@@ -89,8 +112,11 @@
         el("td", { class: "pos" }, pos, moving, bar), el("td", { class: "goal" }, el("div", { class: "row" }, range, num),
           el("div", { class: "row goals" }, el("span", { class: "dim small", text: "speed" }), gspeed,
             el("span", { class: "dim small", text: "current" }), gcur)),
-        el("td", {}, cur, el("span", { class: "dim", text: " mA" })), el("td", {}, volt, el("span", { class: "dim", text: " V" })), btns);
-      rows[keyOf(bus, id)] = { a, st, tr, range, num, gspeed, gcur, pos, bar, moving, cur, volt, status, touched: () => touched, seeded: false };
+        el("td", {}, cur, el("span", { class: "dim", text: gc.unit ? ` ${gc.unit}` : " (raw)" })),
+        el("td", { class: "volt" }, volt, el("span", { class: "dim", text: vu.unit ? ` ${vu.unit}` : " (raw)",
+          title: vu.unit ? null : "the register map gives present-voltage no unit: the raw value" })), btns);
+      rows[keyOf(bus, id)] = { a, st, tr, range, num, gspeed, gcur, pos, bar, moving, cur, volt, vu, span: [plo ?? 0, phi ?? 1], status,
+                               touched: () => touched, seeded: false };
       status.append(statusTag(a, null, st));
       return tr;
   }
@@ -102,10 +128,11 @@
       s.fresh = false;
       setText(r.pos, fmt(s.pos));
       setText(r.cur, fmt(s.cur));
-      setText(r.volt, fmt(s.volt, 1));
+      setText(r.volt, fmt(s.volt, r.vu.digits));
       r.moving.className = "moving" + (s.moving ? " on" : "");
-      if (s.pos !== null) r.bar.lastChild.style.left = `calc(${(s.pos / 4095 * 100).toFixed(2)}% - 1px)`;
-      if (s.goal !== null) r.bar.firstChild.style.left = `${(s.goal / 4095 * 100).toFixed(2)}%`;
+      const [lo, hi] = r.span, at = (v) => (100 * Math.min(1, Math.max(0, (v - lo) / Math.max(1, hi - lo)))).toFixed(2);
+      if (s.pos !== null) r.bar.lastChild.style.left = `calc(${at(s.pos)}% - 1px)`;
+      if (s.goal !== null) r.bar.firstChild.style.left = `${at(s.goal)}%`;
       if (!r.seeded && s.goal !== null && !r.touched()) { r.range.value = s.goal; r.num.value = s.goal; r.seeded = true; }
       for (const [input, v] of [[r.gspeed, s.gspeed], [r.gcur, s.gcur]])   // what the actuator holds, unless being edited
         if (v !== null && v !== undefined && document.activeElement !== input && String(v) !== input.value) input.value = v;
@@ -120,25 +147,34 @@
     : S(bus).actuators.filter(a => a.polled && a.baud === S(bus).baud).map(a => [bus, a.id]));
   function buildPlots() {
     const polled = polledAll(), ids = polled.map(([bus, id]) => keyOf(bus, id));
-    const key = ids.join(",");
+    // one voltage plot a unit the maps give it (the raw values apart from volts)
+    const unitOf = ([bus]) => voltageOf(bus).unit;
+    const units = [...new Set(polled.map(unitOf))];
+    const key = ids.join(",") + "|" + polled.map(unitOf).join(",");
     if (key === plotIds && plots) return;
     plotIds = key;
     const box = $("#plots");
     box.replaceChildren();
     const series = polled.map(([bus, id], i) => ({ label: Z.buses ? `${short(bus)} ID ${id}` : `ID ${id}`, color: COLORS[i % COLORS.length] }));
+    const cu = [...new Set(polled.map(([bus]) => regOf(bus, "present-current").unit || null))];
     plots = { ids, pos: new Z.Plot(box, "Position", series, { window: 30 }),
-              cur: new Z.Plot(box, "Current (mA)", series, { window: 30 }),
-              volt: new Z.Plot(box, "Voltage (V)", series.map(s => ({ ...s, digits: 1 })), { window: 30, digits: 1 }) };
+              cur: new Z.Plot(box, cu.length === 1 && cu[0] ? `Current (${cu[0]})` : "Current", series, { window: 30 }),
+              volt: units.map(u => {
+                const keep = polled.map((p, i) => unitOf(p) === u ? i : -1).filter(i => i >= 0);
+                const digits = keep.length ? voltageOf(polled[keep[0]][0]).digits : 0;
+                return { keys: keep.map(i => ids[i]), plot: new Z.Plot(box, u ? `Voltage (${u})` : "Voltage (raw: the map gives no unit)",
+                  keep.map(i => ({ ...series[i], digits })), { window: 30, digits }) };
+              }) };
   }
   function plotSample(s) {
     if (!plots) return;
-    const i = plots.ids.indexOf(keyOf(s.bus, s.id));
+    const k = keyOf(s.bus, s.id), i = plots.ids.indexOf(k);
     if (i < 0 || s.status !== "ok") return;
-    const t = s.w / 1000, n = plots.ids.length;
-    const at = (v) => { const a = new Array(n).fill(null); a[i] = v; return a; };
-    plots.pos.push(t, at(s.pos));
-    plots.cur.push(t, at(s.cur));
-    plots.volt.push(t, at(s.volt));
+    const t = s.w / 1000;
+    const at = (v, n, j) => { const a = new Array(n).fill(null); a[j] = v; return a; };
+    plots.pos.push(t, at(s.pos, plots.ids.length, i));
+    plots.cur.push(t, at(s.cur, plots.ids.length, i));
+    for (const g of plots.volt) { const j = g.keys.indexOf(k); if (j >= 0) g.plot.push(t, at(s.volt, g.keys.length, j)); }
   }
   Z.onFrame(() => paintRows());
 
@@ -242,6 +278,14 @@
       protocol = m.protocol;
       if (m.protocol === "modbus" && $("#scan-ids").value === "0-253") $("#scan-ids").value = "1-247";
       regInfo = Object.fromEntries(m.registers.map(r => [r.name, r]));
+      // the chosen bus's ranges for what acts on it (sync move, cycle, the current limits)
+      const [lo, hi] = rangeOf(Z.buses ? Z.bus : "", "goal-position", "present-position");
+      if (lo !== null && hi !== null) for (const id of ["#sync-range", "#sync-pos", "#cycle-a", "#cycle-b"]) {
+        const e = $(id); e.min = lo; e.max = hi;
+        if (Number(e.value) > hi || Number(e.value) < lo) e.value = Math.round((lo + hi) / 2);
+      }
+      const gc = regOf(Z.buses ? Z.bus : "", "goal-current");
+      for (const id of ["#play-limit", "#cycle-limit"]) { $(id).max = gc.hi ?? ""; $(id).placeholder = gc.unit || "raw"; }
       const box = $("#scan-bauds");
       box.replaceChildren(...m.bauds.map(b => el("label", { class: "inline" },
         el("input", { type: "checkbox", class: "ctl", value: b, checked: b === m.baud }), b)));
@@ -272,7 +316,11 @@
     S(m.bus).failed = m.text;
     buildTable(); buildPlots(); renderBuses();
   });
-  Z.every("hello", (m) => { if (m.buses) { for (const b of m.buses) S(b.name); renderBuses(); } });
+  Z.every("hello", (m) => {
+    if (m.buses) { for (const b of m.buses) S(b.name); renderBuses(); }
+    else if (m.registers) { keepMap("", m.registers); buildTable(); buildPlots(); }
+  });
+  Z.every("bushello", (m) => { keepMap(m.bus, m.registers); buildTable(); buildPlots(); });
   Z.on("choose", () => {            // the panels of one bus start empty on another
     regId = null;
     $("#registers").hidden = true; $("#reg-empty").hidden = false; $("#reg-id").textContent = "";
