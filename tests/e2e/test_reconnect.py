@@ -158,15 +158,14 @@ class FlappingBridge(LocalServer):
                 pass
 
 
-def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(start_sim):
-    """--reconnect 2 on a port that keeps opening and failing (nothing ever comes from it):
-    that is one outage, counted from its first failure, never a port back; the run ends at
-    2 s (exit 4), not a window later for every reopen."""
+def _give_up_time(start_sim, bridge_cls, window):
+    """``(exit status, stderr, seconds from the device's loss to the end, the bridge)`` of
+    ``zk monitor --reconnect WINDOW`` through a ``bridge_cls`` bridge whose device is lost."""
     url, _ = start_sim(["zk", "--listen", "127.0.0.1:0", *FAST])
     host, port = url[len("socket://"):].rsplit(":", 1)
-    bridge = FlappingBridge((host, int(port)))
+    bridge = bridge_cls((host, int(port)))
     proc = subprocess.Popen([executable("zk"), "monitor", "-p", bridge.url, "--duration", "30", "-f", "jsonl",
-                             "--reconnect", "2"],
+                             "--reconnect", window],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
     try:
         _lines(proc, lambda line: '"kind":"status"' in line)
@@ -179,11 +178,18 @@ def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(s
             proc.kill()
             proc.communicate()
         bridge.close()
-    assert proc.returncode == 4 and "not back within --reconnect 2 s" in err, err
+    return proc.returncode, err, took, bridge
+
+
+def test_reconnect_gives_up_after_its_time_when_the_port_opens_but_fails_again(start_sim):
+    """--reconnect 2 on a port that keeps opening and failing (nothing ever comes from it):
+    that is one outage, counted from its first failure, never a port back; the run ends at
+    2 s (exit 4), not a window later for every reopen."""
+    code, err, took, bridge = _give_up_time(start_sim, FlappingBridge, "2")
+    assert code == 4 and "not back within --reconnect 2 s" in err, err
     assert bridge.opened >= 3                           # it was reopened, and failed each time
     assert "port back" not in err, err
     assert 2.0 <= took < 3.5, f"gave up after {took:.2f} s"
-
 
 class HangingBridge(FlappingBridge):
     """A bridge that, once its device is gone, stops taking connections at all: its listening
@@ -217,23 +223,7 @@ def test_a_reopen_that_hangs_does_not_outlast_the_reconnect_window(start_sim):
     """--reconnect 1.5 on a TCP port whose server stops answering connects: each reopen attempt
     hangs, and the run still ends when the window does (exit 4), not pyserial's 5 s connect
     timeout later."""
-    url, _ = start_sim(["zk", "--listen", "127.0.0.1:0", *FAST])
-    host, port = url[len("socket://"):].rsplit(":", 1)
-    bridge = HangingBridge((host, int(port)))
-    proc = subprocess.Popen([executable("zk"), "monitor", "-p", bridge.url, "--duration", "30", "-f", "jsonl",
-                             "--reconnect", "1.5"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env())
-    try:
-        _lines(proc, lambda line: '"kind":"status"' in line)
-        t0 = time.monotonic()
-        bridge.die()
-        _, err = proc.communicate(timeout=20)
-        took = time.monotonic() - t0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-        bridge.close()
-    assert proc.returncode == 4 and "not back within --reconnect 1.5 s" in err, err
+    code, err, took, _ = _give_up_time(start_sim, HangingBridge, "1.5")
+    assert code == 4 and "not back within --reconnect 1.5 s" in err, err
     assert "port back" not in err, err
     assert 1.5 <= took < 3.0, f"gave up after {took:.2f} s"
