@@ -108,24 +108,37 @@
   // -- the bytes on the bus ------------------------------------------------------------------
   let trafficPaused = false;
   const TRAFFIC_KEPT = 400;
-  Z.on("traffic", (m) => {
-    if (trafficPaused) return;
+  // items are drawn once per animation frame, only the newest TRAFFIC_KEPT of those that came
+  // meanwhile: a bus busy with a play or cycle (hundreds of packets a second) costs the page one
+  // bounded redraw a frame, never a backlog that keeps it from answering a click
+  const clock = new Intl.DateTimeFormat("en-GB", { hour12: false, hour: "2-digit", minute: "2-digit", second: "2-digit" });
+  let trafficPending = [], trafficDrawn = false;
+  function drawTraffic() {
+    trafficDrawn = false;
+    const items = trafficPending.slice(-TRAFFIC_KEPT);
+    trafficPending = [];
     const box = $("#traffic");
     const frag = document.createDocumentFragment();
-    for (const it of m.items) {
-      if (!Z.mine(it)) continue;        // several buses: the chosen bus's bytes
+    for (let k = items.length - 1; k >= 0; k--) {
+      const it = items[k];
       frag.append(el("div", { class: (it.dir === "tx" ? "tx" : "rx") + (it.bad ? " bad" : "") + (it.poll ? " poll" : ""), title: it.hex },
-        el("span", { class: "t num dim", text: new Date(it.w).toLocaleTimeString("en-GB", { hour12: false }) + "." + String(Math.floor(it.w % 1000)).padStart(3, "0") }),
+        el("span", { class: "t num dim", text: clock.format(new Date(it.w)) + "." + String(Math.floor(it.w % 1000)).padStart(3, "0") }),
         el("b", { text: it.dir === "tx" ? " → " : " ← " }), el("span", { text: it.text }), el("span", { class: "h", text: it.hex + (it.n > 64 ? ` … (${it.n} bytes)` : "") })));
     }
     const atTop = box.scrollTop < 4;
-    box.prepend(...[...frag.childNodes].reverse());
+    box.prepend(frag);
     while (box.childElementCount > TRAFFIC_KEPT) box.lastChild.remove();
     if (atTop) box.scrollTop = 0;
+  }
+  Z.on("traffic", (m) => {
+    if (trafficPaused) return;
+    for (const it of m.items) trafficPending.push(it);
+    if (trafficPending.length > 4 * TRAFFIC_KEPT) trafficPending = trafficPending.slice(-TRAFFIC_KEPT);
+    if (!trafficDrawn) { trafficDrawn = true; requestAnimationFrame(drawTraffic); }
   });
   $("#traffic-polls").addEventListener("change", () => Z.send("traffic", { polls: $("#traffic-polls").checked }));
   $("#traffic-pause").addEventListener("click", () => { trafficPaused = !trafficPaused; $("#traffic-pause").textContent = trafficPaused ? "Go on" : "Pause"; });
-  $("#traffic-clear").addEventListener("click", () => $("#traffic").replaceChildren());
+  $("#traffic-clear").addEventListener("click", () => { trafficPending = []; $("#traffic").replaceChildren(); });
   Z.on("traffic-polls", (m) => { $("#traffic-polls").checked = m.polls; });
 
   // -- play ----------------------------------------------------------------------------------
